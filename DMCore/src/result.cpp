@@ -1,0 +1,54 @@
+#include <dm/core/assert.hpp>
+#include <dm/core/result.hpp>
+
+#include <cstdio>
+#include <cstdlib>
+#include <ostream>
+
+namespace dm {
+
+namespace detail {
+void assertionFailed(const char* kind, const char* expr, const char* msg, const char* file,
+                     int line) noexcept {
+  std::fprintf(stderr, "%s:%d: %s(%s) failed: %s\n", file, line, kind, expr, msg ? msg : "");
+  std::fflush(stderr);
+  std::abort();
+}
+}  // namespace detail
+
+const char* toString(ErrorCode code) noexcept {
+  switch (code) {
+    case ErrorCode::InvalidArgument: return "invalid argument";
+    case ErrorCode::NotFound: return "not found";
+    case ErrorCode::Io: return "I/O error";
+    case ErrorCode::Parse: return "parse error";
+    case ErrorCode::Unsupported: return "unsupported";
+    case ErrorCode::Version: return "version mismatch";
+    case ErrorCode::Device: return "device error";
+    case ErrorCode::Network: return "network error";
+    case ErrorCode::Timeout: return "timeout";
+    case ErrorCode::Busy: return "busy";
+    case ErrorCode::Internal: return "internal error";
+  }
+  return "unknown error";
+}
+
+std::string Error::message() const {
+  std::string s;
+  if (!where.empty()) s += where + ": ";
+  s += toString(code);
+  s += ": ";
+  s += what;
+  if (!hint.empty()) s += " (" + hint + ")";
+  return s;
+}
+
+Error Error::within(const std::string& outer) const {
+  Error e = *this;
+  e.where = where.empty() ? outer : outer + ": " + where;
+  return e;
+}
+
+std::ostream& operator<<(std::ostream& os, const Error& e) { return os << e.message(); }
+
+}  // namespace dm
