@@ -8,6 +8,12 @@ function(dm_target_options target)
   if(DM_WERROR)
     target_compile_options(${target} PRIVATE $<$<CXX_COMPILER_ID:GNU,Clang>:-Werror>)
   endif()
+  if(DM_FUZZ)
+    # Coverage for libFuzzer in every library of ours; the fuzz executables
+    # add the fuzzer main themselves (Tests/fuzz/CMakeLists.txt).
+    target_compile_options(${target} PRIVATE -fsanitize=fuzzer-no-link,address,undefined)
+    target_link_options(${target} PRIVATE -fsanitize=address,undefined)
+  endif()
   if(DM_SANITIZE)
     target_compile_options(${target} PRIVATE -fsanitize=${DM_SANITIZE} -fno-omit-frame-pointer
                                              -fno-sanitize-recover=all)
