@@ -12,9 +12,12 @@ namespace {
 std::string escapePointer(std::string_view key) {
   std::string out;
   for (char c : key) {
-    if (c == '~') out += "~0";
-    else if (c == '/') out += "~1";
-    else out += c;
+    if (c == '~')
+      out += "~0";
+    else if (c == '/')
+      out += "~1";
+    else
+      out += c;
   }
   return out;
 }
@@ -50,17 +53,24 @@ Result<Config> Config::parse(std::string_view text, std::string source) {
   if (bad) {
     std::size_t line = 1, col = 1;
     for (std::size_t i = 0; i + 1 < byte && i < text.size(); ++i) {
-      if (text[i] == '\n') { ++line; col = 1; } else { ++col; }
+      if (text[i] == '\n') {
+        ++line;
+        col = 1;
+      } else {
+        ++col;
+      }
     }
-    return fail(ErrorCode::Parse, "invalid JSON at line " + std::to_string(line) + ", column " + std::to_string(col),
-                source + ": byte " + std::to_string(byte), "check for a missing comma, quote or bracket there");
+    return fail(
+        ErrorCode::Parse, "invalid JSON at line " + std::to_string(line) + ", column " + std::to_string(col),
+        source + ": byte " + std::to_string(byte), "check for a missing comma, quote or bracket there");
   }
   return Config(std::move(j), std::move(source));
 }
 
 Result<Config> Config::load(const std::filesystem::path& file) {
   std::ifstream in(file, std::ios::binary);
-  if (!in) return fail(ErrorCode::NotFound, "cannot open file", file.string(), "check the path and permissions");
+  if (!in)
+    return fail(ErrorCode::NotFound, "cannot open file", file.string(), "check the path and permissions");
   std::ostringstream ss;
   ss << in.rdbuf();
   if (in.bad()) return fail(ErrorCode::Io, "read failed", file.string());
@@ -77,7 +87,8 @@ const Json& ConfigReader::nullJson() {
 ConfigReader::ConfigReader(const Json& node, std::string source, std::string path)
     : ConfigReader(&node, std::move(source), std::move(path), std::make_shared<Errors>()) {}
 
-ConfigReader::ConfigReader(const Json* node, std::string source, std::string path, std::shared_ptr<Errors> errors)
+ConfigReader::ConfigReader(const Json* node, std::string source, std::string path,
+                           std::shared_ptr<Errors> errors)
     : node_(node), source_(std::move(source)), path_(std::move(path)), errors_(std::move(errors)) {}
 
 bool ConfigReader::has(std::string_view key) const { return find(key) != nullptr; }
@@ -93,7 +104,8 @@ std::string ConfigReader::pathOf(std::string_view key) const {
 }
 
 void ConfigReader::addError(std::string what, std::string_view key, std::string hint) {
-  errors_->list.push_back(fail(ErrorCode::InvalidArgument, std::move(what), source_ + ": " + pathOf(key), std::move(hint)));
+  errors_->list.push_back(
+      fail(ErrorCode::InvalidArgument, std::move(what), source_ + ": " + pathOf(key), std::move(hint)));
 }
 
 void ConfigReader::typeError(std::string_view key, const char* expected, const Json& got) {
@@ -113,7 +125,8 @@ double ConfigReader::number(std::string_view key, Range range, std::optional<dou
   }
   const double d = v->get<double>();
   if (!std::isfinite(d) || d < range.min || d > range.max) {
-    addError("value " + formatNumber(d) + " is outside [" + formatNumber(range.min) + ", " + formatNumber(range.max) + "]",
+    addError("value " + formatNumber(d) + " is outside [" + formatNumber(range.min) + ", " +
+                 formatNumber(range.max) + "]",
              key);
     return fallback.value_or(std::clamp(d, range.min, range.max));
   }
@@ -133,7 +146,8 @@ long long ConfigReader::integer(std::string_view key, Range range, std::optional
   }
   const long long i = v->get<long long>();
   if (static_cast<double>(i) < range.min || static_cast<double>(i) > range.max) {
-    addError("value " + std::to_string(i) + " is outside [" + formatNumber(range.min) + ", " + formatNumber(range.max) + "]",
+    addError("value " + std::to_string(i) + " is outside [" + formatNumber(range.min) + ", " +
+                 formatNumber(range.max) + "]",
              key);
     return fallback.value_or(i);
   }
@@ -242,7 +256,8 @@ Status ConfigReader::status() const {
   if (errors_->list.size() > 1) {
     first.what += " (and " + std::to_string(errors_->list.size() - 1) + " more problem" +
                   (errors_->list.size() > 2 ? "s" : "") + ":";
-    for (std::size_t i = 1; i < errors_->list.size(); ++i) first.what += " [" + errors_->list[i].message() + "]";
+    for (std::size_t i = 1; i < errors_->list.size(); ++i)
+      first.what += " [" + errors_->list[i].message() + "]";
     first.what += ")";
   }
   return first;
@@ -254,7 +269,8 @@ std::size_t editDistance(std::string_view a, std::string_view b) {
   for (std::size_t i = 1; i <= a.size(); ++i) {
     cur[0] = i;
     for (std::size_t j = 1; j <= b.size(); ++j) {
-      const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) == std::tolower(static_cast<unsigned char>(b[j - 1]));
+      const bool same = std::tolower(static_cast<unsigned char>(a[i - 1])) ==
+                        std::tolower(static_cast<unsigned char>(b[j - 1]));
       cur[j] = std::min({prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (same ? 0 : 1)});
     }
     std::swap(prev, cur);
@@ -267,7 +283,10 @@ std::string closestMatch(std::string_view word, std::initializer_list<std::strin
   std::size_t bestD = std::max<std::size_t>(2, word.size() / 3) + 1;
   for (auto c : candidates) {
     const std::size_t d = editDistance(word, c);
-    if (d < bestD) { bestD = d; best = std::string(c); }
+    if (d < bestD) {
+      bestD = d;
+      best = std::string(c);
+    }
   }
   return best;
 }

@@ -1,5 +1,8 @@
 #include <dm/core/filesystem.hpp>
 
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <condition_variable>
 #include <cstdio>
@@ -7,9 +10,6 @@
 #include <cstring>
 #include <deque>
 #include <thread>
-
-#include <fcntl.h>
-#include <unistd.h>
 
 namespace dm {
 
@@ -40,12 +40,14 @@ FileSystem& FileSystem::global() {
 
 Status FileSystem::mount(const std::string& name, const fs::path& dir, std::string package) {
   if (name.size() < 2 || name.find_first_of(":/\\") != std::string::npos)
-    return fail(ErrorCode::InvalidArgument, "mount name '" + name + "' must be 2+ characters without ':' or '/'",
-                "FileSystem::mount");
+    return fail(ErrorCode::InvalidArgument,
+                "mount name '" + name + "' must be 2+ characters without ':' or '/'", "FileSystem::mount");
   std::lock_guard lock(mutex_);
   auto it = std::find_if(mounts_.begin(), mounts_.end(), [&](const Mount& m) { return m.name == name; });
-  if (it != mounts_.end()) *it = {name, dir, std::move(package)};
-  else mounts_.push_back({name, dir, std::move(package)});
+  if (it != mounts_.end())
+    *it = {name, dir, std::move(package)};
+  else
+    mounts_.push_back({name, dir, std::move(package)});
   return ok();
 }
 
@@ -80,13 +82,14 @@ Result<fs::path> FileSystem::resolve(std::string_view name) const {
       if (fs::exists(p, ec)) return p;
       std::string hint = "check the name";
       if (!fs::exists(m.dir, ec) && !m.package.empty())
-        hint = "the mount directory " + m.dir.string() + " is missing: install the Debian package " + m.package +
-               " (scripts/setup.sh does)";
+        hint = "the mount directory " + m.dir.string() + " is missing: install the Debian package " +
+               m.package + " (scripts/setup.sh does)";
       return fail(ErrorCode::NotFound, "no file " + p.string(), std::string(name), hint);
     }
     std::string known;
     for (const Mount& m : mounts_) known += (known.empty() ? "" : ", ") + m.name + ":";
-    return fail(ErrorCode::NotFound, "unknown mount '" + mountName + ":'", std::string(name), "known mounts: " + known);
+    return fail(ErrorCode::NotFound, "unknown mount '" + mountName + ":'", std::string(name),
+                "known mounts: " + known);
   }
   std::string tried = fs::absolute(direct, ec).string();
   if (direct.is_relative()) {
@@ -102,15 +105,16 @@ Result<fs::path> FileSystem::resolve(std::string_view name) const {
 
 Result<std::vector<std::byte>> readFile(const fs::path& file, std::size_t maxBytes) {
   std::FILE* f = std::fopen(file.c_str(), "rb");
-  if (!f) return fail(ErrorCode::NotFound, std::string("cannot open: ") + std::strerror(errno), file.string());
+  if (!f)
+    return fail(ErrorCode::NotFound, std::string("cannot open: ") + std::strerror(errno), file.string());
   std::vector<std::byte> out;
   std::byte buf[1 << 16];
   for (;;) {
     const std::size_t n = std::fread(buf, 1, sizeof buf, f);
     if (out.size() + n > maxBytes) {
       std::fclose(f);
-      return fail(ErrorCode::InvalidArgument, "file is larger than the limit of " + std::to_string(maxBytes) + " bytes",
-                  file.string());
+      return fail(ErrorCode::InvalidArgument,
+                  "file is larger than the limit of " + std::to_string(maxBytes) + " bytes", file.string());
     }
     out.insert(out.end(), buf, buf + n);
     if (n < sizeof buf) break;
@@ -178,9 +182,13 @@ struct FileStreamReader::Impl {
       std::size_t got = 0;
       bool error = false;
       while (got < c.data.size()) {
-        const ssize_t n = ::pread(fd, c.data.data() + got, c.data.size() - got, static_cast<off_t>(offset + got));
+        const ssize_t n =
+            ::pread(fd, c.data.data() + got, c.data.size() - got, static_cast<off_t>(offset + got));
         if (n < 0 && errno == EINTR) continue;
-        if (n <= 0) { error = true; break; }
+        if (n <= 0) {
+          error = true;
+          break;
+        }
         got += static_cast<std::size_t>(n);
       }
       std::lock_guard lock(m);
@@ -208,7 +216,8 @@ Result<std::unique_ptr<FileStreamReader>> FileStreamReader::open(const fs::path&
   if (chunkBytes == 0 || maxQueued == 0)
     return fail(ErrorCode::InvalidArgument, "chunkBytes and maxQueued must be positive", file.string());
   const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
-  if (fd < 0) return fail(ErrorCode::NotFound, std::string("cannot open: ") + std::strerror(errno), file.string());
+  if (fd < 0)
+    return fail(ErrorCode::NotFound, std::string("cannot open: ") + std::strerror(errno), file.string());
   auto impl = std::make_unique<Impl>();
   impl->path = file.string();
   impl->fd = fd;
@@ -255,7 +264,8 @@ Result<FileStreamReader::Chunk> FileStreamReader::next(std::chrono::milliseconds
   std::unique_lock lock(impl_->m);
   if (!impl_->cv.wait_for(lock, timeout,
                           [&] { return !impl_->queue.empty() || impl_->finished || impl_->cancelled; }))
-    return fail(ErrorCode::Timeout, "no chunk within " + std::to_string(timeout.count()) + " ms", impl_->path);
+    return fail(ErrorCode::Timeout, "no chunk within " + std::to_string(timeout.count()) + " ms",
+                impl_->path);
   if (impl_->queue.empty()) return Chunk{impl_->size, {}};
   Result<Chunk> r = std::move(impl_->queue.front());
   impl_->queue.pop_front();

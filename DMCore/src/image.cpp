@@ -8,32 +8,43 @@ namespace dm {
 
 std::size_t pixelTypeBytes(PixelType t) noexcept {
   switch (t) {
-    case PixelType::U8: return 1;
-    case PixelType::U16: return 2;
-    case PixelType::F32: return 4;
+    case PixelType::U8:
+      return 1;
+    case PixelType::U16:
+      return 2;
+    case PixelType::F32:
+      return 4;
   }
   return 1;
 }
 
 const char* toString(PixelType t) noexcept {
   switch (t) {
-    case PixelType::U8: return "uint8";
-    case PixelType::U16: return "uint16";
-    case PixelType::F32: return "float32";
+    case PixelType::U8:
+      return "uint8";
+    case PixelType::U16:
+      return "uint16";
+    case PixelType::F32:
+      return "float32";
   }
   return "unknown";
 }
 
 Result<Image> Image::create(int width, int height, int channels, PixelType type, std::size_t maxBytes) {
   if (width <= 0 || height <= 0)
-    return fail(ErrorCode::InvalidArgument, "image size " + std::to_string(width) + "x" + std::to_string(height) +
-                                                " must be positive", "image");
+    return fail(ErrorCode::InvalidArgument,
+                "image size " + std::to_string(width) + "x" + std::to_string(height) + " must be positive",
+                "image");
   if (channels < 1 || channels > 4)
-    return fail(ErrorCode::InvalidArgument, "channels must be 1..4, got " + std::to_string(channels), "image");
-  const std::size_t row = pixelTypeBytes(type) * static_cast<std::size_t>(channels) * static_cast<std::size_t>(width);
+    return fail(ErrorCode::InvalidArgument, "channels must be 1..4, got " + std::to_string(channels),
+                "image");
+  const std::size_t row =
+      pixelTypeBytes(type) * static_cast<std::size_t>(channels) * static_cast<std::size_t>(width);
   if (row > maxBytes / static_cast<std::size_t>(height))
-    return fail(ErrorCode::InvalidArgument, "image of " + std::to_string(width) + "x" + std::to_string(height) +
-                                                " exceeds the limit of " + std::to_string(maxBytes) + " bytes", "image");
+    return fail(ErrorCode::InvalidArgument,
+                "image of " + std::to_string(width) + "x" + std::to_string(height) +
+                    " exceeds the limit of " + std::to_string(maxBytes) + " bytes",
+                "image");
   const std::size_t bytes = row * static_cast<std::size_t>(height);
   std::shared_ptr<std::byte[]> buf(new std::byte[bytes]());
   Image img;
@@ -47,16 +58,20 @@ Result<Image> Image::create(int width, int height, int channels, PixelType type,
   return img;
 }
 
-Result<Image> Image::wrap(void* data, int width, int height, int channels, PixelType type, std::size_t strideBytes,
-                          std::shared_ptr<void> owner) {
+Result<Image> Image::wrap(void* data, int width, int height, int channels, PixelType type,
+                          std::size_t strideBytes, std::shared_ptr<void> owner) {
   if (!data) return fail(ErrorCode::InvalidArgument, "null pixel pointer", "image");
   if (width <= 0 || height <= 0 || channels < 1 || channels > 4)
-    return fail(ErrorCode::InvalidArgument, "bad image geometry " + std::to_string(width) + "x" +
-                                                std::to_string(height) + "x" + std::to_string(channels), "image");
-  const std::size_t row = pixelTypeBytes(type) * static_cast<std::size_t>(channels) * static_cast<std::size_t>(width);
+    return fail(ErrorCode::InvalidArgument,
+                "bad image geometry " + std::to_string(width) + "x" + std::to_string(height) + "x" +
+                    std::to_string(channels),
+                "image");
+  const std::size_t row =
+      pixelTypeBytes(type) * static_cast<std::size_t>(channels) * static_cast<std::size_t>(width);
   if (strideBytes < row)
     return fail(ErrorCode::InvalidArgument,
-                "stride " + std::to_string(strideBytes) + " is smaller than a row of " + std::to_string(row) + " bytes",
+                "stride " + std::to_string(strideBytes) + " is smaller than a row of " + std::to_string(row) +
+                    " bytes",
                 "image");
   Image img;
   img.data_ = static_cast<std::byte*>(data);

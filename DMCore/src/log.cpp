@@ -22,13 +22,20 @@ namespace {
 
 spdlog::level::level_enum toSpd(Level l) {
   switch (l) {
-    case Level::Trace: return spdlog::level::trace;
-    case Level::Debug: return spdlog::level::debug;
-    case Level::Info: return spdlog::level::info;
-    case Level::Warn: return spdlog::level::warn;
-    case Level::Error: return spdlog::level::err;
-    case Level::Critical: return spdlog::level::critical;
-    case Level::Off: return spdlog::level::off;
+    case Level::Trace:
+      return spdlog::level::trace;
+    case Level::Debug:
+      return spdlog::level::debug;
+    case Level::Info:
+      return spdlog::level::info;
+    case Level::Warn:
+      return spdlog::level::warn;
+    case Level::Error:
+      return spdlog::level::err;
+    case Level::Critical:
+      return spdlog::level::critical;
+    case Level::Off:
+      return spdlog::level::off;
   }
   return spdlog::level::info;
 }
@@ -170,13 +177,20 @@ void vmessage(Level l, const char* fmt, va_list args) {
 
 const char* toString(Level level) noexcept {
   switch (level) {
-    case Level::Trace: return "trace";
-    case Level::Debug: return "debug";
-    case Level::Info: return "info";
-    case Level::Warn: return "warn";
-    case Level::Error: return "error";
-    case Level::Critical: return "critical";
-    case Level::Off: return "off";
+    case Level::Trace:
+      return "trace";
+    case Level::Debug:
+      return "debug";
+    case Level::Info:
+      return "info";
+    case Level::Warn:
+      return "warn";
+    case Level::Error:
+      return "error";
+    case Level::Critical:
+      return "critical";
+    case Level::Off:
+      return "off";
   }
   return "info";
 }
@@ -185,10 +199,10 @@ void setLevel(Level level) noexcept { state().level.store(level, std::memory_ord
 Level level() noexcept { return state().level.load(std::memory_order_relaxed); }
 bool enabled(Level l) noexcept { return l != Level::Off && l >= level(); }
 
-#define DM_LOG_FORWARD(lvl)      \
-  va_list args;                  \
-  va_start(args, fmt);           \
-  vmessage((lvl), fmt, args);    \
+#define DM_LOG_FORWARD(lvl)   \
+  va_list args;               \
+  va_start(args, fmt);        \
+  vmessage((lvl), fmt, args); \
   va_end(args)
 
 void message(Level l, const char* fmt, ...) { DM_LOG_FORWARD(l); }

@@ -57,7 +57,8 @@ Status Mesh::validate() const {
   auto sizeCheck = [&](std::size_t got, const char* attr) -> Status {
     if (got != 0 && got != n)
       return fail(ErrorCode::InvalidArgument,
-                  std::string(attr) + " has " + std::to_string(got) + " entries for " + std::to_string(n) + " vertices",
+                  std::string(attr) + " has " + std::to_string(got) + " entries for " + std::to_string(n) +
+                      " vertices",
                   where, "give one per vertex or none");
     return ok();
   };
@@ -66,14 +67,14 @@ Status Mesh::validate() const {
   if (auto s = sizeCheck(colors.size(), "colors"); !s) return s;
   for (std::size_t i = 0; i < n; ++i)
     if (!positions[i].allFinite())
-      return fail(ErrorCode::InvalidArgument, "vertex " + std::to_string(i) + " has a NaN or Inf coordinate", where,
-                  "fix or remove the vertex");
+      return fail(ErrorCode::InvalidArgument, "vertex " + std::to_string(i) + " has a NaN or Inf coordinate",
+                  where, "fix or remove the vertex");
   for (std::size_t t = 0; t < triangles.size(); ++t)
     for (std::uint32_t v : triangles[t])
       if (v >= n)
         return fail(ErrorCode::InvalidArgument,
-                    "triangle " + std::to_string(t) + " references vertex " + std::to_string(v) + " but there are only " +
-                        std::to_string(n),
+                    "triangle " + std::to_string(t) + " references vertex " + std::to_string(v) +
+                        " but there are only " + std::to_string(n),
                     where);
   return ok();
 }

@@ -18,17 +18,28 @@ void assertionFailed(const char* kind, const char* expr, const char* msg, const 
 
 const char* toString(ErrorCode code) noexcept {
   switch (code) {
-    case ErrorCode::InvalidArgument: return "invalid argument";
-    case ErrorCode::NotFound: return "not found";
-    case ErrorCode::Io: return "I/O error";
-    case ErrorCode::Parse: return "parse error";
-    case ErrorCode::Unsupported: return "unsupported";
-    case ErrorCode::Version: return "version mismatch";
-    case ErrorCode::Device: return "device error";
-    case ErrorCode::Network: return "network error";
-    case ErrorCode::Timeout: return "timeout";
-    case ErrorCode::Busy: return "busy";
-    case ErrorCode::Internal: return "internal error";
+    case ErrorCode::InvalidArgument:
+      return "invalid argument";
+    case ErrorCode::NotFound:
+      return "not found";
+    case ErrorCode::Io:
+      return "I/O error";
+    case ErrorCode::Parse:
+      return "parse error";
+    case ErrorCode::Unsupported:
+      return "unsupported";
+    case ErrorCode::Version:
+      return "version mismatch";
+    case ErrorCode::Device:
+      return "device error";
+    case ErrorCode::Network:
+      return "network error";
+    case ErrorCode::Timeout:
+      return "timeout";
+    case ErrorCode::Busy:
+      return "busy";
+    case ErrorCode::Internal:
+      return "internal error";
   }
   return "unknown error";
 }

@@ -11,27 +11,39 @@ namespace dm {
 std::size_t voxelBytes(VoxelType t) noexcept {
   switch (t) {
     case VoxelType::U8:
-    case VoxelType::I8: return 1;
+    case VoxelType::I8:
+      return 1;
     case VoxelType::U16:
-    case VoxelType::I16: return 2;
+    case VoxelType::I16:
+      return 2;
     case VoxelType::U32:
     case VoxelType::I32:
-    case VoxelType::F32: return 4;
-    case VoxelType::F64: return 8;
+    case VoxelType::F32:
+      return 4;
+    case VoxelType::F64:
+      return 8;
   }
   return 1;
 }
 
 const char* toString(VoxelType t) noexcept {
   switch (t) {
-    case VoxelType::U8: return "uint8";
-    case VoxelType::I8: return "int8";
-    case VoxelType::U16: return "uint16";
-    case VoxelType::I16: return "int16";
-    case VoxelType::U32: return "uint32";
-    case VoxelType::I32: return "int32";
-    case VoxelType::F32: return "float32";
-    case VoxelType::F64: return "float64";
+    case VoxelType::U8:
+      return "uint8";
+    case VoxelType::I8:
+      return "int8";
+    case VoxelType::U16:
+      return "uint16";
+    case VoxelType::I16:
+      return "int16";
+    case VoxelType::U32:
+      return "uint32";
+    case VoxelType::I32:
+      return "int32";
+    case VoxelType::F32:
+      return "float32";
+    case VoxelType::F64:
+      return "float64";
   }
   return "unknown";
 }
@@ -70,11 +82,12 @@ void storeConverted(std::byte* p, double v) {
 }
 }  // namespace
 
-Result<Volume> Volume::create(const Vec3i& dims, VoxelType type, const Affine3& indexToWorld, std::size_t maxBytes) {
+Result<Volume> Volume::create(const Vec3i& dims, VoxelType type, const Affine3& indexToWorld,
+                              std::size_t maxBytes) {
   if ((dims.array() <= 0).any())
     return fail(ErrorCode::InvalidArgument,
-                "dims " + std::to_string(dims.x()) + "x" + std::to_string(dims.y()) + "x" + std::to_string(dims.z()) +
-                    " must all be positive",
+                "dims " + std::to_string(dims.x()) + "x" + std::to_string(dims.y()) + "x" +
+                    std::to_string(dims.z()) + " must all be positive",
                 "volume");
   std::size_t count = 1;
   for (int a = 0; a < 3; ++a) {
@@ -86,8 +99,9 @@ Result<Volume> Volume::create(const Vec3i& dims, VoxelType type, const Affine3& 
   const std::size_t bytes = voxelBytes(type);
   if (count > maxBytes / bytes)
     return fail(ErrorCode::InvalidArgument,
-                std::to_string(dims.x()) + "x" + std::to_string(dims.y()) + "x" + std::to_string(dims.z()) + " " +
-                    toString(type) + " voxels exceed the limit of " + std::to_string(maxBytes) + " bytes",
+                std::to_string(dims.x()) + "x" + std::to_string(dims.y()) + "x" + std::to_string(dims.z()) +
+                    " " + toString(type) + " voxels exceed the limit of " + std::to_string(maxBytes) +
+                    " bytes",
                 "volume", "crop or downsample the volume, or raise the limit");
   if (auto s = checkAffine(indexToWorld); !s) return std::move(s).error();
   Volume v;
@@ -110,14 +124,22 @@ Status Volume::setIndexToWorld(const Affine3& a) {
 double Volume::valueAt(std::size_t n) const {
   const std::byte* p = data_.data() + n * voxelBytes(type_);
   switch (type_) {
-    case VoxelType::U8: return load<std::uint8_t>(p);
-    case VoxelType::I8: return load<std::int8_t>(p);
-    case VoxelType::U16: return load<std::uint16_t>(p);
-    case VoxelType::I16: return load<std::int16_t>(p);
-    case VoxelType::U32: return load<std::uint32_t>(p);
-    case VoxelType::I32: return load<std::int32_t>(p);
-    case VoxelType::F32: return load<float>(p);
-    case VoxelType::F64: return load<double>(p);
+    case VoxelType::U8:
+      return load<std::uint8_t>(p);
+    case VoxelType::I8:
+      return load<std::int8_t>(p);
+    case VoxelType::U16:
+      return load<std::uint16_t>(p);
+    case VoxelType::I16:
+      return load<std::int16_t>(p);
+    case VoxelType::U32:
+      return load<std::uint32_t>(p);
+    case VoxelType::I32:
+      return load<std::int32_t>(p);
+    case VoxelType::F32:
+      return load<float>(p);
+    case VoxelType::F64:
+      return load<double>(p);
   }
   return 0;
 }
@@ -125,14 +147,30 @@ double Volume::valueAt(std::size_t n) const {
 void Volume::setValueAt(std::size_t n, double v) {
   std::byte* p = data_.data() + n * voxelBytes(type_);
   switch (type_) {
-    case VoxelType::U8: storeConverted<std::uint8_t>(p, v); break;
-    case VoxelType::I8: storeConverted<std::int8_t>(p, v); break;
-    case VoxelType::U16: storeConverted<std::uint16_t>(p, v); break;
-    case VoxelType::I16: storeConverted<std::int16_t>(p, v); break;
-    case VoxelType::U32: storeConverted<std::uint32_t>(p, v); break;
-    case VoxelType::I32: storeConverted<std::int32_t>(p, v); break;
-    case VoxelType::F32: storeConverted<float>(p, v); break;
-    case VoxelType::F64: storeConverted<double>(p, v); break;
+    case VoxelType::U8:
+      storeConverted<std::uint8_t>(p, v);
+      break;
+    case VoxelType::I8:
+      storeConverted<std::int8_t>(p, v);
+      break;
+    case VoxelType::U16:
+      storeConverted<std::uint16_t>(p, v);
+      break;
+    case VoxelType::I16:
+      storeConverted<std::int16_t>(p, v);
+      break;
+    case VoxelType::U32:
+      storeConverted<std::uint32_t>(p, v);
+      break;
+    case VoxelType::I32:
+      storeConverted<std::int32_t>(p, v);
+      break;
+    case VoxelType::F32:
+      storeConverted<float>(p, v);
+      break;
+    case VoxelType::F64:
+      storeConverted<double>(p, v);
+      break;
   }
 }
 

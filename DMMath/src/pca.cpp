@@ -23,7 +23,8 @@ Result<PcaX> pca(const MatX& rows) {
 
 Result<Pca3> pca(std::span<const Vec3> points) {
   MatX rows(static_cast<Eigen::Index>(points.size()), 3);
-  for (std::size_t i = 0; i < points.size(); ++i) rows.row(static_cast<Eigen::Index>(i)) = points[i].transpose();
+  for (std::size_t i = 0; i < points.size(); ++i)
+    rows.row(static_cast<Eigen::Index>(i)) = points[i].transpose();
   auto r = pca(rows);
   if (!r) return std::move(r).error();
   Pca3 out;

@@ -29,7 +29,8 @@ TEST(Config, TypedAccessWithPathsInEveryError) {
     "render": { "camera": { "distance": 0.5, "up": [0, 1] } },
     "objects": [ { "name": "skin" }, { "nmae": "bone" } ],
     "rate_Hz": 10
-  })", "scene.json");
+  })",
+                             "scene.json");
   ASSERT_TRUE(c) << c.error();
   dm::ConfigReader r = c->reader();
   auto h = r.child("haptics", true);

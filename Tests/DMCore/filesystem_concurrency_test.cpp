@@ -14,9 +14,10 @@ namespace {
 TEST(FileStreamReader, StreamsEveryByteInOrder) {
   const fs::path f = fs::temp_directory_path() / ("dm_stream_" + std::to_string(::getpid()) + ".bin");
   std::vector<unsigned char> content(1'000'003);
-  for (std::size_t i = 0; i < content.size(); ++i) content[i] = static_cast<unsigned char>((i * 131) ^ (i >> 9));
-  std::ofstream(f, std::ios::binary).write(reinterpret_cast<const char*>(content.data()),
-                                           static_cast<std::streamsize>(content.size()));
+  for (std::size_t i = 0; i < content.size(); ++i)
+    content[i] = static_cast<unsigned char>((i * 131) ^ (i >> 9));
+  std::ofstream(f, std::ios::binary)
+      .write(reinterpret_cast<const char*>(content.data()), static_cast<std::streamsize>(content.size()));
   auto reader = dm::FileStreamReader::open(f, 64 * 1024, 3);
   ASSERT_TRUE(reader) << reader.error();
   EXPECT_EQ((*reader)->fileSize(), content.size());

@@ -30,7 +30,8 @@ TEST(FileSystem, ResolvesMountsSearchPathsAndDirectPaths) {
   EXPECT_EQ(*fsys.resolve((d / "sub" / "a.txt").string()), d / "sub" / "a.txt");
   auto missing = fsys.resolve("nothere.txt");
   ASSERT_FALSE(missing);
-  EXPECT_NE(missing.error().what.find((d / "sub" / "nothere.txt").string()), std::string::npos) << missing.error();
+  EXPECT_NE(missing.error().what.find((d / "sub" / "nothere.txt").string()), std::string::npos)
+      << missing.error();
   auto badMount = fsys.resolve("nosuch:x");
   ASSERT_FALSE(badMount);
   EXPECT_NE(badMount.error().hint.find("mricron:"), std::string::npos);

@@ -32,7 +32,8 @@ TEST(LogRt, ConcurrentProducersDeliverEveryAcceptedRecord) {
   for (int t = 0; t < kThreads; ++t)
     producers.emplace_back([t, &accepted] {
       for (int i = 0; i < kPerThread; ++i)
-        if (dm::log::rt(dm::log::Level::Debug, "rt-test %d %d %s", t, i, "payload-xxxxxxxxxxxxxxxx")) accepted++;
+        if (dm::log::rt(dm::log::Level::Debug, "rt-test %d %d %s", t, i, "payload-xxxxxxxxxxxxxxxx"))
+          accepted++;
     });
   for (auto& p : producers) p.join();
   dm::log::flush();
@@ -56,7 +57,8 @@ TEST(LogRt, FullQueueDropsAndCountsInsteadOfBlocking) {
   dm::log::setSink([](dm::log::Level, std::string_view) {});
   const std::uint64_t before = dm::log::rtDropped();
   // Far more records than slots, faster than the 2 ms drain cadence.
-  for (std::size_t i = 0; i < 4 * dm::log::kRtQueueSlots; ++i) (void)dm::log::rt(dm::log::Level::Trace, "flood %zu", i);
+  for (std::size_t i = 0; i < 4 * dm::log::kRtQueueSlots; ++i)
+    (void)dm::log::rt(dm::log::Level::Trace, "flood %zu", i);
   EXPECT_GT(dm::log::rtDropped(), before);
   dm::log::flush();
   dm::log::setSink({});

@@ -24,7 +24,9 @@ TEST(Mesh, BoundsAreaAndOutwardFaceNormals) {
   EXPECT_NEAR(m.surfaceArea(), 6.0, 1e-12);
   const dm::Vec3 centre(0.5, 0.5, 0.5);
   for (std::size_t t = 0; t < m.triangleCount(); ++t) {
-    const dm::Vec3 c = (m.positions[m.triangles[t][0]] + m.positions[m.triangles[t][1]] + m.positions[m.triangles[t][2]]) / 3;
+    const dm::Vec3 c =
+        (m.positions[m.triangles[t][0]] + m.positions[m.triangles[t][1]] + m.positions[m.triangles[t][2]]) /
+        3;
     EXPECT_GT(m.faceNormal(t).dot(c - centre), 0) << "triangle " << t << " faces inward";
   }
 }

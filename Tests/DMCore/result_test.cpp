@@ -8,8 +8,9 @@
 namespace {
 
 dm::Result<int> parsePositive(int x) {
-  if (x <= 0) return dm::fail(dm::ErrorCode::InvalidArgument, "value must be > 0, got " + std::to_string(x),
-                              "config.json: /rate_hz", "use a positive rate");
+  if (x <= 0)
+    return dm::fail(dm::ErrorCode::InvalidArgument, "value must be > 0, got " + std::to_string(x),
+                    "config.json: /rate_hz", "use a positive rate");
   return x;
 }
 

@@ -62,13 +62,19 @@ bool parseArgs(int argc, char** argv, Args& a) {
       return argv[++i];
     };
     const char* v = nullptr;
-    if (s == "--volume" && (v = value("--volume"))) a.volume = v;
-    else if (s == "--iso" && (v = value("--iso"))) a.iso = std::atof(v);
-    else if (s == "--seconds" && (v = value("--seconds"))) a.seconds = std::atof(v);
-    else if (s == "--out" && (v = value("--out"))) a.out = v;
-    else if (s == "--lockstep") a.lockstep = true;
+    if (s == "--volume" && (v = value("--volume")))
+      a.volume = v;
+    else if (s == "--iso" && (v = value("--iso")))
+      a.iso = std::atof(v);
+    else if (s == "--seconds" && (v = value("--seconds")))
+      a.seconds = std::atof(v);
+    else if (s == "--out" && (v = value("--out")))
+      a.out = v;
+    else if (s == "--lockstep")
+      a.lockstep = true;
     else {
-      std::fprintf(stderr, "usage: head_probe [--volume NAME] [--iso V] [--seconds S] [--lockstep] [--out DIR]\n");
+      std::fprintf(stderr,
+                   "usage: head_probe [--volume NAME] [--iso V] [--seconds S] [--lockstep] [--out DIR]\n");
       return false;
     }
   }
@@ -98,7 +104,8 @@ struct Sample {
 /// Penalty force of the volume at `x`: zero outside (value <= iso), else
 /// stiffness · depth along the outward normal, with depth from the
 /// first-order distance (v - iso)/|∇v|. Clamped to `maxForce`, NaN-guarded.
-dm::Vec3 volumeForce(const dm::Volume& vol, double iso, const dm::Vec3& x, const dm::Vec3& vel, double& depth) {
+dm::Vec3 volumeForce(const dm::Volume& vol, double iso, const dm::Vec3& x, const dm::Vec3& vel,
+                     double& depth) {
   constexpr double kStiffness = 800.0;  // N/m, soft tissue (DESIGN.md's example material)
   constexpr double kDamping = 2.0;      // N·s/m
   constexpr double kMaxForce = 3.0;     // N, a typical desktop device's continuous limit
@@ -130,7 +137,9 @@ int main(int argc, char** argv) {
   Args args;
   if (!parseArgs(argc, argv, args)) return 2;
   using Clock = std::chrono::steady_clock;
-  auto ms = [](Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
+  auto ms = [](Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+  };
 
   // 1. Resolve and load the scan through the resource manager (async, like an engine would).
   auto path = dm::FileSystem::global().resolve(args.volume);
@@ -139,17 +148,17 @@ int main(int argc, char** argv) {
     return 1;
   }
   dm::ResourceManager resources;
-  if (auto s = resources.registerLoader<dm::Volume>({".nii", ".nii.gz", ".hdr", ".mhd", ".mha", ".nrrd", ".nhdr"},
-                                       [](const std::filesystem::path& p, const dm::ImportOptions&) {
-                                         return dm::readVolume(p);
-                                       });
+  if (auto s = resources.registerLoader<dm::Volume>(
+          {".nii", ".nii.gz", ".hdr", ".mhd", ".mha", ".nrrd", ".nhdr"},
+          [](const std::filesystem::path& p, const dm::ImportOptions&) { return dm::readVolume(p); });
       !s) {
     std::fprintf(stderr, "head_probe: %s\n", s.error().message().c_str());
     return 1;
   }
   const auto t0 = Clock::now();
   std::promise<dm::Result<dm::Handle<dm::Volume>>> loaded;
-  resources.loadAsync<dm::Volume>(*path, {}, [&](dm::Result<dm::Handle<dm::Volume>> r) { loaded.set_value(std::move(r)); });
+  resources.loadAsync<dm::Volume>(
+      *path, {}, [&](dm::Result<dm::Handle<dm::Volume>> r) { loaded.set_value(std::move(r)); });
   auto handle = loaded.get_future().get();
   if (!handle) {
     std::fprintf(stderr, "head_probe: %s\n", handle.error().message().c_str());
@@ -160,10 +169,11 @@ int main(int argc, char** argv) {
   const auto [lo, hi] = vol->range();
   const dm::Vec3 sp = vol->spacing() / dm::units::mm;
   std::printf("loaded %s in %.0f ms: %dx%dx%d %s voxels, spacing %.2fx%.2fx%.2f mm, values %.0f..%.0f\n",
-              path->c_str(), ms(t0, t1), vol->dims().x(), vol->dims().y(), vol->dims().z(), dm::toString(vol->type()),
-              sp.x(), sp.y(), sp.z(), lo, hi);
+              path->c_str(), ms(t0, t1), vol->dims().x(), vol->dims().y(), vol->dims().z(),
+              dm::toString(vol->type()), sp.x(), sp.y(), sp.z(), lo, hi);
   const dm::Vec3 origin = vol->indexToWorld().translation() / dm::units::mm;
-  std::printf("  voxel (0,0,0) is at (%.1f, %.1f, %.1f) mm in the scanner's RAS world\n", origin.x(), origin.y(), origin.z());
+  std::printf("  voxel (0,0,0) is at (%.1f, %.1f, %.1f) mm in the scanner's RAS world\n", origin.x(),
+              origin.y(), origin.z());
 
   // 2. Skin isosurface, checked for closedness and placement.
   const auto t2 = Clock::now();
@@ -175,12 +185,15 @@ int main(int argc, char** argv) {
   const auto t3 = Clock::now();
   const dm::MeshTopology topo = dm::analyzeTopology(*skin);
   const dm::Aabb box = skin->bounds();
-  std::printf("skin isosurface (iso %.0f, marching cubes) in %.0f ms: %zu vertices, %zu triangles, %s, %s, %zu components\n",
-              args.iso, ms(t2, t3), skin->vertexCount(), skin->triangleCount(), topo.isClosed ? "closed" : "OPEN",
-              topo.isManifold ? "manifold" : "NON-MANIFOLD", topo.components);
+  std::printf(
+      "skin isosurface (iso %.0f, marching cubes) in %.0f ms: %zu vertices, %zu triangles, %s, %s, %zu "
+      "components\n",
+      args.iso, ms(t2, t3), skin->vertexCount(), skin->triangleCount(), topo.isClosed ? "closed" : "OPEN",
+      topo.isManifold ? "manifold" : "NON-MANIFOLD", topo.components);
   std::printf("  area %.1f cm², enclosed volume %.2f L, bounds (%.0f..%.0f, %.0f..%.0f, %.0f..%.0f) mm\n",
-              topo.surfaceArea * 1e4, topo.volume.value_or(0.0) * 1e3, box.min().x() * 1e3, box.max().x() * 1e3,
-              box.min().y() * 1e3, box.max().y() * 1e3, box.min().z() * 1e3, box.max().z() * 1e3);
+              topo.surfaceArea * 1e4, topo.volume.value_or(0.0) * 1e3, box.min().x() * 1e3,
+              box.max().x() * 1e3, box.min().y() * 1e3, box.max().y() * 1e3, box.min().z() * 1e3,
+              box.max().z() * 1e3);
   auto axes = dm::pca(skin->positions);
   if (!axes) {
     std::fprintf(stderr, "head_probe: %s\n", axes.error().message().c_str());
@@ -188,8 +201,8 @@ int main(int argc, char** argv) {
   }
   const dm::Vec3 centre = axes->mean;
   const dm::Vec3 sd = axes->variances.cwiseSqrt() / dm::units::mm;
-  std::printf("  principal extents (1 sd) %.0f, %.0f, %.0f mm around centre (%.1f, %.1f, %.1f) mm\n", sd.x(), sd.y(),
-              sd.z(), centre.x() * 1e3, centre.y() * 1e3, centre.z() * 1e3);
+  std::printf("  principal extents (1 sd) %.0f, %.0f, %.0f mm around centre (%.1f, %.1f, %.1f) mm\n", sd.x(),
+              sd.y(), sd.z(), centre.x() * 1e3, centre.y() * 1e3, centre.z() * 1e3);
 
   // 3. The probe: the scripted hand target slides on a 15 mm circle over the
   // scalp at the head's +x side, commanded 3 mm below the skin, so the tip
@@ -202,10 +215,11 @@ int main(int argc, char** argv) {
     if (vol->sampleWorld({x, centre.y(), centre.z()}) > args.iso) skinX = x;
   const dm::Vec3 contactPoint(skinX, centre.y(), centre.z());
   constexpr double kCircle = 0.015, kCommandDepth = 0.003, kCircleHz = 0.5;
-  std::printf("probe: target on a %.0f mm circle at %.1f Hz, %.0f mm below the scalp at (%.1f, %.1f, %.1f) mm; "
-              "1 kHz loop, %s, %.1f s\n",
-              kCircle * 1e3, kCircleHz, kCommandDepth * 1e3, contactPoint.x() * 1e3, contactPoint.y() * 1e3,
-              contactPoint.z() * 1e3, args.lockstep ? "lockstep on a virtual clock" : "real time", args.seconds);
+  std::printf(
+      "probe: target on a %.0f mm circle at %.1f Hz, %.0f mm below the scalp at (%.1f, %.1f, %.1f) mm; "
+      "1 kHz loop, %s, %.1f s\n",
+      kCircle * 1e3, kCircleHz, kCommandDepth * 1e3, contactPoint.x() * 1e3, contactPoint.y() * 1e3,
+      contactPoint.z() * 1e3, args.lockstep ? "lockstep on a virtual clock" : "real time", args.seconds);
 
   // Hand model: tip mass pulled toward the target by a spring-damper (the
   // surgeon's hand), pushed back by the surface; integrated with velocity Verlet.
@@ -225,7 +239,8 @@ int main(int argc, char** argv) {
 
   const dm::SecondOrderRhs accel = [&](double t, const dm::VecX& px, const dm::VecX& pv, dm::VecX& a) {
     const double phase = 2 * M_PI * kCircleHz * t;
-    const dm::Vec3 target = contactPoint + dm::Vec3(-kCommandDepth, kCircle * std::cos(phase), kCircle * std::sin(phase));
+    const dm::Vec3 target =
+        contactPoint + dm::Vec3(-kCommandDepth, kCircle * std::cos(phase), kCircle * std::sin(phase));
     double d = 0;
     const dm::Vec3 surface = volumeForce(*vol, args.iso, px.head<3>(), pv.head<3>(), d);
     a = (kHandK * (target - px.head<3>()) - kHandB * pv.head<3>() + surface) / kMass;
@@ -256,8 +271,8 @@ int main(int argc, char** argv) {
     Sample s;
     while (trace.tryPop(s)) {
       char line[160];
-      std::snprintf(line, sizeof line, "%.3f,%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%.5f\n", s.t, s.tip[0], s.tip[1], s.tip[2],
-                    s.force[0], s.force[1], s.force[2], s.depth);
+      std::snprintf(line, sizeof line, "%.3f,%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%.5f\n", s.t, s.tip[0], s.tip[1],
+                    s.tip[2], s.force[0], s.force[1], s.force[2], s.depth);
       csv << line;
       const double f = std::sqrt(double(s.force[0]) * s.force[0] + double(s.force[1]) * s.force[1] +
                                  double(s.force[2]) * s.force[2]);
@@ -301,26 +316,39 @@ int main(int argc, char** argv) {
   }
   drain();
   const dm::RealTimeLoopStats st = loop.stats();
-  std::printf("haptic loop: %llu ticks, execution p50 %.1f us, p99 %.1f us, p99.9 %.1f us, max %.1f us; "
-              "wake-up p99 %.0f us; deadline misses %llu\n",
-              static_cast<unsigned long long>(st.ticks), st.execution.p50_us, st.execution.p99_us, st.execution.p999_us,
-              st.execution.max_us, st.wakeup.p99_us, static_cast<unsigned long long>(st.deadline_misses));
-  std::printf("contact: %llu of %llu ticks in contact, max force %.2f N (device limit 3 N), max depth %.1f mm; "
-              "trace samples dropped %llu\n",
-              static_cast<unsigned long long>(contactTicks), static_cast<unsigned long long>(samples), maxForce,
-              maxDepth * 1e3, static_cast<unsigned long long>(traceDropped.load()));
+  std::printf(
+      "haptic loop: %llu ticks, execution p50 %.1f us, p99 %.1f us, p99.9 %.1f us, max %.1f us; "
+      "wake-up p99 %.0f us; deadline misses %llu\n",
+      static_cast<unsigned long long>(st.ticks), st.execution.p50_us, st.execution.p99_us,
+      st.execution.p999_us, st.execution.max_us, st.wakeup.p99_us,
+      static_cast<unsigned long long>(st.deadline_misses));
+  std::printf(
+      "contact: %llu of %llu ticks in contact, max force %.2f N (device limit 3 N), max depth %.1f mm; "
+      "trace samples dropped %llu\n",
+      static_cast<unsigned long long>(contactTicks), static_cast<unsigned long long>(samples), maxForce,
+      maxDepth * 1e3, static_cast<unsigned long long>(traceDropped.load()));
 
-  nlohmann::json summary = {
-      {"volume", path->string()},
-      {"dims", {vol->dims().x(), vol->dims().y(), vol->dims().z()}},
-      {"skin", {{"vertices", skin->vertexCount()}, {"triangles", skin->triangleCount()}, {"closed", topo.isClosed},
-                {"manifold", topo.isManifold}, {"volume_m3", topo.volume.value_or(0.0)},
-                {"extract_ms", ms(t2, t3)}}},
-      {"haptics", {{"mode", args.lockstep ? "lockstep" : "realtime"}, {"ticks", st.ticks},
-                   {"execution_us", {{"p50", st.execution.p50_us}, {"p99", st.execution.p99_us},
-                                     {"p999", st.execution.p999_us}, {"max", st.execution.max_us}}},
-                   {"deadline_misses", st.deadline_misses}, {"contact_ticks", contactTicks},
-                   {"max_force_N", maxForce}, {"max_depth_m", maxDepth}}}};
+  nlohmann::json summary = {{"volume", path->string()},
+                            {"dims", {vol->dims().x(), vol->dims().y(), vol->dims().z()}},
+                            {"skin",
+                             {{"vertices", skin->vertexCount()},
+                              {"triangles", skin->triangleCount()},
+                              {"closed", topo.isClosed},
+                              {"manifold", topo.isManifold},
+                              {"volume_m3", topo.volume.value_or(0.0)},
+                              {"extract_ms", ms(t2, t3)}}},
+                            {"haptics",
+                             {{"mode", args.lockstep ? "lockstep" : "realtime"},
+                              {"ticks", st.ticks},
+                              {"execution_us",
+                               {{"p50", st.execution.p50_us},
+                                {"p99", st.execution.p99_us},
+                                {"p999", st.execution.p999_us},
+                                {"max", st.execution.max_us}}},
+                              {"deadline_misses", st.deadline_misses},
+                              {"contact_ticks", contactTicks},
+                              {"max_force_N", maxForce},
+                              {"max_depth_m", maxDepth}}}};
   const std::string text = summary.dump(2) + "\n";
   if (auto s = dm::writeFileAtomic(args.out / "summary.json", text.data(), text.size()); !s) {
     std::fprintf(stderr, "head_probe: %s\n", s.error().message().c_str());

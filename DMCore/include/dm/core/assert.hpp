@@ -7,8 +7,8 @@
 #pragma once
 
 namespace dm::detail {
-[[noreturn]] void assertionFailed(const char* kind, const char* expr, const char* msg,
-                                  const char* file, int line) noexcept;
+[[noreturn]] void assertionFailed(const char* kind, const char* expr, const char* msg, const char* file,
+                                  int line) noexcept;
 }  // namespace dm::detail
 
 #define DM_DEMAND(cond, msg)                                                        \

@@ -66,7 +66,8 @@ class FileSystem {
 
 /// Reads a whole file; fails if it is missing, unreadable or larger than
 /// `maxBytes` (default 4 GiB) — errors name the file.
-Result<std::vector<std::byte>> readFile(const std::filesystem::path& file, std::size_t maxBytes = std::size_t{1} << 32);
+Result<std::vector<std::byte>> readFile(const std::filesystem::path& file,
+                                        std::size_t maxBytes = std::size_t{1} << 32);
 
 /// Writes `bytes` to `file` atomically: a temporary file in the same
 /// directory, fsync, then rename — readers never see a partial file.
@@ -76,8 +77,8 @@ Status writeFileAtomic(const std::filesystem::path& file, const void* bytes, std
 class FileStreamReader {
  public:
   struct Chunk {
-    std::uint64_t offset = 0;       ///< byte offset of data[0] in the file
-    std::vector<std::byte> data;    ///< empty marks the end of the file
+    std::uint64_t offset = 0;     ///< byte offset of data[0] in the file
+    std::vector<std::byte> data;  ///< empty marks the end of the file
   };
 
   /// Opens `file` and starts reading ahead up to `maxQueued` chunks of

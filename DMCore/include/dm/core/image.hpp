@@ -27,10 +27,20 @@ enum class PixelType : std::uint8_t { U8, U16, F32 };
 std::size_t pixelTypeBytes(PixelType t) noexcept;
 const char* toString(PixelType t) noexcept;
 
-template <class T> struct PixelTypeOf;
-template <> struct PixelTypeOf<std::uint8_t> { static constexpr PixelType value = PixelType::U8; };
-template <> struct PixelTypeOf<std::uint16_t> { static constexpr PixelType value = PixelType::U16; };
-template <> struct PixelTypeOf<float> { static constexpr PixelType value = PixelType::F32; };
+template <class T>
+struct PixelTypeOf;
+template <>
+struct PixelTypeOf<std::uint8_t> {
+  static constexpr PixelType value = PixelType::U8;
+};
+template <>
+struct PixelTypeOf<std::uint16_t> {
+  static constexpr PixelType value = PixelType::U16;
+};
+template <>
+struct PixelTypeOf<float> {
+  static constexpr PixelType value = PixelType::F32;
+};
 
 class Image {
  public:
@@ -63,12 +73,17 @@ class Image {
   const std::byte* row(int y) const { return data_ + static_cast<std::size_t>(y) * stride_; }
 
   /// Channel c of pixel (x, y); DM_DEMAND that T matches type().
-  template <class T> T& at(int x, int y, int c = 0) {
+  template <class T>
+  T& at(int x, int y, int c = 0) {
     DM_DEMAND(PixelTypeOf<T>::value == type_, "Image::at<T>() with the wrong pixel type");
     DM_ASSERT(x >= 0 && y >= 0 && x < width_ && y < height_ && c >= 0 && c < channels_, "pixel out of range");
-    return reinterpret_cast<T*>(row(y))[static_cast<std::size_t>(x) * static_cast<std::size_t>(channels_) + static_cast<std::size_t>(c)];
+    return reinterpret_cast<T*>(row(
+        y))[static_cast<std::size_t>(x) * static_cast<std::size_t>(channels_) + static_cast<std::size_t>(c)];
   }
-  template <class T> const T& at(int x, int y, int c = 0) const { return const_cast<Image*>(this)->at<T>(x, y, c); }
+  template <class T>
+  const T& at(int x, int y, int c = 0) const {
+    return const_cast<Image*>(this)->at<T>(x, y, c);
+  }
 
   /// A sub-rectangle sharing this image's memory; clipped to the image.
   Image view(int x, int y, int width, int height) const;

@@ -21,11 +21,11 @@ using Triangle = std::array<std::uint32_t, 3>;
 
 struct Mesh {
   std::string name;
-  std::vector<Vec3> positions;       ///< m, local frame
-  std::vector<Vec3> normals;         ///< unit, per vertex; empty or positions.size()
-  std::vector<Triangle> triangles;   ///< CCW from outside
-  std::vector<Vec2f> uvs;            ///< texture coordinates; empty or positions.size()
-  std::vector<Vec4f> colors;         ///< linear RGBA in [0, 1]; empty or positions.size()
+  std::vector<Vec3> positions;      ///< m, local frame
+  std::vector<Vec3> normals;        ///< unit, per vertex; empty or positions.size()
+  std::vector<Triangle> triangles;  ///< CCW from outside
+  std::vector<Vec2f> uvs;           ///< texture coordinates; empty or positions.size()
+  std::vector<Vec4f> colors;        ///< linear RGBA in [0, 1]; empty or positions.size()
 
   std::size_t vertexCount() const { return positions.size(); }
   std::size_t triangleCount() const { return triangles.size(); }

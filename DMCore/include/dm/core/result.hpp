@@ -69,9 +69,9 @@ class [[nodiscard]] Result {
   static_assert(!std::is_same_v<std::remove_cv_t<T>, Error>, "Result<Error> is ambiguous");
   using value_type = T;
 
-  Result(const T& v) : data_(std::in_place_index<0>, v) {}                 // NOLINT(google-explicit-constructor)
-  Result(T&& v) : data_(std::in_place_index<0>, std::move(v)) {}           // NOLINT(google-explicit-constructor)
-  Result(Error e) : data_(std::in_place_index<1>, std::move(e)) {}         // NOLINT(google-explicit-constructor)
+  Result(const T& v) : data_(std::in_place_index<0>, v) {}          // NOLINT(google-explicit-constructor)
+  Result(T&& v) : data_(std::in_place_index<0>, std::move(v)) {}    // NOLINT(google-explicit-constructor)
+  Result(Error e) : data_(std::in_place_index<1>, std::move(e)) {}  // NOLINT(google-explicit-constructor)
   template <class... Args>
   explicit Result(std::in_place_t, Args&&... args)
       : data_(std::in_place_index<0>, std::forward<Args>(args)...) {}
@@ -79,9 +79,18 @@ class [[nodiscard]] Result {
   bool ok() const noexcept { return data_.index() == 0; }
   explicit operator bool() const noexcept { return ok(); }
 
-  T& value() & { demandValue(); return std::get<0>(data_); }
-  const T& value() const& { demandValue(); return std::get<0>(data_); }
-  T&& value() && { demandValue(); return std::get<0>(std::move(data_)); }
+  T& value() & {
+    demandValue();
+    return std::get<0>(data_);
+  }
+  const T& value() const& {
+    demandValue();
+    return std::get<0>(data_);
+  }
+  T&& value() && {
+    demandValue();
+    return std::get<0>(std::move(data_));
+  }
   T& operator*() & { return value(); }
   const T& operator*() const& { return value(); }
   T&& operator*() && { return std::move(*this).value(); }
@@ -90,16 +99,24 @@ class [[nodiscard]] Result {
 
   /// The value, or `fallback` on error.
   template <class U>
-  T valueOr(U&& fallback) const& { return ok() ? std::get<0>(data_) : T(std::forward<U>(fallback)); }
+  T valueOr(U&& fallback) const& {
+    return ok() ? std::get<0>(data_) : T(std::forward<U>(fallback));
+  }
 
-  const Error& error() const& { DM_DEMAND(!ok(), "Result::error() on a value"); return std::get<1>(data_); }
-  Error&& error() && { DM_DEMAND(!ok(), "Result::error() on a value"); return std::get<1>(std::move(data_)); }
+  const Error& error() const& {
+    DM_DEMAND(!ok(), "Result::error() on a value");
+    return std::get<1>(data_);
+  }
+  Error&& error() && {
+    DM_DEMAND(!ok(), "Result::error() on a value");
+    return std::get<1>(std::move(data_));
+  }
 
  private:
   void demandValue() const {
     if (!ok()) [[unlikely]]
-      detail::assertionFailed("DM_DEMAND", "Result::value()", std::get<1>(data_).message().c_str(),
-                              __FILE__, __LINE__);
+      detail::assertionFailed("DM_DEMAND", "Result::value()", std::get<1>(data_).message().c_str(), __FILE__,
+                              __LINE__);
   }
   std::variant<T, Error> data_;
 };
@@ -114,8 +131,14 @@ class [[nodiscard]] Result<void> {
 
   bool ok() const noexcept { return ok_; }
   explicit operator bool() const noexcept { return ok_; }
-  const Error& error() const& { DM_DEMAND(!ok_, "Result::error() on success"); return error_; }
-  Error&& error() && { DM_DEMAND(!ok_, "Result::error() on success"); return std::move(error_); }
+  const Error& error() const& {
+    DM_DEMAND(!ok_, "Result::error() on success");
+    return error_;
+  }
+  Error&& error() && {
+    DM_DEMAND(!ok_, "Result::error() on success");
+    return std::move(error_);
+  }
 
  private:
   Error error_;

@@ -33,15 +33,40 @@ std::size_t voxelBytes(VoxelType t) noexcept;
 const char* toString(VoxelType t) noexcept;
 
 /// Maps a C++ scalar type to its VoxelType.
-template <class T> struct VoxelTypeOf;
-template <> struct VoxelTypeOf<std::uint8_t> { static constexpr VoxelType value = VoxelType::U8; };
-template <> struct VoxelTypeOf<std::int8_t> { static constexpr VoxelType value = VoxelType::I8; };
-template <> struct VoxelTypeOf<std::uint16_t> { static constexpr VoxelType value = VoxelType::U16; };
-template <> struct VoxelTypeOf<std::int16_t> { static constexpr VoxelType value = VoxelType::I16; };
-template <> struct VoxelTypeOf<std::uint32_t> { static constexpr VoxelType value = VoxelType::U32; };
-template <> struct VoxelTypeOf<std::int32_t> { static constexpr VoxelType value = VoxelType::I32; };
-template <> struct VoxelTypeOf<float> { static constexpr VoxelType value = VoxelType::F32; };
-template <> struct VoxelTypeOf<double> { static constexpr VoxelType value = VoxelType::F64; };
+template <class T>
+struct VoxelTypeOf;
+template <>
+struct VoxelTypeOf<std::uint8_t> {
+  static constexpr VoxelType value = VoxelType::U8;
+};
+template <>
+struct VoxelTypeOf<std::int8_t> {
+  static constexpr VoxelType value = VoxelType::I8;
+};
+template <>
+struct VoxelTypeOf<std::uint16_t> {
+  static constexpr VoxelType value = VoxelType::U16;
+};
+template <>
+struct VoxelTypeOf<std::int16_t> {
+  static constexpr VoxelType value = VoxelType::I16;
+};
+template <>
+struct VoxelTypeOf<std::uint32_t> {
+  static constexpr VoxelType value = VoxelType::U32;
+};
+template <>
+struct VoxelTypeOf<std::int32_t> {
+  static constexpr VoxelType value = VoxelType::I32;
+};
+template <>
+struct VoxelTypeOf<float> {
+  static constexpr VoxelType value = VoxelType::F32;
+};
+template <>
+struct VoxelTypeOf<double> {
+  static constexpr VoxelType value = VoxelType::F64;
+};
 
 class Volume {
  public:
@@ -52,7 +77,8 @@ class Volume {
 
   /// A zero-filled volume. Fails on non-positive dims, a size that overflows
   /// or exceeds `maxBytes`, or a singular / non-finite affine.
-  static Result<Volume> create(const Vec3i& dims, VoxelType type, const Affine3& indexToWorld = Affine3::Identity(),
+  static Result<Volume> create(const Vec3i& dims, VoxelType type,
+                               const Affine3& indexToWorld = Affine3::Identity(),
                                std::size_t maxBytes = kDefaultMaxBytes);
 
   const Vec3i& dims() const { return dims_; }
@@ -65,11 +91,13 @@ class Volume {
   std::byte* bytes() { return data_.data(); }
   const std::byte* bytes() const { return data_.data(); }
   /// Typed access; DM_DEMAND that T matches type().
-  template <class T> T* data() {
+  template <class T>
+  T* data() {
     DM_DEMAND(VoxelTypeOf<T>::value == type_, "Volume::data<T>() with the wrong voxel type");
     return reinterpret_cast<T*>(data_.data());
   }
-  template <class T> const T* data() const {
+  template <class T>
+  const T* data() const {
     DM_DEMAND(VoxelTypeOf<T>::value == type_, "Volume::data<T>() with the wrong voxel type");
     return reinterpret_cast<const T*>(data_.data());
   }
@@ -77,7 +105,9 @@ class Volume {
   std::size_t linearIndex(int i, int j, int k) const {
     DM_ASSERT(contains(i, j, k), "voxel index out of range");
     return static_cast<std::size_t>(i) +
-           static_cast<std::size_t>(dims_.x()) * (static_cast<std::size_t>(j) + static_cast<std::size_t>(dims_.y()) * static_cast<std::size_t>(k));
+           static_cast<std::size_t>(dims_.x()) *
+               (static_cast<std::size_t>(j) +
+                static_cast<std::size_t>(dims_.y()) * static_cast<std::size_t>(k));
   }
   bool contains(int i, int j, int k) const {
     return i >= 0 && j >= 0 && k >= 0 && i < dims_.x() && j < dims_.y() && k < dims_.z();

@@ -10,9 +10,9 @@ namespace dm {
 
 /// Principal axes of a point set.
 struct Pca3 {
-  Vec3 mean = Vec3::Zero();        ///< centroid, same units as the input
-  Mat3 axes = Mat3::Identity();    ///< columns: unit principal axes, right-handed
-  Vec3 variances = Vec3::Zero();   ///< variance along each axis, descending
+  Vec3 mean = Vec3::Zero();       ///< centroid, same units as the input
+  Mat3 axes = Mat3::Identity();   ///< columns: unit principal axes, right-handed
+  Vec3 variances = Vec3::Zero();  ///< variance along each axis, descending
 };
 
 /// PCA of `points` (covariance divided by n). O(n).
