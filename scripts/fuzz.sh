@@ -26,9 +26,13 @@ for t in "${targets[@]}"; do
   [ -d "Tests/fuzz/corpus/$t" ] && cp -n Tests/fuzz/corpus/"$t"/* "$corpus"/ 2>/dev/null || true
   for f in $(seeds_for "$t"); do cp -n "$f" "$corpus"/ 2>/dev/null || true; done
   echo "fuzz: $t for ${seconds}s"
-  ASAN_OPTIONS=detect_leaks=1 "$builddir/$t" -max_total_time="$seconds" -rss_limit_mb=4096 -max_len=1048576 \
-    -artifact_prefix="$builddir/artifacts/$t-" -print_final_stats=1 "$corpus" 2>&1 | tail -4
-  status=${PIPESTATUS[0]}
-  if [ "$status" -ne 0 ]; then echo "fuzz: $t failed (exit $status); inputs in $builddir/artifacts/" >&2; exit 1; fi
+  log="$builddir/artifacts/$t.log"
+  if ! ASAN_OPTIONS=detect_leaks=1 "$builddir/Tests/fuzz/$t" -max_total_time="$seconds" -rss_limit_mb=4096 \
+      -max_len=1048576 -artifact_prefix="$builddir/artifacts/$t-" -print_final_stats=1 "$corpus" >"$log" 2>&1; then
+    tail -40 "$log"
+    echo "fuzz: $t failed; the input is in $builddir/artifacts/" >&2
+    exit 1
+  fi
+  grep -E "^(#[0-9]+ *DONE|stat::number_of_executed_units|Done [0-9]+ runs)" "$log" | tail -2
 done
 echo "fuzz: all ${#targets[@]} targets ran ${seconds}s each without a failure"
