@@ -25,6 +25,16 @@ for t in "${targets[@]}"; do
   mkdir -p "$corpus"
   [ -d "Tests/fuzz/corpus/$t" ] && cp -n Tests/fuzz/corpus/"$t"/* "$corpus"/ 2>/dev/null || true
   for f in $(seeds_for "$t"); do cp -n "$f" "$corpus"/ 2>/dev/null || true; done
+  if [ "$t" = mesh_fuzz ]; then
+    # mesh_fuzz reads a format byte first (0 stl, 1 ply, 2 obj, 3 off, ...).
+    m=/usr/share/assimp/models
+    i=0
+    for pair in "0 $m/STL/Spider_ascii.stl" "1 $m/PLY/cube.ply" "2 $m/OBJ/box.obj" "3 $m/OFF/Cube.off"; do
+      set -- $pair
+      [ -f "$2" ] && { printf "\\$(printf '%03o' "$1")"; head -c 65536 "$2"; } > "$corpus/seed$i" || true
+      i=$((i + 1))
+    done
+  fi
   echo "fuzz: $t for ${seconds}s"
   log="$builddir/artifacts/$t.log"
   if ! ASAN_OPTIONS=detect_leaks=1 "$builddir/Tests/fuzz/$t" -max_total_time="$seconds" -rss_limit_mb=4096 \

@@ -1,0 +1,1241 @@
+// Mesh import through Assimp (see dm/io/mesh_io.hpp for the contract).
+//
+// Pipeline: Assimp reads the file without post-processing; we check the raw
+// scene ourselves (non-finite coordinates would make Assimp's spatial sorts
+// undefined, point clouds deserve a clearer message than "validation
+// failed", empty sub-meshes of otherwise good files are pruned); then
+// Assimp validates the scene and triangulates, joins identical vertices and
+// splits meshes by primitive type. The scene graph is flattened here, with
+// transforms in double precision, and the result is welded by position.
+#include <dm/core/filesystem.hpp>
+#include <dm/core/log.hpp>
+#include <dm/core/units.hpp>
+#include <dm/io/mesh_io.hpp>
+
+#include <assimp/DefaultIOSystem.h>
+#include <assimp/config.h>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#if defined(__linux__)
+#include <sys/prctl.h>
+#endif
+
+#include <algorithm>
+#include <array>
+#include <assimp/IOStream.hpp>
+#include <assimp/IOSystem.hpp>
+#include <assimp/Importer.hpp>
+#include <bit>
+#include <cctype>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <exception>
+#include <fstream>
+#include <limits>
+#include <set>
+#include <string>
+#include <unordered_map>
+#include <utility>
+
+namespace dm {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// Steps run after our own checks of the raw scene. No optimisation steps
+// (OptimizeMeshes, OptimizeGraph, ImproveCacheLocality): they cost time on
+// large inputs and we flatten the graph ourselves.
+constexpr unsigned kPostProcess =
+    aiProcess_Triangulate | aiProcess_JoinIdenticalVertices | aiProcess_SortByPType;
+
+// Deeper scene graphs than this are refused (Assimp rejects cycles, but a
+// crafted file can still nest deeply).
+constexpr std::size_t kMaxNodeDepth = 1024;
+
+std::string lower(std::string_view s) {
+  std::string out(s);
+  for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return out;
+}
+
+std::string squote(std::string_view s) { return "'" + std::string(s) + "'"; }
+
+std::string meshLabel(const aiMesh& m, unsigned index) {
+  const char* n = m.mName.C_Str();
+  return (n[0] != '\0' ? squote(n) + " (mesh " : "(mesh ") + std::to_string(index) + ")";
+}
+
+// ---------------------------------------------------------------------------
+// File access: every file an import opens is checked against one byte budget,
+// and only regular files are opened (a crafted .mtl or glTF uri naming a FIFO
+// or /dev/zero must not block or stream forever).
+
+struct ImportBudget {
+  std::size_t maxBytes = 0;
+  std::size_t usedBytes = 0;
+  std::set<std::string> opened;  ///< canonical paths already counted
+  std::string refusal;           ///< why the last refused open was refused
+};
+
+class LimitedIOSystem final : public Assimp::DefaultIOSystem {
+ public:
+  explicit LimitedIOSystem(ImportBudget* budget) : budget_(budget) {}
+
+  bool Exists(const char* file) const override {
+    std::error_code ec;
+    return file != nullptr && fs::is_regular_file(file, ec);
+  }
+
+  Assimp::IOStream* Open(const char* file, const char* mode = "rb") override {
+    if (file == nullptr) return nullptr;
+    if (mode == nullptr || std::strpbrk(mode, "wa+") != nullptr) {
+      budget_->refusal = std::string("the importer tried to write ") + file + ", which is not allowed";
+      return nullptr;
+    }
+    std::error_code ec;
+    const fs::file_status st = fs::status(file, ec);
+    if (ec || !fs::exists(st)) return nullptr;  // a missing texture or .mtl: the reader decides
+    if (!fs::is_regular_file(st)) {
+      budget_->refusal = std::string("refers to ") + file + ", which is not a regular file";
+      return nullptr;
+    }
+    const std::uintmax_t size = fs::file_size(file, ec);
+    if (ec) return nullptr;
+    const std::string key = fs::weakly_canonical(file, ec).string();
+    if (!budget_->opened.contains(key)) {
+      if (size > budget_->maxBytes - budget_->usedBytes) {
+        budget_->refusal = std::string("reading ") + file + " (" + std::to_string(size) +
+                           " bytes) would exceed " + "the import limit of " +
+                           std::to_string(budget_->maxBytes) +
+                           " bytes; raise MeshImportOptions::maxFileBytes";
+        return nullptr;
+      }
+      budget_->usedBytes += static_cast<std::size_t>(size);
+      budget_->opened.insert(key);
+    }
+    return DefaultIOSystem::Open(file, mode);
+  }
+
+ private:
+  ImportBudget* budget_;
+};
+
+// For parseMesh: the only file is the memory buffer (Assimp's MemoryIOSystem
+// serves it and forwards every other name here).
+class NoFileIOSystem final : public Assimp::IOSystem {
+ public:
+  explicit NoFileIOSystem(ImportBudget* budget) : budget_(budget) {}
+  bool Exists(const char* /*file*/) const override { return false; }
+  char getOsSeparator() const override { return '/'; }
+  Assimp::IOStream* Open(const char* file, const char* /*mode*/) override {
+    budget_->refusal = std::string("refers to the external file ") + (file ? file : "?") +
+                       ", which parseMesh() does not open; use readMesh() on a file";
+    return nullptr;
+  }
+  void Close(Assimp::IOStream* stream) override { delete stream; }
+
+ private:
+  ImportBudget* budget_;
+};
+
+// ---------------------------------------------------------------------------
+// Guards against inputs that make Assimp 5.2 hang rather than fail. They run
+// on the first kHeadBytes of the input, before Assimp sees it.
+
+constexpr std::size_t kHeadBytes = 64 * 1024;
+
+// OFF: Assimp 5.2's OFF reader trusts the vertex and face counts of the
+// header and allocates and loops accordingly (the assimp-testmodels file
+// invalid/OutOfMemory.off hangs it). A vertex needs at least 6 bytes
+// ("0 0 0\n") and a face at least 2, so counts beyond that are refused.
+
+bool parseCount(std::string_view s, std::size_t& pos, std::uint64_t& value) {
+  while (pos < s.size() && std::isspace(static_cast<unsigned char>(s[pos]))) ++pos;
+  if (pos >= s.size() || !std::isdigit(static_cast<unsigned char>(s[pos]))) return false;
+  value = 0;
+  while (pos < s.size() && std::isdigit(static_cast<unsigned char>(s[pos]))) {
+    const std::uint64_t digit = static_cast<std::uint64_t>(s[pos] - '0');
+    value = value > (std::numeric_limits<std::uint64_t>::max() - digit) / 10
+                ? std::numeric_limits<std::uint64_t>::max()
+                : value * 10 + digit;
+    ++pos;
+  }
+  return true;
+}
+
+Status checkOffHeader(std::string_view head, std::uint64_t fileBytes, bool offExtension,
+                      const std::string& where) {
+  std::size_t pos = 0;
+  // Skip blank lines and '#' comments.
+  for (;;) {
+    while (pos < head.size() && std::isspace(static_cast<unsigned char>(head[pos]))) ++pos;
+    if (pos < head.size() && head[pos] == '#') {
+      while (pos < head.size() && head[pos] != '\n') ++pos;
+      continue;
+    }
+    break;
+  }
+  std::size_t end = pos;
+  while (end < head.size() && !std::isspace(static_cast<unsigned char>(head[end]))) ++end;
+  const std::string token = lower(head.substr(pos, end - pos));
+  const bool offToken = token.size() >= 3 && token.compare(token.size() - 3, 3, "off") == 0;
+  if (!offToken && !offExtension) return ok();
+  if (offToken) {
+    pos = end;
+    if (token.find('n') != std::string::npos) {  // nOFF: the dimension comes first
+      std::uint64_t dim = 0;
+      if (!parseCount(head, pos, dim)) return ok();
+    }
+  }
+  std::uint64_t vertices = 0, faces = 0;
+  if (!parseCount(head, pos, vertices) || !parseCount(head, pos, faces))
+    return ok();  // the reader reports it
+  if (vertices > fileBytes / 6 + 1 || faces > fileBytes / 2 + 1)
+    return fail(ErrorCode::Parse,
+                "OFF header declares " + std::to_string(vertices) + " vertices and " + std::to_string(faces) +
+                    " faces, more than a file of " + std::to_string(fileBytes) + " bytes can hold",
+                where, "the header counts are wrong; fix or re-export the file");
+  return ok();
+}
+
+// PLY: Assimp 5.2 reads header lines until one starts with the token
+// "end_header" and never stops at the end of the input, so a header without
+// that line ("end_header" glued to the data, a truncated header) loops
+// forever. Every file that starts with "ply" (the reader's magic) must have
+// an "end_header" line, alone on its line, within the first kHeadBytes.
+Status checkPlyHeader(std::string_view head, bool wholeFile, const std::string& where) {
+  if (head.size() < 3 || lower(head.substr(0, 3)) != "ply") return ok();
+  const char* hint =
+      "the PLY header must end with a line holding only 'end_header'; fix or re-export the file";
+  std::size_t pos = 0;
+  while (pos < head.size()) {
+    const std::size_t eol = head.find('\n', pos);
+    const std::string_view line =
+        head.substr(pos, eol == std::string_view::npos ? std::string_view::npos : eol - pos);
+    if (line.starts_with("end_header")) {
+      const std::string_view rest = line.substr(10);
+      if (eol != std::string_view::npos && rest.find_first_not_of(" \t\r") == std::string_view::npos)
+        return ok();
+      return fail(
+          ErrorCode::Parse,
+          "PLY 'end_header' at byte " + std::to_string(pos) + " is not followed by the end of the line",
+          where, hint);
+    }
+    if (eol == std::string_view::npos) break;
+    pos = eol + 1;
+  }
+  return fail(ErrorCode::Parse,
+              std::string("PLY header has no 'end_header' line") + (wholeFile ? "" : " in its first 64 KiB"),
+              where, hint);
+}
+
+// Collada: Assimp 5.2 reads the index list of a <p> element with a loop that
+// does not advance over a character other than a digit, sign or blank, and
+// grows a vector forever ("<p>0 1 x 2</p>" never returns). Files that look
+// like Collada are scanned whole and such lists refused.
+bool looksLikeCollada(std::string_view head, bool daeExtension) {
+  return daeExtension || lower(head.substr(0, std::min<std::size_t>(head.size(), 4096))).find("<collada") !=
+                             std::string::npos;
+}
+
+Status checkColladaIndexLists(std::string_view xml, const std::string& where) {
+  std::size_t pos = 0;
+  while ((pos = xml.find("<p", pos)) != std::string_view::npos) {
+    pos += 2;
+    if (pos >= xml.size() || (xml[pos] != '>' && !std::isspace(static_cast<unsigned char>(xml[pos]))))
+      continue;
+    const std::size_t open = xml.find('>', pos);
+    if (open == std::string_view::npos) break;
+    if (xml[open - 1] == '/') continue;  // <p/>
+    const std::size_t close = xml.find("</p>", open);
+    if (close == std::string_view::npos) break;  // the XML parser reports it
+    const std::string_view list = xml.substr(open + 1, close - open - 1);
+    const std::size_t bad = list.find_first_not_of("0123456789+- \t\r\n");
+    if (bad != std::string_view::npos)
+      return fail(ErrorCode::Parse,
+                  "Collada index list <p> at byte " + std::to_string(open + 1) + " contains the character '" +
+                      std::string(1, list[bad]) + "' at byte " + std::to_string(open + 1 + bad),
+                  where, "index lists hold whitespace-separated integers only; fix or re-export the file");
+    pos = close + 4;
+  }
+  return ok();
+}
+
+// ---------------------------------------------------------------------------
+// Raw scene checks, before Assimp's post-processing touches the data.
+
+// Counts polygon faces (3 or more indices); fails on a non-finite position.
+Result<std::size_t> checkRawScene(const aiScene& scene, const std::string& where) {
+  std::size_t polygons = 0, others = 0, loose = 0;
+  if (scene.mMeshes == nullptr) return std::size_t{0};
+  for (unsigned k = 0; k < scene.mNumMeshes; ++k) {
+    const aiMesh* m = scene.mMeshes[k];
+    if (m == nullptr) continue;
+    if (m->mVertices != nullptr)
+      for (unsigned v = 0; v < m->mNumVertices; ++v) {
+        const aiVector3D& p = m->mVertices[v];
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) {
+          char coords[96];
+          std::snprintf(coords, sizeof coords, "(%g, %g, %g)", static_cast<double>(p.x),
+                        static_cast<double>(p.y), static_cast<double>(p.z));
+          return fail(ErrorCode::Parse,
+                      "mesh " + meshLabel(*m, k) + ": vertex " + std::to_string(v) +
+                          " has a non-finite coordinate " + coords,
+                      where, "fix or remove the vertex");
+        }
+      }
+    if (m->mFaces != nullptr && m->mNumFaces > 0)
+      for (unsigned f = 0; f < m->mNumFaces; ++f) (m->mFaces[f].mNumIndices >= 3 ? polygons : others) += 1;
+    else if (m->mVertices != nullptr)
+      loose += m->mNumVertices;  // a point cloud without faces
+  }
+  if (polygons == 0 && (others > 0 || loose > 0))
+    return fail(ErrorCode::Parse,
+                "contains no triangles (only " +
+                    (others > 0 ? std::to_string(others) + " points or line segments"
+                                : std::to_string(loose) + " vertices without faces") +
+                    ")",
+                where,
+                "a mesh needs triangles or polygons; export the surface, not the point cloud or wireframe");
+  return polygons;
+}
+
+void pruneNodeReferences(aiNode* node, const std::vector<unsigned>& remap, std::size_t depth) {
+  if (node == nullptr || depth > kMaxNodeDepth) return;
+  if (node->mMeshes != nullptr) {
+    unsigned kept = 0;
+    for (unsigned i = 0; i < node->mNumMeshes; ++i) {
+      const unsigned old = node->mMeshes[i];
+      // Out-of-range references stay out of range for validation to report.
+      if (old >= remap.size())
+        node->mMeshes[kept++] = std::numeric_limits<unsigned>::max();
+      else if (remap[old] != std::numeric_limits<unsigned>::max())
+        node->mMeshes[kept++] = remap[old];
+    }
+    node->mNumMeshes = kept;
+  }
+  if (node->mChildren != nullptr)
+    for (unsigned c = 0; c < node->mNumChildren; ++c)
+      pruneNodeReferences(node->mChildren[c], remap, depth + 1);
+}
+
+// Removes meshes without vertices or faces (an empty "solid" in an STL, the
+// point part of a PLY) so that validation does not reject the whole file.
+void pruneEmptyMeshes(aiScene& scene) {
+  if (scene.mMeshes == nullptr) return;
+  std::vector<unsigned> remap(scene.mNumMeshes, std::numeric_limits<unsigned>::max());
+  unsigned kept = 0;
+  for (unsigned k = 0; k < scene.mNumMeshes; ++k) {
+    aiMesh* m = scene.mMeshes[k];
+    const bool useful = m != nullptr && m->mVertices != nullptr && m->mNumVertices > 0 &&
+                        m->mFaces != nullptr && m->mNumFaces > 0;
+    if (useful) {
+      remap[k] = kept;
+      scene.mMeshes[kept++] = m;
+    } else {
+      delete m;
+    }
+  }
+  if (kept == scene.mNumMeshes) return;
+  for (unsigned k = kept; k < scene.mNumMeshes; ++k) scene.mMeshes[k] = nullptr;
+  scene.mNumMeshes = kept;
+  pruneNodeReferences(scene.mRootNode, remap, 0);
+}
+
+// ---------------------------------------------------------------------------
+// Scene flattening.
+
+Affine3 toAffine(const aiMatrix4x4& m) {
+  Mat4 a;
+  a << m.a1, m.a2, m.a3, m.a4, m.b1, m.b2, m.b3, m.b4, m.c1, m.c2, m.c3, m.c4, m.d1, m.d2, m.d3, m.d4;
+  Affine3 t;
+  t.matrix() = a;
+  return t;
+}
+
+std::size_t triangleCount(const aiMesh& m) {
+  std::size_t n = 0;
+  for (unsigned f = 0; f < m.mNumFaces; ++f) n += m.mFaces[f].mNumIndices == 3 ? 1 : 0;
+  return n;
+}
+
+struct Part {
+  std::string name;
+  Affine3 toFile;  ///< node-to-file transform (file units)
+  unsigned meshIndex = 0;
+};
+
+Result<std::vector<Part>> collectParts(const aiScene& scene, const std::string& where,
+                                       const MeshImportOptions& options) {
+  std::vector<std::size_t> triangles(scene.mNumMeshes);
+  std::vector<std::size_t> vertices(scene.mNumMeshes);
+  for (unsigned k = 0; k < scene.mNumMeshes; ++k) {
+    triangles[k] = triangleCount(*scene.mMeshes[k]);
+    vertices[k] = scene.mMeshes[k]->mNumVertices;
+  }
+
+  std::vector<Part> parts;
+  std::size_t totalTriangles = 0, totalVertices = 0;
+  struct Item {
+    const aiNode* node;
+    Affine3 parent;
+    std::size_t depth;
+  };
+  std::vector<Item> stack{{scene.mRootNode, Affine3::Identity(), 0}};
+  while (!stack.empty()) {
+    const Item item = stack.back();
+    stack.pop_back();
+    if (item.depth > kMaxNodeDepth)
+      return fail(ErrorCode::Unsupported,
+                  "scene graph is deeper than " + std::to_string(kMaxNodeDepth) + " nodes", where);
+    const aiNode& node = *item.node;
+    const Affine3 toFile = item.parent * toAffine(node.mTransformation);
+    if (!toFile.matrix().allFinite())
+      return fail(ErrorCode::Parse, "node " + squote(node.mName.C_Str()) + " has a non-finite transform",
+                  where);
+
+    unsigned triangleMeshes = 0;
+    for (unsigned i = 0; i < node.mNumMeshes; ++i) triangleMeshes += triangles[node.mMeshes[i]] > 0 ? 1 : 0;
+    for (unsigned i = 0; i < node.mNumMeshes; ++i) {
+      const unsigned k = node.mMeshes[i];
+      if (triangles[k] == 0) continue;  // points or lines, split off by SortByPType
+      std::string name = node.mName.C_Str();
+      const std::string meshName = scene.mMeshes[k]->mName.C_Str();
+      if (name.empty())
+        name = meshName.empty() ? "part" + std::to_string(parts.size()) : meshName;
+      else if (triangleMeshes > 1)
+        name += "/" + (meshName.empty() ? std::to_string(i) : meshName);
+      totalTriangles += triangles[k];
+      totalVertices += vertices[k];
+      if (totalTriangles > options.maxTriangles)
+        return fail(ErrorCode::Unsupported,
+                    "has more than " + std::to_string(options.maxTriangles) +
+                        " triangles (over all parts and instances)",
+                    where, "raise MeshImportOptions::maxTriangles or simplify the model");
+      if (totalVertices >= std::numeric_limits<std::uint32_t>::max())
+        return fail(ErrorCode::Unsupported, "has more than 2^32 - 1 vertices", where,
+                    "split or simplify the model");
+      parts.push_back(Part{std::move(name), toFile, k});
+    }
+    // Children pushed in reverse so parts come out in file (depth-first) order.
+    for (unsigned c = node.mNumChildren; c-- > 0;)
+      stack.push_back({node.mChildren[c], toFile, item.depth + 1});
+  }
+  return parts;
+}
+
+// A mesh being assembled, with the bookkeeping welding needs.
+struct Builder {
+  Mesh mesh;
+  std::vector<std::uint8_t> hasNormal;  ///< per vertex: the file gave a usable normal
+  bool anyUv = false;
+  bool anyColor = false;
+};
+
+Status appendPart(Builder& b, const aiMesh& m, const Affine3& toMetres, const std::string& where) {
+  const std::size_t base = b.mesh.positions.size();
+  const Mat3 normalMatrix = toMetres.linear().inverse().transpose();
+  const bool mirror = toMetres.linear().determinant() < 0;
+  const bool hasUv = m.HasTextureCoords(0);
+  const bool hasColor = m.HasVertexColors(0);
+  b.anyUv = b.anyUv || hasUv;
+  b.anyColor = b.anyColor || hasColor;
+  for (unsigned v = 0; v < m.mNumVertices; ++v) {
+    const aiVector3D& q = m.mVertices[v];
+    const Vec3 p = toMetres * Vec3(q.x, q.y, q.z);
+    if (!p.allFinite())
+      return fail(ErrorCode::Parse,
+                  "mesh " + squote(m.mName.C_Str()) + ": vertex " + std::to_string(v) +
+                      " is not finite after the node transform and unit scaling",
+                  where, "check the node transforms and MeshImportOptions::scale");
+    b.mesh.positions.push_back(p);
+    Vec3 n = Vec3::Zero();
+    bool usable = false;
+    if (m.mNormals != nullptr) {
+      const aiVector3D& fn = m.mNormals[v];
+      n = normalMatrix * Vec3(fn.x, fn.y, fn.z);
+      const double len = n.norm();
+      usable = std::isfinite(len) && len > 1e-12;
+      n = usable ? Vec3(n / len) : Vec3::Zero();
+    }
+    b.mesh.normals.push_back(n);
+    b.hasNormal.push_back(usable ? 1 : 0);
+    b.mesh.uvs.push_back(hasUv ? Vec2f(m.mTextureCoords[0][v].x, m.mTextureCoords[0][v].y) : Vec2f::Zero());
+    const aiColor4D white(1, 1, 1, 1);
+    const aiColor4D& c = hasColor ? m.mColors[0][v] : white;
+    b.mesh.colors.push_back(Vec4f(c.r, c.g, c.b, c.a));
+  }
+  for (unsigned f = 0; f < m.mNumFaces; ++f) {
+    const aiFace& face = m.mFaces[f];
+    if (face.mNumIndices != 3) continue;
+    Triangle t;
+    for (int c = 0; c < 3; ++c) {
+      const unsigned idx = face.mIndices[c];
+      if (idx >= m.mNumVertices)
+        return fail(ErrorCode::Parse,
+                    "mesh " + squote(m.mName.C_Str()) + ": face " + std::to_string(f) +
+                        " references vertex " + std::to_string(idx) + " but there are only " +
+                        std::to_string(m.mNumVertices),
+                    where, "the file is corrupt; re-export it");
+      t[static_cast<std::size_t>(c)] = static_cast<std::uint32_t>(base + idx);
+    }
+    // A mirroring transform turns counter-clockwise into clockwise.
+    if (mirror) std::swap(t[1], t[2]);
+    b.mesh.triangles.push_back(t);
+  }
+  return ok();
+}
+
+// ---------------------------------------------------------------------------
+// Welding.
+
+struct KeyHash {
+  std::size_t operator()(const std::array<std::uint64_t, 3>& k) const noexcept {
+    std::uint64_t h = 0x9E3779B97F4A7C15ull;
+    for (std::uint64_t x : k) {
+      h ^= x + 0x9E3779B97F4A7C15ull + (h << 6) + (h >> 2);
+      h *= 0xBF58476D1CE4E5B9ull;
+    }
+    return static_cast<std::size_t>(h ^ (h >> 31));
+  }
+};
+
+using Key = std::array<std::uint64_t, 3>;
+
+Key exactKey(const Vec3& p) {
+  Key k;
+  for (int i = 0; i < 3; ++i)
+    k[static_cast<std::size_t>(i)] = std::bit_cast<std::uint64_t>(p[i] + 0.0);  // -0 → +0
+  return k;
+}
+
+std::int64_t cellIndex(double x, double tol) {
+  const double c = std::floor(x / tol);
+  constexpr double lim = 4.0e18;
+  return static_cast<std::int64_t>(std::clamp(c, -lim, lim));
+}
+
+// old vertex → representative (new) vertex, greedy in vertex order.
+std::vector<std::uint32_t> weldMap(const std::vector<Vec3>& positions, double tol, std::size_t& count) {
+  std::vector<std::uint32_t> map(positions.size());
+  count = 0;
+  if (tol <= 0) {
+    std::unordered_map<Key, std::uint32_t, KeyHash> index;
+    index.reserve(positions.size());
+    for (std::size_t i = 0; i < positions.size(); ++i) {
+      auto [it, inserted] = index.try_emplace(exactKey(positions[i]), static_cast<std::uint32_t>(count));
+      if (inserted) ++count;
+      map[i] = it->second;
+    }
+    return map;
+  }
+  // Spatial hash with cells of the tolerance: a partner within tol lies in
+  // one of the 27 cells around the vertex's cell.
+  std::unordered_map<Key, std::vector<std::uint32_t>, KeyHash> cells;
+  cells.reserve(positions.size());
+  std::vector<std::uint32_t> reps;  // new index → old index of the representative
+  const double tol2 = tol * tol;
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    const Vec3& p = positions[i];
+    const std::int64_t cx = cellIndex(p.x(), tol), cy = cellIndex(p.y(), tol), cz = cellIndex(p.z(), tol);
+    std::int64_t found = -1;
+    for (std::int64_t dx = -1; dx <= 1 && found < 0; ++dx)
+      for (std::int64_t dy = -1; dy <= 1 && found < 0; ++dy)
+        for (std::int64_t dz = -1; dz <= 1 && found < 0; ++dz) {
+          const Key k{static_cast<std::uint64_t>(cx + dx), static_cast<std::uint64_t>(cy + dy),
+                      static_cast<std::uint64_t>(cz + dz)};
+          auto it = cells.find(k);
+          if (it == cells.end()) continue;
+          for (std::uint32_t r : it->second)
+            if ((positions[reps[r]] - p).squaredNorm() <= tol2) {
+              found = r;
+              break;
+            }
+        }
+    if (found >= 0) {
+      map[i] = static_cast<std::uint32_t>(found);
+    } else {
+      map[i] = static_cast<std::uint32_t>(count++);
+      reps.push_back(static_cast<std::uint32_t>(i));
+      cells[Key{static_cast<std::uint64_t>(cx), static_cast<std::uint64_t>(cy),
+                static_cast<std::uint64_t>(cz)}]
+          .push_back(map[i]);
+    }
+  }
+  return map;
+}
+
+// Non-manifold edges (more than two triangles) and edges whose two triangles
+// disagree on orientation are reported, not rejected. O(t log t).
+void reportTopology(const Mesh& mesh, const std::string& where) {
+  // The sort needs 16 bytes per corner; beyond this the check is skipped.
+  constexpr std::size_t kMaxCheckedTriangles = 10'000'000;
+  if (mesh.triangles.size() > kMaxCheckedTriangles) {
+    log::debug("%s: mesh '%s': topology check skipped (%zu triangles)", where.c_str(), mesh.name.c_str(),
+               mesh.triangles.size());
+    return;
+  }
+  std::vector<std::uint64_t> directed;
+  directed.reserve(mesh.triangles.size() * 3);
+  for (const Triangle& t : mesh.triangles)
+    for (int c = 0; c < 3; ++c)
+      directed.push_back((std::uint64_t{t[static_cast<std::size_t>(c)]} << 32) |
+                         t[static_cast<std::size_t>((c + 1) % 3)]);
+  std::vector<std::uint64_t> undirected(directed.size());
+  std::transform(directed.begin(), directed.end(), undirected.begin(), [](std::uint64_t e) {
+    const std::uint64_t a = e >> 32, b = e & 0xFFFFFFFFull;
+    return a < b ? (a << 32) | b : (b << 32) | a;
+  });
+  std::sort(directed.begin(), directed.end());
+  std::sort(undirected.begin(), undirected.end());
+  std::size_t nonManifold = 0, boundary = 0, flipped = 0;
+  for (std::size_t i = 0; i < undirected.size();) {
+    std::size_t j = i;
+    while (j < undirected.size() && undirected[j] == undirected[i]) ++j;
+    if (j - i > 2) ++nonManifold;
+    if (j - i == 1) ++boundary;
+    i = j;
+  }
+  for (std::size_t i = 0; i + 1 < directed.size(); ++i)
+    if (directed[i] == directed[i + 1] && (i + 2 >= directed.size() || directed[i + 2] != directed[i]))
+      ++flipped;
+  if (nonManifold > 0 || flipped > 0)
+    log::warn(
+        "%s: mesh '%s' is not a consistently oriented manifold: %zu non-manifold edges (more than two "
+        "triangles), %zu edges shared by triangles of opposite orientation; loaded anyway",
+        where.c_str(), mesh.name.c_str(), nonManifold, flipped);
+  if (boundary > 0)
+    log::debug("%s: mesh '%s' is open: %zu boundary edges", where.c_str(), mesh.name.c_str(), boundary);
+}
+
+// Welds, drops degenerate triangles and unreferenced vertices, settles the
+// normals and checks the result. A mesh whose triangles all collapse comes
+// back empty (named, nothing else) for the caller to skip or refuse.
+Result<Mesh> finish(Builder&& b, const MeshImportOptions& options, const std::string& where) {
+  Mesh& in = b.mesh;
+  const std::size_t nIn = in.positions.size();
+
+  // 1. Representative of every vertex.
+  std::vector<std::uint32_t> rep(nIn);
+  std::size_t nRep = nIn;
+  if (options.weld)
+    rep = weldMap(in.positions, options.weldTolerance, nRep);
+  else
+    for (std::size_t i = 0; i < nIn; ++i) rep[i] = static_cast<std::uint32_t>(i);
+
+  // 2. Triangles in representatives; collapsed ones are dropped.
+  std::vector<Triangle> tris;
+  tris.reserve(in.triangles.size());
+  std::size_t degenerate = 0;
+  for (const Triangle& t : in.triangles) {
+    const Triangle r{rep[t[0]], rep[t[1]], rep[t[2]]};
+    if (r[0] == r[1] || r[1] == r[2] || r[0] == r[2]) {
+      ++degenerate;
+      continue;
+    }
+    tris.push_back(r);
+  }
+  if (tris.empty()) {
+    log::debug("%s: mesh '%s': all %zu triangles are degenerate", where.c_str(), in.name.c_str(), degenerate);
+    Mesh none;
+    none.name = std::move(in.name);
+    return none;
+  }
+  if (degenerate > 0)
+    log::debug("%s: mesh '%s': dropped %zu degenerate triangles", where.c_str(), in.name.c_str(), degenerate);
+
+  // 3. Referenced representatives get consecutive indices, in first-use order
+  //    of the original vertices (so unwelded input keeps its order).
+  constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+  std::vector<std::uint8_t> used(nRep, 0);
+  for (const Triangle& t : tris)
+    for (std::uint32_t v : t) used[v] = 1;
+  std::vector<std::uint32_t> finalIndex(nRep, kNone);
+  std::vector<std::uint32_t> firstOld;  // final index → first original vertex
+  for (std::size_t i = 0; i < nIn; ++i) {
+    const std::uint32_t r = rep[i];
+    if (used[r] && finalIndex[r] == kNone) {
+      finalIndex[r] = static_cast<std::uint32_t>(firstOld.size());
+      firstOld.push_back(static_cast<std::uint32_t>(i));
+    }
+  }
+  const std::size_t n = firstOld.size();
+
+  Mesh out;
+  out.name = std::move(in.name);
+  out.positions.resize(n);
+  for (std::size_t k = 0; k < n; ++k) out.positions[k] = in.positions[firstOld[k]];
+  if (b.anyUv) {
+    out.uvs.resize(n);
+    for (std::size_t k = 0; k < n; ++k) out.uvs[k] = in.uvs[firstOld[k]];
+  }
+  if (b.anyColor) {
+    out.colors.resize(n);
+    for (std::size_t k = 0; k < n; ++k) out.colors[k] = in.colors[firstOld[k]];
+  }
+  out.triangles.reserve(tris.size());
+  for (const Triangle& t : tris)
+    out.triangles.push_back({finalIndex[t[0]], finalIndex[t[1]], finalIndex[t[2]]});
+
+  // 4. Normals: a merged vertex keeps the file normal only if all its
+  //    members had one and they agree (within about 1°).
+  std::vector<Vec3> sum(n, Vec3::Zero());
+  std::vector<std::uint8_t> keep(n, 1);
+  constexpr double kAgree = 0.99985;  // cos 1°
+  for (std::size_t i = 0; i < nIn; ++i) {
+    const std::uint32_t k = finalIndex[rep[i]];
+    if (k == kNone) continue;
+    if (!b.hasNormal[i]) {
+      keep[k] = 0;
+      continue;
+    }
+    if (!sum[k].isZero() && sum[k].normalized().dot(in.normals[i]) < kAgree) keep[k] = 0;
+    sum[k] += in.normals[i];
+  }
+  bool allKept = true;
+  for (std::size_t k = 0; k < n; ++k) {
+    const double len = sum[k].norm();
+    if (keep[k] && len > 1e-12)
+      sum[k] /= len;
+    else
+      keep[k] = 0;
+    allKept = allKept && keep[k];
+  }
+  if (allKept) {
+    out.normals = std::move(sum);
+  } else if (options.computeNormals) {
+    out.computeNormals();
+    for (std::size_t k = 0; k < n; ++k)
+      if (keep[k]) out.normals[k] = sum[k];
+  }
+
+  if (auto s = out.validate(); !s) return s.error().within(where);
+  if (options.weld) reportTopology(out, where);
+  return out;
+}
+
+// ---------------------------------------------------------------------------
+// The import driver shared by readMesh, readMeshes and parseMesh.
+
+struct Source {
+  const fs::path* file = nullptr;    ///< read from disk, or
+  std::span<const std::byte> bytes;  ///< parse from memory
+  std::string hint;                  ///< extension for memory input
+  std::string where;                 ///< name used in messages
+  std::string stem;                  ///< name of the merged mesh
+};
+
+Status checkOptions(const MeshImportOptions& o, const std::string& where) {
+  if (!std::isfinite(o.scale) || o.scale <= 0)
+    return fail(ErrorCode::InvalidArgument, "MeshImportOptions::scale is " + std::to_string(o.scale), where,
+                "give a finite factor > 0");
+  if (!std::isfinite(o.weldTolerance) || o.weldTolerance < 0)
+    return fail(ErrorCode::InvalidArgument,
+                "MeshImportOptions::weldTolerance is " + std::to_string(o.weldTolerance), where,
+                "give a finite distance >= 0 in metres");
+  if (!std::isfinite(o.timeoutSeconds) || o.timeoutSeconds < 0 || o.timeoutSeconds > 1e6)
+    return fail(ErrorCode::InvalidArgument,
+                "MeshImportOptions::timeoutSeconds is " + std::to_string(o.timeoutSeconds), where,
+                "give seconds in [0, 1e6]; 0 means no limit");
+  if (auto u = metresPerUnit(o.unit); !u) return u.error().within(where);
+  return ok();
+}
+
+// Size limit and the header guards: cheap checks on the raw input, before
+// Assimp sees it.
+Status checkInput(const Source& src, const MeshImportOptions& options) {
+  const std::string& where = src.where;
+  std::string head;
+  std::uint64_t totalBytes = 0;
+  bool offExtension = false, daeExtension = false;
+  if (src.file != nullptr) {
+    std::error_code ec;
+    const fs::file_status st = fs::status(*src.file, ec);
+    if (ec || !fs::exists(st))
+      return fail(ErrorCode::NotFound, "file does not exist", where, "check the path");
+    if (!fs::is_regular_file(st))
+      return fail(ErrorCode::Io, "is not a regular file", where, "give the path of a mesh file");
+    totalBytes = fs::file_size(*src.file, ec);
+    if (ec) return fail(ErrorCode::Io, "cannot read the file size: " + ec.message(), where);
+    std::ifstream f(*src.file, std::ios::binary);
+    if (!f) return fail(ErrorCode::Io, "cannot open the file for reading", where, "check the permissions");
+    head.resize(kHeadBytes);
+    f.read(head.data(), static_cast<std::streamsize>(head.size()));
+    head.resize(static_cast<std::size_t>(f.gcount()));
+    offExtension = lower(src.file->extension().string()) == ".off";
+    daeExtension = lower(src.file->extension().string()) == ".dae";
+  } else {
+    totalBytes = src.bytes.size();
+    head.assign(reinterpret_cast<const char*>(src.bytes.data()),
+                std::min<std::size_t>(src.bytes.size(), kHeadBytes));
+    offExtension = src.hint == "off";
+    daeExtension = src.hint == "dae";
+  }
+  if (totalBytes == 0) return fail(ErrorCode::Parse, "is empty", where, "give a mesh file with triangles");
+  if (totalBytes > options.maxFileBytes)
+    return fail(ErrorCode::Unsupported,
+                "is " + std::to_string(totalBytes) + " bytes, more than the limit of " +
+                    std::to_string(options.maxFileBytes),
+                where, "raise MeshImportOptions::maxFileBytes if the file is genuine");
+  if (auto s = checkOffHeader(head, totalBytes, offExtension, where); !s) return s;
+  if (auto s = checkPlyHeader(head, head.size() == totalBytes, where); !s) return s;
+  if (looksLikeCollada(head, daeExtension)) {
+    if (src.file == nullptr)
+      return checkColladaIndexLists(
+          std::string_view(reinterpret_cast<const char*>(src.bytes.data()), src.bytes.size()), where);
+    auto bytes = readFile(*src.file, options.maxFileBytes);
+    if (!bytes) return bytes.error();
+    return checkColladaIndexLists(
+        std::string_view(reinterpret_cast<const char*>(bytes->data()), bytes->size()), where);
+  }
+  return ok();
+}
+
+// Everything that touches Assimp: import, our raw-scene checks, validation,
+// post-processing and flattening into builders (one merged or one per part).
+// Runs in the child process when the import is isolated, so it must not log
+// (another thread of the parent may have held the logger's lock at fork).
+Result<std::vector<Builder>> loadWithAssimp(const Source& src, const MeshImportOptions& options, bool merge) {
+  const std::string& where = src.where;
+  const double toMetres = metresPerUnit(options.unit).value() * options.scale;
+
+  ImportBudget budget;
+  budget.maxBytes = options.maxFileBytes;
+  Assimp::Importer importer;
+  // BVH and other animation-only files would otherwise get a stick-figure
+  // mesh made up by Assimp.
+  importer.SetPropertyBool(AI_CONFIG_IMPORT_NO_SKELETON_MESHES, true);
+
+  auto assimpError = [&](const char* stage) {
+    std::string msg = importer.GetErrorString();
+    if (msg.empty()) msg = "unknown error";
+    if (!budget.refusal.empty()) msg += " (" + budget.refusal + ")";
+    return fail(ErrorCode::Parse, std::string("Assimp ") + stage + " failed: " + msg, where,
+                "check that the file is a complete, valid mesh file of the format its extension says");
+  };
+
+  const aiScene* scene = nullptr;
+  try {
+    if (src.file != nullptr) {
+      importer.SetIOHandler(new LimitedIOSystem(&budget));
+      scene = importer.ReadFile(src.file->string(), 0);
+    } else {
+      importer.SetIOHandler(new NoFileIOSystem(&budget));
+      scene = importer.ReadFileFromMemory(src.bytes.data(), src.bytes.size(), 0, src.hint.c_str());
+    }
+    if (scene == nullptr) return assimpError("import");
+
+    auto polygons = checkRawScene(*scene, where);
+    if (!polygons) return polygons.error();
+    if (*polygons == 0)
+      return fail(ErrorCode::Parse, "contains no triangles (no meshes)", where,
+                  "the file holds no surface geometry (only a scene graph, cameras, lights or animation)");
+    // The importer owns the scene; like a post-processing step we edit it in
+    // place before the other steps run.
+    pruneEmptyMeshes(*const_cast<aiScene*>(importer.GetScene()));
+
+    // Validation first, alone, so the other steps only see valid data.
+    scene = importer.ApplyPostProcessing(aiProcess_ValidateDataStructure);
+    if (scene == nullptr) return assimpError("validation");
+    scene = importer.ApplyPostProcessing(kPostProcess);
+    if (scene == nullptr) return assimpError("post-processing");
+  } catch (const std::exception& e) {
+    return fail(ErrorCode::Parse, std::string("Assimp threw: ") + e.what(), where);
+  } catch (...) {
+    return fail(ErrorCode::Parse, "Assimp threw an unknown exception", where);
+  }
+
+  auto parts = collectParts(*scene, where, options);
+  if (!parts) return parts.error();
+  if (parts->empty())
+    return fail(ErrorCode::Parse, "contains no triangles (only points or lines in the scene graph)", where,
+                "a mesh needs triangles or polygons");
+  if (merge && !options.mergeMeshes && parts->size() > 1) {
+    std::string names;
+    for (std::size_t i = 0; i < parts->size() && i < 8; ++i)
+      names += (i ? ", " : "") + squote((*parts)[i].name);
+    if (parts->size() > 8) names += ", ...";
+    return fail(ErrorCode::InvalidArgument,
+                "has " + std::to_string(parts->size()) + " parts (" + names + ") but mergeMeshes is off",
+                where, "use readMeshes() for one mesh per part, or set MeshImportOptions::mergeMeshes");
+  }
+
+  const Affine3 scaleToMetres(Eigen::Scaling(toMetres));
+  std::vector<Builder> out(merge ? 1 : parts->size());
+  if (merge) out[0].mesh.name = src.stem;
+  for (std::size_t i = 0; i < parts->size(); ++i) {
+    const Part& p = (*parts)[i];
+    Builder& b = out[merge ? 0 : i];
+    if (!merge) b.mesh.name = p.name;
+    if (auto s = appendPart(b, *scene->mMeshes[p.meshIndex], scaleToMetres * p.toFile, where); !s)
+      return s.error();
+  }
+  return out;
+}
+
+// ---------------------------------------------------------------------------
+// Isolation. Assimp 5.2 loops forever or corrupts its heap on some malformed
+// files (found by Tests/fuzz/mesh_fuzz.cpp), which no check of ours can
+// fully prevent in-process. With MeshImportOptions::isolate, loadWithAssimp()
+// runs in a forked child that streams the builders back through a pipe; the
+// parent enforces the deadline and turns a crash or a timeout into an Error.
+
+static_assert(sizeof(Vec3) == 3 * sizeof(double) && sizeof(Vec2f) == 2 * sizeof(float) &&
+                  sizeof(Vec4f) == 4 * sizeof(float) && sizeof(Triangle) == 3 * sizeof(std::uint32_t),
+              "attribute arrays are sent as packed scalars");
+
+class FdWriter {
+ public:
+  explicit FdWriter(int fd) : fd_(fd) {}
+  void bytes(const void* data, std::size_t n) {
+    const char* p = static_cast<const char*>(data);
+    while (n > 0 && ok_) {
+      const ssize_t w = ::write(fd_, p, n);
+      if (w < 0 && errno == EINTR) continue;
+      if (w <= 0) {
+        ok_ = false;
+        return;
+      }
+      p += w;
+      n -= static_cast<std::size_t>(w);
+    }
+  }
+  void u64(std::uint64_t v) { bytes(&v, sizeof v); }
+  void str(const std::string& s) {
+    u64(s.size());
+    bytes(s.data(), s.size());
+  }
+  template <class T, class Scalar>
+  void array(const std::vector<T>& v) {
+    u64(v.size());
+    if (!v.empty()) bytes(reinterpret_cast<const Scalar*>(v.data()), v.size() * sizeof(T));
+  }
+  bool ok() const { return ok_; }
+
+ private:
+  int fd_;
+  bool ok_ = true;
+};
+
+void sendResult(FdWriter& w, const Result<std::vector<Builder>>& r) {
+  if (!r) {
+    w.u64(0);
+    w.u64(static_cast<std::uint64_t>(r.error().code));
+    w.str(r.error().what);
+    w.str(r.error().where);
+    w.str(r.error().hint);
+    return;
+  }
+  w.u64(1);
+  w.u64(r->size());
+  for (const Builder& b : *r) {
+    w.str(b.mesh.name);
+    w.array<Vec3, double>(b.mesh.positions);
+    w.array<Vec3, double>(b.mesh.normals);
+    w.array<std::uint8_t, std::uint8_t>(b.hasNormal);
+    w.array<Vec2f, float>(b.mesh.uvs);
+    w.array<Vec4f, float>(b.mesh.colors);
+    w.array<Triangle, std::uint32_t>(b.mesh.triangles);
+    w.u64((b.anyUv ? 1u : 0u) | (b.anyColor ? 2u : 0u));
+  }
+  w.u64(0x444d4d45534844ull);  // end marker: the child got to the end
+}
+
+class ByteReader {
+ public:
+  explicit ByteReader(const std::vector<char>& buf) : p_(buf.data()), end_(buf.data() + buf.size()) {}
+  bool bytes(void* out, std::size_t n) {
+    if (static_cast<std::size_t>(end_ - p_) < n) return ok_ = false;
+    if (n > 0) std::memcpy(out, p_, n);
+    p_ += n;
+    return true;
+  }
+  std::uint64_t u64() {
+    std::uint64_t v = 0;
+    bytes(&v, sizeof v);
+    return v;
+  }
+  std::string str() {
+    const std::uint64_t n = u64();
+    if (!ok_ || n > static_cast<std::uint64_t>(end_ - p_)) {
+      ok_ = false;
+      return {};
+    }
+    std::string s(p_, static_cast<std::size_t>(n));
+    p_ += n;
+    return s;
+  }
+  template <class T>
+  void array(std::vector<T>& v) {
+    const std::uint64_t n = u64();
+    if (!ok_ || n > static_cast<std::uint64_t>(end_ - p_) / sizeof(T)) {
+      ok_ = false;
+      return;
+    }
+    v.resize(static_cast<std::size_t>(n));
+    if (n > 0) bytes(static_cast<void*>(v.data()), static_cast<std::size_t>(n) * sizeof(T));
+  }
+  bool ok() const { return ok_; }
+
+ private:
+  const char* p_;
+  const char* end_;
+  bool ok_ = true;
+};
+
+Result<std::vector<Builder>> receiveResult(const std::vector<char>& buf, const std::string& exitInfo,
+                                           const std::string& where) {
+  ByteReader r(buf);
+  auto broken = [&] {
+    return fail(ErrorCode::Internal, "the import process ended (" + exitInfo + ") without a complete result",
+                where, "please report this with the file");
+  };
+  const std::uint64_t okFlag = r.u64();
+  if (!r.ok()) return broken();
+  if (okFlag == 0) {
+    Error e;
+    e.code = static_cast<ErrorCode>(r.u64());
+    e.what = r.str();
+    e.where = r.str();
+    e.hint = r.str();
+    if (!r.ok()) return broken();
+    return e;
+  }
+  const std::uint64_t n = r.u64();
+  if (!r.ok() || n > buf.size()) return broken();
+  std::vector<Builder> out(static_cast<std::size_t>(n));
+  for (Builder& b : out) {
+    b.mesh.name = r.str();
+    r.array(b.mesh.positions);
+    r.array(b.mesh.normals);
+    r.array(b.hasNormal);
+    r.array(b.mesh.uvs);
+    r.array(b.mesh.colors);
+    r.array(b.mesh.triangles);
+    const std::uint64_t flags = r.u64();
+    b.anyUv = (flags & 1u) != 0;
+    b.anyColor = (flags & 2u) != 0;
+    if (!r.ok()) return broken();
+  }
+  if (r.u64() != 0x444d4d45534844ull || !r.ok()) return broken();
+  return out;
+}
+
+Result<std::vector<Builder>> loadIsolated(const Source& src, const MeshImportOptions& options, bool merge) {
+  const std::string& where = src.where;
+  int fds[2];
+  if (::pipe(fds) != 0)
+    return fail(ErrorCode::Io,
+                std::string("cannot create a pipe for the import process: ") + std::strerror(errno), where,
+                "set MeshImportOptions::isolate = false to import in-process");
+  // Unwritten stdio buffers would be inherited and could be written twice
+  // (Assimp flushes std::cout in some importers).
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    const int err = errno;
+    ::close(fds[0]);
+    ::close(fds[1]);
+    return fail(ErrorCode::Io, std::string("cannot start the import process: ") + std::strerror(err), where,
+                "set MeshImportOptions::isolate = false to import in-process");
+  }
+  if (pid == 0) {
+    // Child: die plainly on a fault (the parent's crash handlers are not
+    // ours to run), never outlive the parent's deadline, never return.
+    for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGPIPE}) std::signal(sig, SIG_DFL);
+#if defined(__linux__)
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+#endif
+    if (options.timeoutSeconds > 0) ::alarm(static_cast<unsigned>(std::ceil(options.timeoutSeconds)) + 1);
+    ::close(fds[0]);
+#if defined(__linux__)
+    // Pipes of imports running on other threads must not stay open here, or
+    // their readers would wait for this child to end before seeing EOF.
+    if (fds[1] > 3) ::close_range(3, static_cast<unsigned>(fds[1]) - 1, 0);
+    ::close_range(static_cast<unsigned>(fds[1]) + 1, ~0u, 0);
+#endif
+    FdWriter w(fds[1]);
+    sendResult(w, loadWithAssimp(src, options, merge));
+    ::close(fds[1]);
+    ::_exit(w.ok() ? 0 : 3);
+  }
+
+  ::close(fds[1]);
+  std::vector<char> buf;
+  const auto start = std::chrono::steady_clock::now();
+  bool timedOut = false, readError = false;
+  char chunk[1 << 16];
+  for (;;) {
+    int waitMs = -1;
+    if (options.timeoutSeconds > 0) {
+      const double left = options.timeoutSeconds -
+                          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (left <= 0) {
+        timedOut = true;
+        break;
+      }
+      waitMs = static_cast<int>(std::min(std::ceil(left * 1000), 1e9));
+    }
+    pollfd pfd{fds[0], POLLIN, 0};
+    const int pr = ::poll(&pfd, 1, waitMs);
+    if (pr < 0 && errno == EINTR) continue;
+    if (pr < 0) {
+      readError = true;
+      break;
+    }
+    if (pr == 0) continue;  // the deadline is checked at the top
+    const ssize_t n = ::read(fds[0], chunk, sizeof chunk);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) readError = true;
+    if (n <= 0) break;  // end of data (or error)
+    buf.insert(buf.end(), chunk, chunk + n);
+  }
+  ::close(fds[0]);
+  if (timedOut) ::kill(pid, SIGKILL);
+  int status = 0;
+  pid_t waited;
+  do waited = ::waitpid(pid, &status, 0);
+  while (waited < 0 && errno == EINTR);
+
+  if (timedOut) {
+    char secs[32];
+    std::snprintf(secs, sizeof secs, "%g", options.timeoutSeconds);
+    return fail(
+        ErrorCode::Timeout, std::string("Assimp did not finish reading the file within ") + secs + " s",
+        where,
+        "the file is malformed (Assimp 5 loops on some broken files) or very large: check it, or raise "
+        "MeshImportOptions::timeoutSeconds");
+  }
+  if (waited == pid && WIFSIGNALED(status))
+    return fail(ErrorCode::Parse,
+                std::string("Assimp crashed while reading the file (signal ") +
+                    std::to_string(WTERMSIG(status)) + ", " + strsignal(WTERMSIG(status)) + ")",
+                where, "the file is malformed or triggers an Assimp bug; check or re-export it");
+  if (readError)
+    return fail(ErrorCode::Io, "reading the result of the import process failed", where,
+                "set MeshImportOptions::isolate = false to import in-process");
+  const std::string exitInfo = waited != pid       ? std::string("status unknown")
+                               : WIFEXITED(status) ? "exit status " + std::to_string(WEXITSTATUS(status))
+                                                   : std::string("stopped");
+  return receiveResult(buf, exitInfo, where);
+}
+
+Result<std::vector<Mesh>> import(const Source& src, const MeshImportOptions& options, bool merge) {
+  const std::string& where = src.where;
+  if (auto s = checkOptions(options, where); !s) return s.error();
+  if (auto s = checkInput(src, options); !s) return s.error();
+
+  auto builders = options.isolate ? loadIsolated(src, options, merge) : loadWithAssimp(src, options, merge);
+  if (!builders) return builders.error();
+
+  std::vector<Mesh> out;
+  for (Builder& b : *builders) {
+    auto m = finish(std::move(b), options, where);
+    if (!m) return m.error();
+    if (!m->empty()) out.push_back(std::move(*m));
+  }
+  if (out.empty())
+    return fail(
+        ErrorCode::Parse,
+        "contains no triangles (all are degenerate" + std::string(options.weld ? " after welding)" : ")"),
+        where,
+        options.weld && options.weldTolerance > 0 ? "reduce MeshImportOptions::weldTolerance"
+                                                  : "the surface has zero area everywhere");
+  return out;
+}
+
+const std::set<std::string>& assimpExtensions() {
+  static const std::set<std::string> exts = [] {
+    std::set<std::string> s;
+    Assimp::Importer importer;
+    std::string list;
+    importer.GetExtensionList(list);  // "*.3ds;*.obj;..."
+    std::size_t pos = 0;
+    while (pos < list.size()) {
+      std::size_t end = list.find(';', pos);
+      if (end == std::string::npos) end = list.size();
+      std::string e = list.substr(pos, end - pos);
+      if (e.rfind("*.", 0) == 0) e.erase(0, 2);
+      if (!e.empty()) s.insert(lower(e));
+      pos = end + 1;
+    }
+    return s;
+  }();
+  return exts;
+}
+
+}  // namespace
+
+Result<double> metresPerUnit(std::string_view unit) {
+  if (unit == "m") return units::m;
+  if (unit == "cm") return units::cm;
+  if (unit == "mm") return units::mm;
+  if (unit == "um") return units::um;
+  if (unit == "inch" || unit == "in") return units::inch;
+  if (unit == "ft") return 12 * units::inch;
+  return fail(ErrorCode::InvalidArgument, "unknown length unit '" + std::string(unit) + "'",
+              "MeshImportOptions::unit", "use one of m, cm, mm, um, inch (in), ft");
+}
+
+std::string supportedMeshExtensions() {
+  std::string out;
+  for (const std::string& e : assimpExtensions()) out += (out.empty() ? "*." : ";*.") + e;
+  return out;
+}
+
+bool canReadMesh(const std::filesystem::path& file) {
+  std::string ext = lower(file.extension().string());
+  if (ext.size() < 2) return false;
+  return assimpExtensions().contains(ext.substr(1));
+}
+
+Result<Mesh> readMesh(const std::filesystem::path& file, const MeshImportOptions& options) {
+  Source src;
+  src.file = &file;
+  src.where = file.string();
+  src.stem = file.stem().string();
+  auto meshes = import(src, options, true);
+  if (!meshes) return meshes.error();
+  return std::move(meshes->front());
+}
+
+Result<std::vector<Mesh>> readMeshes(const std::filesystem::path& file, const MeshImportOptions& options) {
+  Source src;
+  src.file = &file;
+  src.where = file.string();
+  src.stem = file.stem().string();
+  return import(src, options, false);
+}
+
+Result<Mesh> parseMesh(std::span<const std::byte> bytes, std::string_view formatHint,
+                       const MeshImportOptions& options) {
+  std::string hint = lower(formatHint);
+  if (!hint.empty() && hint.front() == '.') hint.erase(0, 1);
+  const bool hintOk = !hint.empty() && hint.size() <= 16 && std::all_of(hint.begin(), hint.end(), [](char c) {
+    return std::isalnum(static_cast<unsigned char>(c)) != 0;
+  });
+  if (!hintOk)
+    return fail(ErrorCode::InvalidArgument,
+                "format hint '" + std::string(formatHint) + "' is not an extension", "parseMesh",
+                "give the file extension without the dot, e.g. \"stl\"");
+  Source src;
+  src.bytes = bytes;
+  src.hint = hint;
+  src.where = "<memory>." + hint;
+  src.stem = hint;
+  auto meshes = import(src, options, true);
+  if (!meshes) return meshes.error();
+  return std::move(meshes->front());
+}
+
+}  // namespace dm
