@@ -14,6 +14,7 @@
 #include <string>
 
 #include "gzip.hpp"
+#include "raw_slice.hpp"
 
 namespace dm {
 
@@ -414,22 +415,11 @@ Result<Volume> loadData(const Parsed& p, std::span<const std::byte> stream, cons
     if (data->size() < p.volumeBytes) return shortData(volStart + data->size(), "the decompressed data");
     return decodeRawVolume(*data, p.dims, fmt, p.indexToWorld, source, options.maxBytes);
   }
-  std::uint64_t start;
-  if (p.headerSize == -1) {
-    if (p.volumeBytes != 0 &&
-        static_cast<std::uint64_t>(p.volumes) > (std::uint64_t{1} << 62) / p.volumeBytes)
-      return fail(ErrorCode::Parse, "total data size overflows", source);
-    const std::uint64_t all = static_cast<std::uint64_t>(p.volumes) * p.volumeBytes;
-    if (all > stream.size()) return shortData(stream.size(), "the data file");
-    start = stream.size() - all + volStart;
-  } else {
-    start = static_cast<std::uint64_t>(p.headerSize) + volStart;
-  }
-  if (start > stream.size() || stream.size() - start < p.volumeBytes)
-    return shortData(stream.size(), "the voxel data");
+  auto slice = detail::rawVolumeSlice(stream, p.headerSize, static_cast<std::uint64_t>(p.volumes),
+                                      p.volumeBytes, index, source, shortData);
+  if (!slice) return std::move(slice).error();
   if (!withinLimit) return withinLimit.error();
-  return decodeRawVolume(stream.subspan(static_cast<std::size_t>(start), p.volumeBytes), p.dims, fmt,
-                         p.indexToWorld, source, options.maxBytes);
+  return decodeRawVolume(*slice, p.dims, fmt, p.indexToWorld, source, options.maxBytes);
 }
 
 bool isLocal(const std::string& dataFile) { return lower(dataFile) == "local"; }

@@ -14,6 +14,7 @@
 #include <string>
 
 #include "gzip.hpp"
+#include "raw_slice.hpp"
 
 namespace dm {
 
@@ -650,22 +651,11 @@ Result<Volume> loadData(const Parsed& p, std::span<const std::byte> stream, cons
 
   switch (p.encoding) {
     case Encoding::Raw: {
-      std::uint64_t start;
-      if (p.byteSkip == -1) {
-        if (p.volumeBytes != 0 &&
-            static_cast<std::uint64_t>(p.volumes) > (std::uint64_t{1} << 62) / p.volumeBytes)
-          return fail(ErrorCode::Parse, "total data size overflows", source);
-        const std::uint64_t all = static_cast<std::uint64_t>(p.volumes) * p.volumeBytes;
-        if (all > stream.size()) return shortData(stream.size(), "the data");
-        start = stream.size() - all + volStart;
-      } else {
-        start = skip + volStart;
-      }
-      if (start > stream.size() || stream.size() - start < p.volumeBytes)
-        return shortData(stream.size(), "the data");
+      auto slice = detail::rawVolumeSlice(stream, p.byteSkip, static_cast<std::uint64_t>(p.volumes),
+                                          p.volumeBytes, index, source, shortData);
+      if (!slice) return std::move(slice).error();
       if (!withinLimit) return withinLimit.error();
-      return decodeRawVolume(stream.subspan(static_cast<std::size_t>(start), p.volumeBytes), p.dims, fmt,
-                             p.indexToWorld, source, options.maxBytes);
+      return decodeRawVolume(*slice, p.dims, fmt, p.indexToWorld, source, options.maxBytes);
     }
     case Encoding::Gzip: {
       if (!withinLimit) return withinLimit.error();
