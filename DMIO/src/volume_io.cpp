@@ -1,6 +1,8 @@
+#include <dm/io/dicom.hpp>
 #include <dm/io/metaimage.hpp>
 #include <dm/io/nifti.hpp>
 #include <dm/io/nrrd.hpp>
+#include <dm/io/vdb.hpp>
 #include <dm/io/volume_io.hpp>
 
 #include <algorithm>
@@ -25,14 +27,24 @@ bool endsWith(const std::string& s, std::string_view suffix) {
   return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-enum class Format { Nifti, MetaImage, Nrrd, Unknown };
+enum class Format { Nifti, MetaImage, Nrrd, Dicom, Vdb, Unknown };
+
+// A DICOM series is a directory; one written series is asked for with a
+// trailing separator ("out/series/") or by naming an existing directory.
+bool namesDirectory(const std::filesystem::path& file) {
+  std::error_code ec;
+  return !file.empty() && (!file.has_filename() || std::filesystem::is_directory(file, ec));
+}
 
 Format formatOf(const std::filesystem::path& file) {
+  if (namesDirectory(file)) return Format::Dicom;
   const std::string n = lowerName(file);
   for (const char* e : {".nii", ".nii.gz", ".hdr", ".hdr.gz", ".img", ".img.gz"})
     if (endsWith(n, e)) return Format::Nifti;
   if (endsWith(n, ".mhd") || endsWith(n, ".mha")) return Format::MetaImage;
   if (endsWith(n, ".nrrd") || endsWith(n, ".nhdr")) return Format::Nrrd;
+  if (endsWith(n, ".dcm")) return Format::Dicom;
+  if (endsWith(n, ".vdb")) return Format::Vdb;
   return Format::Unknown;
 }
 
@@ -94,7 +106,8 @@ void convertTo(VoxelType outType, const std::byte* src, std::byte* dst, std::siz
 }  // namespace
 
 const char* supportedVolumeExtensions() noexcept {
-  return ".nii, .nii.gz, .hdr, .hdr.gz, .img, .img.gz (NIfTI), .mhd, .mha (MetaImage), .nrrd, .nhdr (NRRD)";
+  return ".nii, .nii.gz, .hdr, .hdr.gz, .img, .img.gz (NIfTI), .mhd, .mha (MetaImage), .nrrd, .nhdr (NRRD), "
+         "a directory or .dcm file (DICOM series), .vdb (OpenVDB)";
 }
 
 Result<Volume> readVolume(const std::filesystem::path& file, const VolumeReadOptions& options) {
@@ -105,6 +118,16 @@ Result<Volume> readVolume(const std::filesystem::path& file, const VolumeReadOpt
       return readMetaImage(file, {options.volumeIndex, options.maxBytes});
     case Format::Nrrd:
       return readNrrd(file, {options.volumeIndex, options.maxBytes});
+    case Format::Dicom: {
+      DicomReadOptions dicom;
+      dicom.maxBytes = options.maxBytes;
+      return readDicomSeries(file, dicom);
+    }
+    case Format::Vdb: {
+      VdbReadOptions vdb;
+      vdb.maxBytes = options.maxBytes;
+      return readVdb(file, vdb);
+    }
     case Format::Unknown:
       break;
   }
@@ -113,12 +136,15 @@ Result<Volume> readVolume(const std::filesystem::path& file, const VolumeReadOpt
 }
 
 Status writeVolume(const Volume& volume, const std::filesystem::path& file) {
+  if (namesDirectory(file)) return writeDicomSeries(volume, file);
   const std::string n = lowerName(file);
   if (endsWith(n, ".nii") || endsWith(n, ".nii.gz")) return writeNifti(volume, file);
   if (endsWith(n, ".mhd") || endsWith(n, ".mha")) return writeMetaImage(volume, file);
   if (endsWith(n, ".nrrd") || endsWith(n, ".nhdr")) return writeNrrd(volume, file);
+  if (endsWith(n, ".vdb")) return writeVdb(volume, file);
   return fail(ErrorCode::Unsupported, "unknown volume file extension for writing", file.string(),
-              "supported: .nii, .nii.gz, .mhd, .mha, .nrrd, .nhdr");
+              "supported: .nii, .nii.gz, .mhd, .mha, .nrrd, .nhdr, .vdb, or a directory ending in '/' "
+              "(DICOM series)");
 }
 
 std::size_t rawElementBytes(RawElement e) noexcept {

@@ -3,10 +3,12 @@
 //
 // readVolume() picks the reader from the file name: .nii, .nii.gz, .hdr,
 // .hdr.gz, .img, .img.gz (NIfTI, see nifti.hpp), .mhd, .mha (MetaImage, see
-// metaimage.hpp), .nrrd, .nhdr (NRRD, see nrrd.hpp); case-insensitive. Every
-// reader returns a dm::Volume whose indexToWorld() maps voxel indices to the
-// SDK world frame: RAS+ axes (x Right, y Anterior, z Superior of the
-// patient), in metres. LPS formats are converted by negating x and y.
+// metaimage.hpp), .nrrd, .nhdr (NRRD, see nrrd.hpp), a directory or a .dcm
+// file (DICOM series, see dicom.hpp), .vdb (OpenVDB, see vdb.hpp);
+// case-insensitive. Every reader returns a dm::Volume whose indexToWorld()
+// maps voxel indices to the SDK world frame: RAS+ axes (x Right, y Anterior,
+// z Superior of the patient), in metres. LPS formats (DICOM, MetaImage, LPS
+// NRRD) are converted by negating x and y.
 //
 // @code
 //   auto v = dm::readVolume(dm::FileSystem::global().resolve("mricron:ch2.nii.gz").value());
@@ -46,7 +48,9 @@ const char* supportedVolumeExtensions() noexcept;
 Result<Volume> readVolume(const std::filesystem::path& file, const VolumeReadOptions& options = {});
 
 /// Writes a volume, choosing the format by extension: .nii/.nii.gz (NIfTI-1),
-/// .mhd/.mha (MetaImage), .nrrd/.nhdr (NRRD). Atomic per file written.
+/// .mhd/.mha (MetaImage), .nrrd/.nhdr (NRRD), .vdb (OpenVDB, sparse), or a
+/// DICOM series when `file` ends in a separator or names an existing
+/// directory. Atomic per file written.
 /// @code
 ///   if (auto s = dm::writeVolume(*v, "copy.nrrd"); !s) std::cerr << s.error() << '\n';
 /// @endcode
