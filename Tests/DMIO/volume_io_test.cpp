@@ -48,8 +48,8 @@ TEST_P(VolumeIo, Ch2RoundTripsThroughTheDispatch) {
 INSTANTIATE_TEST_SUITE_P(Formats, VolumeIo,
                          ::testing::Values("ch2.nii.gz", "ch2.nii", "ch2.mha", "ch2.mhd", "ch2.nrrd",
                                            "ch2.vdb", "series/"),
-                         [](const auto& info) {
-                           std::string n = info.param;
+                         [](const ::testing::TestParamInfo<std::string>& p) {
+                           std::string n = p.param;
                            for (char& c : n)
                              if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
                            return n;
