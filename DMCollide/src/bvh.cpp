@@ -1,0 +1,357 @@
+// Binned-SAH BVH over mesh triangles; see dm/collide/bvh.hpp.
+#include <dm/collide/bvh.hpp>
+#include <dm/math/mesh_topology.hpp>
+
+#include <tbb/parallel_invoke.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <string>
+
+namespace dm {
+
+namespace {
+
+float roundDown(double x) noexcept {
+  const float f = static_cast<float>(x);
+  return static_cast<double>(f) > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+}
+float roundUp(double x) noexcept {
+  const float f = static_cast<float>(x);
+  return static_cast<double>(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
+}
+
+void setBox(BvhNode& n, const Aabb& b) noexcept {
+  for (int i = 0; i < 3; ++i) {
+    n.lo[i] = roundDown(b.min()[i]);
+    n.hi[i] = roundUp(b.max()[i]);
+  }
+}
+
+double halfArea(const Aabb& b) noexcept {
+  if (b.isEmpty()) return 0.0;
+  const Vec3 d = b.sizes();
+  return d.x() * d.y() + d.y() * d.z() + d.z() * d.x();
+}
+
+// Depth below which SAH is used; deeper nodes split at the object median so
+// that the depth stays below MeshBvh::kMaxDepth (2^30 triangles need 30 more).
+constexpr int kSahDepth = 64;
+static_assert(kSahDepth + 31 < MeshBvh::kMaxDepth);
+
+}  // namespace
+
+// Temporary binary tree built in parallel, then flattened depth-first into
+// the adjacent-children layout.
+struct BvhBuilder {
+  struct TempNode {
+    Aabb box;
+    std::uint32_t left = 0, right = 0;  // temp indices; both 0 for a leaf
+    std::uint32_t begin = 0, count = 0;
+  };
+  const std::vector<Aabb>& boxes;
+  const std::vector<Vec3>& centroids;
+  std::vector<std::uint32_t>& index;
+  std::vector<TempNode>& temp;
+  std::atomic<std::uint32_t> next{1};
+  int bins = 16;
+  int maxLeaf = 4;
+  std::size_t parallelThreshold = 4096;
+
+  std::uint32_t allocate() { return next.fetch_add(1, std::memory_order_relaxed); }
+
+  void build(std::uint32_t node, std::uint32_t begin, std::uint32_t end, int depth) {
+    TempNode& n = temp[node];
+    n.begin = begin;
+    n.count = end - begin;
+    Aabb box, cbox;
+    for (std::uint32_t i = begin; i < end; ++i) {
+      box.extend(boxes[index[i]]);
+      cbox.extend(centroids[index[i]]);
+    }
+    n.box = box;
+    const std::uint32_t count = end - begin;
+    if (count == 1) return;
+
+    std::uint32_t mid = begin;
+    bool split = false;
+    if (depth < kSahDepth) {
+      // Binned SAH over the three axes.
+      constexpr int kMaxBins = 64;
+      struct Bin {
+        Aabb box;
+        std::uint32_t count = 0;
+      };
+      double bestCost = std::numeric_limits<double>::infinity();
+      int bestAxis = -1, bestBin = 0;
+      const Vec3 cmin = cbox.min(), cext = cbox.sizes();
+      for (int axis = 0; axis < 3; ++axis) {
+        if (!(cext[axis] > 0)) continue;
+        std::array<Bin, kMaxBins> bin;  // only the first `bins` are used
+        for (int b = 0; b < bins; ++b) bin[b] = Bin{};
+        const double scale = bins / cext[axis];
+        for (std::uint32_t i = begin; i < end; ++i) {
+          const std::uint32_t t = index[i];
+          const int b = std::min(bins - 1, static_cast<int>((centroids[t][axis] - cmin[axis]) * scale));
+          bin[b].count++;
+          bin[b].box.extend(boxes[t]);
+        }
+        // Right-to-left sweep of areas, then left-to-right evaluation.
+        std::array<double, kMaxBins> rightCost;
+        Aabb acc;
+        std::uint32_t accCount = 0;
+        for (int b = bins - 1; b > 0; --b) {
+          acc.extend(bin[b].box);
+          accCount += bin[b].count;
+          rightCost[b] = halfArea(acc) * accCount;
+        }
+        acc.setEmpty();
+        accCount = 0;
+        for (int b = 0; b < bins - 1; ++b) {
+          acc.extend(bin[b].box);
+          accCount += bin[b].count;
+          if (accCount == 0 || accCount == count) continue;
+          const double cost = halfArea(acc) * accCount + rightCost[b + 1];
+          if (cost < bestCost) {
+            bestCost = cost;
+            bestAxis = axis;
+            bestBin = b;
+          }
+        }
+      }
+      // Cost model: traversal step 1, triangle test 1, both relative to the
+      // parent's area.
+      const double parentArea = halfArea(box);
+      const double splitCost = 1.0 + (parentArea > 0 ? bestCost / parentArea : 0.0);
+      if (bestAxis >= 0 && count <= static_cast<std::uint32_t>(maxLeaf) && splitCost >= count) return;
+      if (bestAxis >= 0) {
+        const double cm = cmin[bestAxis], scale = bins / cext[bestAxis];
+        auto* it = std::partition(index.data() + begin, index.data() + end, [&](std::uint32_t t) {
+          return std::min(bins - 1, static_cast<int>((centroids[t][bestAxis] - cm) * scale)) <= bestBin;
+        });
+        mid = static_cast<std::uint32_t>(it - index.data());
+        split = mid > begin && mid < end;
+      }
+    }
+    if (!split) {
+      if (count <= static_cast<std::uint32_t>(maxLeaf)) return;
+      // All centroids equal, or too deep: object median on the widest axis.
+      int axis = 0;
+      cbox.sizes().maxCoeff(&axis);
+      mid = begin + count / 2;
+      std::nth_element(
+          index.data() + begin, index.data() + mid, index.data() + end,
+          [&](std::uint32_t a, std::uint32_t b) { return centroids[a][axis] < centroids[b][axis]; });
+    }
+    const std::uint32_t l = allocate(), r = allocate();
+    n.left = l;
+    n.right = r;
+    if (count > parallelThreshold) {
+      tbb::parallel_invoke([&] { build(l, begin, mid, depth + 1); }, [&] { build(r, mid, end, depth + 1); });
+    } else {
+      build(l, begin, mid, depth + 1);
+      build(r, mid, end, depth + 1);
+    }
+  }
+};
+
+Result<MeshBvh> MeshBvh::build(const Mesh& mesh, const BvhBuildOptions& options) {
+  const std::string where =
+      mesh.name.empty() ? std::string("MeshBvh::build") : "MeshBvh::build: mesh '" + mesh.name + "'";
+  if (mesh.triangles.empty())
+    return fail(ErrorCode::InvalidArgument, "the mesh has no triangles", where,
+                "build a BVH from a non-empty mesh");
+  if (mesh.triangles.size() > (std::size_t(1) << 30))
+    return fail(ErrorCode::InvalidArgument,
+                "the mesh has " + std::to_string(mesh.triangles.size()) + " triangles", where,
+                "split meshes above 2^30 triangles into parts");
+  const std::size_t nv = mesh.positions.size();
+  for (std::size_t v = 0; v < nv; ++v)
+    if (!mesh.positions[v].allFinite())
+      return fail(ErrorCode::InvalidArgument, "position " + std::to_string(v) + " is not finite", where,
+                  "remove NaN/Inf vertices before building");
+  const std::size_t n = mesh.triangles.size();
+  for (std::size_t t = 0; t < n; ++t)
+    for (std::uint32_t v : mesh.triangles[t])
+      if (v >= nv)
+        return fail(ErrorCode::InvalidArgument,
+                    "triangle " + std::to_string(t) + " uses vertex " + std::to_string(v) + " of " +
+                        std::to_string(nv),
+                    where, "check Mesh::validate()");
+
+  std::vector<Aabb> boxes(n);
+  std::vector<Vec3> centroids(n);
+  for (std::size_t t = 0; t < n; ++t) {
+    const Triangle& tri = mesh.triangles[t];
+    Aabb b(mesh.positions[tri[0]]);
+    b.extend(mesh.positions[tri[1]]);
+    b.extend(mesh.positions[tri[2]]);
+    boxes[t] = b;
+    centroids[t] = b.center();
+  }
+  std::vector<std::uint32_t> index(n);
+  for (std::size_t t = 0; t < n; ++t) index[t] = static_cast<std::uint32_t>(t);
+  std::vector<BvhBuilder::TempNode> temp(2 * n);
+  BvhBuilder builder{boxes, centroids, index, temp};
+  builder.bins = std::clamp(options.bins, 4, 64);
+  builder.maxLeaf = std::clamp(options.maxLeafSize, 1, 8);
+  builder.parallelThreshold = std::max<std::size_t>(options.parallelThreshold, 64);
+  builder.build(0, 0, static_cast<std::uint32_t>(n), 0);
+  const std::size_t tempCount = builder.next.load();
+
+  MeshBvh bvh;
+  bvh.vertexCount_ = nv;
+  // Flatten: slot 0 root, slot 1 padding, children pairs from slot 2 on.
+  bvh.nodeCount_ = tempCount + 1;
+  bvh.blocks_.resize((bvh.nodeCount_ + 1) / 2);
+  BvhNode* nodes = bvh.nodeData();
+  nodes[1] = BvhNode{{0, 0, 0}, 0, {0, 0, 0}, 0};
+  struct Item {
+    std::uint32_t tempIndex, slot;
+    int depth;
+  };
+  std::vector<Item> stack;
+  stack.push_back({0, 0, 0});
+  std::uint32_t nextSlot = 2;
+  while (!stack.empty()) {
+    const Item it = stack.back();
+    stack.pop_back();
+    const BvhBuilder::TempNode& tn = temp[it.tempIndex];
+    BvhNode& out = nodes[it.slot];
+    setBox(out, tn.box);
+    bvh.depth_ = std::max(bvh.depth_, it.depth);
+    if (tn.left == 0) {
+      out.first = tn.begin;
+      out.count = tn.count;
+    } else {
+      out.first = nextSlot;
+      out.count = 0;
+      nextSlot += 2;
+      stack.push_back({tn.right, out.first + 1, it.depth + 1});
+      stack.push_back({tn.left, out.first, it.depth + 1});
+    }
+  }
+  DM_ASSERT(nextSlot == bvh.nodeCount_, "flattened node count");
+  DM_DEMAND(bvh.depth_ <= kMaxDepth, "BVH depth bound violated");
+
+  bvh.order_ = std::move(index);
+  bvh.tris_.resize(n);
+  bvh.corners_.resize(3 * n);
+  for (std::size_t k = 0; k < n; ++k) {
+    const Triangle& tri = mesh.triangles[bvh.order_[k]];
+    bvh.tris_[k] = tri;
+    for (int c = 0; c < 3; ++c) bvh.corners_[3 * k + c] = mesh.positions[tri[c]];
+  }
+  bvh.bounds_ = temp[0].box;
+
+  // Pseudonormals for closed, oriented manifolds: neighbours across edges.
+  const MeshTopology topo = analyzeTopology(mesh);
+  bvh.closed_ =
+      topo.isClosed && topo.isManifold && topo.isOrientedConsistently && topo.degenerateTriangles == 0;
+  if (bvh.closed_) {
+    struct HalfEdge {
+      std::uint32_t from, to, tri;
+      int edge;
+    };
+    std::vector<HalfEdge> half;
+    half.reserve(3 * n);
+    for (std::uint32_t k = 0; k < n; ++k)
+      for (int e = 0; e < 3; ++e) half.push_back({bvh.tris_[k][e], bvh.tris_[k][(e + 1) % 3], k, e});
+    auto key = [](std::uint32_t a, std::uint32_t b) {
+      return (std::uint64_t(std::min(a, b)) << 32) | std::uint64_t(std::max(a, b));
+    };
+    std::sort(half.begin(), half.end(),
+              [&](const HalfEdge& x, const HalfEdge& y) { return key(x.from, x.to) < key(y.from, y.to); });
+    bvh.neighbours_.assign(3 * n, 0);
+    for (std::size_t i = 0; i + 1 < half.size(); i += 2) {
+      // Closed + manifold + oriented: every undirected edge appears exactly twice.
+      DM_ASSERT(key(half[i].from, half[i].to) == key(half[i + 1].from, half[i + 1].to),
+                "edge pairing of a closed mesh");
+      bvh.neighbours_[3 * half[i].tri + half[i].edge] = half[i + 1].tri;
+      bvh.neighbours_[3 * half[i + 1].tri + half[i + 1].edge] = half[i].tri;
+    }
+    bvh.faceNormals_.resize(n);
+    bvh.edgeNormals_.resize(3 * n);
+    bvh.vertexNormals_.resize(nv);
+    bvh.computeNormals();
+  }
+  return bvh;
+}
+
+void MeshBvh::computeNormals() noexcept {
+  const std::size_t n = tris_.size();
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec3* c = &corners_[3 * k];
+    const Vec3 nrm = (c[1] - c[0]).cross(c[2] - c[0]);
+    const double len = nrm.norm();
+    faceNormals_[k] = len > 0 ? Vec3(nrm / len) : Vec3::Zero();
+  }
+  for (Vec3& v : vertexNormals_) v.setZero();
+  for (std::size_t k = 0; k < n; ++k) {
+    const Vec3* c = &corners_[3 * k];
+    for (int e = 0; e < 3; ++e) {
+      const Vec3 s = faceNormals_[k] + faceNormals_[neighbours_[3 * k + e]];
+      const double len = s.norm();
+      edgeNormals_[3 * k + e] = len > 0 ? Vec3(s / len) : faceNormals_[k];
+      // Interior angle at corner e weights the vertex pseudonormal.
+      const Vec3 u = c[(e + 1) % 3] - c[e], w = c[(e + 2) % 3] - c[e];
+      const double angle = std::atan2(u.cross(w).norm(), u.dot(w));
+      vertexNormals_[tris_[k][e]] += angle * faceNormals_[k];
+    }
+  }
+  for (Vec3& v : vertexNormals_) {
+    const double len = v.norm();
+    if (len > 0) v /= len;
+  }
+}
+
+void MeshBvh::computeBoxes() noexcept {
+  BvhNode* nodes = nodeData();
+  for (std::size_t i = nodeCount_; i-- > 0;) {
+    if (i == 1) continue;
+    BvhNode& nd = nodes[i];
+    if (nd.isLeaf()) {
+      Aabb b;
+      for (std::uint32_t k = nd.first; k < nd.first + nd.count; ++k)
+        for (int c = 0; c < 3; ++c) b.extend(corners_[3 * std::size_t(k) + c]);
+      setBox(nd, b);
+      if (i == 0) bounds_ = b;
+    } else {
+      const BvhNode& l = nodes[nd.first];
+      const BvhNode& r = nodes[nd.first + 1];
+      for (int a = 0; a < 3; ++a) {
+        nd.lo[a] = std::min(l.lo[a], r.lo[a]);
+        nd.hi[a] = std::max(l.hi[a], r.hi[a]);
+      }
+    }
+  }
+}
+
+Status MeshBvh::refit(std::span<const Vec3> positions) {
+  if (positions.size() != vertexCount_)
+    return fail(ErrorCode::InvalidArgument,
+                "refit got " + std::to_string(positions.size()) + " positions for a mesh of " +
+                    std::to_string(vertexCount_) + " vertices",
+                "MeshBvh::refit", "pass the deformed positions of the mesh the BVH was built from");
+  for (std::size_t v = 0; v < positions.size(); ++v)
+    if (!positions[v].allFinite())
+      return fail(ErrorCode::InvalidArgument, "position " + std::to_string(v) + " is not finite",
+                  "MeshBvh::refit", "pass finite positions");
+  const std::size_t n = tris_.size();
+  Aabb all;
+  for (std::size_t k = 0; k < n; ++k)
+    for (int c = 0; c < 3; ++c) {
+      corners_[3 * k + c] = positions[tris_[k][c]];
+      all.extend(corners_[3 * k + c]);
+    }
+  computeBoxes();
+  bounds_ = all;
+  if (closed_) computeNormals();
+  return ok();
+}
+
+}  // namespace dm
