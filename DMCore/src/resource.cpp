@@ -1,6 +1,7 @@
 // Resource manager: weak asset cache keyed by (type, canonical path, import
 // options), loader table per type and extension, coalesced sync/async loads
 // on a oneTBB arena, atomic reload.
+#include <dm/core/filesystem.hpp>
 #include <dm/core/log.hpp>
 #include <dm/core/resource.hpp>
 
@@ -163,8 +164,13 @@ struct ResourceManager::Impl {
       out.error = fail(ErrorCode::InvalidArgument, "empty resource path", {}, "pass a file path");
       return out;
     }
+    // Mount names ("mricron:ch2.nii.gz") and DM_DATA_PATH entries resolve
+    // through the file system; anything else is taken as given, so a missing
+    // file still reports "file does not exist" at load time.
+    fs::path located = requested;
+    if (auto r = FileSystem::global().resolve(requested.string())) located = *r;
     std::error_code ec;
-    fs::path path = fs::weakly_canonical(requested, ec);
+    fs::path path = fs::weakly_canonical(located, ec);
     if (ec) {
       out.error = fail(ErrorCode::Io, "cannot resolve the path: " + ec.message(), requested.string(),
                        "check the path and its permissions");

@@ -1,5 +1,6 @@
 // Tests of dm::ResourceManager with a toy resource: a text file loaded into
 // a struct. Every test writes its files into its own temporary directory.
+#include <dm/core/filesystem.hpp>
 #include <dm/core/resource.hpp>
 
 #include <gtest/gtest.h>
@@ -421,6 +422,36 @@ TEST_F(ResourceTest, LongestExtensionMatchWins) {
   EXPECT_FALSE(rm.registerLoader<Text>({}, tagged("x")));
   EXPECT_FALSE(rm.registerLoader<Text>({".new"}, dm::Loader<Text>{}));
   EXPECT_EQ(rm.extensions<Text>(), (std::vector<std::string>{".gz", ".nii", ".nii.gz"}));
+}
+
+}  // namespace
+
+namespace {
+
+// Mount names resolve through the file system: "mricron:ch2.nii.gz" and the
+// file's own path are the same asset.
+TEST(ResourceMounts, MountNamesAndTheirPathsAreOneAsset) {
+  auto located = dm::FileSystem::global().resolve("mricron:ch2.nii.gz");
+  if (!located) GTEST_SKIP() << "mricron-data is not installed (scripts/setup.sh installs it)";
+  dm::ResourceManager rm;
+  std::atomic<int> calls{0};
+  fs::path seen;
+  ASSERT_TRUE(rm.registerLoader<std::uintmax_t>(
+      {".nii.gz"}, [&](const fs::path& p, const dm::ImportOptions&) -> dm::Result<std::uintmax_t> {
+        calls.fetch_add(1);
+        seen = p;
+        return fs::file_size(p);
+      }));
+  auto byMount = rm.load<std::uintmax_t>("mricron:ch2.nii.gz");
+  ASSERT_TRUE(byMount) << byMount.error();
+  EXPECT_EQ(*byMount->get(), fs::file_size(*located));
+  EXPECT_EQ(seen, fs::weakly_canonical(*located));
+  auto byPath = rm.load<std::uintmax_t>(*located);
+  ASSERT_TRUE(byPath) << byPath.error();
+  EXPECT_EQ(byMount->get(), byPath->get());
+  EXPECT_EQ(calls.load(), 1);
+  auto missing = rm.load<std::uintmax_t>("mricron:no_such_scan.nii.gz");
+  ASSERT_FALSE(missing);
 }
 
 }  // namespace

@@ -3,6 +3,8 @@
 // oneTBB task pool, hot-reloadable.
 //
 // An asset is identified by (type, canonical file path, import options).
+// Paths go through FileSystem::global().resolve() first, so mount names such
+// as "mricron:ch2.nii.gz" and DM_DATA_PATH entries work.
 // Loading the same asset again while any handle to it is alive returns the
 // same instance (the cache is weak: releasing every handle frees the asset).
 // Concurrent loads of one asset are coalesced: the loader runs once and every
