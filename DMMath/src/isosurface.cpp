@@ -26,6 +26,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <new>
 #include <string>
@@ -236,7 +237,12 @@ class Extractor {
             : std::array<std::uint8_t, 7>{detail::kEdgeX, detail::kEdgeY, detail::kEdgeZ, 0, 0, 0, 0};
 
   Extractor(const Volume& v, const IsosurfaceOptions& o)
-      : data_(v.data<T>()), iso_(o.iso), inside_(o.iso), normals_(o.computeNormals), cap_(o.maxTriangles) {
+      : data_(v.data<T>()),
+        iso_(o.iso),
+        inside_(o.iso),
+        normals_(o.computeNormals),
+        cap_(o.maxTriangles),
+        progress_(o.progress) {
     const Vec3i d = v.dims();
     const int pad = o.closeBorders ? 1 : 0;
     g_ = Layout{d.x(), d.y(), d.z(), pad, d.x() + 2 * pad, d.y() + 2 * pad, d.z() + 2 * pad, 0};
@@ -257,7 +263,8 @@ class Extractor {
 
   Result<Mesh> run(int threads) {
     Mesh mesh;
-    if (g_.Nx < 2 || g_.Ny < 2 || g_.Nz < 2) return mesh;                   // no cells
+    report(0.0);
+    if (g_.Nx < 2 || g_.Ny < 2 || g_.Nz < 2) return done(std::move(mesh));  // no cells
     if (g_.nx * static_cast<double>(g_.ny) * g_.nz < 32768.0) threads = 1;  // not worth a thread
     threads = std::max(1, std::min(threads, g_.Nz / 2));
 
@@ -269,6 +276,7 @@ class Extractor {
     parallelFor(chunks, threads, [&](int c, int) {
       for (int z = g_.nz * c / chunks; z < g_.nz * (c + 1) / chunks; ++z) classifySlice(z);
     });  // allocates nothing
+    report(0.1);
 
     // 2. Count the vertices of each node slice and number them.
     std::vector<std::size_t> first(static_cast<std::size_t>(g_.Nz) + 1, 0);
@@ -279,7 +287,8 @@ class Extractor {
     });  // allocates nothing
     for (std::size_t k = 0; k < static_cast<std::size_t>(g_.Nz); ++k) first[k + 1] += first[k];
     const std::size_t vertexCount = first.back();
-    if (vertexCount == 0) return mesh;
+    report(0.2);
+    if (vertexCount == 0) return done(std::move(mesh));
     if (vertexCount > std::numeric_limits<std::uint32_t>::max())
       return fail(ErrorCode::Unsupported,
                   "isosurface would have " + std::to_string(vertexCount) + " vertices", "extractIsosurface",
@@ -299,10 +308,15 @@ class Extractor {
     const int slabs = threads == 1 ? 1 : std::min(g_.Nz / 2, 4 * threads);
     std::vector<std::vector<Triangle>> slabTriangles(static_cast<std::size_t>(slabs));
     std::vector<Scratch> scratch(static_cast<std::size_t>(threads));
+    std::atomic<int> slabsDone{0};
     const bool allocated = parallelFor(slabs, threads, [&](int s, int worker) {
       auto& sc = scratch[static_cast<std::size_t>(worker)];
       sc.allocate(static_cast<std::size_t>(g_.Nx) * static_cast<std::size_t>(g_.Ny));
       extractSlab(g_.Nz * s / slabs, g_.Nz * (s + 1) / slabs, sc, slabTriangles[static_cast<std::size_t>(s)]);
+      const int finished = slabsDone.fetch_add(1, std::memory_order_relaxed) + 1;
+      // Worker 0 is the calling thread: only it reports, so the callback
+      // never runs concurrently with itself or on a pool thread.
+      if (worker == 0) report(0.2 + 0.75 * finished / slabs);
     });
     if (!allocated) return outOfMemory();
     if (stop_.load()) return tooManyTriangles();
@@ -318,7 +332,7 @@ class Extractor {
         std::vector<Triangle>().swap(t);
       }
     }
-    return mesh;
+    return done(std::move(mesh));
   }
 
  private:
@@ -333,6 +347,19 @@ class Extractor {
           if (m.size() != n) m.assign(n, 0);
     }
   };
+
+  // Progress comes from the calling thread only (phase ends and the slabs it
+  // finishes), so it never decreases; steps under 1 % are skipped, so the
+  // callback runs at most ~100 times whatever the slab count.
+  void report(double fraction) {
+    if (!progress_ || (fraction < 1.0 && fraction - reported_ < 0.01 && reported_ >= 0.0)) return;
+    reported_ = fraction;
+    progress_(fraction);
+  }
+  Mesh done(Mesh mesh) {
+    report(1.0);
+    return mesh;
+  }
 
   Error tooManyTriangles() const {
     return fail(ErrorCode::Unsupported,
@@ -616,6 +643,8 @@ class Extractor {
   InsideTest<T> inside_;
   bool normals_;
   std::size_t cap_;
+  const std::function<void(double)>& progress_;
+  double reported_ = -1.0;  // last fraction passed to progress_
   Layout g_{};
   double l_[9];  // index-to-world linear part, column-major
   double m_[9];  // its inverse transpose (maps index-space gradients to world)

@@ -25,6 +25,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 
 namespace dm {
 
@@ -45,6 +46,9 @@ struct IsosurfaceOptions {
   bool closeBorders = false;
   int threads = 0;               ///< worker threads; 0 = std::thread::hardware_concurrency()
   std::size_t maxTriangles = 0;  ///< fail when the output would exceed this; 0 = no cap
+  /// Called with the fraction done in [0, 1], nondecreasing, from the calling
+  /// thread only, at most about 100 times; may be empty. Must not throw.
+  std::function<void(double)> progress;
 };
 
 /// Extracts the isosurface `options.iso` of `volume` as a triangle mesh (world
