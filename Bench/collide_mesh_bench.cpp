@@ -26,6 +26,7 @@
 #include <dm/collide/bvh.hpp>
 #include <dm/collide/mesh_query.hpp>
 #include <dm/io/mesh_io.hpp>
+#include <dm/math/primitives.hpp>
 
 #include <BulletCollision/Gimpact/btGImpactCollisionAlgorithm.h>
 #include <BulletCollision/Gimpact/btGImpactShape.h>
@@ -51,46 +52,6 @@ namespace {
 
 using dm::Isometry3;
 using dm::Vec3;
-
-dm::Mesh torusMesh(double R, double r, int nu, int nv) {
-  dm::Mesh m;
-  for (int i = 0; i < nu; ++i)
-    for (int j = 0; j < nv; ++j) {
-      const double u = 2 * std::numbers::pi * i / nu, v = 2 * std::numbers::pi * j / nv;
-      m.positions.emplace_back((R + r * std::cos(v)) * std::cos(u), (R + r * std::cos(v)) * std::sin(u),
-                               r * std::sin(v));
-    }
-  auto id = [&](int i, int j) { return static_cast<std::uint32_t>((i % nu) * nv + (j % nv)); };
-  for (int i = 0; i < nu; ++i)
-    for (int j = 0; j < nv; ++j) {
-      m.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
-      m.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
-    }
-  return m;
-}
-
-dm::Mesh sphereMesh(double radius, int rings, int segments) {
-  dm::Mesh m;
-  m.positions.emplace_back(0, 0, radius);
-  for (int i = 1; i < rings; ++i)
-    for (int j = 0; j < segments; ++j) {
-      const double theta = std::numbers::pi * i / rings, phi = 2 * std::numbers::pi * j / segments;
-      m.positions.emplace_back(radius * std::sin(theta) * std::cos(phi),
-                               radius * std::sin(theta) * std::sin(phi), radius * std::cos(theta));
-    }
-  m.positions.emplace_back(0, 0, -radius);
-  const auto south = static_cast<std::uint32_t>(m.positions.size() - 1);
-  auto at = [&](int i, int j) { return static_cast<std::uint32_t>(1 + (i - 1) * segments + (j % segments)); };
-  for (int j = 0; j < segments; ++j) {
-    m.triangles.push_back({0, at(1, j), at(1, j + 1)});
-    m.triangles.push_back({south, at(rings - 1, j + 1), at(rings - 1, j)});
-    for (int i = 1; i + 1 < rings; ++i) {
-      m.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
-      m.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
-    }
-  }
-  return m;
-}
 
 double bestOf(int reps, const std::function<void()>& f) {
   double best = 1e300;
@@ -324,8 +285,8 @@ int main(int argc, char** argv) {
   // Torus 2·nu·nv triangles, sphere 2·segments·(rings − 1).
   for (const Size& s : {Size{32, 16, 17, 32, poseCount}, Size{100, 50, 51, 100, poseCount},
                         Size{316, 158, 159, 316, std::max(1, poseCount / 4)}}) {
-    benchScene("torus/sphere", torusMesh(0.35, 0.12, s.nu, s.nv), sphereMesh(0.3, s.rings, s.segments),
-               s.poses, reps, rows);
+    benchScene("torus/sphere", dm::makeTorus(0.35, 0.12, s.nu, s.nv),
+               dm::makeUvSphere(0.3, s.rings, s.segments), s.poses, reps, rows);
   }
   dm::MeshImportOptions options;
   auto real = dm::readMesh(model, options);

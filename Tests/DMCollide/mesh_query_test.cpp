@@ -5,6 +5,7 @@
 #include <dm/collide/mesh_query.hpp>
 #include <dm/collide/triangle.hpp>
 #include <dm/math/geometry.hpp>
+#include <dm/math/primitives.hpp>
 
 #include <gtest/gtest.h>
 
@@ -22,52 +23,6 @@ namespace {
 
 using dm::Isometry3;
 using dm::Vec3;
-
-/// Latitude–longitude sphere with poles (closed, CCW from outside).
-dm::Mesh uvSphere(double radius, int rings, int segments) {
-  dm::Mesh m;
-  m.positions.emplace_back(0, 0, radius);
-  for (int i = 1; i < rings; ++i) {
-    const double theta = std::numbers::pi * i / rings;
-    for (int j = 0; j < segments; ++j) {
-      const double phi = 2 * std::numbers::pi * j / segments;
-      m.positions.emplace_back(radius * std::sin(theta) * std::cos(phi),
-                               radius * std::sin(theta) * std::sin(phi), radius * std::cos(theta));
-    }
-  }
-  m.positions.emplace_back(0, 0, -radius);
-  const auto south = static_cast<std::uint32_t>(m.positions.size() - 1);
-  auto ring = [&](int i, int j) {
-    return static_cast<std::uint32_t>(1 + (i - 1) * segments + (j % segments));
-  };
-  for (int j = 0; j < segments; ++j) {
-    m.triangles.push_back({0, ring(1, j), ring(1, j + 1)});
-    m.triangles.push_back({south, ring(rings - 1, j + 1), ring(rings - 1, j)});
-    for (int i = 1; i + 1 < rings; ++i) {
-      m.triangles.push_back({ring(i, j), ring(i + 1, j), ring(i + 1, j + 1)});
-      m.triangles.push_back({ring(i, j), ring(i + 1, j + 1), ring(i, j + 1)});
-    }
-  }
-  return m;
-}
-
-/// Torus about z (major radius R, tube radius r), nu × nv quads, closed.
-dm::Mesh ring(double R, double r, int nu, int nv) {
-  dm::Mesh m;
-  for (int i = 0; i < nu; ++i)
-    for (int j = 0; j < nv; ++j) {
-      const double u = 2 * std::numbers::pi * i / nu, v = 2 * std::numbers::pi * j / nv;
-      m.positions.emplace_back((R + r * std::cos(v)) * std::cos(u), (R + r * std::cos(v)) * std::sin(u),
-                               r * std::sin(v));
-    }
-  auto id = [&](int i, int j) { return static_cast<std::uint32_t>((i % nu) * nv + (j % nv)); };
-  for (int i = 0; i < nu; ++i)
-    for (int j = 0; j < nv; ++j) {
-      m.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
-      m.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
-    }
-  return m;
-}
 
 dm::Mesh soup(std::size_t n, std::uint64_t seed) {
   std::mt19937_64 rng(seed);
@@ -208,14 +163,16 @@ void checkPair(const dm::Mesh& ma, const dm::Mesh& mb, std::uint64_t seed, int b
 }
 
 TEST(MeshQuery, SphereTorusMatchBruteForce) {
-  checkPair(uvSphere(0.6, 6, 8), ring(0.6, 0.2, 12, 6), 1, 600, 20);
+  checkPair(dm::makeUvSphere(0.6, 6, 8), dm::makeTorus(0.6, 0.2, 12, 6), 1, 600, 20);
 }
-TEST(MeshQuery, TorusSoupMatchBruteForce) { checkPair(ring(0.5, 0.15, 10, 6), soup(100, 5), 2, 600, 20); }
+TEST(MeshQuery, TorusSoupMatchBruteForce) {
+  checkPair(dm::makeTorus(0.5, 0.15, 10, 6), soup(100, 5), 2, 600, 20);
+}
 TEST(MeshQuery, SoupSoupMatchBruteForce) { checkPair(soup(120, 8), soup(90, 9), 3, 600, 20, 2.0); }
 
 TEST(MeshQuery, ScaledMeshesMatchBruteForce) {
   for (double s : {1e-4, 1e4}) {
-    dm::Mesh a = uvSphere(0.6 * s, 5, 7), b = soup(60, 4);
+    dm::Mesh a = dm::makeUvSphere(0.6 * s, 5, 7), b = soup(60, 4);
     for (auto& p : b.positions) p *= s;
     const dm::MeshBvh ba = bvhOf(a), bb = bvhOf(b);
     Brute brute{a, b, {}};
@@ -244,7 +201,7 @@ std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> fclModel(const dm::Mesh& m) {
 }
 
 TEST(MeshQuery, MatchesFclBooleanAndDistance) {
-  const dm::Mesh ma = uvSphere(0.5, 12, 16), mb = ring(0.6, 0.2, 24, 12);
+  const dm::Mesh ma = dm::makeUvSphere(0.5, 12, 16), mb = dm::makeTorus(0.6, 0.2, 24, 12);
   const dm::MeshBvh a = bvhOf(ma), b = bvhOf(mb);
   auto fa = fclModel(ma), fb = fclModel(mb);
   std::mt19937_64 rng(23);
@@ -275,7 +232,7 @@ TEST(MeshQuery, MatchesFclBooleanAndDistance) {
 }
 
 TEST(MeshQuery, ContactsAreTheIntersectingPairs) {
-  const dm::Mesh ma = uvSphere(0.6, 8, 10), mb = ring(0.6, 0.2, 14, 7);
+  const dm::Mesh ma = dm::makeUvSphere(0.6, 8, 10), mb = dm::makeTorus(0.6, 0.2, 14, 7);
   const dm::MeshBvh a = bvhOf(ma), b = bvhOf(mb);
   Brute brute{ma, mb, {}};
   std::mt19937_64 rng(31);
@@ -319,7 +276,7 @@ double winding(const dm::Mesh& m, const Vec3& p) {
 }
 
 TEST(MeshQuery, SignedPointDistanceMatchesBruteForceAndWinding) {
-  for (const dm::Mesh& m : {uvSphere(0.5, 10, 14), ring(0.5, 0.2, 20, 10), soup(200, 12)}) {
+  for (const dm::Mesh& m : {dm::makeUvSphere(0.5, 10, 14), dm::makeTorus(0.5, 0.2, 20, 10), soup(200, 12)}) {
     const dm::MeshBvh bvh = bvhOf(m);
     const bool closed = bvh.isClosed();
     EXPECT_EQ(closed, m.triangleCount() != 200);
@@ -351,7 +308,7 @@ TEST(MeshQuery, SignedPointDistanceMatchesBruteForceAndWinding) {
 }
 
 TEST(MeshQuery, RaycastMatchesBruteForce) {
-  const dm::Mesh m = ring(0.5, 0.2, 20, 10);
+  const dm::Mesh m = dm::makeTorus(0.5, 0.2, 20, 10);
   const dm::MeshBvh bvh = bvhOf(m);
   std::mt19937_64 rng(43);
   std::uniform_real_distribution<double> u(-1, 1);

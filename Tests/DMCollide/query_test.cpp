@@ -3,6 +3,7 @@
 // plane–box manifolds, compounds, user shape types and ray casts.
 #include <dm/collide/query.hpp>
 #include <dm/collide/shapes.hpp>
+#include <dm/math/primitives.hpp>
 
 #include <gtest/gtest.h>
 
@@ -314,12 +315,7 @@ TEST(Query, UserShapeTypeAndColliderRegistration) {
 
 // A closed unit cube centred at the origin, outward CCW triangles.
 std::shared_ptr<const dm::Mesh> unitCube() {
-  auto m = std::make_shared<dm::Mesh>();
-  for (int i = 0; i < 8; ++i)
-    m->positions.emplace_back(i & 1 ? 0.5 : -0.5, i & 2 ? 0.5 : -0.5, i & 4 ? 0.5 : -0.5);
-  m->triangles = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4},
-                  {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-  return m;
+  return std::make_shared<const dm::Mesh>(dm::makeBox(Vec3(0.5, 0.5, 0.5)));
 }
 
 // Mesh pairs through the table against the closed-form answers for a unit

@@ -1,4 +1,5 @@
 #include <dm/math/mesh_topology.hpp>
+#include <dm/math/primitives.hpp>
 
 #include <gtest/gtest.h>
 
@@ -32,26 +33,6 @@ dm::Mesh merged(const dm::Mesh& a, const dm::Mesh& b) {
   m.positions.insert(m.positions.end(), b.positions.begin(), b.positions.end());
   for (auto t : b.triangles) m.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
   return m;
-}
-
-/// Torus of radii R (axis to tube centre) and r (tube), n × m quads.
-dm::Mesh torus(double R, double r, int n, int m) {
-  dm::Mesh mesh;
-  for (int i = 0; i < n; ++i)
-    for (int j = 0; j < m; ++j) {
-      const double u = 2 * std::numbers::pi * i / n, v = 2 * std::numbers::pi * j / m;
-      mesh.positions.emplace_back((R + r * std::cos(v)) * std::cos(u), (R + r * std::cos(v)) * std::sin(u),
-                                  r * std::sin(v));
-    }
-  const auto id = [&](int i, int j) { return static_cast<std::uint32_t>((i % n) * m + (j % m)); };
-  // ∂P/∂u × ∂P/∂v points away from the tube's centre line: (i, j) → (i+1, j)
-  // → (i+1, j+1) is counter-clockwise from outside.
-  for (int i = 0; i < n; ++i)
-    for (int j = 0; j < m; ++j) {
-      mesh.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
-      mesh.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
-    }
-  return mesh;
 }
 
 TEST(MeshTopology, BoxIsAClosedOrientedSphere) {
@@ -121,7 +102,7 @@ TEST(MeshTopology, TwoBoxesAreTwoComponents) {
 
 TEST(MeshTopology, TorusHasGenusOne) {
   const double R = 0.05, r = 0.02;
-  const auto t = dm::analyzeTopology(torus(R, r, 64, 32));
+  const auto t = dm::analyzeTopology(dm::makeTorus(R, r, 64, 32));
   EXPECT_TRUE(t.isClosed && t.isManifold && t.isOrientedConsistently);
   EXPECT_EQ(t.eulerCharacteristic, 0);
   ASSERT_TRUE(t.genus);

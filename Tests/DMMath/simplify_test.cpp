@@ -3,6 +3,7 @@
 // and the Hausdorff distance to the input.
 #include <dm/math/mass_properties.hpp>
 #include <dm/math/mesh_topology.hpp>
+#include <dm/math/primitives.hpp>
 #include <dm/math/simplify.hpp>
 
 #include <gtest/gtest.h>
@@ -15,59 +16,6 @@
 #include <vector>
 
 namespace {
-
-/// Unit icosphere: an icosahedron subdivided `levels` times (20·4^levels triangles).
-dm::Mesh icosphere(int levels, double radius = 1.0) {
-  const double t = (1.0 + std::sqrt(5.0)) / 2.0;
-  dm::Mesh m;
-  m.positions = {{-1, t, 0},  {1, t, 0},  {-1, -t, 0}, {1, -t, 0}, {0, -1, t},  {0, 1, t},
-                 {0, -1, -t}, {0, 1, -t}, {t, 0, -1},  {t, 0, 1},  {-t, 0, -1}, {-t, 0, 1}};
-  m.triangles = {{0, 11, 5},  {0, 5, 1},  {0, 1, 7},  {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
-                 {11, 10, 2}, {10, 7, 6}, {7, 1, 8},  {3, 9, 4},  {3, 4, 2},   {3, 2, 6}, {3, 6, 8},
-                 {3, 8, 9},   {4, 9, 5},  {2, 4, 11}, {6, 2, 10}, {8, 6, 7},   {9, 8, 1}};
-  for (int l = 0; l < levels; ++l) {
-    std::map<std::pair<std::uint32_t, std::uint32_t>, std::uint32_t> mid;
-    auto midpoint = [&](std::uint32_t a, std::uint32_t b) {
-      const auto key = std::minmax(a, b);
-      auto it = mid.find(key);
-      if (it != mid.end()) return it->second;
-      const auto id = static_cast<std::uint32_t>(m.positions.size());
-      m.positions.push_back(0.5 * (m.positions[a] + m.positions[b]));
-      mid.emplace(key, id);
-      return id;
-    };
-    std::vector<dm::Triangle> next;
-    for (const dm::Triangle& tri : m.triangles) {
-      const std::uint32_t ab = midpoint(tri[0], tri[1]), bc = midpoint(tri[1], tri[2]),
-                          ca = midpoint(tri[2], tri[0]);
-      next.push_back({tri[0], ab, ca});
-      next.push_back({tri[1], bc, ab});
-      next.push_back({tri[2], ca, bc});
-      next.push_back({ab, bc, ca});
-    }
-    m.triangles = std::move(next);
-  }
-  for (dm::Vec3& p : m.positions) p = radius * p.normalized();
-  return m;
-}
-
-/// Torus around z with major radius R and minor radius r, a welded nu × nv grid.
-dm::Mesh torus(double R, double r, int nu, int nv) {
-  dm::Mesh m;
-  for (int i = 0; i < nu; ++i)
-    for (int j = 0; j < nv; ++j) {
-      const double u = 2 * std::numbers::pi * i / nu, v = 2 * std::numbers::pi * j / nv;
-      m.positions.push_back(
-          {(R + r * std::cos(v)) * std::cos(u), (R + r * std::cos(v)) * std::sin(u), r * std::sin(v)});
-    }
-  auto id = [&](int i, int j) { return static_cast<std::uint32_t>(((i + nu) % nu) * nv + (j + nv) % nv); };
-  for (int i = 0; i < nu; ++i)
-    for (int j = 0; j < nv; ++j) {
-      m.triangles.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
-      m.triangles.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
-    }
-  return m;
-}
 
 /// The unit square [0,1]² at z = z0 as an n × n grid of quads, normal +z.
 dm::Mesh plane(int n, double z0 = 0.0) {
@@ -153,14 +101,14 @@ TEST(Hausdorff, IsSymmetricAndSeesTheLargerOfBothSides) {
 
 TEST(Hausdorff, ConcentricSpheresAreTheRadialGapApart) {
   // Vertices of both lie on their spheres; chords add at most the sagitta.
-  const dm::Mesh a = icosphere(3, 1.0), b = icosphere(3, 1.05);
+  const dm::Mesh a = dm::makeIcosphere(1.0, 3), b = dm::makeIcosphere(1.05, 3);
   const double d = dm::hausdorffDistance(a, b, 8);
   EXPECT_GE(d, 0.05 - 1e-12);
   EXPECT_LT(d, 0.05 + 0.01);
 }
 
 TEST(Simplify, IcosphereAtTenPercentStaysAClosedSphere) {
-  const dm::Mesh sphere = icosphere(5);  // 20480 triangles, edge ≈ 0.03
+  const dm::Mesh sphere = dm::makeIcosphere(1.0, 5);  // 20480 triangles, edge ≈ 0.03
   dm::SimplifyReport report;
   auto out = dm::simplifyMesh(sphere, {.targetRatio = 0.1}, &report);
   ASSERT_TRUE(out) << out.error();
@@ -224,7 +172,7 @@ TEST(Simplify, SubdividedCubeBecomesTheTwelveTriangleCube) {
 }
 
 TEST(Simplify, MaxErrorStopsEarlyWithinTheBound) {
-  const dm::Mesh sphere = icosphere(4);  // 5120 triangles
+  const dm::Mesh sphere = dm::makeIcosphere(1.0, 4);  // 5120 triangles
   constexpr double kMaxError = 0.01;
   dm::SimplifyReport report;
   auto out = dm::simplifyMesh(sphere, {.targetRatio = 0.001, .maxError = kMaxError}, &report);
@@ -243,7 +191,7 @@ TEST(Simplify, MaxErrorStopsEarlyWithinTheBound) {
 }
 
 TEST(Simplify, TorusKeepsGenusOneAtFivePercent) {
-  const dm::Mesh ring = torus(1.0, 0.3, 64, 32);  // 4096 triangles
+  const dm::Mesh ring = dm::makeTorus(1.0, 0.3, 64, 32);  // 4096 triangles
   auto out = dm::simplifyMesh(ring, {.targetRatio = 0.05});
   ASSERT_TRUE(out) << out.error();
   EXPECT_NEAR(double(out->triangleCount()), 205.0, 3.0);
@@ -257,7 +205,7 @@ TEST(Simplify, ProgressIsMonotonicBoundedAndEndsAtOne) {
   dm::SimplifyOptions opt;
   opt.targetRatio = 0.2;
   opt.progress = [&](double f) { calls.push_back(f); };
-  auto out = dm::simplifyMesh(icosphere(3), opt);
+  auto out = dm::simplifyMesh(dm::makeIcosphere(1.0, 3), opt);
   ASSERT_TRUE(out) << out.error();
   ASSERT_FALSE(calls.empty());
   EXPECT_LE(calls.size(), 102u);
@@ -267,7 +215,7 @@ TEST(Simplify, ProgressIsMonotonicBoundedAndEndsAtOne) {
 }
 
 TEST(Simplify, RatioOneKeepsEveryTriangleAndDropsUnusedVertices) {
-  dm::Mesh m = icosphere(2);
+  dm::Mesh m = dm::makeIcosphere(1.0, 2);
   m.positions.push_back({5, 5, 5});  // unused
   auto out = dm::simplifyMesh(m, {.targetRatio = 1.0});
   ASSERT_TRUE(out) << out.error();
@@ -278,7 +226,7 @@ TEST(Simplify, RatioOneKeepsEveryTriangleAndDropsUnusedVertices) {
 }
 
 TEST(Simplify, RejectsBadInputWithAMessage) {
-  const dm::Mesh good = icosphere(1);
+  const dm::Mesh good = dm::makeIcosphere(1.0, 1);
   for (double r : {0.0, -0.5, 1.5, std::nan("")}) {
     auto out = dm::simplifyMesh(good, {.targetRatio = r});
     ASSERT_FALSE(out) << r;
@@ -299,7 +247,7 @@ TEST(Simplify, RejectsBadInputWithAMessage) {
 }
 
 TEST(Lods, LevelsShrinkAndMeasureTheirDistanceToTheInput) {
-  const dm::Mesh sphere = icosphere(4);
+  const dm::Mesh sphere = dm::makeIcosphere(1.0, 4);
   const std::array<double, 3> ratios = {0.5, 0.2, 0.05};
   auto lods = dm::buildLods(sphere, ratios);
   ASSERT_TRUE(lods) << lods.error();
