@@ -16,13 +16,6 @@
 #include <assimp/config.h>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
-#include <poll.h>
-#include <signal.h>
-#include <sys/wait.h>
-#include <unistd.h>
-#if defined(__linux__)
-#include <sys/prctl.h>
-#endif
 
 #include <algorithm>
 #include <array>
@@ -31,10 +24,7 @@
 #include <assimp/Importer.hpp>
 #include <bit>
 #include <cctype>
-#include <cerrno>
-#include <chrono>
 #include <cmath>
-#include <csignal>
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
@@ -46,7 +36,14 @@
 #include <unordered_map>
 #include <utility>
 
+#include "isolate.hpp"
+
 namespace dm {
+
+using detail::ByteReader;
+using detail::FdWriter;
+using detail::IsolateOptions;
+using detail::runIsolated;
 
 namespace {
 
@@ -894,46 +891,10 @@ static_assert(sizeof(Vec3) == 3 * sizeof(double) && sizeof(Vec2f) == 2 * sizeof(
                   sizeof(Vec4f) == 4 * sizeof(float) && sizeof(Triangle) == 3 * sizeof(std::uint32_t),
               "attribute arrays are sent as packed scalars");
 
-class FdWriter {
- public:
-  explicit FdWriter(int fd) : fd_(fd) {}
-  void bytes(const void* data, std::size_t n) {
-    const char* p = static_cast<const char*>(data);
-    while (n > 0 && ok_) {
-      const ssize_t w = ::write(fd_, p, n);
-      if (w < 0 && errno == EINTR) continue;
-      if (w <= 0) {
-        ok_ = false;
-        return;
-      }
-      p += w;
-      n -= static_cast<std::size_t>(w);
-    }
-  }
-  void u64(std::uint64_t v) { bytes(&v, sizeof v); }
-  void str(const std::string& s) {
-    u64(s.size());
-    bytes(s.data(), s.size());
-  }
-  template <class T, class Scalar>
-  void array(const std::vector<T>& v) {
-    u64(v.size());
-    if (!v.empty()) bytes(reinterpret_cast<const Scalar*>(v.data()), v.size() * sizeof(T));
-  }
-  bool ok() const { return ok_; }
-
- private:
-  int fd_;
-  bool ok_ = true;
-};
-
 void sendResult(FdWriter& w, const Result<std::vector<Builder>>& r) {
   if (!r) {
     w.u64(0);
-    w.u64(static_cast<std::uint64_t>(r.error().code));
-    w.str(r.error().what);
-    w.str(r.error().where);
-    w.str(r.error().hint);
+    w.error(r.error());
     return;
   }
   w.u64(1);
@@ -951,48 +912,6 @@ void sendResult(FdWriter& w, const Result<std::vector<Builder>>& r) {
   w.u64(0x444d4d45534844ull);  // end marker: the child got to the end
 }
 
-class ByteReader {
- public:
-  explicit ByteReader(const std::vector<char>& buf) : p_(buf.data()), end_(buf.data() + buf.size()) {}
-  bool bytes(void* out, std::size_t n) {
-    if (static_cast<std::size_t>(end_ - p_) < n) return ok_ = false;
-    if (n > 0) std::memcpy(out, p_, n);
-    p_ += n;
-    return true;
-  }
-  std::uint64_t u64() {
-    std::uint64_t v = 0;
-    bytes(&v, sizeof v);
-    return v;
-  }
-  std::string str() {
-    const std::uint64_t n = u64();
-    if (!ok_ || n > static_cast<std::uint64_t>(end_ - p_)) {
-      ok_ = false;
-      return {};
-    }
-    std::string s(p_, static_cast<std::size_t>(n));
-    p_ += n;
-    return s;
-  }
-  template <class T>
-  void array(std::vector<T>& v) {
-    const std::uint64_t n = u64();
-    if (!ok_ || n > static_cast<std::uint64_t>(end_ - p_) / sizeof(T)) {
-      ok_ = false;
-      return;
-    }
-    v.resize(static_cast<std::size_t>(n));
-    if (n > 0) bytes(static_cast<void*>(v.data()), static_cast<std::size_t>(n) * sizeof(T));
-  }
-  bool ok() const { return ok_; }
-
- private:
-  const char* p_;
-  const char* end_;
-  bool ok_ = true;
-};
-
 Result<std::vector<Builder>> receiveResult(const std::vector<char>& buf, const std::string& exitInfo,
                                            const std::string& where) {
   ByteReader r(buf);
@@ -1003,11 +922,7 @@ Result<std::vector<Builder>> receiveResult(const std::vector<char>& buf, const s
   const std::uint64_t okFlag = r.u64();
   if (!r.ok()) return broken();
   if (okFlag == 0) {
-    Error e;
-    e.code = static_cast<ErrorCode>(r.u64());
-    e.what = r.str();
-    e.where = r.str();
-    e.hint = r.str();
+    Error e = r.error();
     if (!r.ok()) return broken();
     return e;
   }
@@ -1032,102 +947,18 @@ Result<std::vector<Builder>> receiveResult(const std::vector<char>& buf, const s
 }
 
 Result<std::vector<Builder>> loadIsolated(const Source& src, const MeshImportOptions& options, bool merge) {
-  const std::string& where = src.where;
-  int fds[2];
-  if (::pipe(fds) != 0)
-    return fail(ErrorCode::Io,
-                std::string("cannot create a pipe for the import process: ") + std::strerror(errno), where,
-                "set MeshImportOptions::isolate = false to import in-process");
-  // Unwritten stdio buffers would be inherited and could be written twice
-  // (Assimp flushes std::cout in some importers).
-  std::fflush(nullptr);
-  const pid_t pid = ::fork();
-  if (pid < 0) {
-    const int err = errno;
-    ::close(fds[0]);
-    ::close(fds[1]);
-    return fail(ErrorCode::Io, std::string("cannot start the import process: ") + std::strerror(err), where,
-                "set MeshImportOptions::isolate = false to import in-process");
-  }
-  if (pid == 0) {
-    // Child: die plainly on a fault (the parent's crash handlers are not
-    // ours to run), never outlive the parent's deadline, never return.
-    for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGPIPE}) std::signal(sig, SIG_DFL);
-#if defined(__linux__)
-    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
-#endif
-    if (options.timeoutSeconds > 0) ::alarm(static_cast<unsigned>(std::ceil(options.timeoutSeconds)) + 1);
-    ::close(fds[0]);
-#if defined(__linux__)
-    // Pipes of imports running on other threads must not stay open here, or
-    // their readers would wait for this child to end before seeing EOF.
-    if (fds[1] > 3) ::close_range(3, static_cast<unsigned>(fds[1]) - 1, 0);
-    ::close_range(static_cast<unsigned>(fds[1]) + 1, ~0u, 0);
-#endif
-    FdWriter w(fds[1]);
-    sendResult(w, loadWithAssimp(src, options, merge));
-    ::close(fds[1]);
-    ::_exit(w.ok() ? 0 : 3);
-  }
-
-  ::close(fds[1]);
-  std::vector<char> buf;
-  const auto start = std::chrono::steady_clock::now();
-  bool timedOut = false, readError = false;
-  char chunk[1 << 16];
-  for (;;) {
-    int waitMs = -1;
-    if (options.timeoutSeconds > 0) {
-      const double left = options.timeoutSeconds -
-                          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      if (left <= 0) {
-        timedOut = true;
-        break;
-      }
-      waitMs = static_cast<int>(std::min(std::ceil(left * 1000), 1e9));
-    }
-    pollfd pfd{fds[0], POLLIN, 0};
-    const int pr = ::poll(&pfd, 1, waitMs);
-    if (pr < 0 && errno == EINTR) continue;
-    if (pr < 0) {
-      readError = true;
-      break;
-    }
-    if (pr == 0) continue;  // the deadline is checked at the top
-    const ssize_t n = ::read(fds[0], chunk, sizeof chunk);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) readError = true;
-    if (n <= 0) break;  // end of data (or error)
-    buf.insert(buf.end(), chunk, chunk + n);
-  }
-  ::close(fds[0]);
-  if (timedOut) ::kill(pid, SIGKILL);
-  int status = 0;
-  pid_t waited;
-  do waited = ::waitpid(pid, &status, 0);
-  while (waited < 0 && errno == EINTR);
-
-  if (timedOut) {
-    char secs[32];
-    std::snprintf(secs, sizeof secs, "%g", options.timeoutSeconds);
-    return fail(
-        ErrorCode::Timeout, std::string("Assimp did not finish reading the file within ") + secs + " s",
-        where,
-        "the file is malformed (Assimp 5 loops on some broken files) or very large: check it, or raise "
-        "MeshImportOptions::timeoutSeconds");
-  }
-  if (waited == pid && WIFSIGNALED(status))
-    return fail(ErrorCode::Parse,
-                std::string("Assimp crashed while reading the file (signal ") +
-                    std::to_string(WTERMSIG(status)) + ", " + strsignal(WTERMSIG(status)) + ")",
-                where, "the file is malformed or triggers an Assimp bug; check or re-export it");
-  if (readError)
-    return fail(ErrorCode::Io, "reading the result of the import process failed", where,
-                "set MeshImportOptions::isolate = false to import in-process");
-  const std::string exitInfo = waited != pid       ? std::string("status unknown")
-                               : WIFEXITED(status) ? "exit status " + std::to_string(WEXITSTATUS(status))
-                                                   : std::string("stopped");
-  return receiveResult(buf, exitInfo, where);
+  IsolateOptions iso;
+  iso.library = "Assimp";
+  iso.timeoutSeconds = options.timeoutSeconds;
+  iso.disableHint = "set MeshImportOptions::isolate = false to import in-process";
+  iso.crashHint = "the file is malformed or triggers an Assimp bug; check or re-export it";
+  iso.timeoutHint =
+      "the file is malformed (Assimp 5 loops on some broken files) or very large: check it, or raise "
+      "MeshImportOptions::timeoutSeconds";
+  auto run =
+      runIsolated([&](FdWriter& w) { sendResult(w, loadWithAssimp(src, options, merge)); }, iso, src.where);
+  if (!run) return run.error();
+  return receiveResult(run->bytes, run->exitInfo, src.where);
 }
 
 Result<std::vector<Mesh>> import(const Source& src, const MeshImportOptions& options, bool merge) {

@@ -1,0 +1,196 @@
+// Forked-child isolation of third-party parsers; see isolate.hpp.
+#include "isolate.hpp"
+
+#include <poll.h>
+#include <signal.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#if defined(__linux__)
+#include <sys/prctl.h>
+#endif
+
+#include <algorithm>
+#include <cerrno>
+#include <chrono>
+#include <cmath>
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#define DM_ISOLATE_SANITIZED 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
+#define DM_ISOLATE_SANITIZED 1
+#endif
+#endif
+
+namespace dm::detail {
+
+void FdWriter::bytes(const void* data, std::size_t n) {
+  const char* p = static_cast<const char*>(data);
+  while (n > 0 && ok_) {
+    const ssize_t w = ::write(fd_, p, n);
+    if (w < 0 && errno == EINTR) continue;
+    if (w <= 0) {
+      ok_ = false;
+      return;
+    }
+    p += w;
+    n -= static_cast<std::size_t>(w);
+  }
+}
+
+void FdWriter::error(const Error& e) {
+  u64(static_cast<std::uint64_t>(e.code));
+  str(e.what);
+  str(e.where);
+  str(e.hint);
+}
+
+bool ByteReader::bytes(void* out, std::size_t n) {
+  if (remaining() < n) return ok_ = false;
+  if (n > 0) std::memcpy(out, p_, n);
+  p_ += n;
+  return true;
+}
+
+std::string ByteReader::str() {
+  const std::uint64_t n = u64();
+  if (!ok_ || n > remaining()) {
+    ok_ = false;
+    return {};
+  }
+  std::string s(p_, static_cast<std::size_t>(n));
+  p_ += n;
+  return s;
+}
+
+Error ByteReader::error() {
+  Error e;
+  e.code = static_cast<ErrorCode>(u64());
+  e.what = str();
+  e.where = str();
+  e.hint = str();
+  return e;
+}
+
+namespace {
+
+// Caps the child's address space at what it has mapped now plus `budget`.
+void limitAddressSpace(std::size_t budget) {
+#if defined(DM_ISOLATE_SANITIZED)
+  (void)budget;
+#else
+  if (budget == 0) return;
+  std::size_t pages = 0;
+  std::ifstream statm("/proc/self/statm");
+  if (!(statm >> pages)) return;
+  const std::size_t mapped = pages * static_cast<std::size_t>(::sysconf(_SC_PAGESIZE));
+  rlimit lim{};
+  lim.rlim_cur = lim.rlim_max = static_cast<rlim_t>(mapped + budget);
+  ::setrlimit(RLIMIT_AS, &lim);
+#endif
+}
+
+}  // namespace
+
+Result<IsolatedRun> runIsolated(const std::function<void(FdWriter&)>& child, const IsolateOptions& options,
+                                const std::string& where) {
+  int fds[2];
+  if (::pipe(fds) != 0)
+    return fail(ErrorCode::Io,
+                "cannot create a pipe for the " + options.library + " process: " + std::strerror(errno),
+                where, options.disableHint);
+  // Unwritten stdio buffers would be inherited and could be written twice.
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) {
+    const int err = errno;
+    ::close(fds[0]);
+    ::close(fds[1]);
+    return fail(ErrorCode::Io, "cannot start the " + options.library + " process: " + std::strerror(err),
+                where, options.disableHint);
+  }
+  if (pid == 0) {
+    // Child: die plainly on a fault (the parent's crash handlers are not
+    // ours to run), never outlive the parent's deadline, never return.
+    for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGPIPE}) std::signal(sig, SIG_DFL);
+#if defined(__linux__)
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+#endif
+    if (options.timeoutSeconds > 0) ::alarm(static_cast<unsigned>(std::ceil(options.timeoutSeconds)) + 1);
+    ::close(fds[0]);
+#if defined(__linux__)
+    // Pipes of isolated runs on other threads must not stay open here, or
+    // their readers would wait for this child to end before seeing EOF.
+    if (fds[1] > 3) ::close_range(3, static_cast<unsigned>(fds[1]) - 1, 0);
+    ::close_range(static_cast<unsigned>(fds[1]) + 1, ~0u, 0);
+#endif
+    limitAddressSpace(options.addressSpaceBudget);
+    FdWriter w(fds[1]);
+    child(w);
+    ::close(fds[1]);
+    ::_exit(w.ok() ? 0 : 3);
+  }
+
+  ::close(fds[1]);
+  IsolatedRun run;
+  const auto start = std::chrono::steady_clock::now();
+  bool timedOut = false, readError = false;
+  char chunk[1 << 16];
+  for (;;) {
+    int waitMs = -1;
+    if (options.timeoutSeconds > 0) {
+      const double left = options.timeoutSeconds -
+                          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (left <= 0) {
+        timedOut = true;
+        break;
+      }
+      waitMs = static_cast<int>(std::min(std::ceil(left * 1000), 1e9));
+    }
+    pollfd pfd{fds[0], POLLIN, 0};
+    const int pr = ::poll(&pfd, 1, waitMs);
+    if (pr < 0 && errno == EINTR) continue;
+    if (pr < 0) {
+      readError = true;
+      break;
+    }
+    if (pr == 0) continue;  // the deadline is checked at the top
+    const ssize_t n = ::read(fds[0], chunk, sizeof chunk);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) readError = true;
+    if (n <= 0) break;  // end of data (or error)
+    run.bytes.insert(run.bytes.end(), chunk, chunk + n);
+  }
+  ::close(fds[0]);
+  if (timedOut) ::kill(pid, SIGKILL);
+  int status = 0;
+  pid_t waited;
+  do waited = ::waitpid(pid, &status, 0);
+  while (waited < 0 && errno == EINTR);
+
+  if (timedOut) {
+    char secs[32];
+    std::snprintf(secs, sizeof secs, "%g", options.timeoutSeconds);
+    return fail(ErrorCode::Timeout,
+                options.library + " did not finish reading the file within " + secs + " s", where,
+                options.timeoutHint);
+  }
+  if (waited == pid && WIFSIGNALED(status))
+    return fail(ErrorCode::Parse,
+                options.library + " crashed while reading the file (signal " +
+                    std::to_string(WTERMSIG(status)) + ", " + strsignal(WTERMSIG(status)) + ")",
+                where, options.crashHint);
+  if (readError)
+    return fail(ErrorCode::Io, "reading the result of the " + options.library + " process failed", where,
+                options.disableHint);
+  run.exitInfo = waited != pid       ? std::string("status unknown")
+                 : WIFEXITED(status) ? "exit status " + std::to_string(WEXITSTATUS(status))
+                                     : std::string("stopped");
+  return run;
+}
+
+}  // namespace dm::detail

@@ -1,0 +1,104 @@
+// Private to DMIO: run a third-party parser in a forked child process.
+//
+// Assimp 5.2 loops forever or corrupts its heap on some malformed files and
+// OpenVDB allocates buffers as large as lengths read from the file, which no
+// check of ours can fully prevent in-process. runIsolated() forks, runs the
+// parser in the child (which streams its result back through a pipe with
+// FdWriter), enforces a deadline and an address-space budget, and turns a
+// crash, an out-of-memory death or a timeout into an Error. The parent never
+// shares the child's heap.
+#pragma once
+
+#include <dm/core/result.hpp>
+
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace dm::detail {
+
+/// Writes a result to the parent's pipe (in the child).
+class FdWriter {
+ public:
+  explicit FdWriter(int fd) : fd_(fd) {}
+  void bytes(const void* data, std::size_t n);
+  void u64(std::uint64_t v) { bytes(&v, sizeof v); }
+  void str(const std::string& s) {
+    u64(s.size());
+    bytes(s.data(), s.size());
+  }
+  template <class T, class Scalar>
+  void array(const std::vector<T>& v) {
+    u64(v.size());
+    if (!v.empty()) bytes(reinterpret_cast<const Scalar*>(v.data()), v.size() * sizeof(T));
+  }
+  /// An Error as code, what, where, hint.
+  void error(const Error& e);
+  bool ok() const { return ok_; }
+
+ private:
+  int fd_;
+  bool ok_ = true;
+};
+
+/// Reads what FdWriter wrote, bounds-checked (in the parent).
+class ByteReader {
+ public:
+  explicit ByteReader(const std::vector<char>& buf) : p_(buf.data()), end_(buf.data() + buf.size()) {}
+  bool bytes(void* out, std::size_t n);
+  std::uint64_t u64() {
+    std::uint64_t v = 0;
+    bytes(&v, sizeof v);
+    return v;
+  }
+  std::string str();
+  template <class T>
+  void array(std::vector<T>& v) {
+    const std::uint64_t n = u64();
+    if (!ok_ || n > remaining() / sizeof(T)) {
+      ok_ = false;
+      return;
+    }
+    v.resize(static_cast<std::size_t>(n));
+    if (n > 0) bytes(static_cast<void*>(v.data()), static_cast<std::size_t>(n) * sizeof(T));
+  }
+  /// An Error written by FdWriter::error().
+  Error error();
+  std::size_t remaining() const { return static_cast<std::size_t>(end_ - p_); }
+  bool ok() const { return ok_; }
+
+ private:
+  const char* p_;
+  const char* end_;
+  bool ok_ = true;
+};
+
+struct IsolateOptions {
+  std::string library;        ///< "Assimp", "OpenVDB": named in the messages
+  double timeoutSeconds = 0;  ///< 0: no deadline
+  /// Bytes the child may map beyond what the parent had mapped at fork
+  /// (RLIMIT_AS); 0: no limit. Not applied under AddressSanitizer or
+  /// ThreadSanitizer, whose shadow memory needs the address space.
+  std::size_t addressSpaceBudget = 0;
+  std::string disableHint;  ///< how to run in-process instead, for fork/pipe failures
+  std::string crashHint;    ///< what a crash means for the user
+  std::string timeoutHint;  ///< what a timeout means for the user
+};
+
+/// What the child sent, and how it ended ("exit status 0", ...).
+struct IsolatedRun {
+  std::vector<char> bytes;
+  std::string exitInfo;
+};
+
+/// Runs `child` in a forked process; it must write its whole result through
+/// the FdWriter and must not log (another thread may have held the logger's
+/// lock at fork). Fails with Timeout, Parse (the child died by a signal: a
+/// crash, or out of memory within the budget) or Io (no pipe, no fork).
+Result<IsolatedRun> runIsolated(const std::function<void(FdWriter&)>& child, const IsolateOptions& options,
+                                const std::string& where);
+
+}  // namespace dm::detail
