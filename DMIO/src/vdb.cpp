@@ -25,6 +25,8 @@
 #include <system_error>
 #include <utility>
 
+#include "isolate.hpp"
+
 namespace dm {
 namespace {
 
@@ -140,13 +142,16 @@ Status checkBox(const openvdb::CoordBBox& box, VoxelType type, std::size_t maxBy
 }
 
 template <class GridT, class DenseValue>
-void copyDense(const openvdb::GridBase& g, const openvdb::CoordBBox& box, DenseValue* out) {
+void copyDense(const openvdb::GridBase& g, const openvdb::CoordBBox& box, DenseValue* out, bool serial) {
   openvdb::tools::Dense<DenseValue, openvdb::tools::LayoutXYZ> dense(box, out);
-  openvdb::tools::copyToDense(static_cast<const GridT&>(g), dense);
+  openvdb::tools::copyToDense(static_cast<const GridT&>(g), dense, serial);
 }
 
 /// Densifies a fully loaded scalar grid.
-Result<Volume> densify(const openvdb::GridBase& g, std::size_t maxBytes, const std::string& where) {
+/// `serial`: no oneTBB tasks (in the isolated child, whose copy of the
+/// parent's task scheduler has no worker threads).
+Result<Volume> densify(const openvdb::GridBase& g, std::size_t maxBytes, const std::string& where,
+                       bool serial) {
   const openvdb::math::Transform& xform = g.transform();
   if (!xform.isLinear())
     return fail(ErrorCode::Unsupported, "the grid's transform (" + xform.mapType() + ") is not linear", where,
@@ -169,15 +174,15 @@ Result<Volume> densify(const openvdb::GridBase& g, std::size_t maxBytes, const s
   auto v = Volume::create(Vec3i(dim.x(), dim.y(), dim.z()), type, a, maxBytes);
   if (!v) return v.error().within(where);
   if (g.isType<openvdb::FloatGrid>()) {
-    copyDense<openvdb::FloatGrid>(g, box, v->data<float>());
+    copyDense<openvdb::FloatGrid>(g, box, v->data<float>(), serial);
   } else if (g.isType<openvdb::BoolGrid>()) {
-    copyDense<openvdb::BoolGrid>(g, box, v->data<float>());
+    copyDense<openvdb::BoolGrid>(g, box, v->data<float>(), serial);
   } else if (g.isType<openvdb::DoubleGrid>()) {
-    copyDense<openvdb::DoubleGrid>(g, box, v->data<double>());
+    copyDense<openvdb::DoubleGrid>(g, box, v->data<double>(), serial);
   } else if (g.isType<openvdb::Int32Grid>()) {
-    copyDense<openvdb::Int32Grid>(g, box, v->data<double>());
+    copyDense<openvdb::Int32Grid>(g, box, v->data<double>(), serial);
   } else if (g.isType<openvdb::Int64Grid>()) {
-    copyDense<openvdb::Int64Grid>(g, box, v->data<double>());
+    copyDense<openvdb::Int64Grid>(g, box, v->data<double>(), serial);
   } else {
     return fail(ErrorCode::Unsupported, "grid of type " + g.valueType() + " is not scalar", where,
                 "read a float, double, int32, int64 or bool grid");
@@ -318,14 +323,10 @@ Result<Volume> readVdb(const std::filesystem::path& file, const VdbReadOptions& 
   return parseVdb(*bytes, file.string(), options);
 }
 
-Result<Volume> parseVdb(std::span<const std::byte> bytes, std::string_view sourceName,
-                        const VdbReadOptions& options) {
-  const std::string source(sourceName);
-  if (Status s = checkHeader(reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size(), bytes.size(),
-                             source);
-      !s)
-    return s.error();
-  initializeOpenVdb();
+namespace {
+
+Result<Volume> parseInProcess(std::span<const std::byte> bytes, const std::string& source,
+                              const VdbReadOptions& options, bool serial) {
   std::string where = whereOf(source, options.gridName);
   try {
     openvdb::GridPtrVecPtr grids = loadGrids(bytes);
@@ -333,13 +334,99 @@ Result<Volume> parseVdb(std::span<const std::byte> bytes, std::string_view sourc
     auto picked = pickGrid(*grids, options.gridName, source);
     if (!picked) return picked.error();
     where = whereOf(source, (*picked)->getName());
-    return densify(**picked, options.maxBytes, where);
+    return densify(**picked, options.maxBytes, where, serial);
   } catch (const std::exception& e) {
     return fromException(e, where, true);
   } catch (...) {
     return fail(ErrorCode::Parse, "OpenVDB threw an unknown exception while reading", where,
                 "the file is truncated, corrupt or not written by OpenVDB");
   }
+}
+
+detail::IsolateOptions isolateOptions(const VdbReadOptions& options, std::size_t fileBytes) {
+  detail::IsolateOptions iso;
+  iso.library = "OpenVDB";
+  iso.timeoutSeconds = options.timeoutSeconds;
+  // The dense copy, the sparse tree (compressed files expand) and slack.
+  iso.addressSpaceBudget =
+      2 * std::min(options.maxBytes, std::size_t{1} << 40) + 16 * fileBytes + (std::size_t{1} << 30);
+  iso.disableHint = "set VdbReadOptions::isolate = false to read in-process (trusted files only)";
+  iso.crashHint =
+      "the file is corrupt or crafted (OpenVDB allocates the lengths stored in it); check where it came from";
+  iso.timeoutHint = "the file is corrupt or very large: check it, or raise VdbReadOptions::timeoutSeconds";
+  return iso;
+}
+
+constexpr std::uint64_t kEndMarker = 0x44'4d'56'44'42'45'4e'44ull;
+
+// Child -> parent: ok flag, then an Error or dims, type, affine and voxels.
+void sendVolume(detail::FdWriter& w, const Result<Volume>& r) {
+  if (!r) {
+    w.u64(0);
+    w.error(r.error());
+    return;
+  }
+  w.u64(1);
+  for (int i = 0; i < 3; ++i) w.u64(static_cast<std::uint64_t>(r->dims()[i]));
+  w.u64(static_cast<std::uint64_t>(r->type()));
+  const Eigen::Matrix4d m = r->indexToWorld().matrix();
+  w.bytes(m.data(), sizeof(double) * 16);
+  w.u64(r->byteSize());
+  w.bytes(r->bytes(), r->byteSize());
+  w.u64(kEndMarker);
+}
+
+Result<Volume> receiveVolume(const detail::IsolatedRun& run, const std::string& where, std::size_t maxBytes) {
+  detail::ByteReader r(run.bytes);
+  auto broken = [&] {
+    return fail(ErrorCode::Internal,
+                "the OpenVDB process ended (" + run.exitInfo + ") without a complete result", where,
+                "the file is corrupt or needs more memory than the reader allows (VdbReadOptions::maxBytes)");
+  };
+  const std::uint64_t okFlag = r.u64();
+  if (!r.ok()) return broken();
+  if (okFlag == 0) {
+    Error e = r.error();
+    if (!r.ok()) return broken();
+    return e;
+  }
+  std::uint64_t d[3];
+  for (auto& x : d) x = r.u64();
+  const std::uint64_t type = r.u64();
+  Eigen::Matrix4d m;
+  r.bytes(m.data(), sizeof(double) * 16);
+  const std::uint64_t n = r.u64();
+  if (!r.ok() || type > static_cast<std::uint64_t>(VoxelType::F64) || n != r.remaining() - sizeof(kEndMarker))
+    return broken();
+  for (auto x : d)
+    if (x == 0 || x > static_cast<std::uint64_t>(std::numeric_limits<int>::max())) return broken();
+  Affine3 a;
+  a.matrix() = m;
+  auto v = Volume::create(Vec3i(static_cast<int>(d[0]), static_cast<int>(d[1]), static_cast<int>(d[2])),
+                          static_cast<VoxelType>(type), a, maxBytes);
+  if (!v) return v.error().within(where);
+  if (v->byteSize() != n) return broken();
+  r.bytes(v->bytes(), v->byteSize());
+  if (r.u64() != kEndMarker || !r.ok()) return broken();
+  return std::move(*v);
+}
+
+}  // namespace
+
+Result<Volume> parseVdb(std::span<const std::byte> bytes, std::string_view sourceName,
+                        const VdbReadOptions& options) {
+  const std::string source(sourceName);
+  if (Status s = checkHeader(reinterpret_cast<const unsigned char*>(bytes.data()), bytes.size(), bytes.size(),
+                             source);
+      !s)
+    return s.error();
+  initializeOpenVdb();  // before a fork, so the child does not initialise
+  if (!options.isolate) return parseInProcess(bytes, source, options, false);
+  auto run = detail::runIsolated(
+      [&](detail::FdWriter& w) { sendVolume(w, parseInProcess(bytes, source, options, true)); },
+      isolateOptions(options, bytes.size()), whereOf(source, options.gridName));
+  if (!run) return run.error();
+  return receiveVolume(*run, whereOf(source, options.gridName), options.maxBytes);
 }
 
 Status writeVdb(const Volume& volume, const std::filesystem::path& file, const VdbWriteOptions& options) {
@@ -374,19 +461,48 @@ Result<std::vector<std::string>> listVdbGrids(const std::filesystem::path& file)
   auto bytes = loadFile(file, Volume::kDefaultMaxBytes);
   if (!bytes) return bytes.error();
   initializeOpenVdb();
-  try {
-    openvdb::GridPtrVecPtr grids = loadGrids(*bytes);
-    std::vector<std::string> out;
-    if (grids)
-      for (const auto& g : *grids)
-        if (g) out.push_back(describe(*g));
-    return out;
-  } catch (const std::exception& e) {
-    return fromException(e, source, true);
-  } catch (...) {
-    return fail(ErrorCode::Parse, "OpenVDB threw an unknown exception", source,
-                "the file is truncated, corrupt or not written by OpenVDB");
+  const auto list = [&]() -> Result<std::vector<std::string>> {
+    try {
+      openvdb::GridPtrVecPtr grids = loadGrids(*bytes);
+      std::vector<std::string> out;
+      if (grids)
+        for (const auto& g : *grids)
+          if (g) out.push_back(describe(*g));
+      return out;
+    } catch (const std::exception& e) {
+      return fromException(e, source, true);
+    } catch (...) {
+      return fail(ErrorCode::Parse, "OpenVDB threw an unknown exception", source,
+                  "the file is truncated, corrupt or not written by OpenVDB");
+    }
+  };
+  auto run = detail::runIsolated(
+      [&](detail::FdWriter& w) {
+        auto r = list();
+        if (!r) {
+          w.u64(0);
+          w.error(r.error());
+          return;
+        }
+        w.u64(1);
+        w.u64(r->size());
+        for (const auto& name : *r) w.str(name);
+      },
+      isolateOptions(VdbReadOptions{}, bytes->size()), source);
+  if (!run) return run.error();
+  detail::ByteReader r(run->bytes);
+  const std::uint64_t okFlag = r.u64();
+  if (okFlag == 0 && r.ok()) {
+    Error e = r.error();
+    if (r.ok()) return e;
   }
+  std::vector<std::string> names(r.ok() ? std::min<std::uint64_t>(r.u64(), r.remaining()) : 0);
+  for (auto& name : names) name = r.str();
+  if (!r.ok() || okFlag != 1)
+    return fail(ErrorCode::Internal,
+                "the OpenVDB process ended (" + run->exitInfo + ") without a complete result", source,
+                "the file is corrupt or crafted");
+  return names;
 }
 
 }  // namespace dm
