@@ -107,7 +107,7 @@ void convertTo(VoxelType outType, const std::byte* src, std::byte* dst, std::siz
 
 const char* supportedVolumeExtensions() noexcept {
   return ".nii, .nii.gz, .hdr, .hdr.gz, .img, .img.gz (NIfTI), .mhd, .mha (MetaImage), .nrrd, .nhdr (NRRD), "
-         "a directory or .dcm file (DICOM series), .vdb (OpenVDB)";
+         ".dcm or a directory (DICOM series), .vdb (OpenVDB)";
 }
 
 Result<Volume> readVolume(const std::filesystem::path& file, const VolumeReadOptions& options) {

@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -30,7 +32,8 @@ const fs::path kBox = "/usr/share/assimp/models/OBJ/box.obj";
 
 TEST(IoResources, ExtensionListsComeFromTheReaders) {
   const auto vol = dm::volumeExtensions();
-  for (const char* e : {".nii", ".nii.gz", ".hdr", ".img.gz", ".mhd", ".mha", ".nrrd", ".nhdr"})
+  for (const char* e :
+       {".nii", ".nii.gz", ".hdr", ".img.gz", ".mhd", ".mha", ".nrrd", ".nhdr", ".dcm", ".vdb"})
     EXPECT_TRUE(contains(vol, e)) << e;
   for (const std::string& e : vol) {
     EXPECT_EQ(e.front(), '.');
@@ -116,6 +119,28 @@ TEST(IoResources, LoadsAVolumeOnceAndMatchesTheReader) {
   auto negative = rm.load<dm::Volume>(file, {{"volume", "-1"}});
   ASSERT_FALSE(negative);
   EXPECT_EQ(negative.error().code, dm::ErrorCode::InvalidArgument);
+}
+
+// A DICOM series loads through the manager by naming any of its files.
+TEST(IoResources, LoadsADicomSeriesThroughOneOfItsFiles) {
+  const fs::path file = ch2();
+  ASSERT_FALSE(file.empty()) << "mricron-data is not installed";
+  auto direct = dm::readVolume(file);
+  ASSERT_TRUE(direct) << direct.error();
+  const fs::path dir = fs::temp_directory_path() / ("dm_resources_dicom_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  ASSERT_TRUE(dm::writeVolume(*direct, dir / ""));
+  fs::path slice;
+  for (const auto& e : fs::directory_iterator(dir))
+    if (e.path().extension() == ".dcm") slice = e.path();
+  ASSERT_FALSE(slice.empty());
+  dm::ResourceManager rm;
+  ASSERT_TRUE(dm::registerIoLoaders(rm));
+  auto series = rm.load<dm::Volume>(slice);
+  ASSERT_TRUE(series) << series.error();
+  EXPECT_EQ((*series)->dims(), direct->dims());
+  EXPECT_TRUE((*series)->indexToWorld().isApprox(direct->indexToWorld(), 1e-9));
+  fs::remove_all(dir);
 }
 
 TEST(IoResources, UnknownExtensionAndMissingFileFail) {
