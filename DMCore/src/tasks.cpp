@@ -8,6 +8,7 @@
 #include <tbb/task_group.h>
 
 #include <algorithm>
+#include <mutex>
 
 namespace dm {
 
@@ -27,10 +28,16 @@ struct TaskPool::Impl {
   // One slot is kept for the thread that calls wait() (as TBB's default
   // arena does), except in a one-thread pool: there the single slot goes to
   // a worker, so submitted tasks run even if nobody calls wait().
-  explicit Impl(int concurrency) : arena(concurrency, concurrency > 1 ? 1u : 0u) {}
+  // oneTBB may still let an external thread that calls wait() join an arena
+  // whose one slot a worker holds, so a one-thread pool also serialises its
+  // tasks with a lock (recursive: a task that waits on its own pool may run
+  // another of its tasks on the same thread, which is still one at a time).
+  explicit Impl(int concurrency) : arena(concurrency, concurrency > 1 ? 1u : 0u), serial(concurrency == 1) {}
 
   tbb::task_arena arena;
   tbb::task_group group;
+  bool serial;
+  std::recursive_mutex oneAtATime;
 };
 
 namespace {
@@ -63,6 +70,11 @@ TaskPool& TaskPool::operator=(TaskPool&& other) noexcept {
 void TaskPool::enqueue(std::function<void()> task) {
   DM_DEMAND(impl_ != nullptr, "TaskPool: used after move");
   Impl& impl = *impl_;
+  if (impl.serial)
+    task = [&impl, inner = std::move(task)] {
+      std::lock_guard lock(impl.oneAtATime);
+      inner();
+    };
   impl.arena.execute([&impl, &task] { impl.group.run(std::move(task)); });
 }
 
