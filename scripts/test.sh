@@ -44,6 +44,7 @@ ctest_args=(--test-dir "$builddir" --output-on-failure -j "$jobs" --timeout 600)
 [ -n "$label" ] && ctest_args+=(-L "$label")
 if [ -n "$sanitize" ]; then
   export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1:strict_string_checks=1
+  export LSAN_OPTIONS="suppressions=$PWD/scripts/lsan.supp"
   export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
   export TSAN_OPTIONS=halt_on_error=1:second_deadlock_stack=1
 fi

@@ -476,33 +476,7 @@ Result<std::vector<std::string>> listVdbGrids(const std::filesystem::path& file)
                   "the file is truncated, corrupt or not written by OpenVDB");
     }
   };
-  auto run = detail::runIsolated(
-      [&](detail::FdWriter& w) {
-        auto r = list();
-        if (!r) {
-          w.u64(0);
-          w.error(r.error());
-          return;
-        }
-        w.u64(1);
-        w.u64(r->size());
-        for (const auto& name : *r) w.str(name);
-      },
-      isolateOptions(VdbReadOptions{}, bytes->size()), source);
-  if (!run) return run.error();
-  detail::ByteReader r(run->bytes);
-  const std::uint64_t okFlag = r.u64();
-  if (okFlag == 0 && r.ok()) {
-    Error e = r.error();
-    if (r.ok()) return e;
-  }
-  std::vector<std::string> names(r.ok() ? std::min<std::uint64_t>(r.u64(), r.remaining()) : 0);
-  for (auto& name : names) name = r.str();
-  if (!r.ok() || okFlag != 1)
-    return fail(ErrorCode::Internal,
-                "the OpenVDB process ended (" + run->exitInfo + ") without a complete result", source,
-                "the file is corrupt or crafted");
-  return names;
+  return list();
 }
 
 }  // namespace dm

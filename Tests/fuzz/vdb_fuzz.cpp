@@ -1,12 +1,12 @@
 // libFuzzer target: OpenVDB stream parsing from memory (dm::parseVdb).
 // Any input must give a Volume or a dm::Error, never a crash, hang or large
 // allocation in this process: OpenVDB itself runs in the isolated child that
-// parseVdb() forks, whose crash or out-of-memory death must come back as an
+// parseVdb() forks with VdbReadOptions::isolate, whose crash or out-of-memory death must come back as an
 // Error. Such a child still runs libFuzzer's hooks, so it leaves crash-/oom-
 // files in the artifact folder; only this process's exit status counts.
 // (In CI's 30 s the children hit 4 GiB allocations from length fields and an
-// allocation-size-too-big inside OpenVDB; every one came back as an Error.) A parsed volume must also survive writeVdb -> readVdb with
-// identical dims and voxels (the writer's contract).
+// allocation-size-too-big inside OpenVDB; every one came back as an Error.) A parsed volume must also survive
+// writeVdb -> readVdb with identical dims and voxels (the writer's contract).
 #include <dm/io/vdb.hpp>
 
 #include <unistd.h>
@@ -22,6 +22,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::span<const std::byte> bytes(reinterpret_cast<const std::byte*>(data), size);
   dm::VdbReadOptions options;
   options.maxBytes = std::size_t{64} << 20;
+  options.isolate = true;  // the fuzzer runs no worker threads, so forking is safe
   options.timeoutSeconds = 10;
   auto v = dm::parseVdb(bytes, "<fuzz>", options);
   if (!v) {

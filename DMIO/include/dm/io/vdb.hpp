@@ -42,9 +42,12 @@ struct VdbReadOptions {
   std::size_t maxBytes = Volume::kDefaultMaxBytes;
   /// Parse in a forked child with an address-space budget of about
   /// 2·maxBytes + 16·file size + 1 GiB and a deadline, so a crafted file that
-  /// makes OpenVDB allocate or loop becomes an Error. false: in-process, for
-  /// trusted files (saves the fork and one copy of the voxels).
-  bool isolate = true;
+  /// makes OpenVDB allocate or loop becomes an Error. Use it for untrusted
+  /// files from a process that has not started worker threads yet (fork
+  /// copies only the calling thread; an allocator lock held by another
+  /// thread at that instant leaves the child stuck until the deadline).
+  /// false (default): in-process, for trusted files.
+  bool isolate = false;
   double timeoutSeconds = 60.0;  ///< isolated parsing only; 0: no deadline
 };
 
@@ -81,7 +84,7 @@ struct VdbWriteOptions {
 /// transform, empty grid, out of memory) or InvalidArgument (dense box over
 /// maxBytes).
 /// Hostile files: OpenVDB allocates what length fields inside the file ask
-/// for, so by default the parse runs isolated (VdbReadOptions::isolate).
+/// for; read untrusted files with VdbReadOptions::isolate.
 /// @code
 ///   auto v = dm::readVdb("bunny.vdb");
 ///   if (!v) { std::cerr << v.error() << '\n'; return 1; }
@@ -94,9 +97,9 @@ Result<Volume> readVdb(const std::filesystem::path& file, const VdbReadOptions& 
 /// 213..224, header size) before handing the bytes to OpenVDB, and makes
 /// every short read fail at once. OpenVDB 10 allocates strings and
 /// compressed blocks at the lengths stored in the file before reading them
-/// (e.g. openvdb::readString, up to 4 GiB from a 4-byte field), so unless
-/// options.isolate is false the parse runs in a forked child with a memory
-/// budget and deadline (Tests/fuzz/vdb_fuzz.cpp exercises this path).
+/// (e.g. openvdb::readString, up to 4 GiB from a 4-byte field), so with
+/// options.isolate the parse runs in a forked child with a memory budget
+/// and deadline (Tests/fuzz/vdb_fuzz.cpp exercises this path).
 /// @code
 ///   auto bytes = dm::readFile("grid.vdb");
 ///   auto v = dm::parseVdb(*bytes, "grid.vdb");
