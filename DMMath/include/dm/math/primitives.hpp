@@ -1,5 +1,5 @@
 // dm/math/primitives.hpp — closed triangle meshes of analytic shapes: tool
-// models (spheres, tori, boxes), placeholders and test geometry whose volume,
+// models (spheres, tori, boxes), stand-in anatomy and test geometry whose volume,
 // area and distance are known exactly. All are welded, closed, 2-manifold
 // and CCW from outside, in metres, centred at the origin.
 //
