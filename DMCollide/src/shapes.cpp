@@ -18,8 +18,9 @@ namespace dm {
 namespace {
 
 constexpr std::array<std::string_view, static_cast<int>(ShapeType::FirstUser)> kBuiltinNames = {
-    "point",   "segment",  "plane",     "triangle",    "sphere",        "box",
-    "capsule", "cylinder", "ellipsoid", "convex-hull", "triangle-mesh", "compound"};
+    "point",         "segment",  "plane",       "triangle",    "sphere",
+    "box",           "capsule",  "cylinder",    "ellipsoid",   "convex-hull",
+    "triangle-mesh", "compound", "point-shell", "sphere-tree", "voxel-model"};
 
 // User shape names. A slot is written once under the mutex before the count
 // is published (release), so readers below the count need no lock.

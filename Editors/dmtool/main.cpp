@@ -14,9 +14,13 @@ int main(int argc, char** argv) {
                "dmtool"};
   app.require_subcommand(1);
   app.fallthrough(false);
-  std::vector<dmtool::Command> commands = {dmtool::addInfoCommand(app), dmtool::addConvertCommand(app),
-                                           dmtool::addIsosurfaceCommand(app), dmtool::addSimplifyCommand(app),
-                                           dmtool::addVoxelizeCommand(app)};
+  std::vector<dmtool::Command> commands = {
+      dmtool::addInfoCommand(app),
+      dmtool::addConvertCommand(app),
+      dmtool::addIsosurfaceCommand(app),
+      dmtool::addSimplifyCommand(app),
+      dmtool::addVoxelizeCommand(app),
+  };
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -37,121 +37,17 @@
 #include <thread>
 #include <vector>
 
-extern char** environ;
+#include "dmtool_run.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
+using dmtool_test::describe;
+using dmtool_test::parseJson;
+using dmtool_test::runTool;
+using dmtool_test::TempDir;
+using dmtool_test::ToolRun;
 using nlohmann::json;
-
-struct ToolRun {
-  int exitCode = -1;  ///< exit status when the process exited
-  int signal = 0;     ///< terminating signal, 0 if it exited
-  bool timedOut = false;
-  std::string out, err;
-  double seconds = 0.0;
-};
-
-// Runs dmtool with `args` in its own process group; kills the group after
-// `timeoutSeconds` (dmtool forks an Assimp child of its own). With
-// `stderrTerminal`, the child's stderr is a pseudo-terminal (so isatty() is
-// true there) instead of a pipe.
-ToolRun runTool(const std::vector<std::string>& args, double timeoutSeconds = 60.0,
-                bool stderrTerminal = false) {
-  ToolRun r;
-  int outPipe[2], errPipe[2];
-  if (pipe2(outPipe, O_CLOEXEC) != 0) {
-    r.err = "pipe failed";
-    return r;
-  }
-  if (stderrTerminal) {
-    errPipe[0] = posix_openpt(O_RDWR | O_NOCTTY | O_CLOEXEC);
-    if (errPipe[0] < 0 || grantpt(errPipe[0]) != 0 || unlockpt(errPipe[0]) != 0) {
-      r.err = "no pseudo-terminal";
-      return r;
-    }
-    errPipe[1] = open(ptsname(errPipe[0]), O_RDWR | O_NOCTTY | O_CLOEXEC);
-  } else if (pipe2(errPipe, O_CLOEXEC) != 0) {
-    r.err = "pipe failed";
-    return r;
-  }
-  posix_spawn_file_actions_t actions;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawn_file_actions_adddup2(&actions, outPipe[1], STDOUT_FILENO);
-  posix_spawn_file_actions_adddup2(&actions, errPipe[1], STDERR_FILENO);
-  posix_spawnattr_t attr;
-  posix_spawnattr_init(&attr);
-  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP);
-  posix_spawnattr_setpgroup(&attr, 0);
-  std::vector<std::string> argv{DMTOOL_PATH};
-  argv.insert(argv.end(), args.begin(), args.end());
-  std::vector<char*> cargv;
-  for (std::string& a : argv) cargv.push_back(a.data());
-  cargv.push_back(nullptr);
-  const auto start = std::chrono::steady_clock::now();
-  pid_t pid = -1;
-  const int spawned = posix_spawn(&pid, DMTOOL_PATH, &actions, &attr, cargv.data(), environ);
-  posix_spawn_file_actions_destroy(&actions);
-  posix_spawnattr_destroy(&attr);
-  close(outPipe[1]);
-  close(errPipe[1]);
-  if (spawned != 0) {
-    close(outPipe[0]);
-    close(errPipe[0]);
-    r.err = std::string("posix_spawn failed: ") + std::strerror(spawned);
-    return r;
-  }
-  const auto deadline = start + std::chrono::duration<double>(timeoutSeconds);
-  std::array<pollfd, 2> fds{{{outPipe[0], POLLIN, 0}, {errPipe[0], POLLIN, 0}}};
-  std::array<std::string*, 2> sinks{&r.out, &r.err};
-  int open = 2;
-  while (open > 0) {
-    const auto left =
-        std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
-    if (left.count() <= 0) {
-      r.timedOut = true;
-      kill(-pid, SIGKILL);
-      break;
-    }
-    if (poll(fds.data(), fds.size(), static_cast<int>(std::min<long long>(left.count(), 1000))) < 0) continue;
-    for (std::size_t i = 0; i < fds.size(); ++i) {
-      if (fds[i].fd < 0 || fds[i].revents == 0) continue;
-      char buf[65536];
-      const ssize_t n = read(fds[i].fd, buf, sizeof buf);
-      if (n > 0) {
-        sinks[i]->append(buf, static_cast<std::size_t>(n));
-      } else if (n < 0 && errno == EINTR) {
-        continue;
-      } else {  // EOF, or EIO from a terminal whose other side closed
-        close(fds[i].fd);
-        fds[i].fd = -1;
-        --open;
-      }
-    }
-  }
-  for (pollfd& p : fds)
-    if (p.fd >= 0) close(p.fd);
-  int status = 0;
-  while (waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-  }
-  r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  if (WIFEXITED(status)) r.exitCode = WEXITSTATUS(status);
-  if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
-  return r;
-}
-
-std::string describe(const ToolRun& r) {
-  return "exit " + std::to_string(r.exitCode) + " signal " + std::to_string(r.signal) +
-         (r.timedOut ? " (timed out)" : "") + "\nstdout: " + r.out + "\nstderr: " + r.err;
-}
-
-// Parses stdout as exactly one JSON object (one line).
-[[maybe_unused]] json parseJson(const ToolRun& r) {
-  json j = json::parse(r.out, nullptr, /*allow_exceptions=*/false);
-  EXPECT_TRUE(j.is_object()) << describe(r);
-  EXPECT_EQ(std::count(r.out.begin(), r.out.end(), '\n'), 1) << r.out;
-  return j;
-}
 
 [[maybe_unused]] std::string assimpModel(const char* rel) {
   return (fs::path("/usr/share/assimp/models") / rel).string();
@@ -167,19 +63,6 @@ std::string describe(const ToolRun& r) {
   auto p = dm::FileSystem::global().resolve("mricron:ch2.nii.gz");
   return p ? p->string() : std::string();
 }
-
-struct TempDir {
-  fs::path path;
-  TempDir() {
-    char tmpl[] = "/tmp/dmtool_test_XXXXXX";
-    const char* made = mkdtemp(tmpl);
-    path = made ? fs::path(made) : fs::temp_directory_path();
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path, ec);
-  }
-};
 
 [[maybe_unused]] double vecDiff(json a, json b) {
   double d = 0;

@@ -45,6 +45,9 @@ enum class ShapeType : std::uint8_t {
   ConvexHull,
   TriangleMesh,
   Compound,
+  PointShell,  ///< surface points with normals (dm/collide/point_shell.hpp)
+  SphereTree,  ///< hierarchy of spheres (dm/collide/sphere_tree.hpp)
+  VoxelModel,  ///< occupancy + signed distance, dense or OpenVDB (dm/collide/voxel_model.hpp)
   FirstUser,  ///< first id handed out by registerShapeType()
 };
 
