@@ -23,6 +23,8 @@
 #include <string>
 #include <vector>
 
+#include "../common/temp_dir.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -36,23 +38,7 @@ const fs::path kModels = "/usr/share/assimp/models";
              << " is missing); install it with: apt-get install assimp-testmodels";  \
   } while (0)
 
-class TempDir {
- public:
-  explicit TempDir(const std::string& name) {
-    path_ = fs::temp_directory_path() / ("dm_mesh_io_test_" + std::to_string(::getpid()) + "_" + name);
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  fs::path operator/(const std::string& f) const { return path_ / f; }
-  const fs::path& path() const { return path_; }
-
- private:
-  fs::path path_;
-};
+using dm::test::TempDir;
 
 void writeText(const fs::path& p, const std::string& s) {
   std::ofstream f(p, std::ios::binary);

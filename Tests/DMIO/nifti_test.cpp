@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "../../DMIO/src/gzip.hpp"  // the library's own zlib helper, to inspect .gz bytes
+#include "../common/temp_dir.hpp"
 
 namespace {
 
@@ -128,22 +129,7 @@ float floatAt(const Bytes& b, std::size_t off) {
   return f;
 }
 
-class TempDir {
- public:
-  explicit TempDir(const std::string& name) {
-    path_ = fs::temp_directory_path() / ("dm_nifti_test_" + std::to_string(::getpid()) + "_" + name);
-    fs::remove_all(path_);
-    fs::create_directories(path_);
-  }
-  ~TempDir() {
-    std::error_code ec;
-    fs::remove_all(path_, ec);
-  }
-  fs::path operator/(const std::string& f) const { return path_ / f; }
-
- private:
-  fs::path path_;
-};
+using dm::test::TempDir;
 
 void writeBytes(const fs::path& p, const Bytes& b) {
   auto s = dm::writeFileAtomic(p, b.data(), b.size());
