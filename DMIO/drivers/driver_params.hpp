@@ -1,0 +1,121 @@
+// Parameter parsing for device drivers: header-only, so that a driver built
+// as a plugin needs no DMPlatform library. Every problem is written once into
+// the caller's error buffer, naming the key, the value and what is expected.
+#pragma once
+
+#include <dm/io/device_abi.h>
+
+#include <array>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <initializer_list>
+#include <string>
+
+namespace dm::driver {
+
+class ParamReader {
+ public:
+  ParamReader(const DmDeviceParam* params, std::size_t count, char* error, std::size_t errorSize) noexcept
+      : params_(params), count_(count), error_(error), errorSize_(errorSize) {}
+
+  bool ok() const noexcept { return ok_; }
+
+  /// The value of `key`, or nullptr when absent.
+  const char* find(const char* key) const noexcept {
+    for (std::size_t i = 0; i < count_; ++i)
+      if (params_[i].key && std::strcmp(params_[i].key, key) == 0)
+        return params_[i].value ? params_[i].value : "";
+    return nullptr;
+  }
+
+  /// A finite number in [min, max]; `fallback` when absent.
+  double number(const char* key, double fallback, double min, double max) {
+    const char* v = find(key);
+    if (!v) return fallback;
+    char* end = nullptr;
+    errno = 0;
+    const double x = std::strtod(v, &end);
+    if (end == v || *end != '\0' || errno == ERANGE || !std::isfinite(x)) {
+      failf("parameter '%s': '%s' is not a number", key, v);
+      return fallback;
+    }
+    if (x < min || x > max) {
+      failf("parameter '%s': %g is outside [%g, %g]", key, x, min, max);
+      return fallback;
+    }
+    return x;
+  }
+
+  /// Three comma-separated numbers "x,y,z"; `fallback` when absent.
+  std::array<double, 3> triple(const char* key, std::array<double, 3> fallback) {
+    const char* v = find(key);
+    if (!v) return fallback;
+    std::array<double, 3> out{};
+    const char* p = v;
+    for (int i = 0; i < 3; ++i) {
+      char* end = nullptr;
+      errno = 0;
+      out[i] = std::strtod(p, &end);
+      if (end == p || errno == ERANGE || !std::isfinite(out[i]) || (i < 2 && *end != ',') ||
+          (i == 2 && *end)) {
+        failf("parameter '%s': '%s' is not three numbers \"x,y,z\"", key, v);
+        return fallback;
+      }
+      p = end + 1;
+    }
+    return out;
+  }
+
+  /// One of `choices`; returns its index, or `fallback` when absent.
+  int choice(const char* key, std::initializer_list<const char*> choices, int fallback) {
+    const char* v = find(key);
+    if (!v) return fallback;
+    int i = 0;
+    std::string list;
+    for (const char* c : choices) {
+      if (std::strcmp(c, v) == 0) return i;
+      list += (list.empty() ? "" : ", ") + std::string(c);
+      ++i;
+    }
+    failf("parameter '%s': '%s' is not one of: %s", key, v, list.c_str());
+    return fallback;
+  }
+
+  /// Fails on the first key not in `known`.
+  void onlyKnown(std::initializer_list<const char*> known) {
+    for (std::size_t i = 0; i < count_ && ok_; ++i) {
+      bool found = false;
+      for (const char* k : known) found = found || (params_[i].key && std::strcmp(params_[i].key, k) == 0);
+      if (!found) {
+        std::string list;
+        for (const char* k : known) list += (list.empty() ? "" : ", ") + std::string(k);
+        failf("unknown parameter '%s' (known: %s)", params_[i].key ? params_[i].key : "(null)", list.c_str());
+      }
+    }
+  }
+
+  template <class... Args>
+  void failf(const char* format, Args... args) noexcept {
+    if (!ok_) return;  // keep the first message
+    ok_ = false;
+    if (error_ && errorSize_) std::snprintf(error_, errorSize_, format, args...);
+  }
+
+ private:
+  const DmDeviceParam* params_;
+  std::size_t count_;
+  char* error_;
+  std::size_t errorSize_;
+  bool ok_ = true;
+};
+
+/// Copies `s` into a fixed char field, truncating and NUL-terminating.
+template <std::size_t N>
+void copyField(char (&field)[N], const char* s) noexcept {
+  std::snprintf(field, N, "%s", s);
+}
+
+}  // namespace dm::driver

@@ -1,0 +1,358 @@
+// sim-haptic — a simulated 3-DOF haptic device (kind "haptic-device").
+//
+// Without hardware it produces what a stylus would: a scripted trajectory
+// (point, line, circle, spiral, or piecewise linear from a CSV file), or a
+// virtual hand — a mass–spring–damper pulled toward that trajectory and
+// pushed by the forces the device renders — so closed-loop force rendering
+// can be tested. Sensor effects: Gaussian position noise (seeded, so lockstep
+// runs repeat bit for bit), quantization to an encoder step, and latency
+// (samples reported late by a fixed delay). A loss window (drop_at,
+// reconnect_at) exercises connection loss and reconnection.
+//
+// Parameters (all optional; numbers in SI units):
+//   path         point | line | circle | spiral | csv          (circle)
+//   center       "x,y,z" m                                      (0,0,0)
+//   radius       m, circle and spiral                           (0.03)
+//   period       s per turn (circle, spiral) or per sweep (line) (2)
+//   from, to     "x,y,z" m, line ends                           (-0.05,0,0) (0.05,0,0)
+//   pitch        m per turn along z, spiral                     (0.005)
+//   turns        turns before the spiral restarts               (4)
+//   file         CSV of "t,x,y,z" rows (s, m), csv path; loops
+//   hand         0 | 1: drive a virtual hand instead of the stylus (0)
+//   hand_mass    kg (0.2)   hand_stiffness N/m (300)   hand_damping N·s/m (8)
+//   noise        m, standard deviation per axis                 (0)
+//   quantization m, encoder step                                (0)
+//   latency      s, ≤ 0.5                                       (0)
+//   seed         integer, noise generator                       (1)
+//   max_force    N (8)   servo_rate Hz (1000)   workspace m, half extent (0.15)
+//   drop_at      s, device lost from then (-1: never)
+//   reconnect_at s, reconnect succeeds from then (-1: never)
+//
+// Built twice from this file: into DM::IO (registered by
+// dm::registerBuiltinDrivers) and, with DM_DRIVER_PLUGIN, as the plugin
+// libdm_driver_sim_haptic.so.
+#include <dm/core/plugin_abi.h>
+#include <dm/io/device_abi.h>
+
+#include <cmath>
+#include <cstdio>
+#include <new>
+#include <random>
+#include <vector>
+
+#include "driver_params.hpp"
+
+namespace {
+
+using dm::driver::ParamReader;
+using V3 = std::array<double, 3>;
+
+constexpr double kPi = 3.14159265358979323846;
+constexpr std::size_t kHistory = 1 << 15;  // latency ring: 32768 samples
+
+V3 add(V3 a, V3 b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+V3 sub(V3 a, V3 b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+V3 scale(V3 a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
+V3 lerp(V3 a, V3 b, double u) { return add(a, scale(sub(b, a), u)); }
+
+enum Path { kPoint, kLine, kCircle, kSpiral, kCsv };
+
+struct Sample {
+  std::int64_t t = 0;
+  V3 x{}, v{};
+};
+
+// One device instance; DmDevice* is this type behind the C boundary.
+struct SimHaptic {
+  Path path = kCircle;
+  V3 center{}, from{}, to{};
+  double radius = 0.03, period = 2.0, pitch = 0.005, turns = 4.0;
+  std::vector<std::array<double, 4>> csv;  // t, x, y, z; t strictly increasing
+
+  bool hand = false;
+  double mass = 0.2, stiffness = 300.0, damping = 8.0;
+  V3 handX{}, handV{};
+  std::int64_t handT = 0;
+  bool handStarted = false;
+  V3 force{};  // last output (N), acts on the hand
+
+  double noise = 0.0, quantization = 0.0;
+  std::int64_t latencyNs = 0;
+  std::mt19937_64 rng;
+  std::normal_distribution<double> gauss{0.0, 1.0};
+  std::vector<Sample> history;  // ring for latency
+  std::size_t historyCount = 0, historyHead = 0;
+
+  double maxForce = 8.0, servoRate = 1000.0, workspace = 0.15;
+  double dropAt = -1.0, reconnectAt = -1.0;
+  bool lost = false, reconnected = false;
+  unsigned long long seed = 1;
+
+  V3 target(double t) const {
+    switch (path) {
+      case kPoint:
+        return center;
+      case kLine: {
+        const double phase = t / period - std::floor(t / period);
+        return lerp(from, to, phase < 0.5 ? 2.0 * phase : 2.0 - 2.0 * phase);
+      }
+      case kCircle: {
+        const double w = 2.0 * kPi / period;
+        return add(center, {radius * std::cos(w * t), radius * std::sin(w * t), 0.0});
+      }
+      case kSpiral: {
+        const double w = 2.0 * kPi / period;
+        const double u = t / period;
+        return add(center, {radius * std::cos(w * t), radius * std::sin(w * t),
+                            pitch * (u - turns * std::floor(u / turns))});
+      }
+      case kCsv: {
+        const double span = csv.back()[0] - csv.front()[0];
+        double tt = span > 0 ? csv.front()[0] + std::fmod(t - csv.front()[0], span) : csv.front()[0];
+        if (tt < csv.front()[0]) tt += span;
+        std::size_t lo = 0, hi = csv.size() - 1;  // binary search: csv[lo].t ≤ tt < csv[hi].t
+        if (tt >= csv[hi][0]) return {csv[hi][1], csv[hi][2], csv[hi][3]};
+        while (hi - lo > 1) {
+          const std::size_t mid = (lo + hi) / 2;
+          (csv[mid][0] <= tt ? lo : hi) = mid;
+        }
+        const double u = (tt - csv[lo][0]) / (csv[hi][0] - csv[lo][0]);
+        return lerp({csv[lo][1], csv[lo][2], csv[lo][3]}, {csv[hi][1], csv[hi][2], csv[hi][3]}, u);
+      }
+    }
+    return center;
+  }
+
+  // Central difference: exact to O(h²) for the smooth paths; at a line's
+  // turning point or a CSV knot it averages the two sides.
+  V3 targetVelocity(double t) const {
+    const double h = 1e-6;
+    return scale(sub(target(t + h), target(t - h)), 0.5 / h);
+  }
+
+  // The hand integrated up to `now` with semi-implicit Euler, substeps ≤ 0.1 ms.
+  void advanceHand(std::int64_t now) {
+    if (!handStarted) {
+      handStarted = true;
+      handT = now;
+      handX = target(1e-9 * static_cast<double>(now));
+      handV = targetVelocity(1e-9 * static_cast<double>(now));
+      return;
+    }
+    if (now <= handT) return;
+    const std::int64_t total = now - handT;
+    const std::int64_t steps = (total + 99999) / 100000;
+    const double dt = 1e-9 * static_cast<double>(total) / static_cast<double>(steps);
+    for (std::int64_t i = 1; i <= steps; ++i) {
+      const double t = 1e-9 * static_cast<double>(handT) + dt * static_cast<double>(i);
+      const V3 pull = scale(sub(target(t), handX), stiffness);
+      const V3 acc = scale(add(sub(pull, scale(handV, damping)), force), 1.0 / mass);
+      handV = add(handV, scale(acc, dt));
+      handX = add(handX, scale(handV, dt));
+    }
+    handT = now;
+  }
+
+  Sample trueSample(std::int64_t now) {
+    if (hand) {
+      advanceHand(now);
+      return {now, handX, handV};
+    }
+    const double t = 1e-9 * static_cast<double>(now);
+    return {now, target(t), targetVelocity(t)};
+  }
+
+  // The true sample at now − latency, linearly interpolated in the ring.
+  Sample delayed(std::int64_t now) {
+    const Sample s = trueSample(now);
+    if (latencyNs == 0) return s;
+    history[historyHead] = s;
+    historyHead = (historyHead + 1) % kHistory;
+    if (historyCount < kHistory) ++historyCount;
+    const std::int64_t want = now - latencyNs;
+    // Newest first: find the two samples around `want`.
+    Sample newer = s;
+    for (std::size_t k = 1; k < historyCount; ++k) {
+      const Sample& older = history[(historyHead + kHistory - 1 - k) % kHistory];
+      if (older.t <= want) {
+        const double u = newer.t > older.t
+                             ? static_cast<double>(want - older.t) / static_cast<double>(newer.t - older.t)
+                             : 0.0;
+        return {want, lerp(older.x, newer.x, u), lerp(older.v, newer.v, u)};
+      }
+      newer = older;
+    }
+    return {want, newer.x, newer.v};  // not enough history yet: the oldest sample
+  }
+
+  bool lostAt(std::int64_t now) {
+    const double t = 1e-9 * static_cast<double>(now);
+    if (!lost && !reconnected && dropAt >= 0.0 && t >= dropAt) lost = true;
+    return lost;
+  }
+};
+
+SimHaptic* self(DmDevice* d) { return reinterpret_cast<SimHaptic*>(d); }
+
+bool loadCsv(SimHaptic& d, const char* file, ParamReader& r) {
+  std::FILE* f = std::fopen(file, "r");
+  if (!f) {
+    r.failf("parameter 'file': cannot open '%s'", file);
+    return false;
+  }
+  char line[512];
+  int lineNo = 0;
+  while (std::fgets(line, sizeof line, f)) {
+    ++lineNo;
+    if (line[0] == '#' || line[0] == '\n' || line[0] == '\r') continue;
+    std::array<double, 4> row{};
+    if (std::sscanf(line, "%lf,%lf,%lf,%lf", &row[0], &row[1], &row[2], &row[3]) != 4 ||
+        !std::isfinite(row[0]) || !std::isfinite(row[1]) || !std::isfinite(row[2]) ||
+        !std::isfinite(row[3])) {
+      if (lineNo == 1) continue;  // a header line
+      r.failf("%s:%d: expected \"t,x,y,z\" (four numbers)", file, lineNo);
+      break;
+    }
+    if (!d.csv.empty() && !(row[0] > d.csv.back()[0])) {
+      r.failf("%s:%d: time %g does not increase", file, lineNo, row[0]);
+      break;
+    }
+    if (d.csv.size() >= 10'000'000) {
+      r.failf("%s:%d: more than 10 million rows", file, lineNo);
+      break;
+    }
+    d.csv.push_back(row);
+  }
+  std::fclose(f);
+  if (r.ok() && d.csv.empty()) r.failf("%s: no \"t,x,y,z\" rows", file);
+  return r.ok();
+}
+
+DmDevice* simOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
+  ParamReader r(params, count, error, errorSize);
+  r.onlyKnown({"path",         "center",    "radius",       "period",      "from",      "to",
+               "pitch",        "turns",     "file",         "hand",        "hand_mass", "hand_stiffness",
+               "hand_damping", "noise",     "quantization", "latency",     "seed",      "max_force",
+               "servo_rate",   "workspace", "drop_at",      "reconnect_at"});
+  SimHaptic* d = new (std::nothrow) SimHaptic();
+  if (!d) {
+    r.failf("out of memory");
+    return nullptr;
+  }
+  d->path = static_cast<Path>(r.choice("path", {"point", "line", "circle", "spiral", "csv"}, kCircle));
+  d->center = r.triple("center", {0, 0, 0});
+  d->radius = r.number("radius", 0.03, 0.0, 10.0);
+  d->period = r.number("period", 2.0, 1e-3, 1e6);
+  d->from = r.triple("from", {-0.05, 0, 0});
+  d->to = r.triple("to", {0.05, 0, 0});
+  d->pitch = r.number("pitch", 0.005, -10.0, 10.0);
+  d->turns = r.number("turns", 4.0, 1e-3, 1e6);
+  d->hand = r.number("hand", 0.0, 0.0, 1.0) != 0.0;
+  d->mass = r.number("hand_mass", 0.2, 1e-4, 1e3);
+  d->stiffness = r.number("hand_stiffness", 300.0, 0.0, 1e6);
+  d->damping = r.number("hand_damping", 8.0, 0.0, 1e6);
+  d->noise = r.number("noise", 0.0, 0.0, 1.0);
+  d->quantization = r.number("quantization", 0.0, 0.0, 1.0);
+  d->latencyNs = static_cast<std::int64_t>(std::llround(1e9 * r.number("latency", 0.0, 0.0, 0.5)));
+  d->seed = static_cast<unsigned long long>(r.number("seed", 1.0, 0.0, 9007199254740992.0));
+  d->maxForce = r.number("max_force", 8.0, 1e-6, 1e4);
+  d->servoRate = r.number("servo_rate", 1000.0, 1.0, 1e6);
+  d->workspace = r.number("workspace", 0.15, 1e-6, 100.0);
+  d->dropAt = r.number("drop_at", -1.0, -1.0, 1e9);
+  d->reconnectAt = r.number("reconnect_at", -1.0, -1.0, 1e9);
+  if (r.ok() && d->path == kCsv) {
+    const char* file = r.find("file");
+    if (!file)
+      r.failf("parameter 'file' is required with path csv");
+    else
+      loadCsv(*d, file, r);
+  }
+  if (r.ok() && d->latencyNs > 0) d->history.assign(kHistory, Sample{});
+  if (!r.ok()) {
+    delete d;
+    return nullptr;
+  }
+  d->rng.seed(d->seed);
+  return reinterpret_cast<DmDevice*>(d);
+}
+
+void simClose(DmDevice* d) { delete self(d); }
+
+int simInfo(DmDevice* dev, DmHapticInfo* info) {
+  SimHaptic* d = self(dev);
+  *info = DmHapticInfo{};
+  dm::driver::copyField(info->identity.driver, "sim-haptic");
+  dm::driver::copyField(info->identity.vendor, "DMPlatform");
+  dm::driver::copyField(info->identity.model,
+                        d->hand ? "simulated 3-DOF stylus in a virtual hand" : "simulated 3-DOF stylus");
+  std::snprintf(info->identity.serial, sizeof info->identity.serial, "sim-%llu", d->seed);
+  info->capabilities = DM_HAPTIC_CAP_POSITION | DM_HAPTIC_CAP_VELOCITY | DM_HAPTIC_CAP_FORCE;
+  info->button_count = 0;
+  for (int i = 0; i < 3; ++i) {
+    info->workspace_min[i] = d->center[i] - d->workspace;
+    info->workspace_max[i] = d->center[i] + d->workspace;
+  }
+  info->max_force = d->maxForce;
+  info->max_torque = 0.0;
+  info->max_stiffness = 2000.0;
+  info->max_damping = 20.0;
+  info->servo_rate_hz = d->servoRate;
+  return DM_DEVICE_OK;
+}
+
+int simRead(DmDevice* dev, int64_t now, DmHapticState* s) {
+  SimHaptic* d = self(dev);
+  if (d->lostAt(now)) return DM_DEVICE_ERROR_LOST;
+  const Sample smp = d->delayed(now);
+  *s = DmHapticState{};
+  s->time_ns = now;
+  for (int i = 0; i < 3; ++i) {
+    double x = smp.x[i];
+    if (d->noise > 0.0) x += d->noise * d->gauss(d->rng);
+    if (d->quantization > 0.0) x = d->quantization * std::round(x / d->quantization);
+    s->position[i] = x;
+    s->linear_velocity[i] = smp.v[i];
+  }
+  s->orientation[0] = 1.0;
+  return DM_DEVICE_OK;
+}
+
+int simWrite(DmDevice* dev, int64_t now, const double force[3], const double torque[3]) {
+  SimHaptic* d = self(dev);
+  (void)torque;  // no torque output (3-DOF)
+  if (d->lostAt(now)) {
+    d->force = {0, 0, 0};  // motors off while the link is down
+    return DM_DEVICE_ERROR_LOST;
+  }
+  if (d->hand) d->advanceHand(now);  // the previous force acted until now
+  d->force = {force[0], force[1], force[2]};
+  return DM_DEVICE_OK;
+}
+
+int simReconnect(DmDevice* dev, int64_t now) {
+  SimHaptic* d = self(dev);
+  const double t = 1e-9 * static_cast<double>(now);
+  if (!d->lost) return DM_DEVICE_OK;
+  if (d->reconnectAt < 0.0 || t < d->reconnectAt) return DM_DEVICE_ERROR_LOST;
+  d->lost = false;
+  d->reconnected = true;
+  d->force = {0, 0, 0};
+  return DM_DEVICE_OK;
+}
+
+const DmHapticDeviceVTable kSimHaptic = {simOpen, simClose, simInfo, simRead, simWrite, simReconnect};
+
+int simInit(const DmHostApi* host) {
+  return host->register_factory(host->ctx, DM_HAPTIC_DEVICE_KIND, "sim-haptic",
+                                DM_HAPTIC_DEVICE_KIND_ABI_VERSION, &kSimHaptic);
+}
+
+const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "sim-haptic", "1.0", simInit, nullptr};
+
+}  // namespace
+
+#if defined(DM_DRIVER_PLUGIN)
+DM_PLUGIN_ENTRY { return &kInfo; }
+#else
+extern "C" const DmPluginInfo* dm_builtin_entry_sim_haptic(void) { return &kInfo; }
+#endif

@@ -1,0 +1,36 @@
+// dm/io/drivers.hpp — the device drivers that ship with DMPlatform.
+//
+// Each driver in DMIO/drivers/ is built twice from one source: into DM::IO
+// (registered here through PluginLinker::addStatic, the same ABI check and
+// init protocol a plugin goes through) and as a plugin module
+// `libdm_driver_<name>.so` installed in `<prefix>/lib/dmplatform/plugins`
+// (and, in a build tree, in `<build>/plugins`). Use one or the other in a
+// registry: both register the same factory names.
+//
+// Drivers: "sim-haptic" (kind "haptic-device": scripted paths, virtual hand,
+// noise, quantization, latency, loss window; see DMIO/drivers/sim_haptic.cpp).
+//
+// @code
+//   dm::FactoryRegistry registry;
+//   dm::PluginLinker linker(registry);
+//   if (auto s = dm::registerBuiltinDrivers(linker); !s) return s.error();
+//   auto stylus = dm::HapticDevice::open(registry, "sim-haptic", {{"path", "circle"}});
+// @endcode
+#pragma once
+
+#include <dm/core/plugin.hpp>
+#include <dm/core/result.hpp>
+
+#include <string>
+#include <vector>
+
+namespace dm {
+
+/// Names of the built-in drivers, as plugin names (sorted).
+std::vector<std::string> builtinDriverNames();
+
+/// Registers every built-in driver with `linker` (addStatic). Fails like
+/// PluginLinker::addStatic, e.g. when a plugin of the same name is loaded.
+Status registerBuiltinDrivers(PluginLinker& linker);
+
+}  // namespace dm
