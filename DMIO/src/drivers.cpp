@@ -3,6 +3,7 @@
 #include <dm/io/drivers.hpp>
 
 extern "C" const DmPluginInfo* dm_builtin_entry_sim_haptic(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_replay_haptic(void);
 
 namespace dm {
 
@@ -11,7 +12,10 @@ struct BuiltinDriver {
   const char* name;
   DmPluginEntryFn entry;
 };
-constexpr BuiltinDriver kDrivers[] = {{"sim-haptic", &dm_builtin_entry_sim_haptic}};
+constexpr BuiltinDriver kDrivers[] = {
+    {"replay-haptic", &dm_builtin_entry_replay_haptic},
+    {"sim-haptic", &dm_builtin_entry_sim_haptic},
+};
 }  // namespace
 
 std::vector<std::string> builtinDriverNames() {

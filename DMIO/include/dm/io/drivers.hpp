@@ -7,8 +7,12 @@
 // (and, in a build tree, in `<build>/plugins`). Use one or the other in a
 // registry: both register the same factory names.
 //
-// Drivers: "sim-haptic" (kind "haptic-device": scripted paths, virtual hand,
-// noise, quantization, latency, loss window; see DMIO/drivers/sim_haptic.cpp).
+// Drivers:
+//  * "sim-haptic" (kind "haptic-device"): scripted paths, virtual hand,
+//    noise, quantization, latency, loss window (DMIO/drivers/sim_haptic.cpp);
+//  * "replay-haptic" (kind "haptic-device"): plays a recording made with
+//    dm::DeviceRecorder at the recorded or a scaled rate
+//    (DMIO/drivers/replay_haptic.cpp).
 //
 // @code
 //   dm::FactoryRegistry registry;
