@@ -115,7 +115,9 @@ class ParamReader {
 /// Copies `s` into a fixed char field, truncating and NUL-terminating.
 template <std::size_t N>
 void copyField(char (&field)[N], const char* s) noexcept {
-  std::snprintf(field, N, "%s", s);
+  std::size_t i = 0;
+  for (; s && i + 1 < N && s[i]; ++i) field[i] = s[i];
+  field[i] = '\0';
 }
 
 }  // namespace dm::driver

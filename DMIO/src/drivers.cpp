@@ -2,7 +2,12 @@
 // DM::IO (see dm/io/drivers.hpp).
 #include <dm/io/drivers.hpp>
 
+extern "C" const DmPluginInfo* dm_builtin_entry_evdev_controller(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_serial_posix(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_sim_controller(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_sim_daq(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_sim_haptic(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_sim_sensor(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_replay_haptic(void);
 
 namespace dm {
@@ -13,8 +18,13 @@ struct BuiltinDriver {
   DmPluginEntryFn entry;
 };
 constexpr BuiltinDriver kDrivers[] = {
+    {"evdev-controller", &dm_builtin_entry_evdev_controller},
     {"replay-haptic", &dm_builtin_entry_replay_haptic},
+    {"serial-posix", &dm_builtin_entry_serial_posix},
+    {"sim-controller", &dm_builtin_entry_sim_controller},
+    {"sim-daq", &dm_builtin_entry_sim_daq},
     {"sim-haptic", &dm_builtin_entry_sim_haptic},
+    {"sim-sensor", &dm_builtin_entry_sim_sensor},
 };
 }  // namespace
 

@@ -49,7 +49,7 @@ TEST(HapticDeviceThreads, ServoCommandAndConsumerConcurrently) {
       std::this_thread::yield();
     }
   });
-  std::int64_t lastTime = -1, states = 0, torn = 0;
+  std::int64_t lastTime = 0, states = 0, torn = 0;  // time 0 is the empty state before the first sample
   while (!done.load(std::memory_order_acquire)) {
     const dm::HapticState& st = dev.state();
     if (st.timeNs > lastTime) {

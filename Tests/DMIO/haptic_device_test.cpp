@@ -172,6 +172,24 @@ TEST(SimHaptic, BadParametersNameTheKey) {
   EXPECT_EQ(missing.error().code, dm::ErrorCode::NotFound);
 }
 
+TEST(SimHaptic, WrongAbiAndCrashingInitDriversAreRefusedCleanly) {
+  dm::FactoryRegistry registry;
+  dm::PluginLinker linker(registry, {.useEnvironment = false, .probe = true});
+  const dm::ScanReport wrong = linker.scanDirectory(std::string(DM_TEST_DRIVER_DIR) + "/wrong_abi_driver");
+  ASSERT_EQ(wrong.refused.size(), 1u);
+  EXPECT_EQ(wrong.refused[0].error.code, dm::ErrorCode::Version);
+  EXPECT_NE(wrong.refused[0].error.message().find("libdm_test_wrong_abi_driver.so"), std::string::npos)
+      << wrong.refused[0].error.message();
+  const dm::ScanReport crash = linker.scanDirectory(std::string(DM_TEST_DRIVER_DIR) + "/crash_init_driver");
+  ASSERT_EQ(crash.refused.size(), 1u);
+  EXPECT_NE(crash.refused[0].error.message().find("libdm_test_crash_init_driver.so"), std::string::npos)
+      << crash.refused[0].error.message();
+  EXPECT_EQ(registry.size(), 0u);  // nothing left behind
+  // The host still works: a good driver loads after the bad ones.
+  ASSERT_TRUE(dm::registerBuiltinDrivers(linker).ok());
+  EXPECT_TRUE(dm::HapticDevice::open(registry, "sim-haptic").ok());
+}
+
 // Two springs on the hand: its own toward the target (k_h) and the rendered
 // one toward x0 (k_v). Equilibrium x* = k_v·x0 / (k_h + k_v).
 TEST(SimHaptic, VirtualHandSettlesAtTheSpringEquilibrium) {

@@ -13,6 +13,16 @@
 //  * "replay-haptic" (kind "haptic-device"): plays a recording made with
 //    dm::DeviceRecorder at the recorded or a scaled rate
 //    (DMIO/drivers/replay_haptic.cpp).
+//  * "sim-controller" (kind "controller", dm/io/controller.hpp): scripted
+//    axes (sine, square, ramp, constant) and a binary button counter;
+//  * "evdev-controller" (kind "controller"): Linux input devices
+//    (/dev/input/eventN, by path or by name);
+//  * "sim-daq" (kind "daq", dm/io/daq.hpp): a signal generator per channel
+//    with seeded noise and a device FIFO that overflows;
+//  * "sim-sensor" (kind "sensor", dm/io/sensor.hpp): scalar, force,
+//    orientation or tracker readings with noise;
+//  * "serial-posix" (kind "serial", dm/io/serial.hpp): termios serial lines.
+// Each driver's parameters are listed at the top of its source file.
 //
 // @code
 //   dm::FactoryRegistry registry;

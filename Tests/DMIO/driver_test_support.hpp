@@ -1,0 +1,38 @@
+// Helpers for the device driver tests: a registry with the built-in drivers,
+// and a registry with one driver plugin loaded from DM_DRIVER_PLUGIN_DIR
+// (where the build puts libdm_driver_<name>.so).
+#pragma once
+
+#include <dm/core/plugin.hpp>
+#include <dm/io/drivers.hpp>
+
+#include <gtest/gtest.h>
+
+#include <string>
+
+namespace dm::test {
+
+/// A registry filled by registerBuiltinDrivers().
+struct BuiltinDrivers {
+  FactoryRegistry registry;
+  PluginLinker linker{registry};
+  BuiltinDrivers() { EXPECT_TRUE(registerBuiltinDrivers(linker).ok()); }
+};
+
+/// A registry with the plugin libdm_driver_<file>.so loaded through the
+/// linker; `loaded` is false (with a test failure) if it was refused.
+struct PluginDriver {
+  FactoryRegistry registry;
+  PluginLinker linker{registry};
+  bool loaded = false;
+  PluginDriver(const std::string& file, const std::string& expectedName) {
+    auto r = linker.load(std::string(DM_DRIVER_PLUGIN_DIR) + "/libdm_driver_" + file + ".so");
+    EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().message());
+    if (!r.ok()) return;
+    EXPECT_EQ(r->name, expectedName);
+    EXPECT_EQ(r->status, PluginStatus::Loaded);
+    loaded = true;
+  }
+};
+
+}  // namespace dm::test
