@@ -11,12 +11,15 @@
 // |-------------------|--------------|-------------------------------|---------------------------------|
 // | BruteForce        | O(1)         | O(n²)                         | a handful of objects, reference |
 // | SweepAndPrune     | O(1) amort.  | O(n + k + swaps), incremental | coherent motion, few movers     |
-// | HashedGrid        | O(cells)     | O(n + k) per step             | similar sizes, uniform density  |
-// | HierarchicalGrid  | O(cells)     | O(n + k), levels by size      | mixed sizes                     |
-// | DynamicAabbTree   | O(log n)     | O(n log n + k)                | general scenes, ray/box queries |
+// | HashedGrid        | O(1)         | O(n + k), rebuilt per step    | similar sizes, uniform density  |
+// | HierarchicalGrid  | O(1)         | O(n + k), levels by size      | mixed sizes                     |
+// | DynamicAabbTree   | O(log n)     | O(m log n + k), m = re-fitted | general scenes, ray/box queries |
 //
 // (k = overlapping pairs.) Incremental sweep-and-prune keeps the pair set
-// between steps in a hash set (memory O(n + k), never an n² bit matrix).
+// between steps in a hash set (memory O(n + k), never an n² bit matrix); it
+// suits moderate n — at fixed density its swaps per step grow like n^(5/3).
+// query() is O(log n + hits) on the tree and an O(n) scan on the others.
+// Measured against Bullet and FCL by Bench/collide_broadphase_bench.cpp.
 //
 // Not real-time code: updates may allocate when the structure grows. The
 // haptic loop queries a world snapshot, not a broad phase.
@@ -78,7 +81,8 @@ struct BroadPhaseOptions {
 /// Interface of every broad phase. Ids are unique among live proxies; they
 /// need not be dense, but dense ids keep memory low. Boxes must be finite
 /// and non-empty (min ≤ max); a non-finite box is treated as overlapping
-/// nothing. Not thread-safe: one thread mutates and queries.
+/// nothing (the accelerated kinds also treat an inverted box, min > max,
+/// that way). Not thread-safe: one thread mutates and queries.
 class BroadPhase {
  public:
   virtual ~BroadPhase() = default;

@@ -1,0 +1,94 @@
+// Private: the broad-phase implementations behind dm::makeBroadPhase() and
+// the pieces they share — the box validity rule, pair keys, the radix sort
+// that turns a pair list into the sorted output, and an open-addressing hash
+// set of pair keys. Not installed.
+#pragma once
+
+#include <dm/collide/broadphase.hpp>
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+namespace dm::detail {
+
+/// Incremental sweep-and-prune on three axes (broadphase_sap.cpp).
+std::unique_ptr<BroadPhase> makeSweepAndPrune(const BroadPhaseOptions& options);
+/// Uniform spatial hash, one grid (broadphase_grid.cpp).
+std::unique_ptr<BroadPhase> makeHashedGrid(const BroadPhaseOptions& options);
+/// Spatial hash with levels of doubling cell size (broadphase_grid.cpp).
+std::unique_ptr<BroadPhase> makeHierarchicalGrid(const BroadPhaseOptions& options);
+/// Dynamic AABB tree with fat leaves (broadphase_tree.cpp).
+std::unique_ptr<BroadPhase> makeDynamicAabbTree(const BroadPhaseOptions& options);
+
+/// True if every coordinate is finite and min ≤ max on every axis. Other
+/// boxes are kept aside by the accelerated broad phases and overlap nothing.
+bool isUsableBox(const Aabb& box) noexcept;
+
+/// A box as six doubles, the layout the grids and the tree store.
+struct FlatBox {
+  double lo[3], hi[3];
+};
+
+inline FlatBox toFlatBox(const Aabb& b) noexcept {
+  return {{b.min().x(), b.min().y(), b.min().z()}, {b.max().x(), b.max().y(), b.max().z()}};
+}
+
+/// boxesOverlap() on FlatBoxes: closed boxes, false if a coordinate is NaN.
+inline bool overlap(const FlatBox& a, const FlatBox& b) noexcept {
+  return a.lo[0] <= b.hi[0] && b.lo[0] <= a.hi[0] && a.lo[1] <= b.hi[1] && b.lo[1] <= a.hi[1] &&
+         a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
+}
+
+/// Key of the unordered pair {a, b}: the smaller id in the high 32 bits, so
+/// that ascending keys are ascending ProxyPairs.
+inline std::uint64_t pairKey(std::uint32_t a, std::uint32_t b) noexcept {
+  return a < b ? (std::uint64_t(a) << 32) | b : (std::uint64_t(b) << 32) | a;
+}
+
+/// Sorts `keys` (pairKey values, no duplicates needed) ascending with an LSD
+/// radix sort over the bits the ids use, and writes them as pairs to `out`.
+/// O(k) for k keys; `scratch` is reused working memory.
+void emitSortedPairs(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& scratch,
+                     std::vector<ProxyPair>& out);
+
+/// Set of 64-bit keys (never ~0) with linear probing and backward-shift
+/// deletion: memory O(size), no tombstones. Used for persistent pair sets.
+class PairKeySet {
+ public:
+  /// Adds `key`; false if it was present.
+  bool insert(std::uint64_t key);
+  /// Removes `key`; false if it was absent.
+  bool erase(std::uint64_t key);
+  bool contains(std::uint64_t key) const noexcept;
+  std::size_t size() const noexcept { return size_; }
+  void clear() noexcept;
+  /// Removes every key for which `drop(key)` is true. O(capacity).
+  template <class Pred>
+  void eraseIf(Pred drop) {
+    for (std::size_t i = 0; i < slots_.size(); ++i)
+      while (slots_[i] != kEmpty && drop(slots_[i])) eraseAt(i);
+    maybeShrink();
+  }
+  /// Calls `f(key)` for every key.
+  template <class F>
+  void forEach(F f) const {
+    for (std::uint64_t k : slots_)
+      if (k != kEmpty) f(k);
+  }
+
+ private:
+  static constexpr std::uint64_t kEmpty = ~std::uint64_t(0);
+  std::size_t home(std::uint64_t key) const noexcept {
+    return static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ull) >> shift_);
+  }
+  void eraseAt(std::size_t i) noexcept;
+  void rehash(std::size_t capacity);
+  void maybeShrink();
+
+  std::vector<std::uint64_t> slots_;
+  std::size_t size_ = 0;
+  unsigned shift_ = 64;
+};
+
+}  // namespace dm::detail
