@@ -2,9 +2,11 @@
 // (BVHModel<OBBRSSd>) and Bullet 3 GImpact (btGImpactMeshShape, float), on
 // the same meshes and poses, one thread per query.
 //
-//   collide_mesh_bench [poses] [repetitions] [model]
+//   collide_mesh_bench [poses] [repetitions] [model] [queries]
 //
 // Defaults: 200 poses (fewer for the largest meshes), best of 3,
+// all queries (or a comma-separated subset of build,refit,collide,contacts,
+// distance; "-" for the default model),
 // /usr/share/assimp/models/PLY/Wuson.ply as the real model (read with
 // dm::readMesh, scaled to a 1 m box). Meshes: a torus against a UV sphere of
 // about 1k, 10k and 100k triangles each, and the model against a copy of
@@ -22,7 +24,10 @@
 //    FCL BVHModel begin/add/endModel, one thread), also in triangles/s;
 //  - refit: after moving every vertex (dm MeshBvh::refit; FCL
 //    beginUpdateModel/updateSubModel/endUpdateModel, whose refit is bottom-up).
-// The ratio is dm time / peer time: below 1 means dm is faster.
+// Queries are timed in thread CPU time (best of the repetitions), so that
+// other processes on a loaded machine do not count; build and refit, which
+// use several threads, in wall time. The ratio is dm time / peer time:
+// below 1 means dm is faster.
 #include <dm/collide/bvh.hpp>
 #include <dm/collide/mesh_query.hpp>
 #include <dm/io/mesh_io.hpp>
@@ -38,6 +43,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <ctime>
 #include <filesystem>
 #include <functional>
 #include <limits>
@@ -53,6 +59,7 @@ namespace {
 using dm::Isometry3;
 using dm::Vec3;
 
+// Best of `reps` wall-clock runs of f (seconds): for the multi-threaded build.
 double bestOf(int reps, const std::function<void()>& f) {
   double best = 1e300;
   for (int r = 0; r < reps; ++r) {
@@ -61,6 +68,31 @@ double bestOf(int reps, const std::function<void()>& f) {
     best = std::min(best, std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   }
   return best;
+}
+
+// Thread CPU seconds now: unlike wall time it does not count the time this
+// thread waits while other processes run on a shared machine.
+double cpuSeconds() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+// Best of `reps` runs of f in thread CPU time (seconds): for the one-thread queries.
+double bestCpuOf(int reps, const std::function<void()>& f) {
+  double best = 1e300;
+  for (int r = 0; r < reps; ++r) {
+    const double t0 = cpuSeconds();
+    f();
+    best = std::min(best, cpuSeconds() - t0);
+  }
+  return best;
+}
+
+// Queries selected on the command line (empty: all).
+std::string gQueries;
+bool wanted(const char* query) {
+  return gQueries.empty() || ("," + gQueries + ",").find("," + std::string(query) + ",") != std::string::npos;
 }
 
 std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> fclModel(const dm::Mesh& m) {
@@ -147,18 +179,19 @@ void benchScene(const std::string& name, const dm::Mesh& ma, const dm::Mesh& mb,
 
   // Build and refit.
   std::unique_ptr<dm::MeshBvh> a, b;
+  const int buildReps = wanted("build") ? reps : 1;
   const double ourBuild =
-      bestOf(reps, [&] { a = std::make_unique<dm::MeshBvh>(std::move(*dm::MeshBvh::build(ma))); });
+      bestOf(buildReps, [&] { a = std::make_unique<dm::MeshBvh>(std::move(*dm::MeshBvh::build(ma))); });
   b = std::make_unique<dm::MeshBvh>(std::move(*dm::MeshBvh::build(mb)));
   std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> fa, fb;
-  const double fclBuild = bestOf(reps, [&] { fa = fclModel(ma); });
+  const double fclBuild = bestOf(buildReps, [&] { fa = fclModel(ma); });
   fb = fclModel(mb);
   char note[96];
   std::snprintf(note, sizeof note, "%.2f vs %.2f Mtri/s (dm: %u threads)",
                 ma.triangleCount() / ourBuild / 1e6, ma.triangleCount() / fclBuild / 1e6,
                 std::thread::hardware_concurrency());
-  rows.push_back({scene, "build", "FCL", ourBuild, fclBuild, note});
-  {
+  if (wanted("build")) rows.push_back({scene, "build", "FCL", ourBuild, fclBuild, note});
+  if (wanted("refit")) {
     std::vector<Vec3> moved = ma.positions;
     for (Vec3& p : moved)
       p += 0.01 * size * Vec3(std::sin(7 * p.y()), std::cos(5 * p.z()), std::sin(3 * p.x()));
@@ -177,84 +210,89 @@ void benchScene(const std::string& name, const dm::Mesh& ma, const dm::Mesh& mb,
   }
 
   // Boolean.
-  int ourHits = 0, fclHits = 0;
-  const double ourCollide = bestOf(reps, [&] {
-    ourHits = 0;
-    for (const Isometry3& pb : poses) ourHits += dm::meshMeshIntersect(*a, pa, *b, pb);
-  });
-  const double fclCollide = bestOf(reps, [&] {
-    fclHits = 0;
-    for (const Isometry3& pb : poses) {
-      fcl::CollisionObjectd oa(fa, pa), ob(fb, pb);
-      fcl::CollisionRequestd req;
-      fcl::CollisionResultd res;
-      fcl::collide(&oa, &ob, req, res);
-      fclHits += res.isCollision();
-    }
-  });
-  std::snprintf(note, sizeof note, "overlapping poses: dm %d, FCL %d", ourHits, fclHits);
-  rows.push_back({scene, "collide", "FCL", ourCollide / poseCount, fclCollide / poseCount, note});
+  if (wanted("collide")) {
+    int ourHits = 0, fclHits = 0;
+    const double ourCollide = bestCpuOf(reps, [&] {
+      ourHits = 0;
+      for (const Isometry3& pb : poses) ourHits += dm::meshMeshIntersect(*a, pa, *b, pb);
+    });
+    const double fclCollide = bestCpuOf(reps, [&] {
+      fclHits = 0;
+      for (const Isometry3& pb : poses) {
+        fcl::CollisionObjectd oa(fa, pa), ob(fb, pb);
+        fcl::CollisionRequestd req;
+        fcl::CollisionResultd res;
+        fcl::collide(&oa, &ob, req, res);
+        fclHits += res.isCollision();
+      }
+    });
+    std::snprintf(note, sizeof note, "overlapping poses: dm %d, FCL %d", ourHits, fclHits);
+    rows.push_back({scene, "collide", "FCL", ourCollide / poseCount, fclCollide / poseCount, note});
+  }
 
   // Contacts.
-  std::vector<dm::MeshContact> contacts;
-  long ourContacts = 0, fclContacts = 0, btContacts = 0;
-  const double ourAll = bestOf(reps, [&] {
-    ourContacts = 0;
-    for (const Isometry3& pb : poses)
-      ourContacts += static_cast<long>(dm::meshMeshContacts(*a, pa, *b, pb, contacts));
-  });
-  const double fclAll = bestOf(reps, [&] {
-    fclContacts = 0;
-    for (const Isometry3& pb : poses) {
-      fcl::CollisionObjectd oa(fa, pa), ob(fb, pb);
-      fcl::CollisionRequestd req(std::numeric_limits<std::size_t>::max() / 2, true);
-      fcl::CollisionResultd res;
-      fcl::collide(&oa, &ob, req, res);
-      fclContacts += static_cast<long>(res.numContacts());
+  if (wanted("contacts")) {
+    std::vector<dm::MeshContact> contacts;
+    long ourContacts = 0, fclContacts = 0, btContacts = 0;
+    const double ourAll = bestCpuOf(reps, [&] {
+      ourContacts = 0;
+      for (const Isometry3& pb : poses)
+        ourContacts += static_cast<long>(dm::meshMeshContacts(*a, pa, *b, pb, contacts));
+    });
+    const double fclAll = bestCpuOf(reps, [&] {
+      fclContacts = 0;
+      for (const Isometry3& pb : poses) {
+        fcl::CollisionObjectd oa(fa, pa), ob(fb, pb);
+        fcl::CollisionRequestd req(std::numeric_limits<std::size_t>::max() / 2, true);
+        fcl::CollisionResultd res;
+        fcl::collide(&oa, &ob, req, res);
+        fclContacts += static_cast<long>(res.numContacts());
+      }
+    });
+    BulletMesh ba(ma), bb(mb);
+    btDefaultCollisionConfiguration config;
+    btCollisionDispatcher dispatcher(&config);
+    btGImpactCollisionAlgorithm::registerAlgorithm(&dispatcher);
+    // contactPairTest looks up "closest points" algorithms, which
+    // registerAlgorithm() does not register for GImpact.
+    static btGImpactCollisionAlgorithm::CreateFunc gimpact;
+    for (int i = 0; i < MAX_BROADPHASE_COLLISION_TYPES; ++i) {
+      dispatcher.registerClosestPointsCreateFunc(GIMPACT_SHAPE_PROXYTYPE, i, &gimpact);
+      dispatcher.registerClosestPointsCreateFunc(i, GIMPACT_SHAPE_PROXYTYPE, &gimpact);
     }
-  });
-  BulletMesh ba(ma), bb(mb);
-  btDefaultCollisionConfiguration config;
-  btCollisionDispatcher dispatcher(&config);
-  btGImpactCollisionAlgorithm::registerAlgorithm(&dispatcher);
-  // contactPairTest looks up "closest points" algorithms, which
-  // registerAlgorithm() does not register for GImpact.
-  static btGImpactCollisionAlgorithm::CreateFunc gimpact;
-  for (int i = 0; i < MAX_BROADPHASE_COLLISION_TYPES; ++i) {
-    dispatcher.registerClosestPointsCreateFunc(GIMPACT_SHAPE_PROXYTYPE, i, &gimpact);
-    dispatcher.registerClosestPointsCreateFunc(i, GIMPACT_SHAPE_PROXYTYPE, &gimpact);
+    btDbvtBroadphase broadphase;
+    btCollisionWorld world(&dispatcher, &broadphase, &config);
+    btCollisionObject oa, ob;
+    oa.setCollisionShape(ba.shape.get());
+    ob.setCollisionShape(bb.shape.get());
+    oa.setWorldTransform(toBullet(pa));
+    const double btAll = bestCpuOf(reps, [&] {
+      btContacts = 0;
+      for (const Isometry3& pb : poses) {
+        ob.setWorldTransform(toBullet(pb));
+        CountContacts cb;
+        world.contactPairTest(&oa, &ob, cb);
+        btContacts += cb.count;
+      }
+    });
+    std::snprintf(note, sizeof note, "contacts: dm %ld, FCL %ld", ourContacts, fclContacts);
+    rows.push_back({scene, "contacts", "FCL", ourAll / poseCount, fclAll / poseCount, note});
+    std::snprintf(note, sizeof note, "contacts: dm %ld, GImpact %ld", ourContacts, btContacts);
+    rows.push_back({scene, "contacts", "GImpact", ourAll / poseCount, btAll / poseCount, note});
   }
-  btDbvtBroadphase broadphase;
-  btCollisionWorld world(&dispatcher, &broadphase, &config);
-  btCollisionObject oa, ob;
-  oa.setCollisionShape(ba.shape.get());
-  ob.setCollisionShape(bb.shape.get());
-  oa.setWorldTransform(toBullet(pa));
-  const double btAll = bestOf(reps, [&] {
-    btContacts = 0;
-    for (const Isometry3& pb : poses) {
-      ob.setWorldTransform(toBullet(pb));
-      CountContacts cb;
-      world.contactPairTest(&oa, &ob, cb);
-      btContacts += cb.count;
-    }
-  });
-  std::snprintf(note, sizeof note, "contacts: dm %ld, FCL %ld", ourContacts, fclContacts);
-  rows.push_back({scene, "contacts", "FCL", ourAll / poseCount, fclAll / poseCount, note});
-  std::snprintf(note, sizeof note, "contacts: dm %ld, GImpact %ld", ourContacts, btContacts);
-  rows.push_back({scene, "contacts", "GImpact", ourAll / poseCount, btAll / poseCount, note});
 
   // Distance.
+  if (!wanted("distance")) return;
   double ourSum = 0, fclSum = 0, worst = 0;
   std::vector<double> ours(poses.size());
-  const double ourDist = bestOf(reps, [&] {
+  const double ourDist = bestCpuOf(reps, [&] {
     ourSum = 0;
     for (std::size_t i = 0; i < poses.size(); ++i) {
       ours[i] = dm::meshMeshDistance(*a, pa, *b, poses[i]).distance;
       ourSum += ours[i];
     }
   });
-  const double fclDist = bestOf(reps, [&] {
+  const double fclDist = bestCpuOf(reps, [&] {
     fclSum = 0;
     worst = 0;
     for (std::size_t i = 0; i < poses.size(); ++i) {
@@ -276,7 +314,9 @@ void benchScene(const std::string& name, const dm::Mesh& ma, const dm::Mesh& mb,
 int main(int argc, char** argv) {
   const int poseCount = argc > 1 ? std::max(1, std::atoi(argv[1])) : 200;
   const int reps = argc > 2 ? std::max(1, std::atoi(argv[2])) : 3;
-  const std::string model = argc > 3 ? argv[3] : "/usr/share/assimp/models/PLY/Wuson.ply";
+  const std::string model =
+      argc > 3 && std::string(argv[3]) != "-" ? argv[3] : "/usr/share/assimp/models/PLY/Wuson.ply";
+  if (argc > 4) gQueries = argv[4];
   std::vector<Row> rows;
 
   struct Size {

@@ -1,7 +1,9 @@
 // Binned-SAH BVH over mesh triangles; see dm/collide/bvh.hpp.
 #include <dm/collide/bvh.hpp>
+#include <dm/core/tasks.hpp>
 #include <dm/math/mesh_topology.hpp>
 
+#include <Eigen/Eigenvalues>
 #include <tbb/parallel_invoke.h>
 
 #include <algorithm>
@@ -279,7 +281,102 @@ Result<MeshBvh> MeshBvh::build(const Mesh& mesh, const BvhBuildOptions& options)
     bvh.vertexNormals_.resize(nv);
     bvh.computeNormals();
   }
+  bvh.computeObbs();
   return bvh;
+}
+
+namespace {
+// Oriented box extents around leaf-order corners [3·first, 3·end) along
+// o.axes, rounded outward by far more than the rounding of the projections
+// and of the centre's reconstruction (a few ulps of the coordinates).
+void fitObb(BvhObb& o, const std::vector<Vec3>& corners, std::uint32_t first, std::uint32_t end) noexcept {
+  constexpr double kBig = std::numeric_limits<double>::infinity();
+  const Mat3 at = o.axes.transpose();
+  Vec3 lo = Vec3::Constant(kBig), hi = Vec3::Constant(-kBig);
+  for (std::size_t k = 3 * std::size_t(first); k < 3 * std::size_t(end); ++k) {
+    const Vec3 q = at * corners[k];
+    lo = lo.cwiseMin(q), hi = hi.cwiseMax(q);
+  }
+  const double slack = 1e-13 * std::max(lo.cwiseAbs().maxCoeff(), hi.cwiseAbs().maxCoeff());
+  o.half = 0.5 * (hi - lo) + Vec3::Constant(slack);
+  o.center = o.axes * (0.5 * (lo + hi));
+}
+}  // namespace
+
+void MeshBvh::computeObbs() {
+  const std::size_t count = nodeCount_;
+  obbs_.assign(count, BvhObb{Mat3::Identity(), Vec3::Zero(), Vec3::Zero()});
+  nodeSpan_.assign(2 * count, 0);
+  // Corner moments (about the bounds' centre, against cancellation), summed
+  // bottom-up, give every node's covariance in O(n).
+  struct Moments {
+    Vec3 sum;
+    Mat3 outer;
+    double count;
+  };
+  std::vector<Moments> moments(count);
+  const Vec3 origin = bounds_.center();
+  const BvhNode* nodes = nodeData();
+  for (std::size_t i = count; i-- > 0;) {
+    if (i == 1) continue;
+    const BvhNode& nd = nodes[i];
+    Moments& m = moments[i];
+    if (nd.isLeaf()) {
+      m.sum.setZero();
+      m.outer.setZero();
+      m.count = 3.0 * nd.count;
+      for (std::uint32_t k = nd.first; k < nd.first + nd.count; ++k)
+        for (int c = 0; c < 3; ++c) {
+          const Vec3 p = corners_[3 * std::size_t(k) + c] - origin;
+          m.sum += p;
+          m.outer += p * p.transpose();
+        }
+      nodeSpan_[2 * i] = nd.first;
+      nodeSpan_[2 * i + 1] = nd.first + nd.count;
+    } else {
+      const Moments& l = moments[nd.first];
+      const Moments& r = moments[nd.first + 1];
+      m.sum = l.sum + r.sum;
+      m.outer = l.outer + r.outer;
+      m.count = l.count + r.count;
+      // Subtrees are contiguous in leaf order; the hull of the two spans is
+      // a superset otherwise, which only loosens the box.
+      nodeSpan_[2 * i] = std::min(nodeSpan_[2 * nd.first], nodeSpan_[2 * (nd.first + 1)]);
+      nodeSpan_[2 * i + 1] = std::max(nodeSpan_[2 * nd.first + 1], nodeSpan_[2 * (nd.first + 1) + 1]);
+    }
+  }
+  // Axes (principal directions of the corners) and exact extents, node by
+  // node in parallel: O(n log n) work over the levels.
+  parallelFor(0, count, 256, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      if (i == 1) continue;
+      const Moments& m = moments[i];
+      const Vec3 mean = m.sum / m.count;
+      const Mat3 cov = m.outer / m.count - mean * mean.transpose();
+      Eigen::SelfAdjointEigenSolver<Mat3> solver;
+      solver.computeDirect(cov);
+      Vec3 a0 = solver.eigenvectors().col(2), a1 = solver.eigenvectors().col(1);
+      // Exactly orthonormal (to rounding) whatever the solver returned.
+      Mat3 axes = Mat3::Identity();
+      if (a0.allFinite() && a1.allFinite() && a0.norm() > 0.5) {
+        a0.normalize();
+        a1 -= a1.dot(a0) * a0;
+        if (a1.norm() > 1e-6) {
+          a1.normalize();
+          axes.col(0) = a0;
+          axes.col(1) = a1;
+          axes.col(2) = a0.cross(a1).normalized();
+        }
+      }
+      obbs_[i].axes = axes;
+      fitObb(obbs_[i], corners_, nodeSpan_[2 * i], nodeSpan_[2 * i + 1]);
+    }
+  });
+}
+
+void MeshBvh::computeObbExtents() noexcept {
+  for (std::size_t i = 0; i < nodeCount_; ++i)
+    if (i != 1) fitObb(obbs_[i], corners_, nodeSpan_[2 * i], nodeSpan_[2 * i + 1]);
 }
 
 void MeshBvh::computeNormals() noexcept {
@@ -350,6 +447,7 @@ Status MeshBvh::refit(std::span<const Vec3> positions) {
     }
   computeBoxes();
   bounds_ = all;
+  computeObbExtents();
   if (closed_) computeNormals();
   return ok();
 }

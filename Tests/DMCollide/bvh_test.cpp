@@ -88,6 +88,29 @@ void checkInvariants(const dm::MeshBvh& bvh, const dm::Mesh& mesh) {
     }
   }
   for (std::size_t t = 0; t < seen.size(); ++t) ASSERT_EQ(seen[t], 1) << "triangle " << t;
+  // Oriented boxes: orthonormal axes, and every corner of the subtree's
+  // triangles inside (the distance traversal prunes by them).
+  for (std::uint32_t i = 0; i < nodes.size(); ++i) {
+    if (i == 1) continue;
+    const dm::BvhObb& o = bvh.obb(i);
+    ASSERT_TRUE((o.axes.transpose() * o.axes).isIdentity(1e-12)) << "node " << i;
+    std::vector<std::uint32_t> todo{i};
+    while (!todo.empty()) {
+      const dm::BvhNode& n = nodes[todo.back()];
+      todo.pop_back();
+      if (!n.isLeaf()) {
+        todo.push_back(n.first);
+        todo.push_back(n.first + 1);
+        continue;
+      }
+      for (std::uint32_t k = n.first; k < n.first + n.count; ++k)
+        for (int c = 0; c < 3; ++c) {
+          const Vec3 q = o.axes.transpose() * (bvh.corners(k)[c] - o.center);
+          ASSERT_TRUE((q.cwiseAbs().array() <= o.half.array()).all())
+              << "node " << i << " triangle " << k << " outside by " << (q.cwiseAbs() - o.half).maxCoeff();
+        }
+    }
+  }
   EXPECT_LE(bvh.depth(), dm::MeshBvh::kMaxDepth);
   EXPECT_TRUE(bvh.bounds().contains(mesh.bounds()));
 }

@@ -276,6 +276,68 @@ double boxOverlap(const dm::Box& a, const Isometry3& pa, const dm::Box& b, const
   return best;
 }
 
+// Exact penetration depth of two posed polytopes: the minimum over unit
+// directions u of h(u) = max over A of u·x − min over B of u·x, which a
+// convex polytope's Minkowski difference attains at a facet normal: a face
+// normal of A or B or the cross product of an edge of A and an edge of B.
+// Every candidate (both signs) is evaluated; extra ones cannot go below.
+double bruteForceDepth(const dm::Mesh& ma, const Isometry3& pa, const dm::Mesh& mb, const Isometry3& pb) {
+  std::vector<Vec3> va, vb;
+  for (const Vec3& p : ma.positions) va.push_back(pa * p);
+  for (const Vec3& p : mb.positions) vb.push_back(pb * p);
+  std::vector<Vec3> normals, edgesA, edgesB;
+  auto collect = [](const dm::Mesh& m, const std::vector<Vec3>& v, std::vector<Vec3>& n,
+                    std::vector<Vec3>& e) {
+    for (const auto& t : m.triangles) {
+      n.push_back((v[t[1]] - v[t[0]]).cross(v[t[2]] - v[t[0]]));
+      for (int k = 0; k < 3; ++k)
+        if (t[k] < t[(k + 1) % 3]) e.push_back(v[t[(k + 1) % 3]] - v[t[k]]);  // each edge once
+    }
+  };
+  collect(ma, va, normals, edgesA);
+  collect(mb, vb, normals, edgesB);
+  for (const Vec3& ea : edgesA)
+    for (const Vec3& eb : edgesB) normals.push_back(ea.cross(eb));
+  double best = std::numeric_limits<double>::infinity();
+  for (const Vec3& n : normals) {
+    if (n.squaredNorm() < 1e-24) continue;
+    const Vec3 u = n.normalized();
+    for (const Vec3& d : {u, Vec3(-u)}) {
+      double hiA = -std::numeric_limits<double>::infinity(), loB = std::numeric_limits<double>::infinity();
+      for (const Vec3& x : va) hiA = std::max(hiA, d.dot(x));
+      for (const Vec3& x : vb) loB = std::min(loB, d.dot(x));
+      best = std::min(best, hiA - loB);
+    }
+  }
+  return best;
+}
+
+// EPA on hull pairs: the depth is the exact minimum translation distance,
+// and the deepest points are depth apart along the normal.
+TEST(Gjk, EpaDepthOfHullsIsTheMinimumTranslation) {
+  std::mt19937_64 rng(21);
+  for (int nv : {6, 12, 24}) {
+    auto hullA = dm::ConvexHull::create(spherePoints(rng, nv, 0.3));
+    auto hullB = dm::ConvexHull::create(spherePoints(rng, nv, 0.25));
+    ASSERT_TRUE(hullA.ok() && hullB.ok());
+    const dm::Mesh& ma = (*hullA)->mesh();
+    const dm::Mesh& mb = (*hullB)->mesh();
+    int tested = 0;
+    for (int k = 0; k < 200; ++k) {
+      const Isometry3 pa = randomPose(rng, 0.1), pb = randomPose(rng, 0.4);
+      const double depth = bruteForceDepth(ma, pa, mb, pb);
+      if (depth < 1e-6) continue;
+      ++tested;
+      const dm::GjkResult r = dm::gjkDistance(**hullA, pa, **hullB, pb);
+      ASSERT_TRUE(r.exact) << nv << " pose " << k;
+      ASSERT_NEAR(-r.distance, depth, 1e-9) << nv << " pose " << k;
+      ASSERT_NEAR((r.pointA - r.pointB).dot(r.normal), -r.distance, 1e-9) << nv << " pose " << k;
+      ASSERT_TRUE(dm::gjkIntersect(**hullA, pa, **hullB, pb)) << nv << " pose " << k;
+    }
+    EXPECT_GT(tested, 80) << nv;
+  }
+}
+
 // EPA on boxes: depth equals the separating-axis minimum, and moving B by
 // depth along the normal makes the boxes touch.
 TEST(Gjk, EpaDepthOfBoxesIsTheMinimumTranslation) {

@@ -16,6 +16,11 @@
 //  * boxes are float, rounded outward from the double triangle bounds, so
 //    they always contain the exact triangles (exactness of results comes from
 //    the double triangle tests in the leaves).
+//  * obbs: a parallel array (one BvhObb per node, same index) of oriented
+//    boxes in double, axes from the covariance of the node's corners, for
+//    distance bounds: a surface patch is thin along its normal, so these
+//    are far tighter than the axis-aligned boxes on curved or tilted parts.
+//    Distance traversals use them; overlap traversals use the float boxes.
 //  * leaves hold 1..maxLeafSize triangles contiguous in leaf order; the
 //    triangles' three corners (double, metres) are copied in leaf order
 //    (corners(k)), so a leaf's geometry is one contiguous run of memory.
@@ -58,6 +63,15 @@ struct BvhNode {
 };
 static_assert(sizeof(BvhNode) == 32, "BvhNode must stay 32 bytes (two per cache line)");
 
+/// Oriented bounding box of a node (double, m, the mesh's frame): the set
+/// center + Σ s_i·axes.col(i) with |s_i| ≤ half[i]. Axes are orthonormal;
+/// the box contains every corner of the node's triangles (rounded outward).
+struct BvhObb {
+  Mat3 axes;    ///< columns: unit axes
+  Vec3 center;  ///< m
+  Vec3 half;    ///< half extents along the axes, m
+};
+
 /// Options of MeshBvh::build().
 struct BvhBuildOptions {
   int bins = 16;                         ///< SAH bins per axis, clamped to [4, 64]
@@ -86,7 +100,8 @@ class MeshBvh {
   /// Updates corners, boxes (bottom-up) and, for closed meshes, the
   /// pseudonormals after the vertices moved; connectivity is unchanged.
   /// `positions` has one entry per vertex of the mesh given to build()
-  /// (metres, same frame). O(n), no allocation. Fails (InvalidArgument, tree
+  /// (metres, same frame). O(n log n) (each node's oriented box is refitted
+  /// to its triangles along the build's axes), no allocation. Fails (InvalidArgument, tree
   /// unchanged) on a size mismatch or a non-finite position. The tree is not
   /// rebuilt, so large deformations make queries slower, never wrong.
   /// @code
@@ -99,6 +114,9 @@ class MeshBvh {
   std::span<const BvhNode> nodes() const noexcept { return {nodeData(), nodeCount_}; }
   /// Node i (i < nodes().size()).
   const BvhNode& node(std::uint32_t i) const noexcept { return nodeData()[i]; }
+  /// Oriented box of node i (i < nodes().size(); entry 1 is padding). Kept
+  /// by refit() with the build's axes and updated extents.
+  const BvhObb& obb(std::uint32_t i) const noexcept { return obbs_[i]; }
 
   std::size_t triangleCount() const noexcept { return tris_.size(); }
   std::size_t vertexCount() const noexcept { return vertexCount_; }
@@ -141,12 +159,14 @@ class MeshBvh {
   const BvhNode* nodeData() const noexcept { return blocks_.empty() ? nullptr : blocks_.front().pair; }
   BvhNode* nodeData() noexcept { return blocks_.empty() ? nullptr : blocks_.front().pair; }
 
-  std::vector<Vec3> corners_;         // 3 per triangle, leaf order
-  std::vector<Triangle> tris_;        // vertex indices, leaf order
-  std::vector<std::uint32_t> order_;  // leaf order -> mesh triangle
-  std::vector<Vec3> faceNormals_;     // closed meshes: per triangle, leaf order
-  std::vector<Vec3> edgeNormals_;     // closed meshes: 3 per triangle, leaf order
-  std::vector<Vec3> vertexNormals_;   // closed meshes: per vertex
+  std::vector<BvhObb> obbs_;             // per node, parallel to the node array
+  std::vector<std::uint32_t> nodeSpan_;  // per node: first leaf-order triangle and end (2 per node)
+  std::vector<Vec3> corners_;            // 3 per triangle, leaf order
+  std::vector<Triangle> tris_;           // vertex indices, leaf order
+  std::vector<std::uint32_t> order_;     // leaf order -> mesh triangle
+  std::vector<Vec3> faceNormals_;        // closed meshes: per triangle, leaf order
+  std::vector<Vec3> edgeNormals_;        // closed meshes: 3 per triangle, leaf order
+  std::vector<Vec3> vertexNormals_;      // closed meshes: per vertex
   std::vector<std::uint32_t>
       neighbours_;  // closed meshes: 3 per triangle (leaf order of the triangle across edge e)
   Aabb bounds_;
@@ -156,6 +176,8 @@ class MeshBvh {
 
   void computeNormals() noexcept;
   void computeBoxes() noexcept;
+  void computeObbExtents() noexcept;
+  void computeObbs();
 };
 
 }  // namespace dm

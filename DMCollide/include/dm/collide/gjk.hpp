@@ -7,8 +7,14 @@
 // the exact Voronoi-region closest point (dm::closestPointOnTriangle and the
 // tetrahedron's outside faces), which stays robust on degenerate simplices.
 // When the cores overlap, EPA (expanding polytope with a horizon) gives the
-// penetration depth, normal and deepest points. Everything works on the
-// stack: no allocation, no locks, no exceptions, bounded iterations.
+// penetration depth, normal and deepest points; its polytope keeps face
+// adjacency, so an expansion removes only the faces that see the new point.
+// Booleans of shapes without margin (and the overlap test before EPA) use a
+// cheaper GJK that tracks only a search direction (Muratori's simplex
+// update) and answers only with a certificate — a separating direction or
+// a tetrahedron around the origin — falling back to the exact GJK when
+// rounding leaves it unsure. Everything works on the stack: no allocation,
+// no locks, no exceptions, bounded iterations.
 //
 // @code
 //   dm::GjkCache cache;                       // keep one per pair between steps
