@@ -64,5 +64,8 @@ void registerBoxBoxCollider(ColliderTable& table);
 /// Registers mesh–mesh, mesh–sphere, mesh–capsule and the mesh raycaster
 /// (pair_mesh.cpp).
 void registerMeshColliders(ColliderTable& table);
+void registerMeshConvexColliders(ColliderTable& table);  // other convex shapes (pair_mesh_convex.cpp)
+void registerSphereTreeColliders(ColliderTable& table);  // sphere trees (pair_sphere_tree.cpp)
+void registerVoxelColliders(ColliderTable& table);  // point shells, voxel models (pair_voxel.cpp)
 
 }  // namespace dm::detail

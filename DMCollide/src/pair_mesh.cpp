@@ -97,12 +97,37 @@ MeshDistance roundMeshDistance(const MeshBvh& bvh, const Isometry3& pa, const Co
                       : capsuleMeshDistance(bvh, pa, k.p0, k.p1, k.radius);
 }
 
+// A closed mesh is a solid (as for the other convex shapes, see
+// pair_mesh_convex.cpp): a round shape touching no triangle but whose core
+// lies inside is enclosed.
+bool enclosedRound(const MeshBvh& bvh, const Isometry3& pa, const Core& k) noexcept {
+  return bvh.isClosed() && closestPointOnMesh(bvh, pa, k.p0).distance < 0;
+}
+
+// Push-out of an enclosed round shape: along n from its nearest core point to
+// the nearest surface point, far enough that its deepest point clears it.
+// Mesh point first (A), round shape second (B), normal A→B.
+SignedContact pushOutRound(const MeshDistance& d, const Core& k) noexcept {
+  const Vec3 onMesh = d.pointB;
+  const Vec3 gap = onMesh - closestPointOnSegment(onMesh, k.p0, k.p1);
+  const Vec3 n = gap.squaredNorm() > 0 ? Vec3(gap.normalized()) : Vec3::UnitZ();
+  const Vec3 deepCore = n.dot(k.p1 - k.p0) < 0 ? k.p1 : k.p0;
+  const Vec3 deep = deepCore - k.radius * n;
+  SignedContact s;
+  s.distance = -std::max(0.0, n.dot(onMesh - deep));
+  s.pointA = onMesh;
+  s.pointB = deep;
+  s.normal = n;
+  return s;
+}
+
 bool meshRoundHit(const Shape& a, const Isometry3& pa, const Shape& b, const Isometry3& pb, PairCache*) {
   const MeshBvh* bvh = bvhOf(a);
   if (!bvh) return false;
   const Core k = coreOf(b, pb);
-  return k.p0 == k.p1 ? sphereMeshIntersect(*bvh, pa, k.p0, k.radius)
-                      : capsuleMeshIntersect(*bvh, pa, k.p0, k.p1, k.radius);
+  const bool touches = k.p0 == k.p1 ? sphereMeshIntersect(*bvh, pa, k.p0, k.radius)
+                                    : capsuleMeshIntersect(*bvh, pa, k.p0, k.p1, k.radius);
+  return touches || enclosedRound(*bvh, pa, k);
 }
 
 void meshRoundContacts(const Shape& a, const Isometry3& pa, const Shape& b, const Isometry3& pb,
@@ -116,6 +141,10 @@ void meshRoundContacts(const Shape& a, const Isometry3& pa, const Shape& b, cons
   // on the round shape (B here), pointB on the mesh (A here).
   const Core k = coreOf(b, pb);
   const MeshDistance d = roundMeshDistance(*bvh, pa, k);
+  if (d.distance > 0 && enclosedRound(*bvh, pa, k)) {
+    appendContact(pushOutRound(d, k), req, out);
+    return;
+  }
   if (!(d.distance <= 0)) return;
   SignedContact s;
   s.distance = d.distance;
@@ -131,7 +160,9 @@ DistanceResult meshRoundDist(const Shape& a, const Isometry3& pa, const Shape& b
                              PairCache*) {
   const MeshBvh* bvh = bvhOf(a);
   if (!bvh) return unsupportedDistance();
-  const MeshDistance d = roundMeshDistance(*bvh, pa, coreOf(b, pb));
+  const Core k = coreOf(b, pb);
+  const MeshDistance d = roundMeshDistance(*bvh, pa, k);
+  if (d.distance > 0 && enclosedRound(*bvh, pa, k)) return toDistanceResult(pushOutRound(d, k));
   DistanceResult r;
   r.distance = d.distance;
   r.pointA = d.pointB;  // on the mesh (A)

@@ -278,6 +278,9 @@ ColliderTable::ColliderTable() {
   detail::registerPrimitiveColliders(*this);
   detail::registerBoxBoxCollider(*this);
   detail::registerMeshColliders(*this);
+  detail::registerMeshConvexColliders(*this);
+  detail::registerSphereTreeColliders(*this);
+  detail::registerVoxelColliders(*this);
   raycasters_[static_cast<int>(ShapeType::Sphere)] = &raySphere;
   raycasters_[static_cast<int>(ShapeType::Box)] = &rayBox;
   raycasters_[static_cast<int>(ShapeType::Plane)] = &rayPlane;

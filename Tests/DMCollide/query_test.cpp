@@ -373,12 +373,41 @@ TEST(Query, MeshPairsWithoutAColliderReportUnsupported) {
   EXPECT_FALSE(dm::intersect(bare, Isometry3::Identity(), ball, Isometry3::Identity()));
   auto cube = dm::TriangleMesh::create(unitCube());
   ASSERT_TRUE(cube);
-  const dm::Box box(Vec3(0.1, 0.1, 0.1));
-  const dm::Status s = dm::ColliderTable::global().check(box, **cube);
+  // A half-space against a mesh has no built-in collider (a plugin adds one:
+  // collider_plugin_test.cpp).
+  const dm::Plane ground(Vec3::UnitZ(), 0.0);
+  const dm::Status s = dm::ColliderTable::global().check(ground, **cube);
   ASSERT_FALSE(s.ok());
-  EXPECT_NE(s.error().message().find("no collider for (box, triangle-mesh)"), std::string::npos)
+  EXPECT_NE(s.error().message().find("no collider for (plane, triangle-mesh)"), std::string::npos)
       << s.error().message();
-  EXPECT_FALSE(dm::collide(**cube, Isometry3::Identity(), box, Isometry3::Identity()).supported);
+  EXPECT_FALSE(dm::collide(**cube, Isometry3::Identity(), ground, Isometry3::Identity()).supported);
+}
+
+// A closed mesh is a solid for every convex shape: a sphere or capsule
+// inside it, touching no triangle, collides with the push-out depth (the
+// nearest face plus the radius), the same rule as for a box.
+TEST(Query, RoundShapesInsideAClosedMeshAreEnclosed) {
+  auto cube = dm::TriangleMesh::create(unitCube());  // [-0.5, 0.5]³
+  ASSERT_TRUE(cube);
+  const dm::Sphere ball(0.1);
+  const dm::Capsule rod(0.05, 0.1);  // along z: core from z −0.1 to 0.1
+  const dm::Box block(Vec3(0.1, 0.1, 0.1));
+  const Isometry3 pose = at(0.2, 0.0, 0.0);  // nearest face x = 0.5, 0.3 away
+  EXPECT_TRUE(dm::intersect(**cube, Isometry3::Identity(), ball, pose));
+  EXPECT_TRUE(dm::intersect(**cube, Isometry3::Identity(), rod, pose));
+  const dm::DistanceResult db = dm::distance(**cube, Isometry3::Identity(), ball, pose);
+  EXPECT_NEAR(db.distance, -(0.3 + 0.1), 1e-12);
+  EXPECT_NEAR(db.pointA.x(), 0.5, 1e-12);  // on the face
+  EXPECT_NEAR(db.pointB.x(), 0.1, 1e-12);  // the ball's deepest point
+  EXPECT_NEAR(dm::distance(**cube, Isometry3::Identity(), rod, pose).distance, -(0.3 + 0.05), 1e-12);
+  EXPECT_NEAR(dm::distance(**cube, Isometry3::Identity(), block, pose).distance, -(0.3 + 0.1), 1e-12);
+  const dm::CollisionResult c = dm::collide(**cube, Isometry3::Identity(), ball, pose);
+  ASSERT_EQ(c.contacts.size(), 1u);
+  EXPECT_NEAR(c.contacts[0].depth, 0.4, 1e-12);
+  EXPECT_NEAR(c.contacts[0].normal.x(), 1.0, 1e-12);  // the ball leaves through x = 0.5
+  // Outside the cube the same shapes are apart, with the plain gap.
+  EXPECT_NEAR(dm::distance(**cube, Isometry3::Identity(), ball, at(0.8, 0, 0)).distance, 0.2, 1e-12);
+  EXPECT_FALSE(dm::intersect(**cube, Isometry3::Identity(), ball, at(0.8, 0, 0)));
 }
 
 // A reused result keeps its buffer: no allocation once it is large enough.

@@ -8,9 +8,11 @@
 // convex shapes (user shape types included), child-wise dispatch for
 // compounds. A pair registered as (A, B) also serves (B, A): the shapes are
 // swapped, normals flipped and points exchanged. Plugins add pairs at run time
-// with ColliderTable::registerCollider(). Pairs without a collider (triangle
-// meshes against boxes, cylinders, ellipsoids, hulls for now) report
-// `supported = false`.
+// with ColliderTable::registerCollider() (or, from a shared library, through
+// dm/collide/collider_plugin.hpp). Triangle meshes pair with every built-in
+// convex shape (closed meshes count as solids there); sphere trees, point
+// shells and voxel models register their own pairs. Pairs without a
+// collider (e.g. plane–mesh, box–voxel model) report `supported = false`.
 //
 // @code
 //   dm::Sphere ball(0.01);
