@@ -38,6 +38,9 @@ Command addConvertCommand(CLI::App& parent);
 Command addIsosurfaceCommand(CLI::App& parent);
 Command addSimplifyCommand(CLI::App& parent);
 Command addVoxelizeCommand(CLI::App& parent);
+Command addSpheretreeCommand(CLI::App& parent);
+Command addDevicesCommand(CLI::App& parent);
+Command addCollideCommand(CLI::App& parent);
 
 /// Prints "dmtool: error: <where: what (hint)>" on stderr; returns kExitFailure.
 int printError(const dm::Error& error);

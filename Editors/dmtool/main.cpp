@@ -16,10 +16,13 @@ int main(int argc, char** argv) {
   app.fallthrough(false);
   std::vector<dmtool::Command> commands = {
       dmtool::addInfoCommand(app),
+      dmtool::addDevicesCommand(app),
       dmtool::addConvertCommand(app),
       dmtool::addIsosurfaceCommand(app),
       dmtool::addSimplifyCommand(app),
+      dmtool::addCollideCommand(app),
       dmtool::addVoxelizeCommand(app),
+      dmtool::addSpheretreeCommand(app),
   };
   try {
     app.parse(argc, argv);

@@ -29,9 +29,12 @@ TEST(HapticDeviceThreads, ServoCommandAndConsumerConcurrently) {
   std::atomic<std::int64_t> clock{0};  // servo publishes its time; the loop commands at that time
   std::atomic<bool> done{false};
   std::atomic<int> unsafe{0};
+  std::atomic<bool> consumerReady{false};
 
   std::thread servo([&] {
+    while (!consumerReady.load(std::memory_order_acquire)) std::this_thread::yield();
     for (std::int64_t k = 0; k < kSteps; ++k) {
+      if (k % 64 == 0) std::this_thread::yield();  // let the consumer interleave on a small machine
       const std::int64_t t = k * 100'000;  // 10 kHz
       dev.servo(t);
       const dm::HapticOutput& out = dev.lastOutput();
@@ -50,6 +53,7 @@ TEST(HapticDeviceThreads, ServoCommandAndConsumerConcurrently) {
     }
   });
   std::int64_t lastTime = 0, states = 0, torn = 0;  // time 0 is the empty state before the first sample
+  consumerReady.store(true, std::memory_order_release);
   while (!done.load(std::memory_order_acquire)) {
     const dm::HapticState& st = dev.state();
     if (st.timeNs > lastTime) {

@@ -1,0 +1,78 @@
+// dmtool devices: lists built-in drivers and plugins with their status,
+// refuses a crashing and a wrong-ABI plugin without going down, and opens a
+// driver with --open / --only.
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <string>
+
+#include "dmtool_run.hpp"
+
+namespace {
+
+using dmtool_test::describe;
+using dmtool_test::parseJson;
+using dmtool_test::runTool;
+using nlohmann::json;
+
+const json* findBy(const json& list, const char* key, const std::string& value) {
+  for (const json& e : list)
+    if (e.contains(key) && e[key] == value) return &e;
+  return nullptr;
+}
+
+TEST(DmtoolDevices, ListsTheBuiltInDrivers) {
+  const auto r = runTool({"devices", "--json"});
+  ASSERT_EQ(r.exitCode, 0) << describe(r);
+  const json j = parseJson(r);
+  const json* sim = findBy(j["drivers"], "name", "sim-haptic");
+  ASSERT_NE(sim, nullptr) << r.out;
+  EXPECT_EQ((*sim)["kind"], "haptic-device");
+  const json* plugin = findBy(j["plugins"], "name", "sim-haptic");
+  ASSERT_NE(plugin, nullptr);
+  EXPECT_EQ((*plugin)["status"], "built-in");
+}
+
+TEST(DmtoolDevices, OpensOneDriverAndFailsForAMissingOne) {
+  const auto r = runTool({"devices", "--only", "sim-haptic", "--open", "--json"});
+  ASSERT_EQ(r.exitCode, 0) << describe(r);
+  const json j = parseJson(r);
+  ASSERT_EQ(j["drivers"].size(), 1u);
+  EXPECT_EQ(j["drivers"][0]["open"]["status"], "ok");
+  EXPECT_EQ(j["drivers"][0]["open"]["max_force_N"], 8.0);
+  const auto missing = runTool({"devices", "--only", "phantom-omni"});
+  EXPECT_EQ(missing.exitCode, 1) << describe(missing);
+  EXPECT_NE(missing.err.find("phantom-omni"), std::string::npos);
+  // replay-haptic needs a file: --open reports why and --only fails.
+  const auto replay = runTool({"devices", "--only", "replay-haptic", "--open"});
+  EXPECT_EQ(replay.exitCode, 1) << describe(replay);
+  EXPECT_NE(replay.out.find("'file' is required"), std::string::npos) << replay.out;
+}
+
+TEST(DmtoolDevices, RefusesCrashingAndWrongAbiPluginsAndCarriesOn) {
+  const std::string dir = DM_TEST_DRIVER_DIR;
+  const auto r = runTool({"devices", "--json", "--plugin-dir", dir + "/crash_init_driver", "--plugin-dir",
+                          dir + "/wrong_abi_driver"});
+  ASSERT_EQ(r.exitCode, 0) << describe(r);
+  const json j = parseJson(r);
+  int refused = 0;
+  for (const json& p : j["plugins"]) {
+    if (p["status"] != "refused") continue;
+    ++refused;
+    const std::string error = p["error"];
+    const std::string path = p["path"];
+    if (path.find("crash_init") != std::string::npos) {
+      EXPECT_NE(error.find("SIGABRT"), std::string::npos) << error;
+    }
+    if (path.find("wrong_abi") != std::string::npos) {
+      EXPECT_NE(error.find("ABI"), std::string::npos) << error;
+    }
+  }
+  EXPECT_EQ(refused, 2) << r.out;
+  EXPECT_NE(findBy(j["drivers"], "name", "sim-haptic"), nullptr);  // the good drivers are still there
+  const auto bad = runTool({"devices", "--plugin-dir", "/nonexistent/plugins"});
+  EXPECT_EQ(bad.exitCode, 1) << describe(bad);
+  EXPECT_NE(bad.err.find("/nonexistent/plugins"), std::string::npos);
+}
+
+}  // namespace
