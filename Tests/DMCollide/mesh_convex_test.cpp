@@ -63,7 +63,7 @@ struct MeshCase {
   dm::Mesh mesh;
   std::shared_ptr<const dm::TriangleMesh> ours;
   std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> fcl;
-  double reach;  // bounding radius, m
+  double reach = 0.0;  // bounding radius, m
 };
 
 std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> fclMesh(const dm::Mesh& m) {
