@@ -120,4 +120,13 @@ void copyField(char (&field)[N], const char* s) noexcept {
   field[i] = '\0';
 }
 
+/// Identity of a simulated driver: vendor "DMPlatform", serial "sim-<seed>".
+inline void simIdentity(DmDeviceIdentity& id, const char* driver, const char* model,
+                        unsigned long long seed) noexcept {
+  copyField(id.driver, driver);
+  copyField(id.vendor, "DMPlatform");
+  copyField(id.model, model);
+  std::snprintf(id.serial, sizeof id.serial, "sim-%llu", seed);
+}
+
 }  // namespace dm::driver

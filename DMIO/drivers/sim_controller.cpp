@@ -83,10 +83,7 @@ void ctlClose(DmDevice* d) { delete self(d); }
 int ctlInfo(DmDevice* dev, DmControllerInfo* info) {
   SimController* d = self(dev);
   *info = DmControllerInfo{};
-  dm::driver::copyField(info->identity.driver, "sim-controller");
-  dm::driver::copyField(info->identity.vendor, "DMPlatform");
-  dm::driver::copyField(info->identity.model, "simulated 6-axis controller");
-  std::snprintf(info->identity.serial, sizeof info->identity.serial, "sim-%llu", d->seed);
+  dm::driver::simIdentity(info->identity, "sim-controller", "simulated 6-axis controller", d->seed);
   info->capabilities = DM_CONTROLLER_CAP_AXES | DM_CONTROLLER_CAP_BUTTONS | DM_CONTROLLER_CAP_RECONNECT;
   info->axis_count = d->axisCount;
   info->button_count = d->buttonCount;

@@ -104,10 +104,7 @@ void daqClose(DmDevice* d) { delete self(d); }
 int daqInfo(DmDevice* dev, DmDaqInfo* info) {
   SimDaq* d = self(dev);
   *info = DmDaqInfo{};
-  dm::driver::copyField(info->identity.driver, "sim-daq");
-  dm::driver::copyField(info->identity.vendor, "DMPlatform");
-  dm::driver::copyField(info->identity.model, "simulated signal generator");
-  std::snprintf(info->identity.serial, sizeof info->identity.serial, "sim-%llu", d->seed);
+  dm::driver::simIdentity(info->identity, "sim-daq", "simulated signal generator", d->seed);
   info->capabilities = DM_DAQ_CAP_ANALOG_IN | DM_DAQ_CAP_RECONNECT;
   info->channel_count = d->channelCount;
   info->sample_rate_hz = d->rate;

@@ -281,11 +281,9 @@ void simClose(DmDevice* d) { delete self(d); }
 int simInfo(DmDevice* dev, DmHapticInfo* info) {
   SimHaptic* d = self(dev);
   *info = DmHapticInfo{};
-  dm::driver::copyField(info->identity.driver, "sim-haptic");
-  dm::driver::copyField(info->identity.vendor, "DMPlatform");
-  dm::driver::copyField(info->identity.model,
-                        d->hand ? "simulated 3-DOF stylus in a virtual hand" : "simulated 3-DOF stylus");
-  std::snprintf(info->identity.serial, sizeof info->identity.serial, "sim-%llu", d->seed);
+  dm::driver::simIdentity(info->identity, "sim-haptic",
+                          d->hand ? "simulated 3-DOF stylus in a virtual hand" : "simulated 3-DOF stylus",
+                          d->seed);
   info->capabilities = DM_HAPTIC_CAP_POSITION | DM_HAPTIC_CAP_VELOCITY | DM_HAPTIC_CAP_FORCE;
   info->button_count = 0;
   for (int i = 0; i < 3; ++i) {

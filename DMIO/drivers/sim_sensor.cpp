@@ -134,10 +134,7 @@ int senInfo(DmDevice* dev, DmSensorInfo* info) {
   static const std::uint32_t kTypes[] = {DM_SENSOR_SCALAR, DM_SENSOR_VEC3, DM_SENSOR_QUATERNION,
                                          DM_SENSOR_POSE};
   *info = DmSensorInfo{};
-  dm::driver::copyField(info->identity.driver, "sim-sensor");
-  dm::driver::copyField(info->identity.vendor, "DMPlatform");
-  dm::driver::copyField(info->identity.model, kModels[d->type]);
-  std::snprintf(info->identity.serial, sizeof info->identity.serial, "sim-%llu", d->seed);
+  dm::driver::simIdentity(info->identity, "sim-sensor", kModels[d->type], d->seed);
   info->capabilities = DM_SENSOR_CAP_RECONNECT;
   info->reading_type = kTypes[d->type];
   info->rate_hz = d->rate;
