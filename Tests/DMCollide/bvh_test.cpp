@@ -94,13 +94,13 @@ void checkInvariants(const dm::MeshBvh& bvh, const dm::Mesh& mesh) {
     if (i == 1) continue;
     const dm::BvhObb& o = bvh.obb(i);
     ASSERT_TRUE((o.axes.transpose() * o.axes).isIdentity(1e-12)) << "node " << i;
-    std::vector<std::uint32_t> todo{i};
-    while (!todo.empty()) {
-      const dm::BvhNode& n = nodes[todo.back()];
-      todo.pop_back();
+    std::vector<std::uint32_t> pending{i};
+    while (!pending.empty()) {
+      const dm::BvhNode& n = nodes[pending.back()];
+      pending.pop_back();
       if (!n.isLeaf()) {
-        todo.push_back(n.first);
-        todo.push_back(n.first + 1);
+        pending.push_back(n.first);
+        pending.push_back(n.first + 1);
         continue;
       }
       for (std::uint32_t k = n.first; k < n.first + n.count; ++k)
