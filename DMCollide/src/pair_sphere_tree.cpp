@@ -40,58 +40,55 @@ Isometry3 at(const Vec3& c) {
 
 // ------------------------------------------------ tree (A) vs shape (B) ---
 
-bool treeShapeHit(const Shape& a, const Isometry3& pa, const Shape& b, const Isometry3& pb, PairCache*) {
-  const SphereHierarchy& t = treeOf(a);
-  const Aabb boxB = b.aabb(pb);
+enum class Walk { Skip, Descend, Stop };
+
+// Depth-first over the nodes of `t`: visit(centre (world), bound radius,
+// isLeaf) says whether to descend into a node, skip it or stop the walk.
+template <class Visit>
+void walk(const SphereHierarchy& t, const Isometry3& pa, Visit&& visit) {
   NodeId stack[kStackSize];
   int top = 0;
   stack[top++] = t.root();
   while (top > 0) {
     const NodeId n = stack[--top];
     const BoundingSphere bs = t.bound(n);
-    const Vec3 c = pa * bs.center;
-    // Cheap rejection before the exact sphere–shape query.
-    if (boxB.squaredExteriorDistance(c) > bs.radius * bs.radius) continue;
-    const Sphere s(bs.radius);
-    if (!intersect(s, at(c), b, pb)) continue;
     NodeId kids[8];
     const int k = t.children(n, kids);
-    if (k == 0) return true;  // a leaf: its bound is its sphere
-    for (int i = 0; i < k && top < kStackSize; ++i) stack[top++] = kids[i];
+    const Walk w = visit(Vec3(pa * bs.center), bs.radius, k == 0);  // a leaf's bound is its sphere
+    if (w == Walk::Stop) return;
+    if (w == Walk::Descend)
+      for (int i = 0; i < k && top < kStackSize; ++i) stack[top++] = kids[i];
   }
-  return false;
+}
+
+bool treeShapeHit(const Shape& a, const Isometry3& pa, const Shape& b, const Isometry3& pb, PairCache*) {
+  const Aabb boxB = b.aabb(pb);
+  bool hit = false;
+  walk(treeOf(a), pa, [&](const Vec3& c, double r, bool leaf) {
+    // Cheap rejection before the exact sphere–shape query.
+    if (boxB.squaredExteriorDistance(c) > r * r || !intersect(Sphere(r), at(c), b, pb)) return Walk::Skip;
+    hit = leaf;
+    return leaf ? Walk::Stop : Walk::Descend;
+  });
+  return hit;
 }
 
 void treeShapeContacts(const Shape& a, const Isometry3& pa, const Shape& b, const Isometry3& pb,
                        const CollisionRequest& req, CollisionResult& out, PairCache*) {
-  const SphereHierarchy& t = treeOf(a);
   const Aabb boxB = b.aabb(pb);
   // Every touching leaf contributes; the reduction to maxContacts is last.
   CollisionRequest all = req;
   all.maxContacts = std::numeric_limits<int>::max();
   const std::size_t first = out.contacts.size();
-  NodeId stack[kStackSize];
-  int top = 0;
-  stack[top++] = t.root();
-  while (top > 0) {
-    const NodeId n = stack[--top];
-    const BoundingSphere bs = t.bound(n);
-    const Vec3 c = pa * bs.center;
-    // Cheap rejection before the exact sphere–shape query.
-    if (boxB.squaredExteriorDistance(c) > bs.radius * bs.radius) continue;
-    const Sphere s(bs.radius);
-    NodeId kids[8];
-    const int k = t.children(n, kids);
-    if (k > 0) {
-      if (intersect(s, at(c), b, pb))
-        for (int i = 0; i < k && top < kStackSize; ++i) stack[top++] = kids[i];
-      continue;
-    }
+  walk(treeOf(a), pa, [&](const Vec3& c, double r, bool leaf) {
+    if (boxB.squaredExteriorDistance(c) > r * r) return Walk::Skip;
+    const Sphere s(r);
+    if (!leaf) return intersect(s, at(c), b, pb) ? Walk::Descend : Walk::Skip;
     bool swapped = false;
     const Collider* col = ColliderTable::global().find(s, b, swapped);
     if (!col) {
       out.supported = false;
-      return;
+      return Walk::Stop;
     }
     const std::size_t before = out.contacts.size();
     if (!swapped) {
@@ -101,36 +98,30 @@ void treeShapeContacts(const Shape& a, const Isometry3& pa, const Shape& b, cons
       for (std::size_t i = before; i < out.contacts.size(); ++i)
         out.contacts[i].normal = -out.contacts[i].normal;
     }
-    if (!req.contacts && out.colliding) return;
-  }
-  if (req.contacts) reduceContacts(out, first, req.maxContacts);
+    return !req.contacts && out.colliding ? Walk::Stop : Walk::Skip;
+  });
+  if (out.supported && req.contacts) reduceContacts(out, first, req.maxContacts);
 }
 
 DistanceResult treeShapeDist(const Shape& a, const Isometry3& pa, const Shape& b, const Isometry3& pb,
                              PairCache*) {
-  const SphereHierarchy& t = treeOf(a);
   DistanceResult best;
   best.distance = kInf;
-  NodeId stack[kStackSize];
-  int top = 0;
-  stack[top++] = t.root();
-  while (top > 0) {
-    const NodeId n = stack[--top];
-    const BoundingSphere bs = t.bound(n);
-    const Sphere s(bs.radius);
-    const DistanceResult d = distance(s, at(pa * bs.center), b, pb);
-    if (!d.supported) return d;
+  walk(treeOf(a), pa, [&](const Vec3& c, double r, bool leaf) {
+    const DistanceResult d = distance(Sphere(r), at(c), b, pb);
+    if (!d.supported) {
+      best = d;
+      return Walk::Stop;
+    }
     // The bound sphere holds every leaf sphere below, so d is a lower bound
     // of theirs (the signed distance only decreases on a superset).
-    if (d.distance >= best.distance) continue;
-    NodeId kids[8];
-    const int k = t.children(n, kids);
-    if (k == 0) {
+    if (d.distance >= best.distance) return Walk::Skip;
+    if (leaf) {
       best = d;
-      continue;
+      return Walk::Skip;
     }
-    for (int i = 0; i < k && top < kStackSize; ++i) stack[top++] = kids[i];
-  }
+    return Walk::Descend;
+  });
   return best;
 }
 
