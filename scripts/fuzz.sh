@@ -37,7 +37,12 @@ for t in "${targets[@]}"; do
   fi
   echo "fuzz: $t for ${seconds}s"
   log="$builddir/artifacts/$t.log"
+  # The parsers that fork an isolated child (Assimp, OpenVDB) give it its own
+  # memory budget, enforced by allocator hooks under the sanitizers; those run
+  # after libFuzzer's, so its per-malloc limit (by default the RSS limit)
+  # must not end the child first. The RSS limit still guards our process.
   if ! ASAN_OPTIONS=detect_leaks=1 "$builddir/Tests/fuzz/$t" -max_total_time="$seconds" -rss_limit_mb=4096 \
+      -malloc_limit_mb=65536 \
       -max_len=1048576 -artifact_prefix="$builddir/artifacts/$t-" -print_final_stats=1 "$corpus" >"$log" 2>&1; then
     tail -40 "$log"
     echo "fuzz: $t failed; the input is in $builddir/artifacts/" >&2

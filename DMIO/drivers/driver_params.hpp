@@ -8,6 +8,7 @@
 #include <array>
 #include <cerrno>
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -97,11 +98,15 @@ class ParamReader {
     }
   }
 
-  template <class... Args>
-  void failf(const char* format, Args... args) noexcept {
+  /// Records the first failure, printf-style (the format is checked).
+  __attribute__((format(printf, 2, 3))) void failf(const char* format, ...) noexcept {
     if (!ok_) return;  // keep the first message
     ok_ = false;
-    if (error_ && errorSize_) std::snprintf(error_, errorSize_, format, args...);
+    if (!error_ || !errorSize_) return;
+    std::va_list args;
+    va_start(args, format);
+    std::vsnprintf(error_, errorSize_, format, args);
+    va_end(args);
   }
 
  private:

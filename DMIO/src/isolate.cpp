@@ -11,12 +11,14 @@
 #endif
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <chrono>
 #include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
+#include <new>
 
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
 #define DM_ISOLATE_SANITIZED 1
@@ -24,6 +26,15 @@
 #if __has_feature(address_sanitizer) || __has_feature(thread_sanitizer)
 #define DM_ISOLATE_SANITIZED 1
 #endif
+#endif
+
+#if defined(DM_ISOLATE_SANITIZED)
+// The sanitizers' allocator interface (clang ships the header, GCC only the
+// runtime symbols): hooks called after every heap allocation and before
+// every free, and the size of a live allocation.
+extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*mallocHook)(const volatile void*, std::size_t),
+                                                         void (*freeHook)(const volatile void*));
+extern "C" std::size_t __sanitizer_get_allocated_size(const volatile void* p);
 #endif
 
 namespace dm::detail {
@@ -78,12 +89,40 @@ Error ByteReader::error() {
 
 namespace {
 
-// Caps the child's address space at what it has mapped now plus `budget`.
-void limitAddressSpace(std::size_t budget) {
+// The child's exit status when it exceeded its memory budget.
+constexpr int kBudgetExitStatus = 86;
+
+[[noreturn]] void exitOverBudget() { ::_exit(kBudgetExitStatus); }
+
 #if defined(DM_ISOLATE_SANITIZED)
-  (void)budget;
-#else
+// Heap bytes allocated in the child since the hooks went in, minus those
+// freed (frees of blocks from before the fork make it negative).
+std::atomic<long long> gHeapGrowth{0};
+long long gHeapBudget = 0;
+
+void budgetMallocHook(const volatile void*, std::size_t size) {
+  const auto n = static_cast<long long>(size);
+  if (gHeapGrowth.fetch_add(n, std::memory_order_relaxed) + n > gHeapBudget) exitOverBudget();
+}
+
+void budgetFreeHook(const volatile void* p) {
+  if (p != nullptr)
+    gHeapGrowth.fetch_sub(static_cast<long long>(__sanitizer_get_allocated_size(p)), std::memory_order_relaxed);
+}
+#endif
+
+// Caps what the child may allocate beyond what it holds now at `budget`:
+// RLIMIT_AS on the address space, or, under the sanitizers (whose shadow
+// memory needs the address space), allocator hooks counting heap bytes. A
+// failed operator new ends the child with kBudgetExitStatus either way, so
+// the parent can tell "out of budget" from a crash.
+void limitMemory(std::size_t budget) {
   if (budget == 0) return;
+  std::set_new_handler(exitOverBudget);
+#if defined(DM_ISOLATE_SANITIZED)
+  gHeapBudget = static_cast<long long>(std::min<std::size_t>(budget, std::size_t{1} << 60));
+  __sanitizer_install_malloc_and_free_hooks(budgetMallocHook, budgetFreeHook);
+#else
   std::size_t pages = 0;
   std::ifstream statm("/proc/self/statm");
   if (!(statm >> pages)) return;
@@ -92,6 +131,12 @@ void limitAddressSpace(std::size_t budget) {
   lim.rlim_cur = lim.rlim_max = static_cast<rlim_t>(mapped + budget);
   ::setrlimit(RLIMIT_AS, &lim);
 #endif
+}
+
+std::string mebibytes(std::size_t bytes) {
+  char text[32];
+  std::snprintf(text, sizeof text, "%.0f MiB", static_cast<double>(bytes) / (1024.0 * 1024.0));
+  return text;
 }
 
 }  // namespace
@@ -128,7 +173,7 @@ Result<IsolatedRun> runIsolated(const std::function<void(FdWriter&)>& child, con
     if (fds[1] > 3) ::close_range(3, static_cast<unsigned>(fds[1]) - 1, 0);
     ::close_range(static_cast<unsigned>(fds[1]) + 1, ~0u, 0);
 #endif
-    limitAddressSpace(options.addressSpaceBudget);
+    limitMemory(options.memoryBudget);
     FdWriter w(fds[1]);
     child(w);
     ::close(fds[1]);
@@ -184,6 +229,11 @@ Result<IsolatedRun> runIsolated(const std::function<void(FdWriter&)>& child, con
                 options.library + " crashed while reading the file (signal " +
                     std::to_string(WTERMSIG(status)) + ", " + strsignal(WTERMSIG(status)) + ")",
                 where, options.crashHint);
+  if (waited == pid && WIFEXITED(status) && WEXITSTATUS(status) == kBudgetExitStatus && options.memoryBudget > 0)
+    return fail(ErrorCode::Unsupported,
+                options.library + " needed more than its memory budget of " + mebibytes(options.memoryBudget) +
+                    " while reading the file",
+                where, options.budgetHint);
   if (readError)
     return fail(ErrorCode::Io, "reading the result of the " + options.library + " process failed", where,
                 options.disableHint);

@@ -4,8 +4,8 @@
 // OpenVDB allocates buffers as large as lengths read from the file, which no
 // check of ours can fully prevent in-process. runIsolated() forks, runs the
 // parser in the child (which streams its result back through a pipe with
-// FdWriter), enforces a deadline and an address-space budget, and turns a
-// crash, an out-of-memory death or a timeout into an Error. The parent never
+// FdWriter), enforces a deadline and a memory budget, and turns a crash,
+// an allocation beyond the budget or a timeout into an Error. The parent never
 // shares the child's heap.
 #pragma once
 
@@ -79,13 +79,15 @@ class ByteReader {
 struct IsolateOptions {
   std::string library;        ///< "Assimp", "OpenVDB": named in the messages
   double timeoutSeconds = 0;  ///< 0: no deadline
-  /// Bytes the child may map beyond what the parent had mapped at fork
-  /// (RLIMIT_AS); 0: no limit. Not applied under AddressSanitizer or
-  /// ThreadSanitizer, whose shadow memory needs the address space.
-  std::size_t addressSpaceBudget = 0;
+  /// Bytes the child may allocate beyond what it held at fork; 0: no limit.
+  /// Enforced with RLIMIT_AS, or under AddressSanitizer and ThreadSanitizer
+  /// (whose shadow memory needs the address space) with allocator hooks
+  /// counting heap bytes. Exceeding it fails with Unsupported.
+  std::size_t memoryBudget = 0;
   std::string disableHint;  ///< how to run in-process instead, for fork/pipe failures
   std::string crashHint;    ///< what a crash means for the user
   std::string timeoutHint;  ///< what a timeout means for the user
+  std::string budgetHint;   ///< what exceeding the memory budget means for the user
 };
 
 /// What the child sent, and how it ended ("exit status 0", ...).
@@ -97,7 +99,8 @@ struct IsolatedRun {
 /// Runs `child` in a forked process; it must write its whole result through
 /// the FdWriter and must not log (another thread may have held the logger's
 /// lock at fork). Fails with Timeout, Parse (the child died by a signal: a
-/// crash, or out of memory within the budget) or Io (no pipe, no fork).
+/// crash), Unsupported (the child exceeded the memory budget) or Io (no
+/// pipe, no fork).
 Result<IsolatedRun> runIsolated(const std::function<void(FdWriter&)>& child, const IsolateOptions& options,
                                 const std::string& where);
 

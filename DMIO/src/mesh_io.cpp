@@ -955,6 +955,21 @@ Result<std::vector<Builder>> loadIsolated(const Source& src, const MeshImportOpt
   iso.timeoutHint =
       "the file is malformed (Assimp 5 loops on some broken files) or very large: check it, or raise "
       "MeshImportOptions::timeoutSeconds";
+  // Assimp's scene, its post-processing copies and our builders take well
+  // under 1 KiB per triangle; text formats expand up to ~64× in parsing.
+  // Beyond that the file asks for memory its size cannot justify.
+  const std::size_t perTriangle = 1024, maxTriangles = std::min(options.maxTriangles, std::size_t{1} << 40);
+  std::size_t inputBytes = src.bytes.size();
+  if (src.file != nullptr) {
+    std::error_code ec;
+    const auto size = fs::file_size(*src.file, ec);
+    inputBytes = ec ? options.maxFileBytes : std::min<std::size_t>(size, options.maxFileBytes);
+  }
+  iso.memoryBudget = perTriangle * maxTriangles + 64 * std::min(inputBytes, std::size_t{1} << 40) +
+                     (std::size_t{512} << 20);
+  iso.budgetHint =
+      "the file is corrupt or crafted (it asks Assimp for more memory than its size and "
+      "MeshImportOptions::maxTriangles justify); check it, or raise maxTriangles";
   auto run =
       runIsolated([&](FdWriter& w) { sendResult(w, loadWithAssimp(src, options, merge)); }, iso, src.where);
   if (!run) return run.error();

@@ -348,12 +348,13 @@ detail::IsolateOptions isolateOptions(const VdbReadOptions& options, std::size_t
   iso.library = "OpenVDB";
   iso.timeoutSeconds = options.timeoutSeconds;
   // The dense copy, the sparse tree (compressed files expand) and slack.
-  iso.addressSpaceBudget =
+  iso.memoryBudget =
       2 * std::min(options.maxBytes, std::size_t{1} << 40) + 16 * fileBytes + (std::size_t{1} << 30);
   iso.disableHint = "set VdbReadOptions::isolate = false to read in-process (trusted files only)";
   iso.crashHint =
       "the file is corrupt or crafted (OpenVDB allocates the lengths stored in it); check where it came from";
   iso.timeoutHint = "the file is corrupt or very large: check it, or raise VdbReadOptions::timeoutSeconds";
+  iso.budgetHint = "the file is corrupt or crafted, or the grid is larger than VdbReadOptions::maxBytes allows";
   return iso;
 }
 

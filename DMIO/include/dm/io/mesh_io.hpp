@@ -87,6 +87,9 @@ struct MeshImportOptions {
   /// it crash or loop (Assimp 5 does both on some malformed files) fails
   /// with an Error instead of taking the caller down. Costs a fork and a
   /// copy of the mesh through a pipe; turn off only for trusted files.
+  /// The child may allocate about 1 KiB per allowed triangle plus 64× the
+  /// file size and 512 MiB; a file that makes Assimp ask for more fails
+  /// with Unsupported.
   bool isolate = true;
   /// Wall-clock limit for Assimp in the child, seconds (0: none). Only
   /// with `isolate`.

@@ -40,7 +40,7 @@ struct VdbReadOptions {
   std::string gridName;
   /// Largest dense voxel payload accepted, in bytes; checked before allocating.
   std::size_t maxBytes = Volume::kDefaultMaxBytes;
-  /// Parse in a forked child with an address-space budget of about
+  /// Parse in a forked child with a memory budget of about
   /// 2·maxBytes + 16·file size + 1 GiB and a deadline, so a crafted file that
   /// makes OpenVDB allocate or loop becomes an Error. Use it for untrusted
   /// files from a process that has not started worker threads yet (fork
