@@ -587,6 +587,127 @@ EpaOut runEpa(MinkowskiPair& m, Simplex s, const GjkOptions& opt) noexcept {
   return out;
 }
 
+// ------------------------------------------------------------------ MPR ---
+
+// Minkowski portal refinement (Snethen 2008; the structure of libccd's
+// mpr.c): from an interior point v0 of A − B, find a portal triangle
+// (v1, v2, v3) that the ray v0 → origin passes through, then push the portal
+// outwards along its normal until the origin is proven inside (overlap) or
+// outside (separated), and on overlap until the portal lies on the boundary
+// within tolerance. The depth is the origin's distance to the final portal.
+enum class MprStop { Separated, Overlap, Degenerate };
+
+struct MprOut {
+  Vec3 n;        // unit, A's frame, from A to B
+  double depth;  // ≥ 0, of the cores
+  Vec3 pa, pb;   // A's frame
+};
+
+MprStop runMpr(MinkowskiPair& m, const GjkOptions& opt, MprOut& out, Vec3& sep, int& iterations) noexcept {
+  const double scale = m.A.boundingSphere().radius + m.B.boundingSphere().radius + m.t.norm();
+  const double tol = opt.mprTolerance * scale;
+  Vertex v0;
+  v0.a = m.A.interiorPoint();
+  v0.b = m.r * m.B.interiorPoint() + m.t;
+  v0.w = v0.a - v0.b;
+  // The centres coincide: any direction is as good as another for the ray.
+  if (v0.w.squaredNorm() <= 1e-24 * scale * scale) v0.w = Vec3(1e-10 * scale, 0, 0);
+
+  // Portal discovery.
+  Vec3 dir = -v0.w;
+  Vertex v1 = m.support(dir);
+  if (v1.w.dot(dir) <= 0) {
+    sep = dir;
+    return MprStop::Separated;
+  }
+  dir = v0.w.cross(v1.w);
+  if (dir.squaredNorm() <= 1e-24 * v0.w.squaredNorm() * v1.w.squaredNorm()) {
+    // The origin is on segment v0 → v1: it lies inside, |v1| below the boundary.
+    const double d = v1.w.norm();
+    out.n = d > 0 ? Vec3(v1.w / d) : Vec3(-v0.w.normalized());
+    out.depth = d;
+    out.pa = v1.a, out.pb = v1.b;
+    return MprStop::Overlap;
+  }
+  Vertex v2 = m.support(dir);
+  if (v2.w.dot(dir) <= 0) {
+    sep = dir;
+    return MprStop::Separated;
+  }
+  dir = (v1.w - v0.w).cross(v2.w - v0.w);
+  if (dir.dot(v0.w) > 0) {
+    std::swap(v1, v2);
+    dir = -dir;
+  }
+  Vertex v3;
+  for (iterations = 0;; ++iterations) {
+    if (iterations == opt.maxMprIterations || dir.squaredNorm() == 0) return MprStop::Degenerate;
+    v3 = m.support(dir);
+    if (v3.w.dot(dir) <= 0) {
+      sep = dir;
+      return MprStop::Separated;
+    }
+    // The origin must lie inside the cone v0 + (v1, v2, v3); else v3
+    // replaces the vertex on the wrong side and the search goes on.
+    if (v1.w.cross(v3.w).dot(v0.w) < 0) {
+      v2 = v3;
+      dir = (v1.w - v0.w).cross(v3.w - v0.w);
+    } else if (v3.w.cross(v2.w).dot(v0.w) < 0) {
+      v1 = v3;
+      dir = (v3.w - v0.w).cross(v2.w - v0.w);
+    } else {
+      break;
+    }
+  }
+
+  // Refinement: the portal's outward normal points away from v0.
+  bool inside = false;
+  for (; iterations < opt.maxMprIterations; ++iterations) {
+    Vec3 n = (v2.w - v1.w).cross(v3.w - v1.w);
+    const double len = n.norm();
+    if (!(len > 0)) return MprStop::Degenerate;
+    n /= len;
+    const double d1 = n.dot(v1.w);
+    if (d1 >= 0) inside = true;  // the origin is behind the portal
+    const Vertex v4 = m.support(n);
+    const double d4 = n.dot(v4.w);
+    if (!inside && d4 < 0) {  // the boundary along n is below the origin
+      sep = n;
+      return MprStop::Separated;
+    }
+    const double gain = std::min({d4 - d1, d4 - n.dot(v2.w), d4 - n.dot(v3.w)});
+    if (gain <= tol) {
+      if (!inside) {  // the origin is on the boundary within tolerance: touching
+        sep = n;
+        return MprStop::Separated;
+      }
+      const TriangleClosest c = closestPointOnTriangle(Vec3::Zero(), v1.w, v2.w, v3.w);
+      const double d = std::sqrt(c.distanceSq);
+      out.n = d > 0 ? Vec3(c.point / d) : n;
+      out.depth = d;
+      const Vec3& l = c.barycentric;
+      out.pa = l[0] * v1.a + l[1] * v2.a + l[2] * v3.a;
+      out.pb = l[0] * v1.b + l[1] * v2.b + l[2] * v3.b;
+      return MprStop::Overlap;
+    }
+    // Replace the portal vertex so that the ray v0 → origin still passes
+    // through the new portal.
+    const Vec3 v4v0 = v4.w.cross(v0.w);
+    if (v1.w.dot(v4v0) > 0) {
+      if (v2.w.dot(v4v0) > 0)
+        v1 = v4;
+      else
+        v3 = v4;
+    } else {
+      if (v3.w.dot(v4v0) > 0)
+        v2 = v4;
+      else
+        v1 = v4;
+    }
+  }
+  return MprStop::Degenerate;
+}
+
 void storeCache(GjkCache* cache, const Isometry3& poseA, const Vec3& v, bool separated,
                 const MinkowskiPair& m, int iterations) {
   if (!cache) return;
@@ -645,7 +766,26 @@ GjkResult gjkDistance(const ConvexShape& a, const Isometry3& poseA, const Convex
   // separated, its separating direction warm-starts the exact GJK.
   GjkStop stop = GjkStop::Converged;
   Quick quick = Quick::Unsure;
-  if (options.penetration) {
+  GjkResult r;
+  const Mat3 ra3 = poseA.linear();
+  if (options.penetration && options.method == PenetrationMethod::Mpr) {
+    MprOut mo;
+    Vec3 sep;
+    const MprStop ms = runMpr(m, options, mo, sep, it);
+    if (ms == MprStop::Overlap) {
+      storeCache(cache, poseA, v, false, m, it);
+      r.distance = -mo.depth - ra - rb;
+      r.normal = ra3 * mo.n;
+      r.pointA = poseA * Vec3(mo.pa + ra * mo.n);
+      r.pointB = poseA * Vec3(mo.pb - rb * mo.n);
+      return r;
+    }
+    if (ms == MprStop::Separated) {
+      quick = Quick::Separated;  // known: the exact GJK measures the distance
+      dir0 = -sep;
+    }
+  }
+  if (options.penetration && quick == Quick::Unsure) {
     Vec3 sep;
     quick = quickIntersect<true>(m, -dir0, std::min(options.maxIterations, kQuickIterations), sep, s, it);
     if (quick == Quick::Separated) dir0 = -sep;
@@ -657,8 +797,6 @@ GjkResult gjkDistance(const ConvexShape& a, const Isometry3& poseA, const Convex
   }
   storeCache(cache, poseA, v, stop != GjkStop::Overlap && v.squaredNorm() > 0, m, it);
 
-  GjkResult r;
-  const Mat3 ra3 = poseA.linear();
   Vec3 pa, pb, n;
   double coreDistance = 0;
   if (stop == GjkStop::Overlap) {

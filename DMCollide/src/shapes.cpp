@@ -94,6 +94,14 @@ Vec3 ConvexShape::support(const Vec3& direction) const noexcept {
   return n > 0 ? Vec3(core + (margin_ / n) * direction) : core;
 }
 
+Vec3 ConvexShape::interiorPoint() const noexcept {
+  std::uint32_t hint = 0;
+  Vec3 sum = Vec3::Zero();
+  for (int i = 0; i < 3; ++i)
+    sum += supportCore(Vec3::Unit(i), hint) + supportCore(-Vec3::Unit(i), hint);
+  return sum / 6.0;
+}
+
 Aabb ConvexShape::aabb(const Isometry3& pose) const noexcept {
   Aabb out;
   std::uint32_t hint = 0;
@@ -258,6 +266,8 @@ Result<std::shared_ptr<const ConvexHull>> ConvexHull::create(std::span<const Vec
   double r2 = 0;
   for (const Vec3& p : pos) r2 = std::max(r2, (p - c).squaredNorm());
   hull->sphere_ = {c, std::sqrt(r2)};
+  for (const Vec3& p : pos) hull->centroid_ += p;
+  hull->centroid_ /= static_cast<double>(pos.size());
   if (auto mp = computeMassProperties(hull->mesh_); mp) hull->volume_ = mp->volume;
   return std::shared_ptr<const ConvexHull>(std::move(hull));
 }

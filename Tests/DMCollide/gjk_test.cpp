@@ -405,15 +405,89 @@ TEST(Gjk, WarmStartGivesTheColdAnswer) {
   }
 }
 
-// Flat shapes: two coplanar overlapping triangles give a finite answer.
+dm::GjkOptions mprOptions() {
+  dm::GjkOptions o;
+  o.method = dm::PenetrationMethod::Mpr;
+  return o;
+}
+
+// MPR on hull pairs: separated pairs get GJK's exact distance; overlapping
+// pairs a depth no smaller than the minimum translation distance (EPA's),
+// deepest points depth apart along the normal, and the same overlap verdict
+// as the boolean GJK.
+TEST(Gjk, MprDepthBoundsTheMinimumTranslation) {
+  std::mt19937_64 rng(33);
+  const dm::GjkOptions mpr = mprOptions();
+  for (int nv : {8, 32, 128}) {
+    auto hullA = dm::ConvexHull::create(spherePoints(rng, nv, 0.3));
+    auto hullB = dm::ConvexHull::create(spherePoints(rng, nv, 0.25));
+    ASSERT_TRUE(hullA.ok() && hullB.ok());
+    int overlapping = 0, separated = 0, tight = 0;
+    for (int k = 0; k < 400; ++k) {
+      const Isometry3 pa = randomPose(rng, 0.1), pb = randomPose(rng, k % 2 ? 0.3 : 0.8);
+      const dm::GjkResult epa = dm::gjkDistance(**hullA, pa, **hullB, pb);
+      const dm::GjkResult r = dm::gjkDistance(**hullA, pa, **hullB, pb, nullptr, mpr);
+      if (epa.distance > 1e-7) {
+        ++separated;
+        ASSERT_NEAR(r.distance, epa.distance, 1e-12) << nv << " pose " << k;
+        continue;
+      }
+      if (epa.distance > -1e-7) continue;  // touching within rounding
+      ++overlapping;
+      ASSERT_LT(r.distance, 0.0) << nv << " pose " << k;
+      ASSERT_GE(-r.distance, -epa.distance - 1e-9) << nv << " pose " << k;
+      ASSERT_NEAR(r.normal.norm(), 1.0, 1e-12);
+      ASSERT_NEAR((r.pointA - r.pointB).dot(r.normal), -r.distance, 1e-9) << nv << " pose " << k;
+      ASSERT_TRUE(dm::gjkIntersect(**hullA, pa, **hullB, pb)) << nv << " pose " << k;
+      tight += (-r.distance < 1.5 * -epa.distance);
+    }
+    EXPECT_GT(overlapping, 80) << nv;
+    EXPECT_GT(separated, 80) << nv;
+    // An upper bound, but not a loose one: most depths are within 50 %.
+    EXPECT_GT(tight, overlapping * 3 / 4) << nv;
+  }
+}
+
+// Where the ray between the centres leaves A − B through the face that
+// also gives the minimum (a shallow face contact), MPR is exact; spheres go
+// through the margin path either way.
+TEST(Gjk, MprFaceContactAndSpheresAreExact) {
+  const dm::Box a(Vec3(1.0, 1.0, 1.0)), b(Vec3(0.5, 0.5, 0.5));
+  Isometry3 pb = Isometry3::Identity();
+  pb.translation() = Vec3(0.2, 0.1, 1.3);  // overlap along z: 1.5 − 1.3 = 0.2
+  const dm::GjkResult r = dm::gjkDistance(a, Isometry3::Identity(), b, pb, nullptr, mprOptions());
+  EXPECT_NEAR(r.distance, -0.2, 1e-12);
+  EXPECT_NEAR(r.normal.z(), 1.0, 1e-12);
+  EXPECT_NEAR(r.pointA.z() - r.pointB.z(), 0.2, 1e-12);
+
+  const dm::Sphere sa(0.5), sb(0.3);
+  Isometry3 ps = Isometry3::Identity();
+  ps.translation() = Vec3(0.3, 0.4, 0.0);
+  const dm::GjkResult s = dm::gjkDistance(sa, Isometry3::Identity(), sb, ps, nullptr, mprOptions());
+  EXPECT_NEAR(s.distance, -0.3, 1e-15);
+  EXPECT_NEAR(s.normal.x(), 0.6, 1e-15);
+
+  // A box sunk into an ellipsoid along its axis: exact by symmetry.
+  const dm::Ellipsoid e(Vec3(0.4, 0.3, 0.2));
+  Isometry3 pe = Isometry3::Identity();
+  pe.translation() = Vec3(0.0, 0.0, 0.65);  // box top at z = 0.5 (b), ellipsoid bottom at 0.45
+  const dm::GjkResult be = dm::gjkDistance(b, Isometry3::Identity(), e, pe, nullptr, mprOptions());
+  EXPECT_NEAR(be.distance, -0.05, 1e-6);
+  EXPECT_NEAR(be.normal.z(), 1.0, 1e-6);
+}
+
+// Flat shapes: two coplanar overlapping triangles give a finite answer,
+// through EPA and through MPR (which falls back to EPA there).
 TEST(Gjk, DegenerateFlatPairIsFinite) {
   const dm::TriangleShape t(Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0));
   Isometry3 pb = Isometry3::Identity();
   pb.translation() = Vec3(0.2, 0.2, 0.0);
-  const dm::GjkResult r = dm::gjkDistance(t, Isometry3::Identity(), t, pb);
-  EXPECT_TRUE(std::isfinite(r.distance));
-  EXPECT_LE(r.distance, 0.0);
-  EXPECT_NEAR(r.normal.norm(), 1.0, 1e-12);
+  for (const dm::GjkOptions& o : {dm::GjkOptions{}, mprOptions()}) {
+    const dm::GjkResult r = dm::gjkDistance(t, Isometry3::Identity(), t, pb, nullptr, o);
+    EXPECT_TRUE(std::isfinite(r.distance));
+    EXPECT_LE(r.distance, 0.0);
+    EXPECT_NEAR(r.normal.norm(), 1.0, 1e-12);
+  }
   EXPECT_TRUE(dm::gjkIntersect(t, Isometry3::Identity(), t, pb));
 }
 

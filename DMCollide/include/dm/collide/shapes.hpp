@@ -122,6 +122,11 @@ class ConvexShape : public Shape {
   /// hulls, ignored otherwise): pass the same variable on consecutive calls.
   /// O(1) for primitives, O(√n) typical for hulls. Never allocates.
   virtual Vec3 supportCore(const Vec3& direction, std::uint32_t& hint) const noexcept = 0;
+  /// A point of the core (local frame, m), as central as cheaply known: the
+  /// start of MPR penetration queries. The default averages the six axis
+  /// supports (a point of the core by convexity); shapes override it with
+  /// their centre.
+  virtual Vec3 interiorPoint() const noexcept;
   /// Radius added around the core, m (sphere and capsule radius; 0 otherwise).
   double margin() const noexcept { return margin_; }
   /// Support point of the full shape (core + margin) along `direction`.
@@ -144,6 +149,7 @@ class Point final : public ConvexShape {
       : ConvexShape(ShapeType::Point, 0.0), position_(position) {}
   const Vec3& position() const noexcept { return position_; }
   Vec3 supportCore(const Vec3&, std::uint32_t&) const noexcept override { return position_; }
+  Vec3 interiorPoint() const noexcept override { return position_; }
   Aabb localAabb() const noexcept override { return Aabb(position_, position_); }
   double volume() const noexcept override { return 0.0; }
 
@@ -160,6 +166,7 @@ class Segment final : public ConvexShape {
   Vec3 supportCore(const Vec3& d, std::uint32_t&) const noexcept override {
     return d.dot(b_ - a_) > 0 ? b_ : a_;
   }
+  Vec3 interiorPoint() const noexcept override { return 0.5 * (a_ + b_); }
   Aabb localAabb() const noexcept override;
   double volume() const noexcept override { return 0.0; }
 
@@ -191,6 +198,7 @@ class TriangleShape final : public ConvexShape {
       : ConvexShape(ShapeType::TriangleShape, 0.0), v_{a, b, c} {}
   const Vec3& vertex(int i) const noexcept { return v_[i]; }
   Vec3 supportCore(const Vec3& d, std::uint32_t&) const noexcept override;
+  Vec3 interiorPoint() const noexcept override { return (v_[0] + v_[1] + v_[2]) / 3.0; }
   Aabb localAabb() const noexcept override;
   double volume() const noexcept override { return 0.0; }
 
@@ -204,6 +212,7 @@ class Sphere final : public ConvexShape {
   explicit Sphere(double radius) noexcept : ConvexShape(ShapeType::Sphere, radius) {}
   double radius() const noexcept { return margin(); }
   Vec3 supportCore(const Vec3&, std::uint32_t&) const noexcept override { return Vec3::Zero(); }
+  Vec3 interiorPoint() const noexcept override { return Vec3::Zero(); }
   Aabb localAabb() const noexcept override;
   Aabb aabb(const Isometry3& pose) const noexcept override;
   double volume() const noexcept override;
@@ -216,6 +225,7 @@ class Box final : public ConvexShape {
   explicit Box(const Vec3& halfExtents) noexcept : ConvexShape(ShapeType::Box, 0.0), half_(halfExtents) {}
   const Vec3& halfExtents() const noexcept { return half_; }
   Vec3 supportCore(const Vec3& d, std::uint32_t&) const noexcept override;
+  Vec3 interiorPoint() const noexcept override { return Vec3::Zero(); }
   Aabb localAabb() const noexcept override { return Aabb(-half_, half_); }
   Aabb aabb(const Isometry3& pose) const noexcept override;
   double volume() const noexcept override { return 8.0 * half_.prod(); }
@@ -236,6 +246,7 @@ class Capsule final : public ConvexShape {
   Vec3 supportCore(const Vec3& d, std::uint32_t&) const noexcept override {
     return {0, 0, d.z() >= 0 ? h_ : -h_};
   }
+  Vec3 interiorPoint() const noexcept override { return Vec3::Zero(); }
   Aabb localAabb() const noexcept override;
   Aabb aabb(const Isometry3& pose) const noexcept override;
   double volume() const noexcept override;
@@ -253,6 +264,7 @@ class Cylinder final : public ConvexShape {
   double radius() const noexcept { return r_; }
   double halfLength() const noexcept { return h_; }
   Vec3 supportCore(const Vec3& d, std::uint32_t&) const noexcept override;
+  Vec3 interiorPoint() const noexcept override { return Vec3::Zero(); }
   Aabb localAabb() const noexcept override;
   Aabb aabb(const Isometry3& pose) const noexcept override;
   double volume() const noexcept override;
@@ -268,6 +280,7 @@ class Ellipsoid final : public ConvexShape {
   explicit Ellipsoid(const Vec3& radii) noexcept : ConvexShape(ShapeType::Ellipsoid, 0.0), radii_(radii) {}
   const Vec3& radii() const noexcept { return radii_; }
   Vec3 supportCore(const Vec3& d, std::uint32_t&) const noexcept override;
+  Vec3 interiorPoint() const noexcept override { return Vec3::Zero(); }
   Aabb localAabb() const noexcept override { return Aabb(-radii_, radii_); }
   Aabb aabb(const Isometry3& pose) const noexcept override;
   double volume() const noexcept override;
@@ -299,6 +312,8 @@ class ConvexHull final : public ConvexShape {
     return {adjacency_.data() + adjacencyStart_[i], adjacency_.data() + adjacencyStart_[i + 1]};
   }
   Vec3 supportCore(const Vec3& d, std::uint32_t& hint) const noexcept override;
+  /// The mean of the hull's vertices.
+  Vec3 interiorPoint() const noexcept override { return centroid_; }
   Aabb localAabb() const noexcept override { return bounds_; }
   double volume() const noexcept override { return volume_; }
   BoundingSphere boundingSphere() const noexcept override { return sphere_; }
@@ -316,6 +331,7 @@ class ConvexHull final : public ConvexShape {
   std::vector<std::uint32_t> startVertex_;
   Aabb bounds_;
   BoundingSphere sphere_;
+  Vec3 centroid_ = Vec3::Zero();
   double volume_ = 0.0;
 };
 
