@@ -9,6 +9,9 @@ extern "C" const DmPluginInfo* dm_builtin_entry_sim_daq(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_sim_haptic(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_sim_sensor(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_replay_haptic(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_replay_controller(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_replay_daq(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_replay_sensor(void);
 
 namespace dm {
 
@@ -19,7 +22,10 @@ struct BuiltinDriver {
 };
 constexpr BuiltinDriver kDrivers[] = {
     {"evdev-controller", &dm_builtin_entry_evdev_controller},
+    {"replay-controller", &dm_builtin_entry_replay_controller},
+    {"replay-daq", &dm_builtin_entry_replay_daq},
     {"replay-haptic", &dm_builtin_entry_replay_haptic},
+    {"replay-sensor", &dm_builtin_entry_replay_sensor},
     {"serial-posix", &dm_builtin_entry_serial_posix},
     {"sim-controller", &dm_builtin_entry_sim_controller},
     {"sim-daq", &dm_builtin_entry_sim_daq},

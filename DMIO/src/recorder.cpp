@@ -6,6 +6,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <chrono>
 #include <cstring>
@@ -26,6 +27,20 @@ void encodeHapticState(const HapticState& s, unsigned char* out) noexcept {
                         s.angularVelocity.z()};
   record::encodeDoubles(out, v, 13);
   record::putU32(out + 8 * 13, s.buttons);
+}
+
+// A Parse error for record r: what is wrong, where (record index, byte).
+Error recordError(const RecordedRecord& r, const std::string& why) {
+  return fail(ErrorCode::Parse, why, record::recordPlace(r.index, r.offset),
+              "the recording is damaged or was not written by DeviceRecorder");
+}
+
+// The payload of r after checking its type and size (wantSize 0: any).
+Result<const unsigned char*> checkedPayload(const RecordedRecord& r, record::Type type,
+                                            std::uint32_t wantSize, const char* what) {
+  const std::string why = record::checkTypeAndSize(r.type, r.payload.size(), type, wantSize, what);
+  if (!why.empty()) return recordError(r, why);
+  return reinterpret_cast<const unsigned char*>(r.payload.data());
 }
 
 }  // namespace
@@ -82,6 +97,49 @@ bool DeviceRecorder::pushHapticState(const HapticState& state) noexcept {
   encodeHapticState(state, bytes);
   return push(static_cast<std::uint16_t>(RecordType::HapticState), state.timeNs,
               std::as_bytes(std::span<const unsigned char>(bytes)));
+}
+
+bool DeviceRecorder::pushControllerState(const ControllerState& state) noexcept {
+  std::uint64_t buttons[2] = {0, 0};
+  for (std::size_t i = 0; i < kControllerButtons; ++i)
+    if (state.buttons.test(i)) buttons[i / 64] |= std::uint64_t(1) << (i % 64);
+  unsigned char bytes[record::kControllerStateBytes];
+  record::encodeControllerState(bytes, state.axes.data(), buttons);
+  return push(record::kControllerState, state.timeNs, std::as_bytes(std::span<const unsigned char>(bytes)));
+}
+
+std::size_t DeviceRecorder::pushDaqFrames(std::span<const DaqFrame> frames, std::uint32_t channelCount,
+                                          std::uint64_t overrunFrames) noexcept {
+  if (channelCount < 1 || channelCount > kDaqMaxChannels) {
+    dropped_.fetch_add(1, std::memory_order_relaxed);
+    return 0;
+  }
+  const std::uint32_t frameBytes = record::daqFrameBytes(channelCount);
+  const std::size_t perRecord = (kMaxQueuedPayload - record::kDaqBlockHeaderBytes) / frameBytes;
+  unsigned char bytes[kMaxQueuedPayload];
+  std::size_t done = 0;
+  while (done < frames.size()) {
+    const std::size_t n = std::min(perRecord, frames.size() - done);
+    record::encodeDaqBlockHeader(bytes, channelCount, static_cast<std::uint32_t>(n),
+                                 done == 0 ? overrunFrames : 0);
+    for (std::size_t f = 0; f < n; ++f) {
+      const DaqFrame& fr = frames[done + f];
+      record::encodeDaqFrame(bytes + record::kDaqBlockHeaderBytes + f * frameBytes, fr.timeNs, fr.index,
+                             fr.values.data(), channelCount);
+    }
+    const std::size_t size = record::kDaqBlockHeaderBytes + n * frameBytes;
+    if (!push(record::kDaqBlock, frames[done].timeNs,
+              std::as_bytes(std::span<const unsigned char>(bytes, size))))
+      break;
+    done += n;
+  }
+  return done;
+}
+
+bool DeviceRecorder::pushSensorReading(const SensorReading& reading) noexcept {
+  unsigned char bytes[record::kSensorReadingBytes];
+  record::encodeSensorReading(bytes, static_cast<std::uint32_t>(reading.type), reading.values.data());
+  return push(record::kSensorReading, reading.timeNs, std::as_bytes(std::span<const unsigned char>(bytes)));
 }
 
 bool DeviceRecorder::writeAll(const unsigned char* data, std::size_t n) {
@@ -175,6 +233,8 @@ Result<Recording> parseRecording(std::span<const std::uint8_t> bytes, std::strin
     RecordedRecord r;
     r.type = v.type;
     r.timeNs = v.timeNs;
+    r.index = v.index;
+    r.offset = v.offset;
     r.payload.resize(v.size);
     if (v.size) std::memcpy(r.payload.data(), v.payload, v.size);
     rec.records.push_back(std::move(r));
@@ -197,23 +257,59 @@ Result<Recording> readRecording(const std::filesystem::path& file, std::size_t m
 }
 
 Result<HapticState> decodeHapticState(const RecordedRecord& r) {
-  if (r.type != static_cast<std::uint16_t>(RecordType::HapticState) ||
-      r.payload.size() != record::kHapticStateBytes)
-    return fail(ErrorCode::Parse,
-                "record of type " + std::to_string(r.type) + " and " + std::to_string(r.payload.size()) +
-                    " bytes is not a haptic state (type 1, " + std::to_string(record::kHapticStateBytes) +
-                    " bytes)",
-                "record at " + std::to_string(r.timeNs) + " ns");
-  const auto* p = reinterpret_cast<const unsigned char*>(r.payload.data());
+  auto p = checkedPayload(r, record::kHapticState, record::kHapticStateBytes, "haptic-state");
+  if (!p) return std::move(p).error();
   double v[13];
-  record::decodeDoubles(p, v, 13);
+  record::decodeDoubles(*p, v, 13);
   HapticState s;
   s.timeNs = r.timeNs;
   s.position = Vec3(v[0], v[1], v[2]);
   s.orientation = Quat(v[3], v[4], v[5], v[6]);
   s.linearVelocity = Vec3(v[7], v[8], v[9]);
   s.angularVelocity = Vec3(v[10], v[11], v[12]);
-  s.buttons = record::getU32(p + 8 * 13);
+  s.buttons = record::getU32(*p + 8 * 13);
+  return s;
+}
+
+Result<ControllerState> decodeControllerState(const RecordedRecord& r) {
+  auto p = checkedPayload(r, record::kControllerState, record::kControllerStateBytes, "controller-state");
+  if (!p) return std::move(p).error();
+  if (std::string why = record::checkControllerState(*p); !why.empty()) return recordError(r, why);
+  ControllerState s;
+  s.timeNs = r.timeNs;
+  std::uint64_t buttons[2];
+  record::decodeControllerState(*p, s.axes.data(), buttons);
+  for (std::size_t i = 0; i < kControllerButtons; ++i) s.buttons[i] = (buttons[i / 64] >> (i % 64)) & 1u;
+  return s;
+}
+
+Result<RecordedDaqBlock> decodeDaqBlock(const RecordedRecord& r) {
+  auto p = checkedPayload(r, record::kDaqBlock, 0, "DAQ-block");
+  if (!p) return std::move(p).error();
+  record::DaqBlockView view;
+  if (std::string why = record::parseDaqBlock(*p, r.payload.size(), view); !why.empty())
+    return recordError(r, why);
+  RecordedDaqBlock b;
+  b.channelCount = view.channels;
+  b.overrunFrames = view.overrun;
+  b.frames.resize(view.frames);
+  for (std::uint32_t f = 0; f < view.frames; ++f) {
+    b.frames[f].timeNs = view.time(f);
+    b.frames[f].index = view.index(f);
+    view.values(f, b.frames[f].values.data());
+  }
+  return b;
+}
+
+Result<SensorReading> decodeSensorReading(const RecordedRecord& r) {
+  auto p = checkedPayload(r, record::kSensorReading, record::kSensorReadingBytes, "sensor-reading");
+  if (!p) return std::move(p).error();
+  if (std::string why = record::checkSensorReading(*p); !why.empty()) return recordError(r, why);
+  SensorReading s;
+  s.timeNs = r.timeNs;
+  std::uint32_t type = 0;
+  record::decodeSensorReading(*p, type, s.values.data());
+  s.type = static_cast<SensorReadingType>(type);
   return s;
 }
 

@@ -12,7 +12,11 @@
 //    noise, quantization, latency, loss window (DMIO/drivers/sim_haptic.cpp);
 //  * "replay-haptic" (kind "haptic-device"): plays a recording made with
 //    dm::DeviceRecorder at the recorded or a scaled rate
-//    (DMIO/drivers/replay_haptic.cpp).
+//    (DMIO/drivers/replay_haptic.cpp);
+//  * "replay-controller" (kind "controller"), "replay-daq" (kind "daq"),
+//    "replay-sensor" (kind "sensor"): play the controller states, DAQ
+//    frames or sensor readings of a recording at the recorded or a scaled
+//    rate, end of stream reported as a loss (DMIO/drivers/replay_*.cpp);
 //  * "sim-controller" (kind "controller", dm/io/controller.hpp): scripted
 //    axes (sine, square, ramp, constant) and a binary button counter;
 //  * "evdev-controller" (kind "controller"): Linux input devices

@@ -13,8 +13,11 @@
 // the file with whole-record write(2) calls within about a millisecond. A
 // kill therefore loses only the records still queued and the one being
 // written. append() writes one record synchronously (not real-time).
-// The "replay-haptic" driver (dm/io/drivers.hpp) plays a recording back as a
-// haptic device at the recorded or a scaled rate.
+// Typed pushes and decoders cover every device stream: haptic states,
+// controller states, DAQ frames and sensor readings. The replay drivers
+// "replay-haptic", "replay-controller", "replay-daq" and "replay-sensor"
+// (dm/io/drivers.hpp) play a recording back as that device at the recorded
+// or a scaled rate.
 //
 // @code
 //   auto rec = dm::DeviceRecorder::create("stylus.dmrec", {.metadata = R"({"device":"stylus"})"});
@@ -25,7 +28,10 @@
 #pragma once
 
 #include <dm/core/result.hpp>
+#include <dm/io/controller.hpp>
+#include <dm/io/daq.hpp>
 #include <dm/io/haptic_device.hpp>
+#include <dm/io/sensor.hpp>
 
 #include <atomic>
 #include <cstddef>
@@ -41,7 +47,14 @@
 namespace dm {
 
 /// Record types written by DMPlatform; user types start at 1000.
-enum class RecordType : std::uint16_t { HapticState = 1, HapticOutput = 2, FirstUser = 1000 };
+enum class RecordType : std::uint16_t {
+  HapticState = 1,      ///< pushHapticState / decodeHapticState
+  HapticOutput = 2,     ///< force and torque sent (reserved)
+  ControllerState = 3,  ///< pushControllerState / decodeControllerState
+  DaqBlock = 4,         ///< pushDaqFrames / decodeDaqBlock
+  SensorReading = 5,    ///< pushSensorReading / decodeSensorReading
+  FirstUser = 1000
+};
 
 struct RecorderOptions {
   std::string metadata;    ///< stored in the header (e.g. JSON describing the device)
@@ -71,6 +84,22 @@ class DeviceRecorder {
   bool push(std::uint16_t type, std::int64_t timeNs, std::span<const std::byte> payload) noexcept;
   /// push() of a haptic state (RecordType::HapticState).
   bool pushHapticState(const HapticState& state) noexcept;
+  /// push() of a controller state (RecordType::ControllerState, 64 bytes:
+  /// six axes and 128 buttons; the record time is state.timeNs).
+  bool pushControllerState(const ControllerState& state) noexcept;
+  /// push() of DAQ frames of `channelCount` (1..16) channels as
+  /// RecordType::DaqBlock records, split into as many records as a queue
+  /// slot needs (5 frames of 4 channels per record, 1 of 16); each record's
+  /// time is its first frame's. `overrunFrames` (e.g. DaqReadResult::
+  /// overrunFrames) is stored with the first frame: with no frames it is not
+  /// recorded, so add it to the next call. Returns the frames queued (fewer
+  /// than frames.size() when the queue filled, 0 for a bad channel count).
+  /// Real-time safe. O(frames).
+  std::size_t pushDaqFrames(std::span<const DaqFrame> frames, std::uint32_t channelCount,
+                            std::uint64_t overrunFrames = 0) noexcept;
+  /// push() of a sensor reading (RecordType::SensorReading, 64 bytes: the
+  /// type and seven values; the record time is reading.timeNs).
+  bool pushSensorReading(const SensorReading& reading) noexcept;
   /// Writes one record now (payload ≤ 1 MiB), from any one non-real-time
   /// thread; returns after write(2). Fails with Io on a write error.
   Status append(std::uint16_t type, std::int64_t timeNs, std::span<const std::byte> payload);
@@ -112,6 +141,8 @@ struct RecordedRecord {
   std::uint16_t type = 0;
   std::int64_t timeNs = 0;
   std::vector<std::byte> payload;
+  std::size_t index = 0;   ///< position in the recording (0-based), for messages
+  std::size_t offset = 0;  ///< byte offset of the record in the file, for messages
 };
 
 /// A recording read back: every complete record, and where a damaged tail
@@ -132,8 +163,35 @@ Result<Recording> parseRecording(std::span<const std::uint8_t> bytes, std::strin
 Result<Recording> readRecording(const std::filesystem::path& file, std::size_t maxBytes = std::size_t(1)
                                                                                           << 30);
 
-/// The haptic state in a RecordType::HapticState record; Parse error when the
-/// record has another type or size.
+/// The haptic state in a RecordType::HapticState record; Parse error naming
+/// the record index and byte offset when the record has another type or size.
 Result<HapticState> decodeHapticState(const RecordedRecord& record);
+
+/// The controller state in a RecordType::ControllerState record. Parse
+/// error naming the record index and byte offset when the record has
+/// another type or size or an axis outside [-1, 1] (or NaN).
+/// @code
+///   auto rec = dm::readRecording("pedal.dmrec");
+///   for (const dm::RecordedRecord& r : rec->records)
+///     if (auto s = dm::decodeControllerState(r)) states.push_back(*s);  // other types fail
+/// @endcode
+Result<ControllerState> decodeControllerState(const RecordedRecord& record);
+
+/// The frames of one RecordType::DaqBlock record.
+struct RecordedDaqBlock {
+  std::uint32_t channelCount = 0;   ///< 1..16; values beyond it are 0
+  std::uint64_t overrunFrames = 0;  ///< frames lost just before frames[0]
+  std::vector<DaqFrame> frames;     ///< ≥ 1, indices increasing, times not decreasing
+};
+/// The DAQ frames in a RecordType::DaqBlock record. Parse error naming the
+/// record index and byte offset (and the payload byte) when the type, the
+/// channel or frame count, the size, the index or time order or a sample
+/// (NaN/Inf) is wrong. O(payload).
+Result<RecordedDaqBlock> decodeDaqBlock(const RecordedRecord& record);
+
+/// The sensor reading in a RecordType::SensorReading record. Parse error
+/// naming the record index and byte offset when the type or size, the
+/// reading type (not 0..3) or a value (NaN/Inf) is wrong.
+Result<SensorReading> decodeSensorReading(const RecordedRecord& record);
 
 }  // namespace dm
