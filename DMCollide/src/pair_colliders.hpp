@@ -67,5 +67,6 @@ void registerMeshColliders(ColliderTable& table);
 void registerMeshConvexColliders(ColliderTable& table);  // other convex shapes (pair_mesh_convex.cpp)
 void registerSphereTreeColliders(ColliderTable& table);  // sphere trees (pair_sphere_tree.cpp)
 void registerVoxelColliders(ColliderTable& table);  // point shells, voxel models (pair_voxel.cpp)
+void registerVoxelConvexColliders(ColliderTable& table);  // box, hull, ... – voxel (pair_voxel_convex.cpp)
 
 }  // namespace dm::detail

@@ -3,9 +3,9 @@
 // capsule) against voxel models, the voxel-model raycaster and
 // dm::voxmapPenalty(); see dm/collide/voxel_model.hpp.
 //
-// Other shapes against a voxel model (box, cylinder, ellipsoid, hull,
-// triangle, mesh, plane, voxel model) have no collider: sample them into a
-// PointShell (PointShell::fromMesh(dm::makeBox(...)), ...) and collide that.
+// Box, cylinder, ellipsoid, hull and triangle against a voxel model are in
+// pair_voxel_convex.cpp. Meshes, planes and voxel models have no collider:
+// sample them into a PointShell (PointShell::fromMesh(...)) and collide that.
 //
 // All functions here are real-time safe: no allocation (contacts append to
 // the caller's vector, whose capacity it keeps between calls), no lock, no

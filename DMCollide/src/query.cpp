@@ -281,6 +281,7 @@ ColliderTable::ColliderTable() {
   detail::registerMeshConvexColliders(*this);
   detail::registerSphereTreeColliders(*this);
   detail::registerVoxelColliders(*this);
+  detail::registerVoxelConvexColliders(*this);
   raycasters_[static_cast<int>(ShapeType::Sphere)] = &raySphere;
   raycasters_[static_cast<int>(ShapeType::Box)] = &rayBox;
   raycasters_[static_cast<int>(ShapeType::Plane)] = &rayPlane;

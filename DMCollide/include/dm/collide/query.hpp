@@ -11,8 +11,10 @@
 // with ColliderTable::registerCollider() (or, from a shared library, through
 // dm/collide/collider_plugin.hpp). Triangle meshes pair with every built-in
 // convex shape (closed meshes count as solids there); sphere trees, point
-// shells and voxel models register their own pairs. Pairs without a
-// collider (e.g. plane–mesh, box–voxel model) report `supported = false`.
+// shells and voxel models register their own pairs (voxel models pair with
+// point shells and every built-in convex shape: box, cylinder, ellipsoid,
+// hull and triangle by surface sampling at the voxel size). Pairs without a
+// collider (e.g. plane–mesh, plane–voxel model) report `supported = false`.
 //
 // @code
 //   dm::Sphere ball(0.01);

@@ -26,9 +26,12 @@
 // normal −∇d from the shell to the model, reduced to maxContacts; distance =
 // the smallest point distance), point, segment, sphere and capsule – voxel
 // model (deepest point of the core by a march plus golden-section search),
-// and the voxel-model raycaster. Other shapes (box, cylinder, ellipsoid,
-// hull, triangle, mesh, plane, voxel model) have no collider: sample them
-// into a PointShell. Distances farther than the band read as the band.
+// box, cylinder, ellipsoid, convex hull and triangle – voxel model (their
+// surface sampled adaptively at the voxel spacing, cells pruned by the
+// field's Lipschitz bound; distance within one voxel of the true one), and
+// the voxel-model raycaster. Meshes, planes and other voxel models have no
+// collider: sample them into a PointShell. Distances farther than the band
+// read as the band.
 //
 // @code
 //   auto bone = dm::VoxelModel::fromOccupancy(ctVolume, 300.0);  // HU ≥ 300 is bone
