@@ -15,38 +15,9 @@
 #include <thread>
 #include <vector>
 
-// ---------------------------------------------------------------------------
 // Allocation counting for one thread: the loop thread marks itself, and
 // every operator new on a marked thread is counted.
-
-namespace {
-thread_local bool tl_countAllocations = false;
-std::atomic<std::uint64_t> g_markedAllocations{0};
-
-void* countedAlloc(std::size_t n, std::size_t align) {
-  if (tl_countAllocations) g_markedAllocations.fetch_add(1, std::memory_order_relaxed);
-  if (n == 0) n = 1;
-  void* p = align <= alignof(std::max_align_t) ? std::malloc(n)
-                                               : std::aligned_alloc(align, (n + align - 1) / align * align);
-  if (p == nullptr) throw std::bad_alloc();
-  return p;
-}
-}  // namespace
-
-void* operator new(std::size_t n) { return countedAlloc(n, alignof(std::max_align_t)); }
-void* operator new[](std::size_t n) { return countedAlloc(n, alignof(std::max_align_t)); }
-void* operator new(std::size_t n, std::align_val_t a) { return countedAlloc(n, static_cast<std::size_t>(a)); }
-void* operator new[](std::size_t n, std::align_val_t a) {
-  return countedAlloc(n, static_cast<std::size_t>(a));
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+#include "../common/alloc_counter.hpp"
 
 namespace {
 
@@ -231,22 +202,22 @@ TEST(RealTimeLoopConcurrency, LoopThreadDoesNotAllocate) {
   // The loop thread marks itself on its first tick; every allocation it
   // makes from then on (tick, timing, sleeping, bookkeeping) is counted.
   dm::RealTimeLoop loop({.rate_hz = 2000, .name = "test-noalloc"}, [&](const dm::TickInfo&) {
-    tl_countAllocations = true;
+    dm::test::tCountAllocations = true;
     ticks.fetch_add(1, std::memory_order_relaxed);
   });
-  const std::uint64_t before = g_markedAllocations.load();
+  const std::uint64_t before = dm::test::countedAllocations();
   ASSERT_TRUE(loop.start());
   EXPECT_TRUE(waitFor([&] { return ticks.load() >= 200; }));
   (void)loop.stats();  // reading stats concurrently must not make the loop allocate either
   loop.stop();
-  EXPECT_EQ(g_markedAllocations.load(), before);
+  EXPECT_EQ(dm::test::countedAllocations(), before);
   // The counter works: allocating on a marked thread is seen.
   std::thread([] {
-    tl_countAllocations = true;
+    dm::test::tCountAllocations = true;
     auto* p = new int(3);
     delete p;
   }).join();
-  EXPECT_EQ(g_markedAllocations.load(), before + 1);
+  EXPECT_EQ(dm::test::countedAllocations(), before + 1);
 }
 
 TEST(RealTimeLoopConcurrency, PriorityAndPinningTakeEffectOrFallBackWithOneWarning) {

@@ -1,0 +1,58 @@
+// Allocation counting for real-time checks in tests: replaces the global
+// operator new/delete (every form, or GCC flags mismatched pairs) with
+// malloc/free wrappers that count the calls made on threads whose
+// dm::test::tCountAllocations flag is set.
+//
+// Include it in exactly ONE source file of a test executable: replacement
+// operators are not inline and must be defined once per program.
+//
+// @code
+//   dm::test::tCountAllocations = true;
+//   const auto before = dm::test::countedAllocations();
+//   loop.step();
+//   dm::test::tCountAllocations = false;
+//   EXPECT_EQ(dm::test::countedAllocations(), before);
+// @endcode
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <cstdlib>
+#include <new>
+
+namespace dm::test {
+
+/// Set on a thread to count its allocations.
+inline thread_local bool tCountAllocations = false;
+inline std::atomic<std::uint64_t> gCountedAllocations{0};
+
+/// Allocations counted so far (all counting threads together).
+inline std::uint64_t countedAllocations() noexcept { return gCountedAllocations.load(); }
+
+inline void* countedAlloc(std::size_t n, std::size_t align) {
+  if (tCountAllocations) gCountedAllocations.fetch_add(1, std::memory_order_relaxed);
+  if (n == 0) n = 1;
+  void* p = align <= alignof(std::max_align_t) ? std::malloc(n)
+                                               : std::aligned_alloc(align, (n + align - 1) / align * align);
+  if (p == nullptr) throw std::bad_alloc();
+  return p;
+}
+
+}  // namespace dm::test
+
+void* operator new(std::size_t n) { return dm::test::countedAlloc(n, alignof(std::max_align_t)); }
+void* operator new[](std::size_t n) { return dm::test::countedAlloc(n, alignof(std::max_align_t)); }
+void* operator new(std::size_t n, std::align_val_t a) {
+  return dm::test::countedAlloc(n, static_cast<std::size_t>(a));
+}
+void* operator new[](std::size_t n, std::align_val_t a) {
+  return dm::test::countedAlloc(n, static_cast<std::size_t>(a));
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete[](void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
