@@ -1,0 +1,641 @@
+// Viscoelastic mass–spring meshes: builders, the symplectic Euler step and
+// the linearly implicit (Baraff–Witkin) backward-Euler step. See
+// dm/physics/mass_spring.hpp for the model.
+#include <dm/core/assert.hpp>
+#include <dm/core/tasks.hpp>
+#include <dm/physics/mass_spring.hpp>
+
+#include <Eigen/LU>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <utility>
+
+namespace dm {
+
+namespace {
+
+// printf into a std::string, for error messages.
+template <class... Args>
+std::string format(const char* fmt, Args... args) {
+  char buf[512];
+  std::snprintf(buf, sizeof buf, fmt, args...);
+  return buf;
+}
+
+Error invalid(std::string what, std::string where, std::string hint = {}) {
+  return fail(ErrorCode::InvalidArgument, std::move(what), std::move(where), std::move(hint));
+}
+
+bool allFinite(const Vec3& v) { return v.allFinite(); }
+
+Vec3 load3(const VecX& a, std::size_t i) { return a.segment<3>(3 * Eigen::Index(i)); }
+Vec3 load3(const std::vector<double>& a, std::size_t i) { return Vec3(a[3 * i], a[3 * i + 1], a[3 * i + 2]); }
+void store3(std::vector<double>& a, std::size_t i, const Vec3& v) {
+  a[3 * i] = v.x(), a[3 * i + 1] = v.y(), a[3 * i + 2] = v.z();
+}
+
+// Chunk size of the parallel loops: large enough that a chunk costs tens of
+// microseconds, so task overhead stays small.
+constexpr std::size_t kGrain = 2048;
+
+}  // namespace
+
+const char* toString(SpringModel model) noexcept {
+  switch (model) {
+    case SpringModel::KelvinVoigt:
+      return "KelvinVoigt";
+    case SpringModel::Maxwell:
+      return "Maxwell";
+  }
+  return "?";
+}
+
+const char* toString(SpringLayout layout) noexcept {
+  switch (layout) {
+    case SpringLayout::Structural:
+      return "structural";
+    case SpringLayout::Shear:
+      return "shear";
+    case SpringLayout::Bend:
+      return "bend";
+    case SpringLayout::Custom:
+      return "custom";
+  }
+  return "?";
+}
+
+Status validateSpringMaterial(const SpringMaterial& m, const char* where) {
+  if (!std::isfinite(m.stiffness) || m.stiffness < 0)
+    return invalid(format("stiffness is %g N/m", m.stiffness), format("%s.stiffness", where),
+                   "give k in N/m, finite and >= 0");
+  if (!std::isfinite(m.damping) || m.damping < 0)
+    return invalid(format("damping is %g N*s/m", m.damping), format("%s.damping", where),
+                   "give c in N*s/m, finite and >= 0");
+  if (m.model == SpringModel::Maxwell && m.damping <= 0)
+    return invalid("a Maxwell element needs damping > 0 (its damper would carry no force)",
+                   format("%s.damping", where), "set c > 0, or use SpringModel::KelvinVoigt");
+  if (m.model != SpringModel::Maxwell && m.model != SpringModel::KelvinVoigt)
+    return invalid(format("unknown model %d", int(m.model)), format("%s.model", where));
+  return ok();
+}
+
+// ---------------------------------------------------------------------------
+// Building
+
+Result<std::uint32_t> MassSpringBody::addParticle(const Vec3& position, double mass, bool pinned) {
+  constexpr const char* where = "MassSpringBody::addParticle";
+  if (!allFinite(position)) return invalid("position is not finite", format("%s: position", where));
+  if (!std::isfinite(mass) || mass <= 0)
+    return invalid(format("mass is %g kg", mass), format("%s: mass", where), "give a finite mass > 0 kg");
+  if (particleCount() >= kMaxParticles)
+    return invalid(format("the body already has %zu particles", particleCount()), where,
+                   "split the body, or coarsen it");
+  const Eigen::Index n = Eigen::Index(particleCount());
+  x_.conservativeResize(3 * n + 3);
+  v_.conservativeResize(3 * n + 3);
+  fext_.conservativeResize(3 * n + 3);
+  x_.segment<3>(3 * n) = position;
+  v_.segment<3>(3 * n).setZero();
+  fext_.segment<3>(3 * n).setZero();
+  mass_.push_back(mass);
+  pinned_.push_back(pinned ? 1 : 0);
+  prepared_ = false;
+  return std::uint32_t(n);
+}
+
+Result<std::uint32_t> MassSpringBody::addElement(std::uint32_t i, std::uint32_t j,
+                                                 const SpringMaterial& material, double restLength,
+                                                 SpringLayout layout) {
+  constexpr const char* where = "MassSpringBody::addElement";
+  const std::size_t n = particleCount();
+  if (i >= n || j >= n)
+    return invalid(
+        format("particle index %u is out of range (the body has %zu particles)", i >= n ? i : j, n),
+        format("%s: %s", where, i >= n ? "i" : "j"));
+  if (i == j) return invalid(format("both ends are particle %u", i), format("%s: j", where));
+  if (Status s = validateSpringMaterial(material, "material"); !s) return std::move(s).error().within(where);
+  if (std::isnan(restLength) || std::isinf(restLength))
+    return invalid("rest length is not finite", format("%s: restLength", where),
+                   "give L0 in m, or a negative value for the current distance");
+  if (static_cast<std::size_t>(layout) >= kSpringLayoutCount)
+    return invalid(format("unknown layout %d", int(layout)), format("%s: layout", where));
+  if (restLength < 0) restLength = (position(j) - position(i)).norm();
+  ei_.push_back(i);
+  ej_.push_back(j);
+  rest_.push_back(restLength);
+  k_.push_back(material.stiffness);
+  c_.push_back(material.damping);
+  ed_.push_back(0.0);
+  maxwell_.push_back(material.model == SpringModel::Maxwell ? 1 : 0);
+  layout_.push_back(static_cast<std::uint8_t>(layout));
+  ++layoutCount_[static_cast<std::size_t>(layout)];
+  prepared_ = false;
+  decayH_ = -1.0;
+  return std::uint32_t(ei_.size() - 1);
+}
+
+Result<MassSpringBody> MassSpringBody::makeSheet(const SpringSheetOptions& o) {
+  constexpr const char* where = "SpringSheetOptions";
+  const auto field = [&](const char* name) { return format("%s.%s", where, name); };
+  if (o.nx < 2 || o.nx > 4096)
+    return invalid(format("nx is %d", o.nx), field("nx"), "give 2 to 4096 nodes along u");
+  if (o.ny < 2 || o.ny > 4096)
+    return invalid(format("ny is %d", o.ny), field("ny"), "give 2 to 4096 nodes along v");
+  if (std::size_t(o.nx) * std::size_t(o.ny) > kMaxParticles)
+    return invalid(
+        format("nx*ny = %zu nodes exceeds %zu", std::size_t(o.nx) * std::size_t(o.ny), kMaxParticles),
+        field("nx"), "coarsen the sheet");
+  if (!std::isfinite(o.width) || o.width <= 0)
+    return invalid(format("width is %g m", o.width), field("width"), "give a finite width > 0 m");
+  if (!std::isfinite(o.height) || o.height <= 0)
+    return invalid(format("height is %g m", o.height), field("height"), "give a finite height > 0 m");
+  if (!std::isfinite(o.mass) || o.mass <= 0)
+    return invalid(format("mass is %g kg", o.mass), field("mass"), "give the total mass, finite and > 0 kg");
+  if (!allFinite(o.origin)) return invalid("origin is not finite", field("origin"));
+  if (!allFinite(o.uAxis) || o.uAxis.norm() == 0)
+    return invalid("uAxis is zero or not finite", field("uAxis"), "give a direction, e.g. (1, 0, 0)");
+  if (!allFinite(o.vAxis) || o.vAxis.norm() == 0)
+    return invalid("vAxis is zero or not finite", field("vAxis"), "give a direction, e.g. (0, 1, 0)");
+  const Vec3 u = o.uAxis.normalized(), v = o.vAxis.normalized();
+  if (u.cross(v).norm() < 1e-9)
+    return invalid("uAxis and vAxis are parallel", field("vAxis"), "give two independent directions");
+  const SpringMaterial* materials[3] = {&o.structural, &o.shear, &o.bend};
+  const char* names[3] = {"structural", "shear", "bend"};
+  for (int l = 0; l < 3; ++l)
+    if (materials[l]->enabled)
+      if (Status s = validateSpringMaterial(*materials[l], field(names[l]).c_str()); !s)
+        return std::move(s).error();
+
+  const std::size_t nx = std::size_t(o.nx), ny = std::size_t(o.ny), n = nx * ny;
+  MassSpringBody body;
+  body.x_.resize(Eigen::Index(3 * n));
+  body.v_ = VecX::Zero(Eigen::Index(3 * n));
+  body.fext_ = VecX::Zero(Eigen::Index(3 * n));
+  body.mass_.assign(n, o.mass / double(n));
+  body.pinned_.assign(n, 0);
+  for (std::size_t b = 0; b < ny; ++b)
+    for (std::size_t a = 0; a < nx; ++a)
+      body.x_.segment<3>(Eigen::Index(3 * (a + nx * b))) =
+          o.origin + (double(a) / double(nx - 1) * o.width) * u + (double(b) / double(ny - 1) * o.height) * v;
+
+  const std::size_t structural = (nx - 1) * ny + nx * (ny - 1), shear = 2 * (nx - 1) * (ny - 1),
+                    bend = (nx - 2) * ny + nx * (ny - 2);
+  const std::size_t total =
+      (o.structural.enabled ? structural : 0) + (o.shear.enabled ? shear : 0) + (o.bend.enabled ? bend : 0);
+  for (auto* vec : {&body.rest_, &body.k_, &body.c_, &body.ed_}) vec->reserve(total);
+  for (auto* vec : {&body.ei_, &body.ej_}) vec->reserve(total);
+  body.maxwell_.reserve(total);
+  body.layout_.reserve(total);
+  const auto id = [nx](std::size_t a, std::size_t b) { return std::uint32_t(a + nx * b); };
+  // Indices and materials were checked above, so the elements are appended
+  // directly rather than through addElement().
+  const auto link = [&body](std::uint32_t i, std::uint32_t j, const SpringMaterial& m, SpringLayout layout) {
+    body.ei_.push_back(i);
+    body.ej_.push_back(j);
+    body.rest_.push_back((body.position(j) - body.position(i)).norm());
+    body.k_.push_back(m.stiffness);
+    body.c_.push_back(m.damping);
+    body.ed_.push_back(0.0);
+    body.maxwell_.push_back(m.model == SpringModel::Maxwell ? 1 : 0);
+    body.layout_.push_back(static_cast<std::uint8_t>(layout));
+    ++body.layoutCount_[static_cast<std::size_t>(layout)];
+  };
+  for (std::size_t b = 0; b < ny; ++b)
+    for (std::size_t a = 0; a < nx; ++a) {
+      if (o.structural.enabled) {
+        if (a + 1 < nx) link(id(a, b), id(a + 1, b), o.structural, SpringLayout::Structural);
+        if (b + 1 < ny) link(id(a, b), id(a, b + 1), o.structural, SpringLayout::Structural);
+      }
+      if (o.shear.enabled && a + 1 < nx && b + 1 < ny) {
+        link(id(a, b), id(a + 1, b + 1), o.shear, SpringLayout::Shear);
+        link(id(a + 1, b), id(a, b + 1), o.shear, SpringLayout::Shear);
+      }
+      if (o.bend.enabled) {
+        if (a + 2 < nx) link(id(a, b), id(a + 2, b), o.bend, SpringLayout::Bend);
+        if (b + 2 < ny) link(id(a, b), id(a, b + 2), o.bend, SpringLayout::Bend);
+      }
+    }
+  DM_ASSERT(body.elementCount() == total, "sheet element count");
+  body.prepare();
+  return body;
+}
+
+Result<MassSpringBody> MassSpringBody::fromMesh(const Mesh& mesh, const MassSpringMeshOptions& o) {
+  constexpr const char* where = "MassSpringBody::fromMesh";
+  if (Status s = mesh.validate(); !s) return std::move(s).error().within(where);
+  if (!std::isfinite(o.mass) || o.mass <= 0)
+    return invalid(format("mass is %g kg", o.mass), "MassSpringMeshOptions.mass",
+                   "give the total mass, finite and > 0 kg");
+  if (o.structural.enabled)
+    if (Status s = validateSpringMaterial(o.structural, "MassSpringMeshOptions.structural"); !s)
+      return std::move(s).error();
+  if (o.bend.enabled)
+    if (Status s = validateSpringMaterial(o.bend, "MassSpringMeshOptions.bend"); !s)
+      return std::move(s).error();
+  const std::size_t n = mesh.vertexCount();
+  if (n > kMaxParticles)
+    return invalid(format("the mesh has %zu vertices, more than %zu", n, kMaxParticles), where,
+                   "simplify the mesh (dm/math/simplify.hpp)");
+
+  // Lumped masses: a third of each triangle's area to each of its corners.
+  std::vector<double> area(n, 0.0);
+  std::vector<std::uint8_t> used(n, 0);
+  struct HalfEdge {
+    std::uint32_t a, b, opposite;  // a < b
+  };
+  std::vector<HalfEdge> edges;
+  edges.reserve(3 * mesh.triangleCount());
+  for (std::size_t t = 0; t < mesh.triangleCount(); ++t) {
+    const Triangle& tri = mesh.triangles[t];
+    if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2]) continue;
+    const double third = mesh.faceArea(t) / 3.0;
+    for (int c = 0; c < 3; ++c) {
+      area[tri[c]] += third;
+      used[tri[c]] = 1;
+      const std::uint32_t a = tri[c], b = tri[(c + 1) % 3];
+      edges.push_back({std::min(a, b), std::max(a, b), tri[(c + 2) % 3]});
+    }
+  }
+  if (edges.empty())
+    return invalid("the mesh has no non-degenerate triangle", where,
+                   "pass a triangle mesh with distinct corners");
+  double totalArea = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!used[i])
+      return invalid(format("vertex %zu is used by no non-degenerate triangle", i),
+                     format("%s: vertex %zu", where, i),
+                     "remove unreferenced vertices, or weld the mesh (dm::weldVertices)");
+    if (!(area[i] > 0))
+      return invalid(format("vertex %zu has zero area around it (all its triangles are flat)", i),
+                     format("%s: vertex %zu", where, i), "remove degenerate triangles");
+    totalArea += area[i];
+  }
+
+  MassSpringBody body;
+  body.x_.resize(Eigen::Index(3 * n));
+  for (std::size_t i = 0; i < n; ++i) body.x_.segment<3>(Eigen::Index(3 * i)) = mesh.positions[i];
+  body.v_ = VecX::Zero(Eigen::Index(3 * n));
+  body.fext_ = VecX::Zero(Eigen::Index(3 * n));
+  body.mass_.resize(n);
+  for (std::size_t i = 0; i < n; ++i) body.mass_[i] = o.mass * area[i] / totalArea;
+  body.pinned_.assign(n, 0);
+
+  std::sort(edges.begin(), edges.end(), [](const HalfEdge& l, const HalfEdge& r) {
+    return l.a != r.a ? l.a < r.a : (l.b != r.b ? l.b < r.b : l.opposite < r.opposite);
+  });
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> unique, bends;
+  for (std::size_t s = 0; s < edges.size();) {
+    std::size_t e = s;
+    while (e < edges.size() && edges[e].a == edges[s].a && edges[e].b == edges[s].b) ++e;
+    unique.emplace_back(edges[s].a, edges[s].b);
+    if (e - s == 2 && edges[s].opposite != edges[s + 1].opposite)
+      bends.emplace_back(std::min(edges[s].opposite, edges[s + 1].opposite),
+                         std::max(edges[s].opposite, edges[s + 1].opposite));
+    s = e;
+  }
+  std::sort(bends.begin(), bends.end());
+  bends.erase(std::unique(bends.begin(), bends.end()), bends.end());
+  std::erase_if(bends, [&](const auto& p) { return std::binary_search(unique.begin(), unique.end(), p); });
+
+  const auto add = [&body](const std::vector<std::pair<std::uint32_t, std::uint32_t>>& pairs,
+                           const SpringMaterial& m, SpringLayout layout) -> Status {
+    for (const auto& [i, j] : pairs)
+      if (auto e = body.addElement(i, j, m, -1.0, layout); !e) return std::move(e).error();
+    return ok();
+  };
+  if (o.structural.enabled)
+    if (Status s = add(unique, o.structural, SpringLayout::Structural); !s) return std::move(s).error();
+  if (o.bend.enabled)
+    if (Status s = add(bends, o.bend, SpringLayout::Bend); !s) return std::move(s).error();
+  body.prepare();
+  return body;
+}
+
+// ---------------------------------------------------------------------------
+// State access
+
+double MassSpringBody::totalMass() const noexcept {
+  double m = 0;
+  for (double mi : mass_) m += mi;
+  return m;
+}
+
+void MassSpringBody::setPosition(std::size_t i, const Vec3& x) {
+  DM_ASSERT(i < particleCount(), "particle index out of range");
+  x_.segment<3>(3 * Eigen::Index(i)) = x;
+}
+
+void MassSpringBody::setVelocity(std::size_t i, const Vec3& v) {
+  DM_ASSERT(i < particleCount(), "particle index out of range");
+  if (!pinned_[i]) v_.segment<3>(3 * Eigen::Index(i)) = v;
+}
+
+void MassSpringBody::setPinned(std::size_t i, bool pinned) {
+  DM_ASSERT(i < particleCount(), "particle index out of range");
+  pinned_[i] = pinned ? 1 : 0;
+  if (pinned) v_.segment<3>(3 * Eigen::Index(i)).setZero();
+}
+
+void MassSpringBody::setExternalForce(std::size_t i, const Vec3& f) {
+  DM_ASSERT(i < particleCount(), "particle index out of range");
+  fext_.segment<3>(3 * Eigen::Index(i)) = f;
+}
+
+void MassSpringBody::clearExternalForces() { fext_.setZero(); }
+
+Status MassSpringBody::setDrag(double rate) {
+  if (!std::isfinite(rate) || rate < 0)
+    return invalid(format("drag rate is %g 1/s", rate), "MassSpringBody::setDrag: rate",
+                   "give a finite rate >= 0 1/s (0: no drag)");
+  drag_ = rate;
+  return ok();
+}
+
+SpringElement MassSpringBody::element(std::size_t e) const {
+  DM_ASSERT(e < elementCount(), "element index out of range");
+  return SpringElement{ei_[e],
+                       ej_[e],
+                       rest_[e],
+                       k_[e],
+                       c_[e],
+                       ed_[e],
+                       maxwell_[e] ? SpringModel::Maxwell : SpringModel::KelvinVoigt,
+                       static_cast<SpringLayout>(layout_[e])};
+}
+
+double MassSpringBody::elementTension(std::size_t e) const {
+  DM_ASSERT(e < elementCount(), "element index out of range");
+  const Vec3 d = position(ej_[e]) - position(ei_[e]);
+  const double len = d.norm();
+  const double ext = len - rest_[e];
+  if (maxwell_[e]) return k_[e] * (ext - ed_[e]);
+  const double rate = len > 0 ? d.dot(velocity(ej_[e]) - velocity(ei_[e])) / len : 0.0;
+  return k_[e] * ext + c_[e] * rate;
+}
+
+Vec3 MassSpringBody::elementForceOn(std::size_t i) const {
+  Vec3 f = Vec3::Zero();
+  for (std::size_t e = 0; e < elementCount(); ++e) {
+    if (ei_[e] != i && ej_[e] != i) continue;
+    const Vec3 d = position(ej_[e]) - position(ei_[e]);
+    const double len = d.norm();
+    if (len == 0) continue;
+    const Vec3 pull = elementTension(e) / len * d;  // on i, towards j
+    f += ei_[e] == i ? pull : Vec3(-pull);
+  }
+  return f;
+}
+
+double MassSpringBody::kineticEnergy() const {
+  double t = 0;
+  for (std::size_t i = 0; i < particleCount(); ++i) t += 0.5 * mass_[i] * velocity(i).squaredNorm();
+  return t;
+}
+
+double MassSpringBody::elasticEnergy() const {
+  double u = 0;
+  for (std::size_t e = 0; e < elementCount(); ++e) {
+    const double s = (position(ej_[e]) - position(ei_[e])).norm() - rest_[e] - ed_[e];
+    u += 0.5 * k_[e] * s * s;
+  }
+  return u;
+}
+
+double MassSpringBody::gravitationalEnergy() const {
+  double u = 0;
+  for (std::size_t i = 0; i < particleCount(); ++i) u -= mass_[i] * gravity_.dot(position(i));
+  return u;
+}
+
+// ---------------------------------------------------------------------------
+// Stepping
+
+void MassSpringBody::prepare() {
+  const std::size_t n = particleCount(), m = elementCount();
+  // Incidence lists (CSR): the elements touching each particle, in element
+  // order, so that the node loops gather forces in a fixed order.
+  incStart_.assign(n + 1, 0);
+  for (std::size_t e = 0; e < m; ++e) ++incStart_[ei_[e] + 1], ++incStart_[ej_[e] + 1];
+  for (std::size_t i = 0; i < n; ++i) incStart_[i + 1] += incStart_[i];
+  incElem_.resize(2 * m);
+  std::vector<std::uint32_t> fill(incStart_.begin(), incStart_.end() - 1);
+  for (std::size_t e = 0; e < m; ++e) {
+    incElem_[fill[ei_[e]]++] = std::uint32_t(e);
+    incElem_[fill[ej_[e]]++] = std::uint32_t(e);
+  }
+  dir_.assign(3 * m, 0.0);
+  ef_.assign(3 * m, 0.0);
+  axial_.assign(m, 0.0);
+  iso_.assign(m, 0.0);
+  decay_.assign(m, 1.0);
+  decayH_ = -1.0;
+  dinv_.assign(9 * n, 0.0);
+  rhs_ = VecX::Zero(Eigen::Index(3 * n));
+  dv_ = VecX::Zero(Eigen::Index(3 * n));
+  pcg_.reserve(Eigen::Index(3 * n));
+  prepared_ = true;
+}
+
+template <class F>
+void MassSpringBody::forEachRange(std::size_t count, F&& fn) const {
+  if (count == 0) return;
+  if (options_.parallel && particleCount() >= options_.parallelMinParticles && count > kGrain)
+    parallelFor(0, count, kGrain, fn);
+  else
+    fn(std::size_t(0), count);
+}
+
+void MassSpringBody::updateMaxwellDecay(double h) {
+  if (h == decayH_) return;
+  for (std::size_t e = 0; e < elementCount(); ++e)
+    decay_[e] = maxwell_[e] ? std::exp(-h * k_[e] / c_[e]) : 1.0;
+  decayH_ = h;
+}
+
+Status MassSpringBody::stepSymplectic(double h) {
+  if (!std::isfinite(h) || h <= 0)
+    return invalid(format("time step is %g s", h), "MassSpringBody::stepSymplectic: h",
+                   "give a finite h > 0 s");
+  if (!prepared_) prepare();
+  updateMaxwellDecay(h);
+
+  // Element forces at the start of the step; Maxwell dampers relax over it.
+  forEachRange(elementCount(), [this](std::size_t b, std::size_t end) {
+    for (std::size_t e = b; e < end; ++e) {
+      const Vec3 d = load3(x_, ej_[e]) - load3(x_, ei_[e]);
+      const double len = d.norm();
+      const Vec3 n = len > 0 ? Vec3(d / len) : Vec3::Zero();
+      const double ext = len - rest_[e];
+      double tension;
+      if (maxwell_[e]) {
+        const double spring = ext - ed_[e];
+        tension = k_[e] * spring;
+        // Exact solution of ė_d = k (e − e_d)/c with e held over the step.
+        ed_[e] = ext - spring * decay_[e];
+      } else {
+        tension = k_[e] * ext + c_[e] * n.dot(load3(v_, ej_[e]) - load3(v_, ei_[e]));
+      }
+      store3(ef_, e, tension * n);
+    }
+  });
+
+  const Vec3 g = gravity_;
+  forEachRange(particleCount(), [this, h, &g](std::size_t b, std::size_t end) {
+    for (std::size_t i = b; i < end; ++i) {
+      if (pinned_[i]) continue;
+      Vec3 f = mass_[i] * (g - drag_ * load3(v_, i)) + load3(fext_, i);
+      for (std::uint32_t s = incStart_[i]; s < incStart_[i + 1]; ++s) {
+        const std::uint32_t e = incElem_[s];
+        const Vec3 fe = load3(ef_, e);
+        f += ei_[e] == i ? fe : Vec3(-fe);
+      }
+      const Eigen::Index k = 3 * Eigen::Index(i);
+      v_.segment<3>(k) += (h / mass_[i]) * f;
+      x_.segment<3>(k) += h * v_.segment<3>(k);
+    }
+  });
+  return ok();
+}
+
+void MassSpringBody::applyImplicitMatrix(const VecX& p, VecX& y) const {
+  // y = (M + h C + h² K) p on the free particles, 0 on pinned ones; pinned
+  // entries of p are taken as 0 (their velocity change is fixed at zero).
+  forEachRange(particleCount(), [this, &p, &y](std::size_t b, std::size_t end) {
+    for (std::size_t i = b; i < end; ++i) {
+      const Eigen::Index k = 3 * Eigen::Index(i);
+      if (pinned_[i]) {
+        y.segment<3>(k).setZero();
+        continue;
+      }
+      const Vec3 pi = p.segment<3>(k);
+      Vec3 acc = (massScale_ * mass_[i]) * pi;
+      for (std::uint32_t s = incStart_[i]; s < incStart_[i + 1]; ++s) {
+        const std::uint32_t e = incElem_[s];
+        const std::uint32_t other = ei_[e] == i ? ej_[e] : ei_[e];
+        const Vec3 w = pinned_[other] ? pi : Vec3(pi - load3(p, other));
+        const Vec3 n = load3(dir_, e);
+        acc += (axial_[e] * n.dot(w)) * n + iso_[e] * w;
+      }
+      y.segment<3>(k) = acc;
+    }
+  });
+}
+
+void MassSpringBody::applyBlockJacobi(const VecX& r, VecX& z) const {
+  forEachRange(particleCount(), [this, &r, &z](std::size_t b, std::size_t end) {
+    for (std::size_t i = b; i < end; ++i) {
+      const Eigen::Map<const Mat3> dinv(&dinv_[9 * i]);
+      z.segment<3>(3 * Eigen::Index(i)) = dinv * r.segment<3>(3 * Eigen::Index(i));
+    }
+  });
+}
+
+Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
+  if (!std::isfinite(h) || h <= 0)
+    return invalid(format("time step is %g s", h), "MassSpringBody::stepImplicit: h",
+                   "give a finite h > 0 s");
+  if (!prepared_) prepare();
+  const double h2 = h * h;
+  massScale_ = 1.0 + h * drag_;  // M + h·drag·M: the drag's velocity Jacobian
+
+  // Per element: direction n, the block B = axial·n nᵀ + iso·I of h C + h² K,
+  // and the right-hand-side term h f₀ − h² K (v_i − v_j) acting on i.
+  forEachRange(elementCount(), [this, h, h2](std::size_t b, std::size_t end) {
+    for (std::size_t e = b; e < end; ++e) {
+      const Vec3 d = load3(x_, ej_[e]) - load3(x_, ei_[e]);
+      const double len = d.norm();
+      const Vec3 n = len > 0 ? Vec3(d / len) : Vec3::Zero();
+      const double ext = len - rest_[e];
+      const Vec3 w = load3(v_, ej_[e]) - load3(v_, ei_[e]);
+      const double rate = n.dot(w);
+      double springTension, tension, kAxial, cAxial;
+      if (maxwell_[e]) {
+        // Backward Euler on the damper: over the step the element is a spring
+        // of stiffness k/(1 + h k/c) acting on e − e_d.
+        kAxial = k_[e] / (1.0 + h * k_[e] / c_[e]);
+        springTension = tension = kAxial * (ext - ed_[e]);
+        cAxial = 0.0;
+      } else {
+        kAxial = k_[e];
+        springTension = k_[e] * ext;
+        tension = springTension + c_[e] * rate;
+        cAxial = c_[e];
+      }
+      // Transverse (geometric) stiffness T/L, kept only while stretched.
+      const double geo = len > 0 && springTension > 0 ? springTension / len : 0.0;
+      axial_[e] = h * cAxial + h2 * (kAxial - geo);
+      iso_[e] = h2 * geo;
+      store3(dir_, e, n);
+      store3(ef_, e, (h * tension + h2 * (kAxial - geo) * rate) * n + (h2 * geo) * w);
+    }
+  });
+
+  const Vec3 g = gravity_;
+  forEachRange(particleCount(), [this, h, &g](std::size_t b, std::size_t end) {
+    for (std::size_t i = b; i < end; ++i) {
+      const Eigen::Index k = 3 * Eigen::Index(i);
+      Eigen::Map<Mat3> dinv(&dinv_[9 * i]);
+      if (pinned_[i]) {
+        rhs_.segment<3>(k).setZero();
+        dv_.segment<3>(k).setZero();
+        dinv.setZero();
+        continue;
+      }
+      Vec3 bi = h * (mass_[i] * (g - drag_ * load3(v_, i)) + load3(fext_, i));
+      Mat3 diag = (massScale_ * mass_[i]) * Mat3::Identity();
+      for (std::uint32_t s = incStart_[i]; s < incStart_[i + 1]; ++s) {
+        const std::uint32_t e = incElem_[s];
+        const Vec3 re = load3(ef_, e);
+        bi += ei_[e] == i ? re : Vec3(-re);
+        const Vec3 n = load3(dir_, e);
+        diag += axial_[e] * (n * n.transpose()) + iso_[e] * Mat3::Identity();
+      }
+      rhs_.segment<3>(k) = bi;
+      dinv = diag.inverse();
+    }
+  });
+
+  pcg_.setOptions({.tolerance = options_.cgTolerance,
+                   .maxIterations = options_.cgMaxIterations,
+                   .preconditioner = Preconditioner::None,
+                   .useInitialGuess = true});
+  const LinearOperator applyA = [this](const VecX& p, VecX& y) { applyImplicitMatrix(p, y); };
+  const LinearOperator applyM = [this](const VecX& r, VecX& z) { applyBlockJacobi(r, z); };
+  ImplicitStepReport report;
+  auto solved = pcg_.solve(applyA, rhs_, dv_, applyM);
+  report.cgIterations = pcg_.lastReport().iterations;
+  report.relativeResidual = pcg_.lastReport().relativeResidual;
+  if (!solved) {
+    if (solved.error().code != ErrorCode::Timeout || !dv_.allFinite()) {
+      dv_.setZero();
+      return std::move(solved).error().within("MassSpringBody::stepImplicit");
+    }
+    report.converged = false;
+  }
+
+  forEachRange(particleCount(), [this, h](std::size_t b, std::size_t end) {
+    for (std::size_t i = b; i < end; ++i) {
+      if (pinned_[i]) continue;
+      const Eigen::Index k = 3 * Eigen::Index(i);
+      v_.segment<3>(k) += dv_.segment<3>(k);
+      x_.segment<3>(k) += h * v_.segment<3>(k);
+    }
+  });
+  // Maxwell dampers: backward Euler at the new stretch,
+  // e_d' = (e_d + β e')/(1 + β), β = h k/c — consistent with kAxial above.
+  forEachRange(elementCount(), [this, h](std::size_t b, std::size_t end) {
+    for (std::size_t e = b; e < end; ++e) {
+      if (!maxwell_[e]) continue;
+      const double ext = (load3(x_, ej_[e]) - load3(x_, ei_[e])).norm() - rest_[e];
+      const double beta = h * k_[e] / c_[e];
+      ed_[e] = (ed_[e] + beta * ext) / (1.0 + beta);
+    }
+  });
+  return report;
+}
+
+}  // namespace dm

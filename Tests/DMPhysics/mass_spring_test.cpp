@@ -1,0 +1,424 @@
+// Tests of dm/physics/mass_spring.hpp against analytic viscoelastic
+// solutions (damped oscillator, Maxwell stress relaxation and creep,
+// Kelvin–Voigt creep), static equilibrium, energy behaviour of the
+// integrators, exact element counts of the builders and input validation.
+#include <dm/physics/mass_spring.hpp>
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace {
+
+using dm::MassSpringBody;
+using dm::SpringLayout;
+using dm::SpringMaterial;
+using dm::SpringModel;
+using dm::Vec3;
+
+enum class Path { Symplectic, Implicit };
+
+void step(MassSpringBody& body, Path path, double h) {
+  if (path == Path::Symplectic) {
+    ASSERT_TRUE(body.stepSymplectic(h).ok());
+  } else {
+    auto r = body.stepImplicit(h);
+    ASSERT_TRUE(r.ok()) << r.error().message();
+    ASSERT_TRUE(r->converged) << r->relativeResidual;
+  }
+}
+
+// Particle 0 pinned at the origin, particle 1 of mass m at (L0 + x0, 0, 0),
+// one element of rest length L0.
+MassSpringBody twoNode(double m, const SpringMaterial& mat, double restLength, double x0) {
+  MassSpringBody body;
+  EXPECT_TRUE(body.addParticle({0, 0, 0}, 1.0, true).ok());
+  EXPECT_TRUE(body.addParticle({restLength + x0, 0, 0}, m).ok());
+  auto e = body.addElement(0, 1, mat, restLength);
+  EXPECT_TRUE(e.ok()) << e.error().message();
+  return body;
+}
+
+double totalEnergy(const MassSpringBody& b) {
+  return b.kineticEnergy() + b.elasticEnergy() + b.gravitationalEnergy();
+}
+
+// Upward zero crossings (linear interpolation) and peak values of a sampled
+// signal.
+struct Crossings {
+  std::vector<double> times;
+  std::vector<double> peaks;
+};
+Crossings analyse(const std::vector<double>& y, double h) {
+  Crossings c;
+  for (std::size_t i = 1; i < y.size(); ++i)
+    if (y[i - 1] < 0 && y[i] >= 0) c.times.push_back(h * (double(i - 1) + y[i - 1] / (y[i - 1] - y[i])));
+  for (std::size_t i = 1; i + 1 < y.size(); ++i)
+    if (y[i] > y[i - 1] && y[i] >= y[i + 1] && y[i] > 0) {
+      // Parabola through the three samples.
+      const double a = 0.5 * (y[i - 1] + y[i + 1]) - y[i], b = 0.5 * (y[i + 1] - y[i - 1]);
+      c.peaks.push_back(y[i] - b * b / (4 * a));
+    }
+  return c;
+}
+
+TEST(MassSpring, KelvinVoigtOscillatesAtNaturalFrequencyAndDecaysAtAnalyticRate) {
+  const double m = 1.0, k = 100.0, c = 0.4, L0 = 0.5, x0 = 0.01, h = 1e-4;
+  const double w0 = std::sqrt(k / m), zeta = c / (2 * std::sqrt(k * m));
+  const double wd = w0 * std::sqrt(1 - zeta * zeta);
+  for (Path path : {Path::Symplectic, Path::Implicit}) {
+    MassSpringBody body = twoNode(m, {.stiffness = k, .damping = c}, L0, x0);
+    std::vector<double> disp;
+    for (int s = 0; s < 30000; ++s) {
+      step(body, path, h);
+      disp.push_back(body.position(1).x() - L0);
+    }
+    const Crossings cr = analyse(disp, h);
+    ASSERT_GE(cr.times.size(), 4u);
+    const double period = (cr.times.back() - cr.times.front()) / double(cr.times.size() - 1);
+    EXPECT_NEAR(period, 2 * std::numbers::pi / wd, 1e-3 * period);
+    ASSERT_GE(cr.peaks.size(), 4u);
+    // Amplitude ratio per period: exp(−ζ ω0 T). Backward Euler adds
+    // numerical damping ≈ h ω0²/2 per unit time (here 0.005 against ζω0 = 0.2).
+    const double expectedRate = zeta * w0 + (path == Path::Implicit ? h * w0 * w0 / 2 : 0.0);
+    const double rate =
+        -std::log(cr.peaks.back() / cr.peaks.front()) / (period * double(cr.peaks.size() - 1));
+    EXPECT_NEAR(rate, expectedRate, 0.01 * expectedRate)
+        << (path == Path::Implicit ? "implicit" : "symplectic");
+  }
+}
+
+TEST(MassSpring, MaxwellHeldStretchRelaxesExponentially) {
+  const double k = 200.0, c = 20.0, L0 = 1.0, e0 = 0.05, tau = c / k;
+  for (Path path : {Path::Symplectic, Path::Implicit}) {
+    const double h = path == Path::Symplectic ? 1e-3 : 1e-4;
+    MassSpringBody body = twoNode(1.0, {.stiffness = k, .damping = c, .model = SpringModel::Maxwell}, L0, e0);
+    body.setPinned(1, true);  // held stretch
+    EXPECT_NEAR(body.elementTension(0), k * e0, 1e-12);
+    const int steps = int(std::lround(3 * tau / h));
+    for (int s = 1; s <= steps; ++s) {
+      step(body, path, h);
+      if (s % int(std::lround(tau / h)) == 0) {
+        const double t = s * h;
+        const double expected = k * e0 * std::exp(-t / tau);
+        // Exact exponential (explicit) vs backward Euler (1 + hk/c)^(−n) (implicit).
+        const double tol = path == Path::Symplectic ? 1e-9 * k * e0 : 2e-3 * expected;
+        EXPECT_NEAR(body.elementTension(0), expected, tol) << "t = " << t;
+      }
+    }
+    EXPECT_NEAR(body.position(1).x(), L0 + e0, 0.0);  // pinned: did not move
+    // Relaxation is in the damper: the spring part is what is left.
+    EXPECT_NEAR(body.element(0).damperExtension, e0 * (1 - std::exp(-3.0)), 2e-3 * e0);
+  }
+}
+
+TEST(MassSpring, UnderConstantLoadMaxwellFlowsLinearlyAndKelvinVoigtCreepsToFOverK) {
+  const double m = 0.01, k = 100.0, c = 5.0, L0 = 1.0, F = 2.0;
+  for (Path path : {Path::Symplectic, Path::Implicit}) {
+    const double h = path == Path::Symplectic ? 1e-4 : 1e-3;
+    const int steps = int(std::lround(1.0 / h));
+    // Kelvin–Voigt: e(t) ≈ F/k (1 − exp(−t k/c)) (massless limit), e(∞) = F/k.
+    MassSpringBody kv = twoNode(m, {.stiffness = k, .damping = c}, L0, 0.0);
+    kv.setExternalForce(1, {F, 0, 0});
+    for (int s = 1; s <= steps; ++s) {
+      step(kv, path, h);
+      if (s == int(std::lround(c / k / h))) {
+        EXPECT_NEAR(kv.position(1).x() - L0, F / k * (1 - std::exp(-1.0)), 0.01 * F / k);
+      }
+    }
+    EXPECT_NEAR(kv.position(1).x() - L0, F / k, 1e-6 * F / k);
+    EXPECT_NEAR(kv.velocity(1).norm(), 0.0, 1e-6);
+
+    // Maxwell: the spring holds F/k, the damper flows at F/c without bound.
+    MassSpringBody mx = twoNode(m, {.stiffness = k, .damping = c, .model = SpringModel::Maxwell}, L0, 0.0);
+    mx.setExternalForce(1, {F, 0, 0});
+    double xHalf = 0;
+    for (int s = 1; s <= steps; ++s) {
+      step(mx, path, h);
+      if (s == steps / 2) xHalf = mx.position(1).x();
+    }
+    EXPECT_NEAR(mx.velocity(1).x(), F / c, 0.01 * F / c);
+    EXPECT_NEAR(mx.position(1).x() - xHalf, 0.5 * F / c, 0.01 * 0.5 * F / c);
+    EXPECT_NEAR(mx.elementTension(0), F, 0.01 * F);
+    const dm::SpringElement el = mx.element(0);
+    EXPECT_NEAR(mx.position(1).x() - L0 - el.damperExtension, F / k, 0.01 * F / k);
+  }
+}
+
+// An 8 × 8 sheet in the x–z plane hanging from its two top corners.
+MassSpringBody hangingSheet() {
+  auto sheet = MassSpringBody::makeSheet({.nx = 8,
+                                          .ny = 8,
+                                          .width = 0.7,
+                                          .height = 0.7,
+                                          .uAxis = Vec3::UnitX(),
+                                          .vAxis = -Vec3::UnitZ(),
+                                          .mass = 0.64,
+                                          .structural = {true, 200, 0.5, SpringModel::KelvinVoigt},
+                                          .shear = {true, 100, 0.5, SpringModel::KelvinVoigt},
+                                          .bend = {true, 20, 0.5, SpringModel::KelvinVoigt}});
+  EXPECT_TRUE(sheet.ok());
+  sheet->setPinned(0, true);
+  sheet->setPinned(7, true);
+  sheet->setGravity({0, 0, -9.81});
+  // Drag damps the slow swaying modes that the element dampers barely reach.
+  EXPECT_TRUE(sheet->setDrag(5.0).ok());
+  return std::move(sheet).value();
+}
+
+TEST(MassSpring, HangingSheetReachesEquilibriumWherePinsCarryTheWeight) {
+  MassSpringBody implicitSheet = hangingSheet(), explicitSheet = hangingSheet();
+  for (int s = 0; s < 1000; ++s) step(implicitSheet, Path::Implicit, 1e-2);
+  for (int s = 0; s < 20000; ++s) step(explicitSheet, Path::Symplectic, 5e-4);
+
+  for (const MassSpringBody* sheet : {&implicitSheet, &explicitSheet}) {
+    double freeMass = 0, vmax = 0;
+    for (std::size_t i = 0; i < sheet->particleCount(); ++i) {
+      if (!sheet->pinned(i)) freeMass += sheet->mass(i);
+      vmax = std::max(vmax, sheet->velocity(i).norm());
+    }
+    EXPECT_LT(vmax, 1e-6);
+    // The elements pull the pins down with the weight of the free nodes,
+    // shared equally by symmetry.
+    const Vec3 load = sheet->elementForceOn(0) + sheet->elementForceOn(7);
+    const Vec3 weight = freeMass * sheet->gravity();
+    EXPECT_NEAR((load - weight).norm(), 0.0, 1e-5 * weight.norm()) << load.transpose();
+    EXPECT_NEAR(sheet->elementForceOn(0).z(), sheet->elementForceOn(7).z(), 1e-5 * weight.norm());
+    // And the sheet did sag: the bottom row hangs below its rest height.
+    EXPECT_LT(sheet->position(60).z(), -0.7);
+  }
+  // Both integrators find the same equilibrium.
+  for (std::size_t i = 0; i < implicitSheet.particleCount(); ++i)
+    EXPECT_LT((implicitSheet.position(i) - explicitSheet.position(i)).norm(), 1e-5) << "node " << i;
+}
+
+MassSpringBody jiggledSheet(double damping, SpringModel model) {
+  auto sheet = MassSpringBody::makeSheet({.nx = 5,
+                                          .ny = 5,
+                                          .width = 0.4,
+                                          .height = 0.4,
+                                          .mass = 0.25,
+                                          .structural = {true, 50, damping, model},
+                                          .shear = {true, 20, damping, model},
+                                          .bend = {true, 5, damping, model}});
+  EXPECT_TRUE(sheet.ok());
+  std::mt19937 rng(7);
+  std::normal_distribution<double> g(0.0, 0.3);
+  for (std::size_t i = 0; i < sheet->particleCount(); ++i) sheet->setVelocity(i, {g(rng), g(rng), g(rng)});
+  sheet->setPinned(0, true);
+  sheet->setGravity({0, 0, -9.81});
+  return std::move(sheet).value();
+}
+
+TEST(MassSpring, SymplecticEulerConservesEnergyWithoutDampingAndLosesItWithDamping) {
+  // Gravity swings the sheet about its pin, so the energy exchanged between
+  // kinetic and potential (the scale of the integrator's error) is the
+  // largest kinetic energy seen, not the initial one.
+  MassSpringBody body = jiggledSheet(0.0, SpringModel::KelvinVoigt);
+  const double e0 = totalEnergy(body), scale = body.kineticEnergy();
+  const int steps = 100000, window = steps / 10;
+  double maxDev = 0, first = 0, last = 0, exchanged = 0;
+  for (int s = 0; s < steps; ++s) {
+    ASSERT_TRUE(body.stepSymplectic(1e-4).ok());
+    const double e = totalEnergy(body);
+    maxDev = std::max(maxDev, std::abs(e - e0));
+    exchanged = std::max(exchanged, body.kineticEnergy());
+    if (s < window) first += e / window;
+    if (s >= steps - window) last += e / window;
+  }
+  EXPECT_GT(exchanged, 10 * scale);
+  EXPECT_LT(maxDev, 0.01 * exchanged);                  // bounded oscillation…
+  EXPECT_LT(std::abs(last - first), 1e-3 * exchanged);  // …and no drift over 10 s
+
+  for (SpringModel model : {SpringModel::KelvinVoigt, SpringModel::Maxwell}) {
+    for (Path path : {Path::Symplectic, Path::Implicit}) {
+      MassSpringBody damped = jiggledSheet(0.05, model);
+      const double d0 = totalEnergy(damped);
+      double prev = d0, maxKinetic = 0;
+      for (int s = 0; s < 2000; ++s) {
+        step(damped, path, 1e-3);
+        const double e = totalEnergy(damped);
+        maxKinetic = std::max(maxKinetic, damped.kineticEnergy());
+        EXPECT_LE(e, d0 + 0.01 * maxKinetic);
+        if (path == Path::Implicit && model == SpringModel::KelvinVoigt) {
+          EXPECT_LE(e, prev + 1e-9 * scale);
+        }
+        prev = e;
+      }
+      EXPECT_LT(totalEnergy(damped), d0 - 0.3 * scale) << dm::toString(model);
+    }
+  }
+}
+
+TEST(MassSpring, ImplicitStaysStableAtAStepWhereExplicitExplodes) {
+  auto make = [] {
+    auto sheet = MassSpringBody::makeSheet({.nx = 10,
+                                            .ny = 10,
+                                            .width = 0.1,
+                                            .height = 0.1,
+                                            .vAxis = -Vec3::UnitZ(),
+                                            .mass = 0.1,
+                                            .structural = {true, 1e4, 1.0, SpringModel::KelvinVoigt},
+                                            .shear = {true, 5e3, 1.0, SpringModel::KelvinVoigt},
+                                            .bend = {true, 1e3, 1.0, SpringModel::Maxwell}});
+    EXPECT_TRUE(sheet.ok());
+    sheet->setPinned(0, true);
+    sheet->setPinned(9, true);
+    sheet->setGravity({0, 0, -9.81});
+    return std::move(sheet).value();
+  };
+  const double h = 1e-2;  // h·sqrt(k/m) ≈ 30, far beyond explicit stability (2)
+  MassSpringBody expl = make(), impl = make();
+  for (int s = 0; s < 200; ++s) {
+    ASSERT_TRUE(expl.stepSymplectic(h).ok());
+    step(impl, Path::Implicit, h);
+  }
+  const double explSize = expl.positions().allFinite() ? expl.positions().cwiseAbs().maxCoeff() : INFINITY;
+  EXPECT_GT(explSize, 100.0);
+  ASSERT_TRUE(impl.positions().allFinite());
+  EXPECT_LT(impl.positions().cwiseAbs().maxCoeff(), 0.2);
+  // Energy cannot exceed what gravity released: KE + elastic ≤ −ΔU_gravity.
+  const MassSpringBody start = make();
+  EXPECT_LT(impl.kineticEnergy() + impl.elasticEnergy(),
+            start.gravitationalEnergy() - impl.gravitationalEnergy() + 1e-12);
+}
+
+TEST(MassSpring, SheetBuilderCountsElementsExactly) {
+  for (auto [nx, ny] : {std::pair{7, 7}, std::pair{5, 3}, std::pair{2, 2}, std::pair{64, 33}}) {
+    auto s = MassSpringBody::makeSheet({.nx = nx, .ny = ny});
+    ASSERT_TRUE(s.ok());
+    const std::size_t X = std::size_t(nx), Y = std::size_t(ny);
+    EXPECT_EQ(s->particleCount(), X * Y);
+    EXPECT_EQ(s->elementCount(SpringLayout::Structural), (X - 1) * Y + X * (Y - 1));
+    EXPECT_EQ(s->elementCount(SpringLayout::Shear), 2 * (X - 1) * (Y - 1));
+    EXPECT_EQ(s->elementCount(SpringLayout::Bend), (X - 2) * Y + X * (Y - 2));
+    EXPECT_EQ(s->elementCount(), s->elementCount(SpringLayout::Structural) +
+                                     s->elementCount(SpringLayout::Shear) +
+                                     s->elementCount(SpringLayout::Bend));
+    EXPECT_NEAR(s->totalMass(), 1.0, 1e-12);
+  }
+  auto square = MassSpringBody::makeSheet({.nx = 9, .ny = 9});
+  ASSERT_TRUE(square.ok());
+  EXPECT_EQ(square->elementCount(SpringLayout::Structural), 2u * 9 * 8);
+  // Layout geometry: structural at the grid spacing, shear √2 times it, bend twice it.
+  for (std::size_t e = 0; e < square->elementCount(); ++e) {
+    const dm::SpringElement el = square->element(e);
+    const double spacing = 1.0 / 8;
+    const double expected = el.layout == SpringLayout::Structural ? spacing
+                            : el.layout == SpringLayout::Shear    ? std::sqrt(2.0) * spacing
+                                                                  : 2 * spacing;
+    EXPECT_NEAR(el.restLength, expected, 1e-12);
+  }
+  auto noShear = MassSpringBody::makeSheet({.nx = 5, .ny = 3, .shear = {.enabled = false}});
+  ASSERT_TRUE(noShear.ok());
+  EXPECT_EQ(noShear->elementCount(SpringLayout::Shear), 0u);
+  EXPECT_EQ(noShear->elementCount(), 22u + 14u);
+}
+
+dm::Mesh octahedron() {
+  dm::Mesh m;
+  m.positions = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  m.triangles = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4}, {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+  return m;
+}
+
+TEST(MassSpring, FromMeshUsesEdgesAsStructuralAndOppositeVerticesAsBend) {
+  auto oct = MassSpringBody::fromMesh(octahedron(), {.mass = 0.6});
+  ASSERT_TRUE(oct.ok()) << oct.error().message();
+  EXPECT_EQ(oct->particleCount(), 6u);
+  EXPECT_EQ(oct->elementCount(SpringLayout::Structural), 12u);
+  // Every edge's two opposite vertices are an antipodal pair: 3 distinct pairs.
+  ASSERT_EQ(oct->elementCount(SpringLayout::Bend), 3u);
+  for (std::size_t e = 0; e < oct->elementCount(); ++e) {
+    const dm::SpringElement el = oct->element(e);
+    EXPECT_NEAR(el.restLength, el.layout == SpringLayout::Bend ? 2.0 : std::sqrt(2.0), 1e-12);
+    if (el.layout == SpringLayout::Bend) {
+      EXPECT_NEAR((oct->position(el.i) + oct->position(el.j)).norm(), 0.0, 0.0);
+    }
+  }
+  for (std::size_t i = 0; i < 6; ++i) EXPECT_NEAR(oct->mass(i), 0.1, 1e-12);  // equal lumped areas
+
+  // A quad of two triangles: 5 edges, one bend across the diagonal; the
+  // lumped masses follow the areas (corners on the diagonal get 2/6 each).
+  dm::Mesh quad;
+  quad.positions = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  quad.triangles = {{0, 1, 2}, {0, 2, 3}};
+  auto q = MassSpringBody::fromMesh(quad, {.mass = 6.0});
+  ASSERT_TRUE(q.ok());
+  EXPECT_EQ(q->elementCount(SpringLayout::Structural), 5u);
+  EXPECT_EQ(q->elementCount(SpringLayout::Bend), 1u);
+  EXPECT_NEAR(q->mass(0), 2.0, 1e-12);
+  EXPECT_NEAR(q->mass(1), 1.0, 1e-12);
+
+  // A flat membrane from a mesh stays put without loads (rest lengths from the mesh).
+  ASSERT_TRUE(q->stepSymplectic(1e-3).ok());
+  EXPECT_NEAR((q->position(2) - Vec3(1, 1, 0)).norm(), 0.0, 1e-15);
+}
+
+TEST(MassSpring, BadInputIsRejectedWithTheFieldNamed) {
+  const auto whereOf = [](const auto& r) { return r.ok() ? std::string("(ok)") : r.error().message(); };
+  EXPECT_NE(whereOf(MassSpringBody::makeSheet({.nx = 1})).find("nx"), std::string::npos);
+  EXPECT_NE(whereOf(MassSpringBody::makeSheet({.ny = 100000})).find("ny"), std::string::npos);
+  EXPECT_NE(whereOf(MassSpringBody::makeSheet({.width = -1})).find("width"), std::string::npos);
+  EXPECT_NE(whereOf(MassSpringBody::makeSheet({.mass = NAN})).find("mass"), std::string::npos);
+  EXPECT_NE(whereOf(MassSpringBody::makeSheet({.vAxis = Vec3(2, 0, 0)})).find("vAxis"), std::string::npos);
+  EXPECT_NE(whereOf(MassSpringBody::makeSheet({.structural = {true, 10, 0, SpringModel::Maxwell}}))
+                .find("structural.damping"),
+            std::string::npos);
+  EXPECT_NE(whereOf(MassSpringBody::makeSheet({.bend = {true, -5, 0, SpringModel::KelvinVoigt}}))
+                .find("bend.stiffness"),
+            std::string::npos);
+
+  dm::Mesh mesh = octahedron();
+  mesh.positions.push_back({5, 5, 5});  // used by no triangle
+  EXPECT_NE(whereOf(MassSpringBody::fromMesh(mesh)).find("vertex 6"), std::string::npos);
+  mesh = octahedron();
+  mesh.triangles[3][1] = 17;
+  EXPECT_FALSE(MassSpringBody::fromMesh(mesh).ok());
+  EXPECT_NE(whereOf(MassSpringBody::fromMesh(octahedron(), {.mass = 0})).find("mass"), std::string::npos);
+
+  MassSpringBody body;
+  EXPECT_FALSE(body.addParticle({0, 0, 0}, 0.0).ok());
+  EXPECT_FALSE(body.addParticle({NAN, 0, 0}, 1.0).ok());
+  ASSERT_TRUE(body.addParticle({0, 0, 0}, 1.0).ok());
+  ASSERT_TRUE(body.addParticle({1, 0, 0}, 1.0).ok());
+  EXPECT_FALSE(body.addElement(0, 0, {.stiffness = 1}).ok());
+  EXPECT_NE(whereOf(body.addElement(0, 2, {.stiffness = 1})).find("j"), std::string::npos);
+  EXPECT_NE(whereOf(body.addElement(0, 1, {.stiffness = 1, .damping = -1})).find("damping"),
+            std::string::npos);
+  auto e = body.addElement(0, 1, {.stiffness = 1});
+  ASSERT_TRUE(e.ok());
+  EXPECT_NEAR(body.element(*e).restLength, 1.0, 0.0);
+  EXPECT_NE(whereOf(body.setDrag(-1.0)).find("rate"), std::string::npos);
+  EXPECT_FALSE(body.stepSymplectic(0.0).ok());
+  EXPECT_FALSE(body.stepImplicit(-1.0).ok());
+  EXPECT_FALSE(body.stepImplicit(NAN).ok());
+  EXPECT_EQ(body.position(1), Vec3(1, 0, 0));  // a rejected step changes nothing
+}
+
+TEST(MassSpring, ParallelLoopsGiveBitwiseTheSerialResult) {
+  auto make = [](bool parallel) {
+    auto sheet = MassSpringBody::makeSheet({.nx = 48, .ny = 48, .mass = 0.4});
+    EXPECT_TRUE(sheet.ok());
+    sheet->setPinned(0, true);
+    sheet->setPinned(47, true);
+    sheet->setGravity({0, 0, -9.81});
+    sheet->setSolverOptions({.parallel = parallel, .parallelMinParticles = 0});
+    return std::move(sheet).value();
+  };
+  MassSpringBody serial = make(false), parallel = make(true);
+  for (MassSpringBody* b : {&serial, &parallel}) {
+    for (int s = 0; s < 10; ++s) ASSERT_TRUE(b->stepSymplectic(1e-3).ok());
+    for (int s = 0; s < 3; ++s) ASSERT_TRUE(b->stepImplicit(1e-2).ok());
+  }
+  EXPECT_TRUE(serial.positions() == parallel.positions());
+  EXPECT_TRUE(serial.velocities() == parallel.velocities());
+  EXPECT_GT((serial.position(48 * 48 - 1) - Vec3(1, 1, 0)).norm(), 1e-3);  // it did move
+}
+
+}  // namespace
