@@ -1,6 +1,7 @@
 #include <dm/core/assert.hpp>
 #include <dm/core/result.hpp>
 
+#include <cstdarg>
 #include <cstdio>
 #include <cstdlib>
 #include <ostream>
@@ -15,6 +16,19 @@ void assertionFailed(const char* kind, const char* expr, const char* msg, const 
   std::abort();
 }
 }  // namespace detail
+
+std::string formatString(const char* format, ...) noexcept {
+  char buf[512];
+  std::va_list args;
+  va_start(args, format);
+  const int n = std::vsnprintf(buf, sizeof buf, format, args);
+  va_end(args);
+  try {
+    return n < 0 ? std::string() : std::string(buf);
+  } catch (...) {  // out of memory for a message: an empty one
+    return {};
+  }
+}
 
 const char* toString(ErrorCode code) noexcept {
   switch (code) {

@@ -15,14 +15,6 @@
 namespace dm {
 namespace {
 
-// printf into a std::string (messages only; never on a hot path).
-template <class... Args>
-std::string format(const char* fmt, Args... args) {
-  char buf[512];
-  std::snprintf(buf, sizeof buf, fmt, args...);
-  return buf;
-}
-
 Error invalid(std::string what, const char* where, std::string hint = {}) {
   return fail(ErrorCode::InvalidArgument, std::move(what), where, std::move(hint));
 }
@@ -36,7 +28,7 @@ Eigen::Index firstNonFinite(const VecX& v) {
 
 Status checkFiniteVector(const VecX& v, const char* name, const char* where) {
   if (const Eigen::Index i = firstNonFinite(v); i >= 0)
-    return invalid(format("%s[%td] is %g (NaN or Inf)", name, i, v[i]), where,
+    return invalid(formatString("%s[%td] is %g (NaN or Inf)", name, i, v[i]), where,
                    "check the inputs of the system for uninitialised or diverged values");
   return ok();
 }
@@ -47,28 +39,29 @@ Status checkDense(const MatX& A, const VecX& b, const char* where) {
   if (A.rows() == 0 || A.cols() == 0)
     return invalid("the matrix is empty", where, "pass an n×n matrix, n ≥ 1");
   if (A.rows() != A.cols())
-    return invalid(format("the matrix is %td×%td, not square", A.rows(), A.cols()), where,
+    return invalid(formatString("the matrix is %td×%td, not square", A.rows(), A.cols()), where,
                    "these solvers need a square system; for least squares use Eigen's QR on Aᵀ directly");
   if (b.size() != A.rows())
-    return invalid(
-        format("right-hand side has %td entries but the matrix is %td×%td", b.size(), A.rows(), A.cols()),
-        where, "b must have one entry per matrix row");
+    return invalid(formatString("right-hand side has %td entries but the matrix is %td×%td", b.size(),
+                                A.rows(), A.cols()),
+                   where, "b must have one entry per matrix row");
   for (Eigen::Index j = 0; j < A.cols(); ++j)
     for (Eigen::Index i = 0; i < A.rows(); ++i)
       if (!std::isfinite(A(i, j)))
-        return invalid(format("A(%td,%td) is %g (NaN or Inf)", i, j, A(i, j)), where,
+        return invalid(formatString("A(%td,%td) is %g (NaN or Inf)", i, j, A(i, j)), where,
                        "check how the matrix was assembled");
   return checkFiniteVector(b, "b", where);
 }
 
 Status checkSingular(double rcond, double tol, const char* method, const char* where) {
   if (!(rcond >= tol))
-    return invalid(format("the matrix is numerically singular: %s estimates reciprocal condition number "
-                          "%.3e < singularTolerance %.3e",
-                          method, rcond, tol),
-                   where,
-                   "check for a missing constraint (e.g. an unfixed rigid-body mode) or duplicated rows; "
-                   "lower singularTolerance only if you accept an inaccurate solution");
+    return invalid(
+        formatString("the matrix is numerically singular: %s estimates reciprocal condition number "
+                     "%.3e < singularTolerance %.3e",
+                     method, rcond, tol),
+        where,
+        "check for a missing constraint (e.g. an unfixed rigid-body mode) or duplicated rows; "
+        "lower singularTolerance only if you accept an inaccurate solution");
   return ok();
 }
 
@@ -80,8 +73,8 @@ Result<VecX> solveLdlt(const MatX& A, const VecX& b, const DenseSolveOptions& o,
     for (Eigen::Index i = j + 1; i < A.rows(); ++i)
       if (const double d = std::abs(A(i, j) - A(j, i)); d > asym) asym = d, ai = i, aj = j;
   if (asym > o.symmetryTolerance * scale)
-    return invalid(format("the matrix is not symmetric: |A(%td,%td) − A(%td,%td)| = %.3e > %.1e·max|A|", ai,
-                          aj, aj, ai, asym, o.symmetryTolerance),
+    return invalid(formatString("the matrix is not symmetric: |A(%td,%td) − A(%td,%td)| = %.3e > %.1e·max|A|",
+                                ai, aj, aj, ai, asym, o.symmetryTolerance),
                    where, "use DenseMethod::PartialPivLu or ColPivQr for general matrices");
   Eigen::LDLT<MatX> ldlt(A);
   if (ldlt.info() != Eigen::Success)
@@ -92,17 +85,17 @@ Result<VecX> solveLdlt(const MatX& A, const VecX& b, const DenseSolveOptions& o,
   Eigen::Index kmin = 0;
   const double dmin = d.cwiseAbs().minCoeff(&kmin);
   if (dmax == 0.0 || dmin <= o.singularTolerance * dmax)
-    return invalid(format("the matrix is numerically singular: LDLT pivot %td is %.3e (largest %.3e)", kmin,
-                          d[kmin], dmax),
+    return invalid(formatString("the matrix is numerically singular: LDLT pivot %td is %.3e (largest %.3e)",
+                                kmin, d[kmin], dmax),
                    where,
                    "check for a missing constraint (e.g. an unfixed rigid-body mode) or duplicated rows");
   if (!o.allowIndefinite) {
     Eigen::Index kneg = 0;
     if (d.minCoeff(&kneg) <= 0.0)
-      return invalid(format("the matrix is not positive definite: LDLT pivot %td is %.3e", kneg, d[kneg]),
-                     where,
-                     "check the sign convention of the assembly; for symmetric indefinite systems (saddle "
-                     "points, constraints) set allowIndefinite = true");
+      return invalid(
+          formatString("the matrix is not positive definite: LDLT pivot %td is %.3e", kneg, d[kneg]), where,
+          "check the sign convention of the assembly; for symmetric indefinite systems (saddle "
+          "points, constraints) set allowIndefinite = true");
   }
   if (Status s = checkSingular(ldlt.rcond(), o.singularTolerance, "LDLT", where); !s)
     return std::move(s).error();
@@ -116,10 +109,10 @@ Result<VecX> solveLu(const MatX& A, const VecX& b, const DenseSolveOptions& o, c
   const double umin = u.minCoeff(&kmin);
   const double umax = u.maxCoeff();
   if (umax == 0.0 || umin <= o.singularTolerance * umax)
-    return invalid(format("the matrix is numerically singular: LU pivot U(%td,%td) = %.3e (largest %.3e)",
-                          kmin, kmin, lu.matrixLU()(kmin, kmin), umax),
-                   where,
-                   "check for dependent rows/columns; DenseMethod::ColPivQr reports the numerical rank");
+    return invalid(
+        formatString("the matrix is numerically singular: LU pivot U(%td,%td) = %.3e (largest %.3e)", kmin,
+                     kmin, lu.matrixLU()(kmin, kmin), umax),
+        where, "check for dependent rows/columns; DenseMethod::ColPivQr reports the numerical rank");
   if (Status s = checkSingular(lu.rcond(), o.singularTolerance, "LU", where); !s) return std::move(s).error();
   return VecX(lu.solve(b));
 }
@@ -128,8 +121,8 @@ Result<VecX> solveQr(const MatX& A, const VecX& b, const DenseSolveOptions& o, c
   Eigen::ColPivHouseholderQR<MatX> qr(A);
   qr.setThreshold(o.singularTolerance);
   if (qr.rank() < A.rows())
-    return invalid(format("the matrix is rank deficient: numerical rank %td of %td (|R_ii| ≤ %.1e·max)",
-                          qr.rank(), A.rows(), o.singularTolerance),
+    return invalid(formatString("the matrix is rank deficient: numerical rank %td of %td (|R_ii| ≤ %.1e·max)",
+                                qr.rank(), A.rows(), o.singularTolerance),
                    where, "remove dependent equations or add the missing constraints");
   return VecX(qr.solve(b));
 }
@@ -140,12 +133,12 @@ Status checkSparseSquareFinite(const SparseMat& A, const char* where) {
   if (A.rows() == 0 || A.cols() == 0)
     return invalid("the matrix is empty", where, "pass an n×n matrix, n ≥ 1");
   if (A.rows() != A.cols())
-    return invalid(format("the matrix is %td×%td, not square", A.rows(), A.cols()), where,
+    return invalid(formatString("the matrix is %td×%td, not square", A.rows(), A.cols()), where,
                    "a symmetric solver needs a square matrix");
   for (Eigen::Index j = 0; j < A.outerSize(); ++j)
     for (SparseMat::InnerIterator it(A, j); it; ++it)
       if (!std::isfinite(it.value()))
-        return invalid(format("A(%td,%td) is %g (NaN or Inf)", it.row(), it.col(), it.value()), where,
+        return invalid(formatString("A(%td,%td) is %g (NaN or Inf)", it.row(), it.col(), it.value()), where,
                        "check how the matrix was assembled");
   return ok();
 }
@@ -161,8 +154,8 @@ Status checkSparseSymmetric(const SparseMat& A, double relTol, const char* where
       if (it.row() == j) continue;
       const double other = A.coeff(j, it.row());
       if (std::abs(other - it.value()) > relTol * scale)
-        return invalid(format("the matrix is not symmetric: A(%td,%td) = %.6g but A(%td,%td) = %.6g",
-                              it.row(), j, it.value(), j, it.row(), other),
+        return invalid(formatString("the matrix is not symmetric: A(%td,%td) = %.6g but A(%td,%td) = %.6g",
+                                    it.row(), j, it.value(), j, it.row(), other),
                        where,
                        "store both triangles of a symmetric matrix; for non-symmetric systems use "
                        "solveDense() with PartialPivLu/ColPivQr or Eigen::SparseLU");
@@ -232,8 +225,8 @@ Status SparseLdltSolver::factorize(const SparseMat& A, bool requirePositiveDefin
     return invalid("factorize() before compute()", "SparseLdltSolver::factorize",
                    "call compute() once to analyse the sparsity pattern");
   if (A.rows() != impl_->n || A.cols() != impl_->n)
-    return invalid(format("the matrix is %td×%td but the analysed pattern is %td×%td", A.rows(), A.cols(),
-                          impl_->n, impl_->n),
+    return invalid(formatString("the matrix is %td×%td but the analysed pattern is %td×%td", A.rows(),
+                                A.cols(), impl_->n, impl_->n),
                    "SparseLdltSolver::factorize", "call compute() for a matrix with a new pattern");
   return checkAndFactor(A, requirePositiveDefinite, false);
 }
@@ -258,14 +251,15 @@ Status SparseLdltSolver::checkAndFactor(const SparseMat& A, bool requirePositive
   const double dmin = d.cwiseAbs().minCoeff(&kmin);
   const double tiny = 64.0 * std::numeric_limits<double>::epsilon() * static_cast<double>(d.size());
   if (dmin <= tiny * dmax)
-    return invalid(format("the matrix is numerically singular: LDLT pivot %td is %.3e (largest %.3e)", kmin,
-                          d[kmin], dmax),
+    return invalid(formatString("the matrix is numerically singular: LDLT pivot %td is %.3e (largest %.3e)",
+                                kmin, d[kmin], dmax),
                    where, "check for an unconstrained mode (free rigid motion, floating node)");
   if (requirePositiveDefinite) {
     Eigen::Index kneg = 0;
     if (d.minCoeff(&kneg) <= 0.0)
       return invalid(
-          format("the matrix is not positive definite: LDLT pivot %td (in AMD order) is %.3e", kneg, d[kneg]),
+          formatString("the matrix is not positive definite: LDLT pivot %td (in AMD order) is %.3e", kneg,
+                       d[kneg]),
           where, "check the sign convention of the assembly, or pass requirePositiveDefinite = false");
   }
   impl_->factored = true;
@@ -277,9 +271,9 @@ Result<VecX> SparseLdltSolver::solve(const VecX& b) const {
   if (!impl_ || !impl_->factored)
     return invalid("no factorization", where, "call compute() successfully before solve()");
   if (b.size() != impl_->n)
-    return invalid(
-        format("right-hand side has %td entries but the matrix is %td×%td", b.size(), impl_->n, impl_->n),
-        where, "b must have one entry per matrix row");
+    return invalid(formatString("right-hand side has %td entries but the matrix is %td×%td", b.size(),
+                                impl_->n, impl_->n),
+                   where, "b must have one entry per matrix row");
   if (Status s = checkFiniteVector(b, "b", where); !s) return std::move(s).error();
   return VecX(impl_->ldlt.solve(b));
 }
@@ -334,7 +328,7 @@ Status PcgSolver::compute(const SparseMat& A) {
       const double d = A_.coeff(j, j);
       if (!(d > 0.0))
         return invalid(
-            format("diagonal entry A(%td,%td) = %g is not positive, so the matrix is not SPD", j, j, d),
+            formatString("diagonal entry A(%td,%td) = %g is not positive, so the matrix is not SPD", j, j, d),
             where, "PCG needs a symmetric positive definite matrix; check the assembly");
       invDiag_[j] = 1.0 / d;
     }
@@ -350,13 +344,15 @@ Status PcgSolver::compute(const SparseMat& A) {
           if (it.row() < j) continue;
           if (it.row() == j) hasDiag = true;
           if (!hasDiag)
-            return invalid(format("diagonal entry A(%td,%td) is not stored, so the matrix is not SPD", j, j),
-                           where, "store the diagonal explicitly (a zero diagonal is never SPD)");
+            return invalid(
+                formatString("diagonal entry A(%td,%td) is not stored, so the matrix is not SPD", j, j),
+                where, "store the diagonal explicitly (a zero diagonal is never SPD)");
           icRowIdx_.push_back(static_cast<int>(it.row()));
         }
         if (!hasDiag)
-          return invalid(format("diagonal entry A(%td,%td) is not stored, so the matrix is not SPD", j, j),
-                         where, "store the diagonal explicitly (a zero diagonal is never SPD)");
+          return invalid(
+              formatString("diagonal entry A(%td,%td) is not stored, so the matrix is not SPD", j, j), where,
+              "store the diagonal explicitly (a zero diagonal is never SPD)");
         icColPtr_[static_cast<std::size_t>(j) + 1] = static_cast<int>(icRowIdx_.size());
       }
       icVal_.resize(icRowIdx_.size());
@@ -450,13 +446,13 @@ Result<PcgReport> PcgSolver::iterate(const ApplyA& applyA, const ApplyM& applyM,
   report_ = {};
   const Eigen::Index n = b.size();
   if (!(options_.tolerance >= 0.0) || !std::isfinite(options_.tolerance))
-    return invalid(format("tolerance %g must be finite and ≥ 0", options_.tolerance), where);
+    return invalid(formatString("tolerance %g must be finite and ≥ 0", options_.tolerance), where);
   if (options_.maxIterations < 0)
-    return invalid(format("maxIterations %d must be ≥ 0", options_.maxIterations), where);
+    return invalid(formatString("maxIterations %d must be ≥ 0", options_.maxIterations), where);
   if (Status s = checkFiniteVector(b, "b", where); !s) return std::move(s).error();
   if (options_.useInitialGuess) {
     if (x.size() != n)
-      return invalid(format("initial guess has %td entries but the system has %td", x.size(), n), where,
+      return invalid(formatString("initial guess has %td entries but the system has %td", x.size(), n), where,
                      "pass x of size n, or set useInitialGuess = false");
     if (Status s = checkFiniteVector(x, "x (initial guess)", where); !s) return std::move(s).error();
   } else {
@@ -472,8 +468,8 @@ Result<PcgReport> PcgSolver::iterate(const ApplyA& applyA, const ApplyM& applyM,
   }
   const auto sizeError = [&] {
     return invalid(
-        format("the operator returned a vector of size %td for a system of size %td", q_.size(), n), where,
-        "the operator must write y = A x into the given y without resizing it");
+        formatString("the operator returned a vector of size %td for a system of size %td", q_.size(), n),
+        where, "the operator must write y = A x into the given y without resizing it");
   };
   // r = b − A x, the true residual.
   auto fresh = [&]() -> bool {
@@ -497,7 +493,7 @@ Result<PcgReport> PcgSolver::iterate(const ApplyA& applyA, const ApplyM& applyM,
     rz = r_.dot(z_);
     if (!(rz > 0.0) || !std::isfinite(rz))
       return invalid(
-          format("preconditioner is not positive definite: rᵀM⁻¹r = %g", rz), where,
+          formatString("preconditioner is not positive definite: rᵀM⁻¹r = %g", rz), where,
           "a preconditioner must be SPD; use Jacobi or IC(0), or check your preconditioner operator");
     p_ = z_;
     return ok();
@@ -510,12 +506,12 @@ Result<PcgReport> PcgSolver::iterate(const ApplyA& applyA, const ApplyM& applyM,
     if (q_.size() != n) return sizeError();
     const double pAp = p_.dot(q_);
     if (!std::isfinite(pAp))
-      return invalid(format("pᵀAp is %g at iteration %d (NaN/Inf)", pAp, it), where,
+      return invalid(formatString("pᵀAp is %g at iteration %d (NaN/Inf)", pAp, it), where,
                      "the operator or matrix produced a non-finite value; check its inputs");
     if (pAp <= 0.0)
       return invalid(
-          format("negative curvature pᵀAp = %.3e at iteration %d: the matrix is not positive definite", pAp,
-                 it),
+          formatString("negative curvature pᵀAp = %.3e at iteration %d: the matrix is not positive definite",
+                       pAp, it),
           where,
           "CG needs an SPD matrix; check its sign convention, or use SparseLdltSolver with "
           "requirePositiveDefinite = false / solveDense() for indefinite systems");
@@ -541,17 +537,17 @@ Result<PcgReport> PcgSolver::iterate(const ApplyA& applyA, const ApplyM& applyM,
     const double rzNew = r_.dot(z_);
     if (!(rzNew > 0.0) || !std::isfinite(rzNew))
       return invalid(
-          format("preconditioner is not positive definite: rᵀM⁻¹r = %g at iteration %d", rzNew, it), where,
-          "a preconditioner must be SPD; use Jacobi or IC(0), or check your preconditioner");
+          formatString("preconditioner is not positive definite: rᵀM⁻¹r = %g at iteration %d", rzNew, it),
+          where, "a preconditioner must be SPD; use Jacobi or IC(0), or check your preconditioner");
     const double beta = rzNew / rz;
     rz = rzNew;
     p_ = z_ + beta * p_;
   }
   return fail(
       ErrorCode::Timeout,
-      format("PCG (preconditioner %s) did not converge in %d iterations: relative residual %.3e > "
-             "tolerance %.3e",
-             preconditionerLabel, options_.maxIterations, report_.relativeResidual, options_.tolerance),
+      formatString("PCG (preconditioner %s) did not converge in %d iterations: relative residual %.3e > "
+                   "tolerance %.3e",
+                   preconditionerLabel, options_.maxIterations, report_.relativeResidual, options_.tolerance),
       where, advice);
 }
 
@@ -559,13 +555,13 @@ Result<PcgReport> PcgSolver::solve(const VecX& b, VecX& x) {
   constexpr const char* where = "PcgSolver::solve";
   if (!ready_) return invalid("no matrix", where, "call compute(A) successfully before solve()");
   if (b.size() != A_.rows())
-    return invalid(
-        format("right-hand side has %td entries but the matrix is %td×%td", b.size(), A_.rows(), A_.cols()),
-        where, "b must have one entry per matrix row");
+    return invalid(formatString("right-hand side has %td entries but the matrix is %td×%td", b.size(),
+                                A_.rows(), A_.cols()),
+                   where, "b must have one entry per matrix row");
   if (builtPreconditioner_ != options_.preconditioner)
     return invalid(
-        format("the preconditioner built by compute() is %s but the options ask for %s",
-               preconditionerName(builtPreconditioner_), preconditionerName(options_.preconditioner)),
+        formatString("the preconditioner built by compute() is %s but the options ask for %s",
+                     preconditionerName(builtPreconditioner_), preconditionerName(options_.preconditioner)),
         where, "call compute(A) again after changing options (or after a failed compute)");
   auto applyA = [this](const VecX& v, VecX& y) { y.noalias() = A_ * v; };
   const char* label = preconditionerName(builtPreconditioner_);

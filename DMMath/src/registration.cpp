@@ -12,13 +12,6 @@
 namespace dm {
 namespace {
 
-template <class... Args>
-std::string format(const char* fmt, Args... args) {
-  char buf[384];
-  std::snprintf(buf, sizeof buf, fmt, args...);
-  return buf;
-}
-
 Error invalid(std::string what, const char* where, std::string hint = {}) {
   return fail(ErrorCode::InvalidArgument, std::move(what), where, std::move(hint));
 }
@@ -26,8 +19,8 @@ Error invalid(std::string what, const char* where, std::string hint = {}) {
 Status checkFinite(std::span<const Vec3> pts, const char* name, const char* where) {
   for (std::size_t i = 0; i < pts.size(); ++i)
     if (!pts[i].allFinite())
-      return invalid(format("%s[%zu] = (%g, %g, %g) has a NaN or Inf coordinate", name, i, pts[i].x(),
-                            pts[i].y(), pts[i].z()),
+      return invalid(formatString("%s[%zu] = (%g, %g, %g) has a NaN or Inf coordinate", name, i, pts[i].x(),
+                                  pts[i].y(), pts[i].z()),
                      where, "check the fiducial localisation or tracking data");
   return ok();
 }
@@ -40,12 +33,12 @@ Status checkLayout(const Mat3& cov, double maxNorm, double tol, const char* name
   const double s1 = std::sqrt(lambda[2]), s2 = std::sqrt(lambda[1]);
   const double roundoff = 64.0 * std::numeric_limits<double>::epsilon() * maxNorm;
   if (s1 <= roundoff)
-    return invalid(format("%s points are all coincident (spread %.3e)", name, s1), where,
+    return invalid(formatString("%s points are all coincident (spread %.3e)", name, s1), where,
                    "use at least 3 distinct fiducials that span a triangle");
   if (s2 <= tol * s1 || s2 <= roundoff)
     return invalid(
-        format("%s points are collinear: second principal spread %.3e is below %.1e × the first (%.3e)", name,
-               s2, tol, s1),
+        formatString("%s points are collinear: second principal spread %.3e is below %.1e × the first (%.3e)",
+                     name, s2, tol, s1),
         where,
         "rotation about the line through collinear points is undetermined; add a fiducial off the "
         "line (at least 3 non-collinear points with non-zero weight)");
@@ -66,16 +59,17 @@ Result<Registration> registerPoints(std::span<const Vec3> source, std::span<cons
   constexpr const char* where = "registerPoints";
   const std::size_t n = source.size();
   if (target.size() != n)
-    return invalid(format("%zu source points but %zu target points", n, target.size()), where,
+    return invalid(formatString("%zu source points but %zu target points", n, target.size()), where,
                    "registration needs corresponding pairs: source[i] ↔ target[i]");
   if (n < 3)
-    return invalid(format("%zu point pairs; rigid registration needs at least 3 non-collinear pairs", n),
-                   where, "add fiducials");
+    return invalid(
+        formatString("%zu point pairs; rigid registration needs at least 3 non-collinear pairs", n), where,
+        "add fiducials");
   if (Status s = checkFinite(source, "source", where); !s) return std::move(s).error();
   if (Status s = checkFinite(target, "target", where); !s) return std::move(s).error();
   const bool weighted = !options.weights.empty();
   if (weighted && options.weights.size() != n)
-    return invalid(format("%zu weights for %zu point pairs", options.weights.size(), n), where,
+    return invalid(formatString("%zu weights for %zu point pairs", options.weights.size(), n), where,
                    "pass one weight per pair, or none");
   if (!(options.degeneracyTolerance >= 0.0) || !std::isfinite(options.degeneracyTolerance))
     return invalid("degeneracyTolerance must be finite and ≥ 0", where);
@@ -84,13 +78,13 @@ Result<Registration> registerPoints(std::span<const Vec3> source, std::span<cons
   for (std::size_t i = 0; i < n; ++i) {
     const double w = weighted ? options.weights[i] : 1.0;
     if (!std::isfinite(w) || w < 0.0)
-      return invalid(format("weight[%zu] = %g; weights must be finite and ≥ 0", i, w), where);
+      return invalid(formatString("weight[%zu] = %g; weights must be finite and ≥ 0", i, w), where);
     positive += w > 0.0 ? 1 : 0;
     wsum += w;
   }
   if (positive < 3)
-    return invalid(format("only %zu pairs have a positive weight; at least 3 are needed", positive), where,
-                   "give at least 3 non-collinear fiducials a positive weight");
+    return invalid(formatString("only %zu pairs have a positive weight; at least 3 are needed", positive),
+                   where, "give at least 3 non-collinear fiducials a positive weight");
   auto weight = [&](std::size_t i) { return weighted ? options.weights[i] : 1.0; };
 
   Vec3 mp = Vec3::Zero(), mq = Vec3::Zero();
@@ -122,10 +116,10 @@ Result<Registration> registerPoints(std::span<const Vec3> source, std::span<cons
   Eigen::JacobiSVD<Mat3> svd(sigma, Eigen::ComputeFullU | Eigen::ComputeFullV);
   const Vec3 d = svd.singularValues();  // descending
   if (d[1] <= options.degeneracyTolerance * d[0])
-    return invalid(format("the cross-covariance of the pairs has rank < 2 (singular values %.3e, %.3e, %.3e)",
-                          d[0], d[1], d[2]),
-                   where,
-                   "the pairs do not determine a rotation; check that source[i] and target[i] correspond");
+    return invalid(
+        formatString("the cross-covariance of the pairs has rank < 2 (singular values %.3e, %.3e, %.3e)",
+                     d[0], d[1], d[2]),
+        where, "the pairs do not determine a rotation; check that source[i] and target[i] correspond");
   Vec3 S = Vec3::Ones();
   Registration out;
   if (svd.matrixU().determinant() * svd.matrixV().determinant() < 0.0) {
@@ -174,10 +168,11 @@ Result<std::vector<double>> predictedTre(std::span<const Vec3> fiducials, std::s
                                          double fleRms) {
   constexpr const char* where = "predictedTre";
   if (fiducials.size() < 3)
-    return invalid(format("%zu fiducials; the prediction needs at least 3 non-collinear", fiducials.size()),
-                   where);
+    return invalid(
+        formatString("%zu fiducials; the prediction needs at least 3 non-collinear", fiducials.size()),
+        where);
   if (!std::isfinite(fleRms) || fleRms < 0.0)
-    return invalid(format("fleRms = %g must be finite and ≥ 0", fleRms), where);
+    return invalid(formatString("fleRms = %g must be finite and ≥ 0", fleRms), where);
   if (Status s = checkFinite(targets, "targets", where); !s) return std::move(s).error();
   auto p = pca(fiducials);
   if (!p) return std::move(p).error().within(where);

@@ -8,34 +8,28 @@
 namespace dm {
 namespace {
 
-template <class... Args>
-std::string format(const char* fmt, Args... args) {
-  char buf[384];
-  std::snprintf(buf, sizeof buf, fmt, args...);
-  return buf;
-}
-
 constexpr const char* kWhere = "CubicSpline::create";
 
 Status checkKnots(std::span<const double> x, std::span<const double> y) {
   if (x.size() != y.size())
-    return fail(ErrorCode::InvalidArgument, format("%zu knots x but %zu values y", x.size(), y.size()),
+    return fail(ErrorCode::InvalidArgument, formatString("%zu knots x but %zu values y", x.size(), y.size()),
                 kWhere, "pass one value per knot");
   if (x.size() < 2)
-    return fail(ErrorCode::InvalidArgument, format("a spline needs at least 2 points, got %zu", x.size()),
-                kWhere, "add control points (two points give a straight line)");
+    return fail(ErrorCode::InvalidArgument,
+                formatString("a spline needs at least 2 points, got %zu", x.size()), kWhere,
+                "add control points (two points give a straight line)");
   for (std::size_t i = 0; i < x.size(); ++i) {
     if (!std::isfinite(x[i]))
-      return fail(ErrorCode::InvalidArgument, format("x[%zu] is %g (NaN or Inf)", i, x[i]), kWhere,
+      return fail(ErrorCode::InvalidArgument, formatString("x[%zu] is %g (NaN or Inf)", i, x[i]), kWhere,
                   "knots must be finite numbers");
     if (!std::isfinite(y[i]))
-      return fail(ErrorCode::InvalidArgument, format("y[%zu] is %g (NaN or Inf)", i, y[i]), kWhere,
+      return fail(ErrorCode::InvalidArgument, formatString("y[%zu] is %g (NaN or Inf)", i, y[i]), kWhere,
                   "values must be finite numbers");
     if (i > 0 && !(x[i] > x[i - 1]))
       return fail(
           ErrorCode::InvalidArgument,
-          format("x[%zu] = %.17g is not greater than x[%zu] = %.17g: knots must be strictly increasing", i,
-                 x[i], i - 1, x[i - 1]),
+          formatString("x[%zu] = %.17g is not greater than x[%zu] = %.17g: knots must be strictly increasing",
+                       i, x[i], i - 1, x[i - 1]),
           kWhere, "sort the control points by x and merge duplicates");
   }
   return ok();
@@ -115,10 +109,10 @@ Result<CubicSpline> CubicSpline::create(std::span<const double> x, std::span<con
   if (Status s = checkKnots(x, y); !s) return std::move(s).error();
   if (options.kind == SplineKind::Clamped &&
       (!std::isfinite(options.startSlope) || !std::isfinite(options.endSlope)))
-    return fail(
-        ErrorCode::InvalidArgument,
-        format("clamped end slopes must be finite, got %g and %g", options.startSlope, options.endSlope),
-        kWhere);
+    return fail(ErrorCode::InvalidArgument,
+                formatString("clamped end slopes must be finite, got %g and %g", options.startSlope,
+                             options.endSlope),
+                kWhere);
   CubicSpline s;
   s.x_.assign(x.begin(), x.end());
   s.y_.assign(y.begin(), y.end());
@@ -227,7 +221,7 @@ Result<VectorSpline> VectorSpline::create(std::span<const double> x, const MatX&
                 "VectorSpline::create", "pass an n×d matrix with one row per knot");
   if (static_cast<std::size_t>(values.rows()) != x.size())
     return fail(ErrorCode::InvalidArgument,
-                format("%zu knots x but the value matrix has %td rows", x.size(), values.rows()),
+                formatString("%zu knots x but the value matrix has %td rows", x.size(), values.rows()),
                 "VectorSpline::create", "pass one row of values per knot");
   VectorSpline out;
   out.channels_.reserve(static_cast<std::size_t>(values.cols()));
@@ -237,7 +231,7 @@ Result<VectorSpline> VectorSpline::create(std::span<const double> x, const MatX&
     auto s = CubicSpline::create(x, column, options);
     if (!s) {
       Error e = std::move(s).error();
-      e.what = format("channel %td: ", c) + e.what;
+      e.what = formatString("channel %td: ", c) + e.what;
       e.where = "VectorSpline::create";
       return e;
     }
@@ -262,8 +256,9 @@ VecX VectorSpline::operator()(double t) const {
 Result<RgbaSpline> RgbaSpline::create(std::span<const double> x, std::span<const Vec4> rgba,
                                       const RgbaSplineOptions& options) {
   if (x.size() != rgba.size())
-    return fail(ErrorCode::InvalidArgument, format("%zu scalars x but %zu colours", x.size(), rgba.size()),
-                "RgbaSpline::create", "pass one RGBA colour per control scalar");
+    return fail(ErrorCode::InvalidArgument,
+                formatString("%zu scalars x but %zu colours", x.size(), rgba.size()), "RgbaSpline::create",
+                "pass one RGBA colour per control scalar");
   static constexpr const char* kChannel[4] = {"red", "green", "blue", "alpha"};
   RgbaSpline out;
   out.clamp_ = options.clampToUnit;

@@ -18,14 +18,6 @@ namespace dm {
 
 namespace {
 
-// printf into a std::string, for error messages.
-template <class... Args>
-std::string format(const char* fmt, Args... args) {
-  char buf[512];
-  std::snprintf(buf, sizeof buf, fmt, args...);
-  return buf;
-}
-
 Error invalid(std::string what, std::string where, std::string hint = {}) {
   return fail(ErrorCode::InvalidArgument, std::move(what), std::move(where), std::move(hint));
 }
@@ -70,16 +62,16 @@ const char* toString(SpringLayout layout) noexcept {
 
 Status validateSpringMaterial(const SpringMaterial& m, const char* where) {
   if (!std::isfinite(m.stiffness) || m.stiffness < 0)
-    return invalid(format("stiffness is %g N/m", m.stiffness), format("%s.stiffness", where),
+    return invalid(formatString("stiffness is %g N/m", m.stiffness), formatString("%s.stiffness", where),
                    "give k in N/m, finite and >= 0");
   if (!std::isfinite(m.damping) || m.damping < 0)
-    return invalid(format("damping is %g N*s/m", m.damping), format("%s.damping", where),
+    return invalid(formatString("damping is %g N*s/m", m.damping), formatString("%s.damping", where),
                    "give c in N*s/m, finite and >= 0");
   if (m.model == SpringModel::Maxwell && m.damping <= 0)
     return invalid("a Maxwell element needs damping > 0 (its damper would carry no force)",
-                   format("%s.damping", where), "set c > 0, or use SpringModel::KelvinVoigt");
+                   formatString("%s.damping", where), "set c > 0, or use SpringModel::KelvinVoigt");
   if (m.model != SpringModel::Maxwell && m.model != SpringModel::KelvinVoigt)
-    return invalid(format("unknown model %d", int(m.model)), format("%s.model", where));
+    return invalid(formatString("unknown model %d", int(m.model)), formatString("%s.model", where));
   return ok();
 }
 
@@ -88,11 +80,12 @@ Status validateSpringMaterial(const SpringMaterial& m, const char* where) {
 
 Result<std::uint32_t> MassSpringBody::addParticle(const Vec3& position, double mass, bool pinned) {
   constexpr const char* where = "MassSpringBody::addParticle";
-  if (!allFinite(position)) return invalid("position is not finite", format("%s: position", where));
+  if (!allFinite(position)) return invalid("position is not finite", formatString("%s: position", where));
   if (!std::isfinite(mass) || mass <= 0)
-    return invalid(format("mass is %g kg", mass), format("%s: mass", where), "give a finite mass > 0 kg");
+    return invalid(formatString("mass is %g kg", mass), formatString("%s: mass", where),
+                   "give a finite mass > 0 kg");
   if (particleCount() >= kMaxParticles)
-    return invalid(format("the body already has %zu particles", particleCount()), where,
+    return invalid(formatString("the body already has %zu particles", particleCount()), where,
                    "split the body, or coarsen it");
   const Eigen::Index n = Eigen::Index(particleCount());
   x_.conservativeResize(3 * n + 3);
@@ -114,15 +107,15 @@ Result<std::uint32_t> MassSpringBody::addElement(std::uint32_t i, std::uint32_t 
   const std::size_t n = particleCount();
   if (i >= n || j >= n)
     return invalid(
-        format("particle index %u is out of range (the body has %zu particles)", i >= n ? i : j, n),
-        format("%s: %s", where, i >= n ? "i" : "j"));
-  if (i == j) return invalid(format("both ends are particle %u", i), format("%s: j", where));
+        formatString("particle index %u is out of range (the body has %zu particles)", i >= n ? i : j, n),
+        formatString("%s: %s", where, i >= n ? "i" : "j"));
+  if (i == j) return invalid(formatString("both ends are particle %u", i), formatString("%s: j", where));
   if (Status s = validateSpringMaterial(material, "material"); !s) return std::move(s).error().within(where);
   if (std::isnan(restLength) || std::isinf(restLength))
-    return invalid("rest length is not finite", format("%s: restLength", where),
+    return invalid("rest length is not finite", formatString("%s: restLength", where),
                    "give L0 in m, or a negative value for the current distance");
   if (static_cast<std::size_t>(layout) >= kSpringLayoutCount)
-    return invalid(format("unknown layout %d", int(layout)), format("%s: layout", where));
+    return invalid(formatString("unknown layout %d", int(layout)), formatString("%s: layout", where));
   if (restLength < 0) restLength = (position(j) - position(i)).norm();
   ei_.push_back(i);
   ej_.push_back(j);
@@ -140,21 +133,22 @@ Result<std::uint32_t> MassSpringBody::addElement(std::uint32_t i, std::uint32_t 
 
 Result<MassSpringBody> MassSpringBody::makeSheet(const SpringSheetOptions& o) {
   constexpr const char* where = "SpringSheetOptions";
-  const auto field = [&](const char* name) { return format("%s.%s", where, name); };
+  const auto field = [&](const char* name) { return formatString("%s.%s", where, name); };
   if (o.nx < 2 || o.nx > 4096)
-    return invalid(format("nx is %d", o.nx), field("nx"), "give 2 to 4096 nodes along u");
+    return invalid(formatString("nx is %d", o.nx), field("nx"), "give 2 to 4096 nodes along u");
   if (o.ny < 2 || o.ny > 4096)
-    return invalid(format("ny is %d", o.ny), field("ny"), "give 2 to 4096 nodes along v");
+    return invalid(formatString("ny is %d", o.ny), field("ny"), "give 2 to 4096 nodes along v");
   if (std::size_t(o.nx) * std::size_t(o.ny) > kMaxParticles)
     return invalid(
-        format("nx*ny = %zu nodes exceeds %zu", std::size_t(o.nx) * std::size_t(o.ny), kMaxParticles),
+        formatString("nx*ny = %zu nodes exceeds %zu", std::size_t(o.nx) * std::size_t(o.ny), kMaxParticles),
         field("nx"), "coarsen the sheet");
   if (!std::isfinite(o.width) || o.width <= 0)
-    return invalid(format("width is %g m", o.width), field("width"), "give a finite width > 0 m");
+    return invalid(formatString("width is %g m", o.width), field("width"), "give a finite width > 0 m");
   if (!std::isfinite(o.height) || o.height <= 0)
-    return invalid(format("height is %g m", o.height), field("height"), "give a finite height > 0 m");
+    return invalid(formatString("height is %g m", o.height), field("height"), "give a finite height > 0 m");
   if (!std::isfinite(o.mass) || o.mass <= 0)
-    return invalid(format("mass is %g kg", o.mass), field("mass"), "give the total mass, finite and > 0 kg");
+    return invalid(formatString("mass is %g kg", o.mass), field("mass"),
+                   "give the total mass, finite and > 0 kg");
   if (!allFinite(o.origin)) return invalid("origin is not finite", field("origin"));
   if (!allFinite(o.uAxis) || o.uAxis.norm() == 0)
     return invalid("uAxis is zero or not finite", field("uAxis"), "give a direction, e.g. (1, 0, 0)");
@@ -228,7 +222,7 @@ Result<MassSpringBody> MassSpringBody::fromMesh(const Mesh& mesh, const MassSpri
   constexpr const char* where = "MassSpringBody::fromMesh";
   if (Status s = mesh.validate(); !s) return std::move(s).error().within(where);
   if (!std::isfinite(o.mass) || o.mass <= 0)
-    return invalid(format("mass is %g kg", o.mass), "MassSpringMeshOptions.mass",
+    return invalid(formatString("mass is %g kg", o.mass), "MassSpringMeshOptions.mass",
                    "give the total mass, finite and > 0 kg");
   if (o.structural.enabled)
     if (Status s = validateSpringMaterial(o.structural, "MassSpringMeshOptions.structural"); !s)
@@ -238,7 +232,7 @@ Result<MassSpringBody> MassSpringBody::fromMesh(const Mesh& mesh, const MassSpri
       return std::move(s).error();
   const std::size_t n = mesh.vertexCount();
   if (n > kMaxParticles)
-    return invalid(format("the mesh has %zu vertices, more than %zu", n, kMaxParticles), where,
+    return invalid(formatString("the mesh has %zu vertices, more than %zu", n, kMaxParticles), where,
                    "simplify the mesh (dm/math/simplify.hpp)");
 
   // Lumped masses: a third of each triangle's area to each of its corners.
@@ -266,12 +260,12 @@ Result<MassSpringBody> MassSpringBody::fromMesh(const Mesh& mesh, const MassSpri
   double totalArea = 0;
   for (std::size_t i = 0; i < n; ++i) {
     if (!used[i])
-      return invalid(format("vertex %zu is used by no non-degenerate triangle", i),
-                     format("%s: vertex %zu", where, i),
+      return invalid(formatString("vertex %zu is used by no non-degenerate triangle", i),
+                     formatString("%s: vertex %zu", where, i),
                      "remove unreferenced vertices, or weld the mesh (dm::weldVertices)");
     if (!(area[i] > 0))
-      return invalid(format("vertex %zu has zero area around it (all its triangles are flat)", i),
-                     format("%s: vertex %zu", where, i), "remove degenerate triangles");
+      return invalid(formatString("vertex %zu has zero area around it (all its triangles are flat)", i),
+                     formatString("%s: vertex %zu", where, i), "remove degenerate triangles");
     totalArea += area[i];
   }
 
@@ -349,7 +343,7 @@ void MassSpringBody::clearExternalForces() { fext_.setZero(); }
 
 Status MassSpringBody::setDrag(double rate) {
   if (!std::isfinite(rate) || rate < 0)
-    return invalid(format("drag rate is %g 1/s", rate), "MassSpringBody::setDrag: rate",
+    return invalid(formatString("drag rate is %g 1/s", rate), "MassSpringBody::setDrag: rate",
                    "give a finite rate >= 0 1/s (0: no drag)");
   drag_ = rate;
   return ok();
@@ -458,7 +452,7 @@ void MassSpringBody::updateMaxwellDecay(double h) {
 
 Status MassSpringBody::stepSymplectic(double h) {
   if (!std::isfinite(h) || h <= 0)
-    return invalid(format("time step is %g s", h), "MassSpringBody::stepSymplectic: h",
+    return invalid(formatString("time step is %g s", h), "MassSpringBody::stepSymplectic: h",
                    "give a finite h > 0 s");
   if (!prepared_) prepare();
   updateMaxwellDecay(h);
@@ -536,7 +530,7 @@ void MassSpringBody::applyBlockJacobi(const VecX& r, VecX& z) const {
 
 Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
   if (!std::isfinite(h) || h <= 0)
-    return invalid(format("time step is %g s", h), "MassSpringBody::stepImplicit: h",
+    return invalid(formatString("time step is %g s", h), "MassSpringBody::stepImplicit: h",
                    "give a finite h > 0 s");
   if (!prepared_) prepare();
   const double h2 = h * h;

@@ -57,6 +57,13 @@ struct Error {
 
 std::ostream& operator<<(std::ostream& os, const Error& e);
 
+/// printf into a std::string, for error messages (the format is checked by
+/// the compiler; output longer than 511 characters is cut). Not for hot paths.
+/// @code
+///   return dm::fail(ErrorCode::InvalidArgument, dm::formatString("stiffness is %g N/m", k), where);
+/// @endcode
+std::string formatString(const char* format, ...) noexcept __attribute__((format(printf, 1, 2)));
+
 /// Builds an Error; the usual way to fail: `return dm::fail(ErrorCode::Parse, ...)`.
 inline Error fail(ErrorCode code, std::string what, std::string where = {}, std::string hint = {}) {
   return Error{code, std::move(what), std::move(where), std::move(hint)};
