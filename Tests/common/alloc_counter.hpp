@@ -4,7 +4,9 @@
 // dm::test::tCountAllocations flag is set.
 //
 // Include it in exactly ONE source file of a test executable: replacement
-// operators are not inline and must be defined once per program.
+// operators are not inline and must be defined once per program. Other files
+// of the same executable that only read the counter define
+// DM_ALLOC_COUNTER_DECLARE_ONLY before including it.
 //
 // @code
 //   dm::test::tCountAllocations = true;
@@ -16,6 +18,7 @@
 #pragma once
 
 #include <atomic>
+#include <cstddef>
 #include <cstdint>
 #include <cstdlib>
 #include <new>
@@ -40,6 +43,7 @@ inline void* countedAlloc(std::size_t n, std::size_t align) {
 
 }  // namespace dm::test
 
+#ifndef DM_ALLOC_COUNTER_DECLARE_ONLY
 void* operator new(std::size_t n) { return dm::test::countedAlloc(n, alignof(std::max_align_t)); }
 void* operator new[](std::size_t n) { return dm::test::countedAlloc(n, alignof(std::max_align_t)); }
 void* operator new(std::size_t n, std::align_val_t a) {
@@ -56,3 +60,4 @@ void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
 void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
 void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+#endif  // DM_ALLOC_COUNTER_DECLARE_ONLY

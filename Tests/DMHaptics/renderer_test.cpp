@@ -1,0 +1,59 @@
+// HapticMaterial validation: every bad field is refused by name.
+//
+// This file also defines the allocation-counting operators for the whole
+// DMHaptics_tests executable; the real-time tests of the other files include
+// alloc_counter.hpp with DM_ALLOC_COUNTER_DECLARE_ONLY.
+#include "../common/alloc_counter.hpp"
+
+#include <dm/haptics/renderer.hpp>
+
+#include <gtest/gtest.h>
+
+#include <limits>
+
+namespace dm {
+namespace {
+
+TEST(HapticMaterial, DefaultsAndSensibleValuesAreValid) {
+  EXPECT_TRUE(HapticMaterial{}.validate("m").ok());
+  EXPECT_TRUE((HapticMaterial{.stiffness = 500, .damping = 1, .staticFriction = 0.5, .dynamicFriction = 0.3})
+                  .validate("m")
+                  .ok());
+}
+
+TEST(HapticMaterial, BadFieldsAreNamed) {
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  struct Case {
+    HapticMaterial m;
+    const char* field;
+  };
+  const Case cases[] = {
+      {{.stiffness = 0}, "stiffness"},
+      {{.stiffness = nan}, "stiffness"},
+      {{.damping = -1}, "damping"},
+      {{.staticFriction = -0.1}, "staticFriction"},
+      {{.staticFriction = 0.2, .dynamicFriction = 0.3}, "dynamicFriction"},
+      {{.dynamicFriction = nan}, "dynamicFriction"},
+  };
+  for (const Case& c : cases) {
+    const Status s = c.m.validate("scene.json:/objects/0/material");
+    ASSERT_FALSE(s.ok()) << c.field;
+    EXPECT_EQ(s.error().code, ErrorCode::InvalidArgument);
+    EXPECT_NE(s.error().where.find(c.field), std::string::npos) << s.error().where;
+    EXPECT_NE(s.error().where.find("scene.json:/objects/0/material"), std::string::npos);
+  }
+}
+
+TEST(AllocCounter, CountsAllocationsOnFlaggedThreadsOnly) {
+  const auto before = test::countedAllocations();
+  test::tCountAllocations = true;
+  auto* p = new int(3);
+  test::tCountAllocations = false;
+  delete p;
+  auto* q = new int(4);  // not counted
+  delete q;
+  EXPECT_EQ(test::countedAllocations(), before + 1);
+}
+
+}  // namespace
+}  // namespace dm
