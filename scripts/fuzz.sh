@@ -9,6 +9,7 @@ seconds="${1:-30}"
 bash scripts/setup.sh
 builddir=build-fuzz
 CC=clang CXX=clang++ cmake -S . -B "$builddir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDM_FUZZ=ON \
+  "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG" "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O2 -g1 -DNDEBUG" \
   -DDM_BUILD_TESTS=OFF -DDM_BUILD_BENCH=OFF -DDM_BUILD_EXAMPLES=OFF >/dev/null
 mapfile -t targets < <(cmake --build "$builddir" --target help | sed -n 's/^\([a-z0-9_]*_fuzz\):.*/\1/p')
 if [ ${#targets[@]} -eq 0 ]; then echo "fuzz: no targets"; exit 0; fi
