@@ -1,0 +1,512 @@
+// 6-DOF constraint-based sphere-tree haptic rendering (Wang et al.); see
+// dm/haptics/sphere_tree_6dof.hpp for the method.
+//
+// Per tick:
+//  1. step = motion bound (translation + rotation × reach of the tool
+//     spheres) of the handle since the last tick + the objects' motion +
+//     marginEpsilon, at most maxStep; margin = step + marginEpsilon;
+//  2. candidate pairs (tool sphere on the chosen level, environment leaf)
+//     with gap < margin at the previous graphic pose, by simultaneous descent
+//     of the tool tree (with bounds recomputed for the chosen level) and each
+//     object's tree; a max-heap on the gap keeps the maxConstraints deepest;
+//  3. up to `linearizations` times: linearise the constraints at the current
+//     base pose, solve the QP by projected Gauss–Seidel on the dual, clamp the
+//     motion so the total stays within the margin, and sweep every candidate
+//     pair along the straight motion; at the first time of impact the base
+//     pose stops there and the next linearisation starts from the contact;
+//  4. force and torque K (q_g − q_h), material damping while touching.
+#include <dm/haptics/sphere_tree_6dof.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <limits>
+#include <utility>
+
+namespace dm {
+
+namespace {
+
+using NodeId = SphereHierarchy::NodeId;
+constexpr int kStackSize = 512;           // each pop pushes ≤ 8; descents are ≤ 11 + 11 levels deep
+constexpr double kTouchTolerance = 1e-9;  // m: pairs closer than this count as touching in the sweep
+
+// Rotation vector (axis · angle, rad) of a unit quaternion.
+Vec3 logRotation(const Quat& qIn) noexcept {
+  Quat q = qIn;
+  if (q.w() < 0) q.coeffs() = -q.coeffs();
+  const Vec3 v = q.vec();
+  const double s = v.norm();
+  if (s < 1e-300) return 2.0 * v;
+  return v * (2.0 * std::atan2(s, q.w()) / s);
+}
+
+// Unit quaternion of a rotation vector.
+Quat expRotation(const Vec3& w) noexcept {
+  const double a = w.norm();
+  if (a < 1e-300) return Quat::Identity();
+  return Quat(AngleAxis(a, w / a));
+}
+
+bool finitePose(const Isometry3& p) noexcept { return p.matrix().allFinite(); }
+
+// Stored trees: direct node reads.
+struct StoredEnv {
+  const SphereTreeNode* nodes;
+  BoundingSphere bound(NodeId n) const noexcept { return {nodes[n].center, nodes[n].boundRadius}; }
+  int children(NodeId n, NodeId out[8]) const noexcept {
+    const SphereTreeNode& x = nodes[n];
+    for (int i = 0; i < x.childCount; ++i) out[i] = x.firstChild + static_cast<NodeId>(i);
+    return x.childCount;
+  }
+  NodeId root() const noexcept { return 0; }
+};
+
+// Any hierarchy (implicit voxel trees): through the virtual interface.
+struct GenericEnv {
+  const SphereHierarchy* tree;
+  BoundingSphere bound(NodeId n) const noexcept { return tree->bound(n); }
+  int children(NodeId n, NodeId out[8]) const noexcept { return tree->children(n, out); }
+  NodeId root() const noexcept { return tree->root(); }
+};
+
+}  // namespace
+
+struct SphereTree6DofRenderer::State {
+  // ---- model (read-only after create) ----
+  std::shared_ptr<const SphereTree> tool;
+  SphereTree6DofOptions opt;
+  int level = 0;
+  std::uint32_t levelBegin = 0, levelEnd = 0;  // node range of the used level
+  // Nodes [0, levelEnd): centre (tool frame), radius for the descent (the
+  // used level: the sphere; above: a bound of the used level's spheres below).
+  std::vector<Vec3> toolCenter;
+  std::vector<double> toolBound;
+  double toolReach = 0.0;  // max |centre| of the used level's spheres
+  double toolMaxRadius = 0.0;
+  double envMaxLeafRadius = 0.0;
+  double mass = 1.0, inertia = 1.0;
+  Vec3 kLin = Vec3::Zero(), kAng = Vec3::Zero();
+
+  struct Object {
+    std::shared_ptr<const SphereHierarchy> tree;
+    const SphereTree* stored = nullptr;
+    Isometry3 pose = Isometry3::Identity();
+    HapticMaterial material;
+    double reach = 0.0;  // max distance of a leaf point from the local origin
+    double moved = 0.0;  // motion bound since the last tick, m
+  };
+  std::vector<Object> objects;
+
+  // ---- per-tick state (preallocated) ----
+  struct Pair {
+    double gap = 0.0;  // at collection; heap key
+    std::uint32_t toolNode = 0;
+    std::uint32_t object = 0;
+    Vec3 envCenter = Vec3::Zero();  // world
+    double envRadius = 0.0;
+  };
+  std::vector<Pair> pairs;  // capacity maxConstraints
+  std::size_t pairCount = 0;
+  std::size_t candidates = 0;
+  // Smallest gap of a candidate dropped by the truncation: no tool sphere may
+  // move farther than this in the tick, or it could hit a pair not solved for.
+  double minDropped = std::numeric_limits<double>::infinity();
+  // Constraint rows of one linearisation.
+  std::vector<Vec3> rowN, rowRxN;
+  std::vector<double> rowD, rowLambda, rowInvA;
+
+  Vec3 pg = Vec3::Zero();  // graphic tool
+  Quat qg = Quat::Identity();
+  Vec3 lastHandleP = Vec3::Zero();  // handle at the previous tick
+  Quat lastHandleQ = Quat::Identity();
+
+  // ---------------------------------------------------------------------
+  void addCandidate(double gap, std::uint32_t toolNode, std::uint32_t object, const Vec3& envCenterWorld,
+                    double envRadius) noexcept {
+    ++candidates;
+    const auto less = [](const Pair& a, const Pair& b) { return a.gap < b.gap; };
+    const Pair p{gap, toolNode, object, envCenterWorld, envRadius};
+    if (pairCount < pairs.size()) {
+      pairs[pairCount++] = p;
+      std::push_heap(pairs.begin(), pairs.begin() + static_cast<std::ptrdiff_t>(pairCount), less);
+    } else if (gap < pairs.front().gap) {
+      minDropped = std::min(minDropped, pairs.front().gap);
+      std::pop_heap(pairs.begin(), pairs.end(), less);
+      pairs.back() = p;
+      std::push_heap(pairs.begin(), pairs.end(), less);
+    } else {
+      minDropped = std::min(minDropped, gap);
+    }
+  }
+
+  // Pairs of object `k` within `margin` of the tool at (p, q).
+  template <class Env>
+  void collect(const Env& env, std::uint32_t k, const Vec3& p, const Quat& q, double margin) noexcept {
+    const Object& o = objects[k];
+    // Tool frame → object frame.
+    const Mat3 rObj = o.pose.linear();
+    const Mat3 rot = rObj.transpose() * q.toRotationMatrix();
+    const Vec3 tr = rObj.transpose() * (p - o.pose.translation());
+    struct Entry {
+      std::uint32_t t;
+      NodeId e;
+    };
+    std::array<Entry, kStackSize> stack;
+    int top = 0;
+    stack[top++] = {0, env.root()};
+    while (top > 0) {
+      const Entry en = stack[--top];
+      const Vec3 ct = rot * toolCenter[en.t] + tr;
+      const double rt = toolBound[en.t];
+      const BoundingSphere be = env.bound(en.e);
+      const double gap = (ct - be.center).norm() - rt - be.radius;
+      if (gap > margin) continue;
+      const bool toolLeaf = en.t >= levelBegin;
+      NodeId kids[8];
+      const int nk = env.children(en.e, kids);
+      if (toolLeaf && nk == 0) {
+        addCandidate(gap, en.t, k, o.pose * be.center, be.radius);
+        continue;
+      }
+      const bool splitTool = nk == 0 || (!toolLeaf && rt >= be.radius);
+      if (splitTool) {
+        const SphereTreeNode& n = tool->nodes()[en.t];
+        for (int i = 0; i < n.childCount && top < kStackSize; ++i)
+          stack[top++] = {n.firstChild + static_cast<std::uint32_t>(i), en.e};
+      } else {
+        for (int i = 0; i < nk && top < kStackSize; ++i) stack[top++] = {en.t, kids[i]};
+      }
+    }
+  }
+
+  void collectAll(double margin) noexcept {
+    pairCount = 0;
+    candidates = 0;
+    minDropped = std::numeric_limits<double>::infinity();
+    for (std::uint32_t k = 0; k < objects.size(); ++k) {
+      if (objects[k].stored)
+        collect(StoredEnv{objects[k].stored->nodes().data()}, k, pg, qg, margin);
+      else
+        collect(GenericEnv{objects[k].tree.get()}, k, pg, qg, margin);
+    }
+    // Deepest first: Gauss–Seidel resolves the worst overlaps first.
+    std::sort_heap(pairs.begin(), pairs.begin() + static_cast<std::ptrdiff_t>(pairCount),
+                   [](const Pair& a, const Pair& b) { return a.gap < b.gap; });
+  }
+
+  // Centre (world) and lever of a tool sphere at pose (p, R).
+  Vec3 lever(std::uint32_t node, const Mat3& r) const noexcept { return r * toolCenter[node]; }
+
+  // Linearises every pair at (p, R) into the constraint rows.
+  void linearize(const Vec3& p, const Mat3& r) noexcept {
+    for (std::size_t i = 0; i < pairCount; ++i) {
+      const Pair& pr = pairs[i];
+      const Vec3 lv = lever(pr.toolNode, r);
+      const Vec3 diff = p + lv - pr.envCenter;
+      const double dist = diff.norm();
+      // Coincident centres: push along the lever (away from the tool origin), else up.
+      Vec3 n = dist > 1e-12 ? Vec3(diff / dist) : (lv.norm() > 1e-12 ? Vec3(lv.normalized()) : Vec3::UnitZ());
+      rowN[i] = n;
+      rowRxN[i] = lv.cross(n);
+      rowD[i] = dist - toolBound[pr.toolNode] - pr.envRadius;
+      rowLambda[i] = 0.0;
+      rowInvA[i] = 1.0 / (1.0 / mass + rowRxN[i].squaredNorm() / inertia);
+    }
+  }
+
+  // Projected Gauss–Seidel on the dual of
+  //   min ½(Δ − Δh)ᵀ M (Δ − Δh)  s.t.  n·Δx + (r × n)·Δθ + d ≥ 0.
+  // Returns the number of rows with λ > 0.
+  int solve(Vec3& dx, Vec3& dth) noexcept {
+    const double invM = 1.0 / mass, invI = 1.0 / inertia;
+    double* lambda = rowLambda.data();
+    for (int sweep = 0; sweep < opt.solverIterations; ++sweep) {
+      double change = 0.0;
+      for (std::size_t i = 0; i < pairCount; ++i) {
+        const double res = rowN[i].dot(dx) + rowRxN[i].dot(dth) + rowD[i];
+        const double next = std::max(0.0, lambda[i] - res * rowInvA[i]);
+        const double dl = next - lambda[i];
+        if (dl == 0.0) continue;
+        lambda[i] = next;
+        dx += (dl * invM) * rowN[i];
+        dth += (dl * invI) * rowRxN[i];
+        change = std::max(change, std::abs(dl) / rowInvA[i]);  // m moved along the row
+      }
+      if (change < 1e-12) break;
+    }
+    int active = 0;
+    for (std::size_t i = 0; i < pairCount; ++i) active += lambda[i] > 0.0 ? 1 : 0;
+    return active;
+  }
+
+  // Earliest time t ∈ [0, 1] at which a candidate tool sphere, moving on the
+  // straight chord between its centres at (p0, r0) and (p1, r1), touches its
+  // environment sphere; 2 when none does. Pairs already overlapping at t = 0
+  // are being pushed out and are not swept.
+  double sweep(const Vec3& p0, const Mat3& r0, const Vec3& p1, const Mat3& r1) const noexcept {
+    double tFirst = 2.0;
+    for (std::size_t i = 0; i < pairCount; ++i) {
+      const Pair& pr = pairs[i];
+      const Vec3 c0 = p0 + lever(pr.toolNode, r0);
+      const Vec3 c1 = p1 + lever(pr.toolNode, r1);
+      const double rr = toolBound[pr.toolNode] + pr.envRadius - kTouchTolerance;
+      const Vec3 m = c0 - pr.envCenter;
+      const double cq = m.squaredNorm() - rr * rr;
+      if (cq <= 0.0) continue;
+      const Vec3 v = c1 - c0;
+      const double a = v.squaredNorm();
+      if (a < 1e-300) continue;
+      const double b = m.dot(v);
+      if (b >= 0.0) continue;  // moving away
+      const double disc = b * b - a * cq;
+      if (disc < 0.0) continue;
+      const double t = cq / (-b + std::sqrt(disc));  // smaller root, stable form
+      if (t <= 1.0) tFirst = std::min(tFirst, t);
+    }
+    return tFirst;
+  }
+
+  double motionBound(const Vec3& dx, const Vec3& dth) const noexcept {
+    return dx.norm() + dth.norm() * toolReach;
+  }
+};
+
+SphereTree6DofRenderer::SphereTree6DofRenderer(std::unique_ptr<State> state) noexcept
+    : s_(std::move(state)) {}
+SphereTree6DofRenderer::~SphereTree6DofRenderer() = default;
+
+Result<std::unique_ptr<SphereTree6DofRenderer>> SphereTree6DofRenderer::create(
+    std::shared_ptr<const SphereTree> tool, std::vector<SphereTreeObject> objects,
+    const SphereTree6DofOptions& options) {
+  const auto bad = [](std::string what, std::string where, std::string hint) -> Error {
+    return fail(ErrorCode::InvalidArgument, std::move(what), std::move(where), std::move(hint));
+  };
+  const auto finite = [](double x) { return std::isfinite(x); };
+  const SphereTree6DofOptions& o = options;
+  if (!tool) return bad("the tool sphere tree is null", "tool", "build it with dm::buildSphereTreeFitted()");
+  if (o.toolLevel < 0 || o.toolLevel >= tool->levelCount())
+    return bad(formatString("toolLevel is %d but the tool tree has %d levels (0..%d)", o.toolLevel,
+                            tool->levelCount(), tool->levelCount() - 1),
+               "options.toolLevel", "use a smaller level or build the tool tree with more levels");
+  if (!finite(o.mass) || o.mass <= 0)
+    return bad(formatString("mass is %g kg; it must be finite and > 0", o.mass), "options.mass", "");
+  if (!finite(o.inertia) || o.inertia < 0)
+    return bad(formatString("inertia is %g kg*m^2; it must be finite and >= 0 (0 = automatic)", o.inertia),
+               "options.inertia", "");
+  if (!o.linearStiffness.allFinite() || (o.linearStiffness.array() <= 0).any())
+    return bad("linearStiffness has a component that is not finite and > 0 N/m", "options.linearStiffness",
+               "");
+  if (!o.angularStiffness.allFinite() || (o.angularStiffness.array() < 0).any())
+    return bad("angularStiffness has a component that is not finite and >= 0 N*m/rad",
+               "options.angularStiffness", "all three 0 selects K proportional to M");
+  if (o.maxConstraints < 1 || o.maxConstraints > 65536)
+    return bad(formatString("maxConstraints is %d; it must be in 1..65536", o.maxConstraints),
+               "options.maxConstraints", "");
+  if (o.solverIterations < 1 || o.solverIterations > 10000)
+    return bad(formatString("solverIterations is %d; it must be in 1..10000", o.solverIterations),
+               "options.solverIterations", "");
+  if (o.linearizations < 1 || o.linearizations > 16)
+    return bad(formatString("linearizations is %d; it must be in 1..16", o.linearizations),
+               "options.linearizations", "");
+  if (!finite(o.marginEpsilon) || o.marginEpsilon < 0)
+    return bad(formatString("marginEpsilon is %g m; it must be finite and >= 0", o.marginEpsilon),
+               "options.marginEpsilon", "");
+  if (!finite(o.maxStep) || o.maxStep <= 0)
+    return bad(formatString("maxStep is %g m; it must be finite and > 0", o.maxStep), "options.maxStep", "");
+
+  auto s = std::make_unique<State>();
+  s->opt = o;
+  s->level = o.toolLevel;
+  const std::vector<SphereTreeNode>& nodes = tool->nodes();
+  const std::span<const SphereTreeNode> lv = tool->level(o.toolLevel);
+  s->levelBegin = static_cast<std::uint32_t>(lv.data() - nodes.data());
+  s->levelEnd = s->levelBegin + static_cast<std::uint32_t>(lv.size());
+  s->toolCenter.resize(s->levelEnd);
+  s->toolBound.resize(s->levelEnd);
+  for (std::uint32_t i = s->levelEnd; i-- > 0;) {
+    const SphereTreeNode& n = nodes[i];
+    s->toolCenter[i] = n.center;
+    if (i >= s->levelBegin) {
+      s->toolBound[i] = n.radius;
+      s->toolReach = std::max(s->toolReach, n.center.norm());
+      s->toolMaxRadius = std::max(s->toolMaxRadius, n.radius);
+      continue;
+    }
+    // Bound of the used level's spheres below (children come later in the array).
+    double b = 0.0;
+    for (std::uint32_t c = n.firstChild; c < n.firstChild + n.childCount; ++c)
+      b = std::max(b, (nodes[c].center - n.center).norm() + s->toolBound[c]);
+    s->toolBound[i] = b;
+  }
+  s->tool = std::move(tool);
+  s->mass = o.mass;
+  const double rootR = s->tool->nodes()[0].radius;
+  s->inertia = o.inertia > 0 ? o.inertia : 0.4 * o.mass * std::max(rootR * rootR, 1e-12);
+  s->kLin = o.linearStiffness;
+  s->kAng =
+      o.angularStiffness.isZero() ? Vec3(o.linearStiffness * (s->inertia / s->mass)) : o.angularStiffness;
+
+  s->objects.reserve(objects.size());
+  for (std::size_t k = 0; k < objects.size(); ++k) {
+    SphereTreeObject& src = objects[k];
+    const std::string where =
+        formatString("objects[%zu]", k) + (src.name.empty() ? "" : " (" + src.name + ")");
+    if (!src.tree)
+      return bad("the object's sphere tree is null", where + ".tree", "give every object a tree");
+    if (!finitePose(src.pose)) return bad("the object's pose is not finite", where + ".pose", "");
+    if (Status st = src.material.validate(where + ".material"); !st.ok()) return st.error();
+    State::Object ob;
+    ob.stored = dynamic_cast<const SphereTree*>(src.tree.get());
+    const BoundingSphere root = src.tree->bound(src.tree->root());
+    ob.reach = root.center.norm() + root.radius;
+    if (ob.stored) {
+      for (const SphereTreeNode& n : ob.stored->level(ob.stored->levelCount() - 1))
+        s->envMaxLeafRadius = std::max(s->envMaxLeafRadius, n.radius);
+    } else {
+      const std::vector<SphereTreeLevelStats> st = src.tree->levelStats();
+      if (!st.empty()) s->envMaxLeafRadius = std::max(s->envMaxLeafRadius, st.back().maxRadius);
+    }
+    ob.tree = std::move(src.tree);
+    ob.pose = src.pose;
+    ob.material = src.material;
+    s->objects.push_back(std::move(ob));
+  }
+  const auto m = static_cast<std::size_t>(o.maxConstraints);
+  s->pairs.resize(m);
+  s->rowN.resize(m);
+  s->rowRxN.resize(m);
+  s->rowD.resize(m);
+  s->rowLambda.resize(m);
+  s->rowInvA.resize(m);
+  return std::unique_ptr<SphereTree6DofRenderer>(new SphereTree6DofRenderer(std::move(s)));
+}
+
+void SphereTree6DofRenderer::reset(const Isometry3& devicePose) noexcept {
+  if (!finitePose(devicePose)) return;
+  s_->pg = devicePose.translation();
+  s_->qg = Quat(devicePose.linear()).normalized();
+  s_->lastHandleP = s_->pg;
+  s_->lastHandleQ = s_->qg;
+  s_->pairCount = 0;
+  s_->candidates = 0;
+  for (State::Object& o : s_->objects) o.moved = 0.0;
+}
+
+HapticResponse SphereTree6DofRenderer::tick(const HapticInput& input) noexcept {
+  State& s = *s_;
+  HapticResponse out;
+  const Isometry3& hp = input.devicePose;
+  if (!finitePose(hp) || !std::isfinite(input.dt) || input.dt <= 0 || !input.linearVelocity.allFinite() ||
+      !input.angularVelocity.allFinite()) {
+    out.proxyPose = graphicPose();
+    return out;
+  }
+  const Vec3 ph = hp.translation();
+  const Quat qh = Quat(hp.linear()).normalized();
+
+  // 1. Margin: how far the tool may move this tick. The handle's own motion
+  // (the tool tracks it), the objects' motion (they push the tool) and
+  // marginEpsilon (catching up with a handle that drew ahead, e.g. off an
+  // edge); never more than maxStep.
+  const double handleMoved = s.motionBound(ph - s.lastHandleP, logRotation(qh * s.lastHandleQ.conjugate()));
+  s.lastHandleP = ph;
+  s.lastHandleQ = qh;
+  double objectMotion = 0.0;
+  for (State::Object& o : s.objects) {
+    objectMotion = std::max(objectMotion, o.moved);
+    o.moved = 0.0;
+  }
+  double step = std::min(handleMoved + objectMotion + s.opt.marginEpsilon, s.opt.maxStep);
+  // 2. Candidates.
+  s.collectAll(step + s.opt.marginEpsilon);
+  // Truncated: stay clear of the dropped pairs (a speed limit only while
+  // more than maxConstraints pairs are near). When even dropped pairs overlap
+  // (a tool reset deep inside), no clearance exists: resolve the deepest.
+  if (s.minDropped > kTouchTolerance) step = std::min(step, s.minDropped - kTouchTolerance);
+
+  // 3. Linearise, solve, clamp, sweep.
+  Vec3 p = s.pg;
+  Quat q = s.qg;
+  double travelled = 0.0;
+  for (int it = 0; it < s.opt.linearizations; ++it) {
+    const Mat3 r0 = q.toRotationMatrix();
+    s.linearize(p, r0);
+    Vec3 dx = ph - p;
+    Vec3 dth = logRotation(qh * q.conjugate());
+    s.solve(dx, dth);
+    const double allowed = std::max(0.0, step - travelled);
+    const double mb = s.motionBound(dx, dth);
+    if (mb > allowed) {
+      const double f = mb > 0 ? allowed / mb : 0.0;
+      dx *= f;
+      dth *= f;
+    }
+    Vec3 p1 = p + dx;
+    Quat q1 = (expRotation(dth) * q).normalized();
+    const double tHit = s.sweep(p, r0, p1, q1.toRotationMatrix());
+    if (tHit <= 1.0) {
+      dx *= tHit;
+      dth *= tHit;
+      p1 = p + dx;
+      q1 = (expRotation(dth) * q).normalized();
+    }
+    travelled += s.motionBound(dx, dth);
+    p = p1;
+    q = q1;
+    if (s.motionBound(dx, dth) < 1e-12) break;
+  }
+  if (!p.allFinite() || !q.coeffs().allFinite()) {  // defensive: never hand out a NaN pose or force
+    out.proxyPose = graphicPose();
+    return out;
+  }
+  s.pg = p;
+  s.qg = q;
+
+  // 4. Contacts at the final pose, force, torque, damping.
+  const Mat3 rg = q.toRotationMatrix();
+  double damping = 0.0;
+  int touching = 0;
+  for (std::size_t i = 0; i < s.pairCount; ++i) {
+    const State::Pair& pr = s.pairs[i];
+    const double gap =
+        (p + s.lever(pr.toolNode, rg) - pr.envCenter).norm() - s.toolBound[pr.toolNode] - pr.envRadius;
+    if (gap > s.opt.marginEpsilon) continue;
+    ++touching;
+    damping = std::max(damping, s.objects[pr.object].material.damping);
+  }
+  out.force = s.kLin.cwiseProduct(p - ph);
+  out.torque = s.kAng.cwiseProduct(logRotation(q * qh.conjugate()));
+  if (touching > 0) {
+    out.force -= damping * input.linearVelocity;
+    out.penetration = (p - ph).norm();
+  }
+  out.contacts = touching;
+  out.proxyPose = graphicPose();
+  return out;
+}
+
+std::size_t SphereTree6DofRenderer::objectCount() const noexcept { return s_->objects.size(); }
+
+void SphereTree6DofRenderer::setObjectPose(std::size_t index, const Isometry3& pose) noexcept {
+  if (index >= s_->objects.size() || !finitePose(pose)) return;
+  State::Object& o = s_->objects[index];
+  const Quat dq = Quat(pose.linear() * o.pose.linear().transpose());
+  o.moved += (pose.translation() - o.pose.translation()).norm() + logRotation(dq).norm() * o.reach;
+  o.pose = pose;
+}
+
+Isometry3 SphereTree6DofRenderer::graphicPose() const noexcept {
+  Isometry3 pose = Isometry3::Identity();
+  pose.linear() = s_->qg.toRotationMatrix();
+  pose.translation() = s_->pg;
+  return pose;
+}
+
+int SphereTree6DofRenderer::toolLevel() const noexcept { return s_->level; }
+std::size_t SphereTree6DofRenderer::toolSphereCount() const noexcept { return s_->levelEnd - s_->levelBegin; }
+double SphereTree6DofRenderer::toolSphereMaxRadius() const noexcept { return s_->toolMaxRadius; }
+double SphereTree6DofRenderer::environmentLeafMaxRadius() const noexcept { return s_->envMaxLeafRadius; }
+std::size_t SphereTree6DofRenderer::lastCandidateCount() const noexcept { return s_->candidates; }
+
+}  // namespace dm
