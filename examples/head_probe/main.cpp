@@ -1,28 +1,37 @@
-// head_probe — the main job until the master engine (DMEngine) exists.
+// head_probe — the main job until `dmplatform run` exists: the Colin27 head
+// probed through the god-object.
 //
 // Loads the Colin27 MRI head (mricron-data) through the resource manager,
 // extracts the skin isosurface, checks it is a closed manifold placed where
-// the scan says, then runs a 1 kHz haptic-style loop in which a simulated
-// stylus tip (a mass-spring-damper "hand" following a scripted circle that
-// cuts through the scalp) is pushed back by a penalty force computed from the
-// volume's gradient field. The loop hands its state to this thread through a
-// triple buffer and its force samples through an SPSC ring, exactly as the
-// haptics and render loops will. Writes forces.csv and summary.json.
-//
-// The force model here is a volume penalty (depth from the first-order
-// distance (v - iso) / |grad v|); the god-object of DMHaptics replaces it.
+// the scan says, and builds its BVH. A simulated haptic device ("sim-haptic"
+// with a virtual hand: a mass-spring-damper pulled along a 15 mm circle
+// commanded 4 mm under the scalp, and pushed by the rendered force) is
+// driven by the haptic loop (dm::HapticLoop: device servo, god-object with
+// friction and force shading, safety) at 1 kHz; a 30 Hz monitor engine reads
+// the loop's latest sample and drains its force trace. Both are engines of a
+// dm::MasterEngine, on real-time threads or in lockstep on a virtual clock.
+// Writes forces.csv (dm::formatProbeCsv columns), forces.png and summary.json.
 //
 //   head_probe [--volume NAME] [--iso V] [--seconds S] [--lockstep] [--out DIR]
+#include <dm/collide/bvh.hpp>
 #include <dm/core/filesystem.hpp>
 #include <dm/core/log.hpp>
+#include <dm/core/plugin.hpp>
 #include <dm/core/resource.hpp>
 #include <dm/core/ring.hpp>
 #include <dm/core/rt_loop.hpp>
 #include <dm/core/triple_buffer.hpp>
 #include <dm/core/units.hpp>
 #include <dm/core/volume.hpp>
+#include <dm/engine/master_engine.hpp>
+#include <dm/haptics/force_plot.hpp>
+#include <dm/haptics/god_object.hpp>
+#include <dm/haptics/haptic_loop.hpp>
+#include <dm/haptics/probe.hpp>
+#include <dm/io/drivers.hpp>
+#include <dm/io/haptic_device.hpp>
+#include <dm/io/image_io.hpp>
 #include <dm/io/volume_io.hpp>
-#include <dm/math/integrators.hpp>
 #include <dm/math/isosurface.hpp>
 #include <dm/math/mesh_topology.hpp>
 #include <dm/math/pca.hpp>
@@ -85,50 +94,9 @@ bool parseArgs(int argc, char** argv, Args& a) {
   return true;
 }
 
-/// What the haptic loop publishes each tick (through the triple buffer).
-struct ProbeState {
-  std::uint64_t tick = 0;
-  dm::Vec3 tip = dm::Vec3::Zero();
-  dm::Vec3 force = dm::Vec3::Zero();
-  double depth = 0;
-};
-
-/// One force sample for the trace (through the SPSC ring).
-struct Sample {
-  double t;
-  float tip[3];
-  float force[3];
-  float depth;
-};
-
-/// Penalty force of the volume at `x`: zero outside (value <= iso), else
-/// stiffness · depth along the outward normal, with depth from the
-/// first-order distance (v - iso)/|∇v|. Clamped to `maxForce`, NaN-guarded.
-dm::Vec3 volumeForce(const dm::Volume& vol, double iso, const dm::Vec3& x, const dm::Vec3& vel,
-                     double& depth) {
-  constexpr double kStiffness = 800.0;  // N/m, soft tissue (DESIGN.md's example material)
-  constexpr double kDamping = 2.0;      // N·s/m
-  constexpr double kMaxForce = 3.0;     // N, a typical desktop device's continuous limit
-  depth = 0;
-  const double v = vol.sampleWorld(x);
-  if (!(v > iso)) return dm::Vec3::Zero();
-  const double h = 0.5 * vol.spacing().minCoeff();
-  dm::Vec3 g;
-  for (int a = 0; a < 3; ++a) {
-    dm::Vec3 d = dm::Vec3::Zero();
-    d[a] = h;
-    g[a] = (vol.sampleWorld(x + d) - vol.sampleWorld(x - d)) / (2 * h);
-  }
-  const double gn = g.norm();
-  if (!(gn > 1e-9)) return dm::Vec3::Zero();
-  const dm::Vec3 n = -g / gn;  // outward: values fall toward the outside
-  depth = (v - iso) / gn;
-  const double vn = vel.dot(n);
-  dm::Vec3 f = (kStiffness * depth - kDamping * std::min(vn, 0.0)) * n;
-  const double fn = f.norm();
-  if (!std::isfinite(fn)) return dm::Vec3::Zero();
-  if (fn > kMaxForce) f *= kMaxForce / fn;
-  return f;
+int fail(const dm::Error& e) {
+  std::fprintf(stderr, "head_probe: %s\n", e.message().c_str());
+  return 1;
 }
 
 }  // namespace
@@ -204,130 +172,157 @@ int main(int argc, char** argv) {
   std::printf("  principal extents (1 sd) %.0f, %.0f, %.0f mm around centre (%.1f, %.1f, %.1f) mm\n", sd.x(),
               sd.y(), sd.z(), centre.x() * 1e3, centre.y() * 1e3, centre.z() * 1e3);
 
-  // 3. The probe: the scripted hand target slides on a 15 mm circle over the
-  // scalp at the head's +x side, commanded 3 mm below the skin, so the tip
-  // rests on the surface where the penalty force balances the hand's pull.
-  // (A penalty force on intensities cannot stop a tip pushed hard through
-  // the thin scalp — T1 bone is dark — which is what DMHaptics' god-object
-  // is for; the gentle hand here stays in the scalp layer.)
+  // 3. The god-object on the skin: soft-tissue stiffness, friction, force shading.
+  const auto t4 = Clock::now();
+  auto bvh = dm::MeshBvh::build(*skin);
+  if (!bvh) return fail(bvh.error());
+  std::vector<dm::GodObjectObject> objects(1);
+  objects[0].bvh = std::make_shared<const dm::MeshBvh>(std::move(*bvh));
+  objects[0].material = {.stiffness = 800.0, .damping = 0.5, .staticFriction = 0.3, .dynamicFriction = 0.2};
+  auto renderer = dm::GodObjectRenderer::create(std::move(objects), {.forceShading = true, .maxForce = 3.0});
+  if (!renderer) return fail(renderer.error());
+  std::printf(
+      "god-object: BVH over %zu triangles in %.0f ms; k = 800 N/m, mu_s 0.3, mu_d 0.2, force shading\n",
+      skin->triangleCount(), ms(t4, Clock::now()));
+
+  // 4. The device: sim-haptic with a virtual hand. Its circle lies in the
+  // device's xy plane; deviceToWorld turns device (x, y, z) into world
+  // (y, z, x) and puts the device origin on the scalp at the head's +x side,
+  // so the circle slides over the skin and device z = -4 mm is under it.
   double skinX = centre.x();
   for (double x = centre.x(); x < box.max().x() + 0.01; x += 0.0005)
     if (vol->sampleWorld({x, centre.y(), centre.z()}) > args.iso) skinX = x;
   const dm::Vec3 contactPoint(skinX, centre.y(), centre.z());
-  constexpr double kCircle = 0.015, kCommandDepth = 0.003, kCircleHz = 0.5;
+  constexpr double kCircle = 0.015, kCommandDepth = 0.004;
+  dm::FactoryRegistry registry;
+  dm::PluginLinker linker(registry);
+  if (auto s = dm::registerBuiltinDrivers(linker); !s) return fail(s.error());
+  char centerParam[64];
+  std::snprintf(centerParam, sizeof centerParam, "0,0,%.6f", -kCommandDepth);
+  auto device = dm::HapticDevice::open(registry, "sim-haptic",
+                                       {{"path", "circle"},
+                                        {"center", centerParam},
+                                        {"radius", std::to_string(kCircle)},
+                                        {"period", "2"},
+                                        {"hand", "1"},
+                                        {"hand_mass", "0.1"},
+                                        {"hand_stiffness", "150"},
+                                        {"hand_damping", "4"},
+                                        {"max_force", "3"}});
+  if (!device) return fail(device.error());
+  dm::HapticLoopConfig loopConfig;
+  loopConfig.loop = {.rate_hz = 1000, .name = "haptics"};
+  loopConfig.deviceToWorld.linear() << 0, 0, 1,  // world x = device z
+      1, 0, 0,                                   // world y = device x
+      0, 1, 0;                                   // world z = device y
+  loopConfig.deviceToWorld.translation() = contactPoint;
+  // In lockstep an overrun says how loaded this machine is, not what the
+  // simulation did: count it but keep the output (bit-identical reruns).
+  loopConfig.overrunFades = !args.lockstep;
+  auto hapticLoop = dm::HapticLoop::create({.device = **device, .renderer = **renderer}, loopConfig);
+  if (!hapticLoop) return fail(hapticLoop.error());
   std::printf(
-      "probe: target on a %.0f mm circle at %.1f Hz, %.0f mm below the scalp at (%.1f, %.1f, %.1f) mm; "
-      "1 kHz loop, %s, %.1f s\n",
-      kCircle * 1e3, kCircleHz, kCommandDepth * 1e3, contactPoint.x() * 1e3, contactPoint.y() * 1e3,
+      "probe: hand on a %.0f mm circle, 0.5 Hz, commanded %.0f mm under the scalp at (%.1f, %.1f, %.1f) mm; "
+      "%s, %.1f s\n",
+      kCircle * 1e3, kCommandDepth * 1e3, contactPoint.x() * 1e3, contactPoint.y() * 1e3,
       contactPoint.z() * 1e3, args.lockstep ? "lockstep on a virtual clock" : "real time", args.seconds);
 
-  // Hand model: tip mass pulled toward the target by a spring-damper (the
-  // surgeon's hand), pushed back by the surface; integrated with velocity Verlet.
-  constexpr double kMass = 0.05, kHandK = 60.0, kHandB = 3.0;
-  dm::VecX x(3), v(3);
-  x = contactPoint + dm::Vec3(0.002, kCircle, 0);  // start 2 mm off the skin
-  v.setZero();
-  dm::SecondOrderWorkspace ws;  // sized here so the loop never allocates
-  ws.acc.resize(3);
-  ws.accNext.resize(3);
-  ws.vPred.resize(3);
-  dm::Vec3 contactForce = dm::Vec3::Zero();
-  double depth = 0;
-  dm::TripleBuffer<ProbeState> stateOut;
-  dm::SpscRing<Sample, 8192> trace;
-  std::atomic<std::uint64_t> traceDropped{0};
-
-  const dm::SecondOrderRhs accel = [&](double t, const dm::VecX& px, const dm::VecX& pv, dm::VecX& a) {
-    const double phase = 2 * M_PI * kCircleHz * t;
-    const dm::Vec3 target =
-        contactPoint + dm::Vec3(-kCommandDepth, kCircle * std::cos(phase), kCircle * std::sin(phase));
-    double d = 0;
-    const dm::Vec3 surface = volumeForce(*vol, args.iso, px.head<3>(), pv.head<3>(), d);
-    a = (kHandK * (target - px.head<3>()) - kHandB * pv.head<3>() + surface) / kMass;
-  };
-  auto tick = [&](const dm::TickInfo& info) {
-    const double t = static_cast<double>(info.index) * info.dt();
-    dm::velocityVerletStep(accel, t, info.dt(), x, v, ws);
-    contactForce = volumeForce(*vol, args.iso, x, v, depth);  // what the device would render now
-    ProbeState& s = stateOut.writeBuffer();
-    s.tick = info.index;
-    s.tip = x;
-    s.force = contactForce;
-    s.depth = depth;
-    stateOut.publish();
-    const Sample sample{t,
-                        {float(x[0]), float(x[1]), float(x[2])},
-                        {float(contactForce.x()), float(contactForce.y()), float(contactForce.z())},
-                        float(depth)};
-    if (!trace.tryPush(sample)) traceDropped.fetch_add(1, std::memory_order_relaxed);
-  };
-
-  std::filesystem::create_directories(args.out);
-  std::ofstream csv(args.out / "forces.csv");
-  csv << "t_s,tip_x_m,tip_y_m,tip_z_m,fx_N,fy_N,fz_N,depth_m\n";
-  double maxForce = 0, maxDepth = 0;
-  std::uint64_t contactTicks = 0, samples = 0;
-  auto drain = [&] {
-    Sample s;
-    while (trace.tryPop(s)) {
-      char line[160];
-      std::snprintf(line, sizeof line, "%.3f,%.5f,%.5f,%.5f,%.4f,%.4f,%.4f,%.5f\n", s.t, s.tip[0], s.tip[1],
-                    s.tip[2], s.force[0], s.force[1], s.force[2], s.depth);
-      csv << line;
-      const double f = std::sqrt(double(s.force[0]) * s.force[0] + double(s.force[1]) * s.force[1] +
-                                 double(s.force[2]) * s.force[2]);
-      maxForce = std::max(maxForce, f);
-      maxDepth = std::max(maxDepth, double(s.depth));
-      contactTicks += f > 0;
-      ++samples;
-    }
-  };
-
-  dm::RealTimeLoop loop({.rate_hz = 1000, .name = "haptics"}, tick);
-  const auto n = static_cast<std::uint64_t>(args.seconds * 1000);
+  // 5. Engines: haptics at 1 kHz, the monitor at 30 Hz. The haptic engine
+  // hands every tick's sample to the monitor through an SPSC ring; the
+  // monitor keeps the trace (it may allocate, the haptic thread never does).
+  dm::SpscRing<dm::ProbeSample, 8192> ring;
+  std::atomic<std::uint64_t> dropped{0};
+  std::vector<dm::ProbeSample> trace;
+  trace.reserve(static_cast<std::size_t>(args.seconds * 1000) + 16);
+  dm::HapticLoop& loop = **hapticLoop;
+  auto haptics = dm::makeFunctionEngine("haptics", [&](const dm::TickInfo& info) {
+    loop.tick(info);
+    const dm::HapticLoopSample& s = loop.lastSample();
+    dm::ProbeSample p;
+    p.t = static_cast<double>(info.scheduled_ns) * 1e-9;
+    p.devicePose = s.input.devicePose;
+    p.response = s.response;
+    p.response.force = loop.config().deviceToWorld.linear() * s.deviceForce;  // what was sent, world frame
+    if (!ring.tryPush(p)) dropped.fetch_add(1, std::memory_order_relaxed);
+    return true;
+  });
   std::uint64_t frames = 0;
+  auto drain = [&] {
+    dm::ProbeSample p;
+    while (ring.tryPop(p)) trace.push_back(p);
+  };
+  auto monitor = dm::makeFunctionEngine("monitor", [&](const dm::TickInfo& info) {
+    drain();
+    if (++frames % 30 == 0 && !trace.empty() && !args.lockstep) {
+      const dm::ProbeSample& s = trace.back();
+      const dm::Vec3 tip = s.response.proxyPose.translation();
+      std::printf("  t=%5.2f s  proxy (%6.1f, %6.1f, %6.1f) mm  |F| = %.2f N  depth %.1f mm\n",
+                  static_cast<double>(info.scheduled_ns) * 1e-9, tip.x() * 1e3, tip.y() * 1e3, tip.z() * 1e3,
+                  s.response.force.norm(), s.response.penetration * 1e3);
+    }
+    return true;
+  });
+  dm::MasterEngine master;
+  if (auto s = master.addEngine(haptics, {.rateHz = 1000}); !s) return fail(s.error());
+  if (auto s = master.addEngine(monitor, {.rateHz = 30}); !s) return fail(s.error());
+  if (auto s = master.load(args.volume); !s) return fail(s.error());
+  if (auto s = master.start(args.lockstep ? dm::RunMode::Lockstep : dm::RunMode::RealTime); !s)
+    return fail(s.error());
   if (args.lockstep) {
-    dm::VirtualClock vclock;
-    for (std::uint64_t done = 0; done < n; done += 100) {
-      if (auto s = loop.runLockstep(vclock, std::min<std::uint64_t>(100, n - done)); !s) {
-        std::fprintf(stderr, "head_probe: %s\n", s.error().message().c_str());
-        return 1;
-      }
-      drain();
-    }
+    if (auto s = master.advance(args.seconds); !s) return fail(s.error());
   } else {
-    if (auto s = loop.start(); !s) {
-      std::fprintf(stderr, "head_probe: %s\n", s.error().message().c_str());
-      return 1;
-    }
-    // This thread plays the 30 Hz render/monitor loop: it reads the latest
-    // state without ever blocking the haptic thread.
     const auto end = Clock::now() + std::chrono::duration<double>(args.seconds);
     while (Clock::now() < end) {
-      std::this_thread::sleep_for(std::chrono::milliseconds(33));
-      const ProbeState& s = stateOut.read();
-      ++frames;
-      if (frames % 30 == 0)
-        std::printf("  t=%5.2f s  tip (%6.1f, %6.1f, %6.1f) mm  |F| = %.2f N  depth %.1f mm\n", s.tick * 1e-3,
-                    s.tip.x() * 1e3, s.tip.y() * 1e3, s.tip.z() * 1e3, s.force.norm(), s.depth * 1e3);
-      drain();
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+      if (auto s = master.poll(); !s) return fail(s.error());
     }
-    loop.stop();
   }
+  const std::vector<dm::EngineStats> engineStats = master.stats();
+  if (auto s = master.stop("done"); !s) return fail(s.error());
   drain();
-  const dm::RealTimeLoopStats st = loop.stats();
-  std::printf(
-      "haptic loop: %llu ticks, execution p50 %.1f us, p99 %.1f us, p99.9 %.1f us, max %.1f us; "
-      "wake-up p99 %.0f us; deadline misses %llu\n",
-      static_cast<unsigned long long>(st.ticks), st.execution.p50_us, st.execution.p99_us,
-      st.execution.p999_us, st.execution.max_us, st.wakeup.p99_us,
-      static_cast<unsigned long long>(st.deadline_misses));
-  std::printf(
-      "contact: %llu of %llu ticks in contact, max force %.2f N (device limit 3 N), max depth %.1f mm; "
-      "trace samples dropped %llu\n",
-      static_cast<unsigned long long>(contactTicks), static_cast<unsigned long long>(samples), maxForce,
-      maxDepth * 1e3, static_cast<unsigned long long>(traceDropped.load()));
 
+  double maxForce = 0, maxDepth = 0;
+  std::uint64_t contactTicks = 0;
+  for (const dm::ProbeSample& s : trace) {
+    maxForce = std::max(maxForce, s.response.force.norm());
+    maxDepth = std::max(maxDepth, s.response.penetration);
+    contactTicks += s.response.contacts > 0;
+  }
+  const dm::HapticLoopStats hs = loop.stats();
+  for (const dm::EngineStats& e : engineStats)
+    std::printf(
+        "engine %-8s %llu ticks at %.1f Hz (scheduled %.0f Hz), execution p50 %.1f us, p99 %.1f us, "
+        "p99.9 %.1f us, max %.1f us; deadline misses %llu\n",
+        e.name.c_str(), static_cast<unsigned long long>(e.ticks), e.achievedHz, e.rateHz, e.execution.p50_us,
+        e.execution.p99_us, e.execution.p999_us, e.execution.max_us,
+        static_cast<unsigned long long>(e.deadlineMisses));
+  std::printf(
+      "contact: %llu of %zu ticks in contact, max force %.2f N (limit 3 N), max depth %.1f mm; "
+      "safety faults %llu; trace samples dropped %llu\n",
+      static_cast<unsigned long long>(contactTicks), trace.size(), maxForce, maxDepth * 1e3,
+      static_cast<unsigned long long>(hs.faultTicks), static_cast<unsigned long long>(dropped.load()));
+
+  std::filesystem::create_directories(args.out);
+  const std::string csv = dm::formatProbeCsv(trace);
+  if (auto s = dm::writeFileAtomic(args.out / "forces.csv", csv.data(), csv.size()); !s)
+    return fail(s.error());
+  if (!trace.empty()) {
+    auto plot = dm::plotForceTrace(trace);
+    if (!plot) return fail(plot.error());
+    if (auto s = dm::writePng(*plot, args.out / "forces.png"); !s) return fail(s.error());
+  }
+  nlohmann::json engines = nlohmann::json::array();
+  for (const dm::EngineStats& e : engineStats)
+    engines.push_back({{"name", e.name},
+                       {"rate_hz", e.rateHz},
+                       {"achieved_hz", e.achievedHz},
+                       {"ticks", e.ticks},
+                       {"deadline_misses", e.deadlineMisses},
+                       {"execution_us",
+                        {{"p50", e.execution.p50_us},
+                         {"p99", e.execution.p99_us},
+                         {"p999", e.execution.p999_us},
+                         {"max", e.execution.max_us}}}});
   nlohmann::json summary = {{"volume", path->string()},
                             {"dims", {vol->dims().x(), vol->dims().y(), vol->dims().z()}},
                             {"skin",
@@ -337,26 +332,22 @@ int main(int argc, char** argv) {
                               {"manifold", topo.isManifold},
                               {"volume_m3", topo.volume.value_or(0.0)},
                               {"extract_ms", ms(t2, t3)}}},
+                            {"mode", args.lockstep ? "lockstep" : "realtime"},
+                            {"engines", engines},
                             {"haptics",
-                             {{"mode", args.lockstep ? "lockstep" : "realtime"},
-                              {"ticks", st.ticks},
-                              {"execution_us",
-                               {{"p50", st.execution.p50_us},
-                                {"p99", st.execution.p99_us},
-                                {"p999", st.execution.p999_us},
-                                {"max", st.execution.max_us}}},
-                              {"deadline_misses", st.deadline_misses},
+                             {{"renderer", "godobject"},
+                              {"ticks", trace.size()},
                               {"contact_ticks", contactTicks},
                               {"max_force_N", maxForce},
-                              {"max_depth_m", maxDepth}}}};
+                              {"max_depth_m", maxDepth},
+                              {"safety_fault_ticks", hs.faultTicks},
+                              {"trace_dropped", dropped.load()}}}};
   const std::string text = summary.dump(2) + "\n";
-  if (auto s = dm::writeFileAtomic(args.out / "summary.json", text.data(), text.size()); !s) {
-    std::fprintf(stderr, "head_probe: %s\n", s.error().message().c_str());
-    return 1;
-  }
-  csv.close();
-  std::printf("wrote %s and %s\n", (args.out / "forces.csv").c_str(), (args.out / "summary.json").c_str());
-  const bool ok = topo.isClosed && topo.isManifold && contactTicks > 0 && maxForce <= 3.0 + 1e-5;
+  if (auto s = dm::writeFileAtomic(args.out / "summary.json", text.data(), text.size()); !s)
+    return fail(s.error());
+  std::printf("wrote forces.csv, forces.png and summary.json in %s\n", args.out.c_str());
+  const bool ok =
+      topo.isClosed && topo.isManifold && contactTicks > 0 && maxForce <= 3.0 + 1e-5 && dropped.load() == 0;
   if (!ok) std::fprintf(stderr, "head_probe: checks failed (closed skin, contact, force limit)\n");
   return ok ? 0 : 1;
 }
