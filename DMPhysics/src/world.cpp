@@ -2,6 +2,7 @@
 // integrate → update bounds), snapshots and the state hash.
 #include <dm/physics/world.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <utility>
 
@@ -103,6 +104,7 @@ Result<BodyId> PhysicsWorld::addBody(const BodyDesc& desc) {
     if (k < kSecondOrderKinds && d.kind == BodyKind::Rigid) rigidMembers_[k].push_back(index);
   }
   masses_.push_back(d.mass);
+  materials_.emplace_back();
   model_.push_back(m);
   bodies_.push_back(std::move(d));
   return BodyId{index};
@@ -183,6 +185,95 @@ Status PhysicsWorld::addUserForce(std::string name, DmForceCallback callback, vo
   return ok();
 }
 
+Status PhysicsWorld::setMaterial(BodyId id, const ContactMaterial& material) {
+  if (auto st = checkBody(id, "PhysicsWorld::setMaterial"); !st) return st;
+  const std::string where = bodyWhere(id.index, bodies_[id.index].name) + " material";
+  if (!std::isfinite(material.friction) || material.friction < 0.0)
+    return fail(ErrorCode::InvalidArgument, "friction is " + std::to_string(material.friction), where,
+                "give a Coulomb coefficient >= 0, e.g. 0.5");
+  if (!std::isfinite(material.restitution) || material.restitution < 0.0 || material.restitution > 1.0)
+    return fail(ErrorCode::InvalidArgument, "restitution is " + std::to_string(material.restitution), where,
+                "give a coefficient of restitution in [0, 1]");
+  materials_[id.index] = material;
+  return ok();
+}
+
+const ContactMaterial& PhysicsWorld::material(BodyId id) const noexcept {
+  DM_ASSERT(id.index < materials_.size(), "BodyId out of range");
+  return materials_[id.index];
+}
+
+Status PhysicsWorld::setContactSettings(const ContactSettings& settings) {
+  // The solver's own validation names the bad option; run it on an empty problem.
+  ConstraintSolver probe;
+  if (auto st = probe.solve({}, {}, {}, 1.0, settings.solver); !st)
+    return fail(ErrorCode::InvalidArgument, st.error().what, "ContactSettings::solver", st.error().hint);
+  if (settings.maxContactsPerPair < 1)
+    return fail(ErrorCode::InvalidArgument,
+                "maxContactsPerPair is " + std::to_string(settings.maxContactsPerPair),
+                "ContactSettings::maxContactsPerPair", "give at least 1 (4 keeps box faces stable)");
+  if (!std::isfinite(settings.ccdTolerance) || !(settings.ccdTolerance > 0.0))
+    return fail(ErrorCode::InvalidArgument, "ccdTolerance is " + std::to_string(settings.ccdTolerance),
+                "ContactSettings::ccdTolerance", "give a distance > 0 in m, e.g. 1e-6");
+  contactSettings_ = settings;
+  return ok();
+}
+
+Result<std::size_t> PhysicsWorld::addJoint(const JointDesc& desc) {
+  const std::string where = "joints[" + std::to_string(joints_.size()) + "]";
+  for (const BodyId id : {desc.a, desc.b})
+    if (id.valid())
+      if (auto st = checkBody(id, where.c_str()); !st) return std::move(st).error();
+  const auto index = [](BodyId id) { return id.valid() ? static_cast<int>(id.index) : kWorldBody; };
+  const int a = index(desc.a), b = index(desc.b);
+  const auto dynamic = [this](int i) {
+    return i != kWorldBody && model_[static_cast<std::size_t>(i)].inverseMass > 0.0;
+  };
+  if (!dynamic(a) && !dynamic(b))
+    return fail(ErrorCode::InvalidArgument, "neither body is dynamic", where,
+                "join at least one particle or rigid body (a default BodyId is the static world)");
+  if (!desc.anchor.allFinite() || !desc.axis.allFinite() || !std::isfinite(desc.lower) ||
+      !std::isfinite(desc.upper))
+    return fail(ErrorCode::InvalidArgument, "anchor, axis or a limit is not finite", where,
+                "give finite values");
+  if (desc.limitEnabled && desc.lower > desc.upper)
+    return fail(ErrorCode::InvalidArgument, "lower limit > upper limit", where, "swap the limits");
+  std::vector<SolverBody> poses(bodies_.size());
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    poses[i] = SolverBody::fixed(bodies_[i].position, bodies_[i].orientation);
+  Result<Joint> joint = fail(ErrorCode::InvalidArgument, "unknown joint type", where, "use dm::JointType");
+  switch (desc.type) {
+    case JointType::Ball:
+      joint = Joint::ball(poses, a, b, desc.anchor);
+      break;
+    case JointType::Hinge:
+      joint = Joint::hinge(poses, a, b, desc.anchor, desc.axis);
+      break;
+    case JointType::Slider:
+      joint = Joint::slider(poses, a, b, desc.anchor, desc.axis);
+      break;
+    case JointType::Fixed:
+      joint = Joint::fixed(poses, a, b, desc.anchor);
+      break;
+  }
+  if (!joint) {
+    const Error& e = joint.error();
+    return fail(e.code, e.what, where, e.hint);
+  }
+  joint->limitEnabled = desc.limitEnabled;
+  joint->lower = desc.lower;
+  joint->upper = desc.upper;
+  if (a != kWorldBody && b != kWorldBody) {
+    const auto lo = static_cast<std::uint64_t>(std::min(a, b)),
+               hi = static_cast<std::uint64_t>(std::max(a, b));
+    const std::uint64_t key = (lo << 32) | hi;
+    jointedPairs_.insert(std::lower_bound(jointedPairs_.begin(), jointedPairs_.end(), key), key);
+  }
+  joints_.push_back(*joint);
+  jointDescs_.push_back(desc);
+  return joints_.size() - 1;
+}
+
 Result<BodyId> PhysicsWorld::findBody(std::string_view name) const {
   for (std::size_t i = 0; i < bodies_.size(); ++i)
     if (bodies_[i].name == name) return BodyId{static_cast<std::uint32_t>(i)};
@@ -241,6 +332,7 @@ WorldState PhysicsWorld::makeState() const {
   sc.rk4State.setZero(kRk4Size * m2);
   sc.rk4Ws.resize(kRk4Size * m2);
   updateBounds(st);
+  reserveContacts(st);
   return st;
 }
 
@@ -285,6 +377,9 @@ Status PhysicsWorld::restore(WorldState& state, const WorldSnapshot& snap) const
   state.s_.linearVelocity = snap.linearVelocity;
   state.s_.angularVelocity = snap.angularVelocity;
   updateBounds(state);
+  // Warm-start impulses are not part of a snapshot: start them afresh.
+  state.contact_.cache.clear();
+  for (Joint& j : state.contact_.joints) j.impulses.fill(0.0);
   return ok();
 }
 
@@ -532,9 +627,14 @@ Status PhysicsWorld::step(WorldState& state, double dt) const {
                 "the state has " + std::to_string(state.s_.position.size()) + " bodies, the world " +
                     std::to_string(n),
                 "PhysicsWorld::step", "bodies were added after makeState(): make a new state");
+  if (state.contact_.joints.size() != joints_.size() || state.contact_.bodies.size() != n)
+    return fail(ErrorCode::InvalidArgument, "the state was made before joints or bodies were added",
+                "PhysicsWorld::step", "make a new state with makeState()");
   WorldSnapshot& s = state.s_;
   WorldState::Scratch& sc = state.scratch_;
   const double t0 = s.time;
+  const bool contacts = contactsActive();
+  if (contacts) beginContacts(state);
 
   // 0. Impulses due in [t0, t0 + dt).
   for (const Impulse& imp : impulses_)
@@ -551,7 +651,12 @@ Status PhysicsWorld::step(WorldState& state, double dt) const {
   for (int k = 0; k < kSecondOrderKinds; ++k) stepSecondOrder(state, k, t0, dt);
   stepRk4(state, t0, dt);
 
-  // 2. Time and bounds.
+  // 2. Contacts and joints.
+  if (contacts) {
+    if (auto st = finishContacts(state, dt); !st) return st;
+  }
+
+  // 3. Time and bounds.
   s.time = t0 + dt;
   ++s.stepCount;
   updateBounds(state);

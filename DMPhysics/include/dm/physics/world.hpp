@@ -1,13 +1,15 @@
 // dm/physics/world.hpp — the physics world: particles and rigid bodies
-// moved by force accumulators and per-body integrators.
+// moved by force accumulators and per-body integrators, with rigid contact
+// (DMCollide + the ConstraintSolver) and joints; dm/physics/ode_backend.hpp
+// steps the same model and state on ODE instead.
 //
 // Model and state apart (MuJoCo's mjModel/mjData): a PhysicsWorld is the
 // read-only model — bodies' mass properties, integrator choice, shapes and
-// the ForceSet — built once at setup; a WorldState holds everything that
+// the ForceSet, contact materials and joints — built once at setup; a WorldState holds everything that
 // changes (time, positions, orientations, velocities, derived bounds and the
-// step's scratch memory). Stepping is `world.step(state, dt)` with a const
-// world, so one model serves many states (lockstep runs, rollouts, replays),
-// also from several threads at once when the user forces allow it.
+// step's scratch memory, the contact cache and joint impulses). Stepping is `world.step(state, dt)` with a
+// const world, so one model serves many states (lockstep runs, rollouts, replays), also from several threads
+// at once when the user forces allow it.
 //
 // Step order (PhysicsWorld::step):
 //   0. impulses due in [t, t + dt) change the velocities;
@@ -16,7 +18,12 @@
 //      function; every force evaluation the method asks for is an
 //      *accumulate* (dm/physics/accumulators.hpp) of all forces at the
 //      current stage state; then *integrate* (see IntegratorKind);
-//   2. orientations are renormalised and world AABBs of shapes updated.
+//   2. rigid contact and joints (dm/physics/rigid_contact.hpp): contacts
+//      found at the start-of-step poses (broad + narrow phase, DMCollide),
+//      continuous collision for `ccd` bodies, then the ConstraintSolver on
+//      the bodies in contacts or joints, which are re-advanced from their
+//      start-of-step poses with the solved velocities;
+//   3. orientations are renormalised and world AABBs of shapes updated.
 // Kinds are advanced one after another: a later kind sees the earlier kinds'
 // bodies at their end-of-step state (a Gauss–Seidel splitting, first-order in
 // the coupling between kinds). Bodies of one kind are integrated as one
@@ -45,6 +52,7 @@
 #include <dm/math/integrators.hpp>
 #include <dm/physics/accumulators.hpp>
 #include <dm/physics/body.hpp>
+#include <dm/physics/rigid_contact.hpp>
 
 #include <cstdint>
 #include <span>
@@ -86,6 +94,13 @@ class WorldState {
   /// Total force (N) and torque (N·m) of the last step's first evaluation.
   const Vec3& force(BodyId id) const noexcept { return force_[check(id)]; }
   const Vec3& torque(BodyId id) const noexcept { return torque_[check(id)]; }
+  /// What the contact pipeline did in the last step.
+  const ContactStats& contactStats() const noexcept { return contact_.stats; }
+  /// Contacts solved in the last step, with their accumulated impulses
+  /// (N·s); body indices are BodyId::index values (ContactConstraint).
+  std::span<const ContactConstraint> contacts() const noexcept { return contact_.contacts; }
+  /// The world's joints in addJoint order, with their accumulated impulses.
+  std::span<const Joint> joints() const noexcept { return contact_.joints; }
 
   /// The dynamic state, for the state's whole life (one entry per body).
   const WorldSnapshot& data() const noexcept { return s_; }
@@ -98,6 +113,7 @@ class WorldState {
 
  private:
   friend class PhysicsWorld;
+  friend class OdeWorld;
   std::uint32_t check(BodyId id) const noexcept {
     DM_ASSERT(id.index < s_.position.size(), "BodyId out of range");
     return id.index;
@@ -125,6 +141,7 @@ class WorldState {
   std::vector<Aabb> bounds_;
   std::vector<Vec3> force_, torque_;
   Scratch scratch_;
+  RigidContactState contact_;
 };
 
 /// FNV-1a (64-bit, offset basis 0xcbf29ce484222325, prime 0x100000001b3)
@@ -176,26 +193,63 @@ class PhysicsWorld {
   /// back unchanged and must outlive the world. Fails on a null callback.
   Status addUserForce(std::string name, DmForceCallback callback, void* userData);
 
+  /// Sets the contact material of a body (every body starts with the
+  /// defaults of ContactMaterial). Fails with NotFound for an unknown id and
+  /// InvalidArgument (naming the body and field) for μ < 0, e outside
+  /// [0, 1] or non-finite values. Setup only: states made before keep working.
+  /// @code
+  ///   world.setMaterial(ball, {.friction = 0.3, .restitution = 0.5, .ccd = true});
+  /// @endcode
+  Status setMaterial(BodyId id, const ContactMaterial& material);
+  /// The material of a body; `id` must be valid (DM_ASSERT).
+  const ContactMaterial& material(BodyId id) const noexcept;
+  /// Replaces the contact settings. Fails with InvalidArgument naming the
+  /// field for bad solver options, maxContactsPerPair < 1 or a ccdTolerance
+  /// that is not > 0. Takes effect for states made afterwards as well as
+  /// existing ones (capacities grow once if needed).
+  Status setContactSettings(const ContactSettings& settings);
+  /// The contact settings in effect.
+  const ContactSettings& contactSettings() const noexcept { return contactSettings_; }
+  /// Adds a joint built from the bodies' initial poses (see JointDesc); its
+  /// index is the number of joints before. Fails with NotFound for an
+  /// unknown body id and InvalidArgument (message names "joints[i]") for two
+  /// identical bodies, a zero axis, lower > upper, or two non-dynamic
+  /// bodies. States made before this call no longer match (step fails).
+  /// @code
+  ///   auto j = world.addJoint({.type = dm::JointType::Hinge, .b = bob, .anchor = {0, 0, 1}, .axis = {0, 1,
+  ///   0}}); if (!j) return j.error();
+  /// @endcode
+  Result<std::size_t> addJoint(const JointDesc& desc);
+  /// The joint descriptions in addJoint order.
+  std::span<const JointDesc> joints() const noexcept { return jointDescs_; }
+
   std::size_t bodyCount() const noexcept { return bodies_.size(); }
   /// Every body's description, indexed by BodyId::index.
   std::span<const BodyDesc> bodies() const noexcept { return bodies_; }
   /// The forces, by kind.
   const ForceSet& forces() const noexcept { return forces_; }
+  /// The timed impulses, in addImpulse order.
+  std::span<const Impulse> impulses() const noexcept { return impulses_; }
   /// The body named `name`; NotFound otherwise. O(bodies).
   Result<BodyId> findBody(std::string_view name) const;
 
   /// A state at the bodies' initial values, t = 0, with every buffer step()
-  /// needs allocated and bounds computed. O(bodies).
+  /// needs allocated (contact scratch sized by ContactSettings::pairCapacity),
+  /// bounds computed and the joints' warm-start impulses at zero. O(bodies).
   WorldState makeState() const;
 
   /// Advances `state` by `dt` seconds in the order given at the top of this
   /// header. Fails with InvalidArgument (state unchanged) when dt is not
-  /// finite and > 0 or `state` does not match the world (body count), and
-  /// with Unsupported when the step produced a non-finite value (the message
-  /// names the body and field; `state` then holds the bad values: restore a
-  /// snapshot and take a smaller dt or softer springs). Cost: per
-  /// force evaluation O(accumulators), 1 (symplectic Euler), 2 (Verlet) or 4
-  /// (RK4) evaluations per kind present. Allocates nothing.
+  /// finite and > 0 or `state` does not match the world (body or joint
+  /// count), and with Unsupported when the step produced a non-finite value
+  /// or the contact solver rejected it (the message names the body and
+  /// field; `state` then holds the bad values: restore a snapshot and take a
+  /// smaller dt or softer springs). Cost: per force evaluation
+  /// O(accumulators), 1 (symplectic Euler), 2 (Verlet) or 4 (RK4)
+  /// evaluations per kind present; contacts O(n log n + pairs) broad phase,
+  /// one narrow-phase query per pair, O((contacts + joints)·iterations)
+  /// solver. Allocates nothing once makeState() reserved the scratch (see
+  /// dm/physics/rigid_contact.hpp for the exceptions).
   /// @code
   ///   dm::WorldState s = world.makeState();
   ///   if (auto st = world.step(s, 1e-3); !st) std::cerr << st.error() << '\n';
@@ -205,8 +259,10 @@ class PhysicsWorld {
 
   /// Restores `state` to `snapshot` (made from a state of this world) and
   /// recomputes the bounds; the following steps reproduce the original run
-  /// bit for bit. Fails with InvalidArgument on a size mismatch or a
-  /// non-finite value (naming the body and field). No allocation.
+  /// bit for bit while no contact or joint is active (warm-start impulses
+  /// are not in a snapshot: restore clears them, so constrained runs replay
+  /// to solver accuracy, and two restores of one snapshot replay alike). Fails with InvalidArgument on a size
+  /// mismatch or a non-finite value (naming the body and field). No allocation.
   /// @code
   ///   dm::WorldSnapshot snap = state.snapshot();
   ///   world.step(state, dt);
@@ -246,6 +302,16 @@ class PhysicsWorld {
   void applyImpulseAt(WorldState& state, std::uint32_t i, const Vec3& impulse, const Vec3& r) const;
   void stepSecondOrder(WorldState& state, int kind, double t, double dt) const;
   void stepRk4(WorldState& state, double t, double dt) const;
+  // Contact pipeline (rigid_contact.cpp).
+  bool contactsActive() const noexcept;
+  void reserveContacts(WorldState& state) const;
+  void beginContacts(WorldState& state) const;
+  Status finishContacts(WorldState& state, double dt) const;
+  void broadPhase(WorldState& state) const;
+  void narrowPhase(WorldState& state) const;
+  void continuousCollision(WorldState& state) const;
+  bool jointed(std::uint32_t a, std::uint32_t b) const noexcept;
+  bool collider(std::uint32_t i) const noexcept;
 
   std::vector<BodyDesc> bodies_;
   std::vector<BodyModel> model_;
@@ -254,6 +320,11 @@ class PhysicsWorld {
   std::vector<std::uint32_t> rigidMembers_[2];  // rigid bodies among members_[0], members_[1]
   std::vector<Impulse> impulses_;
   ForceSet forces_;
+  std::vector<ContactMaterial> materials_;  // per body
+  ContactSettings contactSettings_;
+  std::vector<JointDesc> jointDescs_;
+  std::vector<Joint> joints_;                // built from the initial poses
+  std::vector<std::uint64_t> jointedPairs_;  // (min << 32 | max) body indices, sorted
 };
 
 }  // namespace dm

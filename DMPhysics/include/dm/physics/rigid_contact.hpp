@@ -1,0 +1,121 @@
+// dm/physics/rigid_contact.hpp — what a PhysicsWorld needs to run rigid
+// contact and joints inside its step: per-body contact materials, world
+// contact settings, joint descriptions, and the per-state scratch of the
+// contact pipeline.
+//
+// Pipeline (PhysicsWorld::step, dm/physics/world.hpp), for bodies with a
+// shape whose material has `collides` set:
+//   1. broad phase at the start-of-step poses: a sort-and-sweep on x of the
+//      world AABBs kept in the WorldState (dm::boxesOverlap), planes
+//      (unbounded shapes) paired with every bounded collider; pairs of two
+//      non-dynamic bodies and pairs joined by a joint are skipped; pairs
+//      are ordered bottom-up (by the lower box bottom along z, then
+//      indices) so that Gauss–Seidel sweeps carry support up a stack;
+//   2. narrow phase: dm::collide (DMCollide's collider table) per pair, up
+//      to ContactSettings::maxContactsPerPair contacts, normals from the
+//      lower to the higher body index;
+//   3. the force accumulators and integrators advance every body as before;
+//   4. continuous collision (bodies whose material has `ccd` set): the
+//      motion of the shape from its start-of-step pose to the integrated
+//      one is tested against every other collider its swept box reaches by
+//      dm::conservativeAdvancement (dm::bisectImpact for pairs without a
+//      distance query); at the first hit the body is moved back to its
+//      pose at the time of impact and a touching contact is added, so the
+//      solver (restitution, friction) handles it — a fast small body does
+//      not tunnel through a thin plate;
+//   5. bodies in a contact or a joint are reset to their start-of-step pose
+//      and keep their integrated velocity; the ConstraintSolver (sequential
+//      impulses with restitution, Coulomb friction, split-impulse position
+//      correction) solves contacts and joints, warm-started by a
+//      ContactCache; their poses are then advanced by
+//      dm::integratePositions (semi-implicit Euler, whatever their
+//      integrator kind: constrained bodies are first order). Bodies without
+//      contacts or joints keep their integrator's result bit for bit.
+// Materials combine per contact as friction √(μa·μb) and restitution
+// max(ea, eb) (Box2D's rules); a static body's material counts as well.
+// Everything runs on the calling thread in a fixed order: the same model,
+// state and dt give bit-identical results. No allocation once makeState()
+// has reserved the scratch (ContactSettings::contactCapacity), except that a
+// step with more pairs or contacts than reserved grows the buffers once, and
+// a CCD query that starts overlapping lets DMCollide allocate its contact.
+#pragma once
+
+#include <dm/collide/broadphase.hpp>
+#include <dm/collide/query.hpp>
+#include <dm/core/types.hpp>
+#include <dm/physics/body.hpp>
+#include <dm/physics/constraint_solver.hpp>
+
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace dm {
+
+/// Contact behaviour of one body (PhysicsWorld::setMaterial).
+struct ContactMaterial {
+  double friction = 0.5;     ///< Coulomb coefficient μ ≥ 0
+  double restitution = 0.0;  ///< coefficient of restitution e in [0, 1]
+  /// Continuous collision detection for this body (fast, small bodies): see
+  /// step 4 in the file comment. Costs one time-of-impact query per nearby
+  /// collider per step while the body moves more than half its thickness.
+  bool ccd = false;
+  /// False: the body's shape only gives bounds, it takes part in no contact.
+  bool collides = true;
+};
+
+/// World-wide contact settings (PhysicsWorld::setContactSettings).
+struct ContactSettings {
+  /// False: the step runs no collision detection (joints are still solved).
+  bool enabled = true;
+  /// Solver settings: 20 velocity sweeps, 4 split-impulse sweeps, 1 mm slop.
+  SolverOptions solver{.velocityIterations = 20, .positionIterations = 4, .slop = 0.001};
+  /// Most contacts per body pair from the narrow phase (≥ 1; box–box
+  /// manifolds are reduced to it).
+  int maxContactsPerPair = 4;
+  /// Pairs reserved by makeState() (0: 4 per collider + 1 per collider per
+  /// plane); contacts reserved: maxContactsPerPair per pair.
+  std::size_t pairCapacity = 0;
+  /// CCD: distance at which conservative advancement reports an impact, m.
+  double ccdTolerance = 1e-6;
+};
+
+/// A joint between two bodies, built from their initial poses (the BodyDesc
+/// positions and orientations) by PhysicsWorld::addJoint. `a` or `b` may be
+/// a default BodyId: the static world.
+struct JointDesc {
+  JointType type = JointType::Ball;  ///< ball, hinge, slider or fixed
+  BodyId a;                          ///< first body (default: the world)
+  BodyId b;                          ///< second body (default: the world)
+  Vec3 anchor = Vec3::Zero();        ///< world anchor at the initial poses, m
+  Vec3 axis = Vec3::UnitX();         ///< hinge / slider axis, world, nonzero
+  bool limitEnabled = false;         ///< hinge angle (rad) / slider travel (m) limits
+  double lower = 0.0;                ///< lower limit, rad or m
+  double upper = 0.0;                ///< upper limit, rad or m
+};
+
+/// What the contact pipeline did in the last step.
+struct ContactStats {
+  std::size_t pairs = 0;        ///< broad-phase pairs tested by the narrow phase
+  std::size_t contacts = 0;     ///< contact points solved (CCD ones included)
+  std::size_t ccdHits = 0;      ///< bodies moved back to a time of impact
+  std::size_t warmStarted = 0;  ///< contacts matched by the ContactCache
+  SolverStats solver;           ///< the ConstraintSolver's report (zero when nothing was solved)
+};
+
+/// Per-state scratch and persistent data of the contact pipeline (owned by a
+/// WorldState; copied with it). Internal: read it through WorldState.
+struct RigidContactState {
+  std::vector<SolverBody> bodies;           ///< one per world body, start-of-step poses
+  std::vector<ContactConstraint> contacts;  ///< the step's contacts
+  std::vector<Joint> joints;                ///< the world's joints with their warm-start impulses
+  std::vector<std::uint32_t> order;         ///< broad phase: bounded colliders sorted by min x
+  std::vector<ProxyPair> pairs;             ///< broad phase: body index pairs (a < b), bottom-up
+  std::vector<std::uint8_t> constrained;    ///< per body: in a contact or joint this step
+  CollisionResult narrow;                   ///< narrow-phase result, reused
+  ConstraintSolver solver;
+  ContactCache cache;
+  ContactStats stats;
+};
+
+}  // namespace dm

@@ -1,0 +1,276 @@
+// The contact pipeline of PhysicsWorld::step (see rigid_contact.hpp): broad
+// phase on the state's AABBs, DMCollide narrow phase, continuous collision,
+// ConstraintSolver with a ContactCache, position update of the constrained
+// bodies.
+#include <dm/collide/broadphase.hpp>
+#include <dm/collide/toi.hpp>
+#include <dm/physics/rigid_contact.hpp>
+#include <dm/physics/world.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <span>
+#include <string>
+
+namespace dm {
+
+namespace {
+
+Isometry3 posed(const Vec3& x, const Quat& q, const Isometry3& offset) {
+  Isometry3 pose = Isometry3::Identity();
+  pose.linear() = q.toRotationMatrix();
+  pose.translation() = x;
+  return pose * offset;
+}
+
+bool unbounded(const Aabb& box) noexcept { return !(box.min().allFinite() && box.max().allFinite()); }
+
+// Half the thinnest extent of a shape, m: a body moving less than this per
+// step cannot pass through anything its own thickness would hit.
+double thickness(const Shape& shape) noexcept {
+  switch (shape.type()) {
+    case ShapeType::Sphere:
+      return static_cast<const Sphere&>(shape).radius();
+    case ShapeType::Capsule:
+      return static_cast<const Capsule&>(shape).radius();
+    case ShapeType::Box:
+      return static_cast<const Box&>(shape).halfExtents().minCoeff();
+    default: {
+      const Aabb box = shape.localAabb();
+      return unbounded(box) ? 0.0 : 0.5 * box.sizes().minCoeff();
+    }
+  }
+}
+
+}  // namespace
+
+bool PhysicsWorld::collider(std::uint32_t i) const noexcept {
+  return bodies_[i].shape != nullptr && materials_[i].collides;
+}
+
+bool PhysicsWorld::jointed(std::uint32_t a, std::uint32_t b) const noexcept {
+  const std::uint64_t key = (std::uint64_t{std::min(a, b)} << 32) | std::max(a, b);
+  return std::binary_search(jointedPairs_.begin(), jointedPairs_.end(), key);
+}
+
+bool PhysicsWorld::contactsActive() const noexcept {
+  if (!joints_.empty()) return true;
+  if (!contactSettings_.enabled) return false;
+  std::size_t colliders = 0;
+  bool dynamic = false;
+  for (std::uint32_t i = 0; i < bodies_.size(); ++i) {
+    if (!collider(i)) continue;
+    ++colliders;
+    dynamic = dynamic || model_[i].inverseMass > 0.0;
+  }
+  return dynamic && colliders >= 2;
+}
+
+void PhysicsWorld::reserveContacts(WorldState& state) const {
+  RigidContactState& c = state.contact_;
+  const std::size_t n = bodies_.size();
+  c.bodies.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    SolverBody& b = c.bodies[i];
+    b.position = state.s_.position[i];
+    b.orientation = state.s_.orientation[i];
+    b.invMass = model_[i].inverseMass;
+    b.invInertiaLocal = model_[i].inverseInertia;
+    b.updateWorldInertia();
+  }
+  c.joints = joints_;
+  c.constrained.assign(n, 0);
+  std::size_t colliders = 0, planes = 0;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    if (!collider(i)) continue;
+    ++colliders;
+    if (unbounded(state.bounds_[i])) ++planes;
+  }
+  const std::size_t pairs =
+      contactSettings_.pairCapacity > 0 ? contactSettings_.pairCapacity : 4 * colliders + colliders * planes;
+  const auto perPair = static_cast<std::size_t>(std::max(contactSettings_.maxContactsPerPair, 1));
+  const std::size_t contacts = pairs * perPair + colliders;
+  c.order.reserve(colliders);
+  c.pairs.reserve(pairs);
+  c.contacts.reserve(contacts);
+  c.narrow.contacts.reserve(std::max<std::size_t>(16, 2 * perPair));
+  c.solver.reserve(n, contacts, joints_.size());
+  c.cache.reserve(contacts);
+}
+
+void PhysicsWorld::broadPhase(WorldState& state) const {
+  RigidContactState& c = state.contact_;
+  const std::vector<Aabb>& box = state.bounds_;
+  const auto eligible = [this](std::uint32_t a, std::uint32_t b) {
+    return (model_[a].inverseMass > 0.0 || model_[b].inverseMass > 0.0) && !jointed(a, b);
+  };
+  const auto push = [&c](std::uint32_t a, std::uint32_t b) {
+    c.pairs.push_back({std::min(a, b), std::max(a, b)});
+  };
+  c.order.clear();
+  c.pairs.clear();
+  const auto n = static_cast<std::uint32_t>(bodies_.size());
+  for (std::uint32_t i = 0; i < n; ++i)
+    if (collider(i) && !unbounded(box[i])) c.order.push_back(i);
+  // Sort-and-sweep on x; ties broken by index so the order is reproducible.
+  std::sort(c.order.begin(), c.order.end(), [&box](std::uint32_t a, std::uint32_t b) {
+    const double xa = box[a].min().x(), xb = box[b].min().x();
+    return xa < xb || (xa == xb && a < b);
+  });
+  for (std::size_t k = 0; k < c.order.size(); ++k) {
+    const std::uint32_t a = c.order[k];
+    const double end = box[a].max().x();
+    for (std::size_t l = k + 1; l < c.order.size() && box[c.order[l]].min().x() <= end; ++l) {
+      const std::uint32_t b = c.order[l];
+      if (boxesOverlap(box[a], box[b]) && eligible(a, b)) push(a, b);
+    }
+  }
+  // Unbounded shapes (planes) against every bounded collider.
+  for (std::uint32_t u = 0; u < n; ++u) {
+    if (!collider(u) || !unbounded(box[u])) continue;
+    for (const std::uint32_t b : c.order)
+      if (eligible(u, b)) push(u, b);
+  }
+  // Bottom-up (ground contacts first): sequential impulses then carry the
+  // support up a stack within one sweep, which tall stacks need at large dt.
+  std::sort(c.pairs.begin(), c.pairs.end(), [&box](const ProxyPair& p, const ProxyPair& q) {
+    const double zp = std::min(box[p.a].min().z(), box[p.b].min().z());
+    const double zq = std::min(box[q.a].min().z(), box[q.b].min().z());
+    return zp < zq || (zp == zq && p < q);
+  });
+}
+
+void PhysicsWorld::narrowPhase(WorldState& state) const {
+  RigidContactState& c = state.contact_;
+  const CollisionRequest request{.contacts = true,
+                                 .maxContacts = std::max(contactSettings_.maxContactsPerPair, 1)};
+  for (const ProxyPair& pair : c.pairs) {
+    const std::uint32_t a = pair.a, b = pair.b;
+    const BodyDesc& da = bodies_[a];
+    const BodyDesc& db = bodies_[b];
+    const SolverBody& ba = c.bodies[a];
+    const SolverBody& bb = c.bodies[b];
+    collide(*da.shape, posed(ba.position, ba.orientation, da.shapeOffset), *db.shape,
+            posed(bb.position, bb.orientation, db.shapeOffset), request, c.narrow);
+    if (!c.narrow.colliding) continue;
+    const double mu = std::sqrt(materials_[a].friction * materials_[b].friction);
+    const double e = std::max(materials_[a].restitution, materials_[b].restitution);
+    for (const ContactPoint& p : c.narrow.contacts)
+      c.contacts.push_back(ContactConstraint::make(static_cast<int>(a), static_cast<int>(b), p, mu, e));
+    c.constrained[a] = c.constrained[b] = 1;
+  }
+  c.stats.pairs = c.pairs.size();
+}
+
+void PhysicsWorld::continuousCollision(WorldState& state) const {
+  RigidContactState& c = state.contact_;
+  const WorldSnapshot& s = state.s_;
+  const auto n = static_cast<std::uint32_t>(bodies_.size());
+  const auto touching = [&c](std::uint32_t a, std::uint32_t b) {
+    for (const ContactConstraint& k : c.contacts)
+      if ((k.bodyA == static_cast<int>(a) && k.bodyB == static_cast<int>(b)) ||
+          (k.bodyA == static_cast<int>(b) && k.bodyB == static_cast<int>(a)))
+        return true;
+    return false;
+  };
+  for (std::uint32_t i = 0; i < n; ++i) {
+    if (!collider(i) || !materials_[i].ccd || !(model_[i].inverseMass > 0.0)) continue;
+    const BodyDesc& di = bodies_[i];
+    const Shape& shape = *di.shape;
+    const Motion motion{posed(c.bodies[i].position, c.bodies[i].orientation, di.shapeOffset),
+                        posed(s.position[i], s.orientation[i], di.shapeOffset)};
+    const double thick = thickness(shape);
+    const double travel = motion.maxPointDisplacement(shape.boundingSphere().radius);
+    if (!(travel > 0.5 * thick)) continue;  // cannot skip over anything in one step
+    Aabb swept = state.bounds_[i];
+    swept.extend(shape.aabb(motion.end));
+    ToiResult best;
+    std::uint32_t hit = i;
+    for (std::uint32_t j = 0; j < n; ++j) {
+      if (j == i || !collider(j) || jointed(i, j) || !boxesOverlap(state.bounds_[j], swept)) continue;
+      if (touching(i, j)) continue;  // the narrow phase already has this pair
+      const BodyDesc& dj = bodies_[j];
+      const Motion other =
+          Motion::stationary(posed(c.bodies[j].position, c.bodies[j].orientation, dj.shapeOffset));
+      ToiResult r = conservativeAdvancement(shape, motion, *dj.shape, other,
+                                            {.tolerance = contactSettings_.ccdTolerance});
+      if (r.status == ToiStatus::Unsupported) {
+        const double samples = thick > 0.0 ? std::ceil(travel / thick) : 8.0;
+        r = bisectImpact(shape, motion, *dj.shape, other,
+                         {.samples = static_cast<int>(std::clamp(samples, 8.0, 256.0))});
+      }
+      if (r.status == ToiStatus::Hit && r.t < best.t) {
+        best = r;
+        hit = j;
+      }
+    }
+    if (hit == i) continue;
+    // Back to the time of impact; the solver takes the contact from there.
+    const Isometry3 pose = motion.at(best.t) * di.shapeOffset.inverse();
+    c.bodies[i].position = pose.translation();
+    c.bodies[i].orientation = Quat(pose.rotation()).normalized();
+    const ContactPoint p{best.point, best.normal, std::max(0.0, -best.distance)};
+    c.contacts.push_back(
+        ContactConstraint::make(static_cast<int>(i), static_cast<int>(hit), p,
+                                std::sqrt(materials_[i].friction * materials_[hit].friction),
+                                std::max(materials_[i].restitution, materials_[hit].restitution)));
+    c.constrained[i] = c.constrained[hit] = 1;
+    ++c.stats.ccdHits;
+  }
+}
+
+void PhysicsWorld::beginContacts(WorldState& state) const {
+  RigidContactState& c = state.contact_;
+  c.stats = ContactStats{};
+  c.contacts.clear();
+  for (std::size_t i = 0; i < bodies_.size(); ++i) {
+    c.bodies[i].position = state.s_.position[i];
+    c.bodies[i].orientation = state.s_.orientation[i];
+    c.constrained[i] = 0;
+  }
+  if (!contactSettings_.enabled) return;
+  broadPhase(state);
+  narrowPhase(state);
+}
+
+Status PhysicsWorld::finishContacts(WorldState& state, double dt) const {
+  RigidContactState& c = state.contact_;
+  WorldSnapshot& s = state.s_;
+  const std::size_t n = bodies_.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    c.bodies[i].linearVelocity = s.linearVelocity[i];
+    c.bodies[i].angularVelocity = s.angularVelocity[i];
+  }
+  if (contactSettings_.enabled) continuousCollision(state);
+  for (const Joint& j : c.joints) {
+    if (j.bodyA != kWorldBody) c.constrained[static_cast<std::size_t>(j.bodyA)] = 1;
+    if (j.bodyB != kWorldBody) c.constrained[static_cast<std::size_t>(j.bodyB)] = 1;
+  }
+  if (c.contacts.empty() && c.joints.empty()) {
+    c.cache.clear();
+    return ok();
+  }
+  for (std::size_t i = 0; i < n; ++i)
+    if (c.constrained[i] && model_[i].inverseMass > 0.0) c.bodies[i].updateWorldInertia();
+  c.stats.warmStarted = static_cast<std::size_t>(c.cache.warmStart(c.contacts, c.bodies));
+  auto solved = c.solver.solve(c.bodies, c.contacts, c.joints, dt, contactSettings_.solver);
+  if (!solved)
+    return fail(ErrorCode::Unsupported, "the contact solver rejected the step: " + solved.error().message(),
+                "PhysicsWorld::step at t = " + std::to_string(s.time) + " s",
+                "reduce dt or check the bodies' states; restore a snapshot to continue");
+  c.stats.solver = *solved;
+  c.stats.contacts = c.contacts.size();
+  c.cache.store(c.contacts, c.bodies);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!c.constrained[i] || !(model_[i].inverseMass > 0.0)) continue;
+    SolverBody& b = c.bodies[i];
+    integratePositions(std::span<SolverBody>(&b, 1), dt);
+    s.position[i] = b.position;
+    s.orientation[i] = b.orientation;
+    s.linearVelocity[i] = b.linearVelocity;
+    if (model_[i].kind == BodyKind::Rigid) s.angularVelocity[i] = b.angularVelocity;
+  }
+  return ok();
+}
+
+}  // namespace dm

@@ -1,0 +1,273 @@
+// Rigid contact inside PhysicsWorld::step: restitution heights, resting
+// contact, stacks, Coulomb friction on a slope, continuous collision against
+// a thin plate, a hinge pendulum, determinism and allocation-free steps —
+// each checked against the closed-form physics.
+#include <dm/collide/shapes.hpp>
+#include <dm/physics/world.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <numbers>
+
+#define DM_ALLOC_COUNTER_DECLARE_ONLY
+#include "../common/alloc_counter.hpp"
+
+namespace {
+
+using dm::BodyDesc;
+using dm::BodyId;
+using dm::BodyKind;
+using dm::PhysicsWorld;
+using dm::Vec3;
+using dm::WorldState;
+
+constexpr double kG = 9.81;
+
+BodyId addGround(PhysicsWorld& w, const Vec3& normal = Vec3::UnitZ(), double friction = 0.5,
+                 double restitution = 0.0) {
+  BodyDesc d;
+  d.name = "ground";
+  d.kind = BodyKind::Static;
+  d.shape = std::make_shared<dm::Plane>(normal, 0.0);
+  const BodyId id = *w.addBody(d);
+  EXPECT_TRUE(w.setMaterial(id, {.friction = friction, .restitution = restitution}).ok());
+  return id;
+}
+
+BodyDesc boxBody(const Vec3& half, double mass, const Vec3& position,
+                 const dm::Quat& q = dm::Quat::Identity()) {
+  BodyDesc d;
+  d.kind = BodyKind::Rigid;
+  d.mass = mass;
+  d.inertia = dm::boxInertia(mass, half);
+  d.position = position;
+  d.orientation = q;
+  d.shape = std::make_shared<dm::Box>(half);
+  return d;
+}
+
+BodyDesc sphereBody(double radius, double mass, const Vec3& position) {
+  BodyDesc d;
+  d.kind = BodyKind::Rigid;
+  d.mass = mass;
+  d.inertia = dm::sphereInertia(mass, radius);
+  d.position = position;
+  d.shape = std::make_shared<dm::Sphere>(radius);
+  return d;
+}
+
+TEST(RigidContact, RestitutionBounceHeightIsESquaredTimesDropHeight) {
+  const double e = 0.5, r = 0.05, h0 = 1.0;
+  PhysicsWorld w;
+  addGround(w, Vec3::UnitZ(), 0.0, e);
+  BodyDesc d = sphereBody(r, 1.0, {0, 0, r + h0});
+  d.name = "ball";
+  const BodyId ball = *w.addBody(d);
+  ASSERT_TRUE(w.setMaterial(ball, {.friction = 0.0, .restitution = e}).ok());
+  ASSERT_TRUE(w.setGravity({0, 0, -kG}).ok());
+  WorldState s = w.makeState();
+  bool bounced = false;
+  double apex = 0.0;
+  for (int i = 0; i < 900; ++i) {  // first fall 0.45 s, first rise 0.23 s
+    ASSERT_TRUE(w.step(s, 1e-3).ok());
+    if (s.linearVelocity(ball).z() > 0.0) bounced = true;
+    if (bounced) apex = std::max(apex, s.position(ball).z() - r);
+  }
+  ASSERT_TRUE(bounced);
+  EXPECT_NEAR(apex, e * e * h0, 0.03 * e * e * h0);
+}
+
+TEST(RigidContact, RestingBoxStaysPut) {
+  PhysicsWorld w;
+  addGround(w);
+  const Vec3 half(0.1, 0.1, 0.1);
+  const BodyId box = *w.addBody(boxBody(half, 2.0, {0.3, -0.2, half.z()}));
+  ASSERT_TRUE(w.setGravity({0, 0, -kG}).ok());
+  WorldState s = w.makeState();
+  const Vec3 start = s.position(box);
+  double worst = 0.0;
+  for (int i = 0; i < 5000; ++i) {
+    ASSERT_TRUE(w.step(s, 1e-3).ok());
+    worst = std::max(worst, (s.position(box) - start).norm());
+  }
+  EXPECT_LT(worst, 1e-3);
+  EXPECT_GT(s.orientation(box).w(), 1.0 - 1e-6);  // no tilt
+  EXPECT_EQ(s.contactStats().contacts, 4u);       // a face on a plane: four corners
+}
+
+std::unique_ptr<PhysicsWorld> stackWorld(int count) {
+  auto w = std::make_unique<PhysicsWorld>();
+  addGround(*w);
+  const Vec3 half(0.1, 0.1, 0.1);
+  for (int k = 0; k < count; ++k) {
+    BodyDesc d = boxBody(half, 1.0, {0, 0, half.z() * (2 * k + 1)});
+    d.name = "box" + std::to_string(k);
+    EXPECT_TRUE(w->addBody(d).ok());
+  }
+  EXPECT_TRUE(w->setGravity({0, 0, -kG}).ok());
+  return w;
+}
+
+TEST(RigidContact, StackOfEightBoxesStandsForFiveSeconds) {
+  const int count = 8;
+  const auto w = stackWorld(count);
+  WorldState s = w->makeState();
+  const WorldState initial = s;
+  for (int i = 0; i < 5000; ++i) ASSERT_TRUE(w->step(s, 1e-3).ok());
+  for (int k = 1; k <= count; ++k) {
+    const BodyId b{static_cast<std::uint32_t>(k)};
+    const Vec3 d = s.position(b) - initial.position(b);
+    EXPECT_LT(std::hypot(d.x(), d.y()), 5e-3) << "box " << k;
+    EXPECT_LT(std::abs(d.z()), 5e-3) << "box " << k;
+    EXPECT_GT(std::abs(s.orientation(b).w()), 1.0 - 1e-4) << "box " << k;
+  }
+}
+
+struct SlopeRun {
+  double travel;  // m down the slope after `seconds`
+  double seconds;
+};
+
+SlopeRun slide(double theta, double mu) {
+  PhysicsWorld w;
+  const Vec3 n(0, -std::sin(theta), std::cos(theta));  // plane normal, rotated about x
+  addGround(w, n, mu);
+  const Vec3 half(0.1, 0.1, 0.05);
+  const dm::Quat q(Eigen::AngleAxisd(theta, Vec3::UnitX()));
+  const BodyId box = *w.addBody(boxBody(half, 1.0, n * half.z(), q));
+  EXPECT_TRUE(w.setMaterial(box, {.friction = mu}).ok());
+  EXPECT_TRUE(w.setGravity({0, 0, -kG}).ok());
+  WorldState s = w.makeState();
+  const Vec3 down(0, -std::cos(theta), -std::sin(theta));
+  const int steps = 1000;
+  for (int i = 0; i < steps; ++i) EXPECT_TRUE(w.step(s, 1e-3).ok());
+  return {(s.position(box) - n * half.z()).dot(down), s.time()};
+}
+
+TEST(RigidContact, BoxOnSlopeSticksWhenMuAboveTanTheta) {
+  const double theta = 20.0 * std::numbers::pi / 180.0;  // tan θ = 0.364
+  const SlopeRun run = slide(theta, 0.6);
+  EXPECT_LT(std::abs(run.travel), 1e-3);
+}
+
+TEST(RigidContact, BoxOnSlopeSlidesWithCoulombAcceleration) {
+  const double theta = 20.0 * std::numbers::pi / 180.0, mu = 0.2;
+  const SlopeRun run = slide(theta, mu);
+  const double a = kG * (std::sin(theta) - mu * std::cos(theta));
+  const double expected = 0.5 * a * run.seconds * run.seconds;
+  EXPECT_NEAR(run.travel, expected, 0.05 * expected);
+}
+
+// A 5 mm sphere at 200 m/s against a 1 mm plate: one step moves it 0.2 m.
+double fastSphereFinalHeight(bool ccd) {
+  PhysicsWorld w;
+  BodyDesc plate;
+  plate.name = "plate";
+  plate.kind = BodyKind::Static;
+  plate.shape = std::make_shared<dm::Box>(Vec3(0.05, 0.05, 0.0005));
+  EXPECT_TRUE(w.addBody(plate).ok());
+  BodyDesc d = sphereBody(0.0025, 5e-4, {0.01, 0, 0.1});
+  d.linearVelocity = Vec3(0, 0, -200.0);
+  d.name = "pellet";
+  const BodyId pellet = *w.addBody(d);
+  EXPECT_TRUE(w.setMaterial(pellet, {.ccd = ccd}).ok());
+  EXPECT_TRUE(w.setGravity({0, 0, -kG}).ok());
+  WorldState s = w.makeState();
+  for (int i = 0; i < 20; ++i) EXPECT_TRUE(w.step(s, 1e-3).ok());
+  return s.position(pellet).z();
+}
+
+TEST(RigidContact, CcdStopsFastSphereAtThinPlate) {
+  EXPECT_LT(fastSphereFinalHeight(false), -0.5);  // without CCD it tunnels
+  const double z = fastSphereFinalHeight(true);
+  EXPECT_GT(z, 0.0005 + 0.0025 - 1e-4);  // resting on top of the plate
+  EXPECT_LT(z, 0.0005 + 0.0025 + 1e-3);
+}
+
+TEST(RigidContact, HingePendulumPeriodMatchesSmallAmplitudeFormula) {
+  const double length = 1.0, theta0 = 0.05, r = 0.01;
+  PhysicsWorld w;
+  BodyDesc d = sphereBody(r, 1.0, {length * std::sin(theta0), 0, -length * std::cos(theta0)});
+  d.shape = nullptr;
+  d.name = "bob";
+  const BodyId bob = *w.addBody(d);
+  ASSERT_TRUE(
+      w.addJoint({.type = dm::JointType::Hinge, .b = bob, .anchor = Vec3::Zero(), .axis = Vec3::UnitY()})
+          .ok());
+  ASSERT_TRUE(w.setGravity({0, 0, -kG}).ok());
+  WorldState s = w.makeState();
+  // Times of downward zero crossings of x (one per period).
+  std::vector<double> crossings;
+  double prev = s.position(bob).x();
+  for (int i = 0; i < 8000; ++i) {
+    ASSERT_TRUE(w.step(s, 1e-3).ok());
+    const double x = s.position(bob).x();
+    if (prev > 0.0 && x <= 0.0) crossings.push_back(s.time() - 1e-3 * x / (x - prev));
+    prev = x;
+  }
+  ASSERT_GE(crossings.size(), 3u);
+  const double period = (crossings.back() - crossings.front()) / static_cast<double>(crossings.size() - 1);
+  // Physical pendulum with the finite-amplitude correction (1 + θ0²/16).
+  const double inertia = 0.4 * r * r + length * length;
+  const double expected =
+      2.0 * std::numbers::pi * std::sqrt(inertia / (kG * length)) * (1.0 + theta0 * theta0 / 16.0);
+  EXPECT_NEAR(period, expected, 5e-3 * expected);
+  EXPECT_NEAR(s.position(bob).norm(), length, 1e-3);  // the joint holds
+}
+
+TEST(RigidContact, LockstepRunsWithContactsAreBitIdentical) {
+  const auto wa = stackWorld(5), wb = stackWorld(5);
+  WorldState a = wa->makeState(), b = wb->makeState();
+  // Knock the top box so that contacts change over the run.
+  ASSERT_TRUE(wa->applyImpulse(a, BodyId{5}, {0.3, 0.1, 0}, a.position(BodyId{5}) + Vec3(0, 0, 0.1)).ok());
+  ASSERT_TRUE(wb->applyImpulse(b, BodyId{5}, {0.3, 0.1, 0}, b.position(BodyId{5}) + Vec3(0, 0, 0.1)).ok());
+  for (int i = 0; i < 600; ++i) {
+    ASSERT_TRUE(wa->step(a, 1e-3).ok());
+    ASSERT_TRUE(wb->step(b, 1e-3).ok());
+  }
+  EXPECT_EQ(dm::stateHash(a.data()), dm::stateHash(b.data()));
+  EXPECT_GT(a.contactStats().contacts, 0u);
+}
+
+TEST(RigidContact, StepWithContactsAllocatesNothing) {
+  const auto w = stackWorld(6);
+  WorldState s = w->makeState();
+  ASSERT_TRUE(w->step(s, 1e-3).ok());
+  const auto before = dm::test::countedAllocations();
+  dm::test::tCountAllocations = true;
+  bool allOk = true;
+  for (int i = 0; i < 200; ++i) allOk = allOk && w->step(s, 1e-3).ok();
+  dm::test::tCountAllocations = false;
+  EXPECT_TRUE(allOk);
+  EXPECT_EQ(dm::test::countedAllocations(), before);
+  EXPECT_GE(s.contactStats().contacts, 24u);
+}
+
+TEST(RigidContact, BadMaterialsAndJointsAreRejectedWithNames) {
+  PhysicsWorld w;
+  const BodyId ground = addGround(w);
+  BodyDesc d = sphereBody(0.1, 1.0, {0, 0, 1});
+  d.name = "ball";
+  const BodyId ball = *w.addBody(d);
+  auto st = w.setMaterial(ball, {.friction = -1.0});
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.error().message().find("'ball'"), std::string::npos) << st.error().message();
+  EXPECT_NE(st.error().message().find("friction"), std::string::npos);
+  EXPECT_FALSE(w.setMaterial(ball, {.restitution = 1.5}).ok());
+  EXPECT_FALSE(w.setMaterial(BodyId{7}, {}).ok());
+  auto j = w.addJoint({.type = dm::JointType::Ball, .a = ground, .anchor = Vec3::Zero()});
+  ASSERT_FALSE(j.ok());
+  EXPECT_NE(j.error().message().find("joints[0]"), std::string::npos);
+  EXPECT_FALSE(w.addJoint({.type = dm::JointType::Hinge, .b = ball, .axis = Vec3::Zero()}).ok());
+  dm::ContactSettings bad;
+  bad.solver.velocityIterations = 0;
+  EXPECT_FALSE(w.setContactSettings(bad).ok());
+  // A state made before a joint is added no longer matches.
+  WorldState s = w.makeState();
+  ASSERT_TRUE(w.addJoint({.type = dm::JointType::Ball, .b = ball, .anchor = {0, 0, 2}}).ok());
+  EXPECT_FALSE(w.step(s, 1e-3).ok());
+}
+
+}  // namespace
