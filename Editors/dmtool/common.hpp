@@ -41,6 +41,7 @@ Command addVoxelizeCommand(CLI::App& parent);
 Command addSpheretreeCommand(CLI::App& parent);
 Command addDevicesCommand(CLI::App& parent);
 Command addCollideCommand(CLI::App& parent);
+Command addProbeCommand(CLI::App& parent);
 
 /// Prints "dmtool: error: <where: what (hint)>" on stderr; returns kExitFailure.
 int printError(const dm::Error& error);

@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
       dmtool::addCollideCommand(app),
       dmtool::addVoxelizeCommand(app),
       dmtool::addSpheretreeCommand(app),
+      dmtool::addProbeCommand(app),
   };
   try {
     app.parse(argc, argv);

@@ -20,19 +20,8 @@ using dmtool_test::parseJson;
 using dmtool_test::runTool;
 using dmtool_test::TempDir;
 using dmtool_test::ToolRun;
+using dmtool_test::writeUnitBox;
 using nlohmann::json;
-
-// Axis-aligned cube of edge 1 m centred at the origin, faces CCW from outside.
-std::string writeUnitBox(const TempDir& dir) {
-  const std::string path = (dir.path / "unit_box.obj").string();
-  std::ofstream f(path);
-  for (int i = 0; i < 8; ++i)
-    f << "v " << (i & 1 ? 0.5 : -0.5) << ' ' << (i & 2 ? 0.5 : -0.5) << ' ' << (i & 4 ? 0.5 : -0.5) << '\n';
-  // Quads as two triangles each (1-based): -x, +x, -y, +y, -z, +z.
-  f << "f 1 5 7\nf 1 7 3\nf 2 4 8\nf 2 8 6\nf 1 2 6\nf 1 6 5\n"
-       "f 3 7 8\nf 3 8 4\nf 1 3 4\nf 1 4 2\nf 5 6 8\nf 5 8 7\n";
-  return path;
-}
 
 // Round-trip decimal text of x.
 std::string num(double x) {

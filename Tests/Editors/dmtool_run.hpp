@@ -20,6 +20,7 @@
 #include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <string>
 #include <vector>
 
@@ -149,5 +150,18 @@ struct TempDir {
     std::filesystem::remove_all(path, ec);
   }
 };
+
+/// Writes an axis-aligned cube of edge 1 m centred at the origin (faces CCW
+/// from outside, two triangles each) as `dir/unit_box.obj`; returns the path.
+inline std::string writeUnitBox(const TempDir& dir) {
+  const std::string file = (dir.path / "unit_box.obj").string();
+  std::ofstream f(file);
+  for (int i = 0; i < 8; ++i)
+    f << "v " << (i & 1 ? 0.5 : -0.5) << ' ' << (i & 2 ? 0.5 : -0.5) << ' ' << (i & 4 ? 0.5 : -0.5) << '\n';
+  // Quads as two triangles each (1-based): -x, +x, -y, +y, -z, +z.
+  f << "f 1 5 7\nf 1 7 3\nf 2 4 8\nf 2 8 6\nf 1 2 6\nf 1 6 5\n"
+       "f 3 7 8\nf 3 8 4\nf 1 3 4\nf 1 4 2\nf 5 6 8\nf 5 8 7\n";
+  return file;
+}
 
 }  // namespace dmtool_test

@@ -1,0 +1,299 @@
+// dmtool probe MODEL --path PATH.csv --renderer godobject|vps|spheretree
+//   [--stiffness N_per_m] [--damping Ns_per_m] [--friction MUS,MUD]
+//   [--tool TOOL_MODEL] [--tool-radius M] [--rate HZ] [--threshold T]
+//   [--voxel-size M] [--levels L] [--unit U] -o OUT.csv [--plot OUT.png] [--json]
+// Replays a device path (CSV t,x,y,z[,qw,qx,qy,qz], SI units; see
+// dm/io/device_path.hpp) through a haptic renderer in lockstep
+// (dm::replayDevicePath) and writes t, force, torque and proxy pose per tick
+// (dm::formatProbeCsv); --plot draws the force trace.
+//
+// The environment is MODEL at the identity pose: a mesh (any format
+// dm::readMesh reads) or a volume (dm::readVolume; solid where value >
+// threshold (default 0); vps also takes a signed distance volume, negative
+// inside, when --threshold is not given). The tool: godobject uses a point proxy, or a
+// ball tip of --tool-radius; vps samples TOOL_MODEL (or a ball of
+// --tool-radius, default 2 mm) into a point shell; spheretree builds the
+// tool's sphere tree the same way.
+#include <dm/collide/bvh.hpp>
+#include <dm/collide/point_shell.hpp>
+#include <dm/collide/sphere_tree.hpp>
+#include <dm/collide/voxel_model.hpp>
+#include <dm/core/filesystem.hpp>
+#include <dm/haptics/force_plot.hpp>
+#include <dm/haptics/god_object.hpp>
+#include <dm/haptics/probe.hpp>
+#include <dm/haptics/sphere_tree_6dof.hpp>
+#include <dm/haptics/vps.hpp>
+#include <dm/io/device_path.hpp>
+#include <dm/io/image_io.hpp>
+#include <dm/io/mesh_io.hpp>
+#include <dm/io/resources.hpp>
+#include <dm/io/volume_io.hpp>
+#include <dm/math/isosurface.hpp>
+#include <dm/math/primitives.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <limits>
+#include <memory>
+#include <optional>
+
+#include "common.hpp"
+
+namespace dmtool {
+namespace {
+
+struct ProbeCliOptions {
+  std::string model;
+  std::string path;
+  std::string renderer = "godobject";
+  double stiffness = 1000.0;
+  double damping = 0.0;
+  std::vector<double> friction;  // μs, μd
+  std::string tool;
+  double toolRadius = 0.0;  // 0: per renderer default
+  double rate = 1000.0;
+  std::optional<double> threshold;
+  double voxelSize = 0.0;  // 0: 1/128 of the model's largest extent
+  int levels = 6;
+  int toolLevel = 4;
+  std::string unit = "m";
+  std::string output;
+  std::string plot;
+  bool json = false;
+};
+
+// The environment as the renderer needs it: a mesh for godobject, a voxel
+// model for vps, a sphere tree for spheretree.
+struct Environment {
+  std::optional<dm::Mesh> mesh;
+  std::optional<dm::Volume> volume;
+};
+
+dm::Result<Environment> loadModel(const std::filesystem::path& in, const ProbeCliOptions& o) {
+  Environment env;
+  if (dm::isVolumePath(in)) {
+    auto v = dm::readVolume(in);
+    if (!v) return v.error();
+    env.volume = std::move(*v);
+  } else {
+    dm::MeshImportOptions import;
+    import.unit = o.unit;
+    auto m = dm::readMesh(in, import);
+    if (!m) return m.error();
+    env.mesh = std::move(*m);
+  }
+  return env;
+}
+
+double largestExtent(const dm::Aabb& box) { return box.isEmpty() ? 0.0 : box.sizes().maxCoeff(); }
+
+dm::Result<dm::Mesh> toolMesh(const ProbeCliOptions& o, double defaultRadius) {
+  if (o.tool.empty()) return dm::makeIcosphere(o.toolRadius > 0 ? o.toolRadius : defaultRadius, 3);
+  dm::MeshImportOptions import;
+  import.unit = o.unit;
+  return dm::readMesh(resolveInput(o.tool), import);
+}
+
+dm::HapticMaterial material(const ProbeCliOptions& o) {
+  dm::HapticMaterial m;
+  m.stiffness = o.stiffness;
+  m.damping = o.damping;
+  if (o.friction.size() == 2) {
+    m.staticFriction = o.friction[0];
+    m.dynamicFriction = o.friction[1];
+  }
+  return m;
+}
+
+dm::Result<std::unique_ptr<dm::HapticRenderer>> makeGodObject(const Environment& env,
+                                                              const ProbeCliOptions& o) {
+  dm::Mesh mesh;
+  if (env.mesh) {
+    mesh = *env.mesh;
+  } else {
+    // A volume: the closed isosurface around the solid (value > threshold).
+    if (!o.threshold)
+      return dm::fail(dm::ErrorCode::InvalidArgument, "godobject on a volume needs --threshold",
+                      "--threshold",
+                      "give the value above which a voxel is solid, e.g. --threshold 300 for bone in CT");
+    auto m = dm::extractIsosurface(*env.volume, {.iso = *o.threshold, .closeBorders = true});
+    if (!m) return m.error();
+    mesh = std::move(*m);
+  }
+  auto bvh = dm::MeshBvh::build(mesh);
+  if (!bvh) return bvh.error();
+  std::vector<dm::GodObjectObject> objects(1);
+  objects[0].bvh = std::make_shared<const dm::MeshBvh>(std::move(*bvh));
+  objects[0].material = material(o);
+  auto r = dm::GodObjectRenderer::create(std::move(objects), {.proxyRadius = o.toolRadius});
+  if (!r) return r.error();
+  return std::unique_ptr<dm::HapticRenderer>(std::move(*r));
+}
+
+dm::Result<std::shared_ptr<const dm::VoxelModel>> voxelModel(const Environment& env,
+                                                             const ProbeCliOptions& o) {
+  if (env.volume) {
+    if (o.threshold) return dm::VoxelModel::fromOccupancy(*env.volume, *o.threshold);
+    return dm::VoxelModel::fromSdf(*env.volume);
+  }
+  dm::VoxelizeOptions vox;
+  vox.voxelSize = o.voxelSize > 0 ? o.voxelSize : largestExtent(env.mesh->bounds()) / 128.0;
+  return dm::VoxelModel::fromMesh(*env.mesh, vox);
+}
+
+dm::Result<std::unique_ptr<dm::HapticRenderer>> makeVps(const Environment& env, const ProbeCliOptions& o) {
+  auto model = voxelModel(env, o);
+  if (!model) return model.error();
+  auto tool = toolMesh(o, 2e-3);
+  if (!tool) return tool.error();
+  const double spacing =
+      std::max(largestExtent(tool->bounds()) / 20.0, (*model)->indexToWorld().linear().col(0).norm() / 2);
+  auto shell = dm::PointShell::fromMesh(*tool, {.spacing = spacing});
+  if (!shell) return shell.error().within("--tool");
+  // The hand feels the virtual coupling (k_c = --stiffness) in series with
+  // the contact, made ten times stiffer so that it dominates; per-point
+  // depths are clamped only beyond the tool's own size.
+  dm::HapticMaterial contact = material(o);
+  contact.stiffness = 10.0 * o.stiffness;
+  dm::VpsOptions options;
+  options.couplingStiffness = o.stiffness;
+  options.maxPointDepth = std::max(options.maxPointDepth, 0.5 * largestExtent(tool->bounds()));
+  options.maxForce = options.maxTorque = std::numeric_limits<double>::infinity();
+  auto r = dm::VpsRenderer::create(*shell, {{*model, dm::Isometry3::Identity(), contact}}, options);
+  if (!r) return r.error();
+  return std::unique_ptr<dm::HapticRenderer>(std::move(*r));
+}
+
+dm::Result<std::unique_ptr<dm::HapticRenderer>> makeSphereTree(const Environment& env,
+                                                               const ProbeCliOptions& o) {
+  dm::SphereTreeOptions st;
+  st.levels = o.levels;
+  if (o.threshold) st.threshold = *o.threshold;
+  auto envTree =
+      env.mesh ? dm::buildSphereTreeOctree(*env.mesh, st) : dm::buildSphereTreeOctree(*env.volume, st);
+  if (!envTree) return envTree.error();
+  auto tool = toolMesh(o, 2e-3);
+  if (!tool) return tool.error();
+  dm::SphereTreeOptions toolOptions;
+  toolOptions.levels = o.toolLevel + 1;
+  auto toolTree = dm::buildSphereTreeOctree(*tool, toolOptions);
+  if (!toolTree) return toolTree.error().within("--tool");
+  std::vector<dm::SphereTreeObject> objects(1);
+  objects[0].tree = *envTree;
+  objects[0].material = material(o);
+  objects[0].name = o.model;
+  dm::SphereTree6DofOptions options;
+  options.toolLevel = o.toolLevel;
+  options.linearStiffness = dm::Vec3::Constant(o.stiffness);
+  auto r = dm::SphereTree6DofRenderer::create(*toolTree, std::move(objects), options);
+  if (!r) return r.error();
+  return std::unique_ptr<dm::HapticRenderer>(std::move(*r));
+}
+
+int runProbe(const ProbeCliOptions& o) {
+  if (!o.friction.empty() && o.friction.size() != 2)
+    return printError(
+        dm::fail(dm::ErrorCode::InvalidArgument, "--friction takes two values MUS,MUD", "--friction"));
+  if (dm::Status s = material(o).validate("--stiffness/--damping/--friction"); !s)
+    return printError(s.error());
+
+  auto path = dm::readDevicePathCsv(resolveInput(o.path));
+  if (!path) return printError(path.error());
+  const std::filesystem::path in = resolveInput(o.model);
+  auto env = loadModel(in, o);
+  if (!env) return printError(env.error());
+
+  dm::Result<std::unique_ptr<dm::HapticRenderer>> renderer = o.renderer == "vps" ? makeVps(*env, o)
+                                                             : o.renderer == "spheretree"
+                                                                 ? makeSphereTree(*env, o)
+                                                                 : makeGodObject(*env, o);
+  if (!renderer) return printError(renderer.error().within(in.string()));
+
+  auto samples = dm::replayDevicePath(**renderer, *path, o.rate);
+  if (!samples) return printError(samples.error().within(o.path));
+  const std::string csv = dm::formatProbeCsv(*samples);
+  if (dm::Status s = dm::writeFileAtomic(o.output, csv.data(), csv.size()); !s)
+    return printError(s.error().within(o.output));
+  if (!o.plot.empty()) {
+    auto image = dm::plotForceTrace(*samples);
+    if (!image) return printError(image.error());
+    if (dm::Status s = dm::writePng(*image, o.plot); !s) return printError(s.error().within(o.plot));
+  }
+
+  double maxForce = 0.0, maxPenetration = 0.0;
+  std::size_t contactTicks = 0;
+  for (const dm::ProbeSample& s : *samples) {
+    maxForce = std::max(maxForce, s.response.force.norm());
+    maxPenetration = std::max(maxPenetration, s.response.penetration);
+    contactTicks += s.response.contacts > 0;
+  }
+  if (o.json) {
+    nlohmann::json j;
+    j["file"] = o.output;
+    j["renderer"] = std::string((*renderer)->name());
+    j["ticks"] = samples->size();
+    j["contactTicks"] = contactTicks;
+    j["maxForce"] = maxForce;
+    j["maxPenetration"] = maxPenetration;
+    if (!o.plot.empty()) j["plot"] = o.plot;
+    printJson(j);
+    return kExitOk;
+  }
+  char line[256];
+  std::snprintf(line, sizeof line,
+                "%s: %zu ticks of %s at %g Hz, %zu in contact, max force %.6g N, max depth %.6g m\n",
+                o.output.c_str(), samples->size(), std::string((*renderer)->name()).c_str(), o.rate,
+                contactTicks, maxForce, maxPenetration);
+  std::cout << line;
+  return kExitOk;
+}
+
+}  // namespace
+
+Command addProbeCommand(CLI::App& parent) {
+  auto o = std::make_shared<ProbeCliOptions>();
+  CLI::App* app = parent.add_subcommand("probe",
+                                        "Replay a device path through a haptic renderer in lockstep and "
+                                        "write force, torque and proxy per tick");
+  app->add_option("model", o->model,
+                  "environment: mesh (any format Assimp reads) or volume (.nii, .nrrd, ...)")
+      ->required();
+  app->add_option("--path", o->path, "device path CSV: t,x,y,z[,qw,qx,qy,qz] in s and m")->required();
+  app->add_option("--renderer", o->renderer,
+                  "godobject (3-DOF proxy), vps (voxel point shell) or spheretree (6-DOF)")
+      ->check(CLI::IsMember({"godobject", "vps", "spheretree"}));
+  app->add_option("--stiffness", o->stiffness, "surface stiffness, N/m")->check(finiteNumber());
+  app->add_option("--damping", o->damping, "surface damping, N*s/m")->check(finiteNumber());
+  app->add_option("--friction", o->friction, "static and dynamic friction coefficients MUS,MUD")
+      ->delimiter(',')
+      ->expected(2)
+      ->check(finiteNumber());
+  app->add_option("--tool", o->tool, "tool mesh for vps and spheretree (default: a ball of --tool-radius)");
+  app->add_option("--tool-radius", o->toolRadius,
+                  "m: godobject ball tip (0 = point), default tool ball (2 mm)")
+      ->check(CLI::Range(0.0, 1.0));
+  app->add_option("--rate", o->rate, "tick rate, Hz")->check(CLI::Range(1.0, 1e6));
+  app->add_option("--threshold", o->threshold,
+                  "volumes: solid where value > threshold (default: the volume is an SDF)")
+      ->check(finiteNumber());
+  app->add_option("--voxel-size", o->voxelSize,
+                  "vps on a mesh: voxel size, m (default: largest extent / 128)")
+      ->check(CLI::Range(0.0, 1.0));
+  app->add_option("--levels", o->levels, "spheretree: levels of the environment tree")
+      ->check(CLI::Range(2, 10));
+  app->add_option("--tool-level", o->toolLevel, "spheretree: tool tree level that collides")
+      ->check(CLI::Range(1, 8));
+  app->add_option("--unit", o->unit, "length unit of mesh files: m, cm, mm, um, inch, ft")
+      ->check(CLI::IsMember({"m", "cm", "mm", "um", "inch", "in", "ft"}));
+  app->add_option("-o,--output", o->output,
+                  "CSV to write: t,fx,fy,fz,tx,ty,tz,px,py,pz,qw,qx,qy,qz,contacts,penetration")
+      ->required();
+  app->add_option("--plot", o->plot, "PNG of the force trace");
+  app->add_flag("--json", o->json, "print one JSON summary on stdout");
+  return {app, [o] { return runProbe(*o); }};
+}
+
+}  // namespace dmtool
