@@ -1,0 +1,376 @@
+// Impulse-based bone fragment placement; see dm/haptics/bone_placement.hpp.
+#include <dm/haptics/bone_placement.hpp>
+#include <dm/haptics/safety.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace dm {
+
+namespace {
+
+constexpr const char* kWhere = "dm::BonePlacementRenderer::create";
+
+bool rigidPose(const Isometry3& p) noexcept {
+  if (!p.matrix().allFinite()) return false;
+  const Mat3 r = p.linear();
+  return (r * r.transpose() - Mat3::Identity()).cwiseAbs().maxCoeff() < 1e-6 && r.determinant() > 0.0;
+}
+
+Status optionError(const char* field, double value, const char* rule) {
+  return fail(ErrorCode::InvalidArgument, formatString("option %s is %g; it must be %s", field, value, rule),
+              std::string(kWhere) + ": options." + field, "fix the BonePlacementOptions field");
+}
+
+Status checkOptions(const BonePlacementOptions& o) {
+  struct Rule {
+    const char* field;
+    double value;
+    bool ok;
+    const char* text;
+  };
+  const auto finite = [](double v) { return std::isfinite(v); };
+  const Rule rules[] = {
+      {"couplingStiffness", o.couplingStiffness, finite(o.couplingStiffness) && o.couplingStiffness > 0,
+       "finite and > 0 N/m"},
+      {"couplingDamping", o.couplingDamping, finite(o.couplingDamping) && o.couplingDamping >= 0,
+       "finite and >= 0 N*s/m"},
+      {"couplingAngularStiffness", o.couplingAngularStiffness,
+       finite(o.couplingAngularStiffness) && o.couplingAngularStiffness > 0, "finite and > 0 N*m/rad"},
+      {"couplingAngularDamping", o.couplingAngularDamping,
+       finite(o.couplingAngularDamping) && o.couplingAngularDamping >= 0, "finite and >= 0 N*m*s/rad"},
+      {"mass", o.mass, finite(o.mass) && o.mass >= 0, "finite and >= 0 kg (0: from the voxels)"},
+      {"density", o.density, finite(o.density) && o.density > 0, "finite and > 0 kg/m^3"},
+      {"threshold", o.threshold, finite(o.threshold), "finite"},
+      {"maxContacts", static_cast<double>(o.maxContacts), o.maxContacts >= 1 && o.maxContacts <= 4096,
+       "between 1 and 4096"},
+      {"iterations", static_cast<double>(o.iterations), o.iterations >= 1 && o.iterations <= 100,
+       "between 1 and 100"},
+      {"slop", o.slop, finite(o.slop), "finite (negative: automatic)"},
+      {"baumgarte", o.baumgarte, finite(o.baumgarte) && o.baumgarte >= 0 && o.baumgarte <= 1, "in [0, 1]"},
+      {"maxForce", o.maxForce, !std::isnan(o.maxForce) && o.maxForce > 0, "> 0 N (infinity allowed)"},
+      {"maxTorque", o.maxTorque, !std::isnan(o.maxTorque) && o.maxTorque > 0, "> 0 N*m (infinity allowed)"},
+      {"stackCapacity", static_cast<double>(o.stackCapacity),
+       o.stackCapacity >= 64 && o.stackCapacity <= (std::size_t{1} << 20), "between 64 and 1048576"},
+  };
+  for (const Rule& r : rules)
+    if (!r.ok) return optionError(r.field, r.value, r.text);
+  return ok();
+}
+
+// Min-heap on depth: the shallowest kept contact sits at the front.
+bool deeper(const BoneContact& a, const BoneContact& b) noexcept { return a.depth > b.depth; }
+
+}  // namespace
+
+Result<VoxelMassProperties> voxelMassProperties(const Volume& volume, double threshold, double density) {
+  const char* where = "dm::voxelMassProperties";
+  if (volume.empty())
+    return fail(ErrorCode::InvalidArgument, "occupancy volume is empty", where,
+                "pass a non-empty label volume");
+  if (!std::isfinite(density) || density <= 0)
+    return fail(ErrorCode::InvalidArgument, formatString("density is %g; it must be finite and > 0", density),
+                std::string(where) + ": density", "pass kg/m^3, e.g. 1900 for cortical bone");
+  const Vec3i& dims = volume.dims();
+  const Affine3& a = volume.indexToWorld();
+  const Mat3 lin = a.linear();
+  // First pass: count and first moments; second: second moments about the
+  // centroid (two passes keep the sums well conditioned far from the origin).
+  std::size_t n = 0;
+  Vec3 sum = Vec3::Zero();
+  for (int k = 0; k < dims.z(); ++k)
+    for (int j = 0; j < dims.y(); ++j)
+      for (int i = 0; i < dims.x(); ++i)
+        if (volume.valueAt(volume.linearIndex(i, j, k)) > threshold) {
+          ++n;
+          sum += a * Vec3(i, j, k);
+        }
+  if (n == 0)
+    return fail(ErrorCode::InvalidArgument,
+                formatString("no voxel of the occupancy volume is above the threshold %g", threshold),
+                std::string(where) + ": volume", "check the label volume and options.threshold");
+  VoxelMassProperties mp;
+  mp.voxels = n;
+  const double voxelMass = density * std::abs(lin.determinant());
+  mp.mass = voxelMass * static_cast<double>(n);
+  mp.centerOfMass = sum / static_cast<double>(n);
+  Mat3 second = Mat3::Zero();  // Σ (p − c)(p − c)ᵀ
+  for (int k = 0; k < dims.z(); ++k)
+    for (int j = 0; j < dims.y(); ++j)
+      for (int i = 0; i < dims.x(); ++i)
+        if (volume.valueAt(volume.linearIndex(i, j, k)) > threshold) {
+          const Vec3 d = a * Vec3(i, j, k) - mp.centerOfMass;
+          second += d * d.transpose();
+        }
+  // Covariance of the voxels' uniform parallelepipeds about their centres.
+  const Mat3 own = static_cast<double>(n) * lin * lin.transpose() / 12.0;
+  const Mat3 c = voxelMass * (second + own);
+  mp.inertia = c.trace() * Mat3::Identity() - c;
+  return mp;
+}
+
+Result<std::unique_ptr<BonePlacementRenderer>> BonePlacementRenderer::create(
+    std::shared_ptr<const ImplicitSphereTree> fixed, const Isometry3& fixedPose,
+    std::shared_ptr<const ImplicitSphereTree> moving, const Volume& movingOccupancy,
+    const BonePlacementOptions& options) {
+  const std::string where = kWhere;
+  if (!fixed)
+    return fail(ErrorCode::InvalidArgument, "fixed fragment tree is null", where + ": fixed",
+                "build one with dm::ImplicitSphereTree::create(labels, threshold)");
+  if (!moving)
+    return fail(ErrorCode::InvalidArgument, "moving fragment tree is null", where + ": moving",
+                "build one with dm::ImplicitSphereTree::create(labels, threshold)");
+  if (!rigidPose(fixedPose))
+    return fail(ErrorCode::InvalidArgument, "fixedPose is not finite or not a rigid transform",
+                where + ": fixedPose", "pass a rotation (orthonormal, det +1) and a finite translation");
+  if (Status s = checkOptions(options); !s) return s.error();
+  auto mp = voxelMassProperties(movingOccupancy, options.threshold, options.density);
+  if (!mp)
+    return fail(ErrorCode::InvalidArgument, mp.error().what, where + ": movingOccupancy",
+                "pass the volume the moving tree was built from, with options.threshold/density");
+
+  std::unique_ptr<BonePlacementRenderer> r(new BonePlacementRenderer());
+  r->fixed_ = std::move(fixed);
+  r->moving_ = std::move(moving);
+  r->fixedPose_ = fixedPose;
+  r->options_ = options;
+  r->massProps_ = *mp;
+  if (options.mass > 0) {
+    r->massProps_.inertia *= options.mass / r->massProps_.mass;
+    r->massProps_.mass = options.mass;
+  }
+  r->inertiaBodyInverse_ = r->massProps_.inertia.inverse();
+  if (options.slop >= 0) {
+    r->slop_ = options.slop;
+  } else {
+    const double rf = r->fixed_->cellSphere(r->fixed_->depth(), 0, 0, 0).radius;
+    const double rm = r->moving_->cellSphere(r->moving_->depth(), 0, 0, 0).radius;
+    // Cubic voxels: leaf radius = h·√3/2; face neighbours are the smaller h apart.
+    r->slop_ = std::max(0.0, rf + rm - 2.0 * std::min(rf, rm) / std::sqrt(3.0));
+  }
+  r->stack_.resize(options.stackCapacity);
+  r->contacts_.resize(static_cast<std::size_t>(options.maxContacts));
+  r->reset(Isometry3::Identity());
+  return r;
+}
+
+void BonePlacementRenderer::reset(const Isometry3& devicePose) noexcept {
+  if (!devicePose.matrix().allFinite()) return;
+  orientation_ = Quat(devicePose.linear()).normalized();
+  position_ = devicePose * massProps_.centerOfMass;
+  velocity_.setZero();
+  angularVelocity_.setZero();
+  contactCount_ = 0;
+  maxDepth_ = 0.0;
+}
+
+void BonePlacementRenderer::setObjectPose(std::size_t index, const Isometry3& pose) noexcept {
+  if (index != 0 || !rigidPose(pose)) return;
+  fixedPose_ = pose;
+}
+
+Isometry3 BonePlacementRenderer::fragmentPose() const noexcept {
+  Isometry3 p = Isometry3::Identity();
+  p.linear() = orientation_.toRotationMatrix();
+  p.translation() = position_ - p.linear() * massProps_.centerOfMass;
+  return p;
+}
+
+double BonePlacementRenderer::alignmentError(std::span<const Vec3> referencePointsInMovingFrame,
+                                             const Isometry3& targetPose) const noexcept {
+  if (referencePointsInMovingFrame.empty()) return 0.0;
+  const Isometry3 current = fragmentPose();
+  double sum = 0.0;
+  for (const Vec3& p : referencePointsInMovingFrame) sum += (current * p - targetPose * p).squaredNorm();
+  return std::sqrt(sum / static_cast<double>(referencePointsInMovingFrame.size()));
+}
+
+void BonePlacementRenderer::offerContact(const Vec3& cFixed, double rFixed, const Vec3& cMoving,
+                                         double rMoving) noexcept {
+  const Vec3 a = fixedPose_ * cFixed;
+  const Vec3 b = fixedPose_ * cMoving;
+  const Vec3 d = b - a;
+  const double dist = d.norm();
+  BoneContact c;
+  if (dist > 1e-12 * (rFixed + rMoving)) {
+    c.normal = d / dist;
+  } else {
+    // Coincident centres: push away from the fixed fragment's root sphere.
+    const Vec3 away = position_ - fixedPose_ * fixed_->cellSphere(0, 0, 0, 0).center;
+    c.normal = away.norm() > 0 ? Vec3(away.normalized()) : Vec3::UnitZ();
+  }
+  c.depth = rFixed + rMoving - dist;
+  c.point = a + c.normal * (rFixed - 0.5 * c.depth);
+  const std::size_t cap = contacts_.size();
+  BoneContact* heap = contacts_.data();
+  if (contactCount_ < cap) {
+    heap[contactCount_++] = c;
+    std::push_heap(heap, heap + contactCount_, deeper);
+  } else if (c.depth > heap[0].depth) {
+    std::pop_heap(heap, heap + cap, deeper);
+    heap[cap - 1] = c;
+    std::push_heap(heap, heap + cap, deeper);
+  }
+}
+
+void BonePlacementRenderer::findContacts() noexcept {
+  contactCount_ = 0;
+  maxDepth_ = 0.0;
+  movingToFixed_ = fixedPose_.inverse(Eigen::Isometry) * fragmentPose();
+  const ImplicitSphereTree& tf = *fixed_;
+  const ImplicitSphereTree& tm = *moving_;
+  const int depthF = tf.depth();
+  const int depthM = tm.depth();
+  const auto overlap = [](const Vec3& c1, double r1, const Vec3& c2, double r2) {
+    const double s = r1 + r2;
+    return (c1 - c2).squaredNorm() < s * s;
+  };
+  {
+    const BoundingSphere f = tf.cellSphere(0, 0, 0, 0);
+    const BoundingSphere m = tm.cellSphere(0, 0, 0, 0);
+    if (!overlap(f.center, f.radius, movingToFixed_ * m.center, m.radius)) return;
+  }
+  std::size_t top = 0;
+  stack_[top++] = {tf.root(), tm.root()};
+  while (top > 0) {
+    const Pair p = stack_[--top];
+    int lf = 0, fi = 0, fj = 0, fk = 0, lm = 0, mi = 0, mj = 0, mk = 0;
+    ImplicitSphereTree::unpack(p.fixedNode, lf, fi, fj, fk);
+    ImplicitSphereTree::unpack(p.movingNode, lm, mi, mj, mk);
+    const BoundingSphere sf = tf.cellSphere(lf, fi, fj, fk);
+    BoundingSphere sm = tm.cellSphere(lm, mi, mj, mk);
+    sm.center = movingToFixed_ * sm.center;
+    if (lf == depthF && lm == depthM) {
+      offerContact(sf.center, sf.radius, sm.center, sm.radius);
+      continue;
+    }
+    // Split the larger sphere (the only one left with children otherwise);
+    // skip a level when it is much larger than the other.
+    const bool splitFixed = lm == depthM || (lf < depthF && sf.radius >= sm.radius);
+    const ImplicitSphereTree& t = splitFixed ? tf : tm;
+    const int level = splitFixed ? lf : lm;
+    const int leafLevel = splitFixed ? depthF : depthM;
+    const double big = splitFixed ? sf.radius : sm.radius;
+    const double small = splitFixed ? sm.radius : sf.radius;
+    const int skip = (big > 4.0 * small && leafLevel - level >= 2) ? 2 : 1;
+    const int n = 1 << skip;
+    const int bi = (splitFixed ? fi : mi) << skip;
+    const int bj = (splitFixed ? fj : mj) << skip;
+    const int bk = (splitFixed ? fk : mk) << skip;
+    const int childLevel = level + skip;
+    for (int k = bk; k < bk + n; ++k)
+      for (int j = bj; j < bj + n; ++j)
+        for (int i = bi; i < bi + n; ++i) {
+          if (!t.occupied(childLevel, i, j, k)) continue;
+          BoundingSphere s = t.cellSphere(childLevel, i, j, k);
+          if (splitFixed) {
+            if (!overlap(s.center, s.radius, sm.center, sm.radius)) continue;
+          } else {
+            s.center = movingToFixed_ * s.center;
+            if (!overlap(s.center, s.radius, sf.center, sf.radius)) continue;
+          }
+          if (top == stack_.size()) {
+            ++stackOverflows_;
+            continue;
+          }
+          const ImplicitSphereTree::NodeId child = ImplicitSphereTree::nodeId(childLevel, i, j, k);
+          stack_[top++] = splitFixed ? Pair{child, p.movingNode} : Pair{p.fixedNode, child};
+        }
+  }
+  for (std::size_t i = 0; i < contactCount_; ++i) maxDepth_ = std::max(maxDepth_, contacts_[i].depth);
+}
+
+void BonePlacementRenderer::solveContacts(double dt, Vec3& pseudoVelocity, Vec3& pseudoAngular) noexcept {
+  pseudoVelocity.setZero();
+  pseudoAngular.setZero();
+  if (contactCount_ == 0) return;
+  const Mat3 rot = orientation_.toRotationMatrix();
+  const Mat3 inertiaInv = rot * inertiaBodyInverse_ * rot.transpose();
+  const double invMass = 1.0 / massProps_.mass;
+  for (std::size_t i = 0; i < contactCount_; ++i) contacts_[i].impulse = contacts_[i].correction = 0.0;
+  // Pass 0: velocity impulses (restitution 0); pass 1: split impulses that
+  // push out the depth beyond the slop through a pseudo-velocity used for
+  // this tick's pose update only, so the correction adds no momentum.
+  for (int pass = 0; pass < 2; ++pass) {
+    Vec3& v = pass == 0 ? velocity_ : pseudoVelocity;
+    Vec3& w = pass == 0 ? angularVelocity_ : pseudoAngular;
+    for (int it = 0; it < options_.iterations; ++it) {
+      for (std::size_t i = 0; i < contactCount_; ++i) {
+        BoneContact& c = contacts_[i];
+        // Pairs within the resting overlap of touching voxels do not stop
+        // motion (the 0.9 margin keeps a resting contact active) and only
+        // the depth beyond the slop is pushed out.
+        if (c.depth <= (pass == 0 ? 0.9 * slop_ : slop_)) continue;
+        double& accumulated = pass == 0 ? c.impulse : c.correction;
+        const double target = pass == 0 ? 0.0 : options_.baumgarte * std::max(0.0, c.depth - slop_) / dt;
+        const Vec3 r = c.point - position_;
+        const Vec3 angular = inertiaInv * r.cross(c.normal);
+        const double effMass = 1.0 / (invMass + r.cross(c.normal).dot(angular));
+        const double vn = c.normal.dot(v + w.cross(r));
+        const double next = std::max(0.0, accumulated + effMass * (target - vn));
+        const double delta = next - accumulated;
+        accumulated = next;
+        v += (delta * invMass) * c.normal;
+        w += delta * angular;
+      }
+    }
+  }
+}
+
+HapticResponse BonePlacementRenderer::tick(const HapticInput& input) noexcept {
+  HapticResponse out;
+  out.proxyPose = fragmentPose();
+  if (!input.devicePose.matrix().allFinite() || !input.linearVelocity.allFinite() ||
+      !input.angularVelocity.allFinite() || !std::isfinite(input.dt) || input.dt <= 0.0)
+    return out;
+  const double dt = input.dt;
+  const double m = massProps_.mass;
+  const BonePlacementOptions& o = options_;
+  const Isometry3& device = input.devicePose;
+  const Vec3 target = device * massProps_.centerOfMass;
+  const Vec3 targetVelocity =
+      input.linearVelocity + input.angularVelocity.cross(target - device.translation());
+
+  // 1. Coupling, linearly implicit (spring and damper at the end of the step).
+  velocity_ = (m * velocity_ +
+               dt * (o.couplingStiffness * (target - position_) + o.couplingDamping * targetVelocity)) /
+              (m + dt * o.couplingDamping + dt * dt * o.couplingStiffness);
+  {
+    const Mat3 rot = orientation_.toRotationMatrix();
+    const Mat3 inertia = rot * massProps_.inertia * rot.transpose();
+    const Vec3 theta = rotationDelta(out.proxyPose, device);
+    const Mat3 lhs =
+        inertia + (dt * o.couplingAngularDamping + dt * dt * o.couplingAngularStiffness) * Mat3::Identity();
+    const Vec3 rhs = inertia * angularVelocity_ + dt * (o.couplingAngularStiffness * theta +
+                                                        o.couplingAngularDamping * input.angularVelocity);
+    angularVelocity_ = lhs.inverse() * rhs;
+  }
+
+  // 2. Contacts at the current pose, simultaneous normal impulses.
+  findContacts();
+  Vec3 pseudoVelocity, pseudoAngular;
+  solveContacts(dt, pseudoVelocity, pseudoAngular);
+
+  // 3. Pose, with the position correction's pseudo-velocities.
+  position_ += dt * (velocity_ + pseudoVelocity);
+  const Vec3 spin = angularVelocity_ + pseudoAngular;
+  const double angle = spin.norm() * dt;
+  if (angle > 0.0) orientation_ = Quat(AngleAxis(angle, spin.normalized())) * orientation_;
+  orientation_.normalize();
+
+  const Isometry3 pose = fragmentPose();
+  const Vec3 couplingForce =
+      o.couplingStiffness * (target - position_) + o.couplingDamping * (targetVelocity - velocity_);
+  const Vec3 couplingTorque = o.couplingAngularStiffness * rotationDelta(pose, device) +
+                              o.couplingAngularDamping * (input.angularVelocity - angularVelocity_);
+  out.force = -couplingForce;
+  out.torque = -couplingTorque;
+  sanitizeWrench(out.force, out.torque, o.maxForce, o.maxTorque);
+  out.proxyPose = pose;
+  out.contacts = static_cast<int>(contactCount_);
+  out.penetration = contactCount_ > 0 ? (device.translation() - pose.translation()).norm() : 0.0;
+  return out;
+}
+
+}  // namespace dm
