@@ -12,12 +12,6 @@ namespace {
 
 constexpr const char* kWhere = "dm::BonePlacementRenderer::create";
 
-bool rigidPose(const Isometry3& p) noexcept {
-  if (!p.matrix().allFinite()) return false;
-  const Mat3 r = p.linear();
-  return (r * r.transpose() - Mat3::Identity()).cwiseAbs().maxCoeff() < 1e-6 && r.determinant() > 0.0;
-}
-
 Status optionError(const char* field, double value, const char* rule) {
   return fail(ErrorCode::InvalidArgument, formatString("option %s is %g; it must be %s", field, value, rule),
               std::string(kWhere) + ": options." + field, "fix the BonePlacementOptions field");
@@ -121,7 +115,7 @@ Result<std::unique_ptr<BonePlacementRenderer>> BonePlacementRenderer::create(
   if (!moving)
     return fail(ErrorCode::InvalidArgument, "moving fragment tree is null", where + ": moving",
                 "build one with dm::ImplicitSphereTree::create(labels, threshold)");
-  if (!rigidPose(fixedPose))
+  if (!isRigidPose(fixedPose))
     return fail(ErrorCode::InvalidArgument, "fixedPose is not finite or not a rigid transform",
                 where + ": fixedPose", "pass a rotation (orthonormal, det +1) and a finite translation");
   if (Status s = checkOptions(options); !s) return s.error();
@@ -166,7 +160,7 @@ void BonePlacementRenderer::reset(const Isometry3& devicePose) noexcept {
 }
 
 void BonePlacementRenderer::setObjectPose(std::size_t index, const Isometry3& pose) noexcept {
-  if (index != 0 || !rigidPose(pose)) return;
+  if (index != 0 || !isRigidPose(pose)) return;
   fixedPose_ = pose;
 }
 

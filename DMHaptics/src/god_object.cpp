@@ -17,12 +17,6 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-bool isRigid(const Isometry3& pose) noexcept {
-  if (!pose.matrix().allFinite()) return false;
-  const Mat3 r = pose.linear();
-  return (r.transpose() * r - Mat3::Identity()).cwiseAbs().maxCoeff() < 1e-6 && r.determinant() > 0;
-}
-
 // Closest point to `goal` on the intersection of the k planes in `idx`
 // treated as equalities: goal + Σ λ_i n_i with the Gram system G λ = rhs.
 // False when the planes are (nearly) dependent.
@@ -151,7 +145,7 @@ Result<std::unique_ptr<GodObjectRenderer>> GodObjectRenderer::create(std::vector
     if (!o.bvh) return bad("the BVH is null", at + ".bvh", "build it with dm::MeshBvh::build(mesh)");
     if (o.bvh->triangleCount() == 0)
       return bad("the BVH has no triangles", at + ".bvh", "give a non-empty mesh");
-    if (!isRigid(o.pose))
+    if (!isRigidPose(o.pose))
       return bad("the pose is not finite or not a rotation plus translation", at + ".pose",
                  "give a rigid local-to-world transform");
     if (Status s = o.material.validate(at + ".material"); !s) return s.error();
@@ -213,7 +207,7 @@ void GodObjectRenderer::reset(const Isometry3& devicePose) noexcept {
 }
 
 void GodObjectRenderer::setObjectPose(std::size_t index, const Isometry3& pose) noexcept {
-  if (index >= objects_.size() || !isRigid(pose)) return;
+  if (index >= objects_.size() || !isRigidPose(pose)) return;
   objects_[index].pendingPose = pose;
   objects_[index].posePending = true;
 }

@@ -31,12 +31,6 @@ Quat quatFromRotationVector(const Vec3& phi) noexcept {
   return Quat(AngleAxis(angle, phi / angle));
 }
 
-bool isRigid(const Isometry3& p) noexcept {
-  if (!p.matrix().allFinite()) return false;
-  const Mat3 r = p.linear();
-  return (r.transpose() * r - Mat3::Identity()).norm() < 1e-6 && r.determinant() > 0;
-}
-
 Status badOption(const char* field, double value, const char* rule) {
   return fail(ErrorCode::InvalidArgument, formatString("option %s is %g; it must be %s", field, value, rule),
               std::string("dm::VpsRenderer::create: options.") + field, "fix the VpsOptions field");
@@ -151,7 +145,7 @@ Result<std::unique_ptr<VpsRenderer>> VpsRenderer::create(std::shared_ptr<const P
     if (!o.model)
       return fail(ErrorCode::InvalidArgument, "voxel model is null", at + ".model",
                   "build one with dm::VoxelModel::fromMesh / fromSdf / fromOccupancy");
-    if (!isRigid(o.pose))
+    if (!isRigidPose(o.pose))
       return fail(ErrorCode::InvalidArgument, "pose is not finite or not a rigid transform", at + ".pose",
                   "pass a rotation (orthonormal, det +1) and a finite translation");
     if (Status s = o.material.validate(at + ".material"); !s) return s.error();
@@ -178,7 +172,7 @@ void VpsRenderer::reset(const Isometry3& devicePose) noexcept {
 }
 
 void VpsRenderer::setObjectPose(std::size_t index, const Isometry3& pose) noexcept {
-  if (index >= objects_.size() || !isRigid(pose)) return;
+  if (index >= objects_.size() || !isRigidPose(pose)) return;
   objects_[index].pose = pose;
   objects_[index].inverse = pose.inverse(Eigen::Isometry);
 }

@@ -44,6 +44,25 @@ TEST(HapticMaterial, BadFieldsAreNamed) {
   }
 }
 
+TEST(IsRigidPose, AcceptsRotationsAndRefusesScalesShearsMirrorsAndNaN) {
+  Isometry3 p = Isometry3::Identity();
+  p.linear() = AngleAxis(0.7, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  p.translation() = Vec3(1, -2, 3);
+  EXPECT_TRUE(isRigidPose(p));
+  Isometry3 scaled = p;
+  scaled.linear() *= 1.01;
+  EXPECT_FALSE(isRigidPose(scaled));
+  Isometry3 mirrored = p;
+  mirrored.linear().col(0) *= -1.0;
+  EXPECT_FALSE(isRigidPose(mirrored));
+  Isometry3 sheared = Isometry3::Identity();
+  sheared.linear()(0, 1) = 0.1;
+  EXPECT_FALSE(isRigidPose(sheared));
+  Isometry3 nan = p;
+  nan.translation().x() = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(isRigidPose(nan));
+}
+
 TEST(AllocCounter, CountsAllocationsOnFlaggedThreadsOnly) {
   const auto before = test::countedAllocations();
   test::tCountAllocations = true;

@@ -48,6 +48,11 @@ struct HapticMaterial {
   Status validate(std::string_view where) const;
 };
 
+/// True when `pose` is finite and its linear part a proper rotation (RᵀR = I
+/// within 1e-6 per entry, det > 0): the check every renderer applies to
+/// object poses it is given. O(1), real-time safe.
+bool isRigidPose(const Isometry3& pose) noexcept;
+
 /// One device sample as a renderer sees it, world frame.
 struct HapticInput {
   std::int64_t timeNs = 0;                       ///< sample time
