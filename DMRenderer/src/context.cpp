@@ -7,7 +7,6 @@
 
 #include <cstdlib>
 #include <cstring>
-#include <map>
 #include <mutex>
 #include <sstream>
 
@@ -92,25 +91,12 @@ struct EglExt {
   bool client(std::string_view name) const { return hasToken(clientExtensions.c_str(), name); }
 };
 
-// EGL displays are process-wide per device: eglTerminate() on one would pull
-// it from under every other context on the same display, so displays are
-// reference-counted and terminated by the last user.
+// EGL displays are process-wide, one per device, shared by every context on
+// it: a display is initialised once and never terminated (eglTerminate would
+// pull it from under the other contexts, and Mesa unloads its driver on
+// terminate, losing the allocations it still holds). libEGL finalises
+// displays at process exit.
 std::mutex gDisplayMutex;
-std::map<EGLDisplay, int>& displayUsers() {
-  static std::map<EGLDisplay, int> users;
-  return users;
-}
-
-void releaseDisplay(EGLDisplay d) {
-  std::lock_guard lock(gDisplayMutex);
-  auto& users = displayUsers();
-  auto it = users.find(d);
-  if (it == users.end()) return;
-  if (--it->second == 0) {
-    eglTerminate(d);
-    users.erase(it);
-  }
-}
 
 std::vector<EGLDeviceEXT> queryDevices() {
   const EglExt& ext = EglExt::get();
@@ -177,15 +163,15 @@ namespace {
 // On failure releases everything it took and says why.
 Result<EGLContext> createOn(EGLDisplay display, const char* platformName, bool debug) {
   {
+    // eglInitialize on an initialised display is a no-op; serialised anyway
+    // because some drivers are not thread-safe here.
     std::lock_guard lock(gDisplayMutex);
     EGLint major = 0, minor = 0;
     if (!eglInitialize(display, &major, &minor))
       return fail(ErrorCode::Unsupported, std::string("eglInitialize failed: ") + eglErrorName(eglGetError()),
                   platformName, kPackages);
-    ++displayUsers()[display];
   }
   auto bail = [&](std::string what, std::string hint = {}) -> Error {
-    releaseDisplay(display);
     return fail(ErrorCode::Unsupported, std::move(what), platformName, std::move(hint));
   };
   const char* dispExt = eglQueryString(display, EGL_EXTENSIONS);
@@ -373,7 +359,6 @@ GlContext::~GlContext() {
   if (eglGetCurrentContext() == egl_->context)
     eglMakeCurrent(egl_->display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
   eglDestroyContext(egl_->display, egl_->context);
-  releaseDisplay(egl_->display);
 }
 
 Status GlContext::makeCurrent() {

@@ -17,20 +17,20 @@
 
 namespace dm::test {
 
-/// The process-wide context, created on first use; null (and the reason in
-/// `contextError()`) when this machine has no EGL OpenGL 4.5.
+/// The process-wide context, created on first use; null (the reason printed)
+/// when this machine has no EGL OpenGL 4.5. It lives until the process ends
+/// and is never destroyed: tearing it down from a static destructor would
+/// race Mesa's own exit handlers.
 inline GlContext* renderContext() {
-  static std::unique_ptr<GlContext> ctx;
-  static bool tried = false;
-  if (!tried) {
-    tried = true;
+  static GlContext* ctx = [] {
     auto c = GlContext::create();
-    if (c)
-      ctx = std::move(*c);
-    else
+    if (!c) {
       std::fprintf(stderr, "no GL context: %s\n", c.error().message().c_str());
-  }
-  return ctx.get();
+      return static_cast<GlContext*>(nullptr);
+    }
+    return c->release();
+  }();
+  return ctx;
 }
 
 /// Where golden references live: $DM_SOURCE_DIR/Tests/DMRenderer/golden.
