@@ -1,0 +1,331 @@
+// dm/io/scene_file.hpp — the scene file (JSON, "dmplatform-scene" version 1)
+// shared by `dmtool render`, the master engine and `dmplatform run`.
+//
+// parseScene() validates a scene document and turns it into SceneDesc, a
+// plain-data description: resources (meshes, volumes, isosurfaces, analytic
+// shapes, images), materials, objects, volume views, lights, cameras,
+// devices, engine settings and outputs. Nothing is loaded here: no file but
+// the scene itself is opened, no GL, no device. docs/scene-format.md documents
+// every key, type, unit, default and range.
+//
+// Validation runs on dm::ConfigReader, so every problem (missing key, wrong
+// type, value out of range, unknown key, dangling reference, duplicate name,
+// bad quaternion, unsorted transfer function) is reported at once, each as a
+// dm::Error whose `where` is "SOURCE: /json/pointer" and whose hint suggests
+// the closest valid name ("did you mean \"skin\"?"). Units are SI (metres,
+// seconds, radians) unless a key says otherwise (`fov_y_deg`).
+//
+// Source paths: a name "mount:rest" uses a dm::FileSystem mount (an unknown
+// mount is a parse error); an absolute path is kept; a relative path is
+// resolved against the scene file's directory. Whether the file exists is
+// checked when it is loaded, not here.
+//
+// @code
+//   std::vector<dm::Error> problems;
+//   auto scene = dm::readScene("examples/scenes/head_probe.json", &problems);
+//   if (!scene) { std::cerr << dm::formatSceneErrors(problems); return 1; }
+// @endcode
+#pragma once
+
+#include <dm/core/config.hpp>
+#include <dm/core/pose.hpp>
+#include <dm/core/result.hpp>
+#include <dm/core/types.hpp>
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace dm {
+
+/// The only scene format version this build reads and writes.
+inline constexpr int kSceneFormatVersion = 1;
+
+/// A named resource: something to load or generate once and share.
+struct SceneResource {
+  enum class Type : std::uint8_t { Mesh, Volume, Isosurface, Shape, Image };
+  enum class Shape : std::uint8_t { Sphere, Box, Capsule, Cylinder, Plane };
+
+  std::string name;
+  Type type = Type::Mesh;
+  /// Mesh, Volume, Image: the source as written ("mricron:ch2.nii.gz", "tool.stl").
+  std::string source;
+  /// The resolved source: the mount's file if it exists (else empty: loading
+  /// reports it), an absolute path as is, a relative one under the scene's directory.
+  std::filesystem::path path;
+  std::string unit = "m";  ///< Mesh: length unit of the file (dm::metresPerUnit names)
+  double scale = 1.0;      ///< Mesh: extra factor after the unit, > 0
+
+  std::string volume;             ///< Isosurface: name of a Volume resource
+  double level = 0.0;             ///< Isosurface: iso value, in the volume's value units
+  bool largestComponent = false;  ///< Isosurface: keep only the largest connected component
+  int smooth = 0;                 ///< Isosurface: smoothing iterations, 0..100
+
+  Shape shape = Shape::Sphere;      ///< Shape: which one, centred at its origin, axis +z
+  double radius = 0.0;              ///< Sphere, capsule, cylinder: m, > 0
+  Vec3 halfExtents = Vec3::Zero();  ///< Box: m, > 0; plane: x, y > 0 and z = 0
+  double height = 0.0;              ///< Capsule (between the cap centres), cylinder: m, > 0
+  int subdivisions = 3;             ///< Shape tessellation level, 0..8
+
+  bool operator==(const SceneResource&) const = default;
+};
+
+/// Contact properties of a touchable surface.
+struct SceneHapticMaterial {
+  double stiffness = 0.0;        ///< N/m, > 0
+  double damping = 0.0;          ///< N·s/m, ≥ 0
+  double staticFriction = 0.0;   ///< coefficient, ≥ 0
+  double dynamicFriction = 0.0;  ///< coefficient, 0 ≤ dynamic ≤ static
+
+  bool operator==(const SceneHapticMaterial&) const = default;
+};
+
+/// Appearance (and optionally haptic contact) of a surface.
+struct SceneMaterial {
+  enum class Model : std::uint8_t { BlinnPhong, Pbr };
+
+  std::string name;
+  Model model = Model::BlinnPhong;
+  Vec4 color{0.8, 0.8, 0.8, 1.0};  ///< linear RGBA, each 0..1
+  Vec3 specular{0.2, 0.2, 0.2};    ///< Blinn-Phong: linear RGB, 0..1
+  double shininess = 32.0;         ///< Blinn-Phong: exponent, 1..10000
+  double metallic = 0.0;           ///< PBR: 0..1
+  double roughness = 0.5;          ///< PBR: 0..1
+  Vec3 emissive = Vec3::Zero();    ///< linear RGB, ≥ 0
+  std::string texture;             ///< name of an Image resource, or empty
+  std::string normalMap;           ///< name of an Image resource, or empty
+  std::optional<SceneHapticMaterial> haptic;
+
+  bool operator==(const SceneMaterial&) const = default;
+};
+
+/// A mesh placed in the world.
+struct SceneObject {
+  std::string name;
+  std::string mesh;      ///< a Mesh, Isosurface or Shape resource
+  std::string material;  ///< a material name, or empty for the renderer's default
+  Pose pose;             ///< object → world; the quaternion is unit within 1e-9
+  double scale = 1.0;    ///< uniform, > 0
+  bool visible = true;
+  bool haptic = false;   ///< touchable by haptic renderers
+  bool dynamic = false;  ///< simulated by the physics engine
+  double mass = 0.0;     ///< kg; > 0 when dynamic, 0 when not given
+
+  bool operator==(const SceneObject& o) const;
+};
+
+/// One control point of a volume transfer function.
+struct SceneTransferPoint {
+  double value = 0.0;        ///< in the volume's value units
+  Vec4 rgba = Vec4::Zero();  ///< linear colour and opacity, 0..1
+
+  bool operator==(const SceneTransferPoint&) const = default;
+};
+
+/// A volume shown directly (ray casting or a slice).
+struct SceneVolume {
+  enum class Mode : std::uint8_t { Composite, Mip, Slice };
+  enum class Axis : std::uint8_t { Axial, Coronal, Sagittal };
+
+  std::string name;
+  std::string volume;  ///< a Volume resource
+  Mode mode = Mode::Composite;
+  /// Values strictly increasing, ≥ 2 points; empty: the renderer's grey ramp.
+  std::vector<SceneTransferPoint> transferFunction;
+  Axis sliceAxis = Axis::Axial;  ///< Slice mode: axial ⟂ z, coronal ⟂ y, sagittal ⟂ x (world)
+  double slicePosition = 0.0;    ///< Slice mode: world coordinate along that axis, m
+  bool visible = true;
+
+  bool operator==(const SceneVolume&) const = default;
+};
+
+/// A light source.
+struct SceneLight {
+  enum class Type : std::uint8_t { Directional, Point, Spot };
+
+  Type type = Type::Directional;
+  Vec3 direction{0.0, 0.0, -1.0};  ///< Directional, spot: unit, world, the way the light travels
+  Vec3 position = Vec3::Zero();    ///< Point, spot: m, world
+  Vec3 color{1.0, 1.0, 1.0};       ///< linear RGB, 0..1
+  double intensity = 1.0;          ///< ≥ 0, multiplies color
+  double range = 0.0;              ///< Point, spot: m, ≥ 0 (0: no cut-off)
+  double innerConeDeg = 20.0;      ///< Spot: full intensity inside, degrees, 0 < inner ≤ outer
+  double outerConeDeg = 30.0;      ///< Spot: no light outside, degrees, ≤ 90
+  bool shadows = false;
+
+  bool operator==(const SceneLight&) const = default;
+};
+
+/// One key of a camera path.
+struct SceneCameraKey {
+  double t = 0.0;  ///< s, strictly increasing along the path
+  Vec3 position = Vec3::Zero();
+  Vec3 target = Vec3::Zero();
+
+  bool operator==(const SceneCameraKey&) const = default;
+};
+
+/// A view of the scene.
+struct SceneCamera {
+  enum class Projection : std::uint8_t { Perspective, Orthographic };
+
+  std::string name;
+  Projection projection = Projection::Perspective;
+  double fovYDeg = 45.0;     ///< Perspective: vertical field of view, degrees, (0, 180)
+  double orthoHeight = 0.3;  ///< Orthographic: height of the view, m, > 0
+  Vec3 position = Vec3::Zero();
+  Vec3 target = Vec3::Zero();
+  Vec3 up{0.0, 0.0, 1.0};            ///< not parallel to target − position
+  double near = 0.01;                ///< m, > 0
+  double far = 10.0;                 ///< m, > near
+  std::string track;                 ///< an object whose origin the camera aims at, or empty
+  std::vector<SceneCameraKey> path;  ///< empty: a fixed camera
+  bool stereo = false;
+  double eyeSeparation = 0.064;  ///< Stereo: m, > 0
+  double convergence = 0.5;      ///< Stereo: distance of zero parallax, m, > 0
+
+  bool operator==(const SceneCamera&) const = default;
+};
+
+/// An input/output device opened through a driver.
+struct SceneDevice {
+  std::string name;
+  std::string driver;            ///< registered driver name, e.g. "sim-haptic"
+  Json config = Json::object();  ///< driver parameters: strings, numbers, booleans or arrays of them
+
+  bool operator==(const SceneDevice&) const = default;
+};
+
+/// The haptic engine: one device rendering contact with objects.
+struct SceneHapticsEngine {
+  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree };
+
+  double rateHz = 1000.0;  ///< 100..10000
+  Renderer renderer = Renderer::GodObject;
+  std::string device;                ///< a device name
+  std::vector<std::string> objects;  ///< touchable object names, ≥ 1
+  double toolRadius = 0.0;           ///< m, 0..0.1 (0: a point)
+  Pose devicePose;                   ///< device frame → world
+  double maxForce = 0.0;             ///< N, ≥ 0 (0: the device's limit)
+  bool forceShading = false;
+  std::string proxyObject;  ///< an object whose pose follows the proxy (the tool shown), or empty
+
+  bool operator==(const SceneHapticsEngine& o) const;
+};
+
+/// The physics engine.
+struct ScenePhysicsEngine {
+  double rateHz = 1000.0;            ///< 10..10000
+  Vec3 gravity{0.0, 0.0, -9.80665};  ///< m/s², world
+
+  bool operator==(const ScenePhysicsEngine&) const = default;
+};
+
+/// The render engine.
+struct SceneRenderEngine {
+  double rateHz = 60.0;  ///< 1..240
+  std::string camera;    ///< a camera name, or empty for the first camera
+  int width = 1280;      ///< pixels, 16..16384
+  int height = 720;      ///< pixels, 16..16384
+  int samples = 1;       ///< MSAA samples: 1, 2, 4, 8 or 16
+
+  bool operator==(const SceneRenderEngine&) const = default;
+};
+
+/// The monitor engine (statistics, traces, console).
+struct SceneMonitorEngine {
+  double rateHz = 30.0;  ///< 1..1000
+
+  bool operator==(const SceneMonitorEngine&) const = default;
+};
+
+/// Which engines run; each is optional.
+struct SceneEngines {
+  std::optional<SceneHapticsEngine> haptics;
+  std::optional<ScenePhysicsEngine> physics;
+  std::optional<SceneRenderEngine> render;
+  std::optional<SceneMonitorEngine> monitor;
+
+  bool operator==(const SceneEngines&) const = default;
+};
+
+/// What a run writes.
+struct SceneOutputs {
+  std::string directory = "out";  ///< relative to the working directory of the run
+  bool frames = false;            ///< rendered frames as PNG
+  int frameEvery = 1;             ///< keep every n-th frame, ≥ 1
+  bool forces = false;            ///< haptic force trace (CSV)
+  bool plot = false;              ///< force plot (PNG)
+  bool summary = true;            ///< summary.json
+
+  bool operator==(const SceneOutputs&) const = default;
+};
+
+/// A whole scene, as plain data. Names are unique within each kind.
+struct SceneDesc {
+  std::string name;
+  std::filesystem::path baseDir;         ///< where relative sources resolve
+  std::vector<SceneResource> resources;  ///< sorted by name
+  std::vector<SceneMaterial> materials;  ///< sorted by name
+  std::vector<SceneObject> objects;      ///< in file order
+  std::vector<SceneVolume> volumes;
+  std::vector<SceneLight> lights;
+  std::vector<SceneCamera> cameras;
+  std::vector<SceneDevice> devices;
+  SceneEngines engines;
+  SceneOutputs outputs;
+
+  /// Find by name; nullptr when there is none. O(n).
+  const SceneResource* resource(std::string_view name) const;
+  const SceneMaterial* material(std::string_view name) const;
+  const SceneObject* object(std::string_view name) const;
+  const SceneVolume* volume(std::string_view name) const;
+  const SceneCamera* camera(std::string_view name) const;
+  const SceneDevice* device(std::string_view name) const;
+
+  bool operator==(const SceneDesc&) const = default;
+};
+
+/// Parses and validates a scene document. `sourceName` names it in errors
+/// ("scene.json"); relative sources resolve against `baseDir`. On failure
+/// the Error is the first problem with the others appended to its `what`,
+/// and `problems` (if given) receives every problem, each with its own
+/// where ("SOURCE: /json/pointer", or "SOURCE: byte N" for bad JSON) and
+/// hint. Documents nested deeper than 64 levels are refused. O(size).
+/// @code
+///   auto s = dm::parseScene(text, "scene.json", "/data/scenes");
+///   if (!s) return s.error();
+///   const dm::SceneObject* skin = s->object("head_skin");
+/// @endcode
+Result<SceneDesc> parseScene(std::string_view json, std::string_view sourceName,
+                             const std::filesystem::path& baseDir, std::vector<Error>* problems = nullptr);
+
+/// Reads a scene file (at most 16 MiB) and parses it with its directory as
+/// base; errors name the file. See parseScene().
+/// @code
+///   auto s = dm::readScene("examples/scenes/head_probe.json");
+///   if (!s) { std::cerr << s.error() << '\n'; return 1; }
+/// @endcode
+Result<SceneDesc> readScene(const std::filesystem::path& file, std::vector<Error>* problems = nullptr);
+
+/// One line per problem ("where: what (hint)\n"), for a console.
+std::string formatSceneErrors(const std::vector<Error>& problems);
+
+/// The scene as a version-1 document with every key written out (defaults
+/// included); parseScene() of it gives back an equal SceneDesc (baseDir
+/// aside, which is not stored).
+/// @code
+///   std::string text = dm::toJson(scene).dump(2);
+/// @endcode
+Json toJson(const SceneDesc& scene);
+
+/// A device's config as driver parameters (dm::DeviceParams): strings as
+/// they are, numbers in shortest round-trip form, booleans as "1"/"0",
+/// arrays joined with commas ([0, 0, -0.004] → "0,0,-0.004").
+std::vector<std::pair<std::string, std::string>> deviceParams(const SceneDevice& device);
+
+}  // namespace dm

@@ -1,0 +1,1280 @@
+#include <dm/core/filesystem.hpp>
+#include <dm/core/units.hpp>
+#include <dm/io/mesh_io.hpp>
+#include <dm/io/scene_file.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <exception>
+#include <limits>
+#include <map>
+#include <optional>
+#include <set>
+#include <utility>
+
+namespace dm {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+constexpr std::string_view kFormatName = "dmplatform-scene";
+constexpr std::size_t kMaxDepth = 64;
+constexpr std::size_t kMaxSceneBytes = std::size_t{16} << 20;
+// A quaternion this far from unit length is a mistake, not rounding.
+constexpr double kUnitTolerance = 1e-3;
+// Closer to unit than this is kept bit for bit, so toJson() round trips.
+constexpr double kRenormalize = 1e-9;
+// Past this many problems, dangling names get no "did you mean".
+constexpr std::size_t kMaxSuggestions = 200;
+
+constexpr std::array<std::string_view, 5> kResourceTypes{"mesh", "volume", "isosurface", "shape", "image"};
+constexpr std::array<std::string_view, 5> kShapes{"sphere", "box", "capsule", "cylinder", "plane"};
+constexpr std::array<std::string_view, 2> kMaterialModels{"blinn-phong", "pbr"};
+constexpr std::array<std::string_view, 3> kVolumeModes{"composite", "mip", "slice"};
+constexpr std::array<std::string_view, 3> kAxes{"axial", "coronal", "sagittal"};
+constexpr std::array<std::string_view, 3> kLightTypes{"directional", "point", "spot"};
+constexpr std::array<std::string_view, 2> kProjections{"perspective", "orthographic"};
+constexpr std::array<std::string_view, 3> kRenderers{"god-object", "vps", "sphere-tree"};
+
+template <class E, std::size_t N>
+std::string nameOf(E e, const std::array<std::string_view, N>& names) {
+  return std::string(names[static_cast<std::size_t>(e)]);
+}
+
+template <std::size_t N, std::size_t... I>
+std::string oneOfArray(ConfigReader& r, std::string_view key, const std::array<std::string_view, N>& names,
+                       std::optional<std::string> fallback, std::index_sequence<I...>) {
+  return r.oneOf(key, {names[I]...}, std::move(fallback));
+}
+
+// An enum value named by one of `names`; nullopt (and an error) when it is
+// missing without a fallback or not one of them.
+template <class E, std::size_t N>
+std::optional<E> readEnum(ConfigReader& r, std::string_view key, const std::array<std::string_view, N>& names,
+                          std::optional<E> fallback = std::nullopt) {
+  const std::size_t before = r.errors().size();
+  std::optional<std::string> fb;
+  if (fallback) fb = nameOf(*fallback, names);
+  const std::string s = oneOfArray(r, key, names, fb, std::make_index_sequence<N>{});
+  if (r.errors().size() != before) return std::nullopt;
+  const auto it = std::find(names.begin(), names.end(), s);
+  return static_cast<E>(it - names.begin());
+}
+
+// The candidate closest to `word` by edit distance, if it is plausibly a
+// typo (at most max(2, length / 3) edits, like dm::closestMatch).
+std::string nearestName(std::string_view word, const std::vector<std::string>& names) {
+  if (word.size() > 256) return {};
+  const std::size_t limit = std::max<std::size_t>(2, word.size() / 3);
+  std::string best;
+  std::size_t bestD = limit + 1;
+  for (const std::string& n : names) {
+    // The length difference bounds the distance from below: skip early.
+    const std::size_t diff = n.size() > word.size() ? n.size() - word.size() : word.size() - n.size();
+    if (diff >= bestD) continue;
+    const std::size_t d = editDistance(word, n);
+    if (d < bestD) {
+      bestD = d;
+      best = n;
+    }
+  }
+  return best;
+}
+
+std::string inQuotes(std::string_view s) { return "\"" + std::string(s) + "\""; }
+
+bool isNull(const ConfigReader& r) { return r.node().is_null(); }
+
+// True if `r` is an object; records an error if it is present but is not.
+bool expectObject(ConfigReader& r) {
+  if (r.isObject()) return true;
+  if (!isNull(r)) r.addError(std::string("expected an object, got ") + r.node().type_name());
+  return false;
+}
+
+bool expectArray(ConfigReader& r) {
+  if (r.isArray()) return true;
+  if (!isNull(r)) r.addError(std::string("expected an array, got ") + r.node().type_name());
+  return false;
+}
+
+Vec3 readVec3(ConfigReader& r, std::string_view key, const Vec3& fallback) {
+  const std::vector<double> v =
+      r.numbers(key, 3, std::vector<double>{fallback.x(), fallback.y(), fallback.z()});
+  return {v[0], v[1], v[2]};
+}
+
+Vec3 readVec3(ConfigReader& r, std::string_view key) {
+  const std::vector<double> v = r.numbers(key, 3);
+  return {v[0], v[1], v[2]};
+}
+
+// A unit vector: any non-zero length is normalised (lengths within 1e-9 of
+// one are kept as written, so a written scene reads back bit for bit).
+Vec3 readDirection(ConfigReader& r, std::string_view key, const Vec3& fallback) {
+  const std::size_t before = r.errors().size();
+  Vec3 d = readVec3(r, key, fallback);
+  if (r.errors().size() != before) return fallback;
+  const double n = d.norm();
+  if (!(n > 1e-12)) {
+    r.addError("direction has zero length", key, "give a non-zero vector, e.g. [0, 0, -1]");
+    return fallback;
+  }
+  if (std::abs(n - 1.0) > kRenormalize) d /= n;
+  return d;
+}
+
+// A number that must be > 0 (and ≤ max).
+double readPositive(ConfigReader& r, std::string_view key, std::optional<double> fallback,
+                    double max = std::numeric_limits<double>::infinity()) {
+  const std::size_t before = r.errors().size();
+  const double v = r.number(key, {.min = 0.0, .max = max}, fallback);
+  if (r.errors().size() == before && !(v > 0.0)) {
+    r.addError("value must be greater than 0", key);
+    return fallback.value_or(1.0);
+  }
+  return v;
+}
+
+// Linear colour [r, g, b] (or [r, g, b, a] when alpha is allowed), each
+// component in [0, max].
+Vec4 readColor(ConfigReader& r, std::string_view key, const Vec4& fallback, bool alpha, double max = 1.0) {
+  if (!r.has(key)) return fallback;
+  ConfigReader c = r.child(key);
+  const Json& j = c.node();
+  if (!j.is_array() || !(j.size() == 3 || (alpha && j.size() == 4))) {
+    if (j.is_array())
+      c.addError("expected " + std::string(alpha ? "[r, g, b] or [r, g, b, a]" : "[r, g, b]") + ", got " +
+                     std::to_string(j.size()) + " numbers",
+                 {}, "give linear colour components between 0 and 1");
+    return fallback;
+  }
+  Vec4 out(0.0, 0.0, 0.0, 1.0);
+  for (std::size_t i = 0; i < j.size(); ++i) {
+    const Json& e = j[i];
+    if (!e.is_number() || !std::isfinite(e.get<double>())) {
+      c.addError("expected a number, got " + std::string(e.type_name()), std::to_string(i));
+      continue;
+    }
+    const double v = e.get<double>();
+    if (v < 0.0 || v > max) {
+      c.addError(formatString("component %g is outside [0, %g]", v, max), std::to_string(i),
+                 "colours are linear, 0..1 (not 0..255)");
+      continue;
+    }
+    out[static_cast<Eigen::Index>(i)] = v;
+  }
+  return out;
+}
+
+// {"position": [x, y, z], "rotation": [w, x, y, z]} or {..., "euler_deg": [rx, ry, rz]}.
+Pose readPose(ConfigReader p) {
+  Pose out;
+  if (!expectObject(p)) return out;
+  p.knownKeys({"position", "rotation", "euler_deg"});
+  out.p = readVec3(p, "position", Vec3::Zero());
+  if (p.has("rotation") && p.has("euler_deg")) {
+    p.addError("both \"rotation\" and \"euler_deg\" are given", "euler_deg", "give only one of them");
+    return out;
+  }
+  const std::size_t before = p.errors().size();
+  if (p.has("rotation")) {
+    const std::vector<double> q = p.numbers("rotation", 4);
+    if (p.errors().size() != before) return out;
+    Quat r(q[0], q[1], q[2], q[3]);
+    const double n = r.norm();
+    if (!(std::abs(n - 1.0) <= kUnitTolerance)) {
+      p.addError(formatString("rotation quaternion has length %g, not 1", n), "rotation",
+                 "give a unit quaternion [w, x, y, z], or use \"euler_deg\": [rx, ry, rz]");
+      return out;
+    }
+    if (std::abs(n - 1.0) > kRenormalize) r.normalize();
+    out.q = r;
+  } else if (p.has("euler_deg")) {
+    const Vec3 e = readVec3(p, "euler_deg") * units::deg;
+    if (p.errors().size() != before) return out;
+    out.q =
+        (AngleAxis(e.z(), Vec3::UnitZ()) * AngleAxis(e.y(), Vec3::UnitY()) * AngleAxis(e.x(), Vec3::UnitX()))
+            .normalized();
+  }
+  return out;
+}
+
+Json toJson(const Vec3& v) { return Json::array({v.x(), v.y(), v.z()}); }
+Json toJson(const Vec4& v) { return Json::array({v.x(), v.y(), v.z(), v.w()}); }
+Json toJson(const Pose& p) {
+  return {{"position", toJson(p.p)}, {"rotation", Json::array({p.q.w(), p.q.x(), p.q.y(), p.q.z()})}};
+}
+
+// Finds keys that occur twice in one JSON object: nlohmann keeps only the
+// last, which would silently drop e.g. one of two resources named "skin".
+// A SAX pass (no document built) tracks the path; each repeat is recorded
+// at its parent object through `root`.
+class DuplicateKeyFinder final : public Json::json_sax_t {
+ public:
+  struct Frame {
+    bool array = false;
+    std::size_t index = 0;
+    std::string key;
+    std::set<std::string> keys;
+  };
+  struct Step {
+    bool array = false;
+    std::size_t index = 0;
+    std::string key;
+  };
+  std::vector<std::pair<std::vector<Step>, std::string>> found;  // path to the object, repeated key
+
+  bool null() override { return element(); }
+  bool boolean(bool) override { return element(); }
+  bool number_integer(number_integer_t) override { return element(); }
+  bool number_unsigned(number_unsigned_t) override { return element(); }
+  bool number_float(number_float_t, const string_t&) override { return element(); }
+  bool string(string_t&) override { return element(); }
+  bool binary(binary_t&) override { return element(); }
+  bool start_object(std::size_t) override { return open(false); }
+  bool start_array(std::size_t) override { return open(true); }
+  bool end_object() override { return close(); }
+  bool end_array() override { return close(); }
+  bool key(string_t& k) override {
+    if (frames_.empty()) return true;
+    Frame& f = frames_.back();
+    f.key = k;
+    if (!f.keys.insert(k).second && found.size() < 100) {
+      std::vector<Step> path;
+      for (std::size_t i = 0; i + 1 < frames_.size(); ++i)
+        path.push_back({frames_[i].array, frames_[i].index, frames_[i].key});
+      found.emplace_back(std::move(path), k);
+    }
+    return true;
+  }
+  bool parse_error(std::size_t, const std::string&, const nlohmann::detail::exception&) override {
+    return false;
+  }
+
+ private:
+  bool element() {
+    if (!frames_.empty() && frames_.back().array) ++frames_.back().index;
+    return true;
+  }
+  bool open(bool array) {
+    frames_.push_back({array, 0, {}, {}});
+    return true;
+  }
+  bool close() {
+    if (!frames_.empty()) frames_.pop_back();
+    return element();
+  }
+  std::vector<Frame> frames_;
+};
+
+void reportDuplicateKeys(std::string_view text, ConfigReader& root) {
+  DuplicateKeyFinder finder;
+  (void)Json::sax_parse(text, &finder, nlohmann::detail::input_format_t::json, /*strict=*/true,
+                        /*ignore_comments=*/true);
+  for (const auto& [path, key] : finder.found) {
+    ConfigReader at = root;
+    for (std::size_t i = 0; i < path.size(); ++i)
+      at = path[i].array ? at.at(path[i].index) : at.child(path[i].key);
+    at.addError("key " + inQuotes(key) + " appears more than once in this object (only the last one counts)",
+                key, "remove or rename one of them");
+  }
+}
+
+// Rejects nesting deeper than kMaxDepth before nlohmann sees the text, so no
+// recursive walk (dump, destruction) can run out of stack.
+std::optional<std::size_t> tooDeepAt(std::string_view text) {
+  std::size_t depth = 0;
+  bool inString = false, escaped = false;
+  for (std::size_t i = 0; i < text.size(); ++i) {
+    const char c = text[i];
+    if (inString) {
+      if (escaped)
+        escaped = false;
+      else if (c == '\\')
+        escaped = true;
+      else if (c == '"')
+        inString = false;
+    } else if (c == '"') {
+      inString = true;
+    } else if (c == '[' || c == '{') {
+      if (++depth > kMaxDepth) return i + 1;  // 1-based, like Config::parse
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+  return std::nullopt;
+}
+
+class SceneParser {
+ public:
+  SceneParser(ConfigReader root, fs::path baseDir) : root_(std::move(root)), baseDir_(std::move(baseDir)) {
+    scene_.baseDir = baseDir_;
+  }
+
+  // False when the document is not a version-1 scene at all (then nothing
+  // else is checked: its other keys would only add noise).
+  bool header() {
+    if (!root_.isObject()) {
+      root_.addError(std::string("a scene is a JSON object, got ") + root_.node().type_name(), {},
+                     "start from examples/scenes/head_probe.json");
+      return false;
+    }
+    const std::size_t before = root_.errors().size();
+    const std::string format = root_.string("format");
+    if (root_.errors().size() == before && format != kFormatName) {
+      root_.addError("format is " + inQuotes(format) + ", not " + inQuotes(kFormatName), "format",
+                     "this is not a scene file, or set \"format\": \"dmplatform-scene\"");
+      return false;
+    }
+    if (root_.has("version") && root_.node()["version"].is_number_integer()) {
+      const long long v = root_.integer("version");
+      if (v != kSceneFormatVersion) {
+        root_.addError("unsupported scene version " + std::to_string(v), "version",
+                       "this build reads version " + std::to_string(kSceneFormatVersion));
+        badVersion_ = true;
+        return false;
+      }
+    } else {
+      (void)root_.integer("version");
+    }
+    return true;
+  }
+
+  void body() {
+    root_.knownKeys({"format", "version", "name", "resources", "materials", "objects", "volumes", "lights",
+                     "cameras", "devices", "engines", "outputs"});
+    scene_.name = root_.string("name", std::string());
+    resources();
+    materials();
+    objects();
+    volumes();
+    lights();
+    devices();
+    cameras();
+    engines();
+    outputs();
+  }
+
+  bool badVersion() const { return badVersion_; }
+  SceneDesc& scene() { return scene_; }
+  ConfigReader& root() { return root_; }
+
+ private:
+  using Type = SceneResource::Type;
+  using NameIndex = std::map<std::string, std::size_t>;
+
+  fs::path resolveSource(ConfigReader& r, const std::string& source) {
+    const std::size_t colon = source.find(':');
+    if (colon != std::string::npos && colon >= 2 && source.find('/') > colon) {
+      auto p = FileSystem::global().resolve(source);
+      if (p) return *p;
+      // FileSystem has no query for its mounts: its error names an unknown one.
+      if (p.error().what.rfind("unknown mount", 0) == 0) r.addError(p.error().what, "source", p.error().hint);
+      return {};
+    }
+    const fs::path p(source);
+    return (p.is_absolute() ? p : baseDir_ / p).lexically_normal();
+  }
+
+  void readSource(ConfigReader& r, SceneResource& res) {
+    const std::size_t before = r.errors().size();
+    res.source = r.string("source");
+    if (r.errors().size() != before) return;
+    if (res.source.empty()) {
+      r.addError("source is empty", "source", "give a file path or \"mount:name\"");
+      return;
+    }
+    res.path = resolveSource(r, res.source);
+  }
+
+  void shape(ConfigReader& r, SceneResource& res) {
+    const auto s = readEnum<SceneResource::Shape>(r, "shape", kShapes);
+    if (!s) return;
+    res.shape = *s;
+    using S = SceneResource::Shape;
+    switch (*s) {
+      case S::Sphere:
+        r.knownKeys({"type", "shape", "radius", "subdivisions"});
+        break;
+      case S::Box:
+      case S::Plane:
+        r.knownKeys({"type", "shape", "half_extents", "subdivisions"});
+        break;
+      case S::Capsule:
+      case S::Cylinder:
+        r.knownKeys({"type", "shape", "radius", "height", "subdivisions"});
+        break;
+    }
+    if (*s == S::Sphere || *s == S::Capsule || *s == S::Cylinder) res.radius = readPositive(r, "radius", {});
+    if (*s == S::Capsule || *s == S::Cylinder) res.height = readPositive(r, "height", {});
+    if (*s == S::Box || *s == S::Plane) {
+      const std::size_t n = *s == S::Box ? 3 : 2;
+      const std::size_t before = r.errors().size();
+      const std::vector<double> h = r.numbers("half_extents", n);
+      if (r.errors().size() == before) {
+        for (std::size_t i = 0; i < n; ++i) res.halfExtents[static_cast<Eigen::Index>(i)] = h[i];
+        if (!(res.halfExtents.head(n).minCoeff() > 0.0))
+          r.addError("half extents must be greater than 0", "half_extents",
+                     n == 3 ? "give [hx, hy, hz] in metres" : "a plane takes [hx, hy] in metres");
+      }
+    }
+    res.subdivisions = static_cast<int>(r.integer("subdivisions", {.min = 0, .max = 8}, 3));
+  }
+
+  void resources() {
+    ConfigReader sec = root_.child("resources");
+    if (!expectObject(sec)) return;
+    std::vector<std::pair<std::size_t, ConfigReader>> isosurfaces;
+    for (auto it = sec.node().begin(); it != sec.node().end(); ++it) {
+      ConfigReader r = sec.child(it.key());
+      if (!expectObject(r)) continue;
+      SceneResource res;
+      res.name = it.key();
+      if (res.name.empty()) r.addError("empty resource name", {}, "give every resource a name");
+      const auto type = readEnum<Type>(r, "type", kResourceTypes);
+      if (!type) continue;
+      res.type = *type;
+      switch (*type) {
+        case Type::Mesh: {
+          r.knownKeys({"type", "source", "unit", "scale"});
+          readSource(r, res);
+          const std::size_t before = r.errors().size();
+          res.unit = r.string("unit", std::string("m"));
+          if (r.errors().size() == before)
+            if (auto m = metresPerUnit(res.unit); !m) r.addError(m.error().what, "unit", m.error().hint);
+          res.scale = readPositive(r, "scale", 1.0);
+          break;
+        }
+        case Type::Volume:
+        case Type::Image:
+          r.knownKeys({"type", "source"});
+          readSource(r, res);
+          break;
+        case Type::Isosurface:
+          r.knownKeys({"type", "volume", "level", "largest_component", "smooth"});
+          res.volume = r.string("volume");
+          res.level = r.number("level");
+          res.largestComponent = r.boolean("largest_component", false);
+          res.smooth = static_cast<int>(r.integer("smooth", {.min = 0, .max = 100}, 0));
+          isosurfaces.emplace_back(scene_.resources.size(), r);
+          break;
+        case Type::Shape:
+          shape(r, res);
+          break;
+      }
+      scene_.resources.push_back(std::move(res));
+    }
+    for (auto& [i, r] : isosurfaces)
+      if (!scene_.resources[i].volume.empty())
+        checkResource(r, "volume", scene_.resources[i].volume, {Type::Volume}, "a volume");
+  }
+
+  // Resources come from a JSON object, so they are sorted by name.
+  const SceneResource* findResource(const std::string& name) const {
+    const auto it = std::lower_bound(scene_.resources.begin(), scene_.resources.end(), name,
+                                     [](const SceneResource& x, const std::string& n) { return x.name < n; });
+    return it != scene_.resources.end() && it->name == name ? &*it : nullptr;
+  }
+
+  // A reference to a resource of one of `types`; records a dangling or
+  // mistyped reference with the closest fitting name.
+  void checkResource(ConfigReader& r, std::string_view key, const std::string& name,
+                     std::initializer_list<Type> types, const char* kind) {
+    auto fits = [&](const SceneResource& x) {
+      return std::find(types.begin(), types.end(), x.type) != types.end();
+    };
+    const SceneResource* res = findResource(name);
+    if (res && fits(*res)) return;
+    std::vector<std::string> fitting;
+    for (const SceneResource& x : scene_.resources)
+      if (fits(x)) fitting.push_back(x.name);
+    if (res) {
+      r.addError("resource " + inQuotes(name) + " is " + (res->type == Type::Image ? "an " : "a ") +
+                     nameOf(res->type, kResourceTypes) + ", not " + kind,
+                 key, fitting.empty() ? "define one under \"resources\"" : "use one of: " + joined(fitting));
+      return;
+    }
+    dangling(r, key, "resource", name, fitting, "resources");
+  }
+
+  // At most 10 quoted names, comma-separated.
+  static std::string joined(const std::vector<std::string>& names) {
+    std::string s;
+    for (std::size_t i = 0; i < names.size() && i < 10; ++i)
+      s += (s.empty() ? "" : ", ") + inQuotes(names[i]);
+    if (names.size() > 10) s += ", ...";
+    return s;
+  }
+
+  static void dangling(ConfigReader& r, std::string_view key, const char* kind, const std::string& name,
+                       const std::vector<std::string>& candidates, const char* section) {
+    // Suggestions cost an edit distance per candidate: a file with hundreds
+    // of mistakes gets them for the first ones only.
+    const std::string near =
+        r.errors().size() < kMaxSuggestions ? nearestName(name, candidates) : std::string();
+    r.addError(std::string("no ") + kind + " " + inQuotes(name), key,
+               !near.empty() ? "did you mean " + inQuotes(near) + "?"
+                             : std::string("define it under \"") + section + "\"");
+  }
+
+  // A reference to a named element (objects, devices, cameras by name →
+  // index); records a dangling one.
+  static bool checkName(ConfigReader& r, std::string_view key, const std::string& name,
+                        const NameIndex& index, const char* kind, const char* section) {
+    if (index.count(name)) return true;
+    std::vector<std::string> names;
+    if (r.errors().size() < kMaxSuggestions)
+      for (const auto& entry : index) names.push_back(entry.first);
+    dangling(r, key, kind, name, names, section);
+    return false;
+  }
+
+  // "name": required, non-empty, unique within `index` (which maps it to
+  // `position`, the element's index in its list).
+  static std::string uniqueName(ConfigReader& r, NameIndex& index, std::size_t position) {
+    const std::size_t before = r.errors().size();
+    std::string name = r.string("name");
+    if (r.errors().size() != before) return name;
+    if (name.empty()) {
+      r.addError("name is empty", "name", "give it a unique name");
+      return name;
+    }
+    const std::string& path = r.path();
+    if (auto [it, fresh] = index.emplace(name, position); !fresh)
+      r.addError("duplicate name " + inQuotes(name) + " (also used by " +
+                     path.substr(0, path.rfind('/') + 1) + std::to_string(it->second) + ")",
+                 "name", "names must be unique: rename one of them");
+    return name;
+  }
+
+  void imageRef(ConfigReader& r, std::string_view key, std::string& out) {
+    const std::size_t before = r.errors().size();
+    out = r.string(key, std::string());
+    if (r.errors().size() == before && r.has(key)) checkResource(r, key, out, {Type::Image}, "an image");
+  }
+
+  void materials() {
+    ConfigReader sec = root_.child("materials");
+    if (!expectObject(sec)) return;
+    for (auto it = sec.node().begin(); it != sec.node().end(); ++it) {
+      ConfigReader r = sec.child(it.key());
+      if (!expectObject(r)) continue;
+      SceneMaterial m;
+      m.name = it.key();
+      if (m.name.empty()) r.addError("empty material name", {}, "give every material a name");
+      const auto model =
+          readEnum<SceneMaterial::Model>(r, "model", kMaterialModels, SceneMaterial::Model::BlinnPhong);
+      if (!model) continue;
+      m.model = *model;
+      if (m.model == SceneMaterial::Model::BlinnPhong) {
+        r.knownKeys(
+            {"model", "color", "specular", "shininess", "emissive", "texture", "normal_map", "haptic"});
+        m.specular =
+            readColor(r, "specular", {m.specular.x(), m.specular.y(), m.specular.z(), 1.0}, false).head<3>();
+        m.shininess = r.number("shininess", {.min = 1.0, .max = 10000.0}, m.shininess);
+      } else {
+        r.knownKeys(
+            {"model", "color", "metallic", "roughness", "emissive", "texture", "normal_map", "haptic"});
+        m.metallic = r.number("metallic", {.min = 0.0, .max = 1.0}, m.metallic);
+        m.roughness = r.number("roughness", {.min = 0.0, .max = 1.0}, m.roughness);
+      }
+      m.color = readColor(r, "color", m.color, true);
+      m.emissive =
+          readColor(r, "emissive", Vec4(0.0, 0.0, 0.0, 1.0), false, std::numeric_limits<double>::infinity())
+              .head<3>();
+      imageRef(r, "texture", m.texture);
+      imageRef(r, "normal_map", m.normalMap);
+      ConfigReader h = r.child("haptic");
+      if (expectObject(h)) {
+        h.knownKeys({"stiffness", "damping", "static_friction", "dynamic_friction"});
+        SceneHapticMaterial hm;
+        hm.stiffness = readPositive(h, "stiffness", {}, 1e6);
+        hm.damping = h.number("damping", {.min = 0.0, .max = 1e4}, 0.0);
+        hm.staticFriction = h.number("static_friction", {.min = 0.0, .max = 10.0}, 0.0);
+        const std::size_t before = h.errors().size();
+        hm.dynamicFriction = h.number("dynamic_friction", {.min = 0.0, .max = 10.0}, hm.staticFriction);
+        if (h.errors().size() == before && hm.dynamicFriction > hm.staticFriction)
+          h.addError(formatString("dynamic friction %g is larger than static friction %g", hm.dynamicFriction,
+                                  hm.staticFriction),
+                     "dynamic_friction", "use dynamic_friction <= static_friction");
+        m.haptic = hm;
+      }
+      materialIndex_.emplace(m.name, scene_.materials.size());
+      scene_.materials.push_back(std::move(m));
+    }
+  }
+
+  void objects() {
+    ConfigReader sec = root_.child("objects");
+    if (!expectArray(sec)) return;
+    for (std::size_t i = 0; i < sec.size(); ++i) {
+      ConfigReader r = sec.at(i);
+      if (!expectObject(r)) continue;
+      r.knownKeys({"name", "mesh", "material", "pose", "scale", "visible", "haptic", "dynamic", "mass"});
+      SceneObject o;
+      o.name = uniqueName(r, objectIndex_, scene_.objects.size());
+      std::size_t before = r.errors().size();
+      o.mesh = r.string("mesh");
+      if (r.errors().size() == before)
+        checkResource(r, "mesh", o.mesh, {Type::Mesh, Type::Isosurface, Type::Shape},
+                      "a mesh, isosurface or shape");
+      o.material = r.string("material", std::string());
+      o.pose = readPose(r.child("pose"));
+      o.scale = readPositive(r, "scale", 1.0);
+      o.visible = r.boolean("visible", true);
+      o.haptic = r.boolean("haptic", false);
+      o.dynamic = r.boolean("dynamic", false);
+      if (r.has("mass"))
+        o.mass = readPositive(r, "mass", {});
+      else if (o.dynamic)
+        r.addError("a dynamic object needs a mass", "mass", "add \"mass\": <kg>");
+      if (r.has("material") && !o.material.empty() &&
+          checkName(r, "material", o.material, materialIndex_, "material", "materials")) {
+        if (o.haptic && !scene_.materials[materialIndex_.at(o.material)].haptic)
+          r.addError("object is touchable but material " + inQuotes(o.material) + " has no \"haptic\" block",
+                     "material", "add \"haptic\": {\"stiffness\": <N/m>} to the material");
+      } else if (o.haptic && o.material.empty()) {
+        r.addError("a touchable object needs a material with a \"haptic\" block", "haptic",
+                   "add \"material\" naming one");
+      }
+      scene_.objects.push_back(std::move(o));
+    }
+  }
+
+  void transferFunction(ConfigReader tf, SceneVolume& v) {
+    if (!expectObject(tf)) return;
+    tf.knownKeys({"points"});
+    ConfigReader pts = tf.child("points", true);
+    if (!expectArray(pts)) return;
+    if (pts.size() < 2) {
+      pts.addError("a transfer function needs at least 2 points, got " + std::to_string(pts.size()), {},
+                   "give [value, r, g, b, a] points, e.g. [[0, 0, 0, 0, 0], [255, 1, 1, 1, 1]]");
+      return;
+    }
+    for (std::size_t i = 0; i < pts.size(); ++i) {
+      ConfigReader p = pts.at(i);
+      const Json& j = p.node();
+      if (!j.is_array() || j.size() != 5) {
+        p.addError(std::string("expected [value, r, g, b, a], got ") + j.type_name() +
+                   (j.is_array() ? " of " + std::to_string(j.size()) : std::string()));
+        continue;
+      }
+      SceneTransferPoint point;
+      bool good = true;
+      for (std::size_t c = 0; c < 5; ++c) {
+        const Json& e = j[c];
+        if (!e.is_number() || !std::isfinite(e.get<double>())) {
+          p.addError("expected a finite number, got " + std::string(e.type_name()), std::to_string(c));
+          good = false;
+          continue;
+        }
+        const double x = e.get<double>();
+        if (c == 0) {
+          point.value = x;
+        } else if (x < 0.0 || x > 1.0) {
+          p.addError(formatString("component %g is outside [0, 1]", x), std::to_string(c),
+                     "colour and opacity are 0..1");
+          good = false;
+        } else {
+          point.rgba[static_cast<Eigen::Index>(c - 1)] = x;
+        }
+      }
+      if (!good) continue;
+      if (!v.transferFunction.empty() && !(point.value > v.transferFunction.back().value))
+        p.addError(formatString("value %g does not increase (previous point: %g)", point.value,
+                                v.transferFunction.back().value),
+                   "0", "sort the points by value; values must strictly increase");
+      v.transferFunction.push_back(point);
+    }
+  }
+
+  void volumes() {
+    ConfigReader sec = root_.child("volumes");
+    if (!expectArray(sec)) return;
+    for (std::size_t i = 0; i < sec.size(); ++i) {
+      ConfigReader r = sec.at(i);
+      if (!expectObject(r)) continue;
+      r.knownKeys({"name", "volume", "mode", "transfer_function", "slice", "visible"});
+      SceneVolume v;
+      v.name = uniqueName(r, volumeIndex_, scene_.volumes.size());
+      const std::size_t before = r.errors().size();
+      v.volume = r.string("volume");
+      if (r.errors().size() == before) checkResource(r, "volume", v.volume, {Type::Volume}, "a volume");
+      v.mode = readEnum<SceneVolume::Mode>(r, "mode", kVolumeModes, SceneVolume::Mode::Composite)
+                   .value_or(SceneVolume::Mode::Composite);
+      transferFunction(r.child("transfer_function"), v);
+      if (r.has("slice") && v.mode != SceneVolume::Mode::Slice) {
+        r.addError("\"slice\" applies only to mode \"slice\"", "slice",
+                   "remove it, or set \"mode\": \"slice\"");
+      } else {
+        ConfigReader s = r.child("slice");
+        if (expectObject(s)) {
+          s.knownKeys({"axis", "position"});
+          v.sliceAxis = readEnum<SceneVolume::Axis>(s, "axis", kAxes, SceneVolume::Axis::Axial)
+                            .value_or(SceneVolume::Axis::Axial);
+          v.slicePosition = s.number("position", {}, 0.0);
+        }
+      }
+      v.visible = r.boolean("visible", true);
+      scene_.volumes.push_back(std::move(v));
+    }
+  }
+
+  void lights() {
+    ConfigReader sec = root_.child("lights");
+    if (!expectArray(sec)) return;
+    using L = SceneLight::Type;
+    for (std::size_t i = 0; i < sec.size(); ++i) {
+      ConfigReader r = sec.at(i);
+      if (!expectObject(r)) continue;
+      const auto type = readEnum<L>(r, "type", kLightTypes);
+      if (!type) continue;
+      SceneLight l;
+      l.type = *type;
+      switch (*type) {
+        case L::Directional:
+          r.knownKeys({"type", "direction", "color", "intensity", "shadows"});
+          break;
+        case L::Point:
+          r.knownKeys({"type", "position", "color", "intensity", "range", "shadows"});
+          break;
+        case L::Spot:
+          r.knownKeys({"type", "direction", "position", "color", "intensity", "range", "inner_cone_deg",
+                       "outer_cone_deg", "shadows"});
+          break;
+      }
+      if (*type != L::Point) {
+        if (!r.has("direction"))
+          r.addError("missing required direction", "direction", "add \"direction\": [x, y, z]");
+        else
+          l.direction = readDirection(r, "direction", l.direction);
+      }
+      if (*type != L::Directional) {
+        l.position = readVec3(r, "position");
+        l.range = r.number("range", {.min = 0.0}, 0.0);
+      }
+      l.color = readColor(r, "color", {1.0, 1.0, 1.0, 1.0}, false).head<3>();
+      l.intensity = r.number("intensity", {.min = 0.0}, 1.0);
+      if (*type == L::Spot) {
+        const std::size_t before = r.errors().size();
+        l.innerConeDeg = r.number("inner_cone_deg", {.min = 0.0, .max = 90.0}, l.innerConeDeg);
+        l.outerConeDeg = r.number("outer_cone_deg", {.min = 0.0, .max = 90.0}, l.outerConeDeg);
+        if (r.errors().size() == before && !(l.innerConeDeg > 0.0 && l.innerConeDeg <= l.outerConeDeg))
+          r.addError(formatString("inner cone %g° must be > 0 and <= outer cone %g°", l.innerConeDeg,
+                                  l.outerConeDeg),
+                     "inner_cone_deg", "light is full inside the inner cone and fades out to the outer cone");
+      }
+      l.shadows = r.boolean("shadows", false);
+      scene_.lights.push_back(l);
+    }
+  }
+
+  void devices() {
+    ConfigReader sec = root_.child("devices");
+    if (!expectArray(sec)) return;
+    for (std::size_t i = 0; i < sec.size(); ++i) {
+      ConfigReader r = sec.at(i);
+      if (!expectObject(r)) continue;
+      r.knownKeys({"name", "driver", "config"});
+      SceneDevice d;
+      d.name = uniqueName(r, deviceIndex_, scene_.devices.size());
+      const std::size_t before = r.errors().size();
+      d.driver = r.string("driver");
+      if (r.errors().size() == before && d.driver.empty())
+        r.addError("driver is empty", "driver", "name a registered driver, e.g. \"sim-haptic\"");
+      ConfigReader c = r.child("config");
+      if (expectObject(c)) {
+        for (auto it = c.node().begin(); it != c.node().end(); ++it) {
+          const Json& v = it.value();
+          bool flat = v.is_primitive() && !v.is_null();
+          if (v.is_array())
+            flat = std::all_of(v.begin(), v.end(),
+                               [](const Json& e) { return e.is_primitive() && !e.is_null(); });
+          if (!flat)
+            c.addError(
+                std::string("driver parameters are strings, numbers, booleans or arrays of them, got ") +
+                    v.type_name(),
+                it.key());
+        }
+        d.config = c.node();
+      }
+      scene_.devices.push_back(std::move(d));
+    }
+  }
+
+  void cameraPath(ConfigReader p, SceneCamera& c) {
+    if (!expectArray(p)) return;
+    if (p.size() == 0) p.addError("a camera path needs at least one key", {}, "remove \"path\" or add keys");
+    for (std::size_t i = 0; i < p.size(); ++i) {
+      ConfigReader k = p.at(i);
+      if (!expectObject(k)) continue;
+      k.knownKeys({"t", "position", "target"});
+      SceneCameraKey key;
+      const std::size_t before = k.errors().size();
+      key.t = k.number("t");
+      key.position = readVec3(k, "position");
+      key.target = readVec3(k, "target");
+      if (k.errors().size() != before) continue;
+      if (!c.path.empty() && !(key.t > c.path.back().t))
+        k.addError(formatString("time %g s does not increase (previous key: %g s)", key.t, c.path.back().t),
+                   "t", "keys must be in strictly increasing time");
+      c.path.push_back(key);
+    }
+  }
+
+  void cameras() {
+    ConfigReader sec = root_.child("cameras");
+    if (!expectArray(sec)) return;
+    using P = SceneCamera::Projection;
+    for (std::size_t i = 0; i < sec.size(); ++i) {
+      ConfigReader r = sec.at(i);
+      if (!expectObject(r)) continue;
+      SceneCamera c;
+      c.name = uniqueName(r, cameraIndex_, scene_.cameras.size());
+      const auto proj = readEnum<P>(r, "projection", kProjections, P::Perspective);
+      if (!proj) continue;
+      c.projection = *proj;
+      if (c.projection == P::Perspective) {
+        r.knownKeys({"name", "projection", "fov_y_deg", "position", "target", "up", "near", "far", "track",
+                     "path", "stereo"});
+        const std::size_t before = r.errors().size();
+        c.fovYDeg = r.number("fov_y_deg", {.min = 0.0, .max = 180.0}, c.fovYDeg);
+        if (r.errors().size() == before && !(c.fovYDeg > 0.0 && c.fovYDeg < 180.0))
+          r.addError(formatString("field of view %g° is not between 0° and 180°", c.fovYDeg), "fov_y_deg");
+      } else {
+        r.knownKeys({"name", "projection", "ortho_height", "position", "target", "up", "near", "far", "track",
+                     "path", "stereo"});
+        c.orthoHeight = readPositive(r, "ortho_height", c.orthoHeight);
+      }
+      cameraPath(r.child("path"), c);
+      const bool hasPath = !c.path.empty();
+      c.position = hasPath ? readVec3(r, "position", c.path.front().position) : readVec3(r, "position");
+      c.target = readVec3(r, "target", hasPath ? c.path.front().target : Vec3::Zero());
+      c.up = readDirection(r, "up", c.up);
+      const std::size_t before = r.errors().size();
+      c.near = readPositive(r, "near", c.near);
+      c.far = r.number("far", {.min = 0.0}, c.far);
+      if (r.errors().size() == before && !(c.far > c.near))
+        r.addError(formatString("far plane %g m is not beyond the near plane %g m", c.far, c.near), "far");
+      if (r.has("track")) {
+        const std::size_t b = r.errors().size();
+        c.track = r.string("track");
+        if (r.errors().size() == b) checkName(r, "track", c.track, objectIndex_, "object", "objects");
+      }
+      if (!hasPath && c.track.empty()) {
+        const Vec3 view = c.target - c.position;
+        if (view.norm() < 1e-9)
+          r.addError("target coincides with position", "target", "aim the camera at a point away from it");
+        else if (view.normalized().cross(c.up).norm() < 1e-6)
+          r.addError("up is parallel to the view direction", "up", "choose an up vector across the view");
+      }
+      ConfigReader st = r.child("stereo");
+      if (expectObject(st)) {
+        st.knownKeys({"eye_separation", "convergence"});
+        c.stereo = true;
+        c.eyeSeparation = readPositive(st, "eye_separation", c.eyeSeparation, 1.0);
+        c.convergence = readPositive(st, "convergence", c.convergence);
+      }
+      scene_.cameras.push_back(std::move(c));
+    }
+  }
+
+  void touchable(ConfigReader& r, std::string_view key, const std::string& name) {
+    if (!checkName(r, key, name, objectIndex_, "object", "objects")) return;
+    if (!scene_.objects[objectIndex_.at(name)].haptic)
+      r.addError("object " + inQuotes(name) + " is not touchable", key, "set \"haptic\": true on it");
+  }
+
+  void hapticsEngine(ConfigReader r) {
+    if (!expectObject(r)) return;
+    r.knownKeys({"rate_hz", "renderer", "device", "object", "objects", "tool_radius", "device_pose",
+                 "max_force", "force_shading", "proxy_object"});
+    SceneHapticsEngine h;
+    h.rateHz = r.number("rate_hz", {.min = 100.0, .max = 10000.0}, h.rateHz);
+    h.renderer =
+        readEnum<SceneHapticsEngine::Renderer>(r, "renderer", kRenderers, h.renderer).value_or(h.renderer);
+    const std::size_t before = r.errors().size();
+    h.device = r.string("device");
+    if (r.errors().size() == before) checkName(r, "device", h.device, deviceIndex_, "device", "devices");
+    if (r.has("object") && r.has("objects")) {
+      r.addError("both \"object\" and \"objects\" are given", "object",
+                 "list every object under \"objects\"");
+    } else if (r.has("object")) {
+      const std::size_t b = r.errors().size();
+      h.objects.push_back(r.string("object"));
+      if (r.errors().size() == b) touchable(r, "object", h.objects.back());
+    } else if (r.has("objects")) {
+      ConfigReader list = r.child("objects");
+      if (expectArray(list)) {
+        if (list.size() == 0) list.addError("no objects", {}, "name at least one touchable object");
+        for (std::size_t i = 0; i < list.size(); ++i) {
+          const Json& e = list.node()[i];
+          if (!e.is_string()) {
+            list.addError(std::string("expected an object name, got ") + e.type_name(), std::to_string(i));
+            continue;
+          }
+          h.objects.push_back(e.get<std::string>());
+          touchable(list, std::to_string(i), h.objects.back());
+        }
+      }
+    } else {
+      r.addError("missing required objects", "objects", "add \"objects\": [\"<touchable object>\"]");
+    }
+    h.toolRadius = r.number("tool_radius", {.min = 0.0, .max = 0.1}, 0.0);
+    h.devicePose = readPose(r.child("device_pose"));
+    h.maxForce = r.number("max_force", {.min = 0.0, .max = 1000.0}, 0.0);
+    h.forceShading = r.boolean("force_shading", false);
+    if (r.has("proxy_object")) {
+      const std::size_t b = r.errors().size();
+      h.proxyObject = r.string("proxy_object");
+      if (r.errors().size() == b &&
+          checkName(r, "proxy_object", h.proxyObject, objectIndex_, "object", "objects") &&
+          std::find(h.objects.begin(), h.objects.end(), h.proxyObject) != h.objects.end())
+        r.addError("the proxy object " + inQuotes(h.proxyObject) + " is also a touched object",
+                   "proxy_object", "show the tool with its own object");
+    }
+    scene_.engines.haptics = std::move(h);
+  }
+
+  void engines() {
+    ConfigReader sec = root_.child("engines");
+    if (!expectObject(sec)) return;
+    sec.knownKeys({"haptics", "physics", "render", "monitor"});
+    hapticsEngine(sec.child("haptics"));
+    if (ConfigReader r = sec.child("physics"); expectObject(r)) {
+      r.knownKeys({"rate_hz", "gravity"});
+      ScenePhysicsEngine p;
+      p.rateHz = r.number("rate_hz", {.min = 10.0, .max = 10000.0}, p.rateHz);
+      p.gravity = readVec3(r, "gravity", p.gravity);
+      scene_.engines.physics = p;
+    }
+    if (ConfigReader r = sec.child("render"); expectObject(r)) {
+      r.knownKeys({"rate_hz", "camera", "width", "height", "samples"});
+      SceneRenderEngine g;
+      g.rateHz = r.number("rate_hz", {.min = 1.0, .max = 240.0}, g.rateHz);
+      const std::size_t before = r.errors().size();
+      g.camera = r.string("camera", std::string());
+      if (r.errors().size() == before) {
+        if (r.has("camera"))
+          checkName(r, "camera", g.camera, cameraIndex_, "camera", "cameras");
+        else if (scene_.cameras.empty())
+          r.addError("the render engine needs a camera", {}, "add one under \"cameras\"");
+      }
+      g.width = static_cast<int>(r.integer("width", {.min = 16, .max = 16384}, g.width));
+      g.height = static_cast<int>(r.integer("height", {.min = 16, .max = 16384}, g.height));
+      const std::size_t b = r.errors().size();
+      g.samples = static_cast<int>(r.integer("samples", {.min = 1, .max = 16}, g.samples));
+      if (r.errors().size() == b && (g.samples & (g.samples - 1)) != 0)
+        r.addError("samples is " + std::to_string(g.samples) + ", not 1, 2, 4, 8 or 16", "samples");
+      scene_.engines.render = g;
+    }
+    if (ConfigReader r = sec.child("monitor"); expectObject(r)) {
+      r.knownKeys({"rate_hz"});
+      SceneMonitorEngine m;
+      m.rateHz = r.number("rate_hz", {.min = 1.0, .max = 1000.0}, m.rateHz);
+      scene_.engines.monitor = m;
+    }
+  }
+
+  void outputs() {
+    ConfigReader r = root_.child("outputs");
+    if (!expectObject(r)) return;
+    r.knownKeys({"directory", "frames", "frame_every", "forces", "plot", "summary"});
+    SceneOutputs& o = scene_.outputs;
+    const std::size_t before = r.errors().size();
+    o.directory = r.string("directory", o.directory);
+    if (r.errors().size() == before && o.directory.empty())
+      r.addError("directory is empty", "directory", "name a directory, e.g. \"out/head_probe\"");
+    o.frames = r.boolean("frames", false);
+    o.frameEvery = static_cast<int>(r.integer("frame_every", {.min = 1, .max = 1000000}, 1));
+    o.forces = r.boolean("forces", false);
+    o.plot = r.boolean("plot", false);
+    o.summary = r.boolean("summary", true);
+    if (o.frames && !scene_.engines.render)
+      r.addError("frames need a render engine", "frames", "add \"render\" under \"engines\"");
+    for (auto [key, on] : {std::pair{"forces", o.forces}, std::pair{"plot", o.plot}})
+      if (on && !scene_.engines.haptics)
+        r.addError(std::string(key) + " needs a haptics engine", key, "add \"haptics\" under \"engines\"");
+  }
+
+  ConfigReader root_;
+  fs::path baseDir_;
+  SceneDesc scene_;
+  // Name → index of the first element with it (duplicates are errors).
+  NameIndex materialIndex_, objectIndex_, volumeIndex_, deviceIndex_, cameraIndex_;
+  bool badVersion_ = false;
+};
+
+template <class T>
+const T* findNamed(const std::vector<T>& list, std::string_view name) {
+  const auto it = std::find_if(list.begin(), list.end(), [&](const T& t) { return t.name == name; });
+  return it == list.end() ? nullptr : &*it;
+}
+
+std::string paramString(const Json& v) {
+  if (v.is_string()) return v.get<std::string>();
+  if (v.is_boolean()) return v.get<bool>() ? "1" : "0";
+  if (v.is_array()) {
+    std::string s;
+    for (const Json& e : v) s += (s.empty() ? "" : ",") + paramString(e);
+    return s;
+  }
+  return v.dump();
+}
+
+}  // namespace
+
+bool SceneObject::operator==(const SceneObject& o) const {
+  return name == o.name && mesh == o.mesh && material == o.material && pose.p == o.pose.p &&
+         pose.q.coeffs() == o.pose.q.coeffs() && scale == o.scale && visible == o.visible &&
+         haptic == o.haptic && dynamic == o.dynamic && mass == o.mass;
+}
+
+bool SceneHapticsEngine::operator==(const SceneHapticsEngine& o) const {
+  return rateHz == o.rateHz && renderer == o.renderer && device == o.device && objects == o.objects &&
+         toolRadius == o.toolRadius && devicePose.p == o.devicePose.p &&
+         devicePose.q.coeffs() == o.devicePose.q.coeffs() && maxForce == o.maxForce &&
+         forceShading == o.forceShading;
+}
+
+const SceneResource* SceneDesc::resource(std::string_view n) const { return findNamed(resources, n); }
+const SceneMaterial* SceneDesc::material(std::string_view n) const { return findNamed(materials, n); }
+const SceneObject* SceneDesc::object(std::string_view n) const { return findNamed(objects, n); }
+const SceneVolume* SceneDesc::volume(std::string_view n) const { return findNamed(volumes, n); }
+const SceneCamera* SceneDesc::camera(std::string_view n) const { return findNamed(cameras, n); }
+const SceneDevice* SceneDesc::device(std::string_view n) const { return findNamed(devices, n); }
+
+Result<SceneDesc> parseScene(std::string_view json, std::string_view sourceName, const fs::path& baseDir,
+                             std::vector<Error>* problems) {
+  const std::string source(sourceName.empty() ? "<string>" : sourceName);
+  auto give = [&](Error e) -> Result<SceneDesc> {
+    if (problems) *problems = {e};
+    return e;
+  };
+  if (auto at = tooDeepAt(json))
+    return give(fail(ErrorCode::Parse, "JSON nested deeper than " + std::to_string(kMaxDepth) + " levels",
+                     source + ": byte " + std::to_string(*at),
+                     "a scene needs a few levels; check the brackets"));
+  std::optional<Result<Config>> cfg;
+  try {
+    cfg.emplace(Config::parse(json, source));
+  } catch (const std::exception& e) {
+    // Config::parse turns syntax errors into an Error; nlohmann reports a
+    // few others (e.g. a number too large for a double) by throwing.
+    return give(fail(ErrorCode::Parse, std::string("invalid JSON: ") + e.what(), source,
+                     "check the numbers and strings in the file"));
+  }
+  if (!*cfg) return give(cfg->error());
+
+  SceneParser parser((*cfg)->reader(), baseDir);
+  if (parser.header()) {
+    parser.body();
+    reportDuplicateKeys(json, parser.root());
+  }
+  if (auto s = parser.root().status(); !s) {
+    if (problems) *problems = parser.root().errors();
+    Error e = s.error();
+    if (parser.badVersion()) e.code = ErrorCode::Version;
+    if (problems && parser.badVersion()) problems->front().code = ErrorCode::Version;
+    return e;
+  }
+  if (problems) problems->clear();
+  return std::move(parser.scene());
+}
+
+Result<SceneDesc> readScene(const fs::path& file, std::vector<Error>* problems) {
+  auto bytes = readFile(file, kMaxSceneBytes);
+  if (!bytes) {
+    Error e = bytes.error();
+    if (e.hint.empty())
+      e.hint = e.code == ErrorCode::NotFound ? "check the path" : "a scene file is at most 16 MiB of JSON";
+    if (problems) *problems = {e};
+    return e;
+  }
+  std::error_code ec;
+  fs::path dir = fs::absolute(file, ec).parent_path();
+  if (ec) dir = file.parent_path();
+  const std::string_view text(reinterpret_cast<const char*>(bytes->data()), bytes->size());
+  return parseScene(text, file.string(), dir, problems);
+}
+
+std::string formatSceneErrors(const std::vector<Error>& problems) {
+  std::string out;
+  for (const Error& e : problems) out += e.message() + "\n";
+  return out;
+}
+
+std::vector<std::pair<std::string, std::string>> deviceParams(const SceneDevice& device) {
+  std::vector<std::pair<std::string, std::string>> out;
+  if (!device.config.is_object()) return out;
+  for (auto it = device.config.begin(); it != device.config.end(); ++it)
+    out.emplace_back(it.key(), paramString(it.value()));
+  return out;
+}
+
+Json toJson(const SceneDesc& scene) {
+  using Type = SceneResource::Type;
+  using S = SceneResource::Shape;
+  Json j = {{"format", kFormatName}, {"version", kSceneFormatVersion}, {"name", scene.name}};
+
+  Json resources = Json::object();
+  for (const SceneResource& r : scene.resources) {
+    Json o = {{"type", nameOf(r.type, kResourceTypes)}};
+    switch (r.type) {
+      case Type::Mesh:
+        o["source"] = r.source;
+        o["unit"] = r.unit;
+        o["scale"] = r.scale;
+        break;
+      case Type::Volume:
+      case Type::Image:
+        o["source"] = r.source;
+        break;
+      case Type::Isosurface:
+        o["volume"] = r.volume;
+        o["level"] = r.level;
+        o["largest_component"] = r.largestComponent;
+        o["smooth"] = r.smooth;
+        break;
+      case Type::Shape:
+        o["shape"] = nameOf(r.shape, kShapes);
+        if (r.shape == S::Sphere || r.shape == S::Capsule || r.shape == S::Cylinder) o["radius"] = r.radius;
+        if (r.shape == S::Capsule || r.shape == S::Cylinder) o["height"] = r.height;
+        if (r.shape == S::Box) o["half_extents"] = toJson(r.halfExtents);
+        if (r.shape == S::Plane) o["half_extents"] = Json::array({r.halfExtents.x(), r.halfExtents.y()});
+        o["subdivisions"] = r.subdivisions;
+        break;
+    }
+    resources[r.name] = std::move(o);
+  }
+  j["resources"] = std::move(resources);
+
+  Json materials = Json::object();
+  for (const SceneMaterial& m : scene.materials) {
+    Json o = {{"model", nameOf(m.model, kMaterialModels)},
+              {"color", toJson(m.color)},
+              {"emissive", toJson(m.emissive)}};
+    if (m.model == SceneMaterial::Model::BlinnPhong) {
+      o["specular"] = toJson(m.specular);
+      o["shininess"] = m.shininess;
+    } else {
+      o["metallic"] = m.metallic;
+      o["roughness"] = m.roughness;
+    }
+    if (!m.texture.empty()) o["texture"] = m.texture;
+    if (!m.normalMap.empty()) o["normal_map"] = m.normalMap;
+    if (m.haptic)
+      o["haptic"] = {{"stiffness", m.haptic->stiffness},
+                     {"damping", m.haptic->damping},
+                     {"static_friction", m.haptic->staticFriction},
+                     {"dynamic_friction", m.haptic->dynamicFriction}};
+    materials[m.name] = std::move(o);
+  }
+  j["materials"] = std::move(materials);
+
+  Json objects = Json::array();
+  for (const SceneObject& o : scene.objects) {
+    Json e = {{"name", o.name},       {"mesh", o.mesh},     {"pose", toJson(o.pose)}, {"scale", o.scale},
+              {"visible", o.visible}, {"haptic", o.haptic}, {"dynamic", o.dynamic}};
+    if (!o.material.empty()) e["material"] = o.material;
+    if (o.mass > 0.0) e["mass"] = o.mass;
+    objects.push_back(std::move(e));
+  }
+  j["objects"] = std::move(objects);
+
+  Json volumes = Json::array();
+  for (const SceneVolume& v : scene.volumes) {
+    Json e = {{"name", v.name},
+              {"volume", v.volume},
+              {"mode", nameOf(v.mode, kVolumeModes)},
+              {"visible", v.visible}};
+    if (!v.transferFunction.empty()) {
+      Json points = Json::array();
+      for (const SceneTransferPoint& p : v.transferFunction)
+        points.push_back({p.value, p.rgba.x(), p.rgba.y(), p.rgba.z(), p.rgba.w()});
+      e["transfer_function"] = {{"points", std::move(points)}};
+    }
+    if (v.mode == SceneVolume::Mode::Slice)
+      e["slice"] = {{"axis", nameOf(v.sliceAxis, kAxes)}, {"position", v.slicePosition}};
+    volumes.push_back(std::move(e));
+  }
+  j["volumes"] = std::move(volumes);
+
+  Json lights = Json::array();
+  for (const SceneLight& l : scene.lights) {
+    Json e = {{"type", nameOf(l.type, kLightTypes)},
+              {"color", toJson(l.color)},
+              {"intensity", l.intensity},
+              {"shadows", l.shadows}};
+    if (l.type != SceneLight::Type::Point) e["direction"] = toJson(l.direction);
+    if (l.type != SceneLight::Type::Directional) {
+      e["position"] = toJson(l.position);
+      e["range"] = l.range;
+    }
+    if (l.type == SceneLight::Type::Spot) {
+      e["inner_cone_deg"] = l.innerConeDeg;
+      e["outer_cone_deg"] = l.outerConeDeg;
+    }
+    lights.push_back(std::move(e));
+  }
+  j["lights"] = std::move(lights);
+
+  Json cameras = Json::array();
+  for (const SceneCamera& c : scene.cameras) {
+    Json e = {{"name", c.name},
+              {"projection", nameOf(c.projection, kProjections)},
+              {"position", toJson(c.position)},
+              {"target", toJson(c.target)},
+              {"up", toJson(c.up)},
+              {"near", c.near},
+              {"far", c.far}};
+    if (c.projection == SceneCamera::Projection::Perspective)
+      e["fov_y_deg"] = c.fovYDeg;
+    else
+      e["ortho_height"] = c.orthoHeight;
+    if (!c.track.empty()) e["track"] = c.track;
+    if (!c.path.empty()) {
+      Json path = Json::array();
+      for (const SceneCameraKey& k : c.path)
+        path.push_back({{"t", k.t}, {"position", toJson(k.position)}, {"target", toJson(k.target)}});
+      e["path"] = std::move(path);
+    }
+    if (c.stereo) e["stereo"] = {{"eye_separation", c.eyeSeparation}, {"convergence", c.convergence}};
+    cameras.push_back(std::move(e));
+  }
+  j["cameras"] = std::move(cameras);
+
+  Json devices = Json::array();
+  for (const SceneDevice& d : scene.devices)
+    devices.push_back({{"name", d.name}, {"driver", d.driver}, {"config", d.config}});
+  j["devices"] = std::move(devices);
+
+  Json engines = Json::object();
+  if (const auto& h = scene.engines.haptics)
+    engines["haptics"] = {{"rate_hz", h->rateHz},         {"renderer", nameOf(h->renderer, kRenderers)},
+                          {"device", h->device},          {"objects", h->objects},
+                          {"tool_radius", h->toolRadius}, {"device_pose", toJson(h->devicePose)},
+                          {"max_force", h->maxForce},     {"force_shading", h->forceShading}};
+  if (scene.engines.haptics && !scene.engines.haptics->proxyObject.empty())
+    engines["haptics"]["proxy_object"] = scene.engines.haptics->proxyObject;
+  if (const auto& p = scene.engines.physics)
+    engines["physics"] = {{"rate_hz", p->rateHz}, {"gravity", toJson(p->gravity)}};
+  if (const auto& r = scene.engines.render) {
+    engines["render"] = {
+        {"rate_hz", r->rateHz}, {"width", r->width}, {"height", r->height}, {"samples", r->samples}};
+    if (!r->camera.empty()) engines["render"]["camera"] = r->camera;
+  }
+  if (const auto& m = scene.engines.monitor) engines["monitor"] = {{"rate_hz", m->rateHz}};
+  j["engines"] = std::move(engines);
+
+  const SceneOutputs& o = scene.outputs;
+  j["outputs"] = {{"directory", o.directory}, {"frames", o.frames}, {"frame_every", o.frameEvery},
+                  {"forces", o.forces},       {"plot", o.plot},     {"summary", o.summary}};
+  return j;
+}
+
+}  // namespace dm
