@@ -49,6 +49,10 @@ Result<Config> Config::parse(std::string_view text, std::string source) {
   } catch (const Json::parse_error& e) {
     bad = true;
     byte = e.byte;
+  } catch (const Json::exception& e) {
+    // e.g. out_of_range 406: a number literal beyond double ([1e400]).
+    return fail(ErrorCode::Parse, std::string("not valid JSON: ") + e.what(), source,
+                "check the numbers and strings of the file");
   }
   if (bad) {
     std::size_t line = 1, col = 1;
@@ -211,7 +215,9 @@ std::vector<double> ConfigReader::numbers(std::string_view key, std::size_t coun
   for (std::size_t i = 0; i < count; ++i) {
     const Json& e = (*v)[i];
     if (!e.is_number() || !std::isfinite(e.get<double>())) {
-      addError("expected a finite number, got " + describe(e), std::string(key) + "/" + std::to_string(i));
+      // The element's pointer is key/i: escape the key alone, not the '/'.
+      errors_->list.push_back(fail(ErrorCode::InvalidArgument, "expected a finite number, got " + describe(e),
+                                   source_ + ": " + pathOf(key) + "/" + std::to_string(i)));
       continue;
     }
     out[i] = e.get<double>();

@@ -101,3 +101,20 @@ TEST(Config, EditDistance) {
 }
 
 }  // namespace
+
+TEST(Config, NumberBeyondDoubleIsAParseErrorNotAnException) {
+  auto c = dm::Config::parse(R"({"a": [1e400]})", "big.json");
+  ASSERT_FALSE(c);
+  EXPECT_EQ(c.error().code, dm::ErrorCode::Parse);
+  EXPECT_EQ(c.error().where, "big.json");
+}
+
+TEST(Config, BadArrayElementPointsAtTheElement) {
+  auto c = dm::Config::parse(R"({"pose": {"position": [0, "x", 1]}})", "scene.json");
+  ASSERT_TRUE(c);
+  dm::ConfigReader r = c->reader();
+  (void)r.child("pose").numbers("position", 3);
+  auto s = r.status();
+  ASSERT_FALSE(s);
+  EXPECT_EQ(s.error().where, "scene.json: /pose/position/1");
+}
