@@ -1,0 +1,187 @@
+// scene_shaders.hpp (private) — GLSL 4.50 sources of SceneRenderer: the mesh
+// vertex stage shared by every shading model, the lit/unlit fragment stage
+// (MODEL 0 unlit, 1 Blinn–Phong, 2 metallic–roughness PBR) and the depth-only
+// shadow pass. Vertex attributes: 0 position, 1 normal, 2 uv, 3 colour,
+// 4 tangent (xyz, w = bitangent sign); 5..8 the per-instance model matrix.
+#pragma once
+
+namespace dm::scene_glsl {
+
+inline constexpr const char* kMeshVs = R"(
+layout(location = 0) in vec3 a_position;
+layout(location = 1) in vec3 a_normal;
+layout(location = 2) in vec2 a_uv;
+layout(location = 3) in vec4 a_color;
+layout(location = 4) in vec4 a_tangent;
+layout(location = 5) in mat4 a_model;
+
+uniform mat4 u_viewProj;
+
+out vec3 v_worldPos;
+out vec3 v_normal;
+out vec2 v_uv;
+out vec4 v_color;
+out vec4 v_tangent;
+
+void main() {
+  vec4 world = a_model * vec4(a_position, 1.0);
+  mat3 normalMatrix = transpose(inverse(mat3(a_model)));
+  v_worldPos = world.xyz;
+  v_normal = normalMatrix * a_normal;
+  v_tangent = vec4(mat3(a_model) * a_tangent.xyz, a_tangent.w);
+  v_uv = a_uv;
+  v_color = a_color;
+  gl_Position = u_viewProj * world;
+}
+)";
+
+inline constexpr const char* kMeshFs = R"(
+#define MAX_LIGHTS 8
+#define MAX_SHADOWS 4
+#define PI 3.14159265358979
+
+in vec3 v_worldPos;
+in vec3 v_normal;
+in vec2 v_uv;
+in vec4 v_color;
+in vec4 v_tangent;
+
+uniform vec4 u_baseColor;
+uniform vec3 u_specular;
+uniform float u_shininess;
+uniform float u_metallic;
+uniform float u_roughness;
+uniform vec3 u_emissive;
+uniform int u_useVertexColor;
+uniform int u_hasColorTex;
+uniform int u_hasNormalTex;
+uniform int u_doubleSided;
+layout(binding = 0) uniform sampler2D u_colorTex;
+layout(binding = 1) uniform sampler2D u_normalTex;
+layout(binding = 2) uniform sampler2DArrayShadow u_shadowMaps;
+
+uniform vec3 u_cameraPos;
+uniform vec3 u_ambient;
+uniform int u_lightCount;
+uniform int u_lightType[MAX_LIGHTS];      // 0 directional, 1 point, 2 spot
+uniform vec3 u_lightPos[MAX_LIGHTS];
+uniform vec3 u_lightDir[MAX_LIGHTS];      // unit, direction of travel
+uniform vec3 u_lightColor[MAX_LIGHTS];    // colour x intensity
+uniform float u_lightRange[MAX_LIGHTS];
+uniform vec2 u_lightCone[MAX_LIGHTS];     // cos(inner), cos(outer)
+uniform int u_lightShadow[MAX_LIGHTS];    // shadow map layer or -1
+uniform mat4 u_shadowMatrix[MAX_SHADOWS];
+uniform float u_shadowTexel[MAX_SHADOWS];  // world size of a texel (at 1 m for spots)
+uniform int u_shadowPerspective[MAX_SHADOWS];
+
+out vec4 o_color;
+
+// Fraction of light reaching p (3x3 PCF over hardware-filtered compares).
+float shadowFactor(int layer, vec3 p, vec3 n, vec3 toLight, float lightDist) {
+  float texel = u_shadowTexel[layer] * (u_shadowPerspective[layer] != 0 ? lightDist : 1.0);
+  // Normal offset grows with the angle between the surface and the light.
+  float cosT = clamp(dot(n, toLight), 0.0, 1.0);
+  vec3 q = p + n * texel * NORMAL_OFFSET * (1.0 - 0.5 * cosT);
+  vec4 s = u_shadowMatrix[layer] * vec4(q, 1.0);
+  s.xyz /= s.w;
+  s.xyz = s.xyz * 0.5 + 0.5;
+  if (s.x <= 0.0 || s.x >= 1.0 || s.y <= 0.0 || s.y >= 1.0 || s.z >= 1.0) return 1.0;
+  vec2 size = vec2(textureSize(u_shadowMaps, 0).xy);
+  float sum = 0.0;
+  for (int dy = -1; dy <= 1; ++dy)
+    for (int dx = -1; dx <= 1; ++dx)
+      sum += texture(u_shadowMaps, vec4(s.xy + vec2(dx, dy) / size, float(layer), s.z));
+  return sum / 9.0;
+}
+
+float ggx(float nh, float a) {
+  float a2 = a * a;
+  float d = nh * nh * (a2 - 1.0) + 1.0;
+  return a2 / (PI * d * d);
+}
+
+float smithSchlick(float nv, float nl, float roughness) {
+  float k = (roughness + 1.0) * (roughness + 1.0) / 8.0;
+  return nv / (nv * (1.0 - k) + k) * nl / (nl * (1.0 - k) + k);
+}
+
+vec3 schlick(float c, vec3 f0) { return f0 + (1.0 - f0) * pow(1.0 - c, 5.0); }
+
+void main() {
+  vec4 base = u_baseColor;
+  if (u_useVertexColor != 0) base *= v_color;
+  if (u_hasColorTex != 0) base *= texture(u_colorTex, v_uv);
+#if MODEL == 0
+  o_color = vec4(base.rgb + u_emissive, 1.0);
+#else
+  vec3 n = normalize(v_normal);
+  if (u_doubleSided != 0 && !gl_FrontFacing) n = -n;
+  vec3 geomN = n;
+  if (u_hasNormalTex != 0) {
+    vec3 t = v_tangent.xyz - n * dot(n, v_tangent.xyz);
+    if (dot(t, t) > 1e-12) {
+      t = normalize(t);
+      vec3 b = cross(n, t) * (v_tangent.w < 0.0 ? -1.0 : 1.0);
+      vec3 m = texture(u_normalTex, v_uv).xyz * 2.0 - 1.0;
+      n = normalize(mat3(t, b, n) * m);
+    }
+  }
+  vec3 v = normalize(u_cameraPos - v_worldPos);
+  float nv = max(dot(n, v), 1e-4);
+#if MODEL == 2
+  float rough = clamp(u_roughness, 0.04, 1.0);
+  float alpha = rough * rough;
+  vec3 f0 = mix(vec3(0.04), base.rgb, u_metallic);
+  vec3 diffuseColor = base.rgb * (1.0 - u_metallic);
+  vec3 color = u_ambient * (diffuseColor + schlick(nv, f0) * (1.0 - 0.5 * rough));
+#else
+  vec3 color = u_ambient * base.rgb;
+#endif
+  for (int i = 0; i < u_lightCount; ++i) {
+    vec3 l;
+    float atten = 1.0;
+    float dist = 1.0;
+    if (u_lightType[i] == 0) {
+      l = -u_lightDir[i];
+    } else {
+      vec3 d = u_lightPos[i] - v_worldPos;
+      dist = length(d);
+      l = d / max(dist, 1e-6);
+      float x = dist / u_lightRange[i];
+      float window = clamp(1.0 - x * x * x * x, 0.0, 1.0);
+      atten = window * window / max(dist * dist, 1e-8);
+      if (u_lightType[i] == 2)
+        atten *= smoothstep(u_lightCone[i].y, u_lightCone[i].x, dot(-l, u_lightDir[i]));
+    }
+    float nl = dot(n, l);
+    if (nl <= 0.0 || atten <= 0.0) continue;
+    if (u_lightShadow[i] >= 0) atten *= shadowFactor(u_lightShadow[i], v_worldPos, geomN, l, dist);
+    vec3 e = u_lightColor[i] * atten;
+    vec3 h = normalize(l + v);
+    float nh = max(dot(n, h), 0.0);
+#if MODEL == 2
+    vec3 f = schlick(max(dot(h, v), 0.0), f0);
+    vec3 spec = f * ggx(nh, alpha) * smithSchlick(nv, nl, rough) / (4.0 * nv * nl);
+    vec3 kd = (1.0 - f) * diffuseColor / PI;
+    color += PI * (kd + spec) * e * nl;
+#else
+    color += (base.rgb * nl + u_specular * pow(nh, u_shininess)) * e;
+#endif
+  }
+  o_color = vec4(color + u_emissive, 1.0);
+#endif
+}
+)";
+
+inline constexpr const char* kDepthVs = R"(
+layout(location = 0) in vec3 a_position;
+layout(location = 5) in mat4 a_model;
+uniform mat4 u_viewProj;
+void main() { gl_Position = u_viewProj * (a_model * vec4(a_position, 1.0)); }
+)";
+
+inline constexpr const char* kDepthFs = R"(
+void main() {}
+)";
+
+}  // namespace dm::scene_glsl
