@@ -452,7 +452,7 @@ Status checkSettings(const VolumeRenderSettings& s, const RenderTarget& target) 
     return bad("lightDirection", s.lightDirection.norm(), "use a finite vector");
   if (!s.slicePosition.allFinite()) return bad("slicePosition", s.slicePosition.norm(), "use a finite point");
   if (!(s.shininess >= 1 && s.shininess <= 1024)) return bad("shininess", s.shininess, "use 1..1024");
-  const PixelRect& v = s.viewport;
+  const Viewport& v = s.viewport;
   const bool whole = v.width == 0 || v.height == 0;
   if (!whole && (v.x < 0 || v.y < 0 || v.width < 0 || v.height < 0 || v.x + v.width > target.width() ||
                  v.y + v.height > target.height()))
@@ -476,8 +476,8 @@ Status VolumeRenderer::render(const RenderTarget& target, const Camera& camera, 
   GpuVolume& g = **found;
   if (auto s = camera.validate(); !s) return s.error().within(where);
   if (auto s = checkSettings(settings, target); !s) return s.error();
-  PixelRect vp = settings.viewport;
-  if (vp.width == 0 || vp.height == 0) vp = PixelRect{0, 0, target.width(), target.height()};
+  Viewport vp = settings.viewport;
+  if (vp.width == 0 || vp.height == 0) vp = Viewport{0, 0, target.width(), target.height()};
 
   const Mat4f viewProj = camera.projectionMatrix(double(vp.width) / double(vp.height)) * camera.viewMatrix();
   const Mat4f invViewProj = viewProj.cast<double>().inverse().cast<float>();
@@ -701,11 +701,11 @@ Result<Camera> VolumeRenderer::sliceViewCamera(VolumeId id, SliceAxis axis, cons
   return cam;
 }
 
-Status VolumeRenderer::renderSliceView(const RenderTarget& target, const PixelRect& viewport, VolumeId id,
+Status VolumeRenderer::renderSliceView(const RenderTarget& target, const Viewport& viewport, VolumeId id,
                                        SliceAxis axis, const Vec3& worldPosition,
                                        const VolumeRenderSettings& settings) {
-  PixelRect vp = viewport;
-  if (vp.width == 0 || vp.height == 0) vp = PixelRect{0, 0, target.width(), target.height()};
+  Viewport vp = viewport;
+  if (vp.width == 0 || vp.height == 0) vp = Viewport{0, 0, target.width(), target.height()};
   auto cam = sliceViewCamera(id, axis, worldPosition, double(vp.width) / double(vp.height));
   if (!cam) return cam.error();
   VolumeRenderSettings s = settings;

@@ -28,6 +28,12 @@
 
 namespace dm {
 
+/// A sub-rectangle of a render target in pixels, origin top-left (like
+/// dm::Image); where it is optional, width or height 0 means the whole target.
+struct Viewport {
+  int x = 0, y = 0, width = 0, height = 0;
+};
+
 /// Size and format of a RenderTarget.
 struct RenderTargetOptions {
   int width = 640;   ///< pixels, 1..GL_MAX_TEXTURE_SIZE

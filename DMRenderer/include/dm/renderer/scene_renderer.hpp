@@ -125,11 +125,6 @@ struct RenderSettings {
   bool shadows = true;                 ///< render shadow maps for shadow-casting lights
 };
 
-/// A sub-rectangle of a target, pixels, origin top-left.
-struct Viewport {
-  int x = 0, y = 0, width = 0, height = 0;
-};
-
 /// What a render call did (the camera passes; shadow passes counted apart).
 struct RenderStats {
   int drawCalls = 0;          ///< camera-pass draw calls

@@ -81,17 +81,11 @@ enum class SliceAxis : unsigned char {
   Axial,     ///< plane z = const
 };
 
-/// A sub-rectangle of a render target, pixels, origin top-left; width or
-/// height 0 means the whole target.
-struct PixelRect {
-  int x = 0, y = 0, width = 0, height = 0;
-};
-
 /// Per-draw settings of render(). Values are in the volume's units unless
 /// stated; NaN window bounds mean the volume's value range.
 struct VolumeRenderSettings {
   VolumeRenderMode mode = VolumeRenderMode::Composite;
-  PixelRect viewport;              ///< where to draw; default the whole target
+  Viewport viewport;              ///< where to draw; default the whole target
   double stepVoxels = 0.5;         ///< sample spacing along rays, voxel-index units (0.05..8)
   bool emptySpaceSkipping = true;  ///< jump over macro cells that cannot contribute
   double terminationAlpha = 0.99;  ///< composite: stop a ray at this accumulated opacity (1 = never)
@@ -186,7 +180,7 @@ class VolumeRenderer {
   /// axial seen from the feet (anterior up, patient right on the image
   /// left), coronal from the front (superior up, right on the left),
   /// sagittal from the patient's left (superior up, anterior on the left).
-  Status renderSliceView(const RenderTarget& target, const PixelRect& viewport, VolumeId id, SliceAxis axis,
+  Status renderSliceView(const RenderTarget& target, const Viewport& viewport, VolumeId id, SliceAxis axis,
                          const Vec3& worldPosition, const VolumeRenderSettings& settings = {});
   /// The orthographic camera renderSliceView() uses for a viewport of
   /// width/height `aspect` (for mapping world points to pixels).
