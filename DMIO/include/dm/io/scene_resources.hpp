@@ -1,0 +1,70 @@
+// dm/io/scene_resources.hpp — loads what a scene file's "resources" name:
+// meshes and volumes from files (through the resource manager, so a file
+// used twice is read once), isosurfaces extracted from volume resources,
+// generated shapes, and images.
+//
+// The scene file itself is parsed by dm/io/scene_file.hpp; this turns its
+// SceneResource entries into data-model objects shared read-only by every
+// engine (the renderer uploads the meshes, haptics builds BVHs over them).
+// Volumes load first, then what derives from them. Errors name the resource
+// ("resources/skin: ...") and keep the loader's message (file, field, byte).
+//
+// @code
+//   auto scene = dm::readScene("head_probe.json");
+//   auto res = dm::loadSceneResources(*scene);
+//   if (!res) return res.error();
+//   std::shared_ptr<const dm::Mesh> skin = res->mesh("skin");
+// @endcode
+#pragma once
+
+#include <dm/core/image.hpp>
+#include <dm/core/mesh.hpp>
+#include <dm/core/result.hpp>
+#include <dm/core/volume.hpp>
+#include <dm/io/scene_file.hpp>
+
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <string_view>
+
+namespace dm {
+
+class ResourceManager;
+
+/// The loaded resources of a scene, by resource name.
+struct SceneResources {
+  std::map<std::string, std::shared_ptr<const Mesh>, std::less<>> meshes;  ///< Mesh, Isosurface, Shape
+  std::map<std::string, std::shared_ptr<const Volume>, std::less<>> volumes;
+  std::map<std::string, std::shared_ptr<const Image>, std::less<>> images;
+
+  /// The mesh (file, isosurface or shape) named `name`, or null. O(log n).
+  std::shared_ptr<const Mesh> mesh(std::string_view name) const;
+  /// The volume named `name`, or null.
+  std::shared_ptr<const Volume> volume(std::string_view name) const;
+  /// The image named `name`, or null.
+  std::shared_ptr<const Image> image(std::string_view name) const;
+};
+
+/// How to load.
+struct SceneLoadOptions {
+  /// A manager to load files through (its cache is shared with the caller);
+  /// null: a private one with dm::registerIoLoaders().
+  ResourceManager* resourceManager = nullptr;
+  /// Called before each resource with its name and the fraction done; may be empty.
+  std::function<void(std::string_view name, double fraction)> progress;
+};
+
+/// Loads every resource of `scene`. Fails on the first resource that does
+/// not load, naming it. Isosurfaces are extracted with closed borders
+/// (watertight where the scan is cut), optionally reduced to their largest
+/// component and Taubin-smoothed. Shapes: icosphere (sphere), box, capsule,
+/// cylinder and plane, finer with `subdivisions`.
+Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoadOptions& options = {});
+
+/// The generated mesh of one Shape resource (no file access). InvalidArgument
+/// for a resource that is not a shape or has non-positive sizes.
+Result<Mesh> makeSceneShape(const SceneResource& shape);
+
+}  // namespace dm

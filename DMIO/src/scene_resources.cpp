@@ -1,0 +1,158 @@
+// scene_resources.cpp — volumes, meshes, isosurfaces, shapes and images of a
+// scene file, loaded in dependency order.
+#include <dm/core/resource.hpp>
+#include <dm/io/image_io.hpp>
+#include <dm/io/resources.hpp>
+#include <dm/io/scene_resources.hpp>
+#include <dm/math/isosurface.hpp>
+#include <dm/math/mesh_filters.hpp>
+#include <dm/math/primitives.hpp>
+
+#include <algorithm>
+
+namespace dm {
+
+namespace {
+
+template <class Map>
+auto findIn(const Map& m, std::string_view name) -> typename Map::mapped_type {
+  auto it = m.find(name);
+  return it == m.end() ? nullptr : it->second;
+}
+
+std::string where(const SceneResource& r) { return "resources/" + r.name; }
+
+Result<Mesh> makeIsosurface(const SceneResource& r, const Volume& volume) {
+  auto mesh = extractIsosurface(volume, {.iso = r.level, .closeBorders = true});
+  if (!mesh) return mesh.error().within(where(r));
+  if (mesh->empty())
+    return fail(ErrorCode::InvalidArgument,
+                formatString("no surface at level %g (volume values lie elsewhere)", r.level),
+                where(r) + "/level",
+                "pick a level between the volume's minimum and maximum (dmtool info shows them)");
+  if (r.largestComponent) *mesh = keepLargestComponent(*mesh);
+  if (r.smooth > 0)
+    if (auto s = smoothMesh(*mesh, r.smooth); !s) return s.error().within(where(r) + "/smooth");
+  mesh->name = r.name;
+  return mesh;
+}
+
+}  // namespace
+
+std::shared_ptr<const Mesh> SceneResources::mesh(std::string_view name) const { return findIn(meshes, name); }
+std::shared_ptr<const Volume> SceneResources::volume(std::string_view name) const {
+  return findIn(volumes, name);
+}
+std::shared_ptr<const Image> SceneResources::image(std::string_view name) const {
+  return findIn(images, name);
+}
+
+Result<Mesh> makeSceneShape(const SceneResource& r) {
+  if (r.type != SceneResource::Type::Shape)
+    return fail(ErrorCode::InvalidArgument, "not a shape resource", where(r));
+  const int sub = std::clamp(r.subdivisions, 0, 8);
+  const int segments = std::min(8 << sub, 1024);  // around an axis: 8, 16, ..., 1024
+  Mesh m;
+  switch (r.shape) {
+    case SceneResource::Shape::Sphere:
+      if (!(r.radius > 0)) break;
+      m = makeIcosphere(r.radius, std::min(sub, 7));
+      break;
+    case SceneResource::Shape::Box:
+      if (!(r.halfExtents.minCoeff() > 0)) break;
+      m = makeBox(r.halfExtents);
+      break;
+    case SceneResource::Shape::Capsule:
+      if (!(r.radius > 0) || !(r.height > 0)) break;
+      m = makeCapsule(r.radius, r.height, segments, std::max(2, segments / 4));
+      break;
+    case SceneResource::Shape::Cylinder:
+      if (!(r.radius > 0) || !(r.height > 0)) break;
+      m = makeCylinder(r.radius, r.height, segments);
+      break;
+    case SceneResource::Shape::Plane:
+      if (!(r.halfExtents.x() > 0) || !(r.halfExtents.y() > 0)) break;
+      m = makePlane(r.halfExtents.x(), r.halfExtents.y(), std::max(1, 1 << std::min(sub, 8)));
+      break;
+  }
+  if (m.empty())
+    return fail(ErrorCode::InvalidArgument, "shape with a non-positive size", where(r),
+                "give radius, half_extents or height > 0 as the shape needs");
+  m.name = r.name;
+  return m;
+}
+
+Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoadOptions& options) {
+  ResourceManager local;
+  ResourceManager* rm = options.resourceManager;
+  if (rm == nullptr) {
+    if (auto s = registerIoLoaders(local); !s) return s.error();
+    rm = &local;
+  }
+  SceneResources out;
+  const double total = std::max<std::size_t>(scene.resources.size(), 1);
+  std::size_t done = 0;
+  auto report = [&](const SceneResource& r) {
+    if (options.progress) options.progress(r.name, double(done) / total);
+    ++done;
+  };
+  auto missing = [](const SceneResource& r) -> Error {
+    return fail(ErrorCode::NotFound, "\"" + r.source + "\" does not exist", where(r) + "/source",
+                "check the path (relative paths resolve against the scene file's folder) or the mount name");
+  };
+  // Volumes first: isosurfaces derive from them.
+  for (const SceneResource& r : scene.resources) {
+    if (r.type != SceneResource::Type::Volume) continue;
+    report(r);
+    if (r.path.empty()) return missing(r);
+    auto h = rm->load<Volume>(r.path);
+    if (!h) return h.error().within(where(r));
+    out.volumes.emplace(r.name, h->get());
+  }
+  for (const SceneResource& r : scene.resources) {
+    switch (r.type) {
+      case SceneResource::Type::Volume:
+        break;
+      case SceneResource::Type::Mesh: {
+        report(r);
+        if (r.path.empty()) return missing(r);
+        ImportOptions o;
+        o.set("unit", r.unit);
+        if (r.scale != 1.0) o.set("scale", formatString("%.17g", r.scale));
+        auto h = rm->load<Mesh>(r.path, o);
+        if (!h) return h.error().within(where(r));
+        out.meshes.emplace(r.name, h->get());
+        break;
+      }
+      case SceneResource::Type::Isosurface: {
+        report(r);
+        auto vol = out.volume(r.volume);
+        if (!vol)
+          return fail(ErrorCode::NotFound, "no volume resource \"" + r.volume + "\"", where(r) + "/volume");
+        auto mesh = makeIsosurface(r, *vol);
+        if (!mesh) return mesh.error();
+        out.meshes.emplace(r.name, std::make_shared<const Mesh>(std::move(*mesh)));
+        break;
+      }
+      case SceneResource::Type::Shape: {
+        report(r);
+        auto mesh = makeSceneShape(r);
+        if (!mesh) return mesh.error();
+        out.meshes.emplace(r.name, std::make_shared<const Mesh>(std::move(*mesh)));
+        break;
+      }
+      case SceneResource::Type::Image: {
+        report(r);
+        if (r.path.empty()) return missing(r);
+        auto img = readPng(r.path);
+        if (!img) return img.error().within(where(r));
+        out.images.emplace(r.name, std::make_shared<const Image>(std::move(*img)));
+        break;
+      }
+    }
+  }
+  if (options.progress) options.progress("", 1.0);
+  return out;
+}
+
+}  // namespace dm
