@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
-# Sets up, builds and runs the main job: the head probe demo on the Colin27
-# MRI head (until the master engine's `dmplatform run` exists).
-#   scripts/run.sh [head_probe options...]   (outputs in out/head_probe/)
+# Sets up, builds and runs the main job: `dmplatform run` on the bundled
+# default scene (examples/scenes/head_probe.json: the Colin27 MRI head probed
+# through the god-object by a simulated haptic device, rendered headless).
+#   scripts/run.sh [dmplatform run options...]   (outputs in out/head_probe/)
+# e.g. scripts/run.sh --realtime --duration 60
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
-cmake --build build -j "$(nproc)" --target head_probe
-exec build/examples/head_probe "$@"
+cmake --build build -j "$(nproc)" --target dmplatform
+exec build/Editors/dmplatform run "$@"

@@ -42,6 +42,10 @@ Command addSpheretreeCommand(CLI::App& parent);
 Command addDevicesCommand(CLI::App& parent);
 Command addCollideCommand(CLI::App& parent);
 Command addProbeCommand(CLI::App& parent);
+Command addValidateCommand(CLI::App& parent);
+#ifdef DM_HAVE_RENDERER
+Command addRenderCommand(CLI::App& parent);
+#endif
 
 /// Prints "dmtool: error: <where: what (hint)>" on stderr; returns kExitFailure.
 int printError(const dm::Error& error);

@@ -1,6 +1,7 @@
 // dmtool — the command line for the SDK's resources: inspect meshes and
 // volumes, convert between formats, extract isosurfaces, voxelize and
-// simplify meshes (see --help).
+// simplify meshes, replay device paths (probe), check scene files (validate)
+// and render them headless (render) (see --help).
 // Exit codes: 0 success, 1 the operation failed (message on stderr),
 // 2 bad command line (usage on stderr).
 #include <exception>
@@ -15,16 +16,14 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
   app.fallthrough(false);
   std::vector<dmtool::Command> commands = {
-      dmtool::addInfoCommand(app),
-      dmtool::addDevicesCommand(app),
-      dmtool::addConvertCommand(app),
-      dmtool::addIsosurfaceCommand(app),
-      dmtool::addSimplifyCommand(app),
-      dmtool::addCollideCommand(app),
-      dmtool::addVoxelizeCommand(app),
-      dmtool::addSpheretreeCommand(app),
-      dmtool::addProbeCommand(app),
+      dmtool::addInfoCommand(app),       dmtool::addDevicesCommand(app),    dmtool::addConvertCommand(app),
+      dmtool::addIsosurfaceCommand(app), dmtool::addSimplifyCommand(app),   dmtool::addCollideCommand(app),
+      dmtool::addVoxelizeCommand(app),   dmtool::addSpheretreeCommand(app), dmtool::addProbeCommand(app),
+      dmtool::addValidateCommand(app),
   };
+#ifdef DM_HAVE_RENDERER
+  commands.push_back(dmtool::addRenderCommand(app));
+#endif
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -111,7 +111,7 @@ TEST(SceneFile, BundledHeadProbeSceneHasTheValuesOfTheMainJob) {
   const dm::SceneResource* tool = s->resource("tool");
   ASSERT_NE(tool, nullptr);
   EXPECT_EQ(tool->shape, dm::SceneResource::Shape::Sphere);
-  EXPECT_DOUBLE_EQ(tool->radius, 2e-3);
+  EXPECT_DOUBLE_EQ(tool->radius, 4e-3);  // the proxy's marker, drawn 4 mm
 
   // examples/head_probe/main.cpp: k = 800 N/m, b = 0.5 N·s/m, mu_s 0.3, mu_d 0.2.
   const dm::SceneMaterial* skinMat = s->material("skin");
@@ -129,10 +129,12 @@ TEST(SceneFile, BundledHeadProbeSceneHasTheValuesOfTheMainJob) {
   EXPECT_TRUE(s->objects[0].pose.isometry().isApprox(dm::Isometry3::Identity()));
   EXPECT_FALSE(s->objects[1].haptic);
 
-  ASSERT_EQ(s->lights.size(), 1u);
+  // A shadow-casting key light and an unshadowed fill.
+  ASSERT_EQ(s->lights.size(), 2u);
   EXPECT_TRUE(s->lights[0].shadows);
+  EXPECT_FALSE(s->lights[1].shadows);
   EXPECT_NEAR(s->lights[0].direction.norm(), 1.0, 1e-15);
-  EXPECT_TRUE(s->lights[0].direction.isApprox(dm::Vec3(-0.5, -0.6, -0.6).normalized(), 1e-15));
+  EXPECT_TRUE(s->lights[0].direction.isApprox(dm::Vec3(-0.6, -0.3, -0.5).normalized(), 1e-15));
 
   // The camera sits at the front (+y, anterior) right (+x) of the head and looks at it.
   ASSERT_EQ(s->cameras.size(), 1u);

@@ -21,7 +21,9 @@ namespace fs = std::filesystem;
 // A scene folder with a ball volume (value 100 inside radius 12 mm, 1 mm
 // voxels, plus a separate 3-voxel speck), an OBJ box and a PNG.
 struct SceneDir {
-  fs::path dir = fs::temp_directory_path() / "dm_scene_resources_test";
+  // One folder per test: ctest runs the tests of this file in parallel.
+  fs::path dir = fs::temp_directory_path() / "dm_scene_resources_test" /
+                 ::testing::UnitTest::GetInstance()->current_test_info()->name();
   SceneDir() {
     fs::remove_all(dir);
     fs::create_directories(dir);

@@ -56,7 +56,7 @@ TEST(ImageCompare, CoveredPixelsCountsNonBackground) {
 
 TEST(Golden, MissingReferenceSaysHowToCreateIt) {
   ::unsetenv("DM_UPDATE_GOLDEN");
-  const auto dir = std::filesystem::temp_directory_path() / "dm_golden_test";
+  const auto dir = std::filesystem::temp_directory_path() / "dm_golden_test_missing";
   std::filesystem::remove_all(dir);
   auto s = dm::checkGolden(solid(4, 4, 3, 7), dir / "none.png", dir);
   ASSERT_FALSE(s);
@@ -65,12 +65,18 @@ TEST(Golden, MissingReferenceSaysHowToCreateIt) {
 }
 
 TEST(Golden, UpdateWritesThenCheckPassesAndAFailureWritesActualAndDiff) {
-  const auto dir = std::filesystem::temp_directory_path() / "dm_golden_test";
+  const auto dir = std::filesystem::temp_directory_path() / "dm_golden_test_update";
   std::filesystem::remove_all(dir);
   const auto ref = dir / "ref" / "square.png";
-  ::setenv("DM_UPDATE_GOLDEN", "1", 1);
-  ASSERT_TRUE(dm::checkGolden(solid(16, 16, 3, 90), ref, dir / "out"));
-  ::unsetenv("DM_UPDATE_GOLDEN");
+  {
+    // Unset again however this block ends: a leftover DM_UPDATE_GOLDEN=1
+    // would rewrite every later test's reference.
+    struct Unset {
+      ~Unset() { ::unsetenv("DM_UPDATE_GOLDEN"); }
+    } unset;
+    ::setenv("DM_UPDATE_GOLDEN", "1", 1);
+    EXPECT_TRUE(dm::checkGolden(solid(16, 16, 3, 90), ref, dir / "out"));
+  }
   EXPECT_TRUE(dm::checkGolden(solid(16, 16, 3, 95), ref, dir / "out"));  // within 8
   dm::Image changed = solid(16, 16, 3, 90);
   for (int x = 0; x < 16; ++x) changed.at<std::uint8_t>(x, 0, 0) = 0;

@@ -1,0 +1,97 @@
+// dm/engine/scene_runtime.hpp — a scene file, run: what `dmplatform run`
+// does, as a library call user code can extend.
+//
+// SceneRuntime::load() reads and validates the scene file
+// (docs/scene-format.md), loads its resources, and builds the engines its
+// "engines" section asks for inside a dm::MasterEngine:
+//   - haptics: the device (a driver from the registry, e.g. sim-haptic),
+//     the god-object renderer over the touchable objects with their scene
+//     materials, force shading and the force limit, and dm::HapticLoop
+//     (device servo, safety, fade) at the scene's rate;
+//   - render: a headless EGL context on the render engine's own thread,
+//     dm::SceneView drawing the render camera with the tool object following
+//     the haptic proxy, a HUD (time, force, force plot) from dm::Overlay,
+//     frames read back and written as PNG by a writer thread;
+//   - monitor: drains the haptic samples into the force trace.
+// run() starts them in lockstep on a virtual clock (bit-reproducible) or on
+// real-time threads, for a duration or until `stop` is raised (Ctrl-C), then
+// stops them and writes the outputs the scene asks for: frames/frame_NNNNN.png,
+// forces.csv, forces.png and summary.json (achieved rate and tick-time
+// percentiles per engine, deadline misses, contacts, maximum force, frames).
+// User code adds engines of its own (addEngine) before run().
+//
+// @code
+//   auto rt = dm::SceneRuntime::load("examples/scenes/head_probe.json");
+//   if (!rt) { std::cerr << rt.error() << '\n'; return 1; }
+//   auto summary = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 5.0, .outDir = "out"});
+// @endcode
+#pragma once
+
+#include <dm/core/result.hpp>
+#include <dm/engine/master_engine.hpp>
+
+#include <nlohmann/json.hpp>
+
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+
+namespace dm {
+
+struct SceneDesc;
+
+/// How to run.
+struct SceneRunOptions {
+  RunMode mode = RunMode::Lockstep;
+  double duration = 10.0;        ///< s of simulation (lockstep) or wall time (real time), > 0
+  std::filesystem::path outDir;  ///< empty: the scene's outputs.directory
+  /// Called on the control thread about 10 times per second with the
+  /// fraction done and a one-line status; may be empty.
+  std::function<void(double fraction, const std::string& status)> progress;
+  /// Raised (by a signal handler, another thread) to stop early; the outputs
+  /// are still written. May be null.
+  const std::atomic<bool>* stop = nullptr;
+};
+
+/// What a run did.
+struct SceneRunResult {
+  nlohmann::json summary;       ///< what summary.json holds
+  bool interrupted = false;     ///< stopped by `stop` before the duration
+  double simulatedSeconds = 0;  ///< how far the clock got
+  std::uint64_t frames = 0;     ///< frames written
+};
+
+/// A loaded scene with its engines (see the file comment). Not copyable.
+class SceneRuntime {
+ public:
+  /// Reads, validates and loads `sceneFile` and builds its engines. Every
+  /// validation problem is in the error (formatSceneErrors); a resource,
+  /// device or GL failure names the scene entry.
+  static Result<std::unique_ptr<SceneRuntime>> load(const std::filesystem::path& sceneFile);
+  /// The same from a parsed scene (its baseDir resolves relative sources).
+  static Result<std::unique_ptr<SceneRuntime>> create(const SceneDesc& scene);
+
+  ~SceneRuntime();
+  SceneRuntime(const SceneRuntime&) = delete;
+  SceneRuntime& operator=(const SceneRuntime&) = delete;
+
+  /// Adds a user engine (before run()).
+  Status addEngine(std::shared_ptr<Engine> engine, const EngineSchedule& schedule);
+  /// The master engine (state, transitions, stats).
+  MasterEngine& master();
+  const SceneDesc& scene() const;
+
+  /// Runs once (see the file comment). Fails when an engine fails (outputs
+  /// written so far are kept and named in the error) or an output cannot be
+  /// written.
+  Result<SceneRunResult> run(const SceneRunOptions& options);
+
+ private:
+  SceneRuntime();
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace dm

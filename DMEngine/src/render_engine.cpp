@@ -1,0 +1,272 @@
+// render_engine.cpp — scene frames at the render rate, HUD, PNG writer.
+#include "render_engine.hpp"
+
+#include <dm/core/log.hpp>
+#include <dm/io/image_io.hpp>
+#include <dm/io/scene_file.hpp>
+#include <dm/io/scene_resources.hpp>
+#include <dm/renderer/context.hpp>
+#include <dm/renderer/overlay.hpp>
+#include <dm/renderer/render_target.hpp>
+#include <dm/renderer/scene_view.hpp>
+
+#include <algorithm>
+#include <chrono>
+#include <condition_variable>
+#include <deque>
+#include <mutex>
+#include <thread>
+
+namespace dm {
+
+namespace {
+
+// Writes frames on its own thread so PNG encoding does not hold the render
+// rate. Bounded: `block` waits for room, otherwise a full queue drops.
+class FrameWriter {
+ public:
+  FrameWriter(std::filesystem::path dir, bool block) : dir_(std::move(dir)), block_(block) {
+    thread_ = std::thread([this] { run(); });
+  }
+  ~FrameWriter() { finish(); }
+  // Returns false when the frame was dropped.
+  bool push(std::uint64_t index, Image image) {
+    std::unique_lock lock(m_);
+    if (queue_.size() >= kCapacity) {
+      if (!block_) {
+        ++dropped_;
+        return false;
+      }
+      room_.wait(lock, [&] { return queue_.size() < kCapacity; });
+    }
+    queue_.emplace_back(index, std::move(image));
+    ready_.notify_one();
+    return true;
+  }
+  void finish() {
+    {
+      std::lock_guard lock(m_);
+      if (done_) return;
+      done_ = true;
+    }
+    ready_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+  std::uint64_t written() const {
+    std::lock_guard lock(m_);
+    return written_;
+  }
+  std::uint64_t dropped() const {
+    std::lock_guard lock(m_);
+    return dropped_;
+  }
+  Error error() const {
+    std::lock_guard lock(m_);
+    return error_;
+  }
+
+ private:
+  static constexpr std::size_t kCapacity = 8;
+  void run() {
+    for (;;) {
+      std::pair<std::uint64_t, Image> item;
+      {
+        std::unique_lock lock(m_);
+        ready_.wait(lock, [&] { return done_ || !queue_.empty(); });
+        if (queue_.empty()) return;
+        item = std::move(queue_.front());
+        queue_.pop_front();
+        room_.notify_one();
+      }
+      const auto file = dir_ / formatString("frame_%05llu.png", static_cast<unsigned long long>(item.first));
+      Status s = writePng(item.second, file);
+      std::lock_guard lock(m_);
+      if (s)
+        ++written_;
+      else if (error_.what.empty())
+        error_ = s.error();
+    }
+  }
+  std::filesystem::path dir_;
+  bool block_;
+  mutable std::mutex m_;
+  std::condition_variable ready_, room_;
+  std::deque<std::pair<std::uint64_t, Image>> queue_;
+  bool done_ = false;
+  std::uint64_t written_ = 0, dropped_ = 0;
+  Error error_;
+  std::thread thread_;
+};
+
+class RenderEngine final : public Engine, public RenderEngineHandle {
+ public:
+  std::string_view name() const noexcept override { return "render"; }
+
+  bool tick(const TickInfo& info) noexcept override {
+    try {
+      return frame(info);
+    } catch (const std::exception& e) {
+      error_ = fail(ErrorCode::Internal, e.what(), "render");
+      return false;
+    }
+  }
+
+  Status shutdown() override {
+    if (writer_) writer_->finish();
+    // Free GL objects with the context current on this (control) thread.
+    if (ctx_ && ctx_->makeCurrent()) {
+      overlay_ = Overlay();
+      target_ = RenderTarget();
+      view_ = SceneView();
+      ctx_->release();
+    }
+    if (writer_ && !writer_->error().what.empty()) return writer_->error();
+    return ok();
+  }
+
+  Error error() const override { return error_; }
+
+  std::shared_ptr<Engine> engine() override { return self_.lock(); }
+
+  RenderEngineStats stats() const override {
+    RenderEngineStats s = stats_;
+    if (writer_) {
+      s.framesWritten = writer_->written();
+      s.framesDropped = writer_->dropped();
+    }
+    std::vector<double> t = renderMs_;
+    if (!t.empty()) {
+      std::sort(t.begin(), t.end());
+      s.renderMsP50 = t[t.size() / 2];
+      s.renderMsMax = t.back();
+    }
+    return s;
+  }
+
+  std::weak_ptr<RenderEngine> self_;
+  std::unique_ptr<GlContext> ctx_;
+  SceneView view_;
+  RenderTarget target_;
+  Overlay overlay_;
+  std::unique_ptr<FrameWriter> writer_;
+  RenderFeed feed_;
+  std::string camera_;
+  std::string proxyObject_;
+  int frameEvery_ = 1;
+  RenderEngineStats stats_;
+  std::vector<double> renderMs_;
+  std::vector<float> recent_;
+  Error error_;
+
+ private:
+  bool frame(const TickInfo& info) {
+    const auto t0 = std::chrono::steady_clock::now();
+    if (!ctx_->isCurrent()) {
+      if (auto s = ctx_->makeCurrent(); !s) {
+        error_ = s.error();
+        return false;
+      }
+    }
+    const double t = static_cast<double>(info.scheduled_ns) * 1e-9;
+    Isometry3 proxy = Isometry3::Identity();
+    Vec3 force = Vec3::Zero();
+    const bool haptics = feed_.haptics && feed_.haptics(proxy, force);
+    if (haptics && !proxyObject_.empty()) {
+      if (auto s = view_.setObjectPose(proxyObject_, proxy); !s) {
+        error_ = s.error();
+        return false;
+      }
+    }
+    auto r = view_.render(target_, camera_, t);
+    if (!r) {
+      error_ = r.error();
+      ctx_->release();
+      return false;
+    }
+    hud(t, haptics, force);
+    const std::uint64_t index = stats_.frames++;
+    if (writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0) {
+      auto img = target_.readColor();
+      if (!img) {
+        error_ = img.error();
+        ctx_->release();
+        return false;
+      }
+      writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(*img));
+    }
+    ctx_->release();
+    renderMs_.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    return true;
+  }
+
+  void hud(double t, bool haptics, const Vec3& force) {
+    overlay_.begin(target_);
+    const float w = static_cast<float>(target_.width()), h = static_cast<float>(target_.height());
+    const float size = std::clamp(h / 32.0f, 10.0f, 24.0f);
+    char line[160];
+    if (haptics)
+      std::snprintf(line, sizeof line, "t = %6.2f s   |F| = %5.2f N", t, force.norm());
+    else
+      std::snprintf(line, sizeof line, "t = %6.2f s", t);
+    overlay_.text(size * 0.6f, size * 0.5f, line, size, Vec4f(1, 1, 1, 1));
+    if (haptics && feed_.recentForce) {
+      double seconds = 0;
+      feed_.recentForce(recent_, seconds);
+      if (recent_.size() >= 2) {
+        const OverlayRect frame{w * 0.58f, h * 0.70f, w * 0.40f, h * 0.27f};
+        PlotSeries series{.values = recent_, .color = Vec4f(1.0f, 0.55f, 0.2f, 1), .width = 1.5f};
+        PlotOptions opt;
+        opt.xMin = static_cast<float>(-seconds);
+        opt.xMax = 0;
+        opt.yLabel = "|F| N";
+        opt.xLabel = "s";
+        opt.textSize = std::max(9.0f, size * 0.6f);
+        overlay_.plot(frame, {&series, 1}, opt);
+      }
+    }
+    if (auto s = overlay_.end(); !s) log::warn("HUD: %s", s.error().message().c_str());
+  }
+};
+
+}  // namespace
+
+Result<std::shared_ptr<RenderEngineHandle>> makeRenderEngine(const SceneDesc& scene,
+                                                             const SceneResources& resources, RenderFeed feed,
+                                                             const std::filesystem::path& framesDir,
+                                                             int frameEvery, bool blockOnWriter) {
+  const SceneRenderEngine settings = scene.engines.render.value_or(SceneRenderEngine{});
+  auto e = std::make_shared<RenderEngine>();
+  e->self_ = e;
+  auto ctx = GlContext::create();
+  if (!ctx) return ctx.error().within("engines/render");
+  e->ctx_ = std::move(*ctx);
+  e->stats_.glRenderer = e->ctx_->info().glRenderer;
+  e->stats_.eglPlatform = toString(e->ctx_->info().platform);
+  auto view = SceneView::create(scene, resources);
+  if (!view) return view.error();
+  e->view_ = std::move(*view);
+  auto target =
+      RenderTarget::create({.width = settings.width, .height = settings.height, .samples = settings.samples});
+  if (!target) return target.error().within("engines/render");
+  e->target_ = std::move(*target);
+  auto overlay = Overlay::create();
+  if (!overlay) return overlay.error().within("engines/render");
+  e->overlay_ = std::move(*overlay);
+  e->camera_ = settings.camera;
+  if (auto cam = e->view_.camera(e->camera_, 0.0); !cam) return cam.error().within("engines/render/camera");
+  if (scene.engines.haptics) e->proxyObject_ = scene.engines.haptics->proxyObject;
+  e->feed_ = std::move(feed);
+  e->frameEvery_ = std::max(1, frameEvery);
+  if (!framesDir.empty()) {
+    std::error_code ec;
+    std::filesystem::create_directories(framesDir, ec);
+    if (ec)
+      return fail(ErrorCode::Io, "cannot create the frames folder: " + ec.message(), framesDir.string());
+    e->writer_ = std::make_unique<FrameWriter>(framesDir, blockOnWriter);
+  }
+  e->ctx_->release();  // the ticking thread makes it current
+  return std::shared_ptr<RenderEngineHandle>(e);
+}
+
+}  // namespace dm

@@ -1,0 +1,57 @@
+// render_engine.hpp (private) — the render engine of a scene run: a headless
+// GL context owned by whichever thread ticks it, dm::SceneView, a HUD, and a
+// writer thread for the frames. Compiled only when DMRenderer exists.
+#pragma once
+
+#include <dm/core/result.hpp>
+#include <dm/core/types.hpp>
+#include <dm/engine/engine.hpp>
+
+#include <cstdint>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace dm {
+
+struct SceneDesc;
+struct SceneResources;
+
+/// What the render engine reads from the others each frame (render thread).
+struct RenderFeed {
+  /// The haptic proxy pose (world) and the force sent (world, N); false
+  /// when there is no haptic engine.
+  std::function<bool(Isometry3& proxy, Vec3& force)> haptics;
+  /// |F| over the last seconds at the haptic rate, oldest first (copied).
+  std::function<void(std::vector<float>& out, double& seconds)> recentForce;
+};
+
+/// Counters of a render engine (control thread, after stop).
+struct RenderEngineStats {
+  std::uint64_t frames = 0;         ///< frames rendered
+  std::uint64_t framesWritten = 0;  ///< PNGs written
+  std::uint64_t framesDropped = 0;  ///< real time: frames the writer could not keep up with
+  std::string glRenderer;           ///< GL_RENDERER
+  std::string eglPlatform;          ///< "device" or "surfaceless"
+  double renderMsP50 = 0, renderMsMax = 0;
+};
+
+/// The engine (to add to the master) and its counters.
+class RenderEngineHandle {
+ public:
+  virtual ~RenderEngineHandle() = default;
+  virtual std::shared_ptr<Engine> engine() = 0;
+  virtual RenderEngineStats stats() const = 0;
+};
+
+/// Builds the render engine (creates the context on the calling thread and
+/// releases it). `framesDir` empty: no frames written. `blockOnWriter`:
+/// wait for the PNG writer instead of dropping frames (lockstep).
+Result<std::shared_ptr<RenderEngineHandle>> makeRenderEngine(const SceneDesc& scene,
+                                                             const SceneResources& resources, RenderFeed feed,
+                                                             const std::filesystem::path& framesDir,
+                                                             int frameEvery, bool blockOnWriter);
+
+}  // namespace dm

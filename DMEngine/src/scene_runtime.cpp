@@ -1,0 +1,410 @@
+// scene_runtime.cpp — a scene file's engines inside a MasterEngine, the run
+// loop, and the outputs.
+#include <dm/collide/bvh.hpp>
+#include <dm/core/filesystem.hpp>
+#include <dm/core/log.hpp>
+#include <dm/core/plugin.hpp>
+#include <dm/core/ring.hpp>
+#include <dm/engine/scene_runtime.hpp>
+#include <dm/haptics/force_plot.hpp>
+#include <dm/haptics/god_object.hpp>
+#include <dm/haptics/haptic_loop.hpp>
+#include <dm/haptics/probe.hpp>
+#include <dm/io/drivers.hpp>
+#include <dm/io/haptic_device.hpp>
+#include <dm/io/image_io.hpp>
+#include <dm/io/scene_file.hpp>
+#include <dm/io/scene_resources.hpp>
+
+#ifdef DM_ENGINE_HAVE_RENDERER
+#include "render_engine.hpp"
+#endif
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <thread>
+
+namespace dm {
+
+namespace {
+
+using SteadyClock = std::chrono::steady_clock;
+
+// The haptic engine: device servo, god-object, safety — one HapticLoop tick
+// per engine tick; every tick's sample goes to the monitor through an SPSC
+// ring (the haptic thread never allocates, locks or logs).
+class HapticsEngine final : public Engine {
+ public:
+  std::string_view name() const noexcept override { return "haptics"; }
+  bool tick(const TickInfo& info) noexcept override {
+    loop->tick(info);
+    const HapticLoopSample& s = loop->lastSample();
+    ProbeSample p;
+    p.t = static_cast<double>(info.scheduled_ns) * 1e-9;
+    p.devicePose = s.input.devicePose;
+    p.response = s.response;
+    p.response.force = loop->config().deviceToWorld.linear() * s.deviceForce;  // what was sent, world frame
+    if (!ring.tryPush(p)) dropped.fetch_add(1, std::memory_order_relaxed);
+    return true;
+  }
+  std::unique_ptr<HapticDevice> device;
+  std::unique_ptr<GodObjectRenderer> renderer;
+  std::unique_ptr<HapticLoop> loop;
+  SpscRing<ProbeSample, 16384> ring;
+  std::atomic<std::uint64_t> dropped{0};
+};
+
+// |F| of the last `seconds` at the haptic rate, shared by the monitor
+// (writer) and the render HUD (reader); neither is a real-time thread.
+struct RecentForce {
+  std::mutex m;
+  std::vector<float> values;  // circular
+  std::size_t next = 0;
+  bool full = false;
+  double seconds = 2.0;
+  void push(float v) {
+    std::lock_guard lock(m);
+    values[next] = v;
+    next = (next + 1) % values.size();
+    full = full || next == 0;
+  }
+  void copy(std::vector<float>& out, double& secs) {
+    std::lock_guard lock(m);
+    out.clear();
+    if (full) out.insert(out.end(), values.begin() + static_cast<std::ptrdiff_t>(next), values.end());
+    out.insert(out.end(), values.begin(), values.begin() + static_cast<std::ptrdiff_t>(next));
+    secs = seconds * double(out.size()) / double(values.size());
+  }
+};
+
+// The monitor: drains the haptic samples into the force trace.
+class MonitorEngine final : public Engine {
+ public:
+  MonitorEngine(HapticsEngine* h, RecentForce* r) : haptics(h), recent(r) {}
+  std::string_view name() const noexcept override { return "monitor"; }
+  bool tick(const TickInfo&) noexcept override {
+    drain();
+    return true;
+  }
+  void drain() {
+    if (haptics == nullptr) return;
+    ProbeSample p;
+    while (haptics->ring.tryPop(p)) {
+      trace.push_back(p);
+      recent->push(static_cast<float>(p.response.force.norm()));
+    }
+  }
+  HapticsEngine* haptics;
+  RecentForce* recent;
+  std::vector<ProbeSample> trace;
+};
+
+Mesh scaledWorldMesh(const Mesh& mesh, double scale) {
+  Mesh m = mesh;
+  if (scale != 1.0)
+    for (auto& p : m.positions) p *= scale;
+  return m;
+}
+
+}  // namespace
+
+struct SceneRuntime::Impl {
+  SceneDesc scene;
+  SceneResources resources;
+  MasterEngine master;
+  std::shared_ptr<HapticsEngine> haptics;
+  std::shared_ptr<MonitorEngine> monitor;
+  RecentForce recent;
+  FactoryRegistry registry;
+  std::unique_ptr<PluginLinker> linker;
+#ifdef DM_ENGINE_HAVE_RENDERER
+  std::shared_ptr<RenderEngineHandle> render;
+#endif
+  std::vector<std::pair<std::shared_ptr<Engine>, EngineSchedule>> userEngines;
+  bool ran = false;
+
+  Status buildHaptics(bool lockstep);
+};
+
+Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
+  const SceneHapticsEngine& h = *scene.engines.haptics;
+  const std::string where = "engines/haptics";
+  if (h.renderer != SceneHapticsEngine::Renderer::GodObject)
+    return fail(ErrorCode::Unsupported, "dmplatform run drives the god-object renderer only",
+                where + "/renderer",
+                "use \"god-object\"; the VPS and sphere-tree renderers run through dmtool probe and the SDK");
+  std::vector<GodObjectObject> objects;
+  for (const std::string& name : h.objects) {
+    const SceneObject* o = scene.object(name);
+    if (o == nullptr) return fail(ErrorCode::NotFound, "no object \"" + name + "\"", where + "/objects");
+    const SceneMaterial* mat = scene.material(o->material);
+    if (mat == nullptr || !mat->haptic)
+      return fail(ErrorCode::InvalidArgument, "touchable object \"" + name + "\" has no haptic material",
+                  "objects/" + name + "/material",
+                  "give its material a \"haptic\" block with stiffness (N/m) and friction");
+    auto mesh = resources.mesh(o->mesh);
+    if (!mesh) return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", "objects/" + name);
+    auto bvh = MeshBvh::build(scaledWorldMesh(*mesh, o->scale));
+    if (!bvh) return bvh.error().within("objects/" + name);
+    GodObjectObject g;
+    g.bvh = std::make_shared<const MeshBvh>(std::move(*bvh));
+    g.pose = o->pose.isometry();
+    g.material = {.stiffness = mat->haptic->stiffness,
+                  .damping = mat->haptic->damping,
+                  .staticFriction = mat->haptic->staticFriction,
+                  .dynamicFriction = mat->haptic->dynamicFriction};
+    objects.push_back(std::move(g));
+  }
+  GodObjectOptions go;
+  go.proxyRadius = h.toolRadius;
+  go.forceShading = h.forceShading;
+  if (h.maxForce > 0) go.maxForce = h.maxForce;
+  auto renderer = GodObjectRenderer::create(std::move(objects), go);
+  if (!renderer) return renderer.error().within(where);
+
+  const SceneDevice* dev = scene.device(h.device);
+  if (dev == nullptr) return fail(ErrorCode::NotFound, "no device \"" + h.device + "\"", where + "/device");
+  linker = std::make_unique<PluginLinker>(registry);
+  if (auto s = registerBuiltinDrivers(*linker); !s) return s.error();
+  auto device = HapticDevice::open(registry, dev->driver, deviceParams(*dev));
+  if (!device) return device.error().within("devices/" + dev->name);
+
+  auto e = std::make_shared<HapticsEngine>();
+  e->device = std::move(*device);
+  e->renderer = std::move(*renderer);
+  HapticLoopConfig config;
+  config.loop = {.rate_hz = h.rateHz, .name = "haptics"};
+  config.deviceToWorld = h.devicePose.isometry();
+  config.forceLimit = h.maxForce;
+  // In lockstep an overrun says how loaded this machine is, not what the
+  // simulation did: count it but keep the output (bit-identical reruns).
+  config.overrunFades = !lockstep;
+  auto loop = HapticLoop::create({.device = *e->device, .renderer = *e->renderer}, config);
+  if (!loop) return loop.error().within(where);
+  e->loop = std::move(*loop);
+  haptics = e;
+  return ok();
+}
+
+SceneRuntime::SceneRuntime() : impl_(std::make_unique<Impl>()) {}
+SceneRuntime::~SceneRuntime() {
+  if (impl_ && impl_->master.state() != SimState::Stopped && impl_->master.state() != SimState::Created)
+    (void)impl_->master.stop("runtime destroyed");
+}
+
+Result<std::unique_ptr<SceneRuntime>> SceneRuntime::load(const std::filesystem::path& sceneFile) {
+  std::vector<Error> problems;
+  auto scene = readScene(sceneFile, &problems);
+  if (!scene) {
+    if (problems.size() > 1) {
+      Error e = scene.error();
+      e.what = formatString("%zu problems:\n", problems.size()) + formatSceneErrors(problems);
+      return e;
+    }
+    return scene.error();
+  }
+  return create(*scene);
+}
+
+Result<std::unique_ptr<SceneRuntime>> SceneRuntime::create(const SceneDesc& scene) {
+  std::unique_ptr<SceneRuntime> rt(new SceneRuntime());
+  rt->impl_->scene = scene;
+  auto res = loadSceneResources(scene);
+  if (!res) return res.error();
+  rt->impl_->resources = std::move(*res);
+  return rt;
+}
+
+Status SceneRuntime::addEngine(std::shared_ptr<Engine> engine, const EngineSchedule& schedule) {
+  if (!engine) return fail(ErrorCode::InvalidArgument, "null engine", "SceneRuntime::addEngine");
+  impl_->userEngines.emplace_back(std::move(engine), schedule);
+  return ok();
+}
+
+MasterEngine& SceneRuntime::master() { return impl_->master; }
+const SceneDesc& SceneRuntime::scene() const { return impl_->scene; }
+
+Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
+  Impl& im = *impl_;
+  if (im.ran) return fail(ErrorCode::InvalidArgument, "a SceneRuntime runs once", "SceneRuntime::run");
+  im.ran = true;
+  if (!(options.duration > 0) || !std::isfinite(options.duration))
+    return fail(ErrorCode::InvalidArgument, formatString("duration %g s", options.duration), "--duration",
+                "give a positive number of seconds");
+  const bool lockstep = options.mode == RunMode::Lockstep;
+  const SceneDesc& scene = im.scene;
+  const std::filesystem::path out =
+      options.outDir.empty() ? std::filesystem::path(scene.outputs.directory) : options.outDir;
+  std::error_code ec;
+  std::filesystem::create_directories(out, ec);
+  if (ec) return fail(ErrorCode::Io, "cannot create the output folder: " + ec.message(), out.string());
+
+  // Engines: haptics first (the render feed reads it), then the monitor,
+  // the renderer, and user engines.
+  if (scene.engines.haptics) {
+    if (auto s = im.buildHaptics(lockstep); !s) return s.error();
+    if (auto s = im.master.addEngine(im.haptics, {.rateHz = scene.engines.haptics->rateHz, .priority = 80});
+        !s)
+      return s.error();
+  }
+  const double hapticRate = scene.engines.haptics ? scene.engines.haptics->rateHz : 1000.0;
+  im.recent.values.assign(static_cast<std::size_t>(std::max(2.0, hapticRate * im.recent.seconds)), 0.0f);
+  im.monitor = std::make_shared<MonitorEngine>(im.haptics.get(), &im.recent);
+  im.monitor->trace.reserve(im.haptics ? static_cast<std::size_t>(options.duration * hapticRate * 1.05) + 64
+                                       : 0);
+  const double monitorRate = scene.engines.monitor ? scene.engines.monitor->rateHz : 30.0;
+  if (auto s = im.master.addEngine(im.monitor, {.rateHz = monitorRate}); !s) return s.error();
+  if (scene.engines.render) {
+#ifdef DM_ENGINE_HAVE_RENDERER
+    RenderFeed feed;
+    if (im.haptics) {
+      HapticsEngine* h = im.haptics.get();
+      feed.haptics = [h](Isometry3& proxy, Vec3& force) {
+        const HapticLoopSample& s = h->loop->latest();
+        proxy = s.response.proxyPose;
+        force = h->loop->config().deviceToWorld.linear() * s.deviceForce;
+        return true;
+      };
+      feed.recentForce = [r = &im.recent](std::vector<float>& v, double& secs) { r->copy(v, secs); };
+    }
+    auto render = makeRenderEngine(scene, im.resources, std::move(feed),
+                                   scene.outputs.frames ? out / "frames" : std::filesystem::path(),
+                                   scene.outputs.frameEvery, lockstep);
+    if (!render) return render.error();
+    im.render = *render;
+    if (auto s = im.master.addEngine(im.render->engine(), {.rateHz = scene.engines.render->rateHz}); !s)
+      return s.error();
+#else
+    return fail(ErrorCode::Unsupported, "this build has no DMRenderer (EGL was not found at configure time)",
+                "engines/render",
+                "install libegl-dev libegl1-mesa-dev libgl1-mesa-dri and rebuild, or remove it");
+#endif
+  }
+  for (auto& [engine, schedule] : im.userEngines)
+    if (auto s = im.master.addEngine(engine, schedule); !s) return s.error();
+
+  if (auto s = im.master.load(scene.name); !s) return s.error();
+  if (im.haptics)
+    im.haptics->renderer->reset(im.haptics->loop->config().deviceToWorld * Isometry3::Identity());
+  if (auto s = im.master.start(options.mode); !s) return s.error();
+
+  // Run: lockstep in 0.1 s chunks of simulated time, real time polling.
+  SceneRunResult result;
+  Status runStatus = ok();
+  const auto wallStart = SteadyClock::now();
+  double done = 0;
+  auto status = [&]() {
+    std::string s = formatString("t = %.1f s", done);
+    if (im.haptics && !im.monitor->trace.empty())
+      s += formatString("  |F| = %.2f N", im.monitor->trace.back().response.force.norm());
+    return s;
+  };
+  while (done < options.duration) {
+    if (options.stop != nullptr && options.stop->load()) {
+      result.interrupted = true;
+      break;
+    }
+    if (lockstep) {
+      const double step = std::min(0.1, options.duration - done);
+      if (auto s = im.master.advance(step); !s) {
+        runStatus = s;
+        break;
+      }
+      done += step;
+    } else {
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      done =
+          std::min(options.duration, std::chrono::duration<double>(SteadyClock::now() - wallStart).count());
+      if (auto s = im.master.poll(); !s) {
+        runStatus = s;
+        break;
+      }
+    }
+    if (options.progress) options.progress(done / options.duration, status());
+  }
+  result.simulatedSeconds = done;
+  const std::vector<EngineStats> engineStats = im.master.stats();
+  Status stopStatus = im.master.stop(result.interrupted ? "interrupted" : "done");
+  im.monitor->drain();
+
+  // Outputs, also after an interruption or an engine failure.
+  const std::vector<ProbeSample>& trace = im.monitor->trace;
+  double maxForce = 0, maxDepth = 0;
+  std::uint64_t contactTicks = 0;
+  for (const ProbeSample& s : trace) {
+    maxForce = std::max(maxForce, s.response.force.norm());
+    maxDepth = std::max(maxDepth, s.response.penetration);
+    contactTicks += s.response.contacts > 0;
+  }
+  std::vector<std::string> written;
+  if (scene.outputs.forces && im.haptics) {
+    const std::string csv = formatProbeCsv(trace);
+    if (auto s = writeFileAtomic(out / "forces.csv", csv.data(), csv.size()); !s) return s.error();
+    written.push_back("forces.csv");
+  }
+  if (scene.outputs.plot && im.haptics && !trace.empty()) {
+    auto plot = plotForceTrace(trace);
+    if (!plot) return plot.error();
+    if (auto s = writePng(*plot, out / "forces.png"); !s) return s.error();
+    written.push_back("forces.png");
+  }
+  nlohmann::json engines = nlohmann::json::array();
+  for (const EngineStats& e : engineStats)
+    engines.push_back({{"name", e.name},
+                       {"rate_hz", e.rateHz},
+                       {"achieved_hz", e.achievedHz},
+                       {"ticks", e.ticks},
+                       {"deadline_misses", e.deadlineMisses},
+                       {"execution_us",
+                        {{"p50", e.execution.p50_us},
+                         {"p99", e.execution.p99_us},
+                         {"p999", e.execution.p999_us},
+                         {"max", e.execution.max_us}}}});
+  nlohmann::json summary = {{"scene", scene.name},
+                            {"mode", lockstep ? "lockstep" : "realtime"},
+                            {"duration_s", options.duration},
+                            {"simulated_s", done},
+                            {"wall_s", std::chrono::duration<double>(SteadyClock::now() - wallStart).count()},
+                            {"interrupted", result.interrupted},
+                            {"engines", engines}};
+  if (im.haptics) {
+    const HapticLoopStats hs = im.haptics->loop->stats();
+    summary["haptics"] = {{"renderer", "god-object"},
+                          {"device", scene.engines.haptics->device},
+                          {"ticks", trace.size()},
+                          {"contact_ticks", contactTicks},
+                          {"max_force_N", maxForce},
+                          {"max_depth_m", maxDepth},
+                          {"safety_fault_ticks", hs.faultTicks},
+                          {"trace_dropped", im.haptics->dropped.load()}};
+  }
+#ifdef DM_ENGINE_HAVE_RENDERER
+  if (im.render) {
+    const RenderEngineStats rs = im.render->stats();
+    result.frames = rs.framesWritten;
+    summary["render"] = {{"gl_renderer", rs.glRenderer},
+                         {"egl_platform", rs.eglPlatform},
+                         {"frames", rs.frames},
+                         {"frames_written", rs.framesWritten},
+                         {"frames_dropped", rs.framesDropped},
+                         {"frame_ms_p50", rs.renderMsP50},
+                         {"frame_ms_max", rs.renderMsMax}};
+    if (rs.framesWritten > 0) written.push_back("frames/");
+  }
+#endif
+  if (scene.outputs.summary) written.push_back("summary.json");
+  summary["outputs"] = written;
+  if (scene.outputs.summary) {
+    const std::string text = summary.dump(2) + "\n";
+    if (auto s = writeFileAtomic(out / "summary.json", text.data(), text.size()); !s) return s.error();
+  }
+  result.summary = std::move(summary);
+  if (!runStatus)
+    return runStatus.error().within(formatString("at t = %.3f s (outputs written to %s)", done, out.c_str()));
+  if (!stopStatus) return stopStatus.error();
+  return result;
+}
+
+}  // namespace dm

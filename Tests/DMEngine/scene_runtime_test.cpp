@@ -1,0 +1,162 @@
+// The scene runtime end to end: a touchable box pressed by a scripted
+// device, run in lockstep; forces against Hooke's law on the god-object,
+// outputs on disk, bit-identical reruns, and Ctrl-C style interruption.
+#include <dm/core/filesystem.hpp>
+#include <dm/engine/scene_runtime.hpp>
+#include <dm/io/image_io.hpp>
+#include <dm/io/scene_file.hpp>
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// A 10 cm box whose top face is at z = 5 cm; the stylus (no virtual hand:
+// it follows the script exactly) sweeps along z from 6 cm to 4 cm and back
+// every 2 s, so it presses 1 cm into the face at the bottom of the sweep.
+std::string sceneJson(bool render) {
+  std::string s = R"({
+  "format": "dmplatform-scene", "version": 1, "name": "press",
+  "resources": {
+    "box": {"type": "shape", "shape": "box", "half_extents": [0.05, 0.05, 0.05]},
+    "ball": {"type": "shape", "shape": "sphere", "radius": 0.003, "subdivisions": 2}
+  },
+  "materials": {
+    "tissue": {"model": "blinn-phong", "color": [0.8, 0.5, 0.4],
+               "haptic": {"stiffness": 500, "damping": 0, "static_friction": 0, "dynamic_friction": 0}}
+  },
+  "objects": [
+    {"name": "block", "mesh": "box", "material": "tissue", "haptic": true},
+    {"name": "tool", "mesh": "ball"}
+  ],
+  "cameras": [{"name": "side", "position": [0.3, -0.3, 0.2], "target": [0, 0, 0.03], "up": [0, 0, 1]}],
+  "devices": [{"name": "stylus", "driver": "sim-haptic",
+               "config": {"path": "line", "from": [0, 0, 0.06], "to": [0, 0, 0.04], "period": 2, "max_force": 8}}],
+  "engines": {
+    "haptics": {"rate_hz": 1000, "renderer": "god-object", "device": "stylus", "objects": ["block"],
+                "proxy_object": "tool"},)";
+  if (render)
+    s += R"(
+    "render": {"rate_hz": 10, "camera": "side", "width": 96, "height": 64, "samples": 1},)";
+  s += R"(
+    "monitor": {"rate_hz": 30}
+  },
+  "outputs": {"frames": )";
+  s += render ? "true" : "false";
+  s += R"(, "forces": true, "plot": true, "summary": true}
+})";
+  return s;
+}
+
+dm::SceneDesc parse(bool render) {
+  auto s = dm::parseScene(sceneJson(render), "press.json", fs::temp_directory_path());
+  EXPECT_TRUE(s) << (s ? "" : s.error().message());
+  return *s;
+}
+
+std::string readAll(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return ss.str();
+}
+
+}  // namespace
+
+TEST(SceneRuntime, PressingABoxFollowsHookesLawAndWritesOutputs) {
+  const fs::path out = fs::temp_directory_path() / "dm_scene_runtime_test" / "a";
+  fs::remove_all(out);
+  auto rt = dm::SceneRuntime::create(parse(true));
+  ASSERT_TRUE(rt) << rt.error();
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 2.0, .outDir = out});
+  ASSERT_TRUE(r) << r.error();
+  EXPECT_FALSE(r->interrupted);
+  const nlohmann::json& s = r->summary;
+  // 1 cm deep at 500 N/m: 5 N at the bottom of the sweep, straight up.
+  EXPECT_NEAR(s["haptics"]["max_force_N"].get<double>(), 5.0, 0.1);
+  EXPECT_NEAR(s["haptics"]["max_depth_m"].get<double>(), 0.01, 2e-4);
+  // In contact while below z = 5 cm: half of the sweep.
+  const auto contact = s["haptics"]["contact_ticks"].get<double>();
+  EXPECT_NEAR(contact / s["haptics"]["ticks"].get<double>(), 0.5, 0.02);
+  for (const auto& e : s["engines"]) {
+    if (e["name"] == "haptics") {
+      EXPECT_EQ(e["ticks"].get<int>(), 2000);
+    }
+    if (e["name"] == "render") {
+      EXPECT_EQ(e["ticks"].get<int>(), 20);
+    }
+  }
+  EXPECT_EQ(s["render"]["frames_written"].get<int>(), 20);
+  EXPECT_TRUE(fs::exists(out / "forces.csv"));
+  EXPECT_TRUE(fs::exists(out / "forces.png"));
+  EXPECT_TRUE(fs::exists(out / "summary.json"));
+  auto frame = dm::readPng(out / "frames" / "frame_00019.png");
+  ASSERT_TRUE(frame) << frame.error();
+  EXPECT_EQ(frame->width(), 96);
+  EXPECT_EQ(frame->height(), 64);
+  // The summary on disk is the one returned.
+  EXPECT_EQ(nlohmann::json::parse(readAll(out / "summary.json"))["haptics"], s["haptics"]);
+}
+
+TEST(SceneRuntime, LockstepRunsAreBitIdentical) {
+  const fs::path a = fs::temp_directory_path() / "dm_scene_runtime_test" / "r1";
+  const fs::path b = fs::temp_directory_path() / "dm_scene_runtime_test" / "r2";
+  for (const auto& out : {a, b}) {
+    fs::remove_all(out);
+    auto rt = dm::SceneRuntime::create(parse(false));
+    ASSERT_TRUE(rt) << rt.error();
+    auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 1.0, .outDir = out});
+    ASSERT_TRUE(r) << r.error();
+  }
+  const std::string fa = readAll(a / "forces.csv"), fb = readAll(b / "forces.csv");
+  EXPECT_GT(fa.size(), 1000u);
+  EXPECT_EQ(fa, fb);
+}
+
+TEST(SceneRuntime, StopFlagEndsEarlyAndStillWritesOutputs) {
+  const fs::path out = fs::temp_directory_path() / "dm_scene_runtime_test" / "stop";
+  fs::remove_all(out);
+  auto rt = dm::SceneRuntime::create(parse(false));
+  ASSERT_TRUE(rt) << rt.error();
+  std::atomic<bool> stop{false};
+  int calls = 0;
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep,
+                       .duration = 100.0,
+                       .outDir = out,
+                       .progress = [&](double, const std::string&) { stop = ++calls >= 3; },
+                       .stop = &stop});
+  ASSERT_TRUE(r) << r.error();
+  EXPECT_TRUE(r->interrupted);
+  EXPECT_NEAR(r->simulatedSeconds, 0.3, 1e-9);
+  EXPECT_TRUE(fs::exists(out / "summary.json"));
+  EXPECT_TRUE(nlohmann::json::parse(readAll(out / "summary.json"))["interrupted"].get<bool>());
+  // A runtime runs once.
+  EXPECT_FALSE((*rt)->run({.duration = 1.0, .outDir = out}));
+}
+
+TEST(SceneRuntime, ErrorsNameTheSceneEntry) {
+  auto bad = dm::SceneRuntime::load(fs::temp_directory_path() / "no_such_scene.json");
+  ASSERT_FALSE(bad);
+  dm::SceneDesc scene = parse(false);
+  scene.devices[0].driver = "no-such-driver";
+  auto rt = dm::SceneRuntime::create(scene);
+  ASSERT_TRUE(rt) << rt.error();
+  auto r =
+      (*rt)->run({.duration = 0.1, .outDir = fs::temp_directory_path() / "dm_scene_runtime_test" / "bad"});
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.error().where.find("devices/stylus"), std::string::npos) << r.error();
+  // A touchable object whose material has no haptic block.
+  scene = parse(false);
+  scene.materials[0].haptic.reset();
+  rt = dm::SceneRuntime::create(scene);
+  ASSERT_TRUE(rt);
+  r = (*rt)->run({.duration = 0.1, .outDir = fs::temp_directory_path() / "dm_scene_runtime_test" / "bad"});
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.error().where, "objects/block/material");
+}
