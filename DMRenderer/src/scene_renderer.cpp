@@ -26,7 +26,10 @@ struct GpuVertex {
 };
 static_assert(sizeof(GpuVertex) == 64);
 
-using InstanceMatrix = std::array<float, 16>;  // column-major model matrix
+// Per instance: the column-major model matrix, then its normal matrix (the
+// inverse transpose of the 3x3 part) as three vec4 columns, computed once per
+// instance on the CPU instead of per vertex in the shader.
+using InstanceMatrix = std::array<float, 28>;
 
 struct MeshSlot {
   std::uint32_t generation = 0;
@@ -34,6 +37,7 @@ struct MeshSlot {
   GLuint vao = 0, vbo = 0, ibo = 0;
   std::size_t vertexCount = 0;
   std::vector<Triangle> triangles;  // CPU copy: tells an in-place update from a topology change
+  bool hasColors = false;           // per-vertex colours given (selects the VERTEX_COLOR variant)
   Aabb bounds;
   Vec3 sphereCenter = Vec3::Zero();
   double sphereRadius = 0;
@@ -276,7 +280,42 @@ struct SceneRenderer::Impl {
   };
 
   SceneRendererOptions options;
-  std::array<ShaderProgram, 3> programs;  // by ShadingModel
+  // Programs by ShadingModel x variant flags (kColorTex, kNormalTex,
+  // kVertexColor, kShadows) x light count 0..kMaxLights, compiled on first
+  // use: slot = (model * kVariants + flags) * kLightCounts + lights.
+  static constexpr int kColorTex = 1, kNormalTex = 2, kVertexColor = 4, kShadows = 8, kVariants = 16;
+  static constexpr int kLightCounts = kMaxLights + 1;
+  std::array<ShaderProgram, 3 * kVariants * kLightCounts> programs;
+  std::string normalOffset;
+
+  int programIndex(const Material& m, const MeshSlot& mesh) const {
+    int flags = 0;
+    if (textures.get(m.colorTexture) != nullptr) flags |= kColorTex;
+    if (textures.get(m.normalTexture) != nullptr) flags |= kNormalTex;
+    if (m.useVertexColors && mesh.hasColors) flags |= kVertexColor;
+    return int(m.model) * kVariants + flags;
+  }
+
+  Status compileProgram(int index) {
+    if (programs[std::size_t(index)].valid()) return ok();
+    static const char* names[3] = {"scene_unlit", "scene_blinn_phong", "scene_pbr"};
+    const int lightCount = index % kLightCounts, variant = index / kLightCounts;
+    const int model = variant / kVariants, flags = variant % kVariants;
+    auto bit = [&](int f) { return std::string((flags & f) != 0 ? "1" : "0"); };
+    auto p = ShaderProgram::create(
+        names[model],
+        {{ShaderStage::Vertex, scene_glsl::kMeshVs}, {ShaderStage::Fragment, scene_glsl::kMeshFs}},
+        {{"MODEL", std::to_string(model)},
+         {"NORMAL_OFFSET", normalOffset},
+         {"COLOR_TEX", bit(kColorTex)},
+         {"NORMAL_TEX", bit(kNormalTex)},
+         {"VERTEX_COLOR", bit(kVertexColor)},
+         {"SHADOWS", bit(kShadows)},
+         {"NUM_LIGHTS", std::to_string(lightCount)}});
+    if (!p) return p.error();
+    programs[std::size_t(index)] = std::move(*p);
+    return ok();
+  }
   ShaderProgram depthProgram;
   GLuint shadowTex = 0, shadowFbo = 0;
   GLuint instanceBuffer = 0;
@@ -382,7 +421,7 @@ struct SceneRenderer::Impl {
       glVertexArrayAttribFormat(s.vao, a.loc, a.size, GL_FLOAT, GL_FALSE, a.offset);
       glVertexArrayAttribBinding(s.vao, a.loc, 0);
     }
-    for (GLuint c = 0; c < 4; ++c) {
+    for (GLuint c = 0; c < 7; ++c) {  // 5..8 model matrix, 9..11 normal matrix
       glEnableVertexArrayAttrib(s.vao, 5 + c);
       glVertexArrayAttribFormat(s.vao, 5 + c, 4, GL_FLOAT, GL_FALSE, c * 4 * sizeof(float));
       glVertexArrayAttribBinding(s.vao, 5 + c, 1);
@@ -390,6 +429,7 @@ struct SceneRenderer::Impl {
     glVertexArrayBindingDivisor(s.vao, 1, 1);
     s.vertexCount = mesh.positions.size();
     s.triangles = mesh.triangles;
+    s.hasColors = !mesh.colors.empty();
     setBounds(s, mesh);
     ++s.uploads;
     return gl::check("SceneRenderer mesh upload");
@@ -452,13 +492,17 @@ struct SceneRenderer::Impl {
         const DrawItem& it = items[r.item];
         b.mesh = r.mesh;
         b.material = byMaterial ? it.material.index : 0;
-        b.program = byMaterial ? int(materials.get(it.material)->material.model) : 0;
+        b.program = byMaterial ? programIndex(materials.get(it.material)->material, meshes.slots[r.mesh]) : 0;
         b.first = static_cast<std::uint32_t>(instances.size());
         out.push_back(b);
       }
-      InstanceMatrix m;
-      const Mat4f mf = items[r.item].model.matrix().cast<float>();
+      InstanceMatrix m{};
+      const Affine3& model = items[r.item].model;
+      const Mat4f mf = model.matrix().cast<float>();
       std::copy(mf.data(), mf.data() + 16, m.begin());
+      const Mat3 nm = model.linear().inverse().transpose();
+      for (int c = 0; c < 3; ++c)
+        for (int k = 0; k < 3; ++k) m[std::size_t(16 + 4 * c + k)] = float(nm(k, c));
       instances.push_back(m);
       ++out.back().count;
     }
@@ -505,7 +549,6 @@ struct SceneRenderer::Impl {
     p.set("u_cameraPos", Vec3f(cam.position.cast<float>()));
     p.set("u_ambient", settings.ambient);
     const int n = static_cast<int>(lights.size());
-    p.set("u_lightCount", n);
     std::array<int, kMaxLights> type{}, shadow{};
     std::array<float, 3 * kMaxLights> pos{}, dir{}, color{};
     std::array<float, kMaxLights> range{};
@@ -558,11 +601,8 @@ struct SceneRenderer::Impl {
     p.set("u_metallic", m.metallic);
     p.set("u_roughness", m.roughness);
     p.set("u_emissive", m.emissive);
-    p.set("u_useVertexColor", m.useVertexColors ? 1 : 0);
     const TextureSlot* color = textures.get(m.colorTexture);
     const TextureSlot* normal = textures.get(m.normalTexture);
-    p.set("u_hasColorTex", color != nullptr ? 1 : 0);
-    p.set("u_hasNormalTex", normal != nullptr ? 1 : 0);
     p.set("u_doubleSided", m.doubleSided ? 1 : 0);
     glBindTextureUnit(0, color != nullptr ? color->texture : 0);
     glBindTextureUnit(1, normal != nullptr ? normal->texture : 0);
@@ -663,7 +703,8 @@ Result<RenderStats> SceneRenderer::Impl::renderViews(const RenderTarget& target,
       const std::uint32_t mesh =
           pickLod(m, it.mesh.index, cam, it.model * m.sphereCenter, m.sphereRadius * scale);
       if (mesh != it.mesh.index) ++st.lodSwitches;
-      const std::uint64_t program = std::uint64_t(materials.get(it.material)->material.model);
+      const std::uint64_t program =
+          std::uint64_t(programIndex(materials.get(it.material)->material, meshes.slots[mesh]));
       records.push_back(
           {(program << 60) | (std::uint64_t(it.material.index) << 30) | mesh, std::uint32_t(i), mesh});
     }
@@ -728,12 +769,19 @@ Result<RenderStats> SceneRenderer::Impl::renderViews(const RenderTarget& target,
       glClearBufferfv(GL_DEPTH, 0, &one);
       glDisable(GL_SCISSOR_TEST);
     }
-    for (ShaderProgram& p : programs) setFrameUniforms(p, views[v].camera, viewProjs[v], lights, settings);
+    // Every variant this view draws exists before the frame uniforms go out.
+    const int shadowFlag = shadowLights.empty() ? 0 : kShadows;
+    const int lightCount = int(lights.size());
+    auto slot = [&](const Batch& b) { return (b.program | shadowFlag) * kLightCounts + lightCount; };
+    for (const Batch& b : viewBatches[v])
+      if (Status s = compileProgram(slot(b)); !s) return s.error();
+    for (ShaderProgram& p : programs)
+      if (p.valid()) setFrameUniforms(p, views[v].camera, viewProjs[v], lights, settings);
     int program = -1;
     std::uint32_t material = ~0u;
     for (const Batch& b : viewBatches[v]) {
-      if (b.program != program) {
-        program = b.program;
+      if (slot(b) != program) {
+        program = slot(b);
         programs[std::size_t(program)].use();
         material = ~0u;
       }
@@ -776,16 +824,12 @@ Result<SceneRenderer> SceneRenderer::create(const SceneRendererOptions& options)
   r.impl_ = std::make_unique<Impl>();
   Impl& im = *r.impl_;
   im.options = options;
-  const std::string offset = formatString("%.6f", double(options.shadowNormalOffset));
-  const char* names[3] = {"scene_unlit", "scene_blinn_phong", "scene_pbr"};
-  for (int model = 0; model < 3; ++model) {
-    auto p = ShaderProgram::create(
-        names[model],
-        {{ShaderStage::Vertex, scene_glsl::kMeshVs}, {ShaderStage::Fragment, scene_glsl::kMeshFs}},
-        {{"MODEL", std::to_string(model)}, {"NORMAL_OFFSET", offset}});
-    if (!p) return p.error();
-    im.programs[std::size_t(model)] = std::move(*p);
-  }
+  im.normalOffset = formatString("%.6f", double(options.shadowNormalOffset));
+  // The plain variant of each model now, so a driver that cannot compile
+  // them fails here; the others on first use.
+  for (int model = 0; model < 3; ++model)
+    if (Status st = im.compileProgram(model * Impl::kVariants * Impl::kLightCounts + 1); !st)
+      return st.error();
   auto depth = ShaderProgram::create("scene_shadow_depth", {{ShaderStage::Vertex, scene_glsl::kDepthVs},
                                                             {ShaderStage::Fragment, scene_glsl::kDepthFs}});
   if (!depth) return depth.error();

@@ -2,35 +2,54 @@
 // vertex stage shared by every shading model, the lit/unlit fragment stage
 // (MODEL 0 unlit, 1 Blinn–Phong, 2 metallic–roughness PBR) and the depth-only
 // shadow pass. Vertex attributes: 0 position, 1 normal, 2 uv, 3 colour,
-// 4 tangent (xyz, w = bitangent sign); 5..8 the per-instance model matrix.
+// 4 tangent (xyz, w = bitangent sign); 5..8 the per-instance model matrix,
+// 9..11 its normal matrix. Features a material or frame does not use are
+// compiled out (COLOR_TEX, NORMAL_TEX, VERTEX_COLOR, SHADOWS), not branched
+// over at run time, and the light loop runs to the constant NUM_LIGHTS.
 #pragma once
 
 namespace dm::scene_glsl {
 
 inline constexpr const char* kMeshVs = R"(
+// Variant macros (0 or 1): COLOR_TEX, NORMAL_TEX, VERTEX_COLOR. Only what a
+// variant reads is interpolated: llvmpipe pays per varying and per branch.
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in vec2 a_uv;
 layout(location = 3) in vec4 a_color;
 layout(location = 4) in vec4 a_tangent;
 layout(location = 5) in mat4 a_model;
+layout(location = 9) in vec4 a_normalMatrix0;  // inverse transpose of the model's 3x3, per instance
+layout(location = 10) in vec4 a_normalMatrix1;
+layout(location = 11) in vec4 a_normalMatrix2;
 
 uniform mat4 u_viewProj;
 
 out vec3 v_worldPos;
 out vec3 v_normal;
+#if COLOR_TEX || NORMAL_TEX
 out vec2 v_uv;
+#endif
+#if VERTEX_COLOR
 out vec4 v_color;
+#endif
+#if NORMAL_TEX
 out vec4 v_tangent;
+#endif
 
 void main() {
   vec4 world = a_model * vec4(a_position, 1.0);
-  mat3 normalMatrix = transpose(inverse(mat3(a_model)));
   v_worldPos = world.xyz;
-  v_normal = normalMatrix * a_normal;
+  v_normal = mat3(a_normalMatrix0.xyz, a_normalMatrix1.xyz, a_normalMatrix2.xyz) * a_normal;
+#if NORMAL_TEX
   v_tangent = vec4(mat3(a_model) * a_tangent.xyz, a_tangent.w);
+#endif
+#if COLOR_TEX || NORMAL_TEX
   v_uv = a_uv;
+#endif
+#if VERTEX_COLOR
   v_color = a_color;
+#endif
   gl_Position = u_viewProj * world;
 }
 )";
@@ -42,9 +61,15 @@ inline constexpr const char* kMeshFs = R"(
 
 in vec3 v_worldPos;
 in vec3 v_normal;
+#if COLOR_TEX || NORMAL_TEX
 in vec2 v_uv;
+#endif
+#if VERTEX_COLOR
 in vec4 v_color;
+#endif
+#if NORMAL_TEX
 in vec4 v_tangent;
+#endif
 
 uniform vec4 u_baseColor;
 uniform vec3 u_specular;
@@ -52,9 +77,6 @@ uniform float u_shininess;
 uniform float u_metallic;
 uniform float u_roughness;
 uniform vec3 u_emissive;
-uniform int u_useVertexColor;
-uniform int u_hasColorTex;
-uniform int u_hasNormalTex;
 uniform int u_doubleSided;
 layout(binding = 0) uniform sampler2D u_colorTex;
 layout(binding = 1) uniform sampler2D u_normalTex;
@@ -62,7 +84,6 @@ layout(binding = 2) uniform sampler2DArrayShadow u_shadowMaps;
 
 uniform vec3 u_cameraPos;
 uniform vec3 u_ambient;
-uniform int u_lightCount;
 uniform int u_lightType[MAX_LIGHTS];      // 0 directional, 1 point, 2 spot
 uniform vec3 u_lightPos[MAX_LIGHTS];
 uniform vec3 u_lightDir[MAX_LIGHTS];      // unit, direction of travel
@@ -109,15 +130,20 @@ vec3 schlick(float c, vec3 f0) { return f0 + (1.0 - f0) * pow(1.0 - c, 5.0); }
 
 void main() {
   vec4 base = u_baseColor;
-  if (u_useVertexColor != 0) base *= v_color;
-  if (u_hasColorTex != 0) base *= texture(u_colorTex, v_uv);
+#if VERTEX_COLOR
+  base *= v_color;
+#endif
+#if COLOR_TEX
+  base *= texture(u_colorTex, v_uv);
+#endif
 #if MODEL == 0
   o_color = vec4(base.rgb + u_emissive, 1.0);
 #else
   vec3 n = normalize(v_normal);
   if (u_doubleSided != 0 && !gl_FrontFacing) n = -n;
   vec3 geomN = n;
-  if (u_hasNormalTex != 0) {
+#if NORMAL_TEX
+  {
     vec3 t = v_tangent.xyz - n * dot(n, v_tangent.xyz);
     if (dot(t, t) > 1e-12) {
       t = normalize(t);
@@ -126,6 +152,7 @@ void main() {
       n = normalize(mat3(t, b, n) * m);
     }
   }
+#endif
   vec3 v = normalize(u_cameraPos - v_worldPos);
   float nv = max(dot(n, v), 1e-4);
 #if MODEL == 2
@@ -137,7 +164,7 @@ void main() {
 #else
   vec3 color = u_ambient * base.rgb;
 #endif
-  for (int i = 0; i < u_lightCount; ++i) {
+  for (int i = 0; i < NUM_LIGHTS; ++i) {  // a constant: llvmpipe runs dynamic loops far slower
     vec3 l;
     float atten = 1.0;
     float dist = 1.0;
@@ -155,7 +182,9 @@ void main() {
     }
     float nl = dot(n, l);
     if (nl <= 0.0 || atten <= 0.0) continue;
+#if SHADOWS
     if (u_lightShadow[i] >= 0) atten *= shadowFactor(u_lightShadow[i], v_worldPos, geomN, l, dist);
+#endif
     vec3 e = u_lightColor[i] * atten;
     vec3 h = normalize(l + v);
     float nh = max(dot(n, h), 0.0);
