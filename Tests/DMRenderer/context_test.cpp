@@ -10,22 +10,11 @@
 
 namespace {
 
-// sRGB encoding of a linear value, as the GL_FRAMEBUFFER_SRGB path stores it.
-int srgb8(double linear) {
-  const double s = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1 / 2.4) - 0.055;
-  return static_cast<int>(std::lround(s * 255));
-}
+// sRGB encoding of a linear value, rounded to the stored byte.
+int srgb8(double linear) { return static_cast<int>(std::lround(dm::test::srgbEncode255(linear))); }
 
-constexpr const char* kVs = R"(
-layout(location = 0) in vec2 a_pos;
-uniform float u_depth;
-void main() { gl_Position = vec4(a_pos, u_depth, 1.0); }
-)";
-constexpr const char* kFs = R"(
-uniform vec4 u_color;
-out vec4 o_color;
-void main() { o_color = u_color; }
-)";
+using dm::test::kFlatFs;
+using dm::test::kFlatVs;
 
 }  // namespace
 
@@ -92,8 +81,8 @@ TEST(RenderTarget, ClearReadsBackSrgbEncoded) {
 
 TEST(RenderTarget, RowsComeBackTopToBottomAndViewportsAddressFromTheTop) {
   DM_REQUIRE_GL();
-  auto prog =
-      dm::ShaderProgram::create("flat", {{dm::ShaderStage::Vertex, kVs}, {dm::ShaderStage::Fragment, kFs}});
+  auto prog = dm::ShaderProgram::create(
+      "flat", {{dm::ShaderStage::Vertex, kFlatVs}, {dm::ShaderStage::Fragment, kFlatFs}});
   ASSERT_TRUE(prog) << prog.error();
   auto rt = dm::RenderTarget::create({.width = 40, .height = 20, .samples = 1, .srgb = false});
   ASSERT_TRUE(rt);
@@ -176,8 +165,8 @@ TEST(AsyncReadback, MatchesSynchronousReadAndRefusesWhenFull) {
 TEST(ShaderProgram, CompileErrorNamesProgramStageAndLine) {
   DM_REQUIRE_GL();
   const char* badFs = "out vec4 o;\nvoid main() {\n  o = vec4(undefined_name, 1.0);\n}\n";
-  auto prog = dm::ShaderProgram::create("broken",
-                                        {{dm::ShaderStage::Vertex, kVs}, {dm::ShaderStage::Fragment, badFs}});
+  auto prog = dm::ShaderProgram::create(
+      "broken", {{dm::ShaderStage::Vertex, kFlatVs}, {dm::ShaderStage::Fragment, badFs}});
   ASSERT_FALSE(prog);
   EXPECT_EQ(prog.error().code, dm::ErrorCode::Parse);
   EXPECT_EQ(prog.error().where, "shader broken, fragment stage");
@@ -189,7 +178,7 @@ TEST(ShaderProgram, LinkErrorNamesProgram) {
   DM_REQUIRE_GL();
   const char* fsNeedsInput = "in vec3 v_missing;\nout vec4 o;\nvoid main() { o = vec4(v_missing, 1.0); }\n";
   auto prog = dm::ShaderProgram::create(
-      "mismatch", {{dm::ShaderStage::Vertex, kVs}, {dm::ShaderStage::Fragment, fsNeedsInput}});
+      "mismatch", {{dm::ShaderStage::Vertex, kFlatVs}, {dm::ShaderStage::Fragment, fsNeedsInput}});
   ASSERT_FALSE(prog);
   EXPECT_EQ(prog.error().where, "shader mismatch");
 }
@@ -198,7 +187,7 @@ TEST(ShaderProgram, DefinesSelectVariants) {
   DM_REQUIRE_GL();
   const char* fs = "out vec4 o;\nvoid main() { o = vec4(VALUE, 0.0, 0.0, 1.0); }\n";
   auto prog = dm::ShaderProgram::create(
-      "variant", {{dm::ShaderStage::Vertex, kVs}, {dm::ShaderStage::Fragment, fs}}, {{"VALUE", "0.25"}});
+      "variant", {{dm::ShaderStage::Vertex, kFlatVs}, {dm::ShaderStage::Fragment, fs}}, {{"VALUE", "0.25"}});
   ASSERT_TRUE(prog) << prog.error();
   EXPECT_GE(prog->location("u_depth"), 0);
   EXPECT_EQ(prog->location("u_not_there"), -1);

@@ -19,10 +19,7 @@
 
 namespace {
 
-double srgbToLinear(int v) {
-  const double s = v / 255.0;
-  return s <= 0.04045 ? s / 12.92 : std::pow((s + 0.055) / 1.055, 2.4);
-}
+using dm::test::srgbToLinear;
 
 struct Box {
   int left = 0, top = 0, right = 0, bottom = 0;  // right/bottom exclusive

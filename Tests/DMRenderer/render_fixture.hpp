@@ -11,6 +11,7 @@
 
 #include <GL/glcorearb.h>
 
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
@@ -32,6 +33,32 @@ inline GlContext* renderContext() {
   }();
   return ctx;
 }
+
+/// sRGB encoding of a linear value in [0, 1] as the GL_FRAMEBUFFER_SRGB path
+/// stores it, on the 0..255 scale (unrounded).
+inline double srgbEncode255(double linear) {
+  const double s = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1 / 2.4) - 0.055;
+  return s * 255;
+}
+
+/// Linear value of an sRGB-encoded 8-bit channel.
+inline double srgbToLinear(int encoded) {
+  const double s = encoded / 255.0;
+  return s <= 0.04045 ? s / 12.92 : std::pow((s + 0.055) / 1.055, 2.4);
+}
+
+/// A flat-colour program for raw test draws: vec2 NDC positions at
+/// attribute 0, depth `u_depth` (NDC), colour `u_color`.
+inline constexpr const char* kFlatVs = R"(
+layout(location = 0) in vec2 a_pos;
+uniform float u_depth;
+void main() { gl_Position = vec4(a_pos, u_depth, 1.0); }
+)";
+inline constexpr const char* kFlatFs = R"(
+uniform vec4 u_color;
+out vec4 o_color;
+void main() { o_color = u_color; }
+)";
 
 /// Where golden references live: $DM_SOURCE_DIR/Tests/DMRenderer/golden.
 inline std::filesystem::path goldenDir() {

@@ -18,10 +18,7 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-double srgbToLinear(int v) {
-  const double s = v / 255.0;
-  return s <= 0.04045 ? s / 12.92 : std::pow((s + 0.055) / 1.055, 2.4);
-}
+using dm::test::srgbToLinear;
 
 // Linear value of channel c at pixel (x, y).
 double linearAt(const dm::Image& img, int x, int y, int c = 0) {

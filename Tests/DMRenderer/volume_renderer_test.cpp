@@ -20,17 +20,9 @@ namespace {
 
 using dm::Vec3;
 
-// sRGB encoding of a linear value, as the GL_FRAMEBUFFER_SRGB path stores it.
-double srgb8(double linear) {
-  const double s = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1 / 2.4) - 0.055;
-  return s * 255;
-}
-
-// Linear value of an sRGB-encoded 8-bit channel.
-double linear(int encoded) {
-  const double s = encoded / 255.0;
-  return s <= 0.04045 ? s / 12.92 : std::pow((s + 0.055) / 1.055, 2.4);
-}
+// sRGB encoding of a linear value (0..255, unrounded) and its inverse.
+double srgb8(double linear) { return dm::test::srgbEncode255(linear); }
+double linear(int encoded) { return dm::test::srgbToLinear(encoded); }
 
 dm::VolumeRenderer& renderer() {
   static std::unique_ptr<dm::VolumeRenderer> r;
@@ -104,21 +96,13 @@ const dm::Volume* colin() {
   return v.get();
 }
 
-constexpr const char* kQuadVs = R"(
-layout(location = 0) in vec2 a_pos;
-uniform float u_depth;
-void main() { gl_Position = vec4(a_pos, u_depth, 1.0); }
-)";
-constexpr const char* kQuadFs = R"(
-uniform vec4 u_color;
-out vec4 o_color;
-void main() { o_color = u_color; }
-)";
+using dm::test::kFlatFs;
+using dm::test::kFlatVs;
 
 // Draws an NDC rectangle [x0, x1] x [-1, 1] at NDC depth `ndcZ`, writing depth.
 void drawOpaqueQuad(float x0, float x1, float ndcZ, const dm::Vec4f& color) {
   auto prog = dm::ShaderProgram::create(
-      "test quad", {{dm::ShaderStage::Vertex, kQuadVs}, {dm::ShaderStage::Fragment, kQuadFs}});
+      "test quad", {{dm::ShaderStage::Vertex, kFlatVs}, {dm::ShaderStage::Fragment, kFlatFs}});
   ASSERT_TRUE(prog) << prog.error();
   const float quad[] = {x0, -1, x1, -1, x1, 1, x0, -1, x1, 1, x0, 1};
   GLuint vao = 0, vbo = 0;
