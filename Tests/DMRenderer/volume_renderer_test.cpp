@@ -7,10 +7,12 @@
 #include <dm/math/isosurface.hpp>
 #include <dm/renderer/image_compare.hpp>
 #include <dm/renderer/render_target.hpp>
+#include <dm/renderer/scene_renderer.hpp>
 #include <dm/renderer/shader.hpp>
 #include <dm/renderer/volume_renderer.hpp>
 
 #include <cmath>
+#include <cstdio>
 #include <memory>
 #include <numbers>
 
@@ -738,5 +740,78 @@ TEST_F(VolumeColin, SlicesGolden) {
   }
   auto r = dm::checkGolden(*img, dm::test::goldenDir() / "volume_ch2_slices.png", dm::test::renderOutDir(),
                            {.pixelThreshold = 12, .maxFraction = 0.005});
+  EXPECT_TRUE(r) << r.error();
+}
+
+// The skin as marching-cubes mesh (SceneRenderer) and as the volume's own
+// first hit of the same iso value (VolumeRenderer) under one camera: their
+// silhouettes agree to well under a pixel along the outline (measured: 19
+// pixels disagree along an outline of 331). The golden shows
+// the mesh on the left half and the volume on the right.
+TEST_F(VolumeColin, MeshOverVolumeAlignmentGolden) {
+  constexpr int kSize = 160;
+  constexpr double kIso = 40;
+  auto mesh = dm::extractIsosurface(*vol_, {.iso = kIso, .closeBorders = true});
+  ASSERT_TRUE(mesh) << mesh.error();
+  const Vec3 c = vol_->worldBounds().center();
+  dm::Camera cam = dm::Camera::lookAt(c + Vec3(0.3, 0.3, 0.1), c, Vec3(0, 0, 1));
+  cam.fovYDeg = 40;
+  cam.nearPlane = 0.1;
+  cam.farPlane = 1.0;
+
+  auto volumeRt = dm::RenderTarget::create({.width = kSize, .height = kSize, .samples = 1});
+  ASSERT_TRUE(volumeRt);
+  volumeRt->clear(dm::Vec4f(0, 0, 0, 1));
+  ASSERT_TRUE(renderer().render(*volumeRt, cam, id_,
+                                {.mode = dm::VolumeRenderMode::Iso,
+                                 .stepVoxels = 0.25,
+                                 .isoValue = kIso,
+                                 .isoColor = Vec3(0.35, 0.55, 0.9)}));
+  auto volumeImg = volumeRt->readColor();
+  ASSERT_TRUE(volumeImg);
+
+  auto scene = dm::SceneRenderer::create();
+  ASSERT_TRUE(scene) << scene.error();
+  auto meshId = scene->addMesh(*mesh);
+  ASSERT_TRUE(meshId) << meshId.error();
+  auto mat = scene->addMaterial({.baseColor = dm::Vec4f(0.9f, 0.55f, 0.35f, 1)});
+  ASSERT_TRUE(mat);
+  const dm::DrawItem item{.mesh = *meshId, .material = *mat};
+  const dm::Light light =
+      dm::Light::directional(cam.forward() + Vec3(0, 0, -0.3), 1.0f);  // a headlight from above
+  auto meshRt = dm::RenderTarget::create({.width = kSize, .height = kSize, .samples = 1});
+  ASSERT_TRUE(meshRt);
+  ASSERT_TRUE(scene->render(*meshRt, cam, {&item, 1}, {&light, 1}, {.background = dm::Vec4f(0, 0, 0, 1)}));
+  auto meshImg = meshRt->readColor();
+  ASSERT_TRUE(meshImg);
+
+  // Silhouettes: covered pixels of each, their disagreement against the
+  // outline length (pixels with an uncovered 4-neighbour).
+  auto covered = [](const dm::Image& img, int x, int y) {
+    return img.at<std::uint8_t>(x, y, 0) > 8 || img.at<std::uint8_t>(x, y, 1) > 8 ||
+           img.at<std::uint8_t>(x, y, 2) > 8;
+  };
+  std::size_t area = 0, outline = 0, disagree = 0;
+  for (int y = 1; y + 1 < kSize; ++y)
+    for (int x = 1; x + 1 < kSize; ++x) {
+      const bool m = covered(*meshImg, x, y), v = covered(*volumeImg, x, y);
+      area += m;
+      disagree += m != v;
+      if (m && (!covered(*meshImg, x - 1, y) || !covered(*meshImg, x + 1, y) ||
+                !covered(*meshImg, x, y - 1) || !covered(*meshImg, x, y + 1)))
+        ++outline;
+    }
+  ASSERT_GT(area, std::size_t(kSize * kSize / 8));
+  // A one-pixel shift of either would disagree along about half the outline.
+  EXPECT_LT(double(disagree), 0.25 * double(outline)) << disagree << " pixels disagree along " << outline;
+  std::printf("silhouettes: %zu pixels disagree along an outline of %zu\n", disagree, outline);
+
+  dm::Image composed = meshImg->clone();
+  for (int y = 0; y < kSize; ++y)
+    for (int x = kSize / 2; x < kSize; ++x)
+      for (int ch = 0; ch < 4; ++ch)
+        composed.at<std::uint8_t>(x, y, ch) = volumeImg->at<std::uint8_t>(x, y, ch);
+  auto r = dm::checkGolden(composed, dm::test::goldenDir() / "volume_ch2_mesh_alignment.png",
+                           dm::test::renderOutDir(), {.pixelThreshold = 12, .maxFraction = 0.005});
   EXPECT_TRUE(r) << r.error();
 }
