@@ -455,11 +455,12 @@ class SceneParser {
           readSource(r, res);
           break;
         case Type::Isosurface:
-          r.knownKeys({"type", "volume", "level", "largest_component", "smooth"});
+          r.knownKeys({"type", "volume", "level", "largest_component", "smooth", "downsample"});
           res.volume = r.string("volume");
           res.level = r.number("level");
           res.largestComponent = r.boolean("largest_component", false);
           res.smooth = static_cast<int>(r.integer("smooth", {.min = 0, .max = 100}, 0));
+          res.downsample = static_cast<int>(r.integer("downsample", {.min = 1, .max = 8}, 1));
           isosurfaces.emplace_back(scene_.resources.size(), r);
           break;
         case Type::Shape:
@@ -614,7 +615,8 @@ class SceneParser {
     for (std::size_t i = 0; i < sec.size(); ++i) {
       ConfigReader r = sec.at(i);
       if (!expectObject(r)) continue;
-      r.knownKeys({"name", "mesh", "material", "pose", "scale", "visible", "haptic", "dynamic", "mass"});
+      r.knownKeys({"name", "mesh", "render_mesh", "material", "pose", "scale", "visible", "haptic", "dynamic",
+                   "mass"});
       SceneObject o;
       o.name = uniqueName(r, objectIndex_, scene_.objects.size());
       std::size_t before = r.errors().size();
@@ -622,6 +624,13 @@ class SceneParser {
       if (r.errors().size() == before)
         checkResource(r, "mesh", o.mesh, {Type::Mesh, Type::Isosurface, Type::Shape},
                       "a mesh, isosurface or shape");
+      if (r.has("render_mesh")) {
+        before = r.errors().size();
+        o.renderMesh = r.string("render_mesh");
+        if (r.errors().size() == before)
+          checkResource(r, "render_mesh", o.renderMesh, {Type::Mesh, Type::Isosurface, Type::Shape},
+                        "a mesh, isosurface or shape");
+      }
       o.material = r.string("material", std::string());
       o.pose = readPose(r.child("pose"));
       o.scale = readPositive(r, "scale", 1.0);
@@ -1029,9 +1038,9 @@ std::string paramString(const Json& v) {
 }  // namespace
 
 bool SceneObject::operator==(const SceneObject& o) const {
-  return name == o.name && mesh == o.mesh && material == o.material && pose.p == o.pose.p &&
-         pose.q.coeffs() == o.pose.q.coeffs() && scale == o.scale && visible == o.visible &&
-         haptic == o.haptic && dynamic == o.dynamic && mass == o.mass;
+  return name == o.name && mesh == o.mesh && renderMesh == o.renderMesh && material == o.material &&
+         pose.p == o.pose.p && pose.q.coeffs() == o.pose.q.coeffs() && scale == o.scale &&
+         visible == o.visible && haptic == o.haptic && dynamic == o.dynamic && mass == o.mass;
 }
 
 bool SceneHapticsEngine::operator==(const SceneHapticsEngine& o) const {
@@ -1139,6 +1148,7 @@ Json toJson(const SceneDesc& scene) {
         o["level"] = r.level;
         o["largest_component"] = r.largestComponent;
         o["smooth"] = r.smooth;
+        o["downsample"] = r.downsample;
         break;
       case Type::Shape:
         o["shape"] = nameOf(r.shape, kShapes);
@@ -1181,6 +1191,7 @@ Json toJson(const SceneDesc& scene) {
     Json e = {{"name", o.name},       {"mesh", o.mesh},     {"pose", toJson(o.pose)}, {"scale", o.scale},
               {"visible", o.visible}, {"haptic", o.haptic}, {"dynamic", o.dynamic}};
     if (!o.material.empty()) e["material"] = o.material;
+    if (!o.renderMesh.empty()) e["render_mesh"] = o.renderMesh;
     if (o.mass > 0.0) e["mass"] = o.mass;
     objects.push_back(std::move(e));
   }

@@ -22,7 +22,41 @@ auto findIn(const Map& m, std::string_view name) -> typename Map::mapped_type {
 
 std::string where(const SceneResource& r) { return "resources/" + r.name; }
 
-Result<Mesh> makeIsosurface(const SceneResource& r, const Volume& volume) {
+// Box average over f x f x f voxel blocks (a remainder at the far faces is
+// dropped); the coarse voxel sits at its block's centre in world space.
+Result<Volume> downsampled(const Volume& v, int f, const std::string& where) {
+  const Vec3i d = v.dims() / f;
+  if (d.minCoeff() < 2)
+    return fail(ErrorCode::InvalidArgument,
+                formatString("downsample %d leaves fewer than 2 voxels on an axis", f), where,
+                "use a smaller factor");
+  Affine3 a = v.indexToWorld();
+  a.translate(Vec3::Constant(0.5 * (f - 1)));
+  a.scale(double(f));
+  auto out = Volume::create(d, VoxelType::F32, a);
+  if (!out) return out.error();
+  float* o = out->data<float>();
+  const double inv = 1.0 / (double(f) * f * f);
+  for (int k = 0; k < d.z(); ++k)
+    for (int j = 0; j < d.y(); ++j)
+      for (int i = 0; i < d.x(); ++i) {
+        double sum = 0;
+        for (int c = 0; c < f; ++c)
+          for (int b = 0; b < f; ++b)
+            for (int q = 0; q < f; ++q) sum += v.value(i * f + q, j * f + b, k * f + c);
+        o[(std::size_t(k) * d.y() + j) * d.x() + i] = static_cast<float>(sum * inv);
+      }
+  return out;
+}
+
+Result<Mesh> makeIsosurface(const SceneResource& r, const Volume& full) {
+  Volume coarse;
+  if (r.downsample > 1) {
+    auto c = downsampled(full, r.downsample, where(r) + "/downsample");
+    if (!c) return c.error();
+    coarse = std::move(*c);
+  }
+  const Volume& volume = r.downsample > 1 ? coarse : full;
   auto mesh = extractIsosurface(volume, {.iso = r.level, .closeBorders = true});
   if (!mesh) return mesh.error().within(where(r));
   if (mesh->empty())

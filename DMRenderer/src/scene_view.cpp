@@ -167,18 +167,21 @@ Result<SceneView> SceneView::create(const SceneDesc& scene, const SceneResources
   Aabb sceneBox;
   for (const SceneObject& o : scene.objects) {
     const std::string where = "objects/" + o.name;
-    auto it = im.meshByResource.find(o.mesh);
+    // Drawn: render_mesh when given (e.g. a coarser skin), else the mesh.
+    const std::string& drawn = o.renderMesh.empty() ? o.mesh : o.renderMesh;
+    auto it = im.meshByResource.find(drawn);
     if (it == im.meshByResource.end()) {
-      auto mesh = resources.mesh(o.mesh);
+      auto mesh = resources.mesh(drawn);
       if (!mesh)
-        return fail(ErrorCode::NotFound, "mesh resource \"" + o.mesh + "\" was not loaded", where + "/mesh");
+        return fail(ErrorCode::NotFound, "mesh resource \"" + drawn + "\" was not loaded",
+                    where + (o.renderMesh.empty() ? "/mesh" : "/render_mesh"));
       auto id = im.meshes.addMesh(*mesh);
       if (!id) return id.error().within(where);
-      it = im.meshByResource.emplace(o.mesh, *id).first;
+      it = im.meshByResource.emplace(drawn, *id).first;
     }
     Impl::Object obj;
     obj.name = o.name;
-    obj.resource = o.mesh;
+    obj.resource = drawn;
     obj.pose = o.pose.isometry();
     obj.scale = o.scale;
     obj.item.mesh = it->second;

@@ -94,7 +94,7 @@ TEST(SceneFile, BundledHeadProbeSceneHasTheValuesOfTheMainJob) {
   EXPECT_EQ(s->name, "head_probe");
   EXPECT_EQ(fs::weakly_canonical(s->baseDir), fs::weakly_canonical(file.parent_path()));
 
-  ASSERT_EQ(s->resources.size(), 3u);
+  ASSERT_EQ(s->resources.size(), 4u);
   const dm::SceneResource* head = s->resource("head");
   ASSERT_NE(head, nullptr);
   EXPECT_EQ(head->type, dm::SceneResource::Type::Volume);
@@ -125,6 +125,10 @@ TEST(SceneFile, BundledHeadProbeSceneHasTheValuesOfTheMainJob) {
 
   ASSERT_EQ(s->objects.size(), 2u);
   EXPECT_EQ(s->objects[0].name, "head_skin");
+  // Touched at full resolution, drawn from the skin averaged over 2x2x2 voxels.
+  EXPECT_EQ(s->objects[0].mesh, "skin");
+  EXPECT_EQ(s->objects[0].renderMesh, "skin_view");
+  EXPECT_EQ(s->resource("skin_view")->downsample, 2);
   EXPECT_TRUE(s->objects[0].haptic);
   EXPECT_TRUE(s->objects[0].pose.isometry().isApprox(dm::Isometry3::Identity()));
   EXPECT_FALSE(s->objects[1].haptic);
@@ -473,7 +477,8 @@ Json fullScene() {
       "ball": {"type": "shape", "shape": "sphere", "radius": 0.005, "subdivisions": 5},
       "liver": {"type": "mesh", "source": "meshes/liver.stl", "unit": "mm", "scale": 1.5},
       "ct": {"type": "volume", "source": "/abs/ct.nii.gz"},
-      "iso": {"type": "isosurface", "volume": "ct", "level": 300.5, "largest_component": true, "smooth": 4},
+      "iso": {"type": "isosurface", "volume": "ct", "level": 300.5, "largest_component": true, "smooth": 4,
+              "downsample": 3},
       "albedo": {"type": "image", "source": "textures/albedo.png"},
       "normals": {"type": "image", "source": "textures/normals.png"}
     },
@@ -489,8 +494,8 @@ Json fullScene() {
        "dynamic": false, "pose": {"position": [0.01, 0.02, 0.03], "rotation": [0.0, 0.6, 0.8, 0.0]}},
       {"name": "ball", "mesh": "ball", "material": "metal", "scale": 1.0, "visible": true, "haptic": false,
        "dynamic": true, "mass": 0.25, "pose": {"position": [0.0, 0.0, 0.5], "rotation": [1.0, 0.0, 0.0, 0.0]}},
-      {"name": "iso", "mesh": "iso", "scale": 1.0, "visible": true, "haptic": false, "dynamic": false,
-       "pose": {"position": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]}}
+      {"name": "iso", "mesh": "iso", "render_mesh": "box", "scale": 1.0, "visible": true, "haptic": false,
+       "dynamic": false, "pose": {"position": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]}}
     ],
     "volumes": [
       {"name": "ct_slice", "volume": "ct", "mode": "slice", "visible": false,

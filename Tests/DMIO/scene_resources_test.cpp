@@ -63,6 +63,7 @@ TEST(SceneResources, LoadsFilesIsosurfacesShapesAndImages) {
     "ball": {"type": "volume", "source": "ball.nii.gz"},
     "surface": {"type": "isosurface", "volume": "ball", "level": 50},
     "surface_one": {"type": "isosurface", "volume": "ball", "level": 50, "largest_component": true, "smooth": 5},
+    "surface_coarse": {"type": "isosurface", "volume": "ball", "level": 50, "largest_component": true, "downsample": 2},
     "box": {"type": "mesh", "source": "box.obj"},
     "box_mm": {"type": "mesh", "source": "box.obj", "unit": "mm"},
     "cyl": {"type": "shape", "shape": "cylinder", "radius": 0.01, "height": 0.05, "subdivisions": 4},
@@ -88,6 +89,17 @@ TEST(SceneResources, LoadsFilesIsosurfacesShapesAndImages) {
   ASSERT_TRUE(t.volume.has_value());
   // A 12 mm ball sampled at 1 mm: enclosed volume within 10% of 4/3 pi r^3.
   EXPECT_NEAR(*t.volume, 4.0 / 3.0 * std::numbers::pi * std::pow(0.012, 3), 0.1 * 7.2e-6);
+
+  // Averaged over 2x2x2 voxels: about a quarter of the triangles, the same ball.
+  auto coarse = res->mesh("surface_coarse");
+  ASSERT_TRUE(coarse);
+  const double ratio = double(coarse->triangleCount()) / double(one->triangleCount());
+  EXPECT_GT(ratio, 0.15);
+  EXPECT_LT(ratio, 0.4);
+  const dm::MeshTopology tc = dm::analyzeTopology(*coarse);
+  EXPECT_TRUE(tc.isClosed);
+  ASSERT_TRUE(tc.volume.has_value());
+  EXPECT_NEAR(*tc.volume, *t.volume, 0.15 * *t.volume);
 
   // The box file, once in metres and once read as millimetres.
   ASSERT_TRUE(res->mesh("box") && res->mesh("box_mm"));

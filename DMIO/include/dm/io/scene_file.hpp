@@ -64,6 +64,7 @@ struct SceneResource {
   double level = 0.0;             ///< Isosurface: iso value, in the volume's value units
   bool largestComponent = false;  ///< Isosurface: keep only the largest connected component
   int smooth = 0;                 ///< Isosurface: smoothing iterations, 0..100
+  int downsample = 1;             ///< Isosurface: voxels averaged per axis before extraction, 1..8
 
   Shape shape = Shape::Sphere;      ///< Shape: which one, centred at its origin, axis +z
   double radius = 0.0;              ///< Sphere, capsule, cylinder: m, > 0
@@ -106,7 +107,8 @@ struct SceneMaterial {
 /// A mesh placed in the world.
 struct SceneObject {
   std::string name;
-  std::string mesh;      ///< a Mesh, Isosurface or Shape resource
+  std::string mesh;      ///< a Mesh, Isosurface or Shape resource (touched, simulated, drawn)
+  std::string renderMesh;  ///< drawn instead of `mesh` when set (e.g. a coarser skin), or empty
   std::string material;  ///< a material name, or empty for the renderer's default
   Pose pose;             ///< object → world; the quaternion is unit within 1e-9
   double scale = 1.0;    ///< uniform, > 0

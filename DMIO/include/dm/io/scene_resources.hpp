@@ -58,8 +58,9 @@ struct SceneLoadOptions {
 
 /// Loads every resource of `scene`. Fails on the first resource that does
 /// not load, naming it. Isosurfaces are extracted with closed borders
-/// (watertight where the scan is cut), optionally reduced to their largest
-/// component and Taubin-smoothed. Shapes: icosphere (sphere), box, capsule,
+/// (watertight where the scan is cut), optionally from the volume averaged
+/// over downsample³ voxel blocks (about downsample² fewer triangles: a light
+/// mesh to draw), reduced to their largest component and Taubin-smoothed. Shapes: icosphere (sphere), box, capsule,
 /// cylinder and plane, finer with `subdivisions`.
 Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoadOptions& options = {});
 
