@@ -81,31 +81,12 @@ TEST(RenderTarget, ClearReadsBackSrgbEncoded) {
 
 TEST(RenderTarget, RowsComeBackTopToBottomAndViewportsAddressFromTheTop) {
   DM_REQUIRE_GL();
-  auto prog = dm::ShaderProgram::create(
-      "flat", {{dm::ShaderStage::Vertex, kFlatVs}, {dm::ShaderStage::Fragment, kFlatFs}});
-  ASSERT_TRUE(prog) << prog.error();
   auto rt = dm::RenderTarget::create({.width = 40, .height = 20, .samples = 1, .srgb = false});
   ASSERT_TRUE(rt);
   rt->clear(dm::Vec4f(0, 0, 0, 1));
-  GLuint vao = 0, vbo = 0;
   // A full-viewport quad drawn into the top-left 10x5 viewport only.
-  const float quad[] = {-1, -1, 1, -1, 1, 1, -1, -1, 1, 1, -1, 1};
-  glCreateVertexArrays(1, &vao);
-  glCreateBuffers(1, &vbo);
-  glNamedBufferStorage(vbo, sizeof(quad), quad, 0);
-  glVertexArrayVertexBuffer(vao, 0, vbo, 0, 2 * sizeof(float));
-  glEnableVertexArrayAttrib(vao, 0);
-  glVertexArrayAttribFormat(vao, 0, 2, GL_FLOAT, GL_FALSE, 0);
-  glVertexArrayAttribBinding(vao, 0, 0);
   rt->bindViewport(0, 0, 10, 5);
-  glEnable(GL_DEPTH_TEST);  // depth is written only with the test on
-  prog->use();
-  prog->set("u_color", dm::Vec4f(0, 1, 0, 1));
-  prog->set("u_depth", 0.0f);
-  glBindVertexArray(vao);
-  glDrawArrays(GL_TRIANGLES, 0, 6);
-  glDeleteVertexArrays(1, &vao);
-  glDeleteBuffers(1, &vbo);
+  ASSERT_TRUE(dm::test::drawNdcRect(-1, -1, 1, 1, 0.0f, dm::Vec4f(0, 1, 0, 1)));
   auto img = rt->readColor();
   ASSERT_TRUE(img);
   EXPECT_EQ(dm::countCoveredPixels(*img, dm::Vec3f(0, 0, 0)), 50u);

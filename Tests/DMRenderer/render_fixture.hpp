@@ -3,6 +3,7 @@
 #pragma once
 
 #include <dm/renderer/context.hpp>
+#include <dm/renderer/shader.hpp>
 
 #ifndef GL_GLEXT_PROTOTYPES
 #define GL_GLEXT_PROTOTYPES 1
@@ -59,6 +60,37 @@ uniform vec4 u_color;
 out vec4 o_color;
 void main() { o_color = u_color; }
 )";
+
+/// Draws the NDC rectangle [x0, x1] x [y0, y1] at NDC depth `ndcZ` in a flat
+/// linear colour into the bound framebuffer and viewport, with the depth
+/// test on (GL_LESS, depth written). Raw GL: no renderer involved.
+inline ::testing::AssertionResult drawNdcRect(float x0, float y0, float x1, float y1, float ndcZ,
+                                              const Vec4f& color) {
+  auto prog =
+      ShaderProgram::create("test rect", {{ShaderStage::Vertex, kFlatVs}, {ShaderStage::Fragment, kFlatFs}});
+  if (!prog) return ::testing::AssertionFailure() << prog.error();
+  const float quad[] = {x0, y0, x1, y0, x1, y1, x0, y0, x1, y1, x0, y1};
+  GLuint vao = 0, vbo = 0;
+  glCreateVertexArrays(1, &vao);
+  glCreateBuffers(1, &vbo);
+  glNamedBufferStorage(vbo, sizeof(quad), quad, 0);
+  glVertexArrayVertexBuffer(vao, 0, vbo, 0, 2 * sizeof(float));
+  glEnableVertexArrayAttrib(vao, 0);
+  glVertexArrayAttribFormat(vao, 0, 2, GL_FLOAT, GL_FALSE, 0);
+  glVertexArrayAttribBinding(vao, 0, 0);
+  glEnable(GL_DEPTH_TEST);
+  glDepthFunc(GL_LESS);
+  glDepthMask(GL_TRUE);
+  prog->use();
+  prog->set("u_color", color);
+  prog->set("u_depth", ndcZ);
+  glBindVertexArray(vao);
+  glDrawArrays(GL_TRIANGLES, 0, 6);
+  glBindVertexArray(0);
+  glDeleteVertexArrays(1, &vao);
+  glDeleteBuffers(1, &vbo);
+  return ::testing::AssertionSuccess();
+}
 
 /// Where golden references live: $DM_SOURCE_DIR/Tests/DMRenderer/golden.
 inline std::filesystem::path goldenDir() {

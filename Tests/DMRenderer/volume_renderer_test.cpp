@@ -98,34 +98,9 @@ const dm::Volume* colin() {
   return v.get();
 }
 
-using dm::test::kFlatFs;
-using dm::test::kFlatVs;
-
 // Draws an NDC rectangle [x0, x1] x [-1, 1] at NDC depth `ndcZ`, writing depth.
 void drawOpaqueQuad(float x0, float x1, float ndcZ, const dm::Vec4f& color) {
-  auto prog = dm::ShaderProgram::create(
-      "test quad", {{dm::ShaderStage::Vertex, kFlatVs}, {dm::ShaderStage::Fragment, kFlatFs}});
-  ASSERT_TRUE(prog) << prog.error();
-  const float quad[] = {x0, -1, x1, -1, x1, 1, x0, -1, x1, 1, x0, 1};
-  GLuint vao = 0, vbo = 0;
-  glCreateVertexArrays(1, &vao);
-  glCreateBuffers(1, &vbo);
-  glNamedBufferStorage(vbo, sizeof(quad), quad, 0);
-  glVertexArrayVertexBuffer(vao, 0, vbo, 0, 2 * sizeof(float));
-  glEnableVertexArrayAttrib(vao, 0);
-  glVertexArrayAttribFormat(vao, 0, 2, GL_FLOAT, GL_FALSE, 0);
-  glVertexArrayAttribBinding(vao, 0, 0);
-  glEnable(GL_DEPTH_TEST);
-  glDepthFunc(GL_LESS);
-  glDepthMask(GL_TRUE);
-  prog->use();
-  prog->set("u_color", color);
-  prog->set("u_depth", ndcZ);
-  glBindVertexArray(vao);
-  glDrawArrays(GL_TRIANGLES, 0, 6);
-  glBindVertexArray(0);
-  glDeleteVertexArrays(1, &vao);
-  glDeleteBuffers(1, &vbo);
+  ASSERT_TRUE(dm::test::drawNdcRect(x0, -1, x1, 1, ndcZ, color));
 }
 
 struct SphereScene {
