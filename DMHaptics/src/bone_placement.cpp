@@ -6,34 +6,20 @@
 #include <cmath>
 #include <string>
 
+#include "option_rules.hpp"
+
 namespace dm {
 
 namespace {
 
 constexpr const char* kWhere = "dm::BonePlacementRenderer::create";
 
-Status optionError(const char* field, double value, const char* rule) {
-  return fail(ErrorCode::InvalidArgument, formatString("option %s is %g; it must be %s", field, value, rule),
-              std::string(kWhere) + ": options." + field, "fix the BonePlacementOptions field");
-}
-
 Status checkOptions(const BonePlacementOptions& o) {
-  struct Rule {
-    const char* field;
-    double value;
-    bool ok;
-    const char* text;
-  };
+  using haptics_detail::OptionRule;
   const auto finite = [](double v) { return std::isfinite(v); };
-  const Rule rules[] = {
-      {"couplingStiffness", o.couplingStiffness, finite(o.couplingStiffness) && o.couplingStiffness > 0,
-       "finite and > 0 N/m"},
-      {"couplingDamping", o.couplingDamping, finite(o.couplingDamping) && o.couplingDamping >= 0,
-       "finite and >= 0 N*s/m"},
-      {"couplingAngularStiffness", o.couplingAngularStiffness,
-       finite(o.couplingAngularStiffness) && o.couplingAngularStiffness > 0, "finite and > 0 N*m/rad"},
-      {"couplingAngularDamping", o.couplingAngularDamping,
-       finite(o.couplingAngularDamping) && o.couplingAngularDamping >= 0, "finite and >= 0 N*m*s/rad"},
+  const auto coupling = haptics_detail::couplingRules(o.couplingStiffness, o.couplingDamping,
+                                                      o.couplingAngularStiffness, o.couplingAngularDamping);
+  const OptionRule rules[] = {
       {"mass", o.mass, finite(o.mass) && o.mass >= 0, "finite and >= 0 kg (0: from the voxels)"},
       {"density", o.density, finite(o.density) && o.density > 0, "finite and > 0 kg/m^3"},
       {"threshold", o.threshold, finite(o.threshold), "finite"},
@@ -48,9 +34,8 @@ Status checkOptions(const BonePlacementOptions& o) {
       {"stackCapacity", static_cast<double>(o.stackCapacity),
        o.stackCapacity >= 64 && o.stackCapacity <= (std::size_t{1} << 20), "between 64 and 1048576"},
   };
-  for (const Rule& r : rules)
-    if (!r.ok) return optionError(r.field, r.value, r.text);
-  return ok();
+  if (auto s = haptics_detail::checkOptionRules(coupling, kWhere, "BonePlacementOptions"); !s) return s;
+  return haptics_detail::checkOptionRules(rules, kWhere, "BonePlacementOptions");
 }
 
 // Min-heap on depth: the shallowest kept contact sits at the front.

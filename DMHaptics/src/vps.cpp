@@ -10,6 +10,8 @@
 #include <string>
 #include <utility>
 
+#include "option_rules.hpp"
+
 namespace dm {
 
 namespace {
@@ -31,27 +33,12 @@ Quat quatFromRotationVector(const Vec3& phi) noexcept {
   return Quat(AngleAxis(angle, phi / angle));
 }
 
-Status badOption(const char* field, double value, const char* rule) {
-  return fail(ErrorCode::InvalidArgument, formatString("option %s is %g; it must be %s", field, value, rule),
-              std::string("dm::VpsRenderer::create: options.") + field, "fix the VpsOptions field");
-}
-
 Status validateOptions(const VpsOptions& o) {
-  struct Check {
-    const char* field;
-    double value;
-    bool ok;
-    const char* rule;
-  };
-  const Check checks[] = {
-      {"couplingStiffness", o.couplingStiffness, finiteScalar(o.couplingStiffness) && o.couplingStiffness > 0,
-       "finite and > 0 N/m"},
-      {"couplingDamping", o.couplingDamping, finiteScalar(o.couplingDamping) && o.couplingDamping >= 0,
-       "finite and >= 0 N*s/m"},
-      {"couplingAngularStiffness", o.couplingAngularStiffness,
-       finiteScalar(o.couplingAngularStiffness) && o.couplingAngularStiffness > 0, "finite and > 0 N*m/rad"},
-      {"couplingAngularDamping", o.couplingAngularDamping,
-       finiteScalar(o.couplingAngularDamping) && o.couplingAngularDamping >= 0, "finite and >= 0 N*m*s/rad"},
+  using haptics_detail::OptionRule;
+  constexpr const char* kOwner = "dm::VpsRenderer::create";
+  const auto coupling = haptics_detail::couplingRules(o.couplingStiffness, o.couplingDamping,
+                                                      o.couplingAngularStiffness, o.couplingAngularDamping);
+  const OptionRule checks[] = {
       {"mass", o.mass, finiteScalar(o.mass) && o.mass > 0, "finite and > 0 kg"},
       {"referenceContacts", o.referenceContacts,
        finiteScalar(o.referenceContacts) && o.referenceContacts >= 1, "finite and >= 1"},
@@ -65,8 +52,8 @@ Status validateOptions(const VpsOptions& o) {
       {"maxTorque", o.maxTorque, !std::isnan(o.maxTorque) && o.maxTorque > 0, "> 0 N*m (infinity allowed)"},
       {"substeps", static_cast<double>(o.substeps), o.substeps >= 1 && o.substeps <= 64, "between 1 and 64"},
   };
-  for (const Check& c : checks)
-    if (!c.ok) return badOption(c.field, c.value, c.rule);
+  if (auto s = haptics_detail::checkOptionRules(coupling, kOwner, "VpsOptions"); !s) return s;
+  if (auto s = haptics_detail::checkOptionRules(checks, kOwner, "VpsOptions"); !s) return s;
   if (!o.inertia.isZero(0.0)) {
     const std::string where = "dm::VpsRenderer::create: options.inertia";
     if (!o.inertia.allFinite())
