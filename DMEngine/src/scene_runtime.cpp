@@ -24,6 +24,7 @@
 #include <chrono>
 #include <cmath>
 #include <mutex>
+#include <span>
 #include <thread>
 
 namespace dm {
@@ -64,11 +65,14 @@ struct RecentForce {
   std::size_t next = 0;
   bool full = false;
   double seconds = 2.0;
-  void push(float v) {
+  // Appends the |F| of `samples` under one lock.
+  void push(std::span<const ProbeSample> samples) {
     std::lock_guard lock(m);
-    values[next] = v;
-    next = (next + 1) % values.size();
-    full = full || next == 0;
+    for (const ProbeSample& p : samples) {
+      values[next] = static_cast<float>(p.response.force.norm());
+      next = (next + 1) % values.size();
+      full = full || next == 0;
+    }
   }
   void copy(std::vector<float>& out, double& secs) {
     std::lock_guard lock(m);
@@ -90,22 +94,23 @@ class MonitorEngine final : public Engine {
   }
   void drain() {
     if (haptics == nullptr) return;
+    const std::size_t first = trace.size();
     ProbeSample p;
-    while (haptics->ring.tryPop(p)) {
-      trace.push_back(p);
-      recent->push(static_cast<float>(p.response.force.norm()));
-    }
+    while (haptics->ring.tryPop(p)) trace.push_back(p);
+    recent->push(std::span<const ProbeSample>(trace).subspan(first));
   }
   HapticsEngine* haptics;
   RecentForce* recent;
   std::vector<ProbeSample> trace;
 };
 
-Mesh scaledWorldMesh(const Mesh& mesh, double scale) {
+// The BVH of an object's mesh in its own frame with the scene's uniform
+// scale baked in (the god-object takes rigid poses); no copy at scale 1.
+Result<MeshBvh> objectBvh(const Mesh& mesh, double scale) {
+  if (scale == 1.0) return MeshBvh::build(mesh);
   Mesh m = mesh;
-  if (scale != 1.0)
-    for (auto& p : m.positions) p *= scale;
-  return m;
+  for (auto& p : m.positions) p *= scale;
+  return MeshBvh::build(m);
 }
 
 }  // namespace
@@ -146,7 +151,7 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
                   "give its material a \"haptic\" block with stiffness (N/m) and friction");
     auto mesh = resources.mesh(o->mesh);
     if (!mesh) return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", "objects/" + name);
-    auto bvh = MeshBvh::build(scaledWorldMesh(*mesh, o->scale));
+    auto bvh = objectBvh(*mesh, o->scale);
     if (!bvh) return bvh.error().within("objects/" + name);
     GodObjectObject g;
     g.bvh = std::make_shared<const MeshBvh>(std::move(*bvh));
@@ -286,8 +291,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
     if (auto s = im.master.addEngine(engine, schedule); !s) return s.error();
 
   if (auto s = im.master.load(scene.name); !s) return s.error();
-  if (im.haptics)
-    im.haptics->renderer->reset(im.haptics->loop->config().deviceToWorld * Isometry3::Identity());
+  if (im.haptics) im.haptics->renderer->reset(im.haptics->loop->config().deviceToWorld);
   if (auto s = im.master.start(options.mode); !s) return s.error();
 
   // Run: lockstep in 0.1 s chunks of simulated time, real time polling.

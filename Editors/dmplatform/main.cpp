@@ -32,7 +32,7 @@ extern "C" void onSignal(int) { gStop.store(true); }
 
 // The bundled default scene: next to the installed binary
 // (../share/dmplatform/scenes) or in the source tree this was built from.
-std::filesystem::path defaultScene(const char* argv0) {
+std::filesystem::path defaultScene() {
   std::error_code ec;
   const auto exe = std::filesystem::canonical("/proc/self/exe", ec);
   if (!ec) {
@@ -40,7 +40,6 @@ std::filesystem::path defaultScene(const char* argv0) {
         exe.parent_path().parent_path() / "share" / "dmplatform" / "scenes" / "head_probe.json";
     if (std::filesystem::exists(installed, ec)) return installed;
   }
-  (void)argv0;
   return std::filesystem::path(DM_SOURCE_SCENES_DIR) / "head_probe.json";
 }
 
@@ -66,8 +65,7 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
   }
-  const std::filesystem::path scene =
-      scenePath.empty() ? defaultScene(argv[0]) : std::filesystem::path(scenePath);
+  const std::filesystem::path scene = scenePath.empty() ? defaultScene() : std::filesystem::path(scenePath);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
 
