@@ -247,6 +247,10 @@ ConfigReader ConfigReader::at(std::size_t i) {
 }
 
 void ConfigReader::knownKeys(std::initializer_list<std::string_view> keys) {
+  knownKeys(std::span<const std::string_view>(keys.begin(), keys.size()));
+}
+
+void ConfigReader::knownKeys(std::span<const std::string_view> keys) {
   if (!node_->is_object()) return;
   for (auto it = node_->begin(); it != node_->end(); ++it) {
     if (std::find(keys.begin(), keys.end(), it.key()) != keys.end()) continue;
@@ -258,15 +262,7 @@ void ConfigReader::knownKeys(std::initializer_list<std::string_view> keys) {
 
 Status ConfigReader::status() const {
   if (errors_->list.empty()) return ok();
-  Error first = errors_->list.front();
-  if (errors_->list.size() > 1) {
-    first.what += " (and " + std::to_string(errors_->list.size() - 1) + " more problem" +
-                  (errors_->list.size() > 2 ? "s" : "") + ":";
-    for (std::size_t i = 1; i < errors_->list.size(); ++i)
-      first.what += " [" + errors_->list[i].message() + "]";
-    first.what += ")";
-  }
-  return first;
+  return combineErrors(errors_->list);
 }
 
 std::size_t editDistance(std::string_view a, std::string_view b) {
@@ -285,6 +281,10 @@ std::size_t editDistance(std::string_view a, std::string_view b) {
 }
 
 std::string closestMatch(std::string_view word, std::initializer_list<std::string_view> candidates) {
+  return closestMatch(word, std::span<const std::string_view>(candidates.begin(), candidates.size()));
+}
+
+std::string closestMatch(std::string_view word, std::span<const std::string_view> candidates) {
   std::string best;
   std::size_t bestD = std::max<std::size_t>(2, word.size() / 3) + 1;
   for (auto c : candidates) {

@@ -68,6 +68,17 @@ std::string Error::message() const {
   return s;
 }
 
+Error combineErrors(std::span<const Error> errors) {
+  DM_DEMAND(!errors.empty(), "combineErrors() needs at least one error");
+  Error first = errors.front();
+  if (errors.size() > 1) {
+    first.what += " (and " + std::to_string(errors.size() - 1) + " more problem" + (errors.size() > 2 ? "s" : "") + ":";
+    for (std::size_t i = 1; i < errors.size(); ++i) first.what += " [" + errors[i].message() + "]";
+    first.what += ")";
+  }
+  return first;
+}
+
 Error Error::within(const std::string& outer) const {
   Error e = *this;
   e.where = where.empty() ? outer : outer + ": " + where;

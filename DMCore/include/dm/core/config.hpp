@@ -26,6 +26,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -94,6 +95,7 @@ class ConfigReader {
   /// Records an error for every key of this object not in `keys`, with the
   /// closest known key as a suggestion (catches typos like "rate_Hz").
   void knownKeys(std::initializer_list<std::string_view> keys);
+  void knownKeys(std::span<const std::string_view> keys);
 
   /// Records a custom problem at `key` below this node (or at this node).
   void addError(std::string what, std::string_view key = {}, std::string hint = {});
@@ -123,5 +125,6 @@ class ConfigReader {
 std::size_t editDistance(std::string_view a, std::string_view b);
 /// The candidate closest to `word`, or "" if none is within a plausible distance.
 std::string closestMatch(std::string_view word, std::initializer_list<std::string_view> candidates);
+std::string closestMatch(std::string_view word, std::span<const std::string_view> candidates);
 
 }  // namespace dm

@@ -17,6 +17,7 @@
 
 #include <cstdint>
 #include <iosfwd>
+#include <span>
 #include <string>
 #include <type_traits>
 #include <utility>
@@ -56,6 +57,10 @@ struct Error {
 };
 
 std::ostream& operator<<(std::ostream& os, const Error& e);
+
+/// One error reporting all of `errors` (non-empty): the first, with the
+/// others' messages appended, so a user sees every mistake at once.
+Error combineErrors(std::span<const Error> errors);
 
 /// printf into a std::string, for error messages (the format is checked by
 /// the compiler; output longer than 511 characters is cut). Not for hot paths.
