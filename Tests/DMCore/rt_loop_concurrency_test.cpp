@@ -15,6 +15,8 @@
 #include <thread>
 #include <vector>
 
+#include "../common/eventually.hpp"
+
 // Allocation counting for one thread: the loop thread marks itself, and
 // every operator new on a marked thread is counted.
 #include "../common/alloc_counter.hpp"
@@ -32,13 +34,8 @@ std::int64_t steadyNs() {
 // Polls `cond` for up to `timeout` (generous: the machine may be loaded and
 // this may run under ThreadSanitizer). No timing is asserted.
 template <class F>
-bool waitFor(F cond, std::chrono::milliseconds timeout = 10s) {
-  const auto end = std::chrono::steady_clock::now() + timeout;
-  while (!cond()) {
-    if (std::chrono::steady_clock::now() > end) return false;
-    std::this_thread::sleep_for(1ms);
-  }
-  return true;
+bool waitFor(F cond) {
+  return dm::test::eventually(cond, std::chrono::seconds(10));
 }
 
 void expectMonotone(const dm::LatencyHistogram::Summary& s, std::uint64_t count) {

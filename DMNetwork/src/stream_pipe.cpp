@@ -1,0 +1,215 @@
+// stream_pipe.cpp — dm::LinkEmulator: a min-heap of scheduled deliveries
+// behind one steady timer on the network thread; fates drawn from a seeded
+// mt19937_64 with hand-written (portable) uniform and normal transforms.
+#include <dm/core/log.hpp>
+#include <dm/network/stream_pipe.hpp>
+
+#include <cmath>
+#include <queue>
+#include <random>
+#include <vector>
+
+#include "io_thread_impl.hpp"
+
+namespace dm {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Delivery {
+  Clock::time_point due;
+  std::uint64_t sequence = 0;  // ties keep submission order
+  std::shared_ptr<const std::vector<std::byte>> bytes;
+  bool operator>(const Delivery& o) const { return due != o.due ? due > o.due : sequence > o.sequence; }
+};
+
+}  // namespace
+
+struct LinkEmulator::Impl : std::enable_shared_from_this<LinkEmulator::Impl> {
+  Impl(IoThread& t, LinkEmulatorOptions o, Deliver d)
+      : user(t), options(o), deliver(std::move(d)), rng(o.seed), timer(t.impl().io) {}
+
+  /// Uniform on [0, 1) from the top 53 bits (the same on every platform,
+  /// unlike std::uniform_real_distribution).
+  double uniform() { return static_cast<double>(rng() >> 11) * 0x1.0p-53; }
+
+  std::chrono::microseconds latency() {
+    const double j = static_cast<double>(options.jitter.count());
+    double extra = 0.0;
+    if (j > 0.0) {
+      if (options.jitterModel == JitterModel::Uniform) {
+        extra = uniform() * j;
+      } else {
+        // Box-Muller; 1 - u is in (0, 1], so the logarithm is finite.
+        const double r = std::sqrt(-2.0 * std::log(1.0 - uniform()));
+        extra = std::min(std::abs(r * std::cos(2.0 * M_PI * uniform())) * j, 6.0 * j);
+      }
+    }
+    return options.delay + std::chrono::microseconds(static_cast<std::int64_t>(std::llround(extra)));
+  }
+
+  /// Network thread: (re)arms the timer for the earliest delivery.
+  void arm() {
+    Clock::time_point due;
+    {
+      std::lock_guard lock(mutex);
+      if (closed || heap.empty()) {
+        armedDue = Clock::time_point::max();
+        return;
+      }
+      due = heap.top().due;
+      armedDue = due;
+    }
+    timer.expires_at(due);
+    timer.async_wait([self = shared_from_this()](std::error_code ec) {
+      if (ec) return;  // re-armed for an earlier delivery, or closed
+      self->fire();
+    });
+  }
+
+  void fire() {
+    std::vector<Delivery> ready;
+    {
+      std::lock_guard lock(mutex);
+      if (closed) return;
+      const Clock::time_point now = Clock::now();
+      while (!heap.empty() && heap.top().due <= now) {
+        ready.push_back(heap.top());
+        heap.pop();
+      }
+    }
+    for (std::size_t i = 0; i < ready.size(); ++i) {
+      if (closed.load()) {  // close() ran from inside a delivery: the rest is discarded
+        discarded.fetch_add(ready.size() - i, std::memory_order_relaxed);
+        pending.fetch_sub(ready.size() - i, std::memory_order_release);
+        return;
+      }
+      const Delivery& d = ready[i];
+      if (deliver) user.thread().impl().guard("LinkEmulator deliver", [&] { deliver(*d.bytes); });
+      delivered.fetch_add(1, std::memory_order_relaxed);
+      pending.fetch_sub(1, std::memory_order_release);  // after the delivery: inFlight 0 means all done
+    }
+    arm();
+  }
+
+  IoUser user;
+  const LinkEmulatorOptions options;
+  Deliver deliver;
+  std::mt19937_64 rng;  // under mutex
+  asio::steady_timer timer;
+
+  mutable std::mutex mutex;  // guards rng, heap, armedDue, counters below that are not atomic
+  std::priority_queue<Delivery, std::vector<Delivery>, std::greater<>> heap;
+  Clock::time_point armedDue = Clock::time_point::max();
+  std::uint64_t nextSequence = 0;
+  std::atomic<std::uint64_t> pending{0};  // scheduled and not yet delivered or discarded
+  std::atomic<bool> closed{false};
+  std::atomic<std::uint64_t> submitted{0}, lost{0}, duplicated{0}, reordered{0}, delivered{0}, refused{0},
+      discarded{0};
+};
+
+LinkEmulator::LinkEmulator(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+LinkEmulator::~LinkEmulator() { close(); }
+
+Result<std::unique_ptr<LinkEmulator>> LinkEmulator::create(IoThread& thread, LinkEmulatorOptions options,
+                                                           Deliver deliver) {
+  const std::string where = "LinkEmulator options";
+  const auto probability = [&](double p, const char* field) -> Status {
+    if (!(p >= 0.0 && p <= 1.0))
+      return fail(ErrorCode::InvalidArgument, formatString("%s is %g", field, p), where + ": " + field,
+                  "give a probability in [0, 1]");
+    return ok();
+  };
+  for (auto s : {probability(options.lossProbability, "lossProbability"),
+                 probability(options.duplicateProbability, "duplicateProbability"),
+                 probability(options.reorderProbability, "reorderProbability")})
+    if (!s) return s.error();
+  if (options.delay.count() < 0 || options.jitter.count() < 0 || options.reorderDelay.count() < 0)
+    return fail(ErrorCode::InvalidArgument,
+                formatString("delay %lld us, jitter %lld us, reorderDelay %lld us",
+                             static_cast<long long>(options.delay.count()),
+                             static_cast<long long>(options.jitter.count()),
+                             static_cast<long long>(options.reorderDelay.count())),
+                where, "times must be >= 0");
+  if (options.maxInFlight == 0 || options.maxPacketBytes == 0)
+    return fail(ErrorCode::InvalidArgument, "maxInFlight or maxPacketBytes is 0", where, "both must be >= 1");
+  return std::unique_ptr<LinkEmulator>(
+      new LinkEmulator(std::make_shared<Impl>(thread, options, std::move(deliver))));
+}
+
+Status LinkEmulator::submit(std::span<const std::byte> packet) {
+  Impl& m = *impl_;
+  if (packet.size() > m.options.maxPacketBytes) {
+    m.refused.fetch_add(1, std::memory_order_relaxed);
+    return fail(ErrorCode::InvalidArgument,
+                formatString("packet of %zu bytes exceeds maxPacketBytes %zu", packet.size(),
+                             m.options.maxPacketBytes),
+                "LinkEmulator::submit", "raise LinkEmulatorOptions::maxPacketBytes");
+  }
+  auto bytes = std::make_shared<const std::vector<std::byte>>(packet.begin(), packet.end());
+  bool rearm = false;
+  {
+    std::lock_guard lock(m.mutex);
+    if (m.closed.load()) return fail(ErrorCode::Network, "emulator is closed", "LinkEmulator::submit");
+    if (m.heap.size() >= m.options.maxInFlight) {
+      m.refused.fetch_add(1, std::memory_order_relaxed);
+      return fail(ErrorCode::Busy, formatString("%zu deliveries in flight", m.heap.size()),
+                  "LinkEmulator::submit", "submit slower, or raise maxInFlight");
+    }
+    m.submitted.fetch_add(1, std::memory_order_relaxed);
+    // The draws happen in the same order for every packet, whatever their
+    // outcome, so one packet's fate never shifts another's.
+    const bool isLost = m.uniform() < m.options.lossProbability;
+    const bool isLate = m.uniform() < m.options.reorderProbability;
+    const bool isDup = m.uniform() < m.options.duplicateProbability;
+    const auto first = m.latency();
+    const auto second = m.latency();
+    if (isLost) {
+      m.lost.fetch_add(1, std::memory_order_relaxed);
+    } else {
+      const Clock::time_point now = Clock::now();
+      const auto extra = isLate ? m.options.reorderDelay : std::chrono::microseconds(0);
+      if (isLate) m.reordered.fetch_add(1, std::memory_order_relaxed);
+      m.heap.push({now + first + extra, m.nextSequence++, bytes});
+      m.pending.fetch_add(1, std::memory_order_relaxed);
+      if (isDup && m.heap.size() < m.options.maxInFlight) {
+        m.duplicated.fetch_add(1, std::memory_order_relaxed);
+        m.heap.push({now + second + extra, m.nextSequence++, bytes});
+        m.pending.fetch_add(1, std::memory_order_relaxed);
+      }
+      if (m.heap.top().due < m.armedDue) {
+        m.armedDue = m.heap.top().due;
+        rearm = true;
+      }
+    }
+  }
+  if (rearm) asio::post(m.user.io(), [self = impl_] { self->arm(); });
+  return ok();
+}
+
+void LinkEmulator::close() {
+  Impl& m = *impl_;
+  if (m.closed.load()) return;
+  m.user.thread().runAndWait([&] {
+    std::lock_guard lock(m.mutex);
+    if (m.closed.exchange(true)) return;
+    m.discarded.fetch_add(m.heap.size(), std::memory_order_relaxed);
+    m.pending.fetch_sub(m.heap.size(), std::memory_order_relaxed);
+    m.heap = {};
+    m.timer.cancel();
+  });
+  m.user.release();
+}
+
+LinkEmulatorStats LinkEmulator::stats() const {
+  const Impl& m = *impl_;
+  // Read first, so that a zero guarantees the counters below include every
+  // delivery (the acquire pairs with the release after each delivery).
+  const std::uint64_t inFlight = m.pending.load(std::memory_order_acquire);
+  return {m.submitted.load(), m.lost.load(),    m.duplicated.load(), m.reordered.load(),
+          m.delivered.load(), m.refused.load(), m.discarded.load(),  inFlight};
+}
+
+}  // namespace dm
