@@ -10,14 +10,13 @@
 #include <dm/core/filesystem.hpp>
 #include <dm/vision/filter_graph.hpp>
 
-#include <opencv2/imgproc.hpp>
-#include <opencv2/video.hpp>
-#include <opencv2/videoio.hpp>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <opencv2/imgproc.hpp>
+#include <opencv2/video.hpp>
+#include <opencv2/videoio.hpp>
 #include <vector>
 
 namespace {
@@ -115,6 +114,7 @@ int main(int argc, char** argv) {
   std::printf("vtest.avi, %ld frames 768x576, %d repeats (median), identical results\n", h.frames, repeats);
   std::printf("%-34s %8.1f fps\n", "OpenCV calls by hand", double(h.frames) / th);
   std::printf("%-34s %8.1f fps   ratio %.3f\n", "FilterGraph, sequential", double(s.frames) / ts, ts / th);
-  std::printf("%-34s %8.1f fps   ratio %.3f\n", "FilterGraph, parallel + prefetch", double(p.frames) / tp, tp / th);
+  std::printf("%-34s %8.1f fps   ratio %.3f\n", "FilterGraph, parallel + prefetch", double(p.frames) / tp,
+              tp / th);
   return 0;
 }

@@ -3,6 +3,7 @@
 
 #include <memory>
 #include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
 #include <string>
 
 namespace dm {
@@ -25,6 +26,15 @@ cv::Mat asCvMat(const Image& image) {
   void* data = const_cast<std::byte*>(image.data());
   return cv::Mat(image.height(), image.width(), CV_MAKETYPE(cvDepthOf(image.type()), image.channels()), data,
                  image.strideBytes());
+}
+
+cv::Mat asCvGray(const Image& image) {
+  if (image.empty() || image.channels() == 2) return {};
+  cv::Mat m = asCvMat(image);
+  if (m.channels() == 1) return m;
+  cv::Mat gray;
+  cv::cvtColor(m, gray, m.channels() == 4 ? cv::COLOR_BGRA2GRAY : cv::COLOR_BGR2GRAY);
+  return gray;
 }
 
 Result<Image> wrapCvMat(const cv::Mat& mat) {

@@ -1,24 +1,28 @@
 // dm::FilterGraph: building, validation (parameters, inputs, types, cycles)
 // and execution on oneTBB's flow graph, with the sources reading the next
 // frame while the current one is filtered.
-#include "filter_nodes.hpp"
-
-#include <opencv2/core.hpp>
 #include <oneapi/tbb/flow_graph.h>
 #include <oneapi/tbb/task_group.h>
 
 #include <atomic>
 #include <chrono>
 #include <map>
+#include <opencv2/core.hpp>
+
+#include "filter_nodes.hpp"
 
 namespace dm {
 
 const char* toString(PortType t) noexcept {
   switch (t) {
-    case PortType::Image: return "image";
-    case PortType::Volume: return "volume";
-    case PortType::Number: return "number";
-    case PortType::PointSet: return "point set";
+    case PortType::Image:
+      return "image";
+    case PortType::Volume:
+      return "volume";
+    case PortType::Number:
+      return "number";
+    case PortType::PointSet:
+      return "point set";
   }
   return "?";
 }
@@ -43,7 +47,9 @@ struct NodeEntry {
 
 bool isSource(const NodeEntry& e) { return e.info->info.role == "source"; }
 
-std::string withArticle(PortType t) { return (t == PortType::Image ? "an " : "a ") + std::string(toString(t)); }
+std::string withArticle(PortType t) {
+  return (t == PortType::Image ? "an " : "a ") + std::string(toString(t));
+}
 
 }  // namespace
 
@@ -146,7 +152,8 @@ Status FilterGraph::setCallback(std::string_view sink, GraphCallback callback) {
   for (const auto& e : impl_->nodes) {
     if (e.name != sink) continue;
     if (e.kind != "callback")
-      return fail(ErrorCode::InvalidArgument, "node \"" + e.name + "\" is a " + e.kind + ", not a callback sink",
+      return fail(ErrorCode::InvalidArgument,
+                  "node \"" + e.name + "\" is a " + e.kind + ", not a callback sink",
                   "FilterGraph::setCallback");
     impl_->callbacks[e.name] = std::move(callback);
     return ok();
@@ -199,8 +206,8 @@ Status FilterGraph::validate() {
     const std::size_t expected = e.info->info.anyInputType ? 1 : want.size();
     if (e.inputs.size() != expected) {
       problem(e, e.inputs.size() > 1 ? "inputs" : "input",
-              e.kind + " takes " + std::to_string(expected) + " input" + (expected == 1 ? "" : "s") + ", got " +
-                  std::to_string(e.inputs.size()),
+              e.kind + " takes " + std::to_string(expected) + " input" + (expected == 1 ? "" : "s") +
+                  ", got " + std::to_string(e.inputs.size()),
               expected == 0 ? "sources have no input" : "name the upstream node(s) in \"input\"/\"inputs\"");
       continue;
     }
@@ -270,7 +277,8 @@ Status FilterGraph::validate() {
       std::string cycle;
       for (std::size_t k = walk.size(); k-- > std::size_t(seen[at]);) cycle += g.nodes[walk[k]].name + " -> ";
       cycle += g.nodes[walk.back()].name;
-      problem(g.nodes[at], "input", "the graph has a cycle: " + cycle, "a node cannot depend on its own output");
+      problem(g.nodes[at], "input", "the graph has a cycle: " + cycle,
+              "a node cannot depend on its own output");
       g.order.clear();
     }
   }
@@ -281,7 +289,8 @@ Status FilterGraph::validate() {
       anySink |= e.info->info.role == "sink";
     }
   if (!g.nodes.empty() && problems.empty() && !anySource)
-    problems.push_back(g.located("/nodes", "the graph has no source", "add e.g. a video_file or image_file node"));
+    problems.push_back(
+        g.located("/nodes", "the graph has no source", "add e.g. a video_file or image_file node"));
   if (g.nodes.empty()) problems.push_back(g.located("/nodes", "the graph has no nodes"));
   (void)anySink;  // a graph of only sources and filters is allowed: run() still times it
 
@@ -344,7 +353,8 @@ Result<GraphRunStats> FilterGraph::run(const GraphRunOptions& options) {
     try {
       s = e.node->process(std::span<const graph::Value* const>(ins, e.in.size()), values[i], frame);
     } catch (const std::exception& ex) {
-      s = fail(ErrorCode::Internal, std::string("OpenCV: ") + ex.what(), "", "check the input's size and type");
+      s = fail(ErrorCode::Internal, std::string("OpenCV: ") + ex.what(), "",
+               "check the input's size and type");
     }
     e.seconds += std::chrono::duration<double>(Clock::now() - t0).count();
     ++e.calls;

@@ -7,15 +7,14 @@
 #include <dm/io/volume_io.hpp>
 #include <dm/vision/cv_image.hpp>
 
+#include <algorithm>
+#include <cstdio>
+#include <fstream>
 #include <opencv2/calib3d.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <opencv2/imgproc.hpp>
 #include <opencv2/video.hpp>
 #include <opencv2/videoio.hpp>
-
-#include <algorithm>
-#include <cstdio>
-#include <fstream>
 #include <random>
 
 namespace dm::graph {
@@ -97,7 +96,8 @@ int imreadMode(ConfigReader& r) {
 Result<cv::Mat> readImageFile(const std::string& path, int mode) {
   cv::Mat m = cv::imread(path, mode);
   if (m.empty())
-    return fail(ErrorCode::Parse, "cannot read image", path, "check that the file exists and is a PNG/JPEG/...");
+    return fail(ErrorCode::Parse, "cannot read image", path,
+                "check that the file exists and is a PNG/JPEG/...");
   return m;
 }
 
@@ -255,9 +255,10 @@ class SyntheticSource final : public Node {
  public:
   static std::unique_ptr<Node> make(ConfigReader& r, const NodeContext&) {
     auto n = std::make_unique<SyntheticSource>();
-    n->pattern_ = r.oneOf("pattern", {"moving_disc", "moving_texture", "checkerboard", "noise"}, "moving_disc");
-    n->width_ = static_cast<int>(r.integer("width", {8, 8192}, 320));
-    n->height_ = static_cast<int>(r.integer("height", {8, 8192}, 240));
+    n->pattern_ =
+        r.oneOf("pattern", {"moving_disc", "moving_texture", "checkerboard", "noise"}, "moving_disc");
+    n->width_ = static_cast<int>(r.integer("width", {8, 4096}, 320));
+    n->height_ = static_cast<int>(r.integer("height", {8, 4096}, 240));
     n->frames_ = r.integer("frames", {1, 1e9}, 100);
     const auto v = r.numbers("velocity", 2, std::vector<double>{1.0, 0.0});
     n->velocity_ = {v[0], v[1]};
@@ -284,7 +285,8 @@ class SyntheticSource final : public Node {
     if (pattern_ == "moving_texture") {
       // Frame k shows the texture shifted by k·velocity (sub-pixel, bilinear).
       const cv::Matx23d shift(1, 0, velocity_.x() * t - margin_, 0, 1, velocity_.y() * t - margin_);
-      cv::warpAffine(texture_, out.mat, shift, cv::Size(width_, height_), cv::INTER_LINEAR, cv::BORDER_REFLECT);
+      cv::warpAffine(texture_, out.mat, shift, cv::Size(width_, height_), cv::INTER_LINEAR,
+                     cv::BORDER_REFLECT);
     } else if (pattern_ == "moving_disc") {
       // A static textured background and a white disc moving by velocity per frame.
       texture_(cv::Rect(margin_, margin_, width_, height_)).copyTo(out.mat);
@@ -297,8 +299,7 @@ class SyntheticSource final : public Node {
       const int ox = int(std::lround(velocity_.x() * t)), oy = int(std::lround(velocity_.y() * t));
       for (int y = 0; y < height_; ++y) {
         auto* row = out.mat.ptr<std::uint8_t>(y);
-        for (int x = 0; x < width_; ++x)
-          row[x] = (((x + ox) / square_ + (y + oy) / square_) % 2) ? 230 : 25;
+        for (int x = 0; x < width_; ++x) row[x] = (((x + ox) / square_ + (y + oy) / square_) % 2) ? 230 : 25;
       }
     } else {
       out.mat.create(height_, width_, CV_8U);
@@ -371,7 +372,8 @@ class ColorNode final : public Node {
         if (target_ == ColorSpace::Gray) code = bgr ? cv::COLOR_BGR2GRAY : cv::COLOR_RGB2GRAY;
         if (target_ == ColorSpace::Hsv) code = bgr ? cv::COLOR_BGR2HSV : cv::COLOR_RGB2HSV;
         if (target_ == ColorSpace::Lab) code = bgr ? cv::COLOR_BGR2Lab : cv::COLOR_RGB2Lab;
-        if (target_ == ColorSpace::Rgb || target_ == ColorSpace::Bgr) code = target_ == a.space ? -2 : cv::COLOR_BGR2RGB;
+        if (target_ == ColorSpace::Rgb || target_ == ColorSpace::Bgr)
+          code = target_ == a.space ? -2 : cv::COLOR_BGR2RGB;
         break;
       case ColorSpace::Rgba:
       case ColorSpace::Bgra:
@@ -387,11 +389,13 @@ class ColorNode final : public Node {
         if (target_ == ColorSpace::Rgb) code = cv::COLOR_Lab2RGB;
         if (target_ == ColorSpace::Bgr) code = cv::COLOR_Lab2BGR;
         break;
-      case ColorSpace::Other: break;
+      case ColorSpace::Other:
+        break;
     }
     if (code == -1)
-      return fail(ErrorCode::InvalidArgument, "no conversion from this image's colour space to the requested one",
-                  "code", "convert to rgb first");
+      return fail(ErrorCode::InvalidArgument,
+                  "no conversion from this image's colour space to the requested one", "code",
+                  "convert to rgb first");
     ownOutput(out.mat);
     if (code == -2)
       a.mat.copyTo(out.mat);
@@ -411,7 +415,8 @@ class SameSpaceNode : public Node {
   Status process(Inputs in, Value& out, std::int64_t) override {
     ownOutput(out.mat);
     if (auto s = apply(*in[0], out.mat); !s) return s;
-    out.space = out.mat.channels() == in[0]->mat.channels() ? in[0]->space : spaceOf(out.mat, ColorSpace::Other);
+    out.space =
+        out.mat.channels() == in[0]->mat.channels() ? in[0]->space : spaceOf(out.mat, ColorSpace::Other);
     return ok();
   }
 
@@ -421,7 +426,10 @@ class SameSpaceNode : public Node {
 
 int interpolation(ConfigReader& r) {
   const std::string m = r.oneOf("interpolation", {"linear", "nearest", "area", "cubic"}, "linear");
-  return m == "nearest" ? cv::INTER_NEAREST : m == "area" ? cv::INTER_AREA : m == "cubic" ? cv::INTER_CUBIC : cv::INTER_LINEAR;
+  return m == "nearest" ? cv::INTER_NEAREST
+         : m == "area"  ? cv::INTER_AREA
+         : m == "cubic" ? cv::INTER_CUBIC
+                        : cv::INTER_LINEAR;
 }
 
 class ResizeNode final : public SameSpaceNode {
@@ -513,7 +521,8 @@ class ThresholdNode final : public SameSpaceNode {
     auto n = std::make_unique<ThresholdNode>();
     n->value_ = r.number("value", {}, 128);
     n->max_ = r.number("max", {}, 255);
-    const std::string t = r.oneOf("type", {"binary", "binary_inv", "trunc", "tozero", "tozero_inv"}, "binary");
+    const std::string t =
+        r.oneOf("type", {"binary", "binary_inv", "trunc", "tozero", "tozero_inv"}, "binary");
     n->type_ = t == "binary"       ? cv::THRESH_BINARY
                : t == "binary_inv" ? cv::THRESH_BINARY_INV
                : t == "trunc"      ? cv::THRESH_TRUNC
@@ -542,7 +551,7 @@ class AdaptiveThresholdNode final : public SameSpaceNode {
     auto n = std::make_unique<AdaptiveThresholdNode>();
     n->max_ = r.number("max", {0, 255}, 255);
     n->method_ = r.oneOf("method", {"mean", "gaussian"}, "mean") == "mean" ? cv::ADAPTIVE_THRESH_MEAN_C
-                                                                         : cv::ADAPTIVE_THRESH_GAUSSIAN_C;
+                                                                           : cv::ADAPTIVE_THRESH_GAUSSIAN_C;
     n->type_ = r.oneOf("type", {"binary", "binary_inv"}, "binary") == "binary" ? cv::THRESH_BINARY
                                                                                : cv::THRESH_BINARY_INV;
     n->block_ = oddSize(r, "block", 11, 3);
@@ -610,7 +619,9 @@ class GradientMagnitudeNode final : public Node {
 
 class VectorMagnitudeNode final : public Node {
  public:
-  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext&) { return std::make_unique<VectorMagnitudeNode>(); }
+  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext&) {
+    return std::make_unique<VectorMagnitudeNode>();
+  }
   Status process(Inputs in, Value& out, std::int64_t) override {
     if (auto s = needChannels(*in[0], {2}, "vector_magnitude"); !s) return s;
     cv::Mat parts[2];
@@ -665,9 +676,10 @@ class MorphologyNode final : public SameSpaceNode {
                                 : cv::MORPH_BLACKHAT;
     const std::string shape = r.oneOf("shape", {"rect", "ellipse", "cross"}, "ellipse");
     const int size = oddSize(r, "size", 3);
-    n->kernel_ = cv::getStructuringElement(
-        shape == "rect" ? cv::MORPH_RECT : shape == "cross" ? cv::MORPH_CROSS : cv::MORPH_ELLIPSE,
-        cv::Size(size, size));
+    n->kernel_ = cv::getStructuringElement(shape == "rect"    ? cv::MORPH_RECT
+                                           : shape == "cross" ? cv::MORPH_CROSS
+                                                              : cv::MORPH_ELLIPSE,
+                                           cv::Size(size, size));
     n->iterations_ = static_cast<int>(r.integer("iterations", {1, 100}, 1));
     return n;
   }
@@ -689,7 +701,8 @@ class UndistortNode final : public SameSpaceNode {
     n->k_ = cv::Mat(3, 3, CV_64F);
     for (int i = 0; i < 9; ++i) n->k_.at<double>(i / 3, i % 3) = k[std::size_t(i)];
     std::size_t count = 0;
-    if (const Json& node = r.node(); node.is_object() && node.contains("dist_coeffs") && node["dist_coeffs"].is_array())
+    if (const Json& node = r.node();
+        node.is_object() && node.contains("dist_coeffs") && node["dist_coeffs"].is_array())
       count = node["dist_coeffs"].size();
     if (count != 4 && count != 5 && count != 8 && count != 12 && count != 14) {
       r.addError("needs 4, 5, 8, 12 or 14 numbers (OpenCV's distortion model)", "dist_coeffs");
@@ -777,7 +790,9 @@ class OpticalFlowNode final : public Node {
 
 class AbsDiffNode final : public Node {
  public:
-  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext&) { return std::make_unique<AbsDiffNode>(); }
+  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext&) {
+    return std::make_unique<AbsDiffNode>();
+  }
   Status process(Inputs in, Value& out, std::int64_t) override {
     if (in[0]->mat.size() != in[1]->mat.size() || in[0]->mat.type() != in[1]->mat.type())
       return fail(ErrorCode::InvalidArgument, "the two inputs differ in size or type", "inputs",
@@ -866,7 +881,9 @@ class MeanNode final : public Node {
 
 class CountNonZeroNode final : public Node {
  public:
-  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext&) { return std::make_unique<CountNonZeroNode>(); }
+  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext&) {
+    return std::make_unique<CountNonZeroNode>();
+  }
   Status process(Inputs in, Value& out, std::int64_t) override {
     if (auto s = needChannels(*in[0], {1}, "count_nonzero"); !s) return s;
     out.type = PortType::Number;
@@ -877,7 +894,9 @@ class CountNonZeroNode final : public Node {
 
 class PointCountNode final : public Node {
  public:
-  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext&) { return std::make_unique<PointCountNode>(); }
+  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext&) {
+    return std::make_unique<PointCountNode>();
+  }
   Status process(Inputs in, Value& out, std::int64_t) override {
     out.type = PortType::Number;
     out.scalar = double(in[0]->points.size());
@@ -995,7 +1014,8 @@ class VideoWriterSink final : public Node {
       if (!dir.empty()) std::filesystem::create_directories(dir, ec);
       size_ = v.mat.size();
       if (!writer_.open(path_, fourcc_, fps_, size_, v.mat.channels() != 1))
-        return fail(ErrorCode::Io, "cannot open the video for writing", path_, "check the directory and fourcc");
+        return fail(ErrorCode::Io, "cannot open the video for writing", path_,
+                    "check the directory and fourcc");
     }
     if (v.mat.size() != size_)
       return fail(ErrorCode::InvalidArgument,
@@ -1114,12 +1134,16 @@ KindInfo source(std::string kind, PortType out, std::string summary, std::vector
   return {{std::move(kind), "source", {}, false, out, std::move(summary)}, std::move(keys), make};
 }
 KindInfo filter(std::string kind, std::vector<PortType> in, PortType out, std::string summary,
-                std::vector<std::string_view> keys, std::unique_ptr<Node> (*make)(ConfigReader&, const NodeContext&)) {
+                std::vector<std::string_view> keys,
+                std::unique_ptr<Node> (*make)(ConfigReader&, const NodeContext&)) {
   return {{std::move(kind), "filter", std::move(in), false, out, std::move(summary)}, std::move(keys), make};
 }
-KindInfo sink(std::string kind, std::vector<PortType> in, std::string summary, std::vector<std::string_view> keys,
+KindInfo sink(std::string kind, std::vector<PortType> in, std::string summary,
+              std::vector<std::string_view> keys,
               std::unique_ptr<Node> (*make)(ConfigReader&, const NodeContext&)) {
-  return {{std::move(kind), "sink", std::move(in), false, std::nullopt, std::move(summary)}, std::move(keys), make};
+  return {{std::move(kind), "sink", std::move(in), false, std::nullopt, std::move(summary)},
+          std::move(keys),
+          make};
 }
 
 }  // namespace
@@ -1127,22 +1151,24 @@ KindInfo sink(std::string kind, std::vector<PortType> in, std::string summary, s
 const std::vector<KindInfo>& kindTable() {
   static const std::vector<KindInfo> table = [] {
     std::vector<KindInfo> t{
-        source("image_file", I, "one image file, repeated `frames` times", {"path", "frames", "order", "mode"},
-               &ImageFileSource::make),
+        source("image_file", I, "one image file, repeated `frames` times",
+               {"path", "frames", "order", "mode"}, &ImageFileSource::make),
         source("image_sequence", I, "numbered files (`pattern` from `start`) or a `files` list",
                {"pattern", "start", "files", "order", "mode"}, &ImageSequenceSource::make),
         source("video_file", I, "a video file through OpenCV's FFmpeg backend", {"path", "order"},
                &CaptureSource::makeFile),
         source("camera", I, "a V4L2 camera by index", {"index", "width", "height", "order"},
                &CaptureSource::makeCamera),
-        source("synthetic", I, "8-bit frames with known motion: moving_disc, moving_texture, checkerboard, noise",
+        source("synthetic", I,
+               "8-bit frames with known motion: moving_disc, moving_texture, checkerboard, noise",
                {"pattern", "width", "height", "frames", "velocity", "radius", "square", "seed"},
                &SyntheticSource::make),
         source("volume_file", V, "a volume file (NIfTI, NRRD, MetaImage, DICOM, VDB)", {"path", "frames"},
                &VolumeFileSource::make),
-        filter("color", {I}, I, "colour conversion to gray, rgb, bgr, hsv or lab", {"code"}, &ColorNode::make),
-        filter("resize", {I}, I, "to width x height or by scale", {"width", "height", "scale", "interpolation"},
-               &ResizeNode::make),
+        filter("color", {I}, I, "colour conversion to gray, rgb, bgr, hsv or lab", {"code"},
+               &ColorNode::make),
+        filter("resize", {I}, I, "to width x height or by scale",
+               {"width", "height", "scale", "interpolation"}, &ResizeNode::make),
         filter("gaussian_blur", {I}, I, "Gaussian blur (ksize, sigma in pixels)", {"ksize", "sigma"},
                &GaussianNode::make),
         filter("median_blur", {I}, I, "median filter", {"ksize"}, &MedianNode::make),
@@ -1153,7 +1179,8 @@ const std::vector<KindInfo>& kindTable() {
         filter("adaptive_threshold", {I}, I, "local mean or Gaussian threshold",
                {"max", "method", "type", "block", "c"}, &AdaptiveThresholdNode::make),
         filter("sobel", {I}, I, "Sobel derivative (float)", {"dx", "dy", "ksize"}, &SobelNode::make),
-        filter("gradient_magnitude", {I}, I, "|grad| by Sobel (float)", {"ksize"}, &GradientMagnitudeNode::make),
+        filter("gradient_magnitude", {I}, I, "|grad| by Sobel (float)", {"ksize"},
+               &GradientMagnitudeNode::make),
         filter("vector_magnitude", {I}, I, "length of a 2-channel vector image, e.g. optical flow", {},
                &VectorMagnitudeNode::make),
         filter("canny", {I}, I, "Canny edges", {"low", "high", "aperture", "l2"}, &CannyNode::make),
@@ -1163,8 +1190,10 @@ const std::vector<KindInfo>& kindTable() {
                {"camera_matrix", "dist_coeffs"}, &UndistortNode::make),
         filter("background_subtraction", {I}, I, "foreground mask (MOG2 or KNN)",
                {"method", "history", "threshold", "shadows", "learning_rate"}, &BackgroundNode::make),
-        filter("optical_flow", {I}, I, "dense Farneback flow from the previous frame (2-channel float, px/frame)",
-               {"pyr_scale", "levels", "window", "iterations", "poly_n", "poly_sigma"}, &OpticalFlowNode::make),
+        filter("optical_flow", {I}, I,
+               "dense Farneback flow from the previous frame (2-channel float, px/frame)",
+               {"pyr_scale", "levels", "window", "iterations", "poly_n", "poly_sigma"},
+               &OpticalFlowNode::make),
         filter("absdiff", {I, I}, I, "per-pixel |a - b|", {}, &AbsDiffNode::make),
         filter("convert", {I}, I, "pixel type conversion: to u8/u16/f32 with scale, offset, abs",
                {"to", "scale", "offset", "abs"}, &ConvertNode::make),

@@ -4,10 +4,9 @@
 
 #include <dm/vision/filter_graph.hpp>
 
-#include <opencv2/core.hpp>
-
 #include <map>
 #include <mutex>
+#include <opencv2/core.hpp>
 
 namespace dm::graph {
 

@@ -44,6 +44,16 @@ int cvDepthOf(PixelType type) noexcept;
 /// @endcode
 cv::Mat asCvMat(const Image& image);
 
+/// A one-channel cv::Mat of `image`: the image's own memory (as asCvMat)
+/// when it has one channel, else a new gray Mat converted from BGR (3
+/// channels) or BGRA (4). O(pixels) for the conversion. Empty image, or 2
+/// channels (gray + alpha: no defined conversion), give an empty Mat.
+/// @code
+///   cv::Mat gray = dm::asCvGray(frame);
+///   cv::findChessboardCorners(gray, {9, 6}, corners);
+/// @endcode
+cv::Mat asCvGray(const Image& image);
+
 /// A dm::Image over `mat`'s memory: same data pointer and row stride. The
 /// image holds a reference to the Mat's buffer (a cv::Mat copy — reference
 /// counted, no pixel copy), so it stays valid after `mat` goes away; Mats

@@ -101,9 +101,9 @@ struct GraphRunStats {
 /// error messages. A sink has no output.
 struct GraphNodeKind {
   std::string kind;
-  std::string role;  ///< "source", "filter" or "sink"
-  std::vector<PortType> inputs;   ///< one per input, in order
-  bool anyInputType = false;      ///< one input of any type (callback sinks)
+  std::string role;              ///< "source", "filter" or "sink"
+  std::vector<PortType> inputs;  ///< one per input, in order
+  bool anyInputType = false;     ///< one input of any type (callback sinks)
   std::optional<PortType> output;
   std::string summary;
 };
@@ -126,7 +126,8 @@ class FilterGraph {
 
   /// Adds a node in code; `params` is the node's JSON object without
   /// "name"/"kind"/"input(s)". Checked by validate().
-  void add(std::string name, std::string kind, Json params = Json::object(), std::vector<std::string> inputs = {});
+  void add(std::string name, std::string kind, Json params = Json::object(),
+           std::vector<std::string> inputs = {});
   /// Sets the function a "callback" sink calls. Fails if `sink` is not a
   /// callback node.
   Status setCallback(std::string_view sink, GraphCallback callback);
