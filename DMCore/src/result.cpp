@@ -72,7 +72,8 @@ Error combineErrors(std::span<const Error> errors) {
   DM_DEMAND(!errors.empty(), "combineErrors() needs at least one error");
   Error first = errors.front();
   if (errors.size() > 1) {
-    first.what += " (and " + std::to_string(errors.size() - 1) + " more problem" + (errors.size() > 2 ? "s" : "") + ":";
+    first.what +=
+        " (and " + std::to_string(errors.size() - 1) + " more problem" + (errors.size() > 2 ? "s" : "") + ":";
     for (std::size_t i = 1; i < errors.size(); ++i) first.what += " [" + errors[i].message() + "]";
     first.what += ")";
   }

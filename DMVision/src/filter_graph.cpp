@@ -1,11 +1,12 @@
 // dm::FilterGraph: building, validation (parameters, inputs, types, cycles)
-// and execution on oneTBB's flow graph, with the sources reading the next
+// and execution on oneTBB tasks by dependency counting, with the sources reading the next
 // frame while the current one is filtered.
-#include <oneapi/tbb/flow_graph.h>
 #include <oneapi/tbb/task_group.h>
 
 #include <atomic>
 #include <chrono>
+#include <functional>
+#include <optional>
 #include <map>
 #include <opencv2/core.hpp>
 
@@ -361,31 +362,52 @@ Result<GraphRunStats> FilterGraph::run(const GraphRunOptions& options) {
     if (!s) recordError(e, s.error(), frame);
   };
 
-  // The flow graph: one continue_node per filter or sink, fired when all of
-  // its upstream filters are done; nodes fed only by sources hang off start.
-  tbb::flow::graph flow;
-  tbb::flow::broadcast_node<tbb::flow::continue_msg> start(flow);
-  std::vector<std::unique_ptr<tbb::flow::continue_node<tbb::flow::continue_msg>>> flowNodes(n);
-  if (options.parallel) {
-    for (std::size_t i : work)
-      flowNodes[i] = std::make_unique<tbb::flow::continue_node<tbb::flow::continue_msg>>(
-          flow, [&runNode, i](const tbb::flow::continue_msg&) { runNode(i); });
-    for (std::size_t i : work) {
-      bool fromStart = false;
-      std::vector<std::size_t> linked;
-      for (std::size_t j : g.nodes[i].in) {
-        if (isSource(g.nodes[j])) {
-          fromStart = true;
-        } else if (std::find(linked.begin(), linked.end(), j) == linked.end()) {
-          linked.push_back(j);
-          tbb::flow::make_edge(*flowNodes[j], *flowNodes[i]);
-        }
+  // Dependency counting over oneTBB tasks: a filter or sink runs once all of
+  // its upstream filters of this frame are done (source values are in place
+  // before the frame starts). A finished node runs one ready successor itself
+  // and spawns the others, so a chain costs no task hand-offs.
+  std::vector<int> indegree(n, 0);
+  std::vector<std::vector<std::size_t>> successors(n);
+  for (std::size_t i : work) {
+    std::vector<std::size_t> linked;
+    for (std::size_t j : g.nodes[i].in)
+      if (!isSource(g.nodes[j]) && std::find(linked.begin(), linked.end(), j) == linked.end()) {
+        linked.push_back(j);
+        successors[j].push_back(i);
       }
-      if (fromStart && linked.empty()) tbb::flow::make_edge(start, *flowNodes[i]);
-      // A node fed by a source and by filters waits for the filters only:
-      // source values are in place before start fires.
-    }
+    indegree[i] = int(linked.size());
   }
+  std::unique_ptr<std::atomic<int>[]> pending(new std::atomic<int>[n]);
+  tbb::task_group tasks;
+  struct Scheduler {
+    const std::vector<std::vector<std::size_t>>& successors;
+    std::atomic<int>* pending;
+    tbb::task_group& tasks;
+    const std::function<void(std::size_t)>& run;
+    void execute(std::size_t i) const {
+      for (;;) {
+        run(i);
+        std::optional<std::size_t> next;
+        for (std::size_t k : successors[i]) {
+          if (pending[k].fetch_sub(1, std::memory_order_acq_rel) != 1) continue;
+          if (!next)
+            next = k;
+          else
+            tasks.run([this, k] { execute(k); });
+        }
+        if (!next) return;
+        i = *next;
+      }
+    }
+  };
+  const std::function<void(std::size_t)> runOne = runNode;
+  const Scheduler scheduler{successors, pending.get(), tasks, runOne};
+  auto runFrame = [&] {
+    for (std::size_t i : work) pending[i].store(indegree[i], std::memory_order_relaxed);
+    for (std::size_t i : work)
+      if (indegree[i] == 0) tasks.run([&scheduler, i] { scheduler.execute(i); });
+    tasks.wait();
+  };
 
   // Two buffers per source: one being filtered, one being read.
   std::vector<graph::Value> next(n);
@@ -424,8 +446,7 @@ Result<GraphRunStats> FilterGraph::run(const GraphRunOptions& options) {
     bool nextMore = false;
     if (wantNext) prefetch.run([&, k = frame + 1] { readSources(k, nextMore); });
     if (options.parallel) {
-      start.try_put(tbb::flow::continue_msg());
-      flow.wait_for_all();
+      runFrame();
     } else {
       for (std::size_t i : work) runNode(i);
     }

@@ -9,7 +9,7 @@
 // you mean" for misspelt kinds and keys), every input name and port type, and
 // that the graph has no cycle. run() then pulls one frame from every source
 // per step (a frame ends when any source ends) and evaluates the graph: nodes
-// whose inputs are ready run concurrently on oneTBB's flow graph, and the
+// whose inputs are ready run concurrently as oneTBB tasks, and the
 // sources read the next frame while the current one is filtered.
 //
 // Images keep OpenCV's memory: a sink hands out a dm::Image wrapping the
