@@ -60,6 +60,15 @@ VibrationEffect::VibrationEffect(double amplitude, double frequencyHz, const Vec
       phase_(std::isfinite(phase) ? phase : 0.0),
       axis_(axis.allFinite() && axis.norm() > 0.0 ? Vec3(axis.normalized()) : Vec3::Zero()) {}
 
+ForceFieldEffect::ForceFieldEffect(ForceFieldFn field, std::string name)
+    : field_(std::move(field)), name_(std::move(name)) {}
+
+void ForceFieldEffect::apply(const HapticInput& input, HapticResponse& out) const noexcept {
+  if (!field_) return;
+  const Vec3 f = field_(input.devicePose.translation());
+  if (f.allFinite()) out.force += f;
+}
+
 void VibrationEffect::apply(const HapticInput& input, HapticResponse& out) const noexcept {
   const double t = nanosToSeconds(input.timeNs);
   out.force += amplitude_ * std::sin(omega_ * t + phase_) * axis_;

@@ -107,6 +107,21 @@ TEST(Vibration, FrequencyAmplitudeAndAxis) {
             Vec3::Zero());
 }
 
+TEST(ForceField, AddsTheFieldAtTheDevicePointAndIgnoresNonFiniteAnswers) {
+  // A linear spring field toward the origin, F = −k p, and one that fails.
+  const ForceFieldEffect spring([](const Vec3& p) { return Vec3(-50.0 * p); }, "spring");
+  EXPECT_EQ(spring.name(), "spring");
+  EXPECT_NEAR((forceOf(spring, probe(Vec3(0.01, -0.02, 0.004))) - Vec3(-0.5, 1.0, -0.2)).norm(), 0.0, 1e-15);
+  const ForceFieldEffect broken([](const Vec3&) { return Vec3(std::nan(""), 0, 0); });
+  EXPECT_EQ(broken.name(), "field");
+  HapticResponse r;
+  r.force = Vec3(1, 2, 3);
+  broken.apply(probe(Vec3::Zero()), r);
+  EXPECT_EQ(r.force, Vec3(1, 2, 3));
+  const ForceFieldEffect empty(nullptr);
+  EXPECT_EQ(forceOf(empty, probe(Vec3::Ones())), Vec3::Zero());
+}
+
 TEST(VirtualFixture, SphereSpringAndDamperOutsideOnly) {
   const VirtualFixture fix(SafeSphere{Vec3(0.1, 0, 0), 0.02}, 800.0, 5.0);
   EXPECT_EQ(forceOf(fix, probe(Vec3(0.11, 0.01, 0), Vec3(1, 1, 1))), Vec3::Zero());  // inside

@@ -1,7 +1,8 @@
 // dm/haptics/effects.hpp — force effects the haptic loop adds on top of a
-// renderer's contact force: viscosity, snap-to surface (magnetic), vibration
-// and guidance springs / virtual fixtures that keep the tool in a safe
-// region (sphere, box, or a corridor around a segment).
+// renderer's contact force: viscosity, snap-to surface (magnetic), vibration,
+// guidance springs / virtual fixtures that keep the tool in a safe region
+// (sphere, box, or a corridor around a segment), and force fields given as a
+// function of the device point (e.g. DMVision's segmentation guidance).
 //
 // Every effect reads the same world-frame HapticInput the renderer got and
 // adds its force (N) and torque (N·m) to the HapticResponse. Effects are
@@ -25,6 +26,7 @@
 #include <functional>
 #include <memory>
 #include <optional>
+#include <string>
 #include <variant>
 #include <vector>
 
@@ -82,6 +84,29 @@ class SnapToSurfaceEffect final : public ForceEffect {
   const MeshBvh* bvh_ = nullptr;
   Isometry3 pose_ = Isometry3::Identity();
   double stiffness_, capture_;
+};
+
+/// A force as a function of the device point (world, m → N). Must be real-time
+/// safe: no allocation, lock or throw.
+using ForceFieldFn = std::function<Vec3(const Vec3& point)>;
+
+/// A force field F(p) at the device point p, e.g. the guidance force of
+/// dm::HapticSegmentation (DMVision) that keeps the probe in homogeneous
+/// tissue. A non-finite answer adds nothing. O(1) plus the field's cost.
+/// @code
+///   effects.add(std::make_unique<dm::ForceFieldEffect>(
+///       [&seg](const dm::Vec3& p) { return seg.guidanceForce(p); }, "segmentation"));
+/// @endcode
+class ForceFieldEffect final : public ForceEffect {
+ public:
+  /// `name` is what name() reports (kept by value; default "field").
+  explicit ForceFieldEffect(ForceFieldFn field, std::string name = "field");
+  std::string_view name() const noexcept override { return name_; }
+  void apply(const HapticInput& input, HapticResponse& out) const noexcept override;
+
+ private:
+  ForceFieldFn field_;
+  std::string name_;
 };
 
 /// Vibration F = A·sin(2π·f·t + φ)·axis with t = input.timeNs in seconds. O(1).

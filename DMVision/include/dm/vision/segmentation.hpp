@@ -25,7 +25,9 @@
 // fixed at create(), so the haptic thread may call them while another
 // thread runs update(). They take what dm::ForceEffect::apply takes (the
 // device point, world frame, metres) and give its force (N, world frame), so
-// a DMHaptics effect wraps them in a few lines.
+// dm::ForceFieldEffect (DMHaptics) puts the guidance in a haptic loop's
+// effect stack: ForceFieldEffect([&seg](const Vec3& p) { return
+// seg.guidanceForce(p); }, "segmentation").
 //
 // @code
 //   auto seg = dm::HapticSegmentation::create(mri, {.grow = {.lower = 90, .upper = 140}});
