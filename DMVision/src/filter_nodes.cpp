@@ -946,6 +946,13 @@ class VolumeSliceNode final : public Node {
 
 // ---- sinks -----------------------------------------------------------------
 
+/// Creates the folder a sink writes into; a failure shows when the file is opened.
+void makeParentDirectory(const std::string& file) {
+  std::error_code ec;
+  const auto dir = std::filesystem::path(file).parent_path();
+  if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+}
+
 /// imwrite wants BGR order.
 const cv::Mat& forWriting(const Value& v, cv::Mat& scratch) {
   if (v.space == ColorSpace::Rgb) {
@@ -976,9 +983,7 @@ class FileSink final : public Node {
       return fail(ErrorCode::InvalidArgument, "image files take 8- or 16-bit pixels", "input",
                   "add a \"convert\" node with \"to\": \"u8\" before this sink");
     const std::string path = formatPattern(pattern_, frame);
-    std::error_code ec;
-    const auto dir = std::filesystem::path(path).parent_path();
-    if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+    makeParentDirectory(path);
     if (!cv::imwrite(path, forWriting(v, scratch_)))
       return fail(ErrorCode::Io, "cannot write image", path, "check the directory and the extension");
     return ok();
@@ -1009,9 +1014,7 @@ class VideoWriterSink final : public Node {
       return fail(ErrorCode::InvalidArgument, "video frames take 8-bit pixels", "input",
                   "add a \"convert\" node with \"to\": \"u8\"");
     if (!writer_.isOpened()) {
-      std::error_code ec;
-      const auto dir = std::filesystem::path(path_).parent_path();
-      if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+      makeParentDirectory(path_);
       size_ = v.mat.size();
       if (!writer_.open(path_, fourcc_, fps_, size_, v.mat.channels() != 1))
         return fail(ErrorCode::Io, "cannot open the video for writing", path_,
@@ -1099,9 +1102,7 @@ class CsvSink final : public Node {
   }
   Status process(Inputs in, Value&, std::int64_t frame) override {
     if (!file_.is_open()) {
-      std::error_code ec;
-      const auto dir = std::filesystem::path(path_).parent_path();
-      if (!dir.empty()) std::filesystem::create_directories(dir, ec);
+      makeParentDirectory(path_);
       file_.open(path_, std::ios::trunc);
       if (!file_) return fail(ErrorCode::Io, "cannot open for writing", path_);
       file_ << "frame,value\n";

@@ -7,6 +7,7 @@
 
 #include <gtest/gtest.h>
 
+#include <array>
 #include <cstring>
 #include <random>
 
@@ -254,18 +255,27 @@ TEST(IgtlImage, VolumeGeometryRoundTripsAndOriginIsTheCentre) {
   EXPECT_EQ(std::memcmp(back->bytes(), vol->bytes(), vol->byteSize()), 0);
 }
 
-TEST(IgtlImage, HonoursBigEndianDataLpsAndSubVolumes) {
-  // 3x2x1 uint16, big-endian, LPS, carrying only the sub-volume x = 1..2, y = 1.
+/// An IMAGE body header (v1 layout, 72 bytes): scalar type, endianness (1 big),
+/// coordinates (1 RAS, 2 LPS), size, the 12 floats of the orientation and
+/// origin, and the sub-volume offset and size.
+Bytes imageHeader(int scalarType, int endian, int coordinates, std::array<int, 3> size,
+                  std::array<float, 12> matrix, std::array<int, 3> subOffset, std::array<int, 3> subSize) {
   Bytes c;
   be(c, 1, 2);
   c.push_back(std::byte{1});
-  c.push_back(std::byte{5});
-  c.push_back(std::byte{1});  // big endian
-  c.push_back(std::byte{2});  // LPS
-  for (int s : {3, 2, 1}) be(c, static_cast<std::uint64_t>(s), 2);
-  for (float v : {2.f, 0.f, 0.f, 0.f, 2.f, 0.f, 0.f, 0.f, 2.f, 10.f, 20.f, 30.f}) f32(c, v);
-  for (int s : {1, 1, 0}) be(c, static_cast<std::uint64_t>(s), 2);
-  for (int s : {2, 1, 1}) be(c, static_cast<std::uint64_t>(s), 2);
+  c.push_back(static_cast<std::byte>(scalarType));
+  c.push_back(static_cast<std::byte>(endian));
+  c.push_back(static_cast<std::byte>(coordinates));
+  for (int v : size) be(c, static_cast<std::uint64_t>(v), 2);
+  for (float v : matrix) f32(c, v);
+  for (int v : subOffset) be(c, static_cast<std::uint64_t>(v), 2);
+  for (int v : subSize) be(c, static_cast<std::uint64_t>(v), 2);
+  return c;
+}
+
+TEST(IgtlImage, HonoursBigEndianDataLpsAndSubVolumes) {
+  // 3x2x1 uint16, big-endian, LPS, carrying only the sub-volume x = 1..2, y = 1.
+  Bytes c = imageHeader(5, 1, 2, {3, 2, 1}, {2, 0, 0, 0, 2, 0, 0, 0, 2, 10, 20, 30}, {1, 1, 0}, {2, 1, 1});
   be(c, 0x1234, 2);
   be(c, 0xABCD, 2);
   const Bytes mWire = frame(1, "IMAGE", "US", c);
@@ -294,31 +304,15 @@ TEST(IgtlImage, HonoursBigEndianDataLpsAndSubVolumes) {
 }
 
 TEST(IgtlImage, HugeDimensionsAreRefusedByTheBodySize) {
-  Bytes c;
-  be(c, 1, 2);
-  c.push_back(std::byte{1});
-  c.push_back(std::byte{11});
-  c.push_back(std::byte{2});
-  c.push_back(std::byte{1});
-  for (int k = 0; k < 3; ++k) be(c, 65535, 2);
-  for (int k = 0; k < 12; ++k) f32(c, 1.f);
-  for (int k = 0; k < 3; ++k) be(c, 0, 2);
-  for (int k = 0; k < 3; ++k) be(c, 65535, 2);
+  const Bytes c = imageHeader(11, 2, 1, {65535, 65535, 65535}, {1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1},
+                              {0, 0, 0}, {65535, 65535, 65535});
   const Bytes mWire = frame(1, "IMAGE", "x", c);
   auto m = igtl::decodeMessage(mWire);
   ASSERT_TRUE(m.ok());
   EXPECT_FALSE(igtl::decodeVolume(*m).ok());
   // A one-voxel sub-volume of a 4000³ image must not allocate the whole image.
-  Bytes sub;
-  be(sub, 1, 2);
-  sub.push_back(std::byte{1});
-  sub.push_back(std::byte{3});
-  sub.push_back(std::byte{2});
-  sub.push_back(std::byte{1});
-  for (int k = 0; k < 3; ++k) be(sub, 4000, 2);
-  for (int k = 0; k < 12; ++k) f32(sub, k % 4 == 0 ? 1.f : 0.f);
-  for (int k = 0; k < 3; ++k) be(sub, 0, 2);
-  for (int k = 0; k < 3; ++k) be(sub, 1, 2);
+  Bytes sub =
+      imageHeader(3, 2, 1, {4000, 4000, 4000}, {1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0}, {0, 0, 0}, {1, 1, 1});
   sub.push_back(std::byte{7});
   const Bytes msWire = frame(1, "IMAGE", "x", sub);
   auto ms = igtl::decodeMessage(msWire);
