@@ -49,6 +49,8 @@ struct TextureSlot {
   std::uint32_t generation = 0;
   bool alive = false;
   GLuint texture = 0;
+  int width = 0, height = 0, channels = 0;
+  SceneTextureOptions options;
 };
 
 struct MaterialSlot {
@@ -936,35 +938,26 @@ Status SceneRenderer::setLods(MeshId base, std::vector<LodLevel> levels) {
   return ok();
 }
 
-Result<TextureId> SceneRenderer::addTexture(const Image& image, bool srgb) {
-  DM_DEMAND(impl_ != nullptr, "SceneRenderer used after move or default construction");
-  if (image.empty())
-    return fail(ErrorCode::InvalidArgument, "image is empty", "SceneRenderer::addTexture",
-                "give a loaded image");
+namespace {
+
+// Checks that `image` can become a texture of at most `maxSize` pixels a side.
+Status checkTextureImage(const Image& image, int maxSize, const char* where) {
+  if (image.empty()) return fail(ErrorCode::InvalidArgument, "image is empty", where, "give a loaded image");
   if (image.type() != PixelType::U8 || image.channels() == 2)
     return fail(ErrorCode::Unsupported,
-                formatString("%s image with %d channels", toString(image.type()), image.channels()),
-                "SceneRenderer::addTexture", "convert to 8-bit gray, RGB or RGBA");
-  if (image.width() > impl_->maxTextureSize || image.height() > impl_->maxTextureSize)
+                formatString("%s image with %d channels", toString(image.type()), image.channels()), where,
+                "convert to 8-bit gray, RGB or RGBA");
+  if (image.width() > maxSize || image.height() > maxSize)
     return fail(ErrorCode::InvalidArgument,
-                formatString("%dx%d image exceeds GL_MAX_TEXTURE_SIZE %d", image.width(), image.height(),
-                             impl_->maxTextureSize),
-                "SceneRenderer::addTexture", "downscale the image");
-  GLenum internal = 0, format = 0;
-  switch (image.channels()) {
-    case 1:
-      internal = srgb ? GL_SRGB8 : GL_R8;
-      format = GL_RED;
-      break;
-    case 3:
-      internal = srgb ? GL_SRGB8 : GL_RGB8;
-      format = GL_RGB;
-      break;
-    default:
-      internal = srgb ? GL_SRGB8_ALPHA8 : GL_RGBA8;
-      format = GL_RGBA;
-      break;
-  }
+                formatString("%dx%d image exceeds GL_MAX_TEXTURE_SIZE %d", image.width(), image.height(), maxSize),
+                where, "downscale the image");
+  return ok();
+}
+
+// Writes `image` into level 0 of `texture` (storage of the same size and
+// channel count) and regenerates the mipmaps when `mipmaps`.
+void writeTexturePixels(GLuint texture, const Image& image, bool mipmaps) {
+  const GLenum format = image.channels() == 1 ? GL_RED : image.channels() == 3 ? GL_RGB : GL_RGBA;
   // Rows whose stride is not a whole number of pixels cannot be described by
   // GL_UNPACK_ROW_LENGTH: those (rare, wrapped foreign memory) are packed first.
   Image packed;
@@ -973,33 +966,85 @@ Result<TextureId> SceneRenderer::addTexture(const Image& image, bool srgb) {
     packed = image.clone();
     src = &packed;
   }
-  const int levels = 1 + static_cast<int>(std::floor(std::log2(std::max(image.width(), image.height()))));
-  const TextureId id = impl_->textures.allocate<TextureId>();
-  TextureSlot& slot = impl_->textures.slots[id.index];
-  glCreateTextures(GL_TEXTURE_2D, 1, &slot.texture);
-  glTextureStorage2D(slot.texture, levels, internal, image.width(), image.height());
   glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
   glPixelStorei(GL_UNPACK_ROW_LENGTH, GLint(src->strideBytes() / src->pixelBytes()));
-  glTextureSubImage2D(slot.texture, 0, 0, 0, image.width(), image.height(), format, GL_UNSIGNED_BYTE,
-                      src->data());
+  glTextureSubImage2D(texture, 0, 0, 0, image.width(), image.height(), format, GL_UNSIGNED_BYTE, src->data());
   glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
   glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+  if (mipmaps) glGenerateTextureMipmap(texture);
+}
+
+// A new GL texture holding `image` as `options` say; 0 and an error when GL refuses.
+Result<GLuint> createTexture(const Image& image, const SceneTextureOptions& options, const char* where) {
+  const bool srgb = options.srgb;
+  const GLenum internal = image.channels() == 1   ? (srgb ? GL_SRGB8 : GL_R8)
+                          : image.channels() == 3 ? (srgb ? GL_SRGB8 : GL_RGB8)
+                                                  : (srgb ? GL_SRGB8_ALPHA8 : GL_RGBA8);
+  const int levels =
+      options.mipmaps ? 1 + static_cast<int>(std::floor(std::log2(std::max(image.width(), image.height())))) : 1;
+  GLuint texture = 0;
+  glCreateTextures(GL_TEXTURE_2D, 1, &texture);
+  glTextureStorage2D(texture, levels, internal, image.width(), image.height());
   if (image.channels() == 1) {
     const GLint swizzle[4] = {GL_RED, GL_RED, GL_RED, GL_ONE};
-    glTextureParameteriv(slot.texture, GL_TEXTURE_SWIZZLE_RGBA, swizzle);
+    glTextureParameteriv(texture, GL_TEXTURE_SWIZZLE_RGBA, swizzle);
+  } else if (options.bgr) {
+    // The bytes go up as they are; sampling swaps red and blue.
+    const GLint swizzle[4] = {GL_BLUE, GL_GREEN, GL_RED, image.channels() == 4 ? GL_ALPHA : GL_ONE};
+    glTextureParameteriv(texture, GL_TEXTURE_SWIZZLE_RGBA, swizzle);
   }
-  glGenerateTextureMipmap(slot.texture);
-  glTextureParameteri(slot.texture, GL_TEXTURE_MIN_FILTER, GL_LINEAR_MIPMAP_LINEAR);
-  glTextureParameteri(slot.texture, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
-  glTextureParameteri(slot.texture, GL_TEXTURE_WRAP_S, GL_REPEAT);
-  glTextureParameteri(slot.texture, GL_TEXTURE_WRAP_T, GL_REPEAT);
-  if (Status s = gl::check("SceneRenderer::addTexture"); !s) {
-    glDeleteTextures(1, &slot.texture);
-    slot.texture = 0;
-    impl_->textures.release(id.index);
+  writeTexturePixels(texture, image, options.mipmaps);
+  glTextureParameteri(texture, GL_TEXTURE_MIN_FILTER, options.mipmaps ? GL_LINEAR_MIPMAP_LINEAR : GL_LINEAR);
+  glTextureParameteri(texture, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTextureParameteri(texture, GL_TEXTURE_WRAP_S, GL_REPEAT);
+  glTextureParameteri(texture, GL_TEXTURE_WRAP_T, GL_REPEAT);
+  if (Status s = gl::check(where); !s) {
+    glDeleteTextures(1, &texture);
     return s.error();
   }
+  return texture;
+}
+
+}  // namespace
+
+Result<TextureId> SceneRenderer::addTexture(const Image& image, bool srgb) {
+  return addTexture(image, SceneTextureOptions{.srgb = srgb});
+}
+
+Result<TextureId> SceneRenderer::addTexture(const Image& image, const SceneTextureOptions& options) {
+  DM_DEMAND(impl_ != nullptr, "SceneRenderer used after move or default construction");
+  constexpr const char* kWhere = "SceneRenderer::addTexture";
+  if (Status s = checkTextureImage(image, impl_->maxTextureSize, kWhere); !s) return s.error();
+  auto texture = createTexture(image, options, kWhere);
+  if (!texture) return texture.error();
+  const TextureId id = impl_->textures.allocate<TextureId>();
+  TextureSlot& slot = impl_->textures.slots[id.index];
+  slot.texture = *texture;
+  slot.width = image.width();
+  slot.height = image.height();
+  slot.channels = image.channels();
+  slot.options = options;
   return id;
+}
+
+Status SceneRenderer::updateTexture(TextureId id, const Image& image) {
+  DM_DEMAND(impl_ != nullptr, "SceneRenderer used after move or default construction");
+  constexpr const char* kWhere = "SceneRenderer::updateTexture";
+  TextureSlot* slot = impl_->textures.get(id);
+  if (slot == nullptr) return staleHandle("texture", id.index, id.generation);
+  if (Status s = checkTextureImage(image, impl_->maxTextureSize, kWhere); !s) return s;
+  if (image.width() == slot->width && image.height() == slot->height && image.channels() == slot->channels) {
+    writeTexturePixels(slot->texture, image, slot->options.mipmaps);
+    return gl::check(kWhere);
+  }
+  auto texture = createTexture(image, slot->options, kWhere);
+  if (!texture) return texture.error();
+  glDeleteTextures(1, &slot->texture);
+  slot->texture = *texture;
+  slot->width = image.width();
+  slot->height = image.height();
+  slot->channels = image.channels();
+  return ok();
 }
 
 Status SceneRenderer::removeTexture(TextureId id) {

@@ -308,6 +308,24 @@ std::vector<std::string> FilterGraph::order() const {
   return names;
 }
 
+std::optional<GraphTexture> FilterGraph::texture(std::string_view name) const {
+  auto it = impl_->slots.find(name);
+  if (it == impl_->slots.end()) return std::nullopt;
+  GraphTexture t;
+  cv::Mat m;
+  graph::ColorSpace space;
+  {
+    std::lock_guard lock(it->second->mutex);
+    m = it->second->mat;
+    t.frame = it->second->frame;
+    space = it->second->space;
+  }
+  if (m.empty()) return std::nullopt;
+  t.image = graph::imageOf(m);
+  t.bgr = space == graph::ColorSpace::Bgr || space == graph::ColorSpace::Bgra;
+  return t;
+}
+
 std::optional<Image> FilterGraph::slot(std::string_view name) const {
   auto it = impl_->slots.find(name);
   if (it == impl_->slots.end()) return std::nullopt;

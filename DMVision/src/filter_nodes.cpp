@@ -1043,23 +1043,44 @@ class VideoWriterSink final : public Node {
   cv::Mat scratch_;
 };
 
+/// "slot" keeps the latest image; "texture" does the same for a renderer
+/// (FilterGraph::texture) and refuses what a texture cannot show as is.
 class SlotSink final : public Node {
  public:
-  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext& c) {
-    auto n = std::make_unique<SlotSink>();
-    auto& slot = (*c.slots)[c.name];
-    if (!slot) slot = std::make_shared<SlotState>();
-    n->slot_ = slot;
-    return n;
-  }
-  Status process(Inputs in, Value&, std::int64_t) override {
+  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext& c) { return make(c, false); }
+  static std::unique_ptr<Node> makeTexture(ConfigReader&, const NodeContext& c) { return make(c, true); }
+  Status process(Inputs in, Value&, std::int64_t frame) override {
+    const Value& v = *in[0];
+    if (texture_) {
+      const int channels = v.mat.channels();
+      const bool colour = v.space == ColorSpace::Rgb || v.space == ColorSpace::Bgr || v.space == ColorSpace::Rgba ||
+                          v.space == ColorSpace::Bgra;
+      if (v.mat.depth() != CV_8U || channels == 2 || (channels > 1 && !colour))
+        return fail(ErrorCode::InvalidArgument,
+                    formatString("a texture needs 8-bit gray, RGB or RGBA pixels; got %s%s",
+                                 cv::typeToString(v.mat.type()).c_str(),
+                                 channels > 1 && !colour ? " in a non-RGB colour space" : ""),
+                    "input", "convert first: a \"color\" node (code gray/rgb/bgr) or \"convert\" (to u8)");
+    }
     std::lock_guard lock(slot_->mutex);
-    slot_->mat = in[0]->mat;  // shares the buffer; the producer allocates anew next frame
+    slot_->mat = v.mat;  // shares the buffer; the producer allocates anew next frame
+    slot_->frame = frame;
+    slot_->space = v.space;
     return ok();
   }
 
  private:
+  static std::unique_ptr<Node> make(const NodeContext& c, bool texture) {
+    auto n = std::make_unique<SlotSink>();
+    auto& slot = (*c.slots)[c.name];
+    if (!slot) slot = std::make_shared<SlotState>();
+    n->slot_ = slot;
+    n->texture_ = texture;
+    return n;
+  }
+
   std::shared_ptr<SlotState> slot_;
+  bool texture_ = false;
 };
 
 class CallbackSink final : public Node {
@@ -1208,6 +1229,8 @@ const std::vector<KindInfo>& kindTable() {
         sink("file", {I}, "image files named by a printf pattern", {"pattern", "every"}, &FileSink::make),
         sink("video_writer", {I}, "a video file", {"path", "fps", "fourcc"}, &VideoWriterSink::make),
         sink("slot", {I}, "keeps the latest image for FilterGraph::slot(name)", {}, &SlotSink::make),
+        sink("texture", {I}, "the latest 8-bit gray/RGB/BGR(A) frame for a renderer texture (FilterGraph::texture)",
+             {}, &SlotSink::makeTexture),
         sink("callback", {}, "calls the function given to FilterGraph::setCallback", {}, &CallbackSink::make),
         sink("csv", {S}, "frame,value lines", {"path"}, &CsvSink::make),
     };

@@ -34,10 +34,12 @@ inline void ownOutput(cv::Mat& m) {
 /// empty for pixel types dm::Image has no name for.
 Image imageOf(const cv::Mat& m);
 
-/// Latest image of a "slot" sink, shared with readers on other threads.
+/// Latest image of a "slot" or "texture" sink, shared with readers on other threads.
 struct SlotState {
   mutable std::mutex mutex;
   cv::Mat mat;
+  std::int64_t frame = -1;
+  ColorSpace space = ColorSpace::Gray;
 };
 
 /// Where nodes find things owned by the graph.

@@ -8,6 +8,7 @@
 #include <dm/renderer/render_target.hpp>
 #include <dm/renderer/scene_renderer.hpp>
 
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <vector>
@@ -568,6 +569,63 @@ TEST(SceneRenderer, GrayTextureIsReplicatedToRgb) {
   auto img = s.target.readColor();
   ASSERT_TRUE(img);
   for (int c = 0; c < 3; ++c) EXPECT_NEAR(img->at<std::uint8_t>(8, 8, c), 150, 1);
+}
+
+TEST(SceneRenderer, BgrVideoTextureSamplesAsRgbAndUpdatesInPlaceOrOnResize) {
+  DM_REQUIRE_GL();
+  Scene s = makeScene(32, 32, 1);
+  auto quad = s.renderer.addMesh(makeQuad(1, 1));
+  ASSERT_TRUE(quad);
+  // A frame as OpenCV delivers it: bytes B, G, R; the left half of each row differs from the right.
+  auto frame = [](int w, int h, std::array<int, 3> leftRgb, std::array<int, 3> rightRgb) {
+    auto img = dm::Image::create(w, h, 3, dm::PixelType::U8);
+    EXPECT_TRUE(img);
+    for (int y = 0; y < h; ++y)
+      for (int x = 0; x < w; ++x) {
+        const auto& rgb = x < w / 2 ? leftRgb : rightRgb;
+        for (int c = 0; c < 3; ++c) img->at<std::uint8_t>(x, y, c) = std::uint8_t(rgb[2 - c]);
+      }
+    return *img;
+  };
+  auto expectHalves = [&](std::array<int, 3> leftRgb, std::array<int, 3> rightRgb, const char* what) {
+    auto img = s.target.readColor();
+    ASSERT_TRUE(img);
+    for (int c = 0; c < 3; ++c) {
+      EXPECT_NEAR(img->at<std::uint8_t>(8, 16, c), leftRgb[c], 1) << what << " left, channel " << c;
+      EXPECT_NEAR(img->at<std::uint8_t>(24, 16, c), rightRgb[c], 1) << what << " right, channel " << c;
+    }
+  };
+  auto tex = s.renderer.addTexture(frame(16, 16, {230, 120, 10}, {30, 60, 200}), {.bgr = true, .mipmaps = false});
+  ASSERT_TRUE(tex) << tex.error();
+  auto mat = s.renderer.addMaterial(
+      {.model = dm::ShadingModel::Unlit, .baseColor = dm::Vec4f(1, 1, 1, 1), .colorTexture = *tex});
+  ASSERT_TRUE(mat);
+  const dm::DrawItem item{.mesh = *quad, .material = *mat};
+  ASSERT_TRUE(s.renderer.render(s.target, orthoFront(1), {&item, 1}, {}, kDark));
+  expectHalves({230, 120, 10}, {30, 60, 200}, "first frame");
+
+  // The next frame, same size: rewritten in place under the same id and material.
+  ASSERT_TRUE(s.renderer.updateTexture(*tex, frame(16, 16, {90, 200, 140}, {250, 250, 0})));
+  ASSERT_TRUE(s.renderer.render(s.target, orthoFront(1), {&item, 1}, {}, kDark));
+  expectHalves({90, 200, 140}, {250, 250, 0}, "same-size update");
+
+  // A resized stream (and a strided view of it): new storage, same id, order kept.
+  auto wide = frame(40, 10, {0, 0, 255}, {255, 0, 0});
+  ASSERT_TRUE(s.renderer.updateTexture(*tex, wide.view(0, 0, 40, 10)));
+  ASSERT_TRUE(s.renderer.render(s.target, orthoFront(1), {&item, 1}, {}, kDark));
+  expectHalves({0, 0, 255}, {255, 0, 0}, "resized update");
+
+  // Bad frames fail with a message and leave the texture as it was.
+  auto f32 = dm::Image::create(40, 10, 3, dm::PixelType::F32);
+  ASSERT_TRUE(f32);
+  auto bad = s.renderer.updateTexture(*tex, *f32);
+  ASSERT_FALSE(bad);
+  EXPECT_EQ(bad.error().code, dm::ErrorCode::Unsupported);
+  EXPECT_EQ(s.renderer.updateTexture(*tex, dm::Image()).error().code, dm::ErrorCode::InvalidArgument);
+  ASSERT_TRUE(s.renderer.render(s.target, orthoFront(1), {&item, 1}, {}, kDark));
+  expectHalves({0, 0, 255}, {255, 0, 0}, "after refused updates");
+  ASSERT_TRUE(s.renderer.removeTexture(*tex));
+  EXPECT_EQ(s.renderer.updateTexture(*tex, wide).error().code, dm::ErrorCode::NotFound);
 }
 
 TEST(SceneRenderer, BadInputFailsWithAMessageAndDrawsNothing) {

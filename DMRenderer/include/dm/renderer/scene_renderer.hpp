@@ -6,7 +6,9 @@
 // dm::Mesh once (float vertices, uint32 indices; normals and per-vertex
 // tangents computed on upload when missing), updateMesh() rewrites the vertex
 // data in place while the topology stays the same (a deforming organ from
-// physics), addTexture() uploads a dm::Image (any stride) with mipmaps, and
+// physics), addTexture() uploads a dm::Image (any stride, RGB or OpenCV's BGR order)
+// with or without mipmaps, updateTexture() replaces its pixels (a video
+// frame per render frame), and
 // addMaterial() registers a material. A frame is a span of DrawItems and a
 // span of Lights: render() culls each item's world box against the view
 // frustum, picks a level of detail by projected size, sorts what is left by
@@ -58,6 +60,14 @@ struct RenderHandle {
 };
 using MeshId = RenderHandle<struct MeshTag>;
 using TextureId = RenderHandle<struct TextureTag>;
+
+/// How addTexture() reads and keeps an image.
+struct SceneTextureOptions {
+  bool srgb = true;     ///< colour data (sRGB-encoded); false for normal maps and other linear data
+  bool bgr = false;     ///< channels in B,G,R(,A) order (OpenCV's): sampled through a texture swizzle,
+                        ///< so the bytes are uploaded as they are, with no conversion
+  bool mipmaps = true;  ///< full mipmap chain (trilinear); false for per-frame video (bilinear, no regeneration)
+};
 using MaterialId = RenderHandle<struct MaterialTag>;
 
 /// How a material is lit.
@@ -204,6 +214,18 @@ class SceneRenderer {
   /// a full mipmap chain; `srgb` for colour data, false for normal maps.
   /// Unsupported for other pixel types or channel counts.
   Result<TextureId> addTexture(const Image& image, bool srgb = true);
+  /// Same, with the channel order and mipmaps chosen (see SceneTextureOptions).
+  /// @code
+  ///   auto tex = scene->addTexture(frame, {.bgr = true, .mipmaps = false});  // an OpenCV camera frame
+  /// @endcode
+  Result<TextureId> addTexture(const Image& image, const SceneTextureOptions& options);
+  /// Replaces the pixels of texture `id` with `image` (a video or camera
+  /// frame each render frame), keeping its options. Same size and channel
+  /// count: rewritten in place (one glTextureSubImage2D, mipmaps regenerated
+  /// if the texture has them); otherwise new storage under the same id, so
+  /// materials keep pointing at it. Fails like addTexture, or NotFound for a
+  /// stale id; on failure the texture keeps its old pixels.
+  Status updateTexture(TextureId id, const Image& image);
   /// Frees a texture. NotFound for a stale id.
   Status removeTexture(TextureId id);
 

@@ -14,8 +14,10 @@
 //
 // Images keep OpenCV's memory: a sink hands out a dm::Image wrapping the
 // node's output buffer with shared ownership, so a camera frame reaches a
-// renderer texture (SceneRenderer::addTexture takes any stride) with no copy and no
-// conversion. A node never overwrites a buffer someone still holds: it
+// renderer texture with no copy and no conversion: a "texture" sink keeps
+// the latest frame with its frame number and channel order
+// (FilterGraph::texture), and the render thread hands it to
+// SceneRenderer::updateTexture (any stride; BGR sampled through a swizzle). A node never overwrites a buffer someone still holds: it
 // allocates a fresh one for the next frame instead. Colour images are RGB
 // unless a source is told "order": "bgr" (OpenCV's own order, saving one
 // conversion per frame); nodes that care about the order know it.
@@ -69,6 +71,18 @@ struct GraphValue {
   const Volume* volume = nullptr;
   double scalar = 0;
   std::span<const Vec2f> points;  ///< pixel coordinates (x right, y down)
+};
+
+/// The latest frame of a "texture" sink: the image shares the producing
+/// node's buffer (it stays valid while held; the node writes its next frame
+/// elsewhere), `frame` tells a reader whether it changed, and `bgr` whether
+/// the channels are in OpenCV's B,G,R(,A) order (a source with "order":
+/// "bgr"), which SceneRenderer samples through a swizzle instead of
+/// converting (SceneTextureOptions::bgr).
+struct GraphTexture {
+  Image image;
+  std::int64_t frame = -1;
+  bool bgr = false;
 };
 
 /// Called by a "callback" sink on the graph's worker threads, once per frame
@@ -142,6 +156,16 @@ class FilterGraph {
   /// The latest image a "slot" sink received, sharing its memory; nullopt
   /// before the first frame. Thread-safe.
   std::optional<Image> slot(std::string_view name) const;
+  /// The latest frame a "texture" (or "slot") sink received, for a renderer
+  /// thread to upload once per render frame without converting it:
+  /// @code
+  ///   if (auto t = graph.texture("endoscope"); t && t->frame != shown) {
+  ///     scene.updateTexture(tex, t->image);  // texture made with {.bgr = t->bgr, .mipmaps = false}
+  ///     shown = t->frame;
+  ///   }
+  /// @endcode
+  /// nullopt before the first frame or for other names. Thread-safe.
+  std::optional<GraphTexture> texture(std::string_view name) const;
   /// Node names in topological order (after validate()).
   std::vector<std::string> order() const;
 
