@@ -8,7 +8,10 @@
 #include <tbb/task_group.h>
 
 #include <algorithm>
+#include <atomic>
 #include <mutex>
+#include <thread>
+#include <vector>
 
 namespace dm {
 
@@ -17,9 +20,29 @@ namespace detail {
 void parallelForRef(std::size_t begin, std::size_t end, std::size_t grain, RangeFnRef fn) {
   if (begin >= end) return;
   DM_ASSERT(fn.call != nullptr, "parallelFor: empty function");
+#if defined(__SANITIZE_THREAD__)
+  // oneTBB's scheduler is not built with ThreadSanitizer, which then cannot
+  // see the synchronisation inside it and reports TBB's own bookkeeping
+  // (task stealing in partitioner.h) as races. Under TSan the same chunks
+  // run on std::threads, whose start and join TSan models, so races in the
+  // caller's chunk code are still found.
+  const std::size_t step = std::max<std::size_t>(grain, 1);
+  const std::size_t chunks = (end - begin + step - 1) / step;
+  const std::size_t threads = std::min<std::size_t>(chunks, std::max(2u, std::thread::hardware_concurrency()));
+  std::atomic<std::size_t> next{0};
+  auto work = [&] {
+    for (std::size_t c = next.fetch_add(1); c < chunks; c = next.fetch_add(1))
+      fn.call(fn.object, begin + c * step, std::min(end, begin + (c + 1) * step));
+  };
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
+#else
   tbb::parallel_for(
       tbb::blocked_range<std::size_t>(begin, end, std::max<std::size_t>(grain, 1)),
       [fn](const tbb::blocked_range<std::size_t>& r) { fn.call(fn.object, r.begin(), r.end()); });
+#endif
 }
 
 }  // namespace detail

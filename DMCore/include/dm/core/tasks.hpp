@@ -5,7 +5,9 @@
 // tbb::task_arena, optionally with fewer threads) to which independent jobs
 // are submitted. Neither is for real-time threads: they allocate and block.
 // Physics, collision pre-passes and asset loading use them; the haptic loop
-// does not.
+// does not. Under ThreadSanitizer (whose view stops at oneTBB's
+// uninstrumented scheduler) parallelFor runs its chunks on std::threads
+// instead, so the concurrency tests still check the callers' chunk code.
 //
 // @code
 //   dm::parallelFor(0, n, 1024, [&](std::size_t b, std::size_t e) {
