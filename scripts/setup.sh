@@ -12,7 +12,7 @@ packages=(
   libeigen3-dev libode-dev libopencv-dev libopencv-contrib-dev libopenvdb-dev
   libboost-iostreams-dev libsundials-dev libassimp-dev libegl-dev libegl1-mesa-dev
   libgl1-mesa-dri libgbm-dev libtbb-dev libspdlog-dev libfmt-dev nlohmann-json3-dev
-  libcli11-dev libasio-dev libdcmtk-dev libpng-dev zlib1g-dev libfreetype-dev fonts-dejavu-core
+  libcli11-dev libasio-dev libssl-dev libdcmtk-dev libpng-dev zlib1g-dev libfreetype-dev fonts-dejavu-core
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # peer libraries (benchmarks and interoperability tests only)
