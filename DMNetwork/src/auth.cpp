@@ -123,7 +123,7 @@ Result<MessageAuthenticator> MessageAuthenticator::fromKey(std::span<const std::
   return MessageAuthenticator(std::move(impl));
 }
 
-Result<MessageAuthenticator> MessageAuthenticator::fromHex(std::string_view hex) {
+Result<std::vector<std::byte>> parseHexKey(std::string_view hex) {
   if (hex.size() % 2 != 0 || hex.size() < 2 * kAuthMinKeyBytes)
     return fail(ErrorCode::InvalidArgument,
                 formatString("hex key has %zu digits; need an even number, at least %zu", hex.size(),
@@ -133,14 +133,22 @@ Result<MessageAuthenticator> MessageAuthenticator::fromHex(std::string_view hex)
   std::vector<std::byte> key(hex.size() / 2);
   for (std::size_t i = 0; i < hex.size(); ++i) {
     const int v = hexValue(hex[i]);
-    if (v < 0)
+    if (v < 0) {
+      OPENSSL_cleanse(key.data(), key.size());
       return fail(ErrorCode::InvalidArgument, "hex key has a character that is not a hex digit",
                   formatString("hex key offset %zu", i), "use only 0-9, a-f, A-F");
+    }
     key[i / 2] = static_cast<std::byte>(static_cast<unsigned>(key[i / 2]) |
                                         (static_cast<unsigned>(v) << (i % 2 == 0 ? 4 : 0)));
   }
-  auto r = fromKey(key);
-  OPENSSL_cleanse(key.data(), key.size());
+  return key;
+}
+
+Result<MessageAuthenticator> MessageAuthenticator::fromHex(std::string_view hex) {
+  auto key = parseHexKey(hex);
+  if (!key) return key.error();
+  auto r = fromKey(*key);
+  OPENSSL_cleanse(key->data(), key->size());
   return r;
 }
 

@@ -61,6 +61,12 @@ using AuthTag = std::array<std::byte, kAuthTagBytes>;
 /// @endcode
 Result<AuthTag> hmacSha256(std::span<const std::byte> key, std::span<const std::byte> data);
 
+/// The bytes of a key written as hex (config files): an even number of
+/// [0-9a-fA-F], at least 32 digits (16 bytes). Fails with InvalidArgument
+/// naming the offending character's offset or the length. Wipe the result
+/// when done with it.
+Result<std::vector<std::byte>> parseHexKey(std::string_view hex);
+
 /// Outcome of MessageAuthenticator::verify().
 enum class AuthVerdict : std::uint8_t {
   Accepted,  ///< tag valid, sequence number new
