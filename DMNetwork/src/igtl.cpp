@@ -4,6 +4,8 @@
 #include <dm/network/crc.hpp>
 
 #include <algorithm>
+#include <array>
+#include <bit>
 #include <cmath>
 #include <cstring>
 
@@ -213,13 +215,20 @@ Result<MessageView> decodeMessage(std::span<const std::byte> bytes, const Decode
 
 Result<std::vector<std::byte>> encodeRaw(const Envelope& env, std::string_view type,
                                          std::span<const std::byte> content) {
+  std::vector<std::byte> out;
+  if (auto s = appendRaw(env, type, content, out); !s) return std::move(s).error();
+  return out;
+}
+
+Status appendRaw(const Envelope& env, std::string_view type, std::span<const std::byte> content,
+                 std::vector<std::byte>& out) {
   if (env.version < 1 || env.version > 3)
     return fail(ErrorCode::InvalidArgument,
                 formatString("header version %u; OpenIGTLink has 1, 2 and 3", env.version),
                 "OpenIGTLink encoder", "use 1 for v1/v2 peers, 2 or 3 for metadata");
   if (type.empty())
     return fail(ErrorCode::InvalidArgument, "empty message type", "OpenIGTLink encoder", "name the type");
-  std::vector<std::byte> out;
+  const std::size_t start = out.size();
   std::size_t metaBytes = 0;
   if (env.version >= 2) {
     if (env.metadata.size() > 0xFFFF)
@@ -242,11 +251,16 @@ Result<std::vector<std::byte>> encodeRaw(const Envelope& env, std::string_view t
   const std::size_t metaHeader = env.version >= 2 ? 2 + 8 * env.metadata.size() : 0;
   const std::size_t body =
       (env.version >= 2 ? kExtendedHeaderBytes : 0) + content.size() + metaHeader + metaBytes;
-  out.reserve(kHeaderBytes + body);
+  out.reserve(start + kHeaderBytes + body);
   putBe16(out, env.version);
-  if (auto s = putFixedString(out, type, kTypeNameBytes, "message type"); !s) return std::move(s).error();
-  if (auto s = putFixedString(out, env.deviceName, kDeviceNameBytes, "device name"); !s)
-    return std::move(s).error();
+  if (auto s = putFixedString(out, type, kTypeNameBytes, "message type"); !s) {
+    out.resize(start);
+    return s;
+  }
+  if (auto s = putFixedString(out, env.deviceName, kDeviceNameBytes, "device name"); !s) {
+    out.resize(start);
+    return s;
+  }
   putBe64(out, env.timestamp);
   putBe64(out, body);
   putBe64(out, 0);  // CRC, filled below
@@ -269,10 +283,10 @@ Result<std::vector<std::byte>> encodeRaw(const Envelope& env, std::string_view t
       putBytes(out, e.value);
     }
   }
-  const std::uint64_t crc = crc64Ecma(std::span<const std::byte>(out).subspan(kHeaderBytes));
+  const std::uint64_t crc = crc64Ecma(std::span<const std::byte>(out).subspan(start + kHeaderBytes));
   for (int i = 0; i < 8; ++i)
-    out[50 + static_cast<std::size_t>(i)] = static_cast<std::byte>((crc >> (56 - 8 * i)) & 0xFF);
-  return out;
+    out[start + 50 + static_cast<std::size_t>(i)] = static_cast<std::byte>((crc >> (56 - 8 * i)) & 0xFF);
+  return ok();
 }
 
 // ---- TRANSFORM ------------------------------------------------------------
@@ -311,20 +325,27 @@ Result<Isometry3> decodeTransform(const MessageView& m) {
   return iso;
 }
 
-Result<std::vector<std::byte>> encodeTransform(const Envelope& env, const Affine3& transform) {
-  std::vector<std::byte> c;
-  c.reserve(48);
+Status appendTransform(const Envelope& env, const Affine3& transform, std::vector<std::byte>& out) {
+  std::array<std::byte, 48> c;
+  auto put = [&c](std::size_t at, double v) {
+    const auto bits = std::bit_cast<std::uint32_t>(static_cast<float>(v));
+    for (std::size_t i = 0; i < 4; ++i) c[at + i] = static_cast<std::byte>((bits >> (24 - 8 * i)) & 0xFFu);
+  };
   for (int col = 0; col < 3; ++col)
-    for (int r = 0; r < 3; ++r) putF32(c, transform.linear()(r, col));
-  for (int r = 0; r < 3; ++r) putF32(c, transform.translation()(r) * kMmPerMetre);
-  return encodeRaw(env, "TRANSFORM", c);
+    for (int r = 0; r < 3; ++r) put(static_cast<std::size_t>(12 * col + 4 * r), transform.linear()(r, col));
+  for (int r = 0; r < 3; ++r)
+    put(static_cast<std::size_t>(36 + 4 * r), transform.translation()(r) * kMmPerMetre);
+  return appendRaw(env, "TRANSFORM", c, out);
+}
+
+Result<std::vector<std::byte>> encodeTransform(const Envelope& env, const Affine3& transform) {
+  std::vector<std::byte> out;
+  if (auto s = appendTransform(env, transform, out); !s) return std::move(s).error();
+  return out;
 }
 
 Result<std::vector<std::byte>> encodeTransform(const Envelope& env, const Isometry3& transform) {
-  Affine3 a = Affine3::Identity();
-  a.linear() = transform.linear();
-  a.translation() = transform.translation();
-  return encodeTransform(env, a);
+  return encodeTransform(env, Affine3(transform.matrix()));
 }
 
 // ---- POSITION -------------------------------------------------------------

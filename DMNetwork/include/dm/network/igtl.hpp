@@ -123,6 +123,10 @@ Result<MessageView> decodeMessage(std::span<const std::byte> bytes, const Decode
 /// oversized metadata. Used by all typed encoders below.
 Result<std::vector<std::byte>> encodeRaw(const Envelope& env, std::string_view type,
                                          std::span<const std::byte> content);
+/// Same, appended to `out` (a buffer reused from message to message:
+/// no allocation once its capacity suffices). On failure `out` is unchanged.
+Status appendRaw(const Envelope& env, std::string_view type, std::span<const std::byte> content,
+                 std::vector<std::byte>& out);
 
 // ---- TRANSFORM -----------------------------------------------------------
 
@@ -144,6 +148,14 @@ Result<Isometry3> decodeTransform(const MessageView& m);
 Result<std::vector<std::byte>> encodeTransform(const Envelope& env, const Affine3& transform);
 /// TRANSFORM message from a rigid transform (translation in metres).
 Result<std::vector<std::byte>> encodeTransform(const Envelope& env, const Isometry3& transform);
+/// TRANSFORM message appended to `out` (see appendRaw): the form for
+/// streaming a tracked tool at a high rate through one reused buffer.
+/// @code
+///   buffer.clear();
+///   if (dm::igtl::appendTransform({.deviceName = "Probe"}, tool.matrix(), buffer))
+///   (void)client->send(buffer);
+/// @endcode
+Status appendTransform(const Envelope& env, const Affine3& transform, std::vector<std::byte>& out);
 
 // ---- POSITION ------------------------------------------------------------
 
