@@ -211,8 +211,7 @@ TEST(RealTimeLoopConcurrency, LoopThreadDoesNotAllocate) {
   // The counter works: allocating on a marked thread is seen.
   std::thread([] {
     dm::test::tCountAllocations = true;
-    auto* p = new int(3);
-    delete p;
+    dm::test::allocateOnce();
   }).join();
   EXPECT_EQ(dm::test::countedAllocations(), before + 1);
 }

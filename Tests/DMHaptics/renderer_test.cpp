@@ -66,11 +66,9 @@ TEST(IsRigidPose, AcceptsRotationsAndRefusesScalesShearsMirrorsAndNaN) {
 TEST(AllocCounter, CountsAllocationsOnFlaggedThreadsOnly) {
   const auto before = test::countedAllocations();
   test::tCountAllocations = true;
-  auto* p = new int(3);
+  test::allocateOnce();
   test::tCountAllocations = false;
-  delete p;
-  auto* q = new int(4);  // not counted
-  delete q;
+  test::allocateOnce();  // not counted
   EXPECT_EQ(test::countedAllocations(), before + 1);
 }
 
