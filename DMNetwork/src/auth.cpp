@@ -13,23 +13,6 @@ namespace dm {
 
 namespace {
 
-void putLe(std::byte* p, std::uint64_t v, int n) {
-  for (int i = 0; i < n; ++i) p[i] = static_cast<std::byte>((v >> (8 * i)) & 0xFFu);
-}
-
-// Header bytes [0, 24) exactly as appendMessage() writes them.
-std::array<std::byte, 24> headerPrefix(const MessageHeader& h, std::uint32_t lengthField) {
-  std::array<std::byte, 24> b{};
-  std::memcpy(b.data(), kMessageMagic.data(), kMessageMagic.size());
-  b[4] = std::byte{kMessageVersion};
-  b[5] = std::byte{h.flags};
-  putLe(b.data() + 6, h.type, 2);
-  putLe(b.data() + 8, h.sequence, 4);
-  putLe(b.data() + 12, lengthField, 4);
-  putLe(b.data() + 16, static_cast<std::uint64_t>(h.timestampNs), 8);
-  return b;
-}
-
 int hexValue(char c) {
   if (c >= '0' && c <= '9') return c - '0';
   if (c >= 'a' && c <= 'f') return c - 'a' + 10;
@@ -154,7 +137,7 @@ Result<MessageAuthenticator> MessageAuthenticator::fromHex(std::string_view hex)
 
 bool MessageAuthenticator::computeTag(const MessageHeader& header, std::uint32_t lengthField,
                                       std::span<const std::byte> payload, AuthTag& out) noexcept {
-  const auto prefix = headerPrefix(header, lengthField);
+  const auto prefix = messageHeaderPrefix(header, lengthField);
   EVP_MD_CTX* c = impl_->ctx;
   std::array<unsigned char, kAuthTagBytes> inner{};
   unsigned int n = 0;

@@ -4,6 +4,7 @@
 #include <openssl/crypto.h>
 #include <openssl/rand.h>
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -92,38 +93,21 @@ struct Session {
   }
 };
 
-// Atomic counters behind CommandStats.
+// Atomic counters behind CommandStats, one per refusal reason.
 struct Counters {
-  std::atomic<std::uint64_t> accepted{0}, noTag{0}, badTag{0}, replayed{0}, stale{0}, malformed{0},
-      handshakes{0};
+  std::atomic<std::uint64_t> accepted{0}, handshakes{0};
+  std::array<std::atomic<std::uint64_t>, 5> refused{};
 
-  void refuse(CommandRefusal r) {
-    switch (r) {
-      case CommandRefusal::NoTag:
-        ++noTag;
-        break;
-      case CommandRefusal::BadTag:
-        ++badTag;
-        break;
-      case CommandRefusal::Replayed:
-        ++replayed;
-        break;
-      case CommandRefusal::Stale:
-        ++stale;
-        break;
-      case CommandRefusal::Malformed:
-        ++malformed;
-        break;
-    }
-  }
+  void refuse(CommandRefusal r) { ++refused[static_cast<std::size_t>(r)]; }
   CommandStats snapshot() const {
+    auto n = [this](CommandRefusal r) { return refused[static_cast<std::size_t>(r)].load(); };
     CommandStats s;
     s.accepted = accepted;
-    s.noTag = noTag;
-    s.badTag = badTag;
-    s.replayed = replayed;
-    s.stale = stale;
-    s.malformed = malformed;
+    s.noTag = n(CommandRefusal::NoTag);
+    s.badTag = n(CommandRefusal::BadTag);
+    s.replayed = n(CommandRefusal::Replayed);
+    s.stale = n(CommandRefusal::Stale);
+    s.malformed = n(CommandRefusal::Malformed);
     s.handshakes = handshakes;
     return s;
   }
@@ -486,7 +470,6 @@ struct CommandClient::Impl {
       log::warn("CommandClient %s: could not sign the hello reply", describe(peer).c_str());
       return;
     }
-    session.seen.reset();
     sendHelloReply(std::move(wire));
   }
 

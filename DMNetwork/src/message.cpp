@@ -75,6 +75,20 @@ Result<MessageView> finish(std::span<const std::byte> msg, std::uint32_t length,
 
 }  // namespace
 
+std::array<std::byte, 24> messageHeaderPrefix(const MessageHeader& header,
+                                              std::uint32_t payloadBytes) noexcept {
+  static_assert(kOffChecksum == 24);
+  std::array<std::byte, 24> h{};
+  std::memcpy(h.data(), kMessageMagic.data(), kMessageMagic.size());
+  h[kOffVersion] = std::byte{kMessageVersion};
+  h[kOffFlags] = std::byte{header.flags};
+  putLe(h.data() + kOffType, header.type, 2);
+  putLe(h.data() + kOffSeq, header.sequence, 4);
+  putLe(h.data() + kOffLength, payloadBytes, 4);
+  putLe(h.data() + kOffTime, static_cast<std::uint64_t>(header.timestampNs), 8);
+  return h;
+}
+
 Status appendMessage(const MessageHeader& header, std::span<const std::byte> payload,
                      std::vector<std::byte>& out, const MessageLimits& limits) {
   const std::size_t limit =
@@ -86,13 +100,8 @@ Status appendMessage(const MessageHeader& header, std::span<const std::byte> pay
   const std::size_t start = out.size();
   out.resize(start + kMessageHeaderBytes);
   std::byte* h = out.data() + start;
-  std::memcpy(h, kMessageMagic.data(), kMessageMagic.size());
-  h[kOffVersion] = std::byte{kMessageVersion};
-  h[kOffFlags] = std::byte{header.flags};
-  putLe(h + kOffType, header.type, 2);
-  putLe(h + kOffSeq, header.sequence, 4);
-  putLe(h + kOffLength, payload.size(), 4);
-  putLe(h + kOffTime, static_cast<std::uint64_t>(header.timestampNs), 8);
+  const auto prefix = messageHeaderPrefix(header, static_cast<std::uint32_t>(payload.size()));
+  std::memcpy(h, prefix.data(), prefix.size());
   putLe(h + kOffChecksum, checksumOf(h, payload), 4);
   out.insert(out.end(), payload.begin(), payload.end());
   return ok();

@@ -68,6 +68,12 @@ struct MessageView {
   std::span<const std::byte> payload;
 };
 
+/// Header bytes [0, 24) as appendMessage() writes them for `header` and a
+/// payload of `payloadBytes` — everything the checksum (and an
+/// authentication tag, dm/network/auth.hpp) covers before the payload. O(1).
+std::array<std::byte, 24> messageHeaderPrefix(const MessageHeader& header,
+                                              std::uint32_t payloadBytes) noexcept;
+
 /// Appends header + payload to `out` (no allocation when `out` has the
 /// capacity). Fails with InvalidArgument when the payload exceeds
 /// limits.maxPayloadBytes. O(n).
