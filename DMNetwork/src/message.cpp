@@ -99,12 +99,20 @@ Status appendMessage(const MessageHeader& header, std::span<const std::byte> pay
                 "appendMessage", "split the payload or raise MessageLimits::maxPayloadBytes");
   const std::size_t start = out.size();
   out.resize(start + kMessageHeaderBytes);
-  std::byte* h = out.data() + start;
-  const auto prefix = messageHeaderPrefix(header, static_cast<std::uint32_t>(payload.size()));
-  std::memcpy(h, prefix.data(), prefix.size());
-  putLe(h + kOffChecksum, checksumOf(h, payload), 4);
   out.insert(out.end(), payload.begin(), payload.end());
+  sealMessage(header, std::span<std::byte>(out).subspan(start), payload.size());
   return ok();
+}
+
+std::size_t sealMessage(const MessageHeader& header, std::span<std::byte> out, std::size_t payloadBytes) noexcept {
+  if (payloadBytes > std::numeric_limits<std::uint32_t>::max() || out.size() < kMessageHeaderBytes ||
+      out.size() - kMessageHeaderBytes < payloadBytes)
+    return 0;
+  std::byte* h = out.data();
+  const auto prefix = messageHeaderPrefix(header, static_cast<std::uint32_t>(payloadBytes));
+  std::memcpy(h, prefix.data(), prefix.size());
+  putLe(h + kOffChecksum, checksumOf(h, out.subspan(kMessageHeaderBytes, payloadBytes)), 4);
+  return kMessageHeaderBytes + payloadBytes;
 }
 
 Result<std::vector<std::byte>> encodeMessage(const MessageHeader& header, std::span<const std::byte> payload,

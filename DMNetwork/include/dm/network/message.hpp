@@ -74,6 +74,13 @@ struct MessageView {
 std::array<std::byte, 24> messageHeaderPrefix(const MessageHeader& header,
                                               std::uint32_t payloadBytes) noexcept;
 
+/// Completes a message whose payload is already in place at
+/// `out[28, 28 + payloadBytes)`: writes the header and its checksum into
+/// `out[0, 28)`. Returns 28 + payloadBytes, or 0 when `out` is shorter than
+/// that or the payload is 2^32 bytes or more. No allocation: the real-time
+/// senders (dm/network/teleop.hpp) build datagrams on the stack with it. O(n).
+std::size_t sealMessage(const MessageHeader& header, std::span<std::byte> out, std::size_t payloadBytes) noexcept;
+
 /// Appends header + payload to `out` (no allocation when `out` has the
 /// capacity). Fails with InvalidArgument when the payload exceeds
 /// limits.maxPayloadBytes. O(n).

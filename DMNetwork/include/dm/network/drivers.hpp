@@ -1,0 +1,53 @@
+// dm/network/drivers.hpp — device drivers that reach a device over the network.
+//
+// "net-haptic" (kind "haptic-device"): the host side of the tele-operation
+// stream (dm/network/teleop.hpp). It makes a haptic device attached to another
+// machine — served there by a TeleopDevice with a TeleopDeviceBridge, e.g. the
+// `dm-teleop-device` tool — look like a local one: dm::HapticDevice opens it
+// like any driver, with the same clamping, NaN guard, deadline fade and
+// loss/reconnect handling. open() asks the device side for its identity and
+// limits (Hello → Info) and fails with a message naming the address when
+// nothing answers. read_state reports the device lost when no state arrived
+// within `timeout`; reconnect sends Hello again and succeeds once states flow.
+// Each instance owns its network thread.
+//
+// Parameters:
+//   device               "address:port" of the device side (required; numeric)
+//   local                "address:port" to bind                (0.0.0.0:0)
+//   timeout              s without a state before "lost"       (0.1)
+//   connect_timeout      s open() waits for the device's Info  (2)
+//   synchronized_clocks  0 | 1: clocks are synchronized (same host, PTP) (0)
+//
+// The driver is compiled into DM::Network and registered through
+// PluginLinker::addStatic (same ABI check and init protocol as a plugin).
+//
+// @code
+//   dm::FactoryRegistry registry;  dm::PluginLinker linker(registry);
+//   dm::registerNetworkDrivers(linker);
+//   auto stylus = dm::HapticDevice::open(registry, "net-haptic", {{"device", "192.168.1.20:47000"}});
+// @endcode
+#pragma once
+
+#include <dm/core/plugin.hpp>
+#include <dm/core/result.hpp>
+#include <dm/network/io_thread.hpp>
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace dm {
+
+/// Names of the network drivers, as plugin names (sorted).
+std::vector<std::string> networkDriverNames();
+
+/// Registers every network driver with `linker` (addStatic). Fails like
+/// PluginLinker::addStatic, e.g. when a plugin of the same name is loaded.
+Status registerNetworkDrivers(PluginLinker& linker);
+
+/// Splits "address:port" (IPv6 as "[::1]:port"); InvalidArgument naming
+/// `field` when the port is missing or not 1..65535 (0 allowed with
+/// `allowZeroPort`).
+Result<SocketAddress> parseEndpoint(std::string_view text, std::string_view field, bool allowZeroPort = false);
+
+}  // namespace dm

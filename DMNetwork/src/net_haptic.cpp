@@ -1,0 +1,190 @@
+// net-haptic — a haptic device on another machine, through the tele-operation
+// stream (kind "haptic-device"); see dm/network/drivers.hpp for what it does
+// and its parameters. The C vtable wraps a dm::TeleopHost on a network
+// thread of its own.
+#include <dm/core/plugin_abi.h>
+#include <dm/io/device_abi.h>
+#include <dm/network/drivers.hpp>
+#include <dm/network/teleop.hpp>
+
+#include <charconv>
+#include <memory>
+#include <new>
+
+#include "driver_params.hpp"
+
+namespace dm {
+
+Result<SocketAddress> parseEndpoint(std::string_view text, std::string_view field, bool allowZeroPort) {
+  const auto bad = [&](const char* why) {
+    return fail(ErrorCode::InvalidArgument,
+                formatString("%.*s: '%.*s' %s", static_cast<int>(field.size()), field.data(),
+                             static_cast<int>(text.size()), text.data(), why),
+                std::string(field), "write \"address:port\", e.g. \"192.168.1.20:47000\" or \"[::1]:47000\"");
+  };
+  const std::size_t colon = text.rfind(':');
+  if (colon == std::string_view::npos || colon == 0) return bad("has no \"address:port\" form");
+  std::string_view address = text.substr(0, colon);
+  if (address.size() >= 2 && address.front() == '[' && address.back() == ']')
+    address = address.substr(1, address.size() - 2);
+  const std::string_view portText = text.substr(colon + 1);
+  unsigned port = 0;
+  const auto [end, ec] = std::from_chars(portText.data(), portText.data() + portText.size(), port);
+  if (ec != std::errc() || end != portText.data() + portText.size() || port > 65535 ||
+      (port == 0 && !allowZeroPort))
+    return bad(allowZeroPort ? "has no port 0..65535" : "has no port 1..65535");
+  return SocketAddress{std::string(address), static_cast<std::uint16_t>(port)};
+}
+
+}  // namespace dm
+
+namespace {
+
+using dm::driver::ParamReader;
+
+// One driver instance; DmDevice* is this type behind the C boundary.
+struct NetHaptic {
+  dm::IoThread thread{"dm-net-haptic"};
+  std::unique_ptr<dm::TeleopHost> host;
+  dm::HapticInfo info;
+  std::int64_t timeoutNs = 100'000'000;
+
+  ~NetHaptic() {
+    if (host) host->close();
+    host.reset();
+    thread.stop();
+  }
+};
+
+NetHaptic* self(DmDevice* d) { return reinterpret_cast<NetHaptic*>(d); }
+
+DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
+  ParamReader r(params, count, error, errorSize);
+  r.onlyKnown({"device", "local", "timeout", "connect_timeout", "synchronized_clocks"});
+  const double timeout = r.number("timeout", 0.1, 1e-3, 60.0);
+  const double connectTimeout = r.number("connect_timeout", 2.0, 0.0, 600.0);
+  const bool synchronized = r.number("synchronized_clocks", 0.0, 0.0, 1.0) != 0.0;
+  const char* deviceText = r.find("device");
+  if (r.ok() && !deviceText) r.failf("parameter 'device' is required: \"address:port\" of the device side");
+  if (!r.ok()) return nullptr;
+  auto peer = dm::parseEndpoint(deviceText, "parameter 'device'");
+  if (!peer) {
+    r.failf("%s", peer.error().message().c_str());
+    return nullptr;
+  }
+  const char* localText = r.find("local");
+  auto local = dm::parseEndpoint(localText ? localText : "0.0.0.0:0", "parameter 'local'", true);
+  if (!local) {
+    r.failf("%s", local.error().message().c_str());
+    return nullptr;
+  }
+  auto d = std::unique_ptr<NetHaptic>(new (std::nothrow) NetHaptic());
+  if (!d) {
+    r.failf("out of memory");
+    return nullptr;
+  }
+  d->timeoutNs = static_cast<std::int64_t>(timeout * 1e9);
+  if (auto s = d->thread.start(); !s) {
+    r.failf("%s", s.error().message().c_str());
+    return nullptr;
+  }
+  auto host = dm::TeleopHost::open(d->thread, {.local = *local,
+                                               .peer = *peer,
+                                               .timeoutSeconds = timeout,
+                                               .clocksSynchronized = synchronized});
+  if (!host) {
+    r.failf("%s", host.error().message().c_str());
+    return nullptr;
+  }
+  d->host = std::move(*host);
+  auto info = d->host->waitForDevice(std::chrono::milliseconds(static_cast<long long>(connectTimeout * 1e3)));
+  if (!info) {
+    r.failf("%s", info.error().message().c_str());
+    return nullptr;
+  }
+  d->info = std::move(*info);
+  return reinterpret_cast<DmDevice*>(d.release());
+}
+
+void netClose(DmDevice* d) { delete self(d); }
+
+int netInfo(DmDevice* dev, DmHapticInfo* out) {
+  const dm::HapticInfo& info = self(dev)->info;
+  *out = DmHapticInfo{};
+  dm::driver::copyField(out->identity.driver, "net-haptic");
+  dm::driver::copyField(out->identity.vendor, info.vendor.c_str());
+  dm::driver::copyField(out->identity.model, info.model.c_str());
+  dm::driver::copyField(out->identity.serial, info.serial.c_str());
+  out->capabilities = info.capabilities;
+  out->button_count = info.buttonCount;
+  for (int i = 0; i < 3; ++i) {
+    out->workspace_min[i] = info.workspace.min()[i];
+    out->workspace_max[i] = info.workspace.max()[i];
+  }
+  out->max_force = info.maxForce;
+  out->max_torque = info.maxTorque;
+  out->max_stiffness = info.maxStiffness;
+  out->max_damping = info.maxDamping;
+  out->servo_rate_hz = info.servoRateHz;
+  return DM_DEVICE_OK;
+}
+
+int netRead(DmDevice* dev, int64_t now, DmHapticState* out) {
+  NetHaptic* d = self(dev);
+  dm::HapticState s;
+  std::int64_t age = 0;
+  if (!d->host->latestState(s, &age) || age > d->timeoutNs) return DM_DEVICE_ERROR_LOST;
+  *out = DmHapticState{};
+  out->time_ns = now;
+  for (int i = 0; i < 3; ++i) {
+    out->position[i] = s.position[i];
+    out->linear_velocity[i] = s.linearVelocity[i];
+    out->angular_velocity[i] = s.angularVelocity[i];
+  }
+  out->orientation[0] = s.orientation.w();
+  out->orientation[1] = s.orientation.x();
+  out->orientation[2] = s.orientation.y();
+  out->orientation[3] = s.orientation.z();
+  out->buttons = s.buttons;
+  return DM_DEVICE_OK;
+}
+
+int netWrite(DmDevice* dev, int64_t /*now*/, const double force[3], const double torque[3]) {
+  NetHaptic* d = self(dev);
+  if (!d->host->linkUp()) return DM_DEVICE_ERROR_LOST;
+  dm::HapticOutput out;
+  out.force = dm::Vec3(force[0], force[1], force[2]);
+  out.torque = dm::Vec3(torque[0], torque[1], torque[2]);
+  return d->host->sendForce(out) ? DM_DEVICE_OK : DM_DEVICE_ERROR_IO;
+}
+
+int netReconnect(DmDevice* dev, int64_t /*now*/) {
+  NetHaptic* d = self(dev);
+  if (d->host->linkUp()) return DM_DEVICE_OK;
+  d->host->sendHello();  // a restarted device side learns this host again
+  return DM_DEVICE_ERROR_LOST;
+}
+
+const DmHapticDeviceVTable kNetHaptic = {netOpen, netClose, netInfo, netRead, netWrite, netReconnect};
+
+int netInit(const DmHostApi* host) {
+  return host->register_factory(host->ctx, DM_HAPTIC_DEVICE_KIND, "net-haptic", DM_HAPTIC_DEVICE_KIND_ABI_VERSION,
+                                &kNetHaptic);
+}
+
+const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "net-haptic", "1.0", netInit, nullptr};
+
+const DmPluginInfo* netEntry(void) { return &kInfo; }
+
+}  // namespace
+
+namespace dm {
+
+std::vector<std::string> networkDriverNames() { return {"net-haptic"}; }
+
+Status registerNetworkDrivers(PluginLinker& linker) {
+  if (auto r = linker.addStatic(&netEntry); !r) return std::move(r).error();
+  return ok();
+}
+
+}  // namespace dm

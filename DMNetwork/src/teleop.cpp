@@ -1,0 +1,809 @@
+// teleop.cpp — the tele-operation device stream (dm/network/teleop.hpp):
+// payload codec, the two ends on one shared implementation, the device
+// bridge.
+//
+// Threads: the network thread receives, decodes, classifies and publishes
+// (TripleBuffer for the newest value, a sequence lock for the echo and the
+// peer address); the servo thread sends with one non-blocking sendto on the
+// socket's descriptor. The descriptor stays open until the implementation
+// is destroyed, so a send racing close() never reaches a reused descriptor.
+#include <dm/core/log.hpp>
+#include <dm/core/rt_loop.hpp>
+#include <dm/network/teleop.hpp>
+
+#include <sys/socket.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstring>
+#include <limits>
+#include <mutex>
+#include <type_traits>
+
+#include "io_thread_impl.hpp"
+
+namespace dm {
+namespace {
+
+using asio::ip::udp;
+
+// ---- payload codec ------------------------------------------------------------
+
+void putU32(std::byte* p, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::byte>((v >> (8 * i)) & 0xFFu);
+}
+void putU64(std::byte* p, std::uint64_t v) {
+  for (int i = 0; i < 8; ++i) p[i] = static_cast<std::byte>((v >> (8 * i)) & 0xFFu);
+}
+void putF64(std::byte* p, double v) { putU64(p, std::bit_cast<std::uint64_t>(v)); }
+std::uint32_t getU32(const std::byte* p) {
+  std::uint32_t v = 0;
+  for (int i = 0; i < 4; ++i) v |= std::to_integer<std::uint32_t>(p[i]) << (8 * i);
+  return v;
+}
+std::uint64_t getU64(const std::byte* p) {
+  std::uint64_t v = 0;
+  for (int i = 0; i < 8; ++i) v |= std::to_integer<std::uint64_t>(p[i]) << (8 * i);
+  return v;
+}
+double getF64(const std::byte* p) { return std::bit_cast<double>(getU64(p)); }
+
+// Writes n doubles from `v` at p; returns the next position.
+std::byte* putVec(std::byte* p, const double* v, int n) {
+  for (int i = 0; i < n; ++i) putF64(p + 8 * i, v[i]);
+  return p + 8 * n;
+}
+
+std::byte* putEcho(std::byte* p, const TeleopEcho& e) {
+  putU64(p, static_cast<std::uint64_t>(e.peerSendNs));
+  putU64(p + 8, static_cast<std::uint64_t>(e.holdNs));
+  return p + 16;
+}
+
+// Reads doubles and checks them; names the first bad one.
+class Reader {
+ public:
+  Reader(std::span<const std::byte> payload, const char* type) : p_(payload), type_(type) {}
+  double f64() {
+    const double v = getF64(p_.data() + at_);
+    if (ok_ && !std::isfinite(v)) failAt("is not finite");
+    at_ += 8;
+    return v;
+  }
+  Vec3 vec3() {
+    Vec3 v;
+    for (int i = 0; i < 3; ++i) v[i] = f64();
+    return v;
+  }
+  std::int64_t i64() {
+    at_ += 8;
+    return static_cast<std::int64_t>(getU64(p_.data() + at_ - 8));
+  }
+  std::uint32_t u32() {
+    at_ += 4;
+    return getU32(p_.data() + at_ - 4);
+  }
+  std::string str64() {
+    const char* s = reinterpret_cast<const char*>(p_.data() + at_);
+    const std::size_t n = strnlen(s, 64);
+    if (ok_ && n == 64) failAt("string field has no terminating NUL within 64 bytes");
+    at_ += 64;
+    return std::string(s, std::min<std::size_t>(n, 63));
+  }
+  void failAt(const char* what) {
+    if (!ok_) return;
+    ok_ = false;
+    error_ = formatString("%s payload byte %zu: %s", type_, at_, what);
+    errorAt_ = at_;
+  }
+  bool ok() const { return ok_; }
+  std::size_t offset() const { return at_; }
+  Error error() const {
+    return Error{ErrorCode::Parse, error_, formatString("datagram byte %zu", kMessageHeaderBytes + errorAt_),
+                 "the peer sent a malformed tele-operation message; it was dropped"};
+  }
+
+ private:
+  std::span<const std::byte> p_;
+  const char* type_;
+  std::size_t at_ = 0, errorAt_ = 0;
+  bool ok_ = true;
+  std::string error_;
+};
+
+std::size_t payloadBytesOf(std::uint16_t type) {
+  switch (type) {
+    case kTeleopStateType:
+      return kTeleopStateBytes;
+    case kTeleopForceType:
+      return kTeleopForceBytes;
+    case kTeleopHelloType:
+      return kTeleopHelloBytes;
+    case kTeleopInfoType:
+      return kTeleopInfoBytes;
+    default:
+      return 0;
+  }
+}
+
+const char* typeName(std::uint16_t type) {
+  switch (type) {
+    case kTeleopStateType:
+      return "State";
+    case kTeleopForceType:
+      return "Force";
+    case kTeleopHelloType:
+      return "Hello";
+    case kTeleopInfoType:
+      return "Info";
+    default:
+      return "unknown";
+  }
+}
+
+// ---- lock-free exchange of small values ------------------------------------
+
+/// A sequence lock over a trivially copyable T: one writer, any number of
+/// readers, neither blocks nor allocates (a reader retries while a write is
+/// in progress, which takes a few nanoseconds). The value lives in relaxed
+/// atomic words, so concurrent access is race-free by the memory model.
+template <class T>
+class SeqLocked {
+  static_assert(std::is_trivially_copyable_v<T>);
+  static constexpr std::size_t kWords = (sizeof(T) + 7) / 8;
+
+ public:
+  void store(const T& value) noexcept {
+    std::array<std::uint64_t, kWords> w{};
+    std::memcpy(w.data(), &value, sizeof(T));
+    const std::uint32_t s = seq_.load(std::memory_order_relaxed);
+    seq_.store(s + 1, std::memory_order_relaxed);
+    std::atomic_thread_fence(std::memory_order_release);
+    for (std::size_t i = 0; i < kWords; ++i) words_[i].store(w[i], std::memory_order_relaxed);
+    seq_.store(s + 2, std::memory_order_release);
+  }
+  /// False (and `out` untouched) before the first store().
+  bool load(T& out) const noexcept {
+    std::array<std::uint64_t, kWords> w{};
+    for (;;) {
+      const std::uint32_t s1 = seq_.load(std::memory_order_acquire);
+      if (s1 & 1u) continue;
+      for (std::size_t i = 0; i < kWords; ++i) w[i] = words_[i].load(std::memory_order_relaxed);
+      std::atomic_thread_fence(std::memory_order_acquire);
+      if (seq_.load(std::memory_order_relaxed) != s1) continue;
+      if (s1 == 0) return false;
+      std::memcpy(static_cast<void*>(&out), w.data(), sizeof(T));
+      return true;
+    }
+  }
+
+ private:
+  std::atomic<std::uint32_t> seq_{0};
+  std::array<std::atomic<std::uint64_t>, kWords> words_{};
+};
+
+struct PeerAddress {
+  sockaddr_storage address{};
+  socklen_t length = 0;
+};
+
+struct EchoSource {
+  std::int64_t peerSendNs = 0;  // the peer's send timestamp of the newest message
+  std::int64_t receivedNs = 0;  // when it arrived, our clock
+};
+
+template <class T>
+struct Stamped {
+  T value{};
+  std::int64_t receivedNs = 0;
+  bool valid = false;
+};
+
+// CLOCK_MONOTONIC, as dm::RealClock.
+std::int64_t nowNs() noexcept {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+PeerAddress toPeer(const udp::endpoint& e) {
+  PeerAddress p;
+  std::memcpy(&p.address, e.data(), e.size());
+  p.length = static_cast<socklen_t>(e.size());
+  return p;
+}
+
+LatencyStats summarize(const LatencyHistogram& h, double last) {
+  LatencyStats s;
+  s.count = h.count();
+  if (s.count == 0) return s;
+  s.last = last;
+  s.min = 1e-9 * static_cast<double>(h.min());
+  s.max = 1e-9 * static_cast<double>(h.max());
+  s.mean = 1e-9 * h.mean();
+  s.p50 = 1e-9 * static_cast<double>(h.percentile(50));
+  s.p99 = 1e-9 * static_cast<double>(h.percentile(99));
+  s.p999 = 1e-9 * static_cast<double>(h.percentile(99.9));
+  return s;
+}
+
+}  // namespace
+
+// ---- wire functions -------------------------------------------------------------
+
+std::size_t writeTeleopState(const MessageHeader& header, const TeleopEcho& echo, const HapticState& state,
+                             std::span<std::byte> out) noexcept {
+  if (out.size() < kMessageHeaderBytes + kTeleopStateBytes) return 0;
+  std::byte* p = putEcho(out.data() + kMessageHeaderBytes, echo);
+  putU64(p, static_cast<std::uint64_t>(state.timeNs));
+  p = putVec(p + 8, state.position.data(), 3);
+  const double q[4] = {state.orientation.w(), state.orientation.x(), state.orientation.y(),
+                       state.orientation.z()};
+  p = putVec(p, q, 4);
+  p = putVec(p, state.linearVelocity.data(), 3);
+  p = putVec(p, state.angularVelocity.data(), 3);
+  putU32(p, state.buttons);
+  putU32(p + 4, 0);  // reserved
+  MessageHeader h = header;
+  h.type = kTeleopStateType;
+  return sealMessage(h, out, kTeleopStateBytes);
+}
+
+std::size_t writeTeleopForce(const MessageHeader& header, const TeleopEcho& echo, const HapticOutput& force,
+                             std::span<std::byte> out) noexcept {
+  if (out.size() < kMessageHeaderBytes + kTeleopForceBytes) return 0;
+  std::byte* p = putEcho(out.data() + kMessageHeaderBytes, echo);
+  p = putVec(p, force.force.data(), 3);
+  putVec(p, force.torque.data(), 3);
+  MessageHeader h = header;
+  h.type = kTeleopForceType;
+  return sealMessage(h, out, kTeleopForceBytes);
+}
+
+std::size_t writeTeleopHello(const MessageHeader& header, std::span<std::byte> out) noexcept {
+  if (out.size() < kMessageHeaderBytes + kTeleopHelloBytes) return 0;
+  putU32(out.data() + kMessageHeaderBytes, kTeleopVersion);
+  MessageHeader h = header;
+  h.type = kTeleopHelloType;
+  return sealMessage(h, out, kTeleopHelloBytes);
+}
+
+std::vector<std::byte> encodeTeleopInfo(const MessageHeader& header, const HapticInfo& info) {
+  std::vector<std::byte> out(kMessageHeaderBytes + kTeleopInfoBytes);
+  std::byte* p = out.data() + kMessageHeaderBytes;
+  for (const std::string* s : {&info.driver, &info.vendor, &info.model, &info.serial}) {
+    std::memcpy(p, s->data(), std::min<std::size_t>(s->size(), 63));
+    p += 64;  // the rest stays NUL
+  }
+  putU32(p, info.capabilities);
+  putU32(p + 4, info.buttonCount);
+  p = putVec(p + 8, info.workspace.min().data(), 3);
+  p = putVec(p, info.workspace.max().data(), 3);
+  const double limits[5] = {info.maxForce, info.maxTorque, info.maxStiffness, info.maxDamping, info.servoRateHz};
+  putVec(p, limits, 5);
+  MessageHeader h = header;
+  h.type = kTeleopInfoType;
+  sealMessage(h, out, kTeleopInfoBytes);
+  return out;
+}
+
+Result<TeleopPacket> decodeTeleopPacket(std::span<const std::byte> datagram) {
+  MessageLimits limits;
+  limits.maxPayloadBytes = kTeleopInfoBytes;
+  auto m = decodeMessage(datagram, limits);
+  if (!m) return std::move(m).error();
+  TeleopPacket out;
+  out.header = m->header;
+  const std::size_t expected = payloadBytesOf(m->header.type);
+  if (expected == 0)
+    return fail(ErrorCode::Parse, formatString("message type 0x%04X is not a tele-operation type", m->header.type),
+                "datagram byte 6", "expected State 0x7401, Force 0x7402, Hello 0x7403 or Info 0x7404");
+  if (m->payload.size() != expected)
+    return fail(ErrorCode::Parse,
+                formatString("%s payload is %zu bytes, expected %zu", typeName(m->header.type), m->payload.size(),
+                             expected),
+                "datagram byte 12", "the peer speaks another layout; update both sides");
+  Reader r(m->payload, typeName(m->header.type));
+  switch (m->header.type) {
+    case kTeleopStateType:
+    case kTeleopForceType: {
+      out.echo.peerSendNs = r.i64();
+      out.echo.holdNs = r.i64();
+      if (m->header.type == kTeleopForceType) {
+        out.force.force = r.vec3();
+        out.force.torque = r.vec3();
+        break;
+      }
+      out.state.timeNs = r.i64();
+      out.state.position = r.vec3();
+      const std::size_t qAt = r.offset();
+      const double w = r.f64(), x = r.f64(), y = r.f64(), z = r.f64();
+      out.state.linearVelocity = r.vec3();
+      out.state.angularVelocity = r.vec3();
+      out.state.buttons = r.u32();
+      if (!r.ok()) return r.error();
+      const double norm = std::sqrt(w * w + x * x + y * y + z * z);
+      if (!(std::abs(norm - 1.0) <= 1e-3))
+        return fail(ErrorCode::Parse, formatString("State orientation has norm %g, expected 1", norm),
+                    formatString("datagram byte %zu", kMessageHeaderBytes + qAt),
+                    "the peer sent a malformed tele-operation message; it was dropped");
+      out.state.orientation = Quat(w / norm, x / norm, y / norm, z / norm);
+      break;
+    }
+    case kTeleopHelloType:
+      out.version = r.u32();
+      if (out.version != kTeleopVersion)
+        return fail(ErrorCode::Version,
+                    formatString("Hello asks for stream version %u, this build speaks %u", out.version,
+                                 kTeleopVersion),
+                    "datagram byte 28", "update the older side");
+      break;
+    case kTeleopInfoType: {
+      out.info.driver = r.str64();
+      out.info.vendor = r.str64();
+      out.info.model = r.str64();
+      out.info.serial = r.str64();
+      out.info.capabilities = r.u32();
+      out.info.buttonCount = r.u32();
+      const Vec3 lo = r.vec3(), hi = r.vec3();
+      const std::size_t limitsAt = r.offset();
+      out.info.maxForce = r.f64();
+      out.info.maxTorque = r.f64();
+      out.info.maxStiffness = r.f64();
+      out.info.maxDamping = r.f64();
+      out.info.servoRateHz = r.f64();
+      if (!r.ok()) return r.error();
+      if (!(lo.array() <= hi.array()).all())
+        return fail(ErrorCode::Parse, "Info workspace minimum exceeds its maximum",
+                    formatString("datagram byte %zu", kMessageHeaderBytes + 264), "fix the device's workspace");
+      if (out.info.maxForce < 0 || out.info.maxTorque < 0 || out.info.maxStiffness < 0 ||
+          out.info.maxDamping < 0 || !(out.info.servoRateHz > 0))
+        return fail(ErrorCode::Parse, "Info limits must be >= 0 and the servo rate > 0",
+                    formatString("datagram byte %zu", kMessageHeaderBytes + limitsAt),
+                    "fix the device's reported limits");
+      out.info.workspace = Aabb(lo, hi);
+      break;
+    }
+    default:
+      break;
+  }
+  if (!r.ok()) return r.error();
+  return out;
+}
+
+// ---- the shared implementation --------------------------------------------------
+
+namespace detail {
+
+/// Everything both ends share; Role picks which stream is received.
+struct TeleopEnd : std::enable_shared_from_this<TeleopEnd> {
+  enum class Role : std::uint8_t { Host, Device };
+
+  TeleopEnd(IoThread& t, Role r, TeleopOptions o)
+      : role(r), user(t), options(std::move(o)), socket(t.impl().io),
+        timeoutNs(static_cast<std::int64_t>(options.timeoutSeconds * 1e9)) {}
+
+  Status bind() {
+    const std::string where = std::string(role == Role::Host ? "TeleopHost " : "TeleopDevice ") +
+                              describe(options.local);
+    if (!(options.timeoutSeconds > 0) || !std::isfinite(options.timeoutSeconds))
+      return fail(ErrorCode::InvalidArgument, formatString("timeoutSeconds is %g", options.timeoutSeconds), where,
+                  "give a timeout > 0 (0.1 s is typical at 1 kHz)");
+    auto address = parseAddress(options.local.address, where + ": local.address");
+    if (!address) return address.error();
+    for (const std::string& a : options.allow)
+      if (auto parsed = parseAddress(a, where + ": allow entry"); !parsed) return parsed.error();
+    if (role == Role::Host) {
+      auto peerAddress = parseAddress(options.peer.address, where + ": peer.address");
+      if (!peerAddress) return peerAddress.error();
+      if (options.peer.port == 0)
+        return fail(ErrorCode::InvalidArgument, "peer port is 0", where, "give the device server's port");
+      hostPeer = udp::endpoint(*peerAddress, options.peer.port);
+      peer.store(toPeer(*hostPeer));
+    }
+    std::error_code ec;
+    const udp::endpoint endpoint(*address, options.local.port);
+    socket.open(endpoint.protocol(), ec);
+    if (!ec) socket.bind(endpoint, ec);
+    if (ec)
+      return fail(ErrorCode::Network, "cannot bind: " + ec.message(), where,
+                  ec == asio::error::address_in_use ? "another program uses this port: pick another or port 0"
+                                                    : "use a local address of this machine");
+    port = socket.local_endpoint(ec).port();
+    name = std::string(role == Role::Host ? "TeleopHost " : "TeleopDevice ") +
+           describe({options.local.address, port});
+    user.thread().runAndWait([&] { receiveMore(); });
+    return ok();
+  }
+
+  void receiveMore() {
+    socket.async_receive_from(asio::buffer(buffer), from,
+                              [self = shared_from_this()](std::error_code ec, std::size_t n) {
+                                if (self->closed.load()) return;
+                                if (ec == asio::error::operation_aborted) return;
+                                if (!ec) self->onDatagram(std::span<const std::byte>(self->buffer.data(), n));
+                                if (!self->closed.load()) self->receiveMore();
+                              });
+  }
+
+  // Logs at most one refusal per second per end, with a count of the rest.
+  void refuse(std::atomic<std::uint64_t>& counter, const std::string& why) {
+    counter.fetch_add(1, std::memory_order_relaxed);
+    const std::int64_t t = nowNs();
+    ++suppressed;
+    if (t - lastRefusalLogNs < 1'000'000'000) return;
+    lastRefusalLogNs = t;
+    log::warn("%s: dropped a datagram from %s: %s (%llu dropped since the last report)", name.c_str(),
+              describe(toSocketAddress(from.address(), from.port())).c_str(), why.c_str(),
+              static_cast<unsigned long long>(suppressed));
+    suppressed = 0;
+  }
+
+  bool allowed(const udp::endpoint& e) const {
+    if (options.allow.empty()) return true;
+    for (const std::string& a : options.allow) {
+      std::error_code ec;
+      if (asio::ip::make_address(a, ec) == e.address() && !ec) return true;
+    }
+    return false;
+  }
+
+  void onDatagram(std::span<const std::byte> bytes) {
+    const std::int64_t now = nowNs();
+    if (bytes.size() > kTeleopMaxDatagram) return refuse(malformed, "larger than any tele-operation message");
+    auto packet = decodeTeleopPacket(bytes);
+    if (!packet) return refuse(malformed, packet.error().message());
+    const std::uint16_t type = packet->header.type;
+    if (role == Role::Host) {
+      if (from != *hostPeer) return refuse(foreign, "not the device this host streams with");
+      if (type == kTeleopInfoType) {
+        std::lock_guard lock(infoMutex);
+        deviceInfo = packet->info;
+        infoArrived.notify_all();
+        return;
+      }
+      if (type != kTeleopStateType) return refuse(foreign, std::string(typeName(type)) + " is sent by hosts");
+      return onStream(*packet, now);
+    }
+    // Device side: the host is whoever is allowed and talks, unless the
+    // current host is still alive.
+    if (type != kTeleopHelloType && type != kTeleopForceType)
+      return refuse(foreign, std::string(typeName(type)) + " is sent by devices");
+    if (!allowed(from)) return refuse(foreign, "sender is not in the allow list");
+    if (!devicePeer || from != *devicePeer) {
+      if (devicePeer && now - lastPeerNs < timeoutNs) return refuse(foreign, "another host is streaming");
+      if (devicePeer)
+        log::info("%s: host %s replaces %s, silent for %.3f s", name.c_str(),
+                  describe(toSocketAddress(from.address(), from.port())).c_str(),
+                  describe(toSocketAddress(devicePeer->address(), devicePeer->port())).c_str(),
+                  1e-9 * static_cast<double>(now - lastPeerNs));
+      devicePeer = from;
+      peer.store(toPeer(from));
+      resetTiming();
+    }
+    lastPeerNs = now;
+    peerAliveNs.store(now, std::memory_order_release);
+    if (type == kTeleopHelloType) {
+      const std::vector<std::byte> answer =
+          encodeTeleopInfo({.sequence = infoSequence++, .timestampNs = nowNs()}, localInfo);
+      sendRaw(answer);
+      return;
+    }
+    onStream(*packet, now);
+  }
+
+  void resetTiming() {
+    tracker.reset();
+    havePrevious = false;
+    filterCount = 0;
+  }
+
+  // A State (host) or Force (device) that passed every check.
+  void onStream(const TeleopPacket& p, std::int64_t now) {
+    const ArrivalInfo arrival = tracker.observe(p.header.sequence);
+    if (arrival.kind == Arrival::Duplicate) return void(duplicates.fetch_add(1, std::memory_order_relaxed));
+    if (arrival.kind == Arrival::Stale) return void(stale.fetch_add(1, std::memory_order_relaxed));
+    if (arrival.kind == Arrival::Late) late.fetch_add(1, std::memory_order_relaxed);
+    received.fetch_add(1, std::memory_order_relaxed);
+    lastAcceptNs.store(now, std::memory_order_release);
+    const std::int64_t sentNs = p.header.timestampNs;
+    // RFC 3550 §6.4.1: D = (Rj − Ri) − (Sj − Si), J += (|D| − J)/16.
+    if (havePrevious) {
+      const double d = static_cast<double>((now - previousReceiveNs) - (sentNs - previousSendNs));
+      jitterNs += (std::abs(d) - jitterNs) / 16.0;
+      jitterBits.store(std::bit_cast<std::uint64_t>(jitterNs), std::memory_order_relaxed);
+    }
+    havePrevious = true;
+    previousReceiveNs = now;
+    previousSendNs = sentNs;
+    // NTP: t1 = echo (our send), t2 = t3 − hold (peer receive), t3 = sentNs, t4 = now.
+    if (p.echo.holdNs >= 0) {
+      const std::int64_t rtt = (now - p.echo.peerSendNs) - p.echo.holdNs;
+      if (rtt >= 0 && rtt < 10'000'000'000) {
+        roundTrip.record(rtt);
+        lastRoundTrip.store(rtt, std::memory_order_relaxed);
+        const std::int64_t theta = ((sentNs - p.echo.holdNs - p.echo.peerSendNs) + (sentNs - now)) / 2;
+        filter[filterNext] = {rtt, theta};
+        filterNext = (filterNext + 1) % filter.size();
+        filterCount = std::min(filterCount + 1, filter.size());
+        std::size_t best = 0;
+        for (std::size_t i = 1; i < filterCount; ++i)
+          if (filter[i].first < filter[best].first) best = i;
+        if (!options.clocksSynchronized) offsetNs.store(filter[best].second, std::memory_order_relaxed);
+        offsetKnown = true;
+      }
+    }
+    if (options.clocksSynchronized || offsetKnown) {
+      const std::int64_t oneWayNs =
+          std::max<std::int64_t>(0, now - (sentNs - offsetNs.load(std::memory_order_relaxed)));
+      oneWay.record(oneWayNs);
+      lastOneWay.store(oneWayNs, std::memory_order_relaxed);
+    }
+    lost.store(tracker.stats().missing, std::memory_order_relaxed);
+    if (arrival.kind == Arrival::Late) return;  // older than what the servo thread already has
+    echo.store({sentNs, now});
+    if (role == Role::Host) {
+      auto& slot = states.writeBuffer();
+      slot = {p.state, now, true};
+      states.publish();
+    } else {
+      auto& slot = forces.writeBuffer();
+      slot = {p.force, now, true};
+      forces.publish();
+    }
+  }
+
+  // Real-time safe: one non-blocking sendto.
+  bool sendRaw(std::span<const std::byte> bytes) noexcept {
+    PeerAddress p;
+    if (closed.load(std::memory_order_acquire) || !peer.load(p)) {
+      sendFailed.fetch_add(1, std::memory_order_relaxed);
+      return false;
+    }
+    const ssize_t n = ::sendto(socket.native_handle(), bytes.data(), bytes.size(), MSG_DONTWAIT | MSG_NOSIGNAL,
+                               reinterpret_cast<const sockaddr*>(&p.address), p.length);
+    if (n != static_cast<ssize_t>(bytes.size())) {
+      sendFailed.fetch_add(1, std::memory_order_relaxed);
+      return false;
+    }
+    sent.fetch_add(1, std::memory_order_relaxed);
+    return true;
+  }
+
+  TeleopEcho currentEcho(std::int64_t now) const noexcept {
+    EchoSource e;
+    if (!echo.load(e)) return {};
+    return {e.peerSendNs, now - e.receivedNs};
+  }
+
+  template <class Write, class Value>
+  bool sendStream(Write write, const Value& value) noexcept {
+    std::array<std::byte, kMessageHeaderBytes + kTeleopStateBytes> datagram;
+    const std::int64_t now = nowNs();
+    const MessageHeader header{.sequence = sequence.fetch_add(1, std::memory_order_relaxed), .timestampNs = now};
+    const std::size_t n = write(header, currentEcho(now), value, std::span<std::byte>(datagram));
+    return sendRaw(std::span<const std::byte>(datagram.data(), n));
+  }
+
+  bool linkUp() const noexcept {
+    const std::int64_t last = lastAcceptNs.load(std::memory_order_acquire);
+    return last != kNever && nowNs() - last < timeoutNs;
+  }
+
+  TeleopStats stats() const {
+    TeleopStats s;
+    s.sent = sent.load(std::memory_order_relaxed);
+    s.sendFailed = sendFailed.load(std::memory_order_relaxed);
+    s.received = received.load(std::memory_order_relaxed);
+    s.malformed = malformed.load(std::memory_order_relaxed);
+    s.foreign = foreign.load(std::memory_order_relaxed);
+    s.duplicates = duplicates.load(std::memory_order_relaxed);
+    s.late = late.load(std::memory_order_relaxed);
+    s.stale = stale.load(std::memory_order_relaxed);
+    s.lost = lost.load(std::memory_order_relaxed);
+    const double arrived = static_cast<double>(s.received);
+    s.lossRatio = s.lost + s.received > 0 ? static_cast<double>(s.lost) / (static_cast<double>(s.lost) + arrived) : 0;
+    s.roundTrip = summarize(roundTrip, 1e-9 * static_cast<double>(lastRoundTrip.load(std::memory_order_relaxed)));
+    s.oneWay = summarize(oneWay, 1e-9 * static_cast<double>(lastOneWay.load(std::memory_order_relaxed)));
+    s.jitter = 1e-9 * std::bit_cast<double>(jitterBits.load(std::memory_order_relaxed));
+    s.clockOffset = 1e-9 * static_cast<double>(offsetNs.load(std::memory_order_relaxed));
+    s.linkUp = linkUp();
+    const std::int64_t last = lastAcceptNs.load(std::memory_order_acquire);
+    s.sinceLastReceive = last == kNever ? -1.0 : 1e-9 * static_cast<double>(nowNs() - last);
+    return s;
+  }
+
+  void close() {
+    if (closed.load()) return;
+    user.thread().runAndWait([&] {
+      if (closed.exchange(true)) return;
+      std::error_code ignored;
+      socket.cancel(ignored);  // the descriptor stays open until destruction (see the file comment)
+    });
+    user.release();
+    std::lock_guard lock(infoMutex);
+    infoArrived.notify_all();
+  }
+
+  static constexpr std::int64_t kNever = std::numeric_limits<std::int64_t>::min();
+
+  const Role role;
+  IoUser user;
+  TeleopOptions options;
+  std::string name;
+  udp::socket socket;
+  std::uint16_t port = 0;
+  const std::int64_t timeoutNs;
+  std::atomic<bool> closed{false};
+
+  // Network thread only.
+  std::array<std::byte, kTeleopMaxDatagram + 1> buffer{};
+  udp::endpoint from;
+  std::optional<udp::endpoint> hostPeer;    // host: the device (fixed)
+  std::optional<udp::endpoint> devicePeer;  // device: the current host
+  std::int64_t lastPeerNs = 0;
+  std::uint32_t infoSequence = 0;
+  HapticInfo localInfo;  // device: the answer to Hello
+  SequenceTracker tracker;
+  bool havePrevious = false, offsetKnown = false;
+  std::int64_t previousReceiveNs = 0, previousSendNs = 0;
+  double jitterNs = 0;
+  std::array<std::pair<std::int64_t, std::int64_t>, 16> filter{};  // (round trip, offset), NTP clock filter
+  std::size_t filterNext = 0, filterCount = 0;
+  std::int64_t lastRefusalLogNs = kNever / 2;
+  std::uint64_t suppressed = 0;
+
+  // Network thread → servo thread.
+  SeqLocked<PeerAddress> peer;
+  SeqLocked<EchoSource> echo;
+  TripleBuffer<Stamped<HapticState>> states;
+  TripleBuffer<Stamped<HapticOutput>> forces;
+  std::atomic<std::int64_t> lastAcceptNs{kNever}, peerAliveNs{kNever};
+
+  // Servo thread.
+  std::atomic<std::uint32_t> sequence{0};
+
+  // Statistics: written by one thread each, read by stats().
+  std::atomic<std::uint64_t> sent{0}, sendFailed{0}, received{0}, malformed{0}, foreign{0}, duplicates{0}, late{0},
+      stale{0}, lost{0};
+  LatencyHistogram roundTrip, oneWay;
+  std::atomic<std::int64_t> lastRoundTrip{0}, lastOneWay{0}, offsetNs{0};
+  std::atomic<std::uint64_t> jitterBits{0};
+
+  // Host: the device's Info.
+  mutable std::mutex infoMutex;
+  std::condition_variable infoArrived;
+  std::optional<HapticInfo> deviceInfo;
+};
+
+}  // namespace detail
+
+// ---- TeleopHost -------------------------------------------------------------------
+
+struct TeleopHost::Impl : detail::TeleopEnd {
+  using TeleopEnd::TeleopEnd;
+};
+
+TeleopHost::TeleopHost(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
+TeleopHost::~TeleopHost() { close(); }
+
+Result<std::unique_ptr<TeleopHost>> TeleopHost::open(IoThread& thread, TeleopOptions options) {
+  auto impl = std::make_shared<Impl>(thread, detail::TeleopEnd::Role::Host, std::move(options));
+  if (auto s = impl->bind(); !s) {
+    impl->user.release();
+    return std::move(s).error();
+  }
+  return std::unique_ptr<TeleopHost>(new TeleopHost(std::move(impl)));
+}
+
+Result<HapticInfo> TeleopHost::waitForDevice(std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  std::unique_lock lock(impl_->infoMutex);
+  impl_->deviceInfo.reset();
+  while (!impl_->deviceInfo && !impl_->closed.load()) {
+    const auto now = std::chrono::steady_clock::now();
+    if (now >= deadline) break;
+    lock.unlock();
+    sendHello();
+    lock.lock();
+    impl_->infoArrived.wait_until(lock, std::min(deadline, now + std::chrono::milliseconds(50)),
+                                  [&] { return impl_->deviceInfo.has_value() || impl_->closed.load(); });
+  }
+  if (impl_->deviceInfo) return *impl_->deviceInfo;
+  return fail(ErrorCode::Timeout,
+              formatString("no answer from the device side at %s within %lld ms",
+                           describe(impl_->options.peer).c_str(), static_cast<long long>(timeout.count())),
+              impl_->name, "start the device side (TeleopDevice / dm-teleop-device) and check address and firewall");
+}
+
+std::optional<HapticInfo> TeleopHost::deviceInfo() const {
+  std::lock_guard lock(impl_->infoMutex);
+  return impl_->deviceInfo;
+}
+
+bool TeleopHost::sendForce(const HapticOutput& force) noexcept { return impl_->sendStream(writeTeleopForce, force); }
+
+bool TeleopHost::sendHello() noexcept {
+  std::array<std::byte, kMessageHeaderBytes + kTeleopHelloBytes> datagram;
+  const std::size_t n = writeTeleopHello({.timestampNs = nowNs()}, datagram);
+  return impl_->sendRaw(std::span<const std::byte>(datagram.data(), n));
+}
+
+bool TeleopHost::latestState(HapticState& state, std::int64_t* ageNs) noexcept {
+  const auto& s = impl_->states.read();
+  if (!s.valid) return false;
+  state = s.value;
+  if (ageNs) *ageNs = nowNs() - s.receivedNs;
+  return true;
+}
+
+bool TeleopHost::linkUp() const noexcept { return impl_->linkUp(); }
+std::uint16_t TeleopHost::port() const noexcept { return impl_->port; }
+TeleopStats TeleopHost::stats() const { return impl_->stats(); }
+void TeleopHost::close() { impl_->close(); }
+
+// ---- TeleopDevice -----------------------------------------------------------------
+
+struct TeleopDevice::Impl : detail::TeleopEnd {
+  using TeleopEnd::TeleopEnd;
+};
+
+TeleopDevice::TeleopDevice(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
+TeleopDevice::~TeleopDevice() { close(); }
+
+Result<std::unique_ptr<TeleopDevice>> TeleopDevice::open(IoThread& thread, TeleopOptions options, HapticInfo info) {
+  auto impl = std::make_shared<Impl>(thread, detail::TeleopEnd::Role::Device, std::move(options));
+  impl->localInfo = std::move(info);
+  if (auto s = impl->bind(); !s) {
+    impl->user.release();
+    return std::move(s).error();
+  }
+  return std::unique_ptr<TeleopDevice>(new TeleopDevice(std::move(impl)));
+}
+
+bool TeleopDevice::sendState(const HapticState& state) noexcept {
+  return impl_->sendStream(writeTeleopState, state);
+}
+
+bool TeleopDevice::latestForce(HapticOutput& force, std::int64_t* ageNs) noexcept {
+  const auto& f = impl_->forces.read();
+  if (!f.valid) return false;
+  force = f.value;
+  if (ageNs) *ageNs = nowNs() - f.receivedNs;
+  return true;
+}
+
+bool TeleopDevice::linkUp() const noexcept {
+  const std::int64_t last = impl_->peerAliveNs.load(std::memory_order_acquire);
+  return last != detail::TeleopEnd::kNever && nowNs() - last < impl_->timeoutNs;
+}
+std::uint16_t TeleopDevice::port() const noexcept { return impl_->port; }
+TeleopStats TeleopDevice::stats() const {
+  TeleopStats s = impl_->stats();
+  s.linkUp = linkUp();
+  return s;
+}
+void TeleopDevice::close() { impl_->close(); }
+
+// ---- TeleopDeviceBridge -------------------------------------------------------------
+
+DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
+  // Command first, so that servo() sends a force of age 0 in this period.
+  HapticOutput force;
+  std::int64_t age = 0;
+  if (link_.latestForce(force, &age) && age < timeoutNs_) {
+    device_.command(force.force, force.torque, nowNs);
+  } else {
+    device_.command(Vec3::Zero(), Vec3::Zero(), nowNs);
+    ++zeroed_;
+  }
+  const DeviceStatus status = device_.servo(nowNs);
+  if (status == DeviceStatus::Ok) link_.sendState(device_.state());
+  return status;
+}
+
+}  // namespace dm
