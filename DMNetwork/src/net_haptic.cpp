@@ -1,7 +1,7 @@
 // net-haptic — a haptic device on another machine, through the tele-operation
 // stream (kind "haptic-device"); see dm/network/drivers.hpp for what it does
 // and its parameters. The C vtable wraps a dm::TeleopHost on a network
-// thread of its own.
+// receive thread of its own.
 #include <dm/core/plugin_abi.h>
 #include <dm/io/device_abi.h>
 #include <dm/network/drivers.hpp>
@@ -44,16 +44,9 @@ using dm::driver::ParamReader;
 
 // One driver instance; DmDevice* is this type behind the C boundary.
 struct NetHaptic {
-  dm::IoThread thread{"dm-net-haptic"};
   std::unique_ptr<dm::TeleopHost> host;
   dm::HapticInfo info;
   std::int64_t timeoutNs = 100'000'000;
-
-  ~NetHaptic() {
-    if (host) host->close();
-    host.reset();
-    thread.stop();
-  }
 };
 
 NetHaptic* self(DmDevice* d) { return reinterpret_cast<NetHaptic*>(d); }
@@ -84,11 +77,7 @@ DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t
     return nullptr;
   }
   d->timeoutNs = static_cast<std::int64_t>(timeout * 1e9);
-  if (auto s = d->thread.start(); !s) {
-    r.failf("%s", s.error().message().c_str());
-    return nullptr;
-  }
-  auto host = dm::TeleopHost::open(d->thread, {.local = *local,
+  auto host = dm::TeleopHost::open({.local = *local,
                                                .peer = *peer,
                                                .timeoutSeconds = timeout,
                                                .clocksSynchronized = synchronized});

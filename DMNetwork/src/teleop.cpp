@@ -2,27 +2,34 @@
 // payload codec, the two ends on one shared implementation, the device
 // bridge.
 //
-// Threads: the network thread receives, decodes, classifies and publishes
-// (TripleBuffer for the newest value, a sequence lock for the echo and the
-// peer address); the servo thread sends with one non-blocking sendto on the
-// socket's descriptor. The descriptor stays open until the implementation
-// is destroyed, so a send racing close() never reaches a reused descriptor.
+// Threads: each end's receive thread blocks in recvfrom (no event loop in
+// between: half the round trip of an asio receive, docs/performance.md),
+// decodes, classifies and publishes (TripleBuffer for the newest value, a
+// sequence lock for the echo and the peer address); the servo thread sends
+// with one non-blocking sendto on the same descriptor. The descriptor stays
+// open until the implementation is destroyed, so a send racing close() never
+// reaches a reused descriptor.
 #include <dm/core/log.hpp>
 #include <dm/core/rt_loop.hpp>
 #include <dm/network/teleop.hpp>
 
+#include <pthread.h>
 #include <sys/socket.h>
+#include <sys/time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
 #include <atomic>
 #include <bit>
 #include <chrono>
+#include <cerrno>
 #include <cmath>
 #include <condition_variable>
 #include <cstring>
 #include <limits>
 #include <mutex>
+#include <thread>
 #include <type_traits>
 
 #include "io_thread_impl.hpp"
@@ -281,8 +288,10 @@ std::vector<std::byte> encodeTeleopInfo(const MessageHeader& header, const Hapti
   }
   putU32(p, info.capabilities);
   putU32(p + 4, info.buttonCount);
-  p = putVec(p + 8, info.workspace.min().data(), 3);
-  p = putVec(p, info.workspace.max().data(), 3);
+  // An empty box (a default HapticInfo) travels as the point at the origin.
+  const Aabb box = info.workspace.isEmpty() ? Aabb(Vec3::Zero(), Vec3::Zero()) : info.workspace;
+  p = putVec(p + 8, box.min().data(), 3);
+  p = putVec(p, box.max().data(), 3);
   const double limits[5] = {info.maxForce, info.maxTorque, info.maxStiffness, info.maxDamping, info.servoRateHz};
   putVec(p, limits, 5);
   MessageHeader h = header;
@@ -380,12 +389,15 @@ Result<TeleopPacket> decodeTeleopPacket(std::span<const std::byte> datagram) {
 namespace detail {
 
 /// Everything both ends share; Role picks which stream is received.
-struct TeleopEnd : std::enable_shared_from_this<TeleopEnd> {
+struct TeleopEnd {
   enum class Role : std::uint8_t { Host, Device };
 
-  TeleopEnd(IoThread& t, Role r, TeleopOptions o)
-      : role(r), user(t), options(std::move(o)), socket(t.impl().io),
-        timeoutNs(static_cast<std::int64_t>(options.timeoutSeconds * 1e9)) {}
+  TeleopEnd(Role r, TeleopOptions o)
+      : role(r), options(std::move(o)), timeoutNs(static_cast<std::int64_t>(options.timeoutSeconds * 1e9)) {}
+  ~TeleopEnd() {
+    close();
+    if (fd >= 0) ::close(fd);
+  }
 
   Status bind() {
     const std::string where = std::string(role == Role::Host ? "TeleopHost " : "TeleopDevice ") +
@@ -405,29 +417,37 @@ struct TeleopEnd : std::enable_shared_from_this<TeleopEnd> {
       hostPeer = udp::endpoint(*peerAddress, options.peer.port);
       peer.store(toPeer(*hostPeer));
     }
-    std::error_code ec;
     const udp::endpoint endpoint(*address, options.local.port);
-    socket.open(endpoint.protocol(), ec);
-    if (!ec) socket.bind(endpoint, ec);
-    if (ec)
-      return fail(ErrorCode::Network, "cannot bind: " + ec.message(), where,
-                  ec == asio::error::address_in_use ? "another program uses this port: pick another or port 0"
-                                                    : "use a local address of this machine");
-    port = socket.local_endpoint(ec).port();
+    fd = ::socket(endpoint.protocol().family(), SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    if (fd < 0 || ::bind(fd, endpoint.data(), static_cast<socklen_t>(endpoint.size())) != 0) {
+      const int err = errno;
+      return fail(ErrorCode::Network, std::string("cannot bind: ") + std::strerror(err), where,
+                  err == EADDRINUSE ? "another program uses this port: pick another or port 0"
+                                    : "use a local address of this machine");
+    }
+    udp::endpoint bound;
+    socklen_t length = static_cast<socklen_t>(bound.capacity());
+    ::getsockname(fd, bound.data(), &length);
+    bound.resize(length);
+    port = bound.port();
+    // The receive thread wakes at least this often to notice close().
+    const timeval wake{0, kWakeMicroseconds};
+    ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &wake, sizeof wake);
     name = std::string(role == Role::Host ? "TeleopHost " : "TeleopDevice ") +
            describe({options.local.address, port});
-    user.thread().runAndWait([&] { receiveMore(); });
+    receiver = std::thread([this] { receiveLoop(); });
     return ok();
   }
 
-  void receiveMore() {
-    socket.async_receive_from(asio::buffer(buffer), from,
-                              [self = shared_from_this()](std::error_code ec, std::size_t n) {
-                                if (self->closed.load()) return;
-                                if (ec == asio::error::operation_aborted) return;
-                                if (!ec) self->onDatagram(std::span<const std::byte>(self->buffer.data(), n));
-                                if (!self->closed.load()) self->receiveMore();
-                              });
+  void receiveLoop() {
+    pthread_setname_np(pthread_self(), role == Role::Host ? "dm-teleop-host" : "dm-teleop-dev");
+    while (!closed.load(std::memory_order_acquire)) {
+      socklen_t length = static_cast<socklen_t>(from.capacity());
+      const ssize_t n = ::recvfrom(fd, buffer.data(), buffer.size(), 0, from.data(), &length);
+      if (n < 0) continue;  // the wake-up timeout, or an ICMP error for an earlier send
+      from.resize(length);
+      onDatagram(std::span<const std::byte>(buffer.data(), static_cast<std::size_t>(n)));
+    }
   }
 
   // Logs at most one refusal per second per end, with a count of the rest.
@@ -564,7 +584,7 @@ struct TeleopEnd : std::enable_shared_from_this<TeleopEnd> {
       sendFailed.fetch_add(1, std::memory_order_relaxed);
       return false;
     }
-    const ssize_t n = ::sendto(socket.native_handle(), bytes.data(), bytes.size(), MSG_DONTWAIT | MSG_NOSIGNAL,
+    const ssize_t n = ::sendto(fd, bytes.data(), bytes.size(), MSG_DONTWAIT | MSG_NOSIGNAL,
                                reinterpret_cast<const sockaddr*>(&p.address), p.length);
     if (n != static_cast<ssize_t>(bytes.size())) {
       sendFailed.fetch_add(1, std::memory_order_relaxed);
@@ -617,30 +637,28 @@ struct TeleopEnd : std::enable_shared_from_this<TeleopEnd> {
     return s;
   }
 
+  // Stops the receive thread (within kWakeMicroseconds); the descriptor
+  // stays open until destruction (see the file comment).
   void close() {
-    if (closed.load()) return;
-    user.thread().runAndWait([&] {
-      if (closed.exchange(true)) return;
-      std::error_code ignored;
-      socket.cancel(ignored);  // the descriptor stays open until destruction (see the file comment)
-    });
-    user.release();
+    closed.store(true, std::memory_order_release);
+    if (receiver.joinable()) receiver.join();
     std::lock_guard lock(infoMutex);
     infoArrived.notify_all();
   }
 
   static constexpr std::int64_t kNever = std::numeric_limits<std::int64_t>::min();
+  static constexpr int kWakeMicroseconds = 20'000;
 
   const Role role;
-  IoUser user;
   TeleopOptions options;
   std::string name;
-  udp::socket socket;
+  int fd = -1;
+  std::thread receiver;
   std::uint16_t port = 0;
   const std::int64_t timeoutNs;
   std::atomic<bool> closed{false};
 
-  // Network thread only.
+  // Receive thread only.
   std::array<std::byte, kTeleopMaxDatagram + 1> buffer{};
   udp::endpoint from;
   std::optional<udp::endpoint> hostPeer;    // host: the device (fixed)
@@ -657,7 +675,7 @@ struct TeleopEnd : std::enable_shared_from_this<TeleopEnd> {
   std::int64_t lastRefusalLogNs = kNever / 2;
   std::uint64_t suppressed = 0;
 
-  // Network thread → servo thread.
+  // Receive thread → servo thread.
   SeqLocked<PeerAddress> peer;
   SeqLocked<EchoSource> echo;
   TripleBuffer<Stamped<HapticState>> states;
@@ -688,15 +706,12 @@ struct TeleopHost::Impl : detail::TeleopEnd {
   using TeleopEnd::TeleopEnd;
 };
 
-TeleopHost::TeleopHost(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
+TeleopHost::TeleopHost(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 TeleopHost::~TeleopHost() { close(); }
 
-Result<std::unique_ptr<TeleopHost>> TeleopHost::open(IoThread& thread, TeleopOptions options) {
-  auto impl = std::make_shared<Impl>(thread, detail::TeleopEnd::Role::Host, std::move(options));
-  if (auto s = impl->bind(); !s) {
-    impl->user.release();
-    return std::move(s).error();
-  }
+Result<std::unique_ptr<TeleopHost>> TeleopHost::open(TeleopOptions options) {
+  auto impl = std::make_unique<Impl>(detail::TeleopEnd::Role::Host, std::move(options));
+  if (auto s = impl->bind(); !s) return std::move(s).error();
   return std::unique_ptr<TeleopHost>(new TeleopHost(std::move(impl)));
 }
 
@@ -752,16 +767,13 @@ struct TeleopDevice::Impl : detail::TeleopEnd {
   using TeleopEnd::TeleopEnd;
 };
 
-TeleopDevice::TeleopDevice(std::shared_ptr<Impl> impl) : impl_(std::move(impl)) {}
+TeleopDevice::TeleopDevice(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 TeleopDevice::~TeleopDevice() { close(); }
 
-Result<std::unique_ptr<TeleopDevice>> TeleopDevice::open(IoThread& thread, TeleopOptions options, HapticInfo info) {
-  auto impl = std::make_shared<Impl>(thread, detail::TeleopEnd::Role::Device, std::move(options));
+Result<std::unique_ptr<TeleopDevice>> TeleopDevice::open(TeleopOptions options, HapticInfo info) {
+  auto impl = std::make_unique<Impl>(detail::TeleopEnd::Role::Device, std::move(options));
   impl->localInfo = std::move(info);
-  if (auto s = impl->bind(); !s) {
-    impl->user.release();
-    return std::move(s).error();
-  }
+  if (auto s = impl->bind(); !s) return std::move(s).error();
   return std::unique_ptr<TeleopDevice>(new TeleopDevice(std::move(impl)));
 }
 

@@ -32,7 +32,6 @@ class NetHaptic : public ::testing::Test {
   void SetUp() override {
     ASSERT_TRUE(dm::registerBuiltinDrivers(linker));
     ASSERT_TRUE(dm::registerNetworkDrivers(linker));
-    ASSERT_TRUE(net.start());
     auto sim = dm::HapticDevice::open(registry, "sim-haptic",
                                       {{"path", "point"}, {"center", "0.01,0.02,0.03"}, {"max_force", "6"}});
     ASSERT_TRUE(sim) << sim.error().message();
@@ -44,7 +43,7 @@ class NetHaptic : public ::testing::Test {
     bridge.reset();
     link.reset();
     ASSERT_TRUE(eventually([&] {
-      auto d = dm::TeleopDevice::open(net, {.local = {"127.0.0.1", port}}, local->info());
+      auto d = dm::TeleopDevice::open({.local = {"127.0.0.1", port}}, local->info());
       if (d) link = std::move(*d);
       return link != nullptr;
     }));
@@ -68,7 +67,6 @@ class NetHaptic : public ::testing::Test {
 
   dm::FactoryRegistry registry;
   dm::PluginLinker linker{registry};
-  dm::IoThread net{"net-haptic-test"};
   std::unique_ptr<dm::HapticDevice> local;
   std::unique_ptr<dm::TeleopDevice> link;
   std::unique_ptr<dm::TeleopDeviceBridge> bridge;

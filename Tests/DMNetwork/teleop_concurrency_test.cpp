@@ -1,7 +1,7 @@
 // The tele-operation stream with its real threads: a device-side servo thread
 // (sim-haptic behind a TeleopDeviceBridge) and a host servo thread (the
-// net-haptic driver in a dm::HapticDevice) at 1 kHz each, the network thread
-// in between, and a third thread reading the statistics — the way a
+// net-haptic driver in a dm::HapticDevice) at 1 kHz each, the two ends' receive
+// threads in between, and a third thread reading the statistics — the way a
 // simulator runs it. Run under ThreadSanitizer in CI.
 #include <dm/io/drivers.hpp>
 #include <dm/network/drivers.hpp>
@@ -44,11 +44,9 @@ TEST(TeleopStreamConcurrency, TwoServoThreadsAndAStatsReaderExchangeStatesAndFor
   dm::PluginLinker linker(registry);
   ASSERT_TRUE(dm::registerBuiltinDrivers(linker));
   ASSERT_TRUE(dm::registerNetworkDrivers(linker));
-  dm::IoThread net("teleop-conc");
-  ASSERT_TRUE(net.start());
   auto local = dm::HapticDevice::open(registry, "sim-haptic", {{"path", "circle"}, {"radius", "0.02"}});
   ASSERT_TRUE(local);
-  auto link = dm::TeleopDevice::open(net, {}, (*local)->info());
+  auto link = dm::TeleopDevice::open({}, (*local)->info());
   ASSERT_TRUE(link);
   dm::TeleopDeviceBridge bridge(**local, **link);
   std::atomic<bool> stopDevice{false}, stopHost{false}, forceArrived{false};

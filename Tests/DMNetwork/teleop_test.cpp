@@ -106,11 +106,7 @@ std::vector<std::byte> stateDatagram(std::uint32_t sequence, std::int64_t sendNs
   return out;
 }
 
-class TeleopEnds : public ::testing::Test {
- protected:
-  void SetUp() override { ASSERT_TRUE(net.start()); }
-  dm::IoThread net{"teleop-test"};
-};
+class TeleopEnds : public ::testing::Test {};
 
 // ---- codec ---------------------------------------------------------------------
 
@@ -233,7 +229,7 @@ TEST(TeleopCodec, MalformedPayloadsAreRefusedNamingTheByte) {
 
 TEST_F(TeleopEnds, HostClassifiesLossReorderingAndDuplicatesAndKeepsTheNewestState) {
   RawPeer device;
-  auto host = dm::TeleopHost::open(net, {.peer = {"127.0.0.1", device.port()}, .clocksSynchronized = true});
+  auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}, .clocksSynchronized = true});
   ASSERT_TRUE(host) << host.error().message();
   // 0 1 2 5 (gap of 2) 4 (late) 4 (duplicate) 3 (late): the newest is 5.
   const std::uint32_t order[] = {0, 1, 2, 5, 4, 4, 3};
@@ -259,7 +255,7 @@ TEST_F(TeleopEnds, HostClassifiesLossReorderingAndDuplicatesAndKeepsTheNewestSta
 
 TEST_F(TeleopEnds, HostDropsMalformedAndForeignDatagramsWithoutLosingTheLink) {
   RawPeer device, stranger;
-  auto host = dm::TeleopHost::open(net, {.peer = {"127.0.0.1", device.port()}});
+  auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}});
   ASSERT_TRUE(host);
   device.sendTo((*host)->port(), stateDatagram(0, monotonicNs(), sampleState(1)));
   auto garbage = stateDatagram(1, monotonicNs(), sampleState(2));
@@ -275,7 +271,7 @@ TEST_F(TeleopEnds, HostDropsMalformedAndForeignDatagramsWithoutLosingTheLink) {
 
 TEST_F(TeleopEnds, RoundTripSubtractsTheHoldTimeTheDeviceReports) {
   RawPeer device;
-  auto host = dm::TeleopHost::open(net, {.peer = {"127.0.0.1", device.port()}});
+  auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}});
   ASSERT_TRUE(host);
   // Round 1: the device holds the force 30 ms and says so: round trip ≈ wire time only.
   // Round 2: it holds it 30 ms and claims 0: round trip ≥ 30 ms.
@@ -301,7 +297,7 @@ TEST_F(TeleopEnds, RoundTripSubtractsTheHoldTimeTheDeviceReports) {
 
 TEST_F(TeleopEnds, ClockOffsetOfThePeerIsEstimatedAndOneWayLatencyCorrected) {
   RawPeer device;
-  auto host = dm::TeleopHost::open(net, {.peer = {"127.0.0.1", device.port()}});
+  auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}});
   ASSERT_TRUE(host);
   const std::int64_t offset = 2'000'000'000;  // the device's clock reads 2 s ahead
   for (std::uint32_t i = 0; i < 20; ++i) {
@@ -326,7 +322,7 @@ TEST_F(TeleopEnds, ClockOffsetOfThePeerIsEstimatedAndOneWayLatencyCorrected) {
 
 TEST_F(TeleopEnds, JitterFollowsRfc3550ForAKnownTransitDifference) {
   RawPeer device;
-  auto host = dm::TeleopHost::open(net, {.peer = {"127.0.0.1", device.port()}, .clocksSynchronized = true});
+  auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}, .clocksSynchronized = true});
   ASSERT_TRUE(host);
   // Send timestamps 1 ms apart, sent back to back: each D ≈ −1 ms, so after
   // n datagrams J = 1 ms · (1 − (15/16)^(n−1)) (RFC 3550 §6.4.1).
@@ -342,7 +338,7 @@ TEST_F(TeleopEnds, JitterFollowsRfc3550ForAKnownTransitDifference) {
 
 TEST_F(TeleopEnds, WaitForDeviceTimesOutNamingThePeer) {
   RawPeer silent;
-  auto host = dm::TeleopHost::open(net, {.peer = {"127.0.0.1", silent.port()}});
+  auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", silent.port()}});
   ASSERT_TRUE(host);
   auto info = (*host)->waitForDevice(120ms);
   ASSERT_FALSE(info);
@@ -353,16 +349,16 @@ TEST_F(TeleopEnds, WaitForDeviceTimesOutNamingThePeer) {
 }
 
 TEST_F(TeleopEnds, BadOptionsAreRefused) {
-  EXPECT_FALSE(dm::TeleopHost::open(net, {.peer = {"127.0.0.1", 0}}));
-  EXPECT_FALSE(dm::TeleopHost::open(net, {.peer = {"not an address", 5}}));
-  EXPECT_FALSE(dm::TeleopHost::open(net, {.peer = {"127.0.0.1", 5}, .timeoutSeconds = 0}));
-  EXPECT_FALSE(dm::TeleopDevice::open(net, {.allow = {"nonsense"}}, sampleInfo()));
+  EXPECT_FALSE(dm::TeleopHost::open({.peer = {"127.0.0.1", 0}}));
+  EXPECT_FALSE(dm::TeleopHost::open({.peer = {"not an address", 5}}));
+  EXPECT_FALSE(dm::TeleopHost::open({.peer = {"127.0.0.1", 5}, .timeoutSeconds = 0}));
+  EXPECT_FALSE(dm::TeleopDevice::open({.allow = {"nonsense"}}, sampleInfo()));
 }
 
 // ---- device end ------------------------------------------------------------------
 
 TEST_F(TeleopEnds, DeviceAnswersHelloLearnsItsHostAndRefusesASecondHostWhileTheFirstIsAlive) {
-  auto device = dm::TeleopDevice::open(net, {.timeoutSeconds = 0.15}, sampleInfo());
+  auto device = dm::TeleopDevice::open({.timeoutSeconds = 0.15}, sampleInfo());
   ASSERT_TRUE(device);
   EXPECT_FALSE((*device)->sendState(sampleState(1)));  // no host yet
   EXPECT_FALSE((*device)->linkUp());
@@ -402,7 +398,7 @@ TEST_F(TeleopEnds, DeviceAnswersHelloLearnsItsHostAndRefusesASecondHostWhileTheF
 }
 
 TEST_F(TeleopEnds, DeviceAllowListRefusesOtherHosts) {
-  auto device = dm::TeleopDevice::open(net, {.allow = {"127.0.0.2"}}, sampleInfo());
+  auto device = dm::TeleopDevice::open({.allow = {"127.0.0.2"}}, sampleInfo());
   ASSERT_TRUE(device);
   RawPeer host;  // 127.0.0.1: not allowed
   std::array<std::byte, 64> hello{};

@@ -9,7 +9,7 @@
 // limits (Hello → Info) and fails with a message naming the address when
 // nothing answers. read_state reports the device lost when no state arrived
 // within `timeout`; reconnect sends Hello again and succeeds once states flow.
-// Each instance owns its network thread.
+// Each instance owns its stream's receive thread.
 //
 // Parameters:
 //   device               "address:port" of the device side (required; numeric)

@@ -1,7 +1,9 @@
 // dm/network/teleop.hpp — the tele-operation device stream: a haptic device's
 // state one way and force the other, over UDP at the servo rate (1 kHz).
 //
-// Two ends, each on its own UDP socket on a caller-owned IoThread:
+// Two ends, each a UDP socket with a receive thread of its own (blocking in
+// recvfrom: the stream's latency budget is below what a shared event loop
+// gives, see docs/performance.md):
 //
 //   device side (console, device attached)          host side (simulation)
 //   TeleopDevice::sendState(state)  ── State ──▶    TeleopHost::latestState()
@@ -10,7 +12,7 @@
 //
 // Every datagram is one DMPlatform message (dm/network/message.hpp: sequence
 // number, send timestamp, CRC-32C) with a fixed little-endian payload, see
-// docs/network.md. Receiving (network thread): a datagram that does not
+// docs/network.md. Receiving (receive thread): a datagram that does not
 // decode, has the wrong size, non-finite values or comes from a peer that is
 // not allowed is dropped, counted and logged (rate limited). Sequence numbers
 // are classified per stream by dm::SequenceTracker: duplicates and stale
@@ -27,8 +29,8 @@
 //  * one-way latency = receive time − (peer send time − offset);
 //  * interarrival jitter as RFC 3550 §6.4.1 defines it (J += (|D| − J)/16);
 //  * loss = sequence numbers never received / expected.
-// Latency percentiles come from a log histogram with 16 bins per octave
-// (≤ 4.4 % relative error), allocation free.
+// Latency percentiles come from dm::LatencyHistogram (within 1.6 %),
+// allocation free.
 //
 // Real-time rules: sendState/sendForce build the datagram on the stack and
 // hand it to the kernel with one non-blocking sendto (no allocation, lock,
@@ -41,9 +43,8 @@
 // so a lost link never leaves a force on the operator.
 //
 // @code
-//   dm::IoThread net;  net.start();
-//   auto dev = dm::TeleopDevice::open(net, {.local = {"0.0.0.0", 47000}}, device.info());
-//   auto host = dm::TeleopHost::open(net, {.peer = {"192.168.1.20", 47000}});
+//   auto dev = dm::TeleopDevice::open({.local = {"0.0.0.0", 47000}}, device.info());   // console
+//   auto host = dm::TeleopHost::open({.peer = {"192.168.1.20", 47000}});             // simulator
 //   auto info = (*host)->waitForDevice(std::chrono::seconds(2));
 //   dm::HapticState s;  std::int64_t age;
 //   if ((*host)->latestState(s, &age)) (*host)->sendForce({.force = f});   // servo thread
@@ -52,7 +53,7 @@
 
 #include <dm/core/result.hpp>
 #include <dm/io/haptic_device.hpp>
-#include <dm/network/io_thread.hpp>
+#include <dm/network/io_thread.hpp>  // SocketAddress
 #include <dm/network/message.hpp>
 
 #include <chrono>
@@ -159,9 +160,9 @@ struct TeleopOptions {
 /// The simulation side: receives the device state, sends forces.
 class TeleopHost {
  public:
-  /// Binds `options.local`, fixes the peer and starts receiving on `thread`.
+  /// Binds `options.local`, fixes the peer and starts the receive thread.
   /// InvalidArgument for bad addresses or options, Network when binding fails.
-  static Result<std::unique_ptr<TeleopHost>> open(IoThread& thread, TeleopOptions options);
+  static Result<std::unique_ptr<TeleopHost>> open(TeleopOptions options);
   ~TeleopHost();
   TeleopHost(const TeleopHost&) = delete;
   TeleopHost& operator=(const TeleopHost&) = delete;
@@ -183,14 +184,15 @@ class TeleopHost {
   bool linkUp() const noexcept;
   std::uint16_t port() const noexcept;
   TeleopStats stats() const;
-  /// Stops receiving; idempotent. No callback runs after it returns.
+  /// Stops the receive thread (within 20 ms); idempotent. Sends after it
+  /// fail. Not from the servo thread.
   void close();
 
   struct Impl;
 
  private:
-  explicit TeleopHost(std::shared_ptr<Impl> impl);
-  std::shared_ptr<Impl> impl_;
+  explicit TeleopHost(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
 };
 
 /// The device side: sends the device state, receives forces. The host is
@@ -199,9 +201,9 @@ class TeleopHost {
 /// timeout.
 class TeleopDevice {
  public:
-  /// Binds `options.local` and starts receiving on `thread`; `info` is what
-  /// a Hello is answered with.
-  static Result<std::unique_ptr<TeleopDevice>> open(IoThread& thread, TeleopOptions options, HapticInfo info);
+  /// Binds `options.local` and starts the receive thread; `info` is what a
+  /// Hello is answered with.
+  static Result<std::unique_ptr<TeleopDevice>> open(TeleopOptions options, HapticInfo info);
   ~TeleopDevice();
   TeleopDevice(const TeleopDevice&) = delete;
   TeleopDevice& operator=(const TeleopDevice&) = delete;
@@ -221,8 +223,8 @@ class TeleopDevice {
   struct Impl;
 
  private:
-  explicit TeleopDevice(std::shared_ptr<Impl> impl);
-  std::shared_ptr<Impl> impl_;
+  explicit TeleopDevice(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
 };
 
 /// Runs a local HapticDevice as the device side of a stream: each step()
