@@ -26,8 +26,6 @@ std::int64_t nowNs() {
       .count();
 }
 
-std::string describe(const SocketAddress& a) { return a.address + ":" + std::to_string(a.port); }
-
 // The raw key of `hex`, or none when authentication is off. Fails when a key
 // is required but missing, or malformed.
 Result<std::vector<std::byte>> keyFrom(const std::string& hex, bool requireAuth, const char* where) {

@@ -166,4 +166,9 @@ IoThreadStats IoThread::stats() const {
 
 const std::string& IoThread::name() const noexcept { return impl_->name; }
 
+std::string describe(const SocketAddress& a) {
+  const bool v6 = a.address.find(':') != std::string::npos;
+  return (v6 ? "[" + a.address + "]" : a.address) + ":" + std::to_string(a.port);
+}
+
 }  // namespace dm

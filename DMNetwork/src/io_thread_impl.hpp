@@ -92,9 +92,4 @@ inline SocketAddress toSocketAddress(const asio::ip::address& a, std::uint16_t p
 }
 
 /// "address:port" ("[::1]:80" for IPv6), for messages.
-inline std::string describe(const SocketAddress& a) {
-  const bool v6 = a.address.find(':') != std::string::npos;
-  return (v6 ? "[" + a.address + "]" : a.address) + ":" + std::to_string(a.port);
-}
-
 }  // namespace dm

@@ -38,6 +38,9 @@ struct SocketAddress {
   std::uint16_t port = 0;  ///< port; 0 asks for an ephemeral one when binding
 };
 
+/// "127.0.0.1:5005", or "[::1]:5005" for IPv6: for messages and logs. O(1).
+std::string describe(const SocketAddress& address);
+
 /// What stop() left undone.
 struct IoStopReport {
   std::size_t tasksDropped = 0;  ///< posted tasks that never ran and were discarded
