@@ -10,6 +10,7 @@
 // open until the implementation is destroyed, so a send racing close() never
 // reaches a reused descriptor.
 #include <dm/core/log.hpp>
+#include <dm/core/ring.hpp>
 #include <dm/core/rt_loop.hpp>
 #include <dm/network/teleop.hpp>
 
@@ -87,9 +88,10 @@ class Reader {
     for (int i = 0; i < 3; ++i) v[i] = f64();
     return v;
   }
-  std::int64_t i64() {
+  std::int64_t i64() { return static_cast<std::int64_t>(u64()); }
+  std::uint64_t u64() {
     at_ += 8;
-    return static_cast<std::int64_t>(getU64(p_.data() + at_ - 8));
+    return getU64(p_.data() + at_ - 8);
   }
   std::uint32_t u32() {
     at_ += 4;
@@ -133,6 +135,8 @@ std::size_t payloadBytesOf(std::uint16_t type) {
       return kTeleopHelloBytes;
     case kTeleopInfoType:
       return kTeleopInfoBytes;
+    case kTeleopWaveType:
+      return kTeleopWaveBytes;
     default:
       return 0;
   }
@@ -148,6 +152,8 @@ const char* typeName(std::uint16_t type) {
       return "Hello";
     case kTeleopInfoType:
       return "Info";
+    case kTeleopWaveType:
+      return "Wave";
     default:
       return "unknown";
   }
@@ -279,6 +285,16 @@ std::size_t writeTeleopHello(const MessageHeader& header, std::span<std::byte> o
   return sealMessage(h, out, kTeleopHelloBytes);
 }
 
+std::size_t writeTeleopWave(const MessageHeader& header, const WaveSample& wave, std::span<std::byte> out) noexcept {
+  if (out.size() < kMessageHeaderBytes + kTeleopWaveBytes) return 0;
+  std::byte* p = putVec(out.data() + kMessageHeaderBytes, wave.wave.data(), 3);
+  putU64(p, wave.sequence);
+  putF64(p + 8, wave.energy);
+  MessageHeader h = header;
+  h.type = kTeleopWaveType;
+  return sealMessage(h, out, kTeleopWaveBytes);
+}
+
 std::vector<std::byte> encodeTeleopInfo(const MessageHeader& header, const HapticInfo& info) {
   std::vector<std::byte> out(kMessageHeaderBytes + kTeleopInfoBytes);
   std::byte* p = out.data() + kMessageHeaderBytes;
@@ -310,7 +326,8 @@ Result<TeleopPacket> decodeTeleopPacket(std::span<const std::byte> datagram) {
   const std::size_t expected = payloadBytesOf(m->header.type);
   if (expected == 0)
     return fail(ErrorCode::Parse, formatString("message type 0x%04X is not a tele-operation type", m->header.type),
-                "datagram byte 6", "expected State 0x7401, Force 0x7402, Hello 0x7403 or Info 0x7404");
+                "datagram byte 6",
+                "expected State 0x7401, Force 0x7402, Hello 0x7403, Info 0x7404 or Wave 0x7405");
   if (m->payload.size() != expected)
     return fail(ErrorCode::Parse,
                 formatString("%s payload is %zu bytes, expected %zu", typeName(m->header.type), m->payload.size(),
@@ -341,6 +358,18 @@ Result<TeleopPacket> decodeTeleopPacket(std::span<const std::byte> datagram) {
                     formatString("datagram byte %zu", kMessageHeaderBytes + qAt),
                     "the peer sent a malformed tele-operation message; it was dropped");
       out.state.orientation = Quat(w / norm, x / norm, y / norm, z / norm);
+      break;
+    }
+    case kTeleopWaveType: {
+      out.wave.wave = r.vec3();
+      out.wave.sequence = r.u64();
+      const std::size_t energyAt = r.offset();
+      out.wave.energy = r.f64();
+      if (!r.ok()) return r.error();
+      if (out.wave.energy < 0)
+        return fail(ErrorCode::Parse, formatString("Wave energy is %g J, expected >= 0", out.wave.energy),
+                    formatString("datagram byte %zu", kMessageHeaderBytes + energyAt),
+                    "the peer sent a malformed tele-operation message; it was dropped");
       break;
     }
     case kTeleopHelloType:
@@ -435,18 +464,45 @@ struct TeleopEnd {
     ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &wake, sizeof wake);
     name = std::string(role == Role::Host ? "TeleopHost " : "TeleopDevice ") +
            describe({options.local.address, port});
+    if (options.emulate) {
+      // The emulator's thread becomes the one that handles datagrams; each
+      // packet carries its sender's address in front.
+      emulatorThread = std::make_unique<IoThread>("dm-teleop-emu");
+      if (auto s = emulatorThread->start(); !s) return s;
+      auto e = LinkEmulator::create(*emulatorThread, *options.emulate, [this](std::span<const std::byte> p) {
+        if (p.size() < sizeof(PeerAddress)) return;
+        PeerAddress sender;
+        std::memcpy(static_cast<void*>(&sender), p.data(), sizeof sender);
+        std::memcpy(from.data(), &sender.address, sender.length);
+        from.resize(sender.length);
+        onDatagram(p.subspan(sizeof sender));
+      });
+      if (!e) return std::move(e).error();
+      emulator = std::move(*e);
+    }
     receiver = std::thread([this] { receiveLoop(); });
     return ok();
   }
 
   void receiveLoop() {
     pthread_setname_np(pthread_self(), role == Role::Host ? "dm-teleop-host" : "dm-teleop-dev");
+    std::array<std::byte, sizeof(PeerAddress) + kTeleopMaxDatagram + 1> packet{};  // emulation only
     while (!closed.load(std::memory_order_acquire)) {
-      socklen_t length = static_cast<socklen_t>(from.capacity());
-      const ssize_t n = ::recvfrom(fd, buffer.data(), buffer.size(), 0, from.data(), &length);
+      udp::endpoint sender;
+      socklen_t length = static_cast<socklen_t>(sender.capacity());
+      const ssize_t n = ::recvfrom(fd, buffer.data(), buffer.size(), 0, sender.data(), &length);
       if (n < 0) continue;  // the wake-up timeout, or an ICMP error for an earlier send
-      from.resize(length);
-      onDatagram(std::span<const std::byte>(buffer.data(), static_cast<std::size_t>(n)));
+      sender.resize(length);
+      const std::span<const std::byte> datagram(buffer.data(), static_cast<std::size_t>(n));
+      if (emulator) {
+        const PeerAddress p = toPeer(sender);
+        std::memcpy(packet.data(), &p, sizeof p);
+        std::memcpy(packet.data() + sizeof p, datagram.data(), datagram.size());
+        (void)emulator->submit(std::span<const std::byte>(packet.data(), sizeof p + datagram.size()));
+        continue;
+      }
+      from = sender;
+      onDatagram(datagram);
     }
   }
 
@@ -486,12 +542,13 @@ struct TeleopEnd {
         infoArrived.notify_all();
         return;
       }
+      if (type == kTeleopWaveType) return queueWave(packet->wave);
       if (type != kTeleopStateType) return refuse(foreign, std::string(typeName(type)) + " is sent by hosts");
       return onStream(*packet, now);
     }
     // Device side: the host is whoever is allowed and talks, unless the
     // current host is still alive.
-    if (type != kTeleopHelloType && type != kTeleopForceType)
+    if (type != kTeleopHelloType && type != kTeleopForceType && type != kTeleopWaveType)
       return refuse(foreign, std::string(typeName(type)) + " is sent by devices");
     if (!allowed(from)) return refuse(foreign, "sender is not in the allow list");
     if (!devicePeer || from != *devicePeer) {
@@ -513,7 +570,16 @@ struct TeleopEnd {
       sendRaw(answer);
       return;
     }
+    if (type == kTeleopWaveType) return queueWave(packet->wave);
     onStream(*packet, now);
+  }
+
+  // Waves carry their own sequence and energy; WaveReceiver sorts them out.
+  void queueWave(const WaveSample& w) {
+    if (waves.tryPush(w))
+      wavesIn.fetch_add(1, std::memory_order_relaxed);
+    else
+      wavesDropped.fetch_add(1, std::memory_order_relaxed);
   }
 
   void resetTiming() {
@@ -609,6 +675,14 @@ struct TeleopEnd {
     return sendRaw(std::span<const std::byte>(datagram.data(), n));
   }
 
+  bool sendWave(const WaveSample& w) noexcept {
+    std::array<std::byte, kMessageHeaderBytes + kTeleopWaveBytes> datagram;
+    const MessageHeader header{.sequence = waveSequence.fetch_add(1, std::memory_order_relaxed),
+                               .timestampNs = nowNs()};
+    const std::size_t n = writeTeleopWave(header, w, datagram);
+    return sendRaw(std::span<const std::byte>(datagram.data(), n));
+  }
+
   bool linkUp() const noexcept {
     const std::int64_t last = lastAcceptNs.load(std::memory_order_acquire);
     return last != kNever && nowNs() - last < timeoutNs;
@@ -625,6 +699,8 @@ struct TeleopEnd {
     s.late = late.load(std::memory_order_relaxed);
     s.stale = stale.load(std::memory_order_relaxed);
     s.lost = lost.load(std::memory_order_relaxed);
+    s.wavesIn = wavesIn.load(std::memory_order_relaxed);
+    s.wavesDropped = wavesDropped.load(std::memory_order_relaxed);
     const double arrived = static_cast<double>(s.received);
     s.lossRatio = s.lost + s.received > 0 ? static_cast<double>(s.lost) / (static_cast<double>(s.lost) + arrived) : 0;
     s.roundTrip = summarize(roundTrip, 1e-9 * static_cast<double>(lastRoundTrip.load(std::memory_order_relaxed)));
@@ -637,11 +713,13 @@ struct TeleopEnd {
     return s;
   }
 
-  // Stops the receive thread (within kWakeMicroseconds); the descriptor
-  // stays open until destruction (see the file comment).
+  // Stops the receive thread (within kWakeMicroseconds) and the emulator;
+  // the descriptor stays open until destruction (see the file comment).
   void close() {
     closed.store(true, std::memory_order_release);
     if (receiver.joinable()) receiver.join();
+    if (emulator) emulator->close();
+    if (emulatorThread) emulatorThread->stop();
     std::lock_guard lock(infoMutex);
     infoArrived.notify_all();
   }
@@ -654,11 +732,13 @@ struct TeleopEnd {
   std::string name;
   int fd = -1;
   std::thread receiver;
+  std::unique_ptr<IoThread> emulatorThread;  // declared before the emulator: destroyed after it
+  std::unique_ptr<LinkEmulator> emulator;
   std::uint16_t port = 0;
   const std::int64_t timeoutNs;
   std::atomic<bool> closed{false};
 
-  // Receive thread only.
+  // The handling thread only: the receive thread, or the emulator's.
   std::array<std::byte, kTeleopMaxDatagram + 1> buffer{};
   udp::endpoint from;
   std::optional<udp::endpoint> hostPeer;    // host: the device (fixed)
@@ -680,14 +760,15 @@ struct TeleopEnd {
   SeqLocked<EchoSource> echo;
   TripleBuffer<Stamped<HapticState>> states;
   TripleBuffer<Stamped<HapticOutput>> forces;
+  SpscRing<WaveSample, 1024> waves;
   std::atomic<std::int64_t> lastAcceptNs{kNever}, peerAliveNs{kNever};
 
   // Servo thread.
-  std::atomic<std::uint32_t> sequence{0};
+  std::atomic<std::uint32_t> sequence{0}, waveSequence{0};
 
   // Statistics: written by one thread each, read by stats().
   std::atomic<std::uint64_t> sent{0}, sendFailed{0}, received{0}, malformed{0}, foreign{0}, duplicates{0}, late{0},
-      stale{0}, lost{0};
+      stale{0}, lost{0}, wavesIn{0}, wavesDropped{0};
   LatencyHistogram roundTrip, oneWay;
   std::atomic<std::int64_t> lastRoundTrip{0}, lastOneWay{0}, offsetNs{0};
   std::atomic<std::uint64_t> jitterBits{0};
@@ -748,6 +829,9 @@ bool TeleopHost::sendHello() noexcept {
   return impl_->sendRaw(std::span<const std::byte>(datagram.data(), n));
 }
 
+bool TeleopHost::sendWave(const WaveSample& wave) noexcept { return impl_->sendWave(wave); }
+bool TeleopHost::popWave(WaveSample& wave) noexcept { return impl_->waves.tryPop(wave); }
+
 bool TeleopHost::latestState(HapticState& state, std::int64_t* ageNs) noexcept {
   const auto& s = impl_->states.read();
   if (!s.valid) return false;
@@ -781,6 +865,9 @@ bool TeleopDevice::sendState(const HapticState& state) noexcept {
   return impl_->sendStream(writeTeleopState, state);
 }
 
+bool TeleopDevice::sendWave(const WaveSample& wave) noexcept { return impl_->sendWave(wave); }
+bool TeleopDevice::popWave(WaveSample& wave) noexcept { return impl_->waves.tryPop(wave); }
+
 bool TeleopDevice::latestForce(HapticOutput& force, std::int64_t* ageNs) noexcept {
   const auto& f = impl_->forces.read();
   if (!f.valid) return false;
@@ -803,7 +890,34 @@ void TeleopDevice::close() { impl_->close(); }
 
 // ---- TeleopDeviceBridge -------------------------------------------------------------
 
+TeleopDeviceBridge::TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link,
+                                       TeleopBridgeOptions options) noexcept
+    : device_(device),
+      link_(link),
+      options_(options),
+      timeoutNs_(static_cast<std::int64_t>(options.timeoutSeconds * 1e9)),
+      txU_(options.dt > 0 ? options.dt : 1e-3),
+      rxV_({.dt = options.dt > 0 ? options.dt : 1e-3, .policy = options.wavePolicy}) {}
+
 DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
+  const double b = options_.waveImpedance;
+  if (b > 0) {
+    // Master port: ẋm from the last sample, v through the energy-bounded receiver.
+    const Vec3 xdot = device_.state().linearVelocity;
+    WaveSample w;
+    while (link_.popWave(w)) rxV_.receive(w);
+    const Vec3 v = rxV_.next();
+    if (link_.linkUp()) {
+      device_.command(-waveMasterForce(xdot, v, b), Vec3::Zero(), nowNs);  // the reaction on the hand
+    } else {
+      device_.command(Vec3::Zero(), Vec3::Zero(), nowNs);
+      ++zeroed_;
+    }
+    const DeviceStatus status = device_.servo(nowNs);
+    if (status == DeviceStatus::Ok) link_.sendState(device_.state());
+    link_.sendWave(txU_.send(waveMasterOut(xdot, v, b)));
+    return status;
+  }
   // Command first, so that servo() sends a force of age 0 in this period.
   HapticOutput force;
   std::int64_t age = 0;

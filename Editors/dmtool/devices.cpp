@@ -11,6 +11,9 @@
 #include <dm/io/device_abi.h>
 #include <dm/io/drivers.hpp>
 #include <dm/io/haptic_device.hpp>
+#ifdef DM_HAVE_NETWORK
+#include <dm/network/drivers.hpp>
+#endif
 
 #include <unistd.h>
 
@@ -69,6 +72,9 @@ int runDevices(const DevicesCliOptions& o) {
   nlohmann::json plugins = nlohmann::json::array();
   if (!o.noBuiltin) {
     if (auto s = dm::registerBuiltinDrivers(linker); !s) return printError(s.error());
+#ifdef DM_HAVE_NETWORK
+    if (auto s = dm::registerNetworkDrivers(linker); !s) return printError(s.error());
+#endif
   }
   // The plugin files of the built-in drivers (libdm_driver_<name>.so, shipped
   // next to dmtool) are the same code: list them as such instead of loading.

@@ -1,7 +1,8 @@
 // dmtool — the command line for the SDK's resources: inspect meshes and
 // volumes, convert between formats, extract isosurfaces, voxelize and
 // simplify meshes, replay device paths (probe), check scene files (validate)
-// and render them headless (render) (see --help).
+// and render them headless (render), serve a haptic device over the network
+// (teleop-device) (see --help).
 // Exit codes: 0 success, 1 the operation failed (message on stderr),
 // 2 bad command line (usage on stderr).
 #include <exception>
@@ -23,6 +24,9 @@ int main(int argc, char** argv) {
   };
 #ifdef DM_HAVE_RENDERER
   commands.push_back(dmtool::addRenderCommand(app));
+#endif
+#ifdef DM_HAVE_NETWORK
+  commands.push_back(dmtool::addTeleopDeviceCommand(app));
 #endif
   try {
     app.parse(argc, argv);

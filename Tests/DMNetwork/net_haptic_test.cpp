@@ -10,7 +10,10 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
+#include <cmath>
+#include <cstdio>
 #include <string>
 #include <thread>
 
@@ -47,7 +50,7 @@ class NetHaptic : public ::testing::Test {
       if (d) link = std::move(*d);
       return link != nullptr;
     }));
-    bridge = std::make_unique<dm::TeleopDeviceBridge>(*local, *link, 0.1);
+    bridge = std::make_unique<dm::TeleopDeviceBridge>(*local, *link, dm::TeleopBridgeOptions{.timeoutSeconds = 0.1});
   }
 
   dm::Result<std::unique_ptr<dm::HapticDevice>> openRemote(double connectTimeout = 2.0) {
@@ -186,6 +189,85 @@ TEST_F(NetHaptic, BadParametersNameTheKey) {
   auto unknown = dm::HapticDevice::open(registry, "net-haptic", {{"device", "127.0.0.1:5"}, {"rate", "1"}});
   ASSERT_FALSE(unknown);
   EXPECT_NE(unknown.error().message().find("'rate'"), std::string::npos);
+}
+
+// Wave-variable mode end to end over loopback: a virtual hand (sim-haptic)
+// pulls the stylus toward z = −1 cm; the simulator raises a 2 kN/m wall under
+// the wave-commanded slave to z = 0 and holds it there. The loop settles and
+// the operator feels the force the simulator renders (at rest Fm = Fs: the
+// wave channel passes a steady force unchanged); the master's receiver never
+// outputs more wave energy than it received. (Passivity under delay, jitter
+// and loss is shown in simulated time in wave_variables_test.cpp.)
+TEST(NetHapticWaves, ContactSettlesAndTheOperatorFeelsTheRenderedForce) {
+  dm::FactoryRegistry registry;
+  dm::PluginLinker linker(registry);
+  ASSERT_TRUE(dm::registerBuiltinDrivers(linker));
+  ASSERT_TRUE(dm::registerNetworkDrivers(linker));
+  auto local = dm::HapticDevice::open(registry, "sim-haptic",
+                                      {{"path", "point"}, {"center", "0,0,-0.01"}, {"hand", "1"},
+                                       {"hand_mass", "0.5"}, {"hand_stiffness", "200"}, {"hand_damping", "40"},
+                                       {"max_force", "20"}});
+  ASSERT_TRUE(local) << local.error().message();
+  auto link = dm::TeleopDevice::open({}, (*local)->info());
+  ASSERT_TRUE(link);
+  const double b = 40.0;
+  dm::TeleopDeviceBridge bridge(**local, **link, {.timeoutSeconds = 0.5, .waveImpedance = b});
+  std::atomic<bool> stop{false};
+  // The device side answers Hello on its own; its servo loop runs here.
+  std::thread device([&] {
+    auto next = std::chrono::steady_clock::now();
+    while (!stop.load()) {
+      bridge.step(monotonicNs());
+      next += 1ms;
+      std::this_thread::sleep_until(next);
+    }
+  });
+  auto remote = dm::HapticDevice::open(registry, "net-haptic",
+                                       {{"device", "127.0.0.1:" + std::to_string((*link)->port())},
+                                        {"wave_impedance", "40"},
+                                        {"timeout", "0.5"}});
+  ASSERT_TRUE(remote) << remote.error().message();
+  const double wall = 2000.0;  // N/m, the surface z = 0
+  double maxAbsZ = 0.0, windowSum = 0.0, lastSecondSum = 0.0;
+  double windowMin = 1e9, windowMax = -1e9;  // over the 100 ms means of the last second
+  const int ticks = 3000;
+  auto next = std::chrono::steady_clock::now();
+  for (int i = 0; i < ticks; ++i) {
+    const std::int64_t now = monotonicNs();
+    (*remote)->servo(now);
+    const double z = (*remote)->state().position.z();
+    ASSERT_TRUE(std::isfinite(z));
+    maxAbsZ = std::max(maxAbsZ, std::abs(z));
+    // The surface rises from 5 cm below the stylus to z = 0 over the first
+    // second (contact builds slowly), then stays.
+    const double surface = -0.05 * std::max(0.0, 1.0 - i / 1000.0);
+    const double f = z < surface ? wall * (surface - z) : 0.0;
+    (*remote)->command(dm::Vec3(0, 0, f), dm::Vec3::Zero(), now);
+    if (i >= ticks - 1000) {
+      windowSum += f;
+      lastSecondSum += f;
+      if ((i + 1) % 100 == 0) {
+        windowMin = std::min(windowMin, windowSum / 100);
+        windowMax = std::max(windowMax, windowSum / 100);
+        windowSum = 0.0;
+      }
+    }
+    next += 1ms;
+    std::this_thread::sleep_until(next);
+  }
+  stop = true;
+  device.join();
+  const double meanForce = lastSecondSum / 1000;
+  const double operatorForce = (*local)->lastOutput().force.z();
+  EXPECT_LT(maxAbsZ, 0.05);                 // bounded: no growing oscillation
+  EXPECT_GT(meanForce, 0.5);                // in contact
+  EXPECT_LT(windowMax - windowMin, 0.2);    // settled: 100 ms means within 0.2 N
+  // At rest Fm = Fs: the hand feels the rendered force.
+  EXPECT_NEAR(operatorForce, meanForce, 0.1 * meanForce);
+  EXPECT_LE(bridge.waveReceiver().energyOut(), bridge.waveReceiver().energyIn() + 1e-12);
+  EXPECT_GT((*link)->stats().wavesIn, 1000u);
+  std::printf("wave contact: rendered %.3f N (100 ms means %.3f..%.3f), operator %.3f N, max |z| %.4f m\n",
+              meanForce, windowMin, windowMax, operatorForce, maxAbsZ);
 }
 
 TEST(NetEndpoint, ParsesAddressPortForms) {

@@ -336,6 +336,27 @@ TEST_F(TeleopEnds, JitterFollowsRfc3550ForAKnownTransitDifference) {
   EXPECT_NEAR((*host)->stats().jitter, expected, 0.15e-3);
 }
 
+TEST_F(TeleopEnds, AnEmulatedLinkDelaysAndLosesWhatArrives) {
+  RawPeer device;
+  auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()},
+                                    .clocksSynchronized = true,
+                                    .emulate = dm::LinkEmulatorOptions{.delay = std::chrono::milliseconds(30),
+                                                                       .lossProbability = 0.2,
+                                                                       .seed = 11}});
+  ASSERT_TRUE(host) << host.error().message();
+  const int n = 300;
+  for (int i = 0; i < n; ++i)
+    device.sendTo((*host)->port(), stateDatagram(static_cast<std::uint32_t>(i), monotonicNs(), sampleState(1)));
+  // The last one may be lost too: wait until nothing more is in flight.
+  std::this_thread::sleep_for(150ms);
+  const dm::TeleopStats s = (*host)->stats();
+  EXPECT_GE(s.oneWay.min, 0.030);  // every datagram waited at least the emulated delay
+  EXPECT_GT(s.received, 0.65 * n);  // 20 % lost: 240 expected, 6 sigma is ±42
+  EXPECT_LT(s.received, 0.95 * n);
+  EXPECT_LE(s.received + s.lost, static_cast<std::uint64_t>(n));  // trailing losses are not yet known
+  EXPECT_NEAR(s.lossRatio, 0.2, 0.12);
+}
+
 TEST_F(TeleopEnds, WaitForDeviceTimesOutNamingThePeer) {
   RawPeer silent;
   auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", silent.port()}});

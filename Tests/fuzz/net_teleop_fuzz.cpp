@@ -1,9 +1,10 @@
 // libFuzzer target: the tele-operation stream's datagram decoder
 // (dm::decodeTeleopPacket), which reads whatever arrives on the stream's UDP
 // port. Input byte 0 picks the mode:
-//  * even: the rest is one datagram as received. Checks: no crash; an
-//    accepted State has a unit quaternion and finite values, and re-encodes
-//    to a datagram that decodes to the same values.
+//  * even: the rest is one datagram as received (any type, Wave included).
+//    Checks: no crash; an accepted State has a unit quaternion and finite
+//    values, and re-encodes to a datagram that decodes to the same values;
+//    an accepted Wave has a finite wave and an energy >= 0.
 //  * odd: the rest seeds a valid State, Force or Info; it is encoded, one bit
 //    is flipped (position from the input) and the result must be refused.
 #include <dm/network/teleop.hpp>
@@ -46,6 +47,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (p && p->header.type == dm::kTeleopStateType) checkState(*p);
     if (p && p->header.type == dm::kTeleopForceType &&
         (!p->force.force.allFinite() || !p->force.torque.allFinite()))
+      std::abort();
+    if (p && p->header.type == dm::kTeleopWaveType && (!p->wave.wave.allFinite() || !(p->wave.energy >= 0)))
       std::abort();
     return 0;
   }

@@ -9,6 +9,7 @@
 //   TeleopDevice::sendState(state)  ── State ──▶    TeleopHost::latestState()
 //   TeleopDevice::latestForce()     ◀── Force ──    TeleopHost::sendForce(force)
 //   answers Hello with Info         ◀── Hello ──    TeleopHost::waitForDevice()
+//   sendWave / popWave              ◀── Wave ──▶    sendWave / popWave (wave-variable mode)
 //
 // Every datagram is one DMPlatform message (dm/network/message.hpp: sequence
 // number, send timestamp, CRC-32C) with a fixed little-endian payload, see
@@ -55,6 +56,8 @@
 #include <dm/io/haptic_device.hpp>
 #include <dm/network/io_thread.hpp>  // SocketAddress
 #include <dm/network/message.hpp>
+#include <dm/network/stream_pipe.hpp>
+#include <dm/network/wave_variables.hpp>
 
 #include <chrono>
 #include <cstddef>
@@ -74,6 +77,7 @@ inline constexpr std::uint16_t kTeleopStateType = 0x7401;  ///< device → host:
 inline constexpr std::uint16_t kTeleopForceType = 0x7402;  ///< host → device: HapticOutput
 inline constexpr std::uint16_t kTeleopHelloType = 0x7403;  ///< host → device: start streaming to me
 inline constexpr std::uint16_t kTeleopInfoType = 0x7404;   ///< device → host: HapticInfo
+inline constexpr std::uint16_t kTeleopWaveType = 0x7405;   ///< either way: a WaveSample (wave-variable mode)
 inline constexpr std::uint32_t kTeleopVersion = 1;         ///< payload layout version (Hello)
 
 /// Payload sizes (bytes after the 28-byte message header).
@@ -81,6 +85,7 @@ inline constexpr std::size_t kTeleopStateBytes = 136;
 inline constexpr std::size_t kTeleopForceBytes = 64;
 inline constexpr std::size_t kTeleopHelloBytes = 4;
 inline constexpr std::size_t kTeleopInfoBytes = 352;
+inline constexpr std::size_t kTeleopWaveBytes = 40;
 /// Largest datagram of the stream (an Info).
 inline constexpr std::size_t kTeleopMaxDatagram = kMessageHeaderBytes + kTeleopInfoBytes;
 
@@ -97,6 +102,7 @@ struct TeleopPacket {
   HapticState state;   ///< State; state.timeNs is the device's sample time (device clock)
   HapticOutput force;  ///< Force
   HapticInfo info;     ///< Info
+  WaveSample wave;     ///< Wave
   std::uint32_t version = 0;  ///< Hello
 };
 
@@ -109,13 +115,16 @@ std::size_t writeTeleopForce(const MessageHeader& header, const TeleopEcho& echo
                              std::span<std::byte> out) noexcept;
 /// Writes one Hello datagram, as writeTeleopState.
 std::size_t writeTeleopHello(const MessageHeader& header, std::span<std::byte> out) noexcept;
+/// Writes one Wave datagram, as writeTeleopState.
+std::size_t writeTeleopWave(const MessageHeader& header, const WaveSample& wave, std::span<std::byte> out) noexcept;
 /// Encodes one Info datagram (strings truncated to 63 bytes).
 std::vector<std::byte> encodeTeleopInfo(const MessageHeader& header, const HapticInfo& info);
 
 /// Decodes and validates one datagram of the stream. Fails with Parse
 /// (message model errors, unknown type, a payload size other than the type's,
 /// non-finite values, a quaternion whose norm is not 1 within 1e-3, an
-/// unterminated string, an empty workspace) or Version (Hello of another
+/// unterminated string, an empty workspace, a negative wave energy) or
+/// Version (Hello of another
 /// version), naming the field and its byte offset. No allocation on
 /// success except for Info's strings. O(size).
 Result<TeleopPacket> decodeTeleopPacket(std::span<const std::byte> datagram);
@@ -137,6 +146,8 @@ struct TeleopStats {
   std::uint64_t foreign = 0;     ///< datagrams from a peer not allowed, or of the other side's type
   std::uint64_t duplicates = 0, late = 0, stale = 0;  ///< see dm::Arrival
   std::uint64_t lost = 0;        ///< sequence numbers skipped and not (yet) arrived late
+  std::uint64_t wavesIn = 0;     ///< Wave samples queued for popWave()
+  std::uint64_t wavesDropped = 0;  ///< Wave samples dropped because popWave() fell 1024 behind
   double lossRatio = 0;          ///< lost / (lost + received − duplicates − stale)
   LatencyStats roundTrip;        ///< s
   LatencyStats oneWay;           ///< s, peer → us, corrected by clockOffset
@@ -155,6 +166,10 @@ struct TeleopOptions {
   std::vector<std::string> allow;       ///< device: host addresses accepted (empty: any)
   double timeoutSeconds = 0.1;          ///< peer silent this long: link down (> 0)
   bool clocksSynchronized = false;      ///< one-way latency without offset estimation
+  /// When set, every received datagram passes through an in-process
+  /// dm::LinkEmulator (delay, jitter, loss, duplication, reordering) before
+  /// it is handled: tele-operation under a bad link, on one machine.
+  std::optional<LinkEmulatorOptions> emulate;
 };
 
 /// The simulation side: receives the device state, sends forces.
@@ -177,6 +192,12 @@ class TeleopHost {
   /// Real-time safe: sends one Hello now (e.g. to ask a restarted device to
   /// resume); false when the kernel refused it.
   bool sendHello() noexcept;
+  /// Real-time safe: sends one wave sample (wave-variable mode); false when
+  /// the kernel refused it.
+  bool sendWave(const WaveSample& wave) noexcept;
+  /// Real-time safe, one reader thread: the next wave sample received, in
+  /// arrival order (feed them to a WaveReceiver). False when none is queued.
+  bool popWave(WaveSample& wave) noexcept;
   /// Real-time safe, one reader thread: the newest state; `ageNs` = ns since
   /// it arrived. False before the first state.
   bool latestState(HapticState& state, std::int64_t* ageNs = nullptr) noexcept;
@@ -214,6 +235,9 @@ class TeleopDevice {
   /// Real-time safe, one reader thread: the newest force; `ageNs` = ns
   /// since it arrived. False before the first force.
   bool latestForce(HapticOutput& force, std::int64_t* ageNs = nullptr) noexcept;
+  /// As TeleopHost::sendWave / popWave.
+  bool sendWave(const WaveSample& wave) noexcept;
+  bool popWave(WaveSample& wave) noexcept;
   /// A host is known and a Force or Hello came from it within the timeout.
   bool linkUp() const noexcept;
   std::uint16_t port() const noexcept;
@@ -227,24 +251,44 @@ class TeleopDevice {
   std::unique_ptr<Impl> impl_;
 };
 
-/// Runs a local HapticDevice as the device side of a stream: each step()
-/// servos the device, sends its state, and commands the newest force, or
-/// zero when none arrived within `timeoutSeconds` (link lost). step() is
-/// real-time safe; call it from the device's servo thread at its rate.
+/// Settings of a TeleopDeviceBridge.
+struct TeleopBridgeOptions {
+  double timeoutSeconds = 0.1;  ///< host silent this long: zero force
+  /// > 0: wave-variable mode with this wave impedance b (N·s/m); the host
+  /// (net-haptic with the same `wave_impedance`) must use it too.
+  double waveImpedance = 0.0;
+  WaveLossPolicy wavePolicy = WaveLossPolicy::Hold;
+  double dt = 1e-3;  ///< servo period (s), the wave sample period
+};
+
+/// Runs a local HapticDevice as the device side of a stream. Each step():
+///  * force mode: commands the newest force, or zero when none arrived
+///    within the timeout (link lost), servos the device, sends its state;
+///  * wave-variable mode (Niemeyer & Slotine, dm/network/wave_variables.hpp):
+///    the device is the master port: it receives the backward wave v
+///    through an energy-bounded WaveReceiver, commands
+///    −Fm = −(b·ẋm − √(2b)·v) (zero while the host is silent), servos, sends its
+///    state and the forward wave u = √(2b)·ẋm − v. The channel then stays
+///    passive for any delay, jitter, loss or reordering.
+/// step() is real-time safe; call it from the device's servo thread.
 class TeleopDeviceBridge {
  public:
-  TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link, double timeoutSeconds = 0.1) noexcept
-      : device_(device), link_(link), timeoutNs_(static_cast<std::int64_t>(timeoutSeconds * 1e9)) {}
+  TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link, TeleopBridgeOptions options = {}) noexcept;
   /// One servo period at loop time `nowNs`. Returns the device's status.
   DeviceStatus step(std::int64_t nowNs) noexcept;
   /// Steps whose force was zeroed because the link was silent.
   std::uint64_t zeroedSteps() const noexcept { return zeroed_; }
+  /// Wave-variable mode: the receiver of v (energy in and out, limiting).
+  const WaveReceiver& waveReceiver() const noexcept { return rxV_; }
 
  private:
   HapticDevice& device_;
   TeleopDevice& link_;
+  TeleopBridgeOptions options_;
   std::int64_t timeoutNs_;
   std::uint64_t zeroed_ = 0;
+  WaveSender txU_;
+  WaveReceiver rxV_;
 };
 
 }  // namespace dm

@@ -12,6 +12,12 @@
 // controller applies, commands ẋs = (√(2b)·u − Fs)/b and sends
 // v = u − √(2/b)·Fs.
 //
+// Signs: Fm is the force the operator applies to the master port, so a
+// haptic device displays −Fm (pushes back on the hand); Fs is the force the
+// slave applies to its environment, so with a simulated environment that
+// pushes the tool with F_render, Fs = −F_render. At rest Fm = Fs: the hand
+// feels exactly F_render.
+//
 // With a constant delay this channel is passive; with variable delay, loss
 // or holding it is not by itself. WaveSender therefore stamps every wave
 // sample with the cumulative wave energy sent so far, Σ|w|²/2·dt (J), and
@@ -40,8 +46,9 @@ Vec3 waveForward(const Vec3& velocity, const Vec3& force, double impedance);
 /// v = (b·ẋ − F)/√(2b) per axis. b > 0 in N·s/m (DM_ASSERT). O(1).
 Vec3 waveBackward(const Vec3& velocity, const Vec3& force, double impedance);
 
-/// Master port: the force to display, Fm = b·ẋm − √(2b)·v (N), from the
-/// measured master velocity (m/s) and the received backward wave v. O(1).
+/// Master port: Fm = b·ẋm − √(2b)·v (N), the force the operator applies to
+/// the port, from the measured master velocity (m/s) and the received
+/// backward wave v; the device displays −Fm. O(1).
 Vec3 waveMasterForce(const Vec3& velocity, const Vec3& vIn, double impedance);
 /// Master port: the forward wave to send, u = √(2b)·ẋm − v. O(1).
 Vec3 waveMasterOut(const Vec3& velocity, const Vec3& vIn, double impedance);

@@ -1,0 +1,93 @@
+// dmtool teleop-device: serves sim-haptic over the tele-operation stream, and
+// this test, as the remote simulator, opens it through the net-haptic driver
+// and sees the stylus where sim-haptic puts it; bad options are refused.
+#include <dm/io/haptic_device.hpp>
+#include <dm/network/drivers.hpp>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <string>
+#include <thread>
+
+#include "dmtool_run.hpp"
+
+namespace {
+
+using dmtool_test::describe;
+using dmtool_test::parseJson;
+using dmtool_test::runTool;
+
+// A UDP port that was free a moment ago (bound to port 0, then released).
+std::uint16_t freeUdpPort() {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  ::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  socklen_t n = sizeof a;
+  ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+std::int64_t monotonicNs() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+TEST(DmtoolTeleop, ServesSimHapticToTheNetHapticDriver) {
+  const std::string port = std::to_string(freeUdpPort());
+  dmtool_test::ToolRun tool;
+  std::thread server([&] {
+    tool = runTool({"teleop-device", "--driver", "sim-haptic", "--param", "path=point", "--param",
+                    "center=0.01,-0.02,0.03", "--listen", "127.0.0.1:" + port, "--seconds", "3", "--json"});
+  });
+  dm::FactoryRegistry registry;
+  dm::PluginLinker linker(registry);
+  ASSERT_TRUE(dm::registerNetworkDrivers(linker));
+  auto remote = dm::HapticDevice::open(registry, "net-haptic",
+                                       {{"device", "127.0.0.1:" + port}, {"connect_timeout", "2.5"}});
+  ASSERT_TRUE(remote) << remote.error().message();
+  EXPECT_EQ((*remote)->info().model, "simulated 3-DOF stylus");
+  bool there = false;
+  for (int i = 0; i < 2000 && !there; ++i) {
+    (*remote)->servo(monotonicNs());
+    there = (*remote)->state().position == dm::Vec3(0.01, -0.02, 0.03);
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  EXPECT_TRUE(there);
+  server.join();
+  ASSERT_EQ(tool.exitCode, 0) << describe(tool);
+  EXPECT_NE(tool.err.find("serving sim-haptic"), std::string::npos) << tool.err;
+  const nlohmann::json j = parseJson(tool);
+  EXPECT_EQ(j["port"], std::stoi(port));
+  EXPECT_GT(j["stream"]["sent"].get<std::uint64_t>(), 0u);
+  EXPECT_GT(j["stream"]["received"].get<std::uint64_t>(), 0u);  // the forces the driver sent
+  EXPECT_EQ(j["stream"]["malformed"], 0);
+}
+
+TEST(DmtoolTeleop, DevicesListsTheNetHapticDriver) {
+  const auto r = runTool({"devices", "--only", "net-haptic"});
+  EXPECT_EQ(r.exitCode, 0) << describe(r);
+  EXPECT_NE(r.out.find("haptic-device / net-haptic"), std::string::npos) << r.out;
+}
+
+TEST(DmtoolTeleop, RefusesBadOptions) {
+  const auto listen = runTool({"teleop-device", "--listen", "127.0.0.1", "--seconds", "0.1"});
+  EXPECT_EQ(listen.exitCode, 2) << describe(listen);
+  EXPECT_NE(listen.err.find("--listen"), std::string::npos) << listen.err;
+  const auto param = runTool({"teleop-device", "--param", "radius", "--seconds", "0.1"});
+  EXPECT_EQ(param.exitCode, 2) << describe(param);
+  const auto driver = runTool({"teleop-device", "--driver", "phantom-omni", "--seconds", "0.1"});
+  EXPECT_EQ(driver.exitCode, 1) << describe(driver);
+  EXPECT_NE(driver.err.find("phantom-omni"), std::string::npos) << driver.err;
+}
+
+}  // namespace
