@@ -321,7 +321,7 @@ struct CommandServer::Impl {
     }
   }
 
-  void onDisconnect(ConnectionId id) {
+  void onDisconnect(ConnectionId id, const Disconnect& /*why*/) {
     std::lock_guard lock(mutex);
     connections.erase(id);
   }
@@ -340,21 +340,8 @@ Result<std::unique_ptr<CommandServer>> CommandServer::listen(IoThread& thread, C
   impl->onCommand = std::move(onCommand);
   impl->thread = &thread;
   impl->weakSelf = impl;
-  std::weak_ptr<Impl> weak = impl;
-  TcpServerCallbacks callbacks{
-      .onConnect =
-          [weak](ConnectionId id, const SocketAddress& peer) {
-            if (auto self = weak.lock()) self->onConnect(id, peer);
-          },
-      .onBytes =
-          [weak](ConnectionId id, std::span<const std::byte> bytes) {
-            if (auto self = weak.lock()) self->onBytes(id, bytes);
-          },
-      .onDisconnect =
-          [weak](ConnectionId id, const Disconnect&) {
-            if (auto self = weak.lock()) self->onDisconnect(id);
-          },
-  };
+  TcpServerCallbacks callbacks = forwardTcpServerCallbacks(std::weak_ptr<Impl>(impl));
+
   auto tcp = TcpServer::listen(thread, std::move(options.tcp), std::move(callbacks));
   if (!tcp) return tcp.error();
   impl->owned = std::move(*tcp);

@@ -476,21 +476,8 @@ Result<std::unique_ptr<IgtlServer>> IgtlServer::listen(IoThread& thread, IgtlSer
   TcpServerOptions tcpOptions = std::move(options.tcp);
   impl->options = std::move(options);
   impl->handlers = std::move(handlers);
-  std::weak_ptr<Impl> weak = impl;
-  TcpServerCallbacks callbacks{
-      .onConnect =
-          [weak](ConnectionId id, const SocketAddress& peer) {
-            if (auto self = weak.lock()) self->onConnect(id, peer);
-          },
-      .onBytes =
-          [weak](ConnectionId id, std::span<const std::byte> bytes) {
-            if (auto self = weak.lock()) self->onBytes(id, bytes);
-          },
-      .onDisconnect =
-          [weak](ConnectionId id, const Disconnect& d) {
-            if (auto self = weak.lock()) self->onDisconnect(id, d);
-          },
-  };
+  TcpServerCallbacks callbacks = forwardTcpServerCallbacks(std::weak_ptr<Impl>(impl));
+
   // Created on the network thread, so that no callback runs before
   // impl->tcp is set (TcpServer::listen runs its own set-up inline there).
   Status status = ok();

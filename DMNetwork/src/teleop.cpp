@@ -9,6 +9,7 @@
 // with one non-blocking sendto on the same descriptor. The descriptor stays
 // open until the implementation is destroyed, so a send racing close() never
 // reaches a reused descriptor.
+#include <dm/core/clock.hpp>
 #include <dm/core/log.hpp>
 #include <dm/core/ring.hpp>
 #include <dm/core/rt_loop.hpp>
@@ -217,11 +218,8 @@ struct Stamped {
   bool valid = false;
 };
 
-// CLOCK_MONOTONIC, as dm::RealClock.
-std::int64_t nowNs() noexcept {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+// CLOCK_MONOTONIC: the stream's timestamps on both ends.
+std::int64_t nowNs() noexcept { return RealClock().now(); }
 
 PeerAddress toPeer(const udp::endpoint& e) {
   PeerAddress p;

@@ -4,6 +4,7 @@
 // forces arriving at the far motor — and link loss, device restart and a
 // silent host are handled as the safety rules say. The servo paths make no
 // allocation.
+#include <dm/core/clock.hpp>
 #include <dm/io/drivers.hpp>
 #include <dm/network/drivers.hpp>
 #include <dm/network/teleop.hpp>
@@ -25,10 +26,7 @@ namespace {
 using namespace std::chrono_literals;
 using dm::test::eventually;
 
-std::int64_t monotonicNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+std::int64_t monotonicNs() { return dm::RealClock().now(); }  // CLOCK_MONOTONIC, as the stream
 
 class NetHaptic : public ::testing::Test {
  protected:

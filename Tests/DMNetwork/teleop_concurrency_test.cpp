@@ -3,6 +3,7 @@
 // net-haptic driver in a dm::HapticDevice) at 1 kHz each, the two ends' receive
 // threads in between, and a third thread reading the statistics — the way a
 // simulator runs it. Run under ThreadSanitizer in CI.
+#include <dm/core/clock.hpp>
 #include <dm/io/drivers.hpp>
 #include <dm/network/drivers.hpp>
 #include <dm/network/teleop.hpp>
@@ -21,10 +22,7 @@ namespace {
 using namespace std::chrono_literals;
 using dm::test::eventually;
 
-std::int64_t monotonicNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+std::int64_t monotonicNs() { return dm::RealClock().now(); }  // CLOCK_MONOTONIC, as the stream
 
 /// Calls `step(now)` every millisecond until `stop`.
 template <class F>

@@ -3,6 +3,7 @@
 // loss, reordering, duplicates, clock offset, round-trip timing and RFC 3550
 // jitter, driven by a raw POSIX socket that plays the other end with
 // sequence numbers and timestamps the test chooses.
+#include <dm/core/clock.hpp>
 #include <dm/network/teleop.hpp>
 
 #include <gtest/gtest.h>
@@ -29,10 +30,7 @@ namespace {
 using namespace std::chrono_literals;
 using dm::test::eventually;
 
-std::int64_t monotonicNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+std::int64_t monotonicNs() { return dm::RealClock().now(); }  // CLOCK_MONOTONIC, as the stream
 
 dm::HapticState sampleState(double k) {
   dm::HapticState s;

@@ -1,6 +1,7 @@
 // dmtool teleop-device: serves sim-haptic over the tele-operation stream, and
 // this test, as the remote simulator, opens it through the net-haptic driver
 // and sees the stylus where sim-haptic puts it; bad options are refused.
+#include <dm/core/clock.hpp>
 #include <dm/io/haptic_device.hpp>
 #include <dm/network/drivers.hpp>
 
@@ -37,10 +38,7 @@ std::uint16_t freeUdpPort() {
   return ntohs(a.sin_port);
 }
 
-std::int64_t monotonicNs() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
+std::int64_t monotonicNs() { return dm::RealClock().now(); }  // CLOCK_MONOTONIC, as the stream
 
 TEST(DmtoolTeleop, ServesSimHapticToTheNetHapticDriver) {
   const std::string port = std::to_string(freeUdpPort());

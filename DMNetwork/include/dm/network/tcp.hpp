@@ -100,6 +100,22 @@ struct TcpServerCallbacks {
   std::function<void(ConnectionId, const Disconnect&)> onDisconnect;
 };
 
+/// Callbacks that forward to `onConnect(id, peer)`, `onBytes(id, bytes)` and
+/// `onDisconnect(id, disconnect)` of the object behind `weak` while it
+/// lives (a session layer over TcpServer that may be destroyed first).
+template <class T>
+TcpServerCallbacks forwardTcpServerCallbacks(std::weak_ptr<T> weak) {
+  return {.onConnect = [weak](ConnectionId id, const SocketAddress& peer) {
+            if (auto self = weak.lock()) self->onConnect(id, peer);
+          },
+          .onBytes = [weak](ConnectionId id, std::span<const std::byte> bytes) {
+            if (auto self = weak.lock()) self->onBytes(id, bytes);
+          },
+          .onDisconnect = [weak](ConnectionId id, const Disconnect& d) {
+            if (auto self = weak.lock()) self->onDisconnect(id, d);
+          }};
+}
+
 /// A listening TCP socket and its accepted connections.
 class TcpServer {
  public:
