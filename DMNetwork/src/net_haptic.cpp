@@ -47,31 +47,17 @@ struct NetHaptic {
   std::unique_ptr<dm::TeleopHost> host;
   dm::HapticInfo info;
   std::int64_t timeoutNs = 100'000'000;
-
-  // Wave-variable mode (b > 0): this driver is the slave port. The device
-  // it reports is the wave-commanded slave: ẋs = (√(2b)·u − Fs)/b,
-  // integrated from the first state's position; the force the application
-  // renders, F, makes Fs = −F, returned as v = u − √(2/b)·Fs.
-  double b = 0.0;
-  double dt = 1e-3;  // the device's servo period
-  dm::WaveReceiver rxU;
-  dm::WaveSender txV{1e-3};
-  dm::Vec3 u = dm::Vec3::Zero(), fs = dm::Vec3::Zero(), xs = dm::Vec3::Zero(), xsDot = dm::Vec3::Zero();
-  bool slaveStarted = false;
 };
 
 NetHaptic* self(DmDevice* d) { return reinterpret_cast<NetHaptic*>(d); }
 
 DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
   ParamReader r(params, count, error, errorSize);
-  r.onlyKnown({"device", "local", "timeout", "connect_timeout", "synchronized_clocks", "wave_impedance",
-               "wave_policy", "emulate_delay", "emulate_jitter", "emulate_loss", "emulate_seed"});
+  r.onlyKnown({"device", "local", "timeout", "connect_timeout", "synchronized_clocks", "emulate_delay", "emulate_jitter", "emulate_loss", "emulate_seed"});
   const double emulateDelay = r.number("emulate_delay", 0.0, 0.0, 10.0);
   const double emulateJitter = r.number("emulate_jitter", 0.0, 0.0, 10.0);
   const double emulateLoss = r.number("emulate_loss", 0.0, 0.0, 1.0);
   const double emulateSeed = r.number("emulate_seed", 1.0, 0.0, 9007199254740992.0);
-  const double waveImpedance = r.number("wave_impedance", 0.0, 0.0, 1e6);
-  const int wavePolicy = r.choice("wave_policy", {"hold", "zero"}, 0);
   const double timeout = r.number("timeout", 0.1, 1e-3, 60.0);
   const double connectTimeout = r.number("connect_timeout", 2.0, 0.0, 600.0);
   const bool synchronized = r.number("synchronized_clocks", 0.0, 0.0, 1.0) != 0.0;
@@ -117,11 +103,6 @@ DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t
     return nullptr;
   }
   d->info = std::move(*info);
-  d->b = waveImpedance;
-  d->dt = d->info.servoRateHz > 0 ? 1.0 / d->info.servoRateHz : 1e-3;
-  d->rxU = dm::WaveReceiver({.dt = d->dt,
-                             .policy = wavePolicy == 0 ? dm::WaveLossPolicy::Hold : dm::WaveLossPolicy::Zero});
-  d->txV = dm::WaveSender(d->dt);
   return reinterpret_cast<DmDevice*>(d.release());
 }
 
@@ -153,19 +134,6 @@ int netRead(DmDevice* dev, int64_t now, DmHapticState* out) {
   dm::HapticState s;
   std::int64_t age = 0;
   if (!d->host->latestState(s, &age) || age > d->timeoutNs) return DM_DEVICE_ERROR_LOST;
-  if (d->b > 0) {
-    dm::WaveSample w;
-    while (d->host->popWave(w)) d->rxU.receive(w);
-    d->u = d->rxU.next();
-    if (!d->slaveStarted) {
-      d->xs = s.position;
-      d->slaveStarted = true;
-    }
-    d->xsDot = dm::waveSlaveVelocity(d->u, d->fs, d->b);
-    d->xs += d->xsDot * d->dt;
-    s.position = d->xs;
-    s.linearVelocity = d->xsDot;
-  }
   *out = DmHapticState{};
   out->time_ns = now;
   for (int i = 0; i < 3; ++i) {
@@ -187,11 +155,6 @@ int netWrite(DmDevice* dev, int64_t /*now*/, const double force[3], const double
   dm::HapticOutput out;
   out.force = dm::Vec3(force[0], force[1], force[2]);
   out.torque = dm::Vec3(torque[0], torque[1], torque[2]);
-  if (d->b > 0) {
-    d->fs = -out.force;  // the slave pushes on its environment against the rendered force
-    if (!d->host->sendWave(d->txV.send(dm::waveSlaveOut(d->u, d->fs, d->b)))) return DM_DEVICE_ERROR_IO;
-  }
-  // In wave mode the Force still carries the timing echo (the device does not apply it).
   return d->host->sendForce(out) ? DM_DEVICE_OK : DM_DEVICE_ERROR_IO;
 }
 

@@ -888,34 +888,7 @@ void TeleopDevice::close() { impl_->close(); }
 
 // ---- TeleopDeviceBridge -------------------------------------------------------------
 
-TeleopDeviceBridge::TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link,
-                                       TeleopBridgeOptions options) noexcept
-    : device_(device),
-      link_(link),
-      options_(options),
-      timeoutNs_(static_cast<std::int64_t>(options.timeoutSeconds * 1e9)),
-      txU_(options.dt > 0 ? options.dt : 1e-3),
-      rxV_({.dt = options.dt > 0 ? options.dt : 1e-3, .policy = options.wavePolicy}) {}
-
 DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
-  const double b = options_.waveImpedance;
-  if (b > 0) {
-    // Master port: ẋm from the last sample, v through the energy-bounded receiver.
-    const Vec3 xdot = device_.state().linearVelocity;
-    WaveSample w;
-    while (link_.popWave(w)) rxV_.receive(w);
-    const Vec3 v = rxV_.next();
-    if (link_.linkUp()) {
-      device_.command(-waveMasterForce(xdot, v, b), Vec3::Zero(), nowNs);  // the reaction on the hand
-    } else {
-      device_.command(Vec3::Zero(), Vec3::Zero(), nowNs);
-      ++zeroed_;
-    }
-    const DeviceStatus status = device_.servo(nowNs);
-    if (status == DeviceStatus::Ok) link_.sendState(device_.state());
-    link_.sendWave(txU_.send(waveMasterOut(xdot, v, b)));
-    return status;
-  }
   // Command first, so that servo() sends a force of age 0 in this period.
   HapticOutput force;
   std::int64_t age = 0;

@@ -355,6 +355,34 @@ TEST_F(TeleopEnds, AnEmulatedLinkDelaysAndLosesWhatArrives) {
   EXPECT_NEAR(s.lossRatio, 0.2, 0.12);
 }
 
+TEST_F(TeleopEnds, WaveSamplesCrossBothWaysInArrivalOrder) {
+  auto device = dm::TeleopDevice::open({}, sampleInfo());
+  ASSERT_TRUE(device);
+  auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", (*device)->port()}});
+  ASSERT_TRUE(host);
+  ASSERT_TRUE((*host)->waitForDevice(2000ms));  // the device learns its host
+  dm::WaveSender tx(1e-3);
+  std::vector<dm::WaveSample> sent;
+  for (int i = 0; i < 5; ++i) sent.push_back(tx.send(dm::Vec3(0.1 * i, -0.2, 0.3)));
+  for (const auto& w : sent) ASSERT_TRUE((*device)->sendWave(w));
+  for (const auto& w : sent) ASSERT_TRUE((*host)->sendWave(w));
+  std::vector<dm::WaveSample> atHost, atDevice;
+  ASSERT_TRUE(eventually([&] {
+    dm::WaveSample w;
+    while ((*host)->popWave(w)) atHost.push_back(w);
+    while ((*device)->popWave(w)) atDevice.push_back(w);
+    return atHost.size() == sent.size() && atDevice.size() == sent.size();
+  }));
+  for (std::size_t i = 0; i < sent.size(); ++i) {
+    EXPECT_EQ(atHost[i].wave, sent[i].wave);
+    EXPECT_EQ(atHost[i].sequence, sent[i].sequence);
+    EXPECT_EQ(atHost[i].energy, sent[i].energy);
+    EXPECT_EQ(atDevice[i].sequence, sent[i].sequence);
+  }
+  EXPECT_EQ((*host)->stats().wavesIn, sent.size());
+  EXPECT_EQ((*device)->stats().wavesDropped, 0u);
+}
+
 TEST_F(TeleopEnds, WaitForDeviceTimesOutNamingThePeer) {
   RawPeer silent;
   auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", silent.port()}});

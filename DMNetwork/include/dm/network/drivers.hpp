@@ -17,22 +17,10 @@
 //   timeout              s without a state before "lost"       (0.1)
 //   connect_timeout      s open() waits for the device's Info  (2)
 //   synchronized_clocks  0 | 1: clocks are synchronized (same host, PTP) (0)
-//   wave_impedance       N·s/m; > 0: wave-variable mode, the device side's
-//                        TeleopDeviceBridge must use the same b (0: off)
-//   wave_policy          hold | zero: WaveReceiver loss policy  (hold)
 //   emulate_delay, emulate_jitter (s), emulate_loss (0..1), emulate_seed:
 //                        pass received states through an in-process
 //                        LinkEmulator (uniform jitter) — latency training
 //                        and tests on one machine                (off)
-//
-// Wave-variable mode: the driver is the slave port of Niemeyer & Slotine's
-// wave transformation. The position it reports is the wave-commanded slave,
-// ẋs = (√(2b)·u − Fs)/b integrated from the device's first position, and the
-// force F the application renders (after HapticDevice's clamping) is the
-// environment's push on the slave, Fs = −F, and goes back as the wave
-// v = u − √(2/b)·Fs. Both wave directions pass through
-// energy-bounded receivers, so the loop stays passive under any delay; the
-// price is that the slave position drifts from the master's under loss.
 //
 // The driver is compiled into DM::Network and registered through
 // PluginLinker::addStatic (same ABI check and init protocol as a plugin).

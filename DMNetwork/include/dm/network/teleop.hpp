@@ -9,7 +9,7 @@
 //   TeleopDevice::sendState(state)  ── State ──▶    TeleopHost::latestState()
 //   TeleopDevice::latestForce()     ◀── Force ──    TeleopHost::sendForce(force)
 //   answers Hello with Info         ◀── Hello ──    TeleopHost::waitForDevice()
-//   sendWave / popWave              ◀── Wave ──▶    sendWave / popWave (wave-variable mode)
+//   sendWave / popWave              ◀── Wave ──▶    sendWave / popWave (WaveSamples, either way)
 //
 // Every datagram is one DMPlatform message (dm/network/message.hpp: sequence
 // number, send timestamp, CRC-32C) with a fixed little-endian payload, see
@@ -77,7 +77,7 @@ inline constexpr std::uint16_t kTeleopStateType = 0x7401;  ///< device → host:
 inline constexpr std::uint16_t kTeleopForceType = 0x7402;  ///< host → device: HapticOutput
 inline constexpr std::uint16_t kTeleopHelloType = 0x7403;  ///< host → device: start streaming to me
 inline constexpr std::uint16_t kTeleopInfoType = 0x7404;   ///< device → host: HapticInfo
-inline constexpr std::uint16_t kTeleopWaveType = 0x7405;   ///< either way: a WaveSample (wave-variable mode)
+inline constexpr std::uint16_t kTeleopWaveType = 0x7405;   ///< either way: a WaveSample
 inline constexpr std::uint32_t kTeleopVersion = 1;         ///< payload layout version (Hello)
 
 /// Payload sizes (bytes after the 28-byte message header).
@@ -192,8 +192,8 @@ class TeleopHost {
   /// Real-time safe: sends one Hello now (e.g. to ask a restarted device to
   /// resume); false when the kernel refused it.
   bool sendHello() noexcept;
-  /// Real-time safe: sends one wave sample (wave-variable mode); false when
-  /// the kernel refused it.
+  /// Real-time safe: sends one wave sample (dm/network/wave_variables.hpp);
+  /// false when the kernel refused it.
   bool sendWave(const WaveSample& wave) noexcept;
   /// Real-time safe, one reader thread: the next wave sample received, in
   /// arrival order (feed them to a WaveReceiver). False when none is queued.
@@ -254,41 +254,26 @@ class TeleopDevice {
 /// Settings of a TeleopDeviceBridge.
 struct TeleopBridgeOptions {
   double timeoutSeconds = 0.1;  ///< host silent this long: zero force
-  /// > 0: wave-variable mode with this wave impedance b (N·s/m); the host
-  /// (net-haptic with the same `wave_impedance`) must use it too.
-  double waveImpedance = 0.0;
-  WaveLossPolicy wavePolicy = WaveLossPolicy::Hold;
-  double dt = 1e-3;  ///< servo period (s), the wave sample period
 };
 
-/// Runs a local HapticDevice as the device side of a stream. Each step():
-///  * force mode: commands the newest force, or zero when none arrived
-///    within the timeout (link lost), servos the device, sends its state;
-///  * wave-variable mode (Niemeyer & Slotine, dm/network/wave_variables.hpp):
-///    the device is the master port: it receives the backward wave v
-///    through an energy-bounded WaveReceiver, commands
-///    −Fm = −(b·ẋm − √(2b)·v) (zero while the host is silent), servos, sends its
-///    state and the forward wave u = √(2b)·ẋm − v. The channel then stays
-///    passive for any delay, jitter, loss or reordering.
-/// step() is real-time safe; call it from the device's servo thread.
+/// Runs a local HapticDevice as the device side of a stream: each step()
+/// commands the newest force, or zero when none arrived within the timeout
+/// (link lost), servos the device and sends its state. step() is real-time
+/// safe; call it from the device's servo thread at its rate.
 class TeleopDeviceBridge {
  public:
-  TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link, TeleopBridgeOptions options = {}) noexcept;
+  TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link, TeleopBridgeOptions options = {}) noexcept
+      : device_(device), link_(link), timeoutNs_(static_cast<std::int64_t>(options.timeoutSeconds * 1e9)) {}
   /// One servo period at loop time `nowNs`. Returns the device's status.
   DeviceStatus step(std::int64_t nowNs) noexcept;
   /// Steps whose force was zeroed because the link was silent.
   std::uint64_t zeroedSteps() const noexcept { return zeroed_; }
-  /// Wave-variable mode: the receiver of v (energy in and out, limiting).
-  const WaveReceiver& waveReceiver() const noexcept { return rxV_; }
 
  private:
   HapticDevice& device_;
   TeleopDevice& link_;
-  TeleopBridgeOptions options_;
   std::int64_t timeoutNs_;
   std::uint64_t zeroed_ = 0;
-  WaveSender txU_;
-  WaveReceiver rxV_;
 };
 
 }  // namespace dm
