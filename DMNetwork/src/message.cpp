@@ -7,17 +7,13 @@
 #include <cstring>
 #include <limits>
 
+#include "le_bytes.hpp"
+
 namespace dm {
 namespace {
 
-void putLe(std::byte* p, std::uint64_t v, int n) {
-  for (int i = 0; i < n; ++i) p[i] = static_cast<std::byte>((v >> (8 * i)) & 0xFFu);
-}
-std::uint64_t getLe(const std::byte* p, int n) {
-  std::uint64_t v = 0;
-  for (int i = 0; i < n; ++i) v |= std::to_integer<std::uint64_t>(p[i]) << (8 * i);
-  return v;
-}
+using detail::getLe;
+using detail::putLe;
 
 constexpr std::size_t kOffVersion = 4, kOffFlags = 5, kOffType = 6, kOffSeq = 8, kOffLength = 12,
                       kOffTime = 16, kOffChecksum = 24;

@@ -35,6 +35,7 @@
 #include <type_traits>
 
 #include "io_thread_impl.hpp"
+#include "le_bytes.hpp"
 
 namespace dm {
 namespace {
@@ -43,23 +44,11 @@ using asio::ip::udp;
 
 // ---- payload codec ------------------------------------------------------------
 
-void putU32(std::byte* p, std::uint32_t v) {
-  for (int i = 0; i < 4; ++i) p[i] = static_cast<std::byte>((v >> (8 * i)) & 0xFFu);
-}
-void putU64(std::byte* p, std::uint64_t v) {
-  for (int i = 0; i < 8; ++i) p[i] = static_cast<std::byte>((v >> (8 * i)) & 0xFFu);
-}
+void putU32(std::byte* p, std::uint32_t v) { detail::putLe(p, v, 4); }
+void putU64(std::byte* p, std::uint64_t v) { detail::putLe(p, v, 8); }
 void putF64(std::byte* p, double v) { putU64(p, std::bit_cast<std::uint64_t>(v)); }
-std::uint32_t getU32(const std::byte* p) {
-  std::uint32_t v = 0;
-  for (int i = 0; i < 4; ++i) v |= std::to_integer<std::uint32_t>(p[i]) << (8 * i);
-  return v;
-}
-std::uint64_t getU64(const std::byte* p) {
-  std::uint64_t v = 0;
-  for (int i = 0; i < 8; ++i) v |= std::to_integer<std::uint64_t>(p[i]) << (8 * i);
-  return v;
-}
+std::uint32_t getU32(const std::byte* p) { return static_cast<std::uint32_t>(detail::getLe(p, 4)); }
+std::uint64_t getU64(const std::byte* p) { return detail::getLe(p, 8); }
 double getF64(const std::byte* p) { return std::bit_cast<double>(getU64(p)); }
 
 // Writes n doubles from `v` at p; returns the next position.
@@ -681,8 +670,10 @@ struct TeleopEnd {
     return sendRaw(std::span<const std::byte>(datagram.data(), n));
   }
 
+  // Host: a state arrived within the timeout. Device: a Hello, Force or
+  // Wave came from the current host within it.
   bool linkUp() const noexcept {
-    const std::int64_t last = lastAcceptNs.load(std::memory_order_acquire);
+    const std::int64_t last = (role == Role::Host ? lastAcceptNs : peerAliveNs).load(std::memory_order_acquire);
     return last != kNever && nowNs() - last < timeoutNs;
   }
 
@@ -874,16 +865,9 @@ bool TeleopDevice::latestForce(HapticOutput& force, std::int64_t* ageNs) noexcep
   return true;
 }
 
-bool TeleopDevice::linkUp() const noexcept {
-  const std::int64_t last = impl_->peerAliveNs.load(std::memory_order_acquire);
-  return last != detail::TeleopEnd::kNever && nowNs() - last < impl_->timeoutNs;
-}
+bool TeleopDevice::linkUp() const noexcept { return impl_->linkUp(); }
 std::uint16_t TeleopDevice::port() const noexcept { return impl_->port; }
-TeleopStats TeleopDevice::stats() const {
-  TeleopStats s = impl_->stats();
-  s.linkUp = linkUp();
-  return s;
-}
+TeleopStats TeleopDevice::stats() const { return impl_->stats(); }
 void TeleopDevice::close() { impl_->close(); }
 
 // ---- TeleopDeviceBridge -------------------------------------------------------------

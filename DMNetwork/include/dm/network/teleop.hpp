@@ -153,7 +153,7 @@ struct TeleopStats {
   LatencyStats oneWay;           ///< s, peer → us, corrected by clockOffset
   double jitter = 0;             ///< s, RFC 3550 interarrival jitter of the received stream
   double clockOffset = 0;        ///< s, peer clock − our clock (0 with clocksSynchronized)
-  bool linkUp = false;           ///< a stream message arrived within the timeout
+  bool linkUp = false;           ///< as linkUp() of the end
   double sinceLastReceive = -1;  ///< s since the newest accepted message; < 0: none yet
 };
 
