@@ -417,7 +417,7 @@ struct CommandClient::Impl {
               detail.c_str());
   }
 
-  void onState(ConnectionState state) {
+  void onState(ConnectionState state, const std::string& /*detail*/) {
     if (state == ConnectionState::Connected) {
       decoder.reset();
       if (!authenticated()) setReady(true);  // else: wait for the server's hello
@@ -520,17 +520,8 @@ Result<std::unique_ptr<CommandClient>> CommandClient::connect(IoThread& thread, 
   impl->peer = options.tcp.peer;
   impl->thread = &thread;
   impl->weakSelf = impl;
-  std::weak_ptr<Impl> weak = impl;
-  TcpClientCallbacks callbacks{
-      .onState =
-          [weak](ConnectionState s, const std::string&) {
-            if (auto self = weak.lock()) self->onState(s);
-          },
-      .onBytes =
-          [weak](std::span<const std::byte> bytes) {
-            if (auto self = weak.lock()) self->onBytes(bytes);
-          },
-  };
+  TcpClientCallbacks callbacks = forwardTcpClientCallbacks(std::weak_ptr<Impl>(impl));
+
   auto tcp = TcpClient::connect(thread, std::move(options.tcp), std::move(callbacks));
   if (!tcp) return tcp.error();
   impl->owned = std::move(*tcp);

@@ -630,17 +630,8 @@ Result<std::unique_ptr<IgtlClient>> IgtlClient::connect(IoThread& thread, IgtlCl
   TcpClientOptions tcpOptions = std::move(options.tcp);
   impl->options = std::move(options);
   impl->handlers = std::move(handlers);
-  std::weak_ptr<Impl> weak = impl;
-  TcpClientCallbacks callbacks{
-      .onState =
-          [weak](ConnectionState s, const std::string& detail) {
-            if (auto self = weak.lock()) self->onState(s, detail);
-          },
-      .onBytes =
-          [weak](std::span<const std::byte> bytes) {
-            if (auto self = weak.lock()) self->onBytes(bytes);
-          },
-  };
+  TcpClientCallbacks callbacks = forwardTcpClientCallbacks(std::weak_ptr<Impl>(impl));
+
   // On the network thread, so that no callback runs before impl->tcp is set.
   Status status = ok();
   thread.runAndWait([&] {

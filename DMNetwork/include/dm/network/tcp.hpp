@@ -193,6 +193,19 @@ struct TcpClientCallbacks {
   std::function<void(std::span<const std::byte>)> onBytes;
 };
 
+/// Callbacks that forward to `onState(state, detail)` and `onBytes(bytes)`
+/// of the object behind `weak` while it lives (a session layer over
+/// TcpClient that may be destroyed first).
+template <class T>
+TcpClientCallbacks forwardTcpClientCallbacks(std::weak_ptr<T> weak) {
+  return {.onState = [weak](ConnectionState s, const std::string& detail) {
+            if (auto self = weak.lock()) self->onState(s, detail);
+          },
+          .onBytes = [weak](std::span<const std::byte> bytes) {
+            if (auto self = weak.lock()) self->onBytes(bytes);
+          }};
+}
+
 /// A TCP connection to a server, optionally re-established with exponential
 /// back-off. Bytes queued when a connection is lost are discarded and
 /// reported (they could leave a half-written frame on the next connection).
