@@ -10,6 +10,7 @@
 #include <charconv>
 #include <memory>
 #include <new>
+#include <optional>
 
 #include "driver_params.hpp"
 
@@ -47,13 +48,20 @@ struct NetHaptic {
   std::unique_ptr<dm::TeleopHost> host;
   dm::HapticInfo info;
   std::int64_t timeoutNs = 100'000'000;
+  // Wave-variable mode: this driver is the slave port (see drivers.hpp).
+  double waveImpedance = 0.0;
+  dm::WaveLossPolicy wavePolicy = dm::WaveLossPolicy::Hold;
+  std::optional<dm::WaveSlavePort> wave;
 };
 
 NetHaptic* self(DmDevice* d) { return reinterpret_cast<NetHaptic*>(d); }
 
 DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
   ParamReader r(params, count, error, errorSize);
-  r.onlyKnown({"device", "local", "timeout", "connect_timeout", "synchronized_clocks", "emulate_delay", "emulate_jitter", "emulate_loss", "emulate_seed"});
+  r.onlyKnown({"device", "local", "timeout", "connect_timeout", "synchronized_clocks", "wave_impedance",
+               "wave_policy", "emulate_delay", "emulate_jitter", "emulate_loss", "emulate_seed"});
+  const double waveImpedance = r.number("wave_impedance", 0.0, 0.0, 1e6);
+  const int wavePolicy = r.choice("wave_policy", {"hold", "zero"}, 0);
   const double emulateDelay = r.number("emulate_delay", 0.0, 0.0, 10.0);
   const double emulateJitter = r.number("emulate_jitter", 0.0, 0.0, 10.0);
   const double emulateLoss = r.number("emulate_loss", 0.0, 0.0, 1.0);
@@ -81,6 +89,8 @@ DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t
     return nullptr;
   }
   d->timeoutNs = static_cast<std::int64_t>(timeout * 1e9);
+  d->waveImpedance = waveImpedance;
+  d->wavePolicy = wavePolicy == 0 ? dm::WaveLossPolicy::Hold : dm::WaveLossPolicy::Zero;
   dm::TeleopOptions options{.local = *local,
                             .peer = *peer,
                             .timeoutSeconds = timeout,
@@ -134,6 +144,22 @@ int netRead(DmDevice* dev, int64_t now, DmHapticState* out) {
   dm::HapticState s;
   std::int64_t age = 0;
   if (!d->host->latestState(s, &age) || age > d->timeoutNs) return DM_DEVICE_ERROR_LOST;
+  if (d->waveImpedance > 0) {
+    // Slave port: the tool starts where the device is, then only waves move
+    // it; apply() in write moves it with the force rendered at what read
+    // reported.
+    if (!d->wave) {
+      // The Info's servo rate is checked positive by HapticDevice::open.
+      d->wave.emplace(dm::WavePortOptions{
+          .impedance = d->waveImpedance, .dt = 1.0 / d->info.servoRateHz, .policy = d->wavePolicy});
+      d->wave->reset(s.position);
+    }
+    dm::WaveSample w;
+    while (d->host->popWave(w)) d->wave->receive(w);
+    d->wave->begin();
+    s.position = d->wave->position();
+    s.linearVelocity = d->wave->velocity();
+  }
   *out = DmHapticState{};
   out->time_ns = now;
   for (int i = 0; i < 3; ++i) {
@@ -155,6 +181,8 @@ int netWrite(DmDevice* dev, int64_t /*now*/, const double force[3], const double
   dm::HapticOutput out;
   out.force = dm::Vec3(force[0], force[1], force[2]);
   out.torque = dm::Vec3(torque[0], torque[1], torque[2]);
+  if (d->wave && !d->host->sendWave(d->wave->apply(out.force))) return DM_DEVICE_ERROR_IO;
+  // In wave mode the Force still carries the timing echo; the device side does not apply it.
   return d->host->sendForce(out) ? DM_DEVICE_OK : DM_DEVICE_ERROR_IO;
 }
 

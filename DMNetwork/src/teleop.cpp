@@ -872,7 +872,33 @@ void TeleopDevice::close() { impl_->close(); }
 
 // ---- TeleopDeviceBridge -------------------------------------------------------------
 
+TeleopDeviceBridge::TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link,
+                                       TeleopBridgeOptions options) noexcept
+    : device_(device), link_(link), timeoutNs_(static_cast<std::int64_t>(options.timeoutSeconds * 1e9)) {
+  // HapticDevice::open guarantees a positive finite servo rate.
+  if (options.waveImpedance > 0.0 && std::isfinite(options.waveImpedance))
+    wave_.emplace(WavePortOptions{.impedance = options.waveImpedance,
+                                  .dt = 1.0 / device.info().servoRateHz,
+                                  .policy = options.wavePolicy});
+}
+
 DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
+  if (wave_) {
+    // Master port: ẋm of the last servo, the waves that arrived since.
+    WaveSample w;
+    while (link_.popWave(w)) wave_->receive(w);
+    const Vec3 force = wave_->step(device_.state().linearVelocity);
+    if (link_.linkUp()) {
+      device_.command(force, Vec3::Zero(), nowNs);
+    } else {
+      device_.command(Vec3::Zero(), Vec3::Zero(), nowNs);
+      ++zeroed_;
+    }
+    const DeviceStatus status = device_.servo(nowNs);
+    if (status == DeviceStatus::Ok) link_.sendState(device_.state());
+    link_.sendWave(wave_->outgoing());
+    return status;
+  }
   // Command first, so that servo() sends a force of age 0 in this period.
   HapticOutput force;
   std::int64_t age = 0;

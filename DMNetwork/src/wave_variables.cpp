@@ -85,4 +85,37 @@ Vec3 WaveReceiver::next() {
   return out;
 }
 
+WaveMasterPort::WaveMasterPort(WavePortOptions options)
+    : options_(options), tx_(options.dt), rx_({.dt = options.dt, .policy = options.policy}) {
+  DM_DEMAND(options.impedance > 0.0, "WaveMasterPort: wave impedance b must be > 0 N·s/m");
+}
+
+Vec3 WaveMasterPort::step(const Vec3& velocity) {
+  const Vec3 v = rx_.next();
+  out_ = tx_.send(waveMasterOut(velocity, v, options_.impedance));
+  return -waveMasterForce(velocity, v, options_.impedance);  // the reaction on the hand
+}
+
+WaveSlavePort::WaveSlavePort(WavePortOptions options)
+    : options_(options), tx_(options.dt), rx_({.dt = options.dt, .policy = options.policy}) {
+  DM_DEMAND(options.impedance > 0.0, "WaveSlavePort: wave impedance b must be > 0 N·s/m");
+}
+
+void WaveSlavePort::reset(const Vec3& position) {
+  x_ = position;
+  xDot_.setZero();
+}
+
+const WaveSample& WaveSlavePort::apply(const Vec3& environmentForce) {
+  const double b = options_.impedance;
+  // The port force is the slave's push on the environment plus the matched
+  // damper's: Fp = −F + b·ẋs. With ẋs = (√(2b)·u − Fp)/b that is linear in
+  // ẋs; solved: ẋs = (√(2b)·u + F)/(2b).
+  xDot_ = (std::sqrt(2.0 * b) * u_ + environmentForce) / (2.0 * b);
+  const Vec3 portForce = b * xDot_ - environmentForce;
+  x_ += xDot_ * options_.dt;
+  out_ = tx_.send(waveSlaveOut(u_, portForce, b));
+  return out_;
+}
+
 }  // namespace dm

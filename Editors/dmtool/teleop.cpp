@@ -6,7 +6,8 @@
 // simulator's "net-haptic" driver talks to. A real-time loop at the device's
 // servo rate runs a TeleopDeviceBridge: it servos the device, sends its
 // state, and commands the newest force, or zero when the host fell silent
-// for --timeout. Prints the bound address first ("serving ... on ADDR:PORT",
+// for --timeout; with --wave-impedance B it exchanges wave variables instead
+// (stable under delay; the simulator's net-haptic uses the same B). Prints the bound address first ("serving ... on ADDR:PORT",
 // useful with port 0), then the link statistics once a second; with
 // --seconds it stops after that long (otherwise on SIGINT/SIGTERM) and, with
 // --json, prints the final statistics as one JSON object.
@@ -37,6 +38,8 @@ struct TeleopCliOptions {
   std::string listen = "0.0.0.0:47000";
   std::vector<std::string> allow;
   double timeout = 0.1;
+  double waveImpedance = 0.0;
+  std::string wavePolicy = "hold";
   double seconds = 0.0;
   bool json = false;
 };
@@ -100,7 +103,11 @@ int runTeleopDevice(const TeleopCliOptions& o) {
   std::fflush(banner);
 
   const double rate = info.servoRateHz > 0 ? info.servoRateHz : 1000.0;
-  dm::TeleopDeviceBridge bridge(**device, **link, {.timeoutSeconds = o.timeout});
+  dm::TeleopDeviceBridge bridge(
+      **device, **link,
+      {.timeoutSeconds = o.timeout,
+       .waveImpedance = o.waveImpedance,
+       .wavePolicy = o.wavePolicy == "zero" ? dm::WaveLossPolicy::Zero : dm::WaveLossPolicy::Hold});
   dm::RealTimeLoop loop({.rate_hz = rate, .name = "dm-teleop-dev"},
                         [&](const dm::TickInfo& t) { bridge.step(t.start_ns); });
   if (auto s = loop.start(); !s) return printError(s.error());
@@ -127,12 +134,25 @@ int runTeleopDevice(const TeleopCliOptions& o) {
   std::signal(SIGINT, SIG_DFL);
   std::signal(SIGTERM, SIG_DFL);
   const dm::TeleopStats s = (*link)->stats();
-  if (o.json)
-    printJson({{"driver", o.driver},
-               {"port", (*link)->port()},
-               {"zeroed_steps", bridge.zeroedSteps()},
-               {"loop_ticks", loop.stats().ticks},
-               {"stream", toJson(s)}});
+  if (o.json) {
+    nlohmann::json j = {{"driver", o.driver},
+                        {"port", (*link)->port()},
+                        {"zeroed_steps", bridge.zeroedSteps()},
+                        {"loop_ticks", loop.stats().ticks},
+                        {"output_force_N", dmtool::toJson((*device)->lastOutput().force)},
+                        {"stream", toJson(s)}};
+    if (const dm::WaveMasterPort* w = bridge.wavePort()) {
+      const dm::WaveReceiverStats ws = w->receiver().stats();
+      j["wave"] = {{"impedance", o.waveImpedance},
+                   {"energy_in_J", w->receiver().energyIn()},
+                   {"energy_out_J", w->receiver().energyOut()},
+                   {"received", ws.received},
+                   {"stale", ws.stale},
+                   {"held", ws.held},
+                   {"limited", ws.limited}};
+    }
+    printJson(j);
+  }
   return kExitOk;
 }
 
@@ -149,6 +169,12 @@ Command addTeleopDeviceCommand(CLI::App& parent) {
   app->add_option("--allow", o->allow, "Accept only this host address (repeatable; default any)");
   app->add_option("--timeout", o->timeout, "Seconds without a force before the output is zeroed (default 0.1)")
       ->check(CLI::Range(1e-3, 60.0));
+  app->add_option("--wave-impedance", o->waveImpedance,
+                  "Wave-variable mode with this impedance b in N*s/m (the simulator's net-haptic needs the same "
+                  "wave_impedance); 0: force mode (default)")
+      ->check(CLI::Range(0.0, 1e6));
+  app->add_option("--wave-policy", o->wavePolicy, "Wave receiver loss policy: hold (default) or zero")
+      ->check(CLI::IsMember({"hold", "zero"}));
   app->add_option("--seconds", o->seconds, "Stop after this long (default: run until SIGINT/SIGTERM)")
       ->check(CLI::Range(0.0, 1e7));
   app->add_flag("--json", o->json, "Print the final statistics as one JSON object (no periodic lines)");

@@ -3,7 +3,8 @@
 // the local device — same identity and limits, bit-identical positions,
 // forces arriving at the far motor — and link loss, device restart and a
 // silent host are handled as the safety rules say. The servo paths make no
-// allocation.
+// allocation. In wave-variable mode a stiff contact settles over loopback
+// and over an emulated delayed, jittery, lossy link.
 #include <dm/core/clock.hpp>
 #include <dm/io/drivers.hpp>
 #include <dm/network/drivers.hpp>
@@ -11,6 +12,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -168,6 +170,29 @@ TEST_F(NetHaptic, ServoPathsDoNotAllocate) {
   EXPECT_EQ(dm::test::countedAllocations(), before);
 }
 
+TEST_F(NetHaptic, WaveModeServoPathsDoNotAllocate) {
+  bridge = std::make_unique<dm::TeleopDeviceBridge>(
+      *local, *link, dm::TeleopBridgeOptions{.timeoutSeconds = 0.1, .waveImpedance = 40.0});
+  auto remote = dm::HapticDevice::open(registry, "net-haptic",
+                                       {{"device", "127.0.0.1:" + std::to_string(link->port())},
+                                        {"wave_impedance", "40"}});
+  ASSERT_TRUE(remote) << remote.error().message();
+  ASSERT_TRUE(eventually([&] {
+    tick(remote->get());
+    return (*remote)->connected() && link->stats().wavesIn > 0;
+  }));
+  dm::test::tCountAllocations = true;
+  const auto before = dm::test::countedAllocations();
+  for (int i = 0; i < 50; ++i) {
+    const std::int64_t now = monotonicNs();
+    (*remote)->command(dm::Vec3(0.5, 0, 0), dm::Vec3::Zero(), now);
+    bridge->step(now);
+    (*remote)->servo(now);
+  }
+  dm::test::tCountAllocations = false;
+  EXPECT_EQ(dm::test::countedAllocations(), before);
+}
+
 TEST_F(NetHaptic, OpenFailsNamingTheAddressWhenNoDeviceSideAnswers) {
   const std::string where = "127.0.0.1:" + std::to_string(link->port());
   link.reset();  // nobody answers on that port any more
@@ -188,6 +213,117 @@ TEST_F(NetHaptic, BadParametersNameTheKey) {
   ASSERT_FALSE(unknown);
   EXPECT_NE(unknown.error().message().find("'rate'"), std::string::npos);
 }
+
+// Wave-variable mode end to end: a virtual hand (sim-haptic, 0.5 kg on
+// 200 N/m, lightly damped) pulls the stylus toward z = −1 cm; the simulator
+// raises a 2 kN/m wall under net-haptic's tool to z = 0 over the first
+// second and holds it there. Both loops run at 1 kHz on threads of their
+// own (unsynchronized, as on two machines); the link is loopback, or the
+// link emulator with 5 ms ± 2 ms each way and 2 % loss on both ends. The
+// contact settles, the operator feels the force the simulator renders (at
+// rest the wave channel passes a steady force unchanged), and neither
+// receiver outputs more wave energy than it received. (Simulated-time
+// versions with up to 100 ms each way: wave_variables_test.cpp.)
+struct WaveLink {
+  const char* name;
+  double delay, jitter, loss;  // each way: s, s, probability
+};
+
+class NetHapticWaves : public ::testing::TestWithParam<WaveLink> {};
+
+TEST_P(NetHapticWaves, ContactSettlesAndTheOperatorFeelsTheRenderedForce) {
+  const WaveLink& w = GetParam();
+  dm::FactoryRegistry registry;
+  dm::PluginLinker linker(registry);
+  ASSERT_TRUE(dm::registerBuiltinDrivers(linker));
+  ASSERT_TRUE(dm::registerNetworkDrivers(linker));
+  auto local = dm::HapticDevice::open(registry, "sim-haptic",
+                                      {{"path", "point"}, {"center", "0,0,-0.01"}, {"hand", "1"},
+                                       {"hand_mass", "0.5"}, {"hand_stiffness", "200"}, {"hand_damping", "4"},
+                                       {"max_force", "20"}});
+  ASSERT_TRUE(local) << local.error().message();
+  dm::TeleopOptions deviceOptions;
+  if (w.delay > 0)
+    deviceOptions.emulate = dm::LinkEmulatorOptions{
+        .delay = std::chrono::microseconds(static_cast<long long>(w.delay * 1e6)),
+        .jitter = std::chrono::microseconds(static_cast<long long>(w.jitter * 1e6)),
+        .lossProbability = w.loss,
+        .seed = 7};
+  auto link = dm::TeleopDevice::open(deviceOptions, (*local)->info());
+  ASSERT_TRUE(link) << link.error().message();
+  const double b = 40.0;
+  dm::TeleopDeviceBridge bridge(**local, **link, {.timeoutSeconds = 0.5, .waveImpedance = b});
+  ASSERT_NE(bridge.wavePort(), nullptr);
+  std::atomic<bool> stop{false};
+  // The device side answers Hello on its own; its servo loop runs here.
+  std::thread device([&] {
+    auto next = std::chrono::steady_clock::now();
+    while (!stop.load()) {
+      bridge.step(monotonicNs());
+      next += 1ms;
+      std::this_thread::sleep_until(next);
+    }
+  });
+  dm::DeviceParams params{{"device", "127.0.0.1:" + std::to_string((*link)->port())},
+                          {"wave_impedance", "40"},
+                          {"timeout", "0.5"}};
+  if (w.delay > 0) {
+    params.push_back({"emulate_delay", std::to_string(w.delay)});
+    params.push_back({"emulate_jitter", std::to_string(w.jitter)});
+    params.push_back({"emulate_loss", std::to_string(w.loss)});
+  }
+  auto remote = dm::HapticDevice::open(registry, "net-haptic", params);
+  if (!remote) {
+    stop = true;
+    device.join();
+    FAIL() << remote.error().message();
+  }
+  const double wall = 2000.0;  // N/m, the surface z = 0
+  double maxAbsZ = 0.0, windowSum = 0.0, lastSecondSum = 0.0;
+  double windowMin = 1e9, windowMax = -1e9;  // over the 100 ms means of the last second
+  const int ticks = 3000;
+  auto next = std::chrono::steady_clock::now();
+  for (int i = 0; i < ticks; ++i) {
+    const std::int64_t now = monotonicNs();
+    (*remote)->servo(now);
+    const double z = (*remote)->state().position.z();
+    if (!std::isfinite(z)) break;
+    maxAbsZ = std::max(maxAbsZ, std::abs(z));
+    const double surface = -0.05 * std::max(0.0, 1.0 - i / 1000.0);
+    const double f = z < surface ? wall * (surface - z) : 0.0;
+    (*remote)->command(dm::Vec3(0, 0, f), dm::Vec3::Zero(), now);
+    if (i >= ticks - 1000) {
+      windowSum += f;
+      lastSecondSum += f;
+      if ((i + 1) % 100 == 0) {
+        windowMin = std::min(windowMin, windowSum / 100);
+        windowMax = std::max(windowMax, windowSum / 100);
+        windowSum = 0.0;
+      }
+    }
+    next += 1ms;
+    std::this_thread::sleep_until(next);
+  }
+  stop = true;
+  device.join();
+  const double meanForce = lastSecondSum / 1000;
+  const double operatorForce = (*local)->lastOutput().force.z();
+  const dm::WaveReceiver& rx = bridge.wavePort()->receiver();
+  EXPECT_LT(maxAbsZ, 0.05);               // bounded: no growing oscillation
+  EXPECT_GT(meanForce, 0.5);              // in contact
+  EXPECT_LT(windowMax - windowMin, 0.2);  // settled: 100 ms means within 0.2 N
+  // At rest the hand feels the rendered force.
+  EXPECT_NEAR(operatorForce, meanForce, 0.1 * meanForce);
+  EXPECT_LE(rx.energyOut(), rx.energyIn() + 1e-12);
+  EXPECT_GT((*link)->stats().wavesIn, 1000u);
+  std::printf("%s: rendered %.3f N (100 ms means %.3f..%.3f), operator %.3f N, max |z| %.4f m\n", w.name,
+              meanForce, windowMin, windowMax, operatorForce, maxAbsZ);
+}
+
+INSTANTIATE_TEST_SUITE_P(Links, NetHapticWaves,
+                         ::testing::Values(WaveLink{"loopback", 0.0, 0.0, 0.0},
+                                           WaveLink{"emulated", 0.005, 0.002, 0.02}),
+                         [](const auto& p) { return std::string(p.param.name); });
 
 TEST(NetEndpoint, ParsesAddressPortForms) {
   auto v4 = dm::parseEndpoint("192.168.1.20:47000", "x");

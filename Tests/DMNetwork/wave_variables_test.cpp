@@ -340,4 +340,150 @@ TEST(WaveVariables, WaveChannelPassiveAndSlaveSettles) {
   }
 }
 
+// ---- the ports, as a tele-operation stream runs them -----------------------
+//
+// The order of operations is the stream's, as HapticDevice::servo runs
+// both ends (read the state, then write the last command): the operator's
+// device (a hand of 0.5 kg on a 200 N/m spring, lightly damped, pulling
+// 1 cm into the wall) gets the force computed from the velocity of its last
+// servo, clamped to 20 N, for the next period; the simulator (net-haptic)
+// reads the tool position at its servo, renders the environment there (a
+// 2 kN/m wall rising under the tool to z = 0 over the first second), and
+// that force moves the tool at the next servo's write — one period stale,
+// held over the period (zero-order hold).
+
+struct PortOutcome {
+  bool diverged = false;
+  double maxAbsTool = 0.0;       ///< m
+  double swing = 0.0;            ///< peak-to-peak of the 100 ms means of the wall force, last second, N
+  double wallForce = 0.0;        ///< mean over the last second, N
+  double operatorForce = 0.0;    ///< displayed force, mean over the last second, N
+  double handForce = 0.0;        ///< the hand's push into the wall at the end, N
+  bool receiversBounded = true;  ///< energy out ≤ energy in at both receivers, every tick
+};
+
+/// `matched`: the library's WaveSlavePort; otherwise the textbook slave port
+/// without the matched damper (ẋs and v from the same Fs), for contrast.
+PortOutcome runPorts(int delayTicks, int jitterTicks, double loss, long ticks, bool matched) {
+  const dm::WavePortOptions opt{.impedance = 40.0, .dt = kDt};
+  SimLink<dm::WaveSample> fwd(delayTicks, jitterTicks, loss, 41);
+  SimLink<dm::WaveSample> bwd(delayTicks, jitterTicks, loss, 42);
+  dm::WaveMasterPort master(opt);
+  dm::WaveSlavePort slave(opt);
+  dm::WaveSender txPlain(kDt);
+  dm::WaveReceiver rxPlain({.dt = kDt});
+  const double mass = 0.5, kHand = 200.0, bHand = 4.0, xHand = -0.01, wall = 2000.0, maxForce = 20.0;
+  double x = 0.0, v = 0.0;         // the hand and stylus
+  double stateV = 0.0;             // velocity read at the last servo
+  double displayed = 0.0;          // force acting on the hand now
+  double command = 0.0;            // the simulator's last command: the wall force at the reported tool
+  double toolPlain = 0.0;          // the unmatched slave's tool position
+  PortOutcome o;
+  double windowSum = 0.0, wMin = 1e9, wMax = -1e9, opSum = 0.0, wallSum = 0.0;
+  slave.reset(Vec3::Zero());
+  for (long k = 0; k < ticks; ++k) {
+    fwd.deliver(k, [&](const dm::WaveSample& s) { matched ? slave.receive(s) : rxPlain.receive(s); });
+    bwd.deliver(k, [&](const dm::WaveSample& s) { master.receive(s); });
+    // Master: the force from the last servo's velocity, then the servo
+    // (the hand moves under the previous force, 10 substeps), then the write.
+    const double masterForce = master.step(Vec3(0, 0, stateV)).z();
+    for (int i = 0; i < 10; ++i) {
+      const double h = kDt / 10;
+      v += h * (kHand * (xHand - x) - bHand * v + displayed) / mass;
+      x += h * v;
+    }
+    stateV = v;
+    displayed = std::clamp(masterForce, -maxForce, maxForce);
+    fwd.submit(k, master.outgoing());
+    // Slave servo: read (this period's wave; report the tool), then write
+    // the last command (the move); then the simulator renders at the report.
+    double tool = 0.0;
+    if (matched) {
+      slave.begin();
+      tool = slave.position().z();
+      bwd.submit(k, slave.apply(Vec3(0, 0, command)));
+    } else {
+      const Vec3 u = rxPlain.next();
+      tool = toolPlain;
+      const Vec3 fs(0, 0, -command);
+      toolPlain += dm::waveSlaveVelocity(u, fs, opt.impedance).z() * kDt;
+      bwd.submit(k, txPlain.send(dm::waveSlaveOut(u, fs, opt.impedance)));
+    }
+    const double surface = -0.05 * std::max(0.0, 1.0 - static_cast<double>(k) / 1000.0);
+    command = tool < surface ? wall * (surface - tool) : 0.0;
+    o.maxAbsTool = std::max(o.maxAbsTool, std::abs(tool));
+    if (master.receiver().energyOut() > master.receiver().energyIn() + 1e-12 ||
+        slave.receiver().energyOut() > slave.receiver().energyIn() + 1e-12)
+      o.receiversBounded = false;
+    if (!std::isfinite(tool) || std::abs(tool) > 1.0) {
+      o.diverged = true;
+      return o;
+    }
+    if (k >= ticks - 1000) {
+      windowSum += command;
+      wallSum += command;
+      opSum += displayed;
+      if ((k + 1) % 100 == 0) {
+        wMin = std::min(wMin, windowSum / 100);
+        wMax = std::max(wMax, windowSum / 100);
+        windowSum = 0.0;
+      }
+    }
+  }
+  o.swing = wMax - wMin;
+  o.wallForce = wallSum / 1000;
+  o.operatorForce = opSum / 1000;
+  o.handForce = kHand * (x - xHand);  // the hand pushing the stylus into the wall
+  return o;
+}
+
+TEST(WavePorts, TextbookSlavePortRingsUpAgainstAStiffWall) {
+  // Control for the next test: without the matched damper the same loop
+  // diverges with one period of delay each way.
+  const PortOutcome o = runPorts(1, 0, 0.0, 3000, false);
+  EXPECT_TRUE(o.diverged);
+}
+
+TEST(WavePorts, MatchedPortsHoldAStiffContactUnderDelayJitterAndLoss) {
+  struct Case {
+    int delay, jitter;
+    double loss;
+    long ticks;
+  };
+  // One-way delays from one period to 100 ms; the long ones need longer to settle.
+  for (const Case c : {Case{1, 0, 0.0, 3000}, Case{5, 2, 0.02, 3000}, Case{20, 5, 0.05, 5000},
+                       Case{100, 20, 0.05, 20000}}) {
+    SCOPED_TRACE(testing::Message() << "delay " << c.delay << " ms, jitter " << c.jitter << " ms, loss " << c.loss);
+    const PortOutcome o = runPorts(c.delay, c.jitter, c.loss, c.ticks, true);
+    ASSERT_FALSE(o.diverged);
+    EXPECT_TRUE(o.receiversBounded);
+    EXPECT_LT(o.maxAbsTool, 0.05) << "m";  // never pushed far through the wall
+    EXPECT_GT(o.wallForce, 0.5) << "N";     // in contact
+    EXPECT_LT(o.swing, 0.02) << "N";        // settled
+    // At rest the operator feels the rendered force, and holds it with the hand.
+    EXPECT_NEAR(o.operatorForce, o.wallForce, 0.02 * o.wallForce);
+    EXPECT_NEAR(o.handForce, o.wallForce, 0.05 * o.wallForce);
+  }
+}
+
+TEST(WavePorts, FreeMotionSlaveTracksTheMasterVelocity) {
+  // Matched termination: with no environment force the slave absorbs the
+  // forward wave, so v = 0 and ẋs = ẋm exactly; the master feels b·ẋm.
+  const double b = 40.0;
+  dm::WaveMasterPort master({.impedance = b, .dt = kDt});
+  dm::WaveSlavePort slave({.impedance = b, .dt = kDt});
+  slave.reset(Vec3(0.1, 0, 0));
+  for (int k = 0; k < 100; ++k) {
+    const Vec3 velocity(0.02 * std::sin(0.05 * k), 0.01, -0.03);
+    const Vec3 force = master.step(velocity);
+    EXPECT_LT((force + b * velocity).norm(), 1e-12);
+    slave.receive(master.outgoing());
+    slave.begin();
+    const dm::WaveSample back = slave.apply(Vec3::Zero());
+    EXPECT_LT(back.wave.norm(), 1e-12);
+    EXPECT_LT((slave.velocity() - velocity).norm(), 1e-12);
+    master.receive(back);
+  }
+}
+
 }  // namespace

@@ -13,6 +13,8 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <string>
 #include <thread>
@@ -69,6 +71,49 @@ TEST(DmtoolTeleop, ServesSimHapticToTheNetHapticDriver) {
   EXPECT_GT(j["stream"]["sent"].get<std::uint64_t>(), 0u);
   EXPECT_GT(j["stream"]["received"].get<std::uint64_t>(), 0u);  // the forces the driver sent
   EXPECT_EQ(j["stream"]["malformed"], 0);
+}
+
+TEST(DmtoolTeleop, WaveImpedanceServesTheMasterPortOfAWaveLoop) {
+  // A fixed stylus (sim-haptic "point") is the master; the simulator renders
+  // a constant 1 N on net-haptic's tool. A master that does not move
+  // reflects every wave, so the loop settles where the tool is at rest and
+  // the device displays the rendered force: −Fm = √(2b)·v = F.
+  const std::string port = std::to_string(freeUdpPort());
+  dmtool_test::ToolRun tool;
+  std::atomic<bool> done{false};
+  std::thread server([&] {
+    tool = runTool({"teleop-device", "--driver", "sim-haptic", "--param", "path=point", "--listen",
+                    "127.0.0.1:" + port, "--wave-impedance", "40", "--seconds", "2.5", "--json"});
+    done = true;
+  });
+  dm::FactoryRegistry registry;
+  dm::PluginLinker linker(registry);
+  ASSERT_TRUE(dm::registerNetworkDrivers(linker));
+  auto remote = dm::HapticDevice::open(
+      registry, "net-haptic", {{"device", "127.0.0.1:" + port}, {"connect_timeout", "2"}, {"wave_impedance", "40"}});
+  if (!remote) {
+    server.join();
+    FAIL() << remote.error().message();
+  }
+  double drift = 0.0;
+  while (!done.load()) {  // serve until the tool has written its statistics
+    const std::int64_t now = monotonicNs();
+    (*remote)->servo(now);
+    drift = std::max(drift, (*remote)->state().position.norm());
+    (*remote)->command(dm::Vec3(0, 0, 1.0), dm::Vec3::Zero(), now);
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  server.join();
+  ASSERT_EQ(tool.exitCode, 0) << describe(tool);
+  const nlohmann::json j = parseJson(tool);
+  ASSERT_TRUE(j.contains("wave")) << tool.out;
+  EXPECT_EQ(j["wave"]["impedance"], 40.0);
+  EXPECT_GT(j["wave"]["received"].get<std::uint64_t>(), 1000u);
+  EXPECT_LE(j["wave"]["energy_out_J"].get<double>(), j["wave"]["energy_in_J"].get<double>() + 1e-12);
+  EXPECT_NEAR(j["output_force_N"][2].get<double>(), 1.0, 0.05) << tool.out;
+  EXPECT_NEAR(j["output_force_N"][0].get<double>(), 0.0, 1e-6);
+  // The tool, pushed by 1 N against a fixed master, moved a few millimetres at most.
+  EXPECT_LT(drift, 0.01) << "m";
 }
 
 TEST(DmtoolTeleop, DevicesListsTheNetHapticDriver) {

@@ -17,10 +17,25 @@
 //   timeout              s without a state before "lost"       (0.1)
 //   connect_timeout      s open() waits for the device's Info  (2)
 //   synchronized_clocks  0 | 1: clocks are synchronized (same host, PTP) (0)
+//   wave_impedance       N·s/m; > 0: wave-variable mode, the device side's
+//                        TeleopDeviceBridge must use the same b     (0: off)
+//   wave_policy          hold | zero: the WaveReceiver's loss policy (hold)
 //   emulate_delay, emulate_jitter (s), emulate_loss (0..1), emulate_seed:
 //                        pass received states through an in-process
 //                        LinkEmulator (uniform jitter) — latency training
 //                        and tests on one machine                (off)
+//
+// Wave-variable mode: the driver is the matched WaveSlavePort
+// (dm/network/wave_variables.hpp). The position it reports is a virtual
+// tool that starts at the device's position and is moved only by the
+// forward waves; the force the application renders on it (after
+// HapticDevice's clamping) moves it for one servo period at the next write
+// and returns as the backward wave. The loop stays stable under delay,
+// jitter and loss (verified with 100 ms one way in simulated time and
+// through the link emulator end to end); the price is that the tool drifts
+// from the device's position under loss and delay. Choose b well above
+// k·T for the stiffest contact k rendered at servo period T (the tests hold
+// a 2 kN/m contact with 40 N·s/m at 1 kHz).
 //
 // The driver is compiled into DM::Network and registered through
 // PluginLinker::addStatic (same ABI check and init protocol as a plugin).

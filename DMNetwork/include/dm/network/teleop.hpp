@@ -254,26 +254,38 @@ class TeleopDevice {
 /// Settings of a TeleopDeviceBridge.
 struct TeleopBridgeOptions {
   double timeoutSeconds = 0.1;  ///< host silent this long: zero force
+  /// > 0: wave-variable mode with this wave impedance b (N·s/m); the host
+  /// (net-haptic with the same `wave_impedance`) must use the same b.
+  double waveImpedance = 0.0;
+  WaveLossPolicy wavePolicy = WaveLossPolicy::Hold;
 };
 
-/// Runs a local HapticDevice as the device side of a stream: each step()
-/// commands the newest force, or zero when none arrived within the timeout
-/// (link lost), servos the device and sends its state. step() is real-time
-/// safe; call it from the device's servo thread at its rate.
+/// Runs a local HapticDevice as the device side of a stream. Each step():
+///  * force mode: commands the newest force, or zero when none arrived
+///    within the timeout (link lost), servos the device, sends its state;
+///  * wave-variable mode (dm/network/wave_variables.hpp): the device is the
+///    WaveMasterPort: it displays −(b·ẋm − √(2b)·v) for the backward waves v
+///    received (zero while the host is silent), servos, and sends its state
+///    and the forward wave u = √(2b)·ẋm − v. The wave period is the device's
+///    servo period. With the host's matched WaveSlavePort the loop stays
+///    stable under delay, jitter and loss.
+/// step() is real-time safe; call it from the device's servo thread.
 class TeleopDeviceBridge {
  public:
-  TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link, TeleopBridgeOptions options = {}) noexcept
-      : device_(device), link_(link), timeoutNs_(static_cast<std::int64_t>(options.timeoutSeconds * 1e9)) {}
+  TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link, TeleopBridgeOptions options = {}) noexcept;
   /// One servo period at loop time `nowNs`. Returns the device's status.
   DeviceStatus step(std::int64_t nowNs) noexcept;
   /// Steps whose force was zeroed because the link was silent.
   std::uint64_t zeroedSteps() const noexcept { return zeroed_; }
+  /// The master port in wave-variable mode, otherwise null.
+  const WaveMasterPort* wavePort() const noexcept { return wave_ ? &*wave_ : nullptr; }
 
  private:
   HapticDevice& device_;
   TeleopDevice& link_;
   std::int64_t timeoutNs_;
   std::uint64_t zeroed_ = 0;
+  std::optional<WaveMasterPort> wave_;
 };
 
 }  // namespace dm

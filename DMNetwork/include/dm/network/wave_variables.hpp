@@ -28,6 +28,19 @@
 // directions bounded that way make the energy the channel delivers at its
 // ports ≤ the energy put in, exactly, in discrete time.
 //
+// On top of these sit the two ports a tele-operation loop runs once per
+// servo period (WaveMasterPort on the operator's device, WaveSlavePort
+// where the environment is rendered). The slave port terminates the line
+// with a matched damper β = b between the port and the environment: in free
+// motion it absorbs the arriving wave instead of reflecting it (the slave
+// then moves exactly at the master's velocity), so no wave circulates
+// between two nearly lossless ends. Without it the discrete-time loop is
+// not passive: a stiff rendered wall sampled once per period (zero-order
+// hold) adds ½·k·Δx² per period, and with a stiff hand at the master (which
+// reflects every wave) nothing takes it out again — the loop rings up even
+// at 1 ms of delay. At rest the damper carries no force, so a steady
+// contact force still reaches the operator unchanged.
+//
 // @code
 //   dm::WaveSender tx(1e-3);  dm::WaveReceiver rx({.dt = 1e-3});
 //   rx.receive(tx.send(dm::waveMasterOut(velocity, vIn, b)));
@@ -130,6 +143,72 @@ class WaveReceiver {
   double energyIn_ = 0.0;
   double energyOut_ = 0.0;
   WaveReceiverStats stats_;
+};
+
+/// Settings of a WaveMasterPort or WaveSlavePort.
+struct WavePortOptions {
+  double impedance = 40.0;                       ///< wave impedance b, N·s/m (> 0); same at both ports
+  double dt = 1e-3;                              ///< servo period, s (> 0): the wave sample period
+  WaveLossPolicy policy = WaveLossPolicy::Hold;  ///< the port's WaveReceiver policy
+};
+
+/// The master port: the operator's device. Each servo period, from the
+/// device's measured velocity ẋm and the received backward wave v, it
+/// gives the force to display, −Fm = −(b·ẋm − √(2b)·v), and the forward
+/// wave to send, u = √(2b)·ẋm − v. Real-time safe; not thread-safe.
+class WaveMasterPort {
+ public:
+  /// `options.impedance` and `options.dt` must be > 0 (DM_DEMAND).
+  explicit WaveMasterPort(WavePortOptions options);
+  /// Takes one arrived backward-wave sample (any order). O(1).
+  void receive(const WaveSample& sample) { rx_.receive(sample); }
+  /// One period: the force (N) the device should display for the measured
+  /// velocity (m/s); the sample to send is then outgoing(). O(1).
+  Vec3 step(const Vec3& velocity);
+  /// The forward-wave sample produced by the last step().
+  const WaveSample& outgoing() const { return out_; }
+  const WaveReceiver& receiver() const { return rx_; }
+
+ private:
+  WavePortOptions options_;
+  WaveSender tx_;
+  WaveReceiver rx_;
+  WaveSample out_;
+};
+
+/// The slave port: a virtual tool point the environment is rendered
+/// against, moved by the forward wave. Each period, begin() takes the
+/// received wave u; then apply(F) takes the force F (N) the environment
+/// exerts on the tool at its current position, moves the tool for one
+/// period with ẋs = (√(2b)·u + F)/(b + β) (matched damper β = b) and
+/// returns the backward wave v = u − √(2/b)·(βẋs − F). Real-time safe; not
+/// thread-safe.
+class WaveSlavePort {
+ public:
+  /// `options.impedance` and `options.dt` must be > 0 (DM_DEMAND).
+  explicit WaveSlavePort(WavePortOptions options);
+  /// Places the tool (the master's position when the link starts).
+  void reset(const Vec3& position);
+  /// Takes one arrived forward-wave sample (any order). O(1).
+  void receive(const WaveSample& sample) { rx_.receive(sample); }
+  /// Starts a period: takes the wave u to use for it. O(1).
+  void begin() { u_ = rx_.next(); }
+  /// Ends the period with the environment's force on the tool (N): moves
+  /// the tool and returns the backward-wave sample to send. O(1).
+  const WaveSample& apply(const Vec3& environmentForce);
+  /// Tool position (m) and its velocity over the last period (m/s).
+  const Vec3& position() const { return x_; }
+  const Vec3& velocity() const { return xDot_; }
+  const WaveReceiver& receiver() const { return rx_; }
+
+ private:
+  WavePortOptions options_;
+  WaveSender tx_;
+  WaveReceiver rx_;
+  WaveSample out_;
+  Vec3 u_ = Vec3::Zero();
+  Vec3 x_ = Vec3::Zero();
+  Vec3 xDot_ = Vec3::Zero();
 };
 
 }  // namespace dm
