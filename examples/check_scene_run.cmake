@@ -3,8 +3,18 @@
 #   cmake -DDMPLATFORM=... -DSCENE=... -DOUT=... -DDURATION=... -DFRAMES=N
 #         -DMIN_CONTACT_TICKS=N (FRAMES: at least that many frames)
 #         -DMIN_FORCE=F -DMAX_FORCE=F -P check_scene_run.cmake
+# Tele-operation scenes (a device with "serve") run in real time:
+#         -DMODE=realtime -DMIN_ROUND_TRIP_MS=T: the served device's link
+#         measured a round trip of at least T ms (p50), received a force
+#         for at least 90 % of the haptic ticks, and its wave receiver, if
+#         any, output no more energy than it received. -DMAX_FAULT_TICKS=N
+#         allows N safety-fault ticks (real-time overruns on a shared
+#         machine; default 0).
+if(NOT DEFINED MODE)
+  set(MODE lockstep)
+endif()
 file(REMOVE_RECURSE "${OUT}")
-execute_process(COMMAND "${DMPLATFORM}" run "${SCENE}" --lockstep --duration ${DURATION} --out "${OUT}"
+execute_process(COMMAND "${DMPLATFORM}" run "${SCENE}" --${MODE} --duration ${DURATION} --out "${OUT}"
                 RESULT_VARIABLE rc OUTPUT_VARIABLE stdout ERROR_VARIABLE stderr)
 message("${stdout}")
 if(NOT rc EQUAL 0)
@@ -31,7 +41,10 @@ endif()
 if(maxForce LESS MIN_FORCE OR maxForce GREATER MAX_FORCE)
   message(FATAL_ERROR "max force ${maxForce} N outside [${MIN_FORCE}, ${MAX_FORCE}] N")
 endif()
-if(NOT dropped EQUAL 0 OR NOT faults EQUAL 0)
+if(NOT DEFINED MAX_FAULT_TICKS)
+  set(MAX_FAULT_TICKS 0)
+endif()
+if(NOT dropped EQUAL 0 OR faults GREATER MAX_FAULT_TICKS)
   message(FATAL_ERROR "${dropped} trace samples dropped, ${faults} safety fault ticks")
 endif()
 if(DEFINED FRAMES)
@@ -49,5 +62,26 @@ if(DEFINED FRAMES)
   if(NOT EXISTS "${OUT}/frames/frame_${name}.png")
     message(FATAL_ERROR "missing last frame ${OUT}/frames/frame_${name}.png")
   endif()
+endif()
+if(DEFINED MIN_ROUND_TRIP_MS)
+  string(JSON rtt GET "${summary}" teleop 0 round_trip p50_ms)
+  string(JSON received GET "${summary}" teleop 0 received)
+  if(rtt LESS MIN_ROUND_TRIP_MS)
+    message(FATAL_ERROR "tele-operation round trip p50 ${rtt} ms, expected >= ${MIN_ROUND_TRIP_MS} ms")
+  endif()
+  # The simulator sends a force every haptic tick.
+  math(EXPR minReceived "${ticks} * 9 / 10")
+  if(received LESS minReceived)
+    message(FATAL_ERROR "the console received ${received} forces for ${ticks} haptic ticks")
+  endif()
+  string(JSON wave ERROR_VARIABLE noWave GET "${summary}" teleop 0 wave)
+  if(NOT noWave)
+    string(JSON ein GET "${wave}" energy_in_J)
+    string(JSON eout GET "${wave}" energy_out_J)
+    if(eout GREATER ein)
+      message(FATAL_ERROR "wave receiver output ${eout} J of ${ein} J received")
+    endif()
+  endif()
+  message(STATUS "tele-operation: round trip p50 ${rtt} ms, ${received} forces received")
 endif()
 message(STATUS "ok: ${contact}/${ticks} ticks in contact, max force ${maxForce} N")

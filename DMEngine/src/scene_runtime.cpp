@@ -16,6 +16,11 @@
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
 
+#ifdef DM_ENGINE_HAVE_NETWORK
+#include <dm/core/rt_loop.hpp>
+#include <dm/network/drivers.hpp>
+#include <dm/network/teleop.hpp>
+#endif
 #ifdef DM_ENGINE_HAVE_RENDERER
 #include "render_engine.hpp"
 #endif
@@ -113,6 +118,89 @@ Result<MeshBvh> objectBvh(const Mesh& mesh, double scale) {
   return MeshBvh::build(m);
 }
 
+#ifdef DM_ENGINE_HAVE_NETWORK
+// A device with "serve": the console side of a tele-operation link inside
+// this process. It stands for another machine, so it runs on a real-time
+// loop of its own at the device's servo rate, not as one of the master's
+// engines, and is live before the simulator's net-haptic device opens.
+struct ServedDevice {
+  std::string name;
+  std::unique_ptr<HapticDevice> device;
+  std::unique_ptr<TeleopDevice> link;
+  std::unique_ptr<TeleopDeviceBridge> bridge;
+  std::unique_ptr<RealTimeLoop> loop;
+  std::string address;  // what "@name" stands for
+
+  ServedDevice() = default;
+  ServedDevice(const ServedDevice&) = delete;
+  ServedDevice& operator=(const ServedDevice&) = delete;
+  ~ServedDevice() {
+    if (loop) loop->stop();  // before the bridge, device and link it steps
+  }
+
+  nlohmann::json summary() const {
+    const TeleopStats st = link->stats();
+    const auto latency = [](const LatencyStats& l) {
+      return nlohmann::json{{"count", l.count}, {"p50_ms", 1e3 * l.p50}, {"p99_ms", 1e3 * l.p99},
+                            {"max_ms", 1e3 * l.max}};
+    };
+    nlohmann::json j = {{"device", name},
+                        {"address", address},
+                        {"sent", st.sent},
+                        {"received", st.received},
+                        {"lost", st.lost},
+                        {"loss_ratio", st.lossRatio},
+                        {"round_trip", latency(st.roundTrip)},
+                        {"one_way", latency(st.oneWay)},
+                        {"jitter_ms", 1e3 * st.jitter},
+                        {"zeroed_steps", bridge->zeroedSteps()},
+                        {"max_output_force_N", maxOutputForce}};
+    if (const WaveMasterPort* w = bridge->wavePort())
+      j["wave"] = {{"energy_in_J", w->receiver().energyIn()},
+                   {"energy_out_J", w->receiver().energyOut()},
+                   {"limited", w->receiver().stats().limited}};
+    return j;
+  }
+  double maxOutputForce = 0.0;  // written by the loop thread, read after it stopped
+};
+
+// Opens, serves and starts the device `d` (which has "serve").
+Result<std::unique_ptr<ServedDevice>> serveDevice(FactoryRegistry& registry, const SceneDevice& d) {
+  const std::string where = "devices/" + d.name + "/serve";
+  auto listen = parseEndpoint(d.serve->listen, where + "/listen", true);
+  if (!listen) return listen.error();
+  auto sd = std::make_unique<ServedDevice>();
+  sd->name = d.name;
+  auto device = HapticDevice::open(registry, d.driver, deviceParams(d));
+  if (!device) return device.error().within("devices/" + d.name);
+  sd->device = std::move(*device);
+  // On a loopback address the simulator is on this machine, with the same
+  // CLOCK_MONOTONIC: one-way latencies need no offset estimate.
+  const bool loopback = listen->address.starts_with("127.") || listen->address == "::1";
+  auto link = TeleopDevice::open(
+      {.local = *listen, .timeoutSeconds = d.serve->timeout, .clocksSynchronized = loopback}, sd->device->info());
+  if (!link) return link.error().within(where);
+  sd->link = std::move(*link);
+  const std::string host = listen->address.empty() || listen->address == "0.0.0.0" ? "127.0.0.1"
+                           : listen->address == "::"                              ? "[::1]"
+                           : listen->address.find(':') != std::string::npos       ? "[" + listen->address + "]"
+                                                                                  : listen->address;
+  sd->address = host + ":" + std::to_string(sd->link->port());
+  sd->bridge = std::make_unique<TeleopDeviceBridge>(
+      *sd->device, *sd->link,
+      TeleopBridgeOptions{.timeoutSeconds = d.serve->timeout, .waveImpedance = d.serve->waveImpedance});
+  ServedDevice* raw = sd.get();
+  sd->loop = std::make_unique<RealTimeLoop>(
+      RealTimeLoopConfig{.rate_hz = sd->device->info().servoRateHz, .name = "dm-served"},
+      [raw](const TickInfo& t) {
+        raw->bridge->step(t.start_ns);
+        raw->maxOutputForce = std::max(raw->maxOutputForce, raw->device->lastOutput().force.norm());
+      });
+  if (auto s = sd->loop->start(); !s) return s.error().within(where);
+  return sd;
+}
+#endif
+
 }  // namespace
 
 struct SceneRuntime::Impl {
@@ -128,6 +216,9 @@ struct SceneRuntime::Impl {
   std::shared_ptr<RenderEngineHandle> render;
 #endif
   std::vector<std::pair<std::shared_ptr<Engine>, EngineSchedule>> userEngines;
+#ifdef DM_ENGINE_HAVE_NETWORK
+  std::vector<std::unique_ptr<ServedDevice>> served;  // destroyed before the registry and linker
+#endif
   bool ran = false;
 
   Status buildHaptics(bool lockstep);
@@ -173,7 +264,28 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   if (dev == nullptr) return fail(ErrorCode::NotFound, "no device \"" + h.device + "\"", where + "/device");
   linker = std::make_unique<PluginLinker>(registry);
   if (auto s = registerBuiltinDrivers(*linker); !s) return s.error();
-  auto device = HapticDevice::open(registry, dev->driver, deviceParams(*dev));
+  std::vector<std::pair<std::string, std::string>> params = deviceParams(*dev);
+#ifdef DM_ENGINE_HAVE_NETWORK
+  if (auto s = registerNetworkDrivers(*linker); !s) return s.error();
+  for (const SceneDevice& d : scene.devices) {
+    if (!d.serve) continue;
+    if (lockstep)
+      return fail(ErrorCode::Unsupported, "a served device runs on the network's real time, not in lockstep",
+                  "devices/" + d.name + "/serve", "run the scene with --realtime");
+    auto sd = serveDevice(registry, d);
+    if (!sd) return sd.error();
+    served.push_back(std::move(*sd));
+  }
+  for (auto& [key, value] : params)
+    for (const auto& sd : served)
+      if (value == "@" + sd->name) value = sd->address;
+#else
+  for (const SceneDevice& d : scene.devices)
+    if (d.serve)
+      return fail(ErrorCode::Unsupported, "this build has no DMNetwork, which serves devices",
+                  "devices/" + d.name + "/serve", "build with DMNetwork (libasio-dev) or remove \"serve\"");
+#endif
+  auto device = HapticDevice::open(registry, dev->driver, params);
   if (!device) return device.error().within("devices/" + dev->name);
 
   auto e = std::make_shared<HapticsEngine>();
@@ -332,6 +444,13 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   const std::vector<EngineStats> engineStats = im.master.stats();
   Status stopStatus = im.master.stop(result.interrupted ? "interrupted" : "done");
   im.monitor->drain();
+#ifdef DM_ENGINE_HAVE_NETWORK
+  nlohmann::json teleop = nlohmann::json::array();
+  for (const auto& sd : im.served) {
+    sd->loop->stop();  // the console side stops with the simulator
+    teleop.push_back(sd->summary());
+  }
+#endif
 
   // Outputs, also after an interruption or an engine failure.
   const std::vector<ProbeSample>& trace = im.monitor->trace;
@@ -397,6 +516,9 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
                          {"frame_ms_max", rs.renderMsMax}};
     if (rs.framesWritten > 0) written.push_back("frames/");
   }
+#endif
+#ifdef DM_ENGINE_HAVE_NETWORK
+  if (!teleop.empty()) summary["teleop"] = std::move(teleop);
 #endif
   if (scene.outputs.summary) written.push_back("summary.json");
   summary["outputs"] = written;

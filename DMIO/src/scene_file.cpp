@@ -788,7 +788,7 @@ class SceneParser {
     for (std::size_t i = 0; i < sec.size(); ++i) {
       ConfigReader r = sec.at(i);
       if (!expectObject(r)) continue;
-      r.knownKeys({"name", "driver", "config"});
+      r.knownKeys({"name", "driver", "config", "serve"});
       SceneDevice d;
       d.name = uniqueName(r, deviceIndex_, scene_.devices.size());
       const std::size_t before = r.errors().size();
@@ -811,7 +811,40 @@ class SceneParser {
         }
         d.config = c.node();
       }
+      if (r.has("serve")) {
+        ConfigReader sv = r.child("serve");
+        if (expectObject(sv)) {
+          sv.knownKeys({"listen", "timeout", "wave_impedance"});
+          SceneDeviceServe serve;
+          serve.listen = sv.string("listen", serve.listen);
+          const std::size_t colon = serve.listen.rfind(':');
+          if (colon == std::string::npos || colon == 0 || colon + 1 == serve.listen.size() ||
+              serve.listen.find_first_not_of("0123456789", colon + 1) != std::string::npos ||
+              std::stol(serve.listen.substr(colon + 1, 6)) > 65535)
+            sv.addError("\"" + serve.listen + "\" is not \"address:port\"", "listen",
+                        "e.g. \"127.0.0.1:0\" (port 0: any free port) or \"0.0.0.0:47000\"");
+          serve.timeout = sv.number("timeout", {.min = 1e-3, .max = 60.0}, serve.timeout);
+          serve.waveImpedance = sv.number("wave_impedance", {.min = 0.0, .max = 1e6}, 0.0);
+          d.serve = serve;
+        }
+      }
       scene_.devices.push_back(std::move(d));
+    }
+    // "@NAME" in a config stands for a served device's address.
+    for (std::size_t i = 0; i < scene_.devices.size(); ++i) {
+      const SceneDevice& d = scene_.devices[i];
+      if (!d.config.is_object()) continue;
+      for (auto it = d.config.begin(); it != d.config.end(); ++it) {
+        if (!it.value().is_string()) continue;
+        const std::string& v = it.value().get_ref<const std::string&>();
+        if (v.empty() || v[0] != '@') continue;
+        const SceneDevice* target = scene_.device(std::string_view(v).substr(1));
+        if (target == nullptr || !target->serve || target == &d)
+          sec.at(i).child("config").addError(
+              "\"" + v + "\" names no other device with \"serve\"", it.key(),
+              "\"@NAME\" stands for the address of the device NAME served in this scene; give NAME a "
+              "\"serve\" block");
+      }
     }
   }
 
@@ -1260,8 +1293,14 @@ Json toJson(const SceneDesc& scene) {
   j["cameras"] = std::move(cameras);
 
   Json devices = Json::array();
-  for (const SceneDevice& d : scene.devices)
-    devices.push_back({{"name", d.name}, {"driver", d.driver}, {"config", d.config}});
+  for (const SceneDevice& d : scene.devices) {
+    Json o = {{"name", d.name}, {"driver", d.driver}, {"config", d.config}};
+    if (d.serve)
+      o["serve"] = {{"listen", d.serve->listen},
+                    {"timeout", d.serve->timeout},
+                    {"wave_impedance", d.serve->waveImpedance}};
+    devices.push_back(std::move(o));
+  }
   j["devices"] = std::move(devices);
 
   Json engines = Json::object();

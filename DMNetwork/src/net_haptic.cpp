@@ -8,9 +8,11 @@
 #include <dm/network/teleop.hpp>
 
 #include <charconv>
+#include <chrono>
 #include <memory>
 #include <new>
 #include <optional>
+#include <thread>
 
 #include "driver_params.hpp"
 
@@ -58,8 +60,9 @@ NetHaptic* self(DmDevice* d) { return reinterpret_cast<NetHaptic*>(d); }
 
 DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
   ParamReader r(params, count, error, errorSize);
-  r.onlyKnown({"device", "local", "timeout", "connect_timeout", "synchronized_clocks", "wave_impedance",
-               "wave_policy", "emulate_delay", "emulate_jitter", "emulate_loss", "emulate_seed"});
+  r.onlyKnown({"device", "local", "timeout", "connect_timeout", "wait_for_state", "synchronized_clocks",
+               "wave_impedance", "wave_policy", "emulate_delay", "emulate_jitter", "emulate_loss", "emulate_seed"});
+  const double waitForState = r.number("wait_for_state", 0.0, 0.0, 600.0);
   const double waveImpedance = r.number("wave_impedance", 0.0, 0.0, 1e6);
   const int wavePolicy = r.choice("wave_policy", {"hold", "zero"}, 0);
   const double emulateDelay = r.number("emulate_delay", 0.0, 0.0, 10.0);
@@ -113,6 +116,20 @@ DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t
     return nullptr;
   }
   d->info = std::move(*info);
+  if (waitForState > 0) {
+    // The first servo then already has a state instead of reporting a loss.
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(waitForState);
+    dm::HapticState first;
+    while (!d->host->latestState(first)) {
+      if (std::chrono::steady_clock::now() >= deadline) {
+        r.failf("the device side at %s answered but sent no state within wait_for_state = %g s (is its servo "
+                "loop running?)",
+                dm::describe(*peer).c_str(), waitForState);
+        return nullptr;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+  }
   return reinterpret_cast<DmDevice*>(d.release());
 }
 

@@ -160,3 +160,47 @@ TEST(SceneRuntime, ErrorsNameTheSceneEntry) {
   ASSERT_FALSE(r);
   EXPECT_EQ(r.error().where, "objects/block/material");
 }
+
+#ifdef DM_TEST_WITH_NETWORK
+// Both ends of a tele-operation link in one scene: the scripted stylus is
+// served (devices/stylus/serve) and the haptic engine drives it through
+// net-haptic over loopback UDP. The presses reach the simulator and the
+// forces reach the stylus: up to 5 N at the bottom of the sweep, the same
+// on both sides.
+TEST(SceneRuntime, ServedDeviceIsDrivenOverTheNetwork) {
+  dm::SceneDesc scene = parse(false);
+  scene.devices[0].serve = dm::SceneDeviceServe{};
+  scene.devices.push_back(
+      {.name = "remote", .driver = "net-haptic", .config = {{"device", "@stylus"}, {"wait_for_state", 2}}});
+  scene.engines.haptics->device = "remote";
+  const fs::path out = fs::temp_directory_path() / "dm_scene_runtime_test" / "teleop";
+
+  // Lockstep cannot drive a real socket: refused, naming the entry.
+  auto rt = dm::SceneRuntime::create(scene);
+  ASSERT_TRUE(rt) << rt.error();
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 0.1, .outDir = out});
+  ASSERT_FALSE(r);
+  EXPECT_EQ(r.error().where, "devices/stylus/serve");
+  EXPECT_NE(r.error().hint.find("--realtime"), std::string::npos);
+
+  rt = dm::SceneRuntime::create(scene);
+  ASSERT_TRUE(rt) << rt.error();
+  r = (*rt)->run({.mode = dm::RunMode::RealTime, .duration = 1.5, .outDir = out});
+  ASSERT_TRUE(r) << r.error();
+  const nlohmann::json& s = r->summary;
+  // Hooke's law bounds the force (real-time overruns on a loaded machine
+  // fade it, never raise it), and the stylus reached the box.
+  const double maxForce = s["haptics"]["max_force_N"].get<double>();
+  EXPECT_LT(maxForce, 5.0 + 0.1);
+  EXPECT_GT(maxForce, 2.0);
+  ASSERT_EQ(s["teleop"].size(), 1u) << s.dump(1);
+  const nlohmann::json& t = s["teleop"][0];
+  EXPECT_EQ(t["device"], "stylus");
+  EXPECT_EQ(t["address"].get<std::string>().rfind("127.0.0.1:", 0), 0u);
+  EXPECT_GT(t["received"].get<int>(), 1000);  // a force per haptic tick
+  EXPECT_GT(t["round_trip"]["count"].get<int>(), 1000);
+  // The stylus displayed what the simulator sent (its largest force may be
+  // superseded before a late console tick applies it: within 0.1 N).
+  EXPECT_NEAR(t["max_output_force_N"].get<double>(), maxForce, 0.1);
+}
+#endif

@@ -228,6 +228,37 @@ TEST(SceneFile, OutOfRange) {
   EXPECT_EQ(e->hint, "colours are linear, 0..1 (not 0..255)");
 }
 
+TEST(SceneFile, ServedDevicesAndTheirReferences) {
+  Json j = baseScene();
+  j["devices"].push_back({{"name", "console"},
+                          {"driver", "sim-haptic"},
+                          {"serve", {{"listen", "127.0.0.1"}, {"timeout", 0}, {"wave_b", 1}}}});
+  j["devices"].push_back({{"name", "far"}, {"driver", "net-haptic"}, {"config", {{"device", "@hand"}}}});
+  j["devices"].push_back({{"name", "self"}, {"driver", "net-haptic"}, {"config", {{"device", "@nobody"}}}});
+  const auto p = problemsOf(j);
+  ASSERT_EQ(p.size(), 5u) << dm::formatSceneErrors(p);
+  const dm::Error* e = at(p, "/devices/1/serve/listen");
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->what, "\"127.0.0.1\" is not \"address:port\"");
+  ASSERT_TRUE(at(p, "/devices/1/serve/timeout"));
+  ASSERT_TRUE(at(p, "/devices/1/serve/wave_b"));
+  // "hand" exists but is not served; "nobody" does not exist.
+  e = at(p, "/devices/2/config/device");
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->what, "\"@hand\" names no other device with \"serve\"");
+  ASSERT_TRUE(at(p, "/devices/3/config/device"));
+
+  Json ok = baseScene();
+  ok["devices"].push_back({{"name", "console"}, {"driver", "sim-haptic"}, {"serve", Json::object()}});
+  ok["devices"][0]["config"]["device"] = "@console";
+  auto scene = dm::parseScene(ok.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(scene) << scene.error();
+  ASSERT_TRUE(scene->device("console")->serve);
+  EXPECT_EQ(scene->device("console")->serve->listen, "127.0.0.1:0");  // the defaults
+  EXPECT_EQ(scene->device("console")->serve->timeout, 0.1);
+  EXPECT_EQ(scene->device("console")->serve->waveImpedance, 0.0);
+}
+
 TEST(SceneFile, UnknownKeyGetsSuggestion) {
   Json j = baseScene();
   j["objects"][0]["visibel"] = true;
@@ -524,7 +555,9 @@ Json fullScene() {
     "devices": [
       {"name": "stylus", "driver": "replay-haptic", "config": {"file": "press.csv", "loop": true,
                                                                "offset": [0.0, 0.0, 0.01]}},
-      {"name": "spare", "driver": "sim-haptic", "config": {}}
+      {"name": "spare", "driver": "sim-haptic", "config": {},
+       "serve": {"listen": "0.0.0.0:47000", "timeout": 0.25, "wave_impedance": 20.0}},
+      {"name": "far", "driver": "net-haptic", "config": {"device": "@spare"}}
     ],
     "engines": {
       "haptics": {"rate_hz": 2000.0, "renderer": "sphere-tree", "device": "stylus", "objects": ["liver"],
@@ -560,6 +593,10 @@ TEST(SceneFile, ToJsonWritesEveryKeyAndReadsBackEqual) {
   EXPECT_EQ(dm::deviceParams(*a->device("stylus")),
             (std::vector<std::pair<std::string, std::string>>{
                 {"file", "press.csv"}, {"loop", "1"}, {"offset", "0.0,0.0,0.01"}}));
+  ASSERT_TRUE(a->device("spare")->serve);
+  EXPECT_EQ(a->device("spare")->serve->listen, "0.0.0.0:47000");
+  EXPECT_EQ(a->device("spare")->serve->waveImpedance, 20.0);
+  EXPECT_FALSE(a->device("stylus")->serve);
   // A change anywhere is visible to ==.
   dm::SceneDesc c = *b;
   c.objects[0].pose.q = dm::Quat(0.0, 0.8, 0.6, 0.0);

@@ -193,6 +193,30 @@ TEST_F(NetHaptic, WaveModeServoPathsDoNotAllocate) {
   EXPECT_EQ(dm::test::countedAllocations(), before);
 }
 
+TEST_F(NetHaptic, WaitForStateOpensOnlyOnceStatesFlow) {
+  const std::string where = "127.0.0.1:" + std::to_string(link->port());
+  // The device side answers Hello but its servo loop does not run: no state.
+  auto idle = dm::HapticDevice::open(registry, "net-haptic", {{"device", where}, {"wait_for_state", "0.2"}});
+  ASSERT_FALSE(idle);
+  EXPECT_NE(idle.error().message().find("wait_for_state"), std::string::npos) << idle.error().message();
+  EXPECT_NE(idle.error().message().find(where), std::string::npos) << idle.error().message();
+  // With the loop running, the first servo already has the device's position.
+  std::atomic<bool> stop{false};
+  std::thread device([&] {
+    while (!stop.load()) {
+      bridge->step(monotonicNs());
+      std::this_thread::sleep_for(1ms);
+    }
+  });
+  auto live = dm::HapticDevice::open(registry, "net-haptic", {{"device", where}, {"wait_for_state", "2"}});
+  const dm::DeviceStatus first = live ? (*live)->servo(monotonicNs()) : dm::DeviceStatus::Lost;
+  stop = true;
+  device.join();
+  ASSERT_TRUE(live) << live.error().message();
+  EXPECT_EQ(first, dm::DeviceStatus::Ok);
+  EXPECT_EQ((*live)->state().position, dm::Vec3(0.01, 0.02, 0.03));
+}
+
 TEST_F(NetHaptic, OpenFailsNamingTheAddressWhenNoDeviceSideAnswers) {
   const std::string where = "127.0.0.1:" + std::to_string(link->port());
   link.reset();  // nobody answers on that port any more
@@ -254,12 +278,18 @@ TEST_P(NetHapticWaves, ContactSettlesAndTheOperatorFeelsTheRenderedForce) {
   const double b = 40.0;
   dm::TeleopDeviceBridge bridge(**local, **link, {.timeoutSeconds = 0.5, .waveImpedance = b});
   ASSERT_NE(bridge.wavePort(), nullptr);
-  std::atomic<bool> stop{false};
+  std::atomic<bool> stop{false}, measure{false};
+  double operatorSum = 0.0;  // the force displayed to the hand while measuring
+  int operatorTicks = 0;
   // The device side answers Hello on its own; its servo loop runs here.
   std::thread device([&] {
     auto next = std::chrono::steady_clock::now();
     while (!stop.load()) {
       bridge.step(monotonicNs());
+      if (measure.load()) {
+        operatorSum += (*local)->lastOutput().force.z();
+        ++operatorTicks;
+      }
       next += 1ms;
       std::this_thread::sleep_until(next);
     }
@@ -293,6 +323,7 @@ TEST_P(NetHapticWaves, ContactSettlesAndTheOperatorFeelsTheRenderedForce) {
     const double f = z < surface ? wall * (surface - z) : 0.0;
     (*remote)->command(dm::Vec3(0, 0, f), dm::Vec3::Zero(), now);
     if (i >= ticks - 1000) {
+      measure = true;
       windowSum += f;
       lastSecondSum += f;
       if ((i + 1) % 100 == 0) {
@@ -307,12 +338,15 @@ TEST_P(NetHapticWaves, ContactSettlesAndTheOperatorFeelsTheRenderedForce) {
   stop = true;
   device.join();
   const double meanForce = lastSecondSum / 1000;
-  const double operatorForce = (*local)->lastOutput().force.z();
+  ASSERT_GT(operatorTicks, 0);
+  const double operatorForce = operatorSum / operatorTicks;
   const dm::WaveReceiver& rx = bridge.wavePort()->receiver();
-  EXPECT_LT(maxAbsZ, 0.05);               // bounded: no growing oscillation
-  EXPECT_GT(meanForce, 0.5);              // in contact
-  EXPECT_LT(windowMax - windowMin, 0.2);  // settled: 100 ms means within 0.2 N
-  // At rest the hand feels the rendered force.
+  EXPECT_LT(maxAbsZ, 0.05);   // bounded: no growing oscillation
+  EXPECT_GT(meanForce, 0.5);  // in contact
+  // Settled: the 100 ms means of the last second within 0.3 N (0.01-0.03 N
+  // on an idle machine; a loaded one delays the two 1 kHz threads).
+  EXPECT_LT(windowMax - windowMin, 0.3);
+  // At rest the hand feels the rendered force (means over the last second).
   EXPECT_NEAR(operatorForce, meanForce, 0.1 * meanForce);
   EXPECT_LE(rx.energyOut(), rx.energyIn() + 1e-12);
   EXPECT_GT((*link)->stats().wavesIn, 1000u);

@@ -193,11 +193,27 @@ struct SceneCamera {
   bool operator==(const SceneCamera&) const = default;
 };
 
+/// A haptic device served in this process to the tele-operation stream
+/// (DMNetwork's TeleopDevice + TeleopDeviceBridge): the console side of a
+/// tele-operation link, which another device — net-haptic with
+/// "device": "@NAME" — reaches over the network.
+struct SceneDeviceServe {
+  std::string listen = "127.0.0.1:0";  ///< "address:port" to bind; port 0: any free port
+  double timeout = 0.1;                ///< s without a force from the simulator before the output is zeroed
+  double waveImpedance = 0.0;          ///< N·s/m; > 0: wave-variable mode (net-haptic's wave_impedance too)
+
+  bool operator==(const SceneDeviceServe&) const = default;
+};
+
 /// An input/output device opened through a driver.
 struct SceneDevice {
   std::string name;
   std::string driver;            ///< registered driver name, e.g. "sim-haptic"
   Json config = Json::object();  ///< driver parameters: strings, numbers, booleans or arrays of them
+  /// Served to the tele-operation stream (haptic devices). A config string
+  /// "@NAME" of another device stands for the address a served device NAME
+  /// listens on, filled in when the scene runs.
+  std::optional<SceneDeviceServe> serve;
 
   bool operator==(const SceneDevice&) const = default;
 };

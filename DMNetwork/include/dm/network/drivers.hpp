@@ -16,6 +16,8 @@
 //   local                "address:port" to bind                (0.0.0.0:0)
 //   timeout              s without a state before "lost"       (0.1)
 //   connect_timeout      s open() waits for the device's Info  (2)
+//   wait_for_state       s open() then waits for the first state, so the
+//                        first servo has one; none by then: open fails (0)
 //   synchronized_clocks  0 | 1: clocks are synchronized (same host, PTP) (0)
 //   wave_impedance       N·s/m; > 0: wave-variable mode, the device side's
 //                        TeleopDeviceBridge must use the same b     (0: off)
