@@ -85,20 +85,15 @@ Vec3 WaveReceiver::next() {
   return out;
 }
 
-WaveMasterPort::WaveMasterPort(WavePortOptions options)
+WavePort::WavePort(WavePortOptions options)
     : options_(options), tx_(options.dt), rx_({.dt = options.dt, .policy = options.policy}) {
-  DM_DEMAND(options.impedance > 0.0, "WaveMasterPort: wave impedance b must be > 0 N·s/m");
+  DM_DEMAND(options.impedance > 0.0, "WavePort: wave impedance b must be > 0 N·s/m");
 }
 
 Vec3 WaveMasterPort::step(const Vec3& velocity) {
   const Vec3 v = rx_.next();
   out_ = tx_.send(waveMasterOut(velocity, v, options_.impedance));
   return -waveMasterForce(velocity, v, options_.impedance);  // the reaction on the hand
-}
-
-WaveSlavePort::WaveSlavePort(WavePortOptions options)
-    : options_(options), tx_(options.dt), rx_({.dt = options.dt, .policy = options.policy}) {
-  DM_DEMAND(options.impedance > 0.0, "WaveSlavePort: wave impedance b must be > 0 N·s/m");
 }
 
 void WaveSlavePort::reset(const Vec3& position) {

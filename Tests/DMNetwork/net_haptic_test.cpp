@@ -68,6 +68,21 @@ class NetHaptic : public ::testing::Test {
     std::this_thread::sleep_for(1ms);
   }
 
+  /// 50 periods of both ends (command, bridge step, remote servo) without
+  /// a heap allocation on this thread.
+  void expectServoPathsDoNotAllocate(dm::HapticDevice& remote) {
+    dm::test::tCountAllocations = true;
+    const auto before = dm::test::countedAllocations();
+    for (int i = 0; i < 50; ++i) {
+      const std::int64_t now = monotonicNs();
+      remote.command(dm::Vec3(0.5, 0, 0), dm::Vec3::Zero(), now);
+      bridge->step(now);
+      remote.servo(now);
+    }
+    dm::test::tCountAllocations = false;
+    EXPECT_EQ(dm::test::countedAllocations(), before);
+  }
+
   dm::FactoryRegistry registry;
   dm::PluginLinker linker{registry};
   std::unique_ptr<dm::HapticDevice> local;
@@ -158,16 +173,7 @@ TEST_F(NetHaptic, ServoPathsDoNotAllocate) {
     tick(remote->get());
     return (*remote)->connected();
   }));
-  dm::test::tCountAllocations = true;
-  const auto before = dm::test::countedAllocations();
-  for (int i = 0; i < 50; ++i) {
-    const std::int64_t now = monotonicNs();
-    (*remote)->command(dm::Vec3(0.5, 0, 0), dm::Vec3::Zero(), now);
-    bridge->step(now);
-    (*remote)->servo(now);
-  }
-  dm::test::tCountAllocations = false;
-  EXPECT_EQ(dm::test::countedAllocations(), before);
+  expectServoPathsDoNotAllocate(**remote);
 }
 
 TEST_F(NetHaptic, WaveModeServoPathsDoNotAllocate) {
@@ -181,16 +187,7 @@ TEST_F(NetHaptic, WaveModeServoPathsDoNotAllocate) {
     tick(remote->get());
     return (*remote)->connected() && link->stats().wavesIn > 0;
   }));
-  dm::test::tCountAllocations = true;
-  const auto before = dm::test::countedAllocations();
-  for (int i = 0; i < 50; ++i) {
-    const std::int64_t now = monotonicNs();
-    (*remote)->command(dm::Vec3(0.5, 0, 0), dm::Vec3::Zero(), now);
-    bridge->step(now);
-    (*remote)->servo(now);
-  }
-  dm::test::tCountAllocations = false;
-  EXPECT_EQ(dm::test::countedAllocations(), before);
+  expectServoPathsDoNotAllocate(**remote);
 }
 
 TEST_F(NetHaptic, WaitForStateOpensOnlyOnceStatesFlow) {

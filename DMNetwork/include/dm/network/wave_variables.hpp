@@ -152,28 +152,35 @@ struct WavePortOptions {
   WaveLossPolicy policy = WaveLossPolicy::Hold;  ///< the port's WaveReceiver policy
 };
 
-/// The master port: the operator's device. Each servo period, from the
-/// device's measured velocity ẋm and the received backward wave v, it
-/// gives the force to display, −Fm = −(b·ẋm − √(2b)·v), and the forward
-/// wave to send, u = √(2b)·ẋm − v. Real-time safe; not thread-safe.
-class WaveMasterPort {
+/// What both ports share: the settings, the sender of the outgoing wave and
+/// the energy-bounded receiver of the incoming one.
+class WavePort {
  public:
-  /// `options.impedance` and `options.dt` must be > 0 (DM_DEMAND).
-  explicit WaveMasterPort(WavePortOptions options);
-  /// Takes one arrived backward-wave sample (any order). O(1).
+  /// Takes one arrived sample of the incoming wave (any order). O(1).
   void receive(const WaveSample& sample) { rx_.receive(sample); }
-  /// One period: the force (N) the device should display for the measured
-  /// velocity (m/s); the sample to send is then outgoing(). O(1).
-  Vec3 step(const Vec3& velocity);
-  /// The forward-wave sample produced by the last step().
+  /// The outgoing sample produced by the last period.
   const WaveSample& outgoing() const { return out_; }
   const WaveReceiver& receiver() const { return rx_; }
 
- private:
+ protected:
+  /// `options.impedance` and `options.dt` must be > 0 (DM_DEMAND).
+  explicit WavePort(WavePortOptions options);
   WavePortOptions options_;
   WaveSender tx_;
   WaveReceiver rx_;
   WaveSample out_;
+};
+
+/// The master port: the operator's device. Each servo period, from the
+/// device's measured velocity ẋm and the received backward wave v, it
+/// gives the force to display, −Fm = −(b·ẋm − √(2b)·v), and the forward
+/// wave to send, u = √(2b)·ẋm − v. Real-time safe; not thread-safe.
+class WaveMasterPort : public WavePort {
+ public:
+  explicit WaveMasterPort(WavePortOptions options) : WavePort(options) {}
+  /// One period: the force (N) the device should display for the measured
+  /// velocity (m/s); the forward-wave sample to send is then outgoing(). O(1).
+  Vec3 step(const Vec3& velocity);
 };
 
 /// The slave port: a virtual tool point the environment is rendered
@@ -183,14 +190,11 @@ class WaveMasterPort {
 /// period with ẋs = (√(2b)·u + F)/(b + β) (matched damper β = b) and
 /// returns the backward wave v = u − √(2/b)·(βẋs − F). Real-time safe; not
 /// thread-safe.
-class WaveSlavePort {
+class WaveSlavePort : public WavePort {
  public:
-  /// `options.impedance` and `options.dt` must be > 0 (DM_DEMAND).
-  explicit WaveSlavePort(WavePortOptions options);
+  explicit WaveSlavePort(WavePortOptions options) : WavePort(options) {}
   /// Places the tool (the master's position when the link starts).
   void reset(const Vec3& position);
-  /// Takes one arrived forward-wave sample (any order). O(1).
-  void receive(const WaveSample& sample) { rx_.receive(sample); }
   /// Starts a period: takes the wave u to use for it. O(1).
   void begin() { u_ = rx_.next(); }
   /// Ends the period with the environment's force on the tool (N): moves
@@ -199,13 +203,8 @@ class WaveSlavePort {
   /// Tool position (m) and its velocity over the last period (m/s).
   const Vec3& position() const { return x_; }
   const Vec3& velocity() const { return xDot_; }
-  const WaveReceiver& receiver() const { return rx_; }
 
  private:
-  WavePortOptions options_;
-  WaveSender tx_;
-  WaveReceiver rx_;
-  WaveSample out_;
   Vec3 u_ = Vec3::Zero();
   Vec3 x_ = Vec3::Zero();
   Vec3 xDot_ = Vec3::Zero();
