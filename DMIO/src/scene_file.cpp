@@ -1,3 +1,4 @@
+#include <dm/core/endpoint.hpp>
 #include <dm/core/filesystem.hpp>
 #include <dm/core/units.hpp>
 #include <dm/io/mesh_io.hpp>
@@ -817,12 +818,8 @@ class SceneParser {
           sv.knownKeys({"listen", "timeout", "wave_impedance"});
           SceneDeviceServe serve;
           serve.listen = sv.string("listen", serve.listen);
-          const std::size_t colon = serve.listen.rfind(':');
-          if (colon == std::string::npos || colon == 0 || colon + 1 == serve.listen.size() ||
-              serve.listen.find_first_not_of("0123456789", colon + 1) != std::string::npos ||
-              std::stol(serve.listen.substr(colon + 1, 6)) > 65535)
-            sv.addError("\"" + serve.listen + "\" is not \"address:port\"", "listen",
-                        "e.g. \"127.0.0.1:0\" (port 0: any free port) or \"0.0.0.0:47000\"");
+          if (auto hp = parseHostPort(serve.listen, "listen", true); !hp)
+            sv.addError(hp.error().what, "listen", "e.g. \"127.0.0.1:0\" (port 0: any free port) or \"0.0.0.0:47000\"");
           serve.timeout = sv.number("timeout", {.min = 1e-3, .max = 60.0}, serve.timeout);
           serve.waveImpedance = sv.number("wave_impedance", {.min = 0.0, .max = 1e6}, 0.0);
           d.serve = serve;

@@ -883,26 +883,20 @@ TeleopDeviceBridge::TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link,
 }
 
 DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
+  // Command first, so that servo() sends a force of age 0 in this period.
+  HapticOutput force;
+  bool live = false;
   if (wave_) {
     // Master port: ẋm of the last servo, the waves that arrived since.
     WaveSample w;
     while (link_.popWave(w)) wave_->receive(w);
-    const Vec3 force = wave_->step(device_.state().linearVelocity);
-    if (link_.linkUp()) {
-      device_.command(force, Vec3::Zero(), nowNs);
-    } else {
-      device_.command(Vec3::Zero(), Vec3::Zero(), nowNs);
-      ++zeroed_;
-    }
-    const DeviceStatus status = device_.servo(nowNs);
-    if (status == DeviceStatus::Ok) link_.sendState(device_.state());
-    link_.sendWave(wave_->outgoing());
-    return status;
+    force.force = wave_->step(device_.state().linearVelocity);
+    live = link_.linkUp();
+  } else {
+    std::int64_t age = 0;
+    live = link_.latestForce(force, &age) && age < timeoutNs_;
   }
-  // Command first, so that servo() sends a force of age 0 in this period.
-  HapticOutput force;
-  std::int64_t age = 0;
-  if (link_.latestForce(force, &age) && age < timeoutNs_) {
+  if (live) {
     device_.command(force.force, force.torque, nowNs);
   } else {
     device_.command(Vec3::Zero(), Vec3::Zero(), nowNs);
@@ -910,6 +904,7 @@ DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
   }
   const DeviceStatus status = device_.servo(nowNs);
   if (status == DeviceStatus::Ok) link_.sendState(device_.state());
+  if (wave_) link_.sendWave(wave_->outgoing());
   return status;
 }
 

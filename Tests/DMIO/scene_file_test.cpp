@@ -239,7 +239,7 @@ TEST(SceneFile, ServedDevicesAndTheirReferences) {
   ASSERT_EQ(p.size(), 5u) << dm::formatSceneErrors(p);
   const dm::Error* e = at(p, "/devices/1/serve/listen");
   ASSERT_TRUE(e);
-  EXPECT_EQ(e->what, "\"127.0.0.1\" is not \"address:port\"");
+  EXPECT_EQ(e->what, "listen: '127.0.0.1' has no \"address:port\" form");
   ASSERT_TRUE(at(p, "/devices/1/serve/timeout"));
   ASSERT_TRUE(at(p, "/devices/1/serve/wave_b"));
   // "hand" exists but is not served; "nobody" does not exist.

@@ -66,9 +66,9 @@ std::vector<std::string> networkDriverNames();
 /// PluginLinker::addStatic, e.g. when a plugin of the same name is loaded.
 Status registerNetworkDrivers(PluginLinker& linker);
 
-/// Splits "address:port" (IPv6 as "[::1]:port"); InvalidArgument naming
-/// `field` when the port is missing or not 1..65535 (0 allowed with
-/// `allowZeroPort`).
+/// dm::parseHostPort (dm/core/endpoint.hpp) as a SocketAddress: splits
+/// "address:port" (IPv6 as "[::1]:port"); InvalidArgument naming `field`
+/// when the port is missing or not 1..65535 (0 allowed with `allowZeroPort`).
 Result<SocketAddress> parseEndpoint(std::string_view text, std::string_view field, bool allowZeroPort = false);
 
 }  // namespace dm
