@@ -883,6 +883,9 @@ TeleopDeviceBridge::TeleopDeviceBridge(HapticDevice& device, TeleopDevice& link,
 }
 
 DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
+  const double period = 1.0 / device_.info().servoRateHz;
+  const double elapsed = lastStepNs_ ? 1e-9 * static_cast<double>(nowNs - *lastStepNs_) : period;
+  lastStepNs_ = nowNs;
   // Command first, so that servo() sends a force of age 0 in this period.
   HapticOutput force;
   bool live = false;
@@ -890,18 +893,20 @@ DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
     // Master port: ẋm of the last servo, the waves that arrived since.
     WaveSample w;
     while (link_.popWave(w)) wave_->receive(w);
-    force.force = wave_->step(device_.state().linearVelocity);
+    force.force = wave_->step(device_.state().linearVelocity, elapsed);
     live = link_.linkUp();
   } else {
     std::int64_t age = 0;
     live = link_.latestForce(force, &age) && age < timeoutNs_;
   }
-  if (live) {
-    device_.command(force.force, force.torque, nowNs);
-  } else {
-    device_.command(Vec3::Zero(), Vec3::Zero(), nowNs);
+  if (!live) {
+    force = HapticOutput{};
     ++zeroed_;
   }
+  device_.command(force.force, force.torque, nowNs);
+  // First-order low pass over kMeanForceSeconds of what the device was told.
+  const double alpha = std::clamp(elapsed / kMeanForceSeconds, 0.0, 1.0);
+  if (force.force.allFinite()) meanForce_ += alpha * (force.force - meanForce_);
   const DeviceStatus status = device_.servo(nowNs);
   if (status == DeviceStatus::Ok) link_.sendState(device_.state());
   if (wave_) link_.sendWave(wave_->outgoing());

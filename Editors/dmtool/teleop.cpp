@@ -140,12 +140,14 @@ int runTeleopDevice(const TeleopCliOptions& o) {
                         {"zeroed_steps", bridge.zeroedSteps()},
                         {"loop_ticks", loop.stats().ticks},
                         {"output_force_N", dmtool::toJson((*device)->lastOutput().force)},
+                        {"output_force_mean_N", dmtool::toJson(bridge.meanForce())},
                         {"stream", toJson(s)}};
     if (const dm::WaveMasterPort* w = bridge.wavePort()) {
       const dm::WaveReceiverStats ws = w->receiver().stats();
       j["wave"] = {{"impedance", o.waveImpedance},
                    {"energy_in_J", w->receiver().energyIn()},
                    {"energy_out_J", w->receiver().energyOut()},
+                   {"overrun_J", w->receiver().overrun()},
                    {"received", ws.received},
                    {"stale", ws.stale},
                    {"held", ws.held},

@@ -111,9 +111,15 @@ TEST(DmtoolTeleop, WaveImpedanceServesTheMasterPortOfAWaveLoop) {
   ASSERT_TRUE(j.contains("wave")) << tool.out;
   EXPECT_EQ(j["wave"]["impedance"], 40.0);
   EXPECT_GT(j["wave"]["received"].get<std::uint64_t>(), 1000u);
-  EXPECT_LE(j["wave"]["energy_out_J"].get<double>(), j["wave"]["energy_in_J"].get<double>() + 1e-12);
-  EXPECT_NEAR(j["output_force_N"][2].get<double>(), 1.0, 0.1) << tool.out;
-  EXPECT_NEAR(j["output_force_N"][0].get<double>(), 0.0, 1e-6);
+  // Out ≤ in, within the late correction of a period the device loop
+  // overran (|v|²/2 = 6 mJ/s here; 10 ms allowed).
+  const double overrun = j["wave"]["overrun_J"].get<double>();
+  EXPECT_LT(overrun, 6.25e-5);
+  EXPECT_LE(j["wave"]["energy_out_J"].get<double>(), j["wave"]["energy_in_J"].get<double>() + overrun + 1e-15);
+  // What the hand feels: the last tick alone may be one the receiver held
+  // out of budget (zero), so the 0.1 s mean is the figure.
+  EXPECT_NEAR(j["output_force_mean_N"][2].get<double>(), 1.0, 0.1) << tool.out;
+  EXPECT_NEAR(j["output_force_mean_N"][0].get<double>(), 0.0, 1e-6);
   // The tool, pushed by 1 N against a fixed master, moves at F/(2b) =
   // 12.5 mm/s only until the master's reflection arrives: a few millimetres
   // (about 1 cm when a loaded machine stalls the device side).

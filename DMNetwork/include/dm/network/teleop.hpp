@@ -267,7 +267,8 @@ struct TeleopBridgeOptions {
 ///    WaveMasterPort: it displays −(b·ẋm − √(2b)·v) for the backward waves v
 ///    received (zero while the host is silent), servos, and sends its state
 ///    and the forward wave u = √(2b)·ẋm − v. The wave period is the device's
-///    servo period. With the host's matched WaveSlavePort the loop stays
+///    servo period; each sample's energy counts the measured time between
+///    steps. With the host's matched WaveSlavePort the loop stays
 ///    stable under delay, jitter and loss.
 /// step() is real-time safe; call it from the device's servo thread.
 class TeleopDeviceBridge {
@@ -277,6 +278,12 @@ class TeleopDeviceBridge {
   DeviceStatus step(std::int64_t nowNs) noexcept;
   /// Steps whose force was zeroed because the link was silent.
   std::uint64_t zeroedSteps() const noexcept { return zeroed_; }
+  /// The force commanded to the device (N), low-passed with a time
+  /// constant of kMeanForceSeconds: what a hand feels of a force that
+  /// chatters from tick to tick (a wave receiver out of budget, a lost
+  /// force). Read it from the servo thread or after the loop stopped.
+  const Vec3& meanForce() const noexcept { return meanForce_; }
+  static constexpr double kMeanForceSeconds = 0.1;
   /// The master port in wave-variable mode, otherwise null.
   const WaveMasterPort* wavePort() const noexcept { return wave_ ? &*wave_ : nullptr; }
 
@@ -286,6 +293,8 @@ class TeleopDeviceBridge {
   std::int64_t timeoutNs_;
   std::uint64_t zeroed_ = 0;
   std::optional<WaveMasterPort> wave_;
+  std::optional<std::int64_t> lastStepNs_;  ///< the previous step's time
+  Vec3 meanForce_ = Vec3::Zero();
 };
 
 }  // namespace dm
