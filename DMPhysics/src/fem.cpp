@@ -394,6 +394,12 @@ void FemBody::setVelocities(std::span<const Vec3> v) {
   std::copy(v.begin(), v.end(), v_.begin());
 }
 
+void FemBody::setVelocity(std::size_t i, const Vec3& v) {
+  DM_DEMAND(i < v_.size(), "FemBody::setVelocity: node index out of range");
+  DM_DEMAND(v.allFinite(), "FemBody::setVelocity: velocity must be finite");
+  v_[i] = v;
+}
+
 void FemBody::setFixed(std::size_t i, bool fixed) {
   DM_DEMAND(i < fixed_.size(), "FemBody::setFixed: node index out of range");
   fixed_[i] = fixed ? 1 : 0;
@@ -571,6 +577,18 @@ void FemBody::applySystem(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out, doubl
   });
 }
 
+void FemBody::applyStiffness(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out) const {
+  forRange(x_.size(), 256, [&](std::size_t b, std::size_t e) {
+    for (std::size_t r = b; r < e; ++r) {
+      Vec3 acc = Vec3::Zero();
+      for (int s = rowStart_[r]; s < rowStart_[r + 1]; ++s)
+        acc.noalias() +=
+            blocks_[std::size_t(s)] * in.segment<3>(Eigen::Index(3 * std::size_t(colIndex_[std::size_t(s)])));
+      out.segment<3>(Eigen::Index(3 * r)) = acc;
+    }
+  });
+}
+
 Result<FemStepReport> FemBody::step(double h) {
   constexpr const char* where = "FemBody::step";
   if (!(h > 0.0) || !std::isfinite(h))
@@ -581,8 +599,9 @@ Result<FemStepReport> FemBody::step(double h) {
   const double massScale = 1.0 + h * alpha, stiffScale = h * beta + h * h;
   const std::size_t n = x_.size();
 
-  // tmp = K v (fixed nodes have v = 0, so their columns do not matter).
-  applySystem(Eigen::Map<const VecX>(v_.data()->data(), Eigen::Index(3 * n)), tmp_, 0.0, 1.0);
+  // tmp = K v, fixed columns included: a fixed node's prescribed velocity
+  // (kept through the step, so its Δv is zero) drives the free nodes.
+  applyStiffness(Eigen::Map<const VecX>(v_.data()->data(), Eigen::Index(3 * n)), tmp_);
   forRange(n, 512, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const Eigen::Index o = Eigen::Index(3 * i);
@@ -649,12 +668,8 @@ Result<FemStepReport> FemBody::step(double h) {
 
   forRange(n, 1024, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
-      if (fixed_[i]) {
-        v_[i].setZero();
-        continue;
-      }
-      v_[i] += dv_.segment<3>(Eigen::Index(3 * i));
-      x_[i] += h * v_[i];
+      if (!fixed_[i]) v_[i] += dv_.segment<3>(Eigen::Index(3 * i));
+      x_[i] += h * v_[i];  // a fixed node: its prescribed motion
     }
   });
   return report_;
@@ -683,6 +698,21 @@ void FemBody::computeElasticForces(std::vector<Vec3>& out) const {
     Vec3 f[4], g[4];
     elementForces(e, R, x_, f, g);
     for (int i = 0; i < 4; ++i) out[tets_[e][i]] += f[i];
+  }
+}
+
+void FemBody::computeConstraintForces(std::vector<Vec3>& out) const {
+  computeElasticForces(out);
+  const std::size_t n = x_.size();
+  VecX kv(Eigen::Index(3 * n));
+  applyStiffness(Eigen::Map<const VecX>(v_.data()->data(), Eigen::Index(3 * n)), kv);
+  for (std::size_t i = 0; i < n; ++i) {
+    if (!fixed_[i]) {
+      out[i].setZero();
+      continue;
+    }
+    const Vec3 damping = -damping_.alpha * mass_[i] * v_[i] - damping_.beta * kv.segment<3>(Eigen::Index(3 * i));
+    out[i] = -(out[i] + damping + fext_[i] + mass_[i] * gravity_);
   }
 }
 

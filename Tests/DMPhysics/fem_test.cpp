@@ -359,3 +359,78 @@ TEST(FemBody, CantileverConvergesToEulerBernoulli) {
 
 }  // namespace
 }  // namespace dm
+
+using dm::Vec3;
+
+namespace {
+
+// A column (ν = 0, so bonded faces do not constrain it and the stress is
+// uniaxial) compressed by its top face at a prescribed constant speed w:
+// the quasi-static Kelvin–Voigt answer is F = E·A·(d + β·w)/L on the loading
+// ramp and E·A·d/L once the face stops. Light (1 kg/m³): inertia ≈ 0.
+struct Column {
+  static constexpr double kE = 1e4, kBeta = 0.05, kSide = 0.01, kLength = 0.02, kSpeed = 2e-3;
+  dm::FemBody body;
+  std::vector<std::size_t> top;
+  dm::Vec3 forceOnTop() const {
+    std::vector<dm::Vec3> r;
+    body.computeConstraintForces(r);
+    dm::Vec3 f = dm::Vec3::Zero();
+    for (std::size_t i : top) f -= r[i];  // the tissue on the indenter
+    return f;
+  }
+};
+
+Column makeColumn() {
+  auto mesh = dm::tetMeshBox({2, 2, 4}, dm::Vec3(Column::kSide, Column::kSide, Column::kLength));
+  EXPECT_TRUE(mesh);
+  auto body = dm::FemBody::create(*mesh, {.youngsModulus = Column::kE, .poissonRatio = 0.0, .density = 1.0},
+                                  {.beta = Column::kBeta}, {.tolerance = 1e-12, .maxIterations = 2000});
+  EXPECT_TRUE(body);
+  Column c{std::move(*body), {}};
+  c.body.fixNodesWhere([](const Vec3& p) { return p.z() < 1e-12; });
+  for (std::size_t i = 0; i < mesh->nodeCount(); ++i)
+    if (mesh->nodes[i].z() > Column::kLength - 1e-12) c.top.push_back(i);
+  return c;
+}
+
+}  // namespace
+
+TEST(FemBody, PrescribedFaceMotionGivesTheKelvinVoigtColumnForce) {
+  Column c = makeColumn();
+  ASSERT_EQ(c.top.size(), 9u);
+  for (std::size_t i : c.top) {
+    c.body.setFixed(i, true);
+    c.body.setVelocity(i, Vec3(0, 0, -Column::kSpeed));
+  }
+  const double h = 5e-3, A = Column::kSide * Column::kSide;
+  double t = 0;
+  for (int s = 0; s < 200; ++s, t += h) ASSERT_TRUE(c.body.step(h));
+  // The top moved exactly by its prescribed motion.
+  for (std::size_t i : c.top)
+    EXPECT_NEAR(c.body.positions()[i].z(), Column::kLength - Column::kSpeed * t, 1e-12);
+  const double d = Column::kSpeed * t;
+  const double loading = Column::kE * A * (d + Column::kBeta * Column::kSpeed) / Column::kLength;
+  const Vec3 f = c.forceOnTop();
+  EXPECT_NEAR(f.z(), loading, 2e-3 * loading) << "elastic part " << Column::kE * A * d / Column::kLength;
+  EXPECT_LT(std::hypot(f.x(), f.y()), 1e-9);
+  // Uniaxial: the interior follows the linear displacement profile.
+  for (std::size_t i = 0; i < c.body.nodeCount(); ++i) {
+    const Vec3& p0 = c.body.restPositions()[i];
+    EXPECT_NEAR(c.body.positions()[i].z(), p0.z() * (1 - d / Column::kLength), 1e-7) << "node " << i;
+    EXPECT_NEAR(c.body.positions()[i].x(), p0.x(), 1e-9);
+  }
+  // Stopped: the viscous part goes, the elastic part stays.
+  for (std::size_t i : c.top) c.body.setVelocity(i, Vec3::Zero());
+  for (int s = 0; s < 100; ++s) ASSERT_TRUE(c.body.step(h));
+  const double holding = Column::kE * A * d / Column::kLength;
+  EXPECT_NEAR(c.forceOnTop().z(), holding, 2e-3 * holding);
+  // Free nodes carry no constraint force.
+  std::vector<Vec3> r;
+  c.body.computeConstraintForces(r);
+  for (std::size_t i = 0; i < r.size(); ++i) {
+    if (!c.body.isFixed(i)) {
+      EXPECT_EQ(r[i], Vec3::Zero());
+    }
+  }
+}

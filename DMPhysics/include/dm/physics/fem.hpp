@@ -40,7 +40,9 @@
 // allocates nor searches), with a block-Jacobi preconditioner (inverse of
 // each node's 3×3 diagonal block) and the previous Δv as the initial guess. Fixed nodes
 // (Dirichlet) are eliminated by projection: their rows and columns are the
-// identity and their right-hand side is zero, so they keep their position.
+// identity and their right-hand side is zero; a fixed node moves with its
+// prescribed velocity (zero unless set), which enters the free rows'
+// right-hand side through −h(β + h)·K v.
 // Element loops run in parallel with dm::parallelFor over a greedy element
 // colouring (elements of one colour share no node), so the result does not
 // depend on the thread count.
@@ -229,13 +231,21 @@ class FemBody {
   double totalMass() const noexcept { return totalMass_; }
 
   /// Overwrites all positions / velocities (sizes must equal nodeCount();
-  /// DM_DEMAND). Fixed nodes take the given values too.
+  /// DM_DEMAND). Fixed nodes take the given values too: a fixed node's
+  /// velocity is its prescribed velocity (see setFixed).
   void setPositions(std::span<const Vec3> x);
   void setVelocities(std::span<const Vec3> v);
 
-  /// Fixes (Dirichlet) or frees node i; a fixed node keeps its position and
-  /// has zero velocity. Out-of-range i is a DM_DEMAND failure.
+  /// Fixes (Dirichlet) or frees node i. Fixing sets its velocity to zero, so
+  /// it keeps its position; a velocity given afterwards (setVelocity,
+  /// setVelocities) is prescribed: step(h) moves the node by h·v, and the
+  /// free nodes feel that motion implicitly (their stiffness and damping
+  /// rows include it), which is how a tool pushes tissue (an indenter, a
+  /// clamp). Out-of-range i is a DM_DEMAND failure.
   void setFixed(std::size_t i, bool fixed);
+  /// Velocity of node i (m/s); for a fixed node, its prescribed velocity.
+  /// Out-of-range i or a non-finite v is a DM_DEMAND failure.
+  void setVelocity(std::size_t i, const Vec3& v);
   bool isFixed(std::size_t i) const { return fixed_[i] != 0; }
   /// Fixes every node whose rest position p satisfies pred(p). Returns count.
   template <class Pred>
@@ -267,6 +277,19 @@ class FemBody {
   /// Elastic node forces at the current positions (N), resized to
   /// nodeCount(); same rotations as elasticEnergy(). O(T).
   void computeElasticForces(std::vector<Vec3>& out) const;
+  /// The force (N) each fixed node's constraint applies to the body to hold
+  /// it on its prescribed motion, at the current state: −(f_elastic +
+  /// f_damping + f_ext + m·g) with f_damping = −(αM + βK)v, K as assembled
+  /// by the last step; zero for free nodes; resized to nodeCount(). The
+  /// fixed node's own inertia is left out (exact at rest and for a constant
+  /// prescribed velocity). Summed over an indenter's nodes and negated, it
+  /// is the force the tissue exerts on the indenter. O(T + nnz).
+  /// @code
+  ///   std::vector<dm::Vec3> r;  body.computeConstraintForces(r);
+  ///   dm::Vec3 onTool = dm::Vec3::Zero();
+  ///   for (auto i : punchNodes) onTool -= r[i];
+  /// @endcode
+  void computeConstraintForces(std::vector<Vec3>& out) const;
   /// Σ mᵢ vᵢ, kg·m/s, and the centre of mass, m.
   Vec3 linearMomentum() const;
   Vec3 centerOfMass() const;
@@ -293,6 +316,8 @@ class FemBody {
   void assemble();
   void applySystem(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out, double massScale,
                    double stiffScale) const;
+  // out = K·in over every row and column (fixed ones included).
+  void applyStiffness(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out) const;
   template <class F>
   void forRange(std::size_t n, std::size_t grain, F&& fn) const;
 
