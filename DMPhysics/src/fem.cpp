@@ -703,15 +703,15 @@ void FemBody::computeElasticForces(std::vector<Vec3>& out) const {
 
 void FemBody::computeConstraintForces(std::vector<Vec3>& out) const {
   computeElasticForces(out);
-  const std::size_t n = x_.size();
-  VecX kv(Eigen::Index(3 * n));
-  applyStiffness(Eigen::Map<const VecX>(v_.data()->data(), Eigen::Index(3 * n)), kv);
-  for (std::size_t i = 0; i < n; ++i) {
+  for (std::size_t i = 0; i < x_.size(); ++i) {
     if (!fixed_[i]) {
       out[i].setZero();
       continue;
     }
-    const Vec3 damping = -damping_.alpha * mass_[i] * v_[i] - damping_.beta * kv.segment<3>(Eigen::Index(3 * i));
+    Vec3 kv = Vec3::Zero();  // row i of K·v
+    for (int s = rowStart_[i]; s < rowStart_[i + 1]; ++s)
+      kv.noalias() += blocks_[std::size_t(s)] * v_[std::size_t(colIndex_[std::size_t(s)])];
+    const Vec3 damping = -damping_.alpha * mass_[i] * v_[i] - damping_.beta * kv;
     out[i] = -(out[i] + damping + fext_[i] + mass_[i] * gravity_);
   }
 }

@@ -5,7 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 namespace dm {
@@ -52,6 +54,30 @@ TEST(ForcePlot, RefusesEmptyAndTinyPlots) {
   std::vector<ProbeSample> one(1);
   EXPECT_FALSE(plotForceTrace(one, 100, 50).ok());
   EXPECT_TRUE(plotForceTrace(one).ok());  // one sample, zero force: still a plot
+}
+
+// plotSeries: points are crosses centred where (x, y) maps, over the data's
+// x range and a y range that includes 0.
+TEST(PlotSeries, PointsLandWhereTheyMapAndBadSeriesAreRefused) {
+  const std::vector<double> x = {1.0, 2.0, 3.0}, y = {2.0, 4.0, 8.0};
+  const PlotSeries series[] = {{"MEASURED", {30, 60, 220}, x, y, true}};
+  const auto img = plotSeries(series, {.xUnit = "mm", .yUnit = "N"}, 600, 300);
+  ASSERT_TRUE(img.ok()) << img.error().message();
+  // x in [1, 3] → [70, 580]; y in [0, 8] → [266, 34].
+  for (std::size_t i = 0; i < x.size(); ++i) {
+    const int px = 70 + static_cast<int>((x[i] - 1.0) / 2.0 * 510 + 0.5);
+    const int py = 266 - static_cast<int>(y[i] / 8.0 * 232 + 0.5);
+    EXPECT_TRUE(isBlue(*img, px, py)) << "point " << i;
+    EXPECT_TRUE(isBlue(*img, px + 2, py + 2)) << "point " << i;
+  }
+  const std::vector<double> shorter = {1.0};
+  const PlotSeries bad[] = {{"FIT", {0, 0, 0}, x, shorter}};
+  const auto refused = plotSeries(bad);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.error().message().find("FIT"), std::string::npos) << refused.error().message();
+  const std::vector<double> nan = {std::nan(""), std::nan(""), std::nan("")};
+  const PlotSeries empty[] = {{"NAN", {0, 0, 0}, x, nan}};
+  EXPECT_FALSE(plotSeries(empty).ok());
 }
 
 }  // namespace

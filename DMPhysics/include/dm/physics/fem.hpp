@@ -283,7 +283,8 @@ class FemBody {
   /// by the last step; zero for free nodes; resized to nodeCount(). The
   /// fixed node's own inertia is left out (exact at rest and for a constant
   /// prescribed velocity). Summed over an indenter's nodes and negated, it
-  /// is the force the tissue exerts on the indenter. O(T + nnz).
+  /// is the force the tissue exerts on the indenter. O(T + nnz); allocates
+  /// only when `out` is smaller than nodeCount().
   /// @code
   ///   std::vector<dm::Vec3> r;  body.computeConstraintForces(r);
   ///   dm::Vec3 onTool = dm::Vec3::Zero();
