@@ -1,0 +1,72 @@
+# Runs the osteotomy example (lockstep) twice and checks from summary.json:
+#  - the skull region and both fragments are substantial (> 2000 voxels each);
+#  - the hand going exactly to the anatomical pose puts the fragment back
+#    within 0.3 mm RMS at its reference points (from > 5 mm), touching the
+#    other fragment, with no force left on the hand;
+#  - the hand pressing 2 mm past it, into the fixed fragment: the fragment
+#    closes the 1 mm saw kerf and stops there (final error < 1.5 mm, contact
+#    depth below one voxel), and the hand feels the coupling pull it back
+#    out along the cut normal (> 0.2 N, equal to k_c times the offset within
+#    1 %);
+#  - the outputs exist.
+# -DEXAMPLE=program -DOUT=dir
+function(run_example name push)
+  file(REMOVE_RECURSE ${OUT}/${name})
+  execute_process(COMMAND ${EXAMPLE} --out ${OUT}/${name} --push ${push}
+                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  message(STATUS "${name}: ${out}")
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "${EXAMPLE} --push ${push} exited with ${rc}: ${err}")
+  endif()
+  foreach(f fragments.nii.gz hand.dmrec forces.csv forces.png alignment.csv summary.json)
+    if(NOT EXISTS ${OUT}/${name}/${f})
+      message(FATAL_ERROR "${name}: missing output ${f}")
+    endif()
+  endforeach()
+  file(READ ${OUT}/${name}/summary.json summary)
+  set(summary "${summary}" PARENT_SCOPE)
+endfunction()
+
+macro(get key)
+  string(JSON ${key} GET "${summary}" ${key})
+endmacro()
+
+run_example(home 0)
+get(fixed_voxels)
+get(moving_voxels)
+get(initial_error_mm)
+get(final_error_mm)
+get(final_contacts)
+get(max_force_N)
+get(rest_force_along_normal_N)
+if(fixed_voxels LESS 2000 OR moving_voxels LESS 2000)
+  message(FATAL_ERROR "fragments of ${fixed_voxels} and ${moving_voxels} voxels")
+endif()
+if(initial_error_mm LESS 5 OR final_error_mm GREATER 0.3)
+  message(FATAL_ERROR "home: error ${initial_error_mm} mm -> ${final_error_mm} mm, expected > 5 -> < 0.3")
+endif()
+if(final_contacts LESS 1)
+  message(FATAL_ERROR "home: the fragments do not touch at the anatomical pose")
+endif()
+if(rest_force_along_normal_N GREATER 0.02 OR rest_force_along_normal_N LESS -0.02)
+  message(FATAL_ERROR "home: ${rest_force_along_normal_N} N left on the hand at rest")
+endif()
+
+run_example(pressed 2)
+get(final_error_mm)
+get(max_contact_depth_mm)
+get(rest_force_along_normal_N)
+get(rest_force_minus_coupling_N)
+if(final_error_mm GREATER 1.5)
+  message(FATAL_ERROR "pressed: the fragment ended ${final_error_mm} mm from home (the kerf is 1 mm)")
+endif()
+if(max_contact_depth_mm GREATER 1.0)
+  message(FATAL_ERROR "pressed: leaf spheres overlapped ${max_contact_depth_mm} mm: the fragment sank in")
+endif()
+if(rest_force_along_normal_N LESS 0.2)
+  message(FATAL_ERROR "pressed: the hand feels ${rest_force_along_normal_N} N back along the cut normal")
+endif()
+if(rest_force_minus_coupling_N GREATER 0.0035)
+  message(FATAL_ERROR "pressed: rest force and coupling k_c times offset differ by ${rest_force_minus_coupling_N} N")
+endif()
+message(STATUS "ok")
