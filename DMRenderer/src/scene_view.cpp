@@ -330,27 +330,35 @@ bool SceneView::isStereo(std::string_view name) const {
 }
 
 Result<SceneFrameStats> SceneView::render(const RenderTarget& target, std::string_view cameraName, double t) {
-  Impl& im = *impl_;
   auto cam = camera(cameraName, t);
   if (!cam) return cam.error();
+  const Impl::CameraEntry* e = impl_->cameraEntry(cameraName);
+  return renderImpl(target, *cam, e != nullptr && e->desc.stereo ? &e->desc : nullptr);
+}
+
+Result<SceneFrameStats> SceneView::render(const RenderTarget& target, const Camera& camera) {
+  return renderImpl(target, camera, nullptr);
+}
+
+Result<SceneFrameStats> SceneView::renderImpl(const RenderTarget& target, const Camera& cam,
+                                              const SceneCamera* stereo) {
+  Impl& im = *impl_;
   im.items.clear();
   for (const auto& o : im.objects) im.items.push_back(o.item);
   RenderSettings settings;
   settings.background = im.options.background;
   settings.ambient = im.options.ambient;
   SceneFrameStats stats;
-  const Impl::CameraEntry* e = im.cameraEntry(cameraName);
-  const bool stereo = e != nullptr && e->desc.stereo;
-  Result<RenderStats> r = stereo ? im.meshes.renderStereo(target, *cam, e->desc.eyeSeparation,
-                                                          e->desc.convergence, im.items, im.lights, settings)
-                                 : im.meshes.render(target, *cam, im.items, im.lights, settings);
+  Result<RenderStats> r = stereo ? im.meshes.renderStereo(target, cam, stereo->eyeSeparation,
+                                                          stereo->convergence, im.items, im.lights, settings)
+                                 : im.meshes.render(target, cam, im.items, im.lights, settings);
   if (!r) return r.error();
   stats.meshes = *r;
   // Volumes over the meshes: rays stop at the depth the meshes left.
   for (const auto& v : im.volumeEntries) {
     if (!v.visible) continue;
     if (stereo) {
-      const auto [left, right] = cam->stereoPair(e->desc.eyeSeparation, e->desc.convergence);
+      const auto [left, right] = cam.stereoPair(stereo->eyeSeparation, stereo->convergence);
       const int half = target.width() / 2;
       VolumeRenderSettings s = v.settings;
       s.viewport = {0, 0, half, target.height()};
@@ -359,7 +367,7 @@ Result<SceneFrameStats> SceneView::render(const RenderTarget& target, std::strin
       s.viewport = {half, 0, target.width() - half, target.height()};
       if (auto st = im.volumes.render(target, right, v.id, s); !st)
         return st.error().within("volumes/" + v.name);
-    } else if (auto st = im.volumes.render(target, *cam, v.id, v.settings); !st) {
+    } else if (auto st = im.volumes.render(target, cam, v.id, v.settings); !st) {
       return st.error().within("volumes/" + v.name);
     }
     ++stats.volumes;

@@ -90,6 +90,9 @@ class SceneView {
 
   /// Renders camera `name` at time `t` into the whole target (clears it).
   Result<SceneFrameStats> render(const RenderTarget& target, std::string_view cameraName, double t);
+  /// Renders the scene seen by `camera` (mono; an editor's or a user's own
+  /// view) into the whole target (clears it).
+  Result<SceneFrameStats> render(const RenderTarget& target, const Camera& camera);
 
   /// The renderers, for extra draw items or settings.
   SceneRenderer& meshRenderer();
@@ -97,6 +100,8 @@ class SceneView {
 
  private:
   struct Impl;
+  // Both render()s: stereo when `stereo` (the camera entry) is given.
+  Result<SceneFrameStats> renderImpl(const RenderTarget& target, const Camera& camera, const SceneCamera* stereo);
   std::unique_ptr<Impl> impl_;
 };
 
