@@ -13,6 +13,8 @@ packages=(
   libboost-iostreams-dev libsundials-dev libassimp-dev libegl-dev libegl1-mesa-dev
   libgl1-mesa-dri libgbm-dev libtbb-dev libspdlog-dev libfmt-dev nlohmann-json3-dev
   libcli11-dev libasio-dev libssl-dev libdcmtk-dev libpng-dev zlib1g-dev libfreetype-dev fonts-dejavu-core
+  # the editor (dmedit: Dear ImGui on GLFW; its test runs it under Xvfb)
+  libglfw3-dev libimgui-dev libstb-dev xvfb
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # peer libraries (benchmarks and interoperability tests only)

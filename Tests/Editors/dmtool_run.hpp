@@ -1,6 +1,6 @@
-// Runs the built dmtool (DMTOOL_PATH) for the Editors tests: posix_spawn in
-// its own process group, stdout and stderr captured, a deadline, and the
-// exit status or signal. Shared by dmtool_test.cpp and dmtool_*_test.cpp.
+// Runs the built dmtool (DMTOOL_PATH), or any program (runProgram), for the
+// Editors tests: posix_spawn in its own process group, stdout and stderr
+// captured, a deadline, and the exit status or signal. Shared by dmtool_test.cpp and dmtool_*_test.cpp.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -40,8 +40,8 @@ struct ToolRun {
 // `timeoutSeconds` (dmtool forks an Assimp child of its own). With
 // `stderrTerminal`, the child's stderr is a pseudo-terminal (so isatty() is
 // true there) instead of a pipe.
-inline ToolRun runTool(const std::vector<std::string>& args, double timeoutSeconds = 60.0,
-                       bool stderrTerminal = false) {
+inline ToolRun runProgram(const std::string& program, const std::vector<std::string>& args,
+                          double timeoutSeconds = 60.0, bool stderrTerminal = false) {
   ToolRun r;
   int outPipe[2], errPipe[2];
   if (pipe2(outPipe, O_CLOEXEC) != 0) {
@@ -67,14 +67,14 @@ inline ToolRun runTool(const std::vector<std::string>& args, double timeoutSecon
   posix_spawnattr_init(&attr);
   posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETPGROUP);
   posix_spawnattr_setpgroup(&attr, 0);
-  std::vector<std::string> argv{DMTOOL_PATH};
+  std::vector<std::string> argv{program};
   argv.insert(argv.end(), args.begin(), args.end());
   std::vector<char*> cargv;
   for (std::string& a : argv) cargv.push_back(a.data());
   cargv.push_back(nullptr);
   const auto start = std::chrono::steady_clock::now();
   pid_t pid = -1;
-  const int spawned = posix_spawn(&pid, DMTOOL_PATH, &actions, &attr, cargv.data(), environ);
+  const int spawned = posix_spawn(&pid, program.c_str(), &actions, &attr, cargv.data(), environ);
   posix_spawn_file_actions_destroy(&actions);
   posix_spawnattr_destroy(&attr);
   close(outPipe[1]);
@@ -123,6 +123,13 @@ inline ToolRun runTool(const std::vector<std::string>& args, double timeoutSecon
   if (WIFSIGNALED(status)) r.signal = WTERMSIG(status);
   return r;
 }
+
+#ifdef DMTOOL_PATH
+inline ToolRun runTool(const std::vector<std::string>& args, double timeoutSeconds = 60.0,
+                       bool stderrTerminal = false) {
+  return runProgram(DMTOOL_PATH, args, timeoutSeconds, stderrTerminal);
+}
+#endif
 
 inline std::string describe(const ToolRun& r) {
   return "exit " + std::to_string(r.exitCode) + " signal " + std::to_string(r.signal) +
