@@ -112,9 +112,10 @@ TEST(DmtoolTeleop, WaveImpedanceServesTheMasterPortOfAWaveLoop) {
   EXPECT_EQ(j["wave"]["impedance"], 40.0);
   EXPECT_GT(j["wave"]["received"].get<std::uint64_t>(), 1000u);
   // Out ≤ in, within the late correction of a period the device loop
-  // overran (|v|²/2 = 6 mJ/s here; 10 ms allowed).
+  // overran: at most one sample over 10 periods, ½·(F/√(2b))²·9 ms =
+  // 0.056 mJ for the 1 N at rest; twice that for transients.
   const double overrun = j["wave"]["overrun_J"].get<double>();
-  EXPECT_LT(overrun, 6.25e-5);
+  EXPECT_LT(overrun, 1.12e-4);
   EXPECT_LE(j["wave"]["energy_out_J"].get<double>(), j["wave"]["energy_in_J"].get<double>() + overrun + 1e-15);
   // What the hand feels: the last tick alone may be one the receiver held
   // out of budget (zero), so the 0.1 s mean is the figure.
