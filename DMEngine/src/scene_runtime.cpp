@@ -306,6 +306,22 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   return ok();
 }
 
+nlohmann::json engineStatsJson(const std::vector<EngineStats>& stats) {
+  nlohmann::json engines = nlohmann::json::array();
+  for (const EngineStats& e : stats)
+    engines.push_back({{"name", e.name},
+                       {"rate_hz", e.rateHz},
+                       {"achieved_hz", e.achievedHz},
+                       {"ticks", e.ticks},
+                       {"deadline_misses", e.deadlineMisses},
+                       {"execution_us",
+                        {{"p50", e.execution.p50_us},
+                         {"p99", e.execution.p99_us},
+                         {"p999", e.execution.p999_us},
+                         {"max", e.execution.max_us}}}});
+  return engines;
+}
+
 SceneRuntime::SceneRuntime() : impl_(std::make_unique<Impl>()) {}
 SceneRuntime::~SceneRuntime() {
   if (impl_ && impl_->master.state() != SimState::Stopped && impl_->master.state() != SimState::Created)
@@ -474,18 +490,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
     if (auto s = writePng(*plot, out / "forces.png"); !s) return s.error();
     written.push_back("forces.png");
   }
-  nlohmann::json engines = nlohmann::json::array();
-  for (const EngineStats& e : engineStats)
-    engines.push_back({{"name", e.name},
-                       {"rate_hz", e.rateHz},
-                       {"achieved_hz", e.achievedHz},
-                       {"ticks", e.ticks},
-                       {"deadline_misses", e.deadlineMisses},
-                       {"execution_us",
-                        {{"p50", e.execution.p50_us},
-                         {"p99", e.execution.p99_us},
-                         {"p999", e.execution.p999_us},
-                         {"max", e.execution.max_us}}}});
+  const nlohmann::json engines = engineStatsJson(engineStats);
   nlohmann::json summary = {{"scene", scene.name},
                             {"mode", lockstep ? "lockstep" : "realtime"},
                             {"duration_s", options.duration},

@@ -46,6 +46,8 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "../common/example_support.hpp"
+
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -234,19 +236,10 @@ int run(const Options& o) {
   dm::MasterEngine master;
   if (auto s = master.addEngine(haptics, {.rateHz = 1000}); !s) return fail(s.error());
   if (auto s = master.addEngine(painting, {.rateHz = 20}); !s) return fail(s.error());
-  if (auto s = master.load("haptic segmentation"); !s) return fail(s.error());
-  if (auto s = master.start(o.realtime ? dm::RunMode::RealTime : dm::RunMode::Lockstep); !s)
-    return fail(s.error());
-  if (o.realtime) {
-    const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(o.duration);
-    while (std::chrono::steady_clock::now() < until && master.poll())
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  } else if (auto s = master.advance(o.duration); !s) {
-    return fail(paintError.what.empty() ? s.error() : paintError);
-  }
-  const std::vector<dm::EngineStats> stats = master.stats();
-  if (auto s = master.stop("done"); !s) return fail(s.error());
+  std::vector<dm::EngineStats> stats;
+  const dm::Status ran = dm_example::runEngines(master, "haptic segmentation", o.realtime, o.duration, stats);
   if (!paintError.what.empty()) return fail(paintError);
+  if (!ran) return fail(ran.error());
 
   // Outcomes.
   const dm::Volume& mask = seg->mask();
@@ -268,15 +261,12 @@ int run(const Options& o) {
     radiusSum += seg->adaptiveRadius(p);
     ++along;
   }
-  std::error_code ec;
-  fs::create_directories(o.out, ec);
-  if (ec) return fail(dm::Error{dm::ErrorCode::Io, ec.message(), o.out.string(), "choose a writable --out"});
+  if (auto s = dm_example::makeOutputDir(o.out); !s) return fail(s.error());
   std::vector<std::string> written;
   if (auto s = dm::writeVolume(mask, o.out / "segmentation.nii.gz"); !s) return fail(s.error());
   written.push_back("segmentation.nii.gz");
-  const std::string csv = dm::formatProbeCsv(trace);
-  if (auto s = dm::writeFileAtomic(o.out / "forces.csv", csv.data(), csv.size()); !s) return fail(s.error());
-  written.push_back("forces.csv");
+  if (auto s = dm_example::writeOutput(o.out / "forces.csv", dm::formatProbeCsv(trace), written); !s)
+    return fail(s.error());
   if (!trace.empty()) {
     auto plot = dm::plotForceTrace(trace);
     if (!plot) return fail(plot.error());
@@ -289,14 +279,6 @@ int run(const Options& o) {
   written.push_back("slice.png");
 
   const double voxelMl = reference->stats.volumeMl / static_cast<double>(reference->stats.voxelCount);
-  nlohmann::json engines = nlohmann::json::array();
-  for (const dm::EngineStats& e : stats)
-    engines.push_back({{"name", e.name},
-                       {"ticks", e.ticks},
-                       {"achieved_hz", e.achievedHz},
-                       {"deadline_misses", e.deadlineMisses},
-                       {"tick_p50_us", e.execution.p50_us},
-                       {"tick_p999_us", e.execution.p999_us}});
   nlohmann::json summary = {
       {"volume", o.volume},
       {"mode", o.realtime ? "realtime" : "lockstep"},
@@ -312,10 +294,10 @@ int run(const Options& o) {
       {"mean_edge_strength", along ? edgeSum / static_cast<double>(along) : 0.0},
       {"mean_radius_mm", along ? 1e3 * radiusSum / static_cast<double>(along) : 0.0},
       {"max_force_N", maxForce},
-      {"engines", engines},
+      {"engines", dm::engineStatsJson(stats)},
       {"outputs", written}};
-  const std::string text = summary.dump(2) + "\n";
-  if (auto s = dm::writeFileAtomic(o.out / "summary.json", text.data(), text.size()); !s) return fail(s.error());
+  if (auto s = dm_example::writeOutput(o.out / "summary.json", summary.dump(2) + "\n", written); !s)
+    return fail(s.error());
   std::printf("painted %.2f mL of white matter (precision %.3f against the reference, %zu voxels outside the "
               "brain) in %zu updates; guidance %s: mean edge strength %.3f, mean radius %.2f mm, max force "
               "%.2f N; outputs in %s\n",
@@ -335,10 +317,7 @@ int main(int argc, char** argv) {
   app.add_option("--duration", o.duration, "Seconds to run (default 8)")->check(CLI::Range(0.1, 3600.0));
   app.add_flag("!--no-guidance", o.guidance, "Render no guidance force (the control run)");
   app.add_flag("--realtime", o.realtime, "Real-time threads instead of lockstep on a virtual clock");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  }
-  return run(o);
+  bool parsed = false;
+  const int code = dm_example::parseCommandLine(app, argc, argv, parsed);
+  return parsed ? run(o) : code;
 }

@@ -10,28 +10,13 @@
 #    1 %);
 #  - the outputs exist.
 # -DEXAMPLE=program -DOUT=dir
-function(run_example name push)
-  file(REMOVE_RECURSE ${OUT}/${name})
-  execute_process(COMMAND ${EXAMPLE} --out ${OUT}/${name} --push ${push}
-                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-  message(STATUS "${name}: ${out}")
-  if(NOT rc EQUAL 0)
-    message(FATAL_ERROR "${EXAMPLE} --push ${push} exited with ${rc}: ${err}")
-  endif()
-  foreach(f fragments.nii.gz hand.dmrec forces.csv forces.png alignment.csv summary.json)
-    if(NOT EXISTS ${OUT}/${name}/${f})
-      message(FATAL_ERROR "${name}: missing output ${f}")
-    endif()
-  endforeach()
-  file(READ ${OUT}/${name}/summary.json summary)
-  set(summary "${summary}" PARENT_SCOPE)
-endfunction()
+include(${CMAKE_CURRENT_LIST_DIR}/../common/run_example.cmake)
 
 macro(get key)
   string(JSON ${key} GET "${summary}" ${key})
 endmacro()
 
-run_example(home 0)
+dm_run_example(NAME home ARGS --push 0 OUTPUTS fragments.nii.gz hand.dmrec forces.csv forces.png alignment.csv)
 get(fixed_voxels)
 get(moving_voxels)
 get(initial_error_mm)
@@ -52,7 +37,7 @@ if(rest_force_along_normal_N GREATER 0.02 OR rest_force_along_normal_N LESS -0.0
   message(FATAL_ERROR "home: ${rest_force_along_normal_N} N left on the hand at rest")
 endif()
 
-run_example(pressed 2)
+dm_run_example(NAME pressed ARGS --push 2)
 get(final_error_mm)
 get(max_contact_depth_mm)
 get(rest_force_along_normal_N)

@@ -54,6 +54,8 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "../common/example_support.hpp"
+
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -266,9 +268,7 @@ int run(const Options& o) {
   if (!renderer) return fail(renderer.error());
   const std::vector<Vec3> points = referencePoints(skull->moving);
 
-  std::error_code ec;
-  fs::create_directories(o.out, ec);
-  if (ec) return fail(dm::fail(dm::ErrorCode::Io, ec.message(), o.out.string(), "choose a writable --out"));
+  if (auto s = dm_example::makeOutputDir(o.out); !s) return fail(s.error());
   std::vector<std::string> written;
   if (auto s = dm::writeVolume(skull->labels, o.out / "fragments.nii.gz"); !s) return fail(s.error());
   written.push_back("fragments.nii.gz");
@@ -332,19 +332,9 @@ int run(const Options& o) {
   dm::MasterEngine master;
   if (auto s = master.addEngine(haptics, {.rateHz = 1000}); !s) return fail(s.error());
   if (auto s = master.addEngine(monitor, {.rateHz = 50}); !s) return fail(s.error());
-  if (auto s = master.load("osteotomy"); !s) return fail(s.error());
-  if (auto s = master.start(o.realtime ? dm::RunMode::RealTime : dm::RunMode::Lockstep); !s)
-    return fail(s.error());
-  if (o.realtime) {
-    const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(duration);
-    while (std::chrono::steady_clock::now() < until && master.poll())
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  } else if (auto s = master.advance(duration); !s) {
-    return fail(s.error());
-  }
-  const std::vector<dm::EngineStats> stats = master.stats();
+  std::vector<dm::EngineStats> stats;
+  if (auto s = dm_example::runEngines(master, "osteotomy", o.realtime, duration, stats); !s) return fail(s.error());
   const dm::HapticLoopStats loopStats = hl.stats();
-  if (auto s = master.stop("done"); !s) return fail(s.error());
   if (trace.empty()) return fail(dm::fail(dm::ErrorCode::Internal, "no haptic tick ran", "osteotomy"));
 
   // Outcomes: the last 0.5 s is the rest at the goal.
@@ -367,31 +357,21 @@ int run(const Options& o) {
   restOffset /= static_cast<double>(rest);
   const Vec3 coupling = -bo.couplingStiffness * restOffset;  // what the hand should feel at rest
 
-  const std::string csv = dm::formatProbeCsv(trace);
-  if (auto s = dm::writeFileAtomic(o.out / "forces.csv", csv.data(), csv.size()); !s) return fail(s.error());
-  written.push_back("forces.csv");
+  if (auto s = dm_example::writeOutput(o.out / "forces.csv", dm::formatProbeCsv(trace), written); !s)
+    return fail(s.error());
   auto plot = dm::plotForceTrace(trace);
   if (!plot) return fail(plot.error());
   if (auto s = dm::writePng(*plot, o.out / "forces.png"); !s) return fail(s.error());
   written.push_back("forces.png");
   std::string a = "t,rms_error_m,contacts\n";
   for (const Alignment& x : alignment) a += dm::formatString("%.3f,%.9g,%d\n", x.t, x.rms, x.contacts);
-  if (auto s = dm::writeFileAtomic(o.out / "alignment.csv", a.data(), a.size()); !s) return fail(s.error());
-  written.push_back("alignment.csv");
+  if (auto s = dm_example::writeOutput(o.out / "alignment.csv", a, written); !s) return fail(s.error());
 
   std::size_t fixedVoxels = 0, movingVoxels = 0;
   for (std::size_t i = 0; i < skull->labels.voxelCount(); ++i) {
     fixedVoxels += skull->labels.valueAt(i) == 1;
     movingVoxels += skull->labels.valueAt(i) == 2;
   }
-  nlohmann::json engines = nlohmann::json::array();
-  for (const dm::EngineStats& e : stats)
-    engines.push_back({{"name", e.name},
-                       {"ticks", e.ticks},
-                       {"achieved_hz", e.achievedHz},
-                       {"deadline_misses", e.deadlineMisses},
-                       {"tick_p50_us", e.execution.p50_us},
-                       {"tick_p999_us", e.execution.p999_us}});
   const auto vec = [](const Vec3& v) { return nlohmann::json::array({v.x(), v.y(), v.z()}); };
   nlohmann::json summary = {
       {"mode", o.realtime ? "realtime" : "lockstep"},
@@ -413,10 +393,10 @@ int run(const Options& o) {
       {"rest_force_along_normal_N", restForce.dot(skull->cutNormal)},
       {"rest_force_minus_coupling_N", (restForce - coupling).norm()},
       {"fault_ticks", loopStats.faultTicks},
-      {"engines", engines},
+      {"engines", dm::engineStatsJson(stats)},
       {"outputs", written}};
-  const std::string text = summary.dump(2) + "\n";
-  if (auto s = dm::writeFileAtomic(o.out / "summary.json", text.data(), text.size()); !s) return fail(s.error());
+  if (auto s = dm_example::writeOutput(o.out / "summary.json", summary.dump(2) + "\n", written); !s)
+    return fail(s.error());
   std::printf("skull region %zu voxels cut into %zu + %zu; the fragment (%.1f g) placed from %.2f mm to %.3f mm RMS "
               "error with %d contacts; the hand %.1f mm past the goal feels %.3f N along the cut normal "
               "(coupling %.3f N); outputs in %s\n",
@@ -435,10 +415,7 @@ int main(int argc, char** argv) {
   app.add_option("--push", o.pushMm, "How far past the anatomical pose the hand presses, mm (default 2)")
       ->check(CLI::Range(0.0, 5.0));
   app.add_flag("--realtime", o.realtime, "Real-time threads instead of lockstep on a virtual clock");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  }
-  return run(o);
+  bool parsed = false;
+  const int code = dm_example::parseCommandLine(app, argc, argv, parsed);
+  return parsed ? run(o) : code;
 }

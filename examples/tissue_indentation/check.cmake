@@ -9,25 +9,11 @@
 #  - a malformed curve is refused with its file and line;
 #  - the outputs exist.
 # -DEXAMPLE=program -DOUT=dir
-function(run_example name)
-  file(REMOVE_RECURSE ${OUT}/${name})
-  execute_process(COMMAND ${EXAMPLE} --out ${OUT}/${name} ${ARGN}
-                  RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-  message(STATUS "${name}: ${out}")
-  if(NOT rc EQUAL 0)
-    message(FATAL_ERROR "${EXAMPLE} ${ARGN} exited with ${rc}: ${err}")
-  endif()
-  file(READ ${OUT}/${name}/summary.json summary)
-  set(summary "${summary}" PARENT_SCOPE)
-endfunction()
+include(${CMAKE_CURRENT_LIST_DIR}/../common/run_example.cmake)
 
 function(check_fit name youngs beta)
-  run_example(${name} --youngs ${youngs} --beta ${beta} --noise 0.01 --seed 7)
-  foreach(f curve.csv measured.csv curve.png forces.png)
-    if(NOT EXISTS ${OUT}/${name}/${f})
-      message(FATAL_ERROR "${name}: missing output ${f}")
-    endif()
-  endforeach()
+  dm_run_example(NAME ${name} ARGS --youngs ${youngs} --beta ${beta} --noise 0.01 --seed 7
+                 OUTPUTS curve.csv measured.csv curve.png forces.png)
   string(JSON eE GET "${summary}" relative_error youngs_modulus)
   string(JSON eB GET "${summary}" relative_error beta)
   string(JSON ratio GET "${summary}" rms_over_noise)
@@ -50,10 +36,10 @@ set(stiffB ${fitB})
 check_fit(soft 6000 0.015)
 
 # The measurement fitted again from its CSV.
-run_example(refit --measured ${OUT}/stiff/measured.csv)
+dm_run_example(NAME refit ARGS --measured ${OUT}/stiff/measured.csv)
 string(JSON refitE GET "${summary}" fit youngs_modulus_Pa)
 string(JSON refitB GET "${summary}" fit beta_s)
-math(EXPR dummy "0")  # (CMake has no float arithmetic: compare the printed values' leading digits)
+# (CMake has no float arithmetic: compare the printed values' leading digits.)
 string(SUBSTRING "${refitE}" 0 7 a)
 string(SUBSTRING "${stiffE}" 0 7 b)
 string(SUBSTRING "${refitB}" 0 6 c)

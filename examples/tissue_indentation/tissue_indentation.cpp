@@ -54,6 +54,8 @@
 #include <Eigen/Dense>
 #include <nlohmann/json.hpp>
 
+#include "../common/example_support.hpp"
+
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -304,24 +306,11 @@ dm::Result<std::vector<CurvePoint>> runSimulator(const Options& o, nlohmann::jso
   dm::MasterEngine master;
   if (auto s = master.addEngine(haptics, {.rateHz = 1000}); !s) return s.error();
   if (auto s = master.addEngine(physics, {.rateHz = kPhysicsRate}); !s) return s.error();
-  if (auto s = master.load("tissue indentation"); !s) return s.error();
-  if (auto s = master.start(o.realtime ? dm::RunMode::RealTime : dm::RunMode::Lockstep); !s) return s.error();
-  if (o.realtime) {
-    const auto until = std::chrono::steady_clock::now() + std::chrono::duration<double>(duration);
-    while (std::chrono::steady_clock::now() < until && master.poll())
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  } else if (auto s = master.advance(duration); !s) {
-    return physicsError.what.empty() ? s.error() : physicsError;
-  }
-  for (const dm::EngineStats& e : master.stats())
-    engines.push_back({{"name", e.name},
-                       {"ticks", e.ticks},
-                       {"achieved_hz", e.achievedHz},
-                       {"deadline_misses", e.deadlineMisses},
-                       {"tick_p50_us", e.execution.p50_us},
-                       {"tick_p999_us", e.execution.p999_us}});
-  if (auto s = master.stop("done"); !s) return s.error();
+  std::vector<dm::EngineStats> stats;
+  const dm::Status ran = dm_example::runEngines(master, "tissue indentation", o.realtime, duration, stats);
   if (!physicsError.what.empty()) return physicsError;
+  if (!ran) return ran.error();
+  engines = dm::engineStatsJson(stats);
   return curve;
 }
 
@@ -354,9 +343,7 @@ int run(const Options& o) {
   auto fitted = simulate(curve, fit->youngs, fit->beta);
   if (!fitted) return fail(fitted.error());
 
-  std::error_code ec;
-  fs::create_directories(o.out, ec);
-  if (ec) return fail(dm::fail(dm::ErrorCode::Io, ec.message(), o.out.string(), "choose a writable --out"));
+  if (auto s = dm_example::makeOutputDir(o.out); !s) return fail(s.error());
   std::vector<std::string> written;
   std::string csv = "t,displacement_m,simulated_N,measured_N,fitted_N\n";
   const double nan = std::numeric_limits<double>::quiet_NaN();
@@ -367,13 +354,11 @@ int run(const Options& o) {
     depthMm.push_back(1e3 * curve[k].depth);
     measured.push_back(curve[k].force);
   }
-  if (auto s = dm::writeFileAtomic(o.out / "curve.csv", csv.data(), csv.size()); !s) return fail(s.error());
-  written.push_back("curve.csv");
+  if (auto s = dm_example::writeOutput(o.out / "curve.csv", csv, written); !s) return fail(s.error());
   if (synthetic) {  // the measurement alone, in the format --measured reads
     std::string m = "t,displacement_m,force_N\n";
     for (const CurvePoint& c : curve) m += dm::formatString("%.6f,%.17g,%.17g\n", c.t, c.depth, c.force);
-    if (auto s = dm::writeFileAtomic(o.out / "measured.csv", m.data(), m.size()); !s) return fail(s.error());
-    written.push_back("measured.csv");
+    if (auto s = dm_example::writeOutput(o.out / "measured.csv", m, written); !s) return fail(s.error());
   }
   const dm::PlotSeries series[] = {{"MEASURED", {30, 60, 220}, depthMm, measured, true},
                                    {"FIT", {220, 30, 30}, depthMm, *fitted}};
@@ -409,8 +394,8 @@ int run(const Options& o) {
                                  {"beta", std::abs(fit->beta - o.beta) / o.beta}};
     summary["rms_over_noise"] = o.noise > 0 ? fit->rms / o.noise : nan;
   }
-  const std::string text = summary.dump(2) + "\n";
-  if (auto s = dm::writeFileAtomic(o.out / "summary.json", text.data(), text.size()); !s) return fail(s.error());
+  if (auto s = dm_example::writeOutput(o.out / "summary.json", summary.dump(2) + "\n", written); !s)
+    return fail(s.error());
   std::printf("fitted E = %.1f Pa, beta = %.4f s (residual RMS %.4f N, %d iterations, %d simulations)", fit->youngs,
               fit->beta, fit->rms, fit->iterations, fit->evaluations);
   if (synthetic)
@@ -436,10 +421,7 @@ int main(int argc, char** argv) {
   app.add_option("--cycles", o.cycles, "Indentation cycles (default 1)")->check(CLI::Range(1, 20));
   app.add_option("--measured", o.measured, "Fit this curve (CSV t,displacement,force) instead of a simulated one");
   app.add_flag("--realtime", o.realtime, "Real-time threads instead of lockstep on a virtual clock");
-  try {
-    app.parse(argc, argv);
-  } catch (const CLI::ParseError& e) {
-    return app.exit(e) == 0 ? 0 : 2;
-  }
-  return run(o);
+  bool parsed = false;
+  const int code = dm_example::parseCommandLine(app, argc, argv, parsed);
+  return parsed ? run(o) : code;
 }

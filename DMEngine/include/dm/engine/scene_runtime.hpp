@@ -37,6 +37,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
 
 namespace dm {
 
@@ -62,6 +63,11 @@ struct SceneRunResult {
   double simulatedSeconds = 0;  ///< how far the clock got
   std::uint64_t frames = 0;     ///< frames written
 };
+
+/// Per-engine figures as summary.json lists them: name, rate_hz,
+/// achieved_hz, ticks, deadline_misses and execution_us {p50, p99, p999,
+/// max}; also for programs that run a MasterEngine of their own.
+nlohmann::json engineStatsJson(const std::vector<EngineStats>& stats);
 
 /// A loaded scene with its engines (see the file comment). Not copyable.
 class SceneRuntime {
