@@ -158,7 +158,6 @@ struct ServedDevice {
     if (const WaveMasterPort* w = bridge->wavePort())
       j["wave"] = {{"energy_in_J", w->receiver().energyIn()},
                    {"energy_out_J", w->receiver().energyOut()},
-                   {"overrun_J", w->receiver().overrun()},
                    {"limited", w->receiver().stats().limited}};
     return j;
   }

@@ -39,7 +39,6 @@ struct NetHaptic {
   double waveImpedance = 0.0;
   dm::WaveLossPolicy wavePolicy = dm::WaveLossPolicy::Hold;
   std::optional<dm::WaveSlavePort> wave;
-  std::optional<std::int64_t> lastWaveNs;  ///< the previous read's time in wave mode
 };
 
 NetHaptic* self(DmDevice* d) { return reinterpret_cast<NetHaptic*>(d); }
@@ -159,9 +158,7 @@ int netRead(DmDevice* dev, int64_t now, DmHapticState* out) {
     }
     dm::WaveSample w;
     while (d->host->popWave(w)) d->wave->receive(w);
-    const double elapsed = d->lastWaveNs ? 1e-9 * static_cast<double>(now - *d->lastWaveNs) : d->wave->period();
-    d->lastWaveNs = now;
-    d->wave->begin(elapsed);
+    d->wave->begin();
     s.position = d->wave->position();
     s.linearVelocity = d->wave->velocity();
   }

@@ -893,7 +893,7 @@ DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
     // Master port: ẋm of the last servo, the waves that arrived since.
     WaveSample w;
     while (link_.popWave(w)) wave_->receive(w);
-    force.force = wave_->step(device_.state().linearVelocity, elapsed);
+    force.force = wave_->step(device_.state().linearVelocity);
     live = link_.linkUp();
   } else {
     std::int64_t age = 0;

@@ -2,7 +2,6 @@
 #include <dm/core/assert.hpp>
 #include <dm/network/wave_variables.hpp>
 
-#include <algorithm>
 #include <cmath>
 
 namespace dm {
@@ -41,16 +40,8 @@ WaveSender::WaveSender(double dt) : dt_(dt) {
   DM_DEMAND(dt > 0.0, "WaveSender: sample period dt must be > 0 s");
 }
 
-double wavePeriod(double elapsed, double dt) {
-  if (!std::isfinite(elapsed)) return dt;
-  return std::clamp(elapsed, 0.0, 10.0 * dt);
-}
-
-WaveSample WaveSender::send(const Vec3& wave, double elapsed) {
-  // The previous sample was charged for dt; it was in force for `elapsed`.
-  if (sequence_ > 0) energy_ += 0.5 * last_.squaredNorm() * (wavePeriod(elapsed, dt_) - dt_);
+WaveSample WaveSender::send(const Vec3& wave) {
   energy_ += 0.5 * wave.squaredNorm() * dt_;
-  last_ = wave;
   return {.wave = wave, .sequence = ++sequence_, .energy = energy_};
 }
 
@@ -74,10 +65,7 @@ void WaveReceiver::receive(const WaveSample& sample) {
   ++stats_.received;
 }
 
-Vec3 WaveReceiver::next(double elapsed) {
-  // The previous output was charged for dt; it was in force for `elapsed`.
-  energyOut_ += 0.5 * lastOut_.squaredNorm() * (wavePeriod(elapsed, options_.dt) - options_.dt);
-  overrun_ = std::max(overrun_, energyOut_ - energyIn_);
+Vec3 WaveReceiver::next() {
   Vec3 out = Vec3::Zero();
   if (fresh_ || (haveSample_ && options_.policy == WaveLossPolicy::Hold)) out = latest_;
   if (!fresh_) ++stats_.held;
@@ -94,7 +82,6 @@ Vec3 WaveReceiver::next(double elapsed) {
   } else {
     energyOut_ += want;
   }
-  lastOut_ = out;
   return out;
 }
 
@@ -103,15 +90,10 @@ WavePort::WavePort(WavePortOptions options)
   DM_DEMAND(options.impedance > 0.0, "WavePort: wave impedance b must be > 0 N·s/m");
 }
 
-Vec3 WaveMasterPort::step(const Vec3& velocity, double elapsed) {
-  const Vec3 v = rx_.next(elapsed);
-  out_ = tx_.send(waveMasterOut(velocity, v, options_.impedance), elapsed);
+Vec3 WaveMasterPort::step(const Vec3& velocity) {
+  const Vec3 v = rx_.next();
+  out_ = tx_.send(waveMasterOut(velocity, v, options_.impedance));
   return -waveMasterForce(velocity, v, options_.impedance);  // the reaction on the hand
-}
-
-void WaveSlavePort::begin(double elapsed) {
-  u_ = rx_.next(elapsed);
-  period_ = wavePeriod(elapsed, options_.dt);
 }
 
 void WaveSlavePort::reset(const Vec3& position) {
@@ -126,8 +108,8 @@ const WaveSample& WaveSlavePort::apply(const Vec3& environmentForce) {
   // ẋs; solved: ẋs = (√(2b)·u + F)/(2b).
   xDot_ = (std::sqrt(2.0 * b) * u_ + environmentForce) / (2.0 * b);
   const Vec3 portForce = b * xDot_ - environmentForce;
-  x_ += xDot_ * period_;
-  out_ = tx_.send(waveSlaveOut(u_, portForce, b), period_);
+  x_ += xDot_ * options_.dt;
+  out_ = tx_.send(waveSlaveOut(u_, portForce, b));
   return out_;
 }
 

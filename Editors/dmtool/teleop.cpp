@@ -147,7 +147,6 @@ int runTeleopDevice(const TeleopCliOptions& o) {
       j["wave"] = {{"impedance", o.waveImpedance},
                    {"energy_in_J", w->receiver().energyIn()},
                    {"energy_out_J", w->receiver().energyOut()},
-                   {"overrun_J", w->receiver().overrun()},
                    {"received", ws.received},
                    {"stale", ws.stale},
                    {"held", ws.held},

@@ -98,12 +98,17 @@ TEST(DmtoolTeleop, WaveImpedanceServesTheMasterPortOfAWaveLoop) {
     FAIL() << remote.error().message();
   }
   double drift = 0.0;
+  // At the device's 1 kHz on an absolute schedule (a late tick is caught up,
+  // as the device's RealTimeLoop does): the master's receiver counts its
+  // budget in samples, so a slower host would thin the force it displays.
+  auto next = std::chrono::steady_clock::now();
   while (!done.load()) {  // serve until the tool has written its statistics
     const std::int64_t now = monotonicNs();
     (*remote)->servo(now);
     drift = std::max(drift, (*remote)->state().position.norm());
     (*remote)->command(dm::Vec3(0, 0, 1.0), dm::Vec3::Zero(), now);
-    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    next += std::chrono::milliseconds(1);
+    std::this_thread::sleep_until(next);
   }
   server.join();
   ASSERT_EQ(tool.exitCode, 0) << describe(tool);
@@ -111,15 +116,12 @@ TEST(DmtoolTeleop, WaveImpedanceServesTheMasterPortOfAWaveLoop) {
   ASSERT_TRUE(j.contains("wave")) << tool.out;
   EXPECT_EQ(j["wave"]["impedance"], 40.0);
   EXPECT_GT(j["wave"]["received"].get<std::uint64_t>(), 1000u);
-  // Out ≤ in, within the late correction of a period the device loop
-  // overran: at most one sample over 10 periods, ½·(F/√(2b))²·9 ms =
-  // 0.056 mJ for the 1 N at rest; twice that for transients.
-  const double overrun = j["wave"]["overrun_J"].get<double>();
-  EXPECT_LT(overrun, 1.12e-4);
-  EXPECT_LE(j["wave"]["energy_out_J"].get<double>(), j["wave"]["energy_in_J"].get<double>() + overrun + 1e-15);
-  // What the hand feels: the last tick alone may be one the receiver held
-  // out of budget (zero), so the 0.1 s mean is the figure.
-  EXPECT_NEAR(j["output_force_mean_N"][2].get<double>(), 1.0, 0.1) << tool.out;
+  EXPECT_LE(j["wave"]["energy_out_J"].get<double>(), j["wave"]["energy_in_J"].get<double>() + 1e-12);
+  // What the hand feels: a tick without a new sample and without budget
+  // left displays zero (the receiver never creates energy), so the last tick
+  // alone may be 0 N; its 0.1 s mean is the rendered force, less the ticks
+  // a late host left without a sample.
+  EXPECT_NEAR(j["output_force_mean_N"][2].get<double>(), 1.0, 0.15) << tool.out;
   EXPECT_NEAR(j["output_force_mean_N"][0].get<double>(), 0.0, 1e-6);
   // The tool, pushed by 1 N against a fixed master, moves at F/(2b) =
   // 12.5 mm/s only until the master's reflection arrives: a few millimetres

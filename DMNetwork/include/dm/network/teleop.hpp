@@ -267,8 +267,7 @@ struct TeleopBridgeOptions {
 ///    WaveMasterPort: it displays −(b·ẋm − √(2b)·v) for the backward waves v
 ///    received (zero while the host is silent), servos, and sends its state
 ///    and the forward wave u = √(2b)·ẋm − v. The wave period is the device's
-///    servo period; each sample's energy counts the measured time between
-///    steps. With the host's matched WaveSlavePort the loop stays
+///    servo period. With the host's matched WaveSlavePort the loop stays
 ///    stable under delay, jitter and loss.
 /// step() is real-time safe; call it from the device's servo thread.
 class TeleopDeviceBridge {

@@ -28,18 +28,6 @@
 // directions bounded that way make the energy the channel delivers at its
 // ports ≤ the energy put in, exactly, in discrete time.
 //
-// Both ends count each sample for the time it was really in force: the
-// caller passes the measured period (the time since its previous tick), and
-// a sample first charged for one nominal period dt is corrected by
-// |w|²/2·(elapsed − dt) on the next tick. Two loops that run at slightly
-// different real rates (two clocks, or one side stalled by load) therefore
-// stay in balance; counted in samples instead, the faster receiver would
-// exhaust its budget and chatter to zero on every tick it holds. A measured
-// period is clamped to [0, 10·dt]. A period shorter than dt makes the
-// sender's exact total dip by at most one sample's energy; the receiver
-// keeps the largest total it has seen, so its bound holds within that one
-// sample's energy.
-//
 // On top of these sit the two ports a tele-operation loop runs once per
 // servo period (WaveMasterPort on the operator's device, WaveSlavePort
 // where the environment is rendered). The slave port terminates the line
@@ -97,24 +85,16 @@ class WaveSender {
  public:
   /// `dt` is the sample period in seconds (> 0, DM_DEMAND).
   explicit WaveSender(double dt);
-  /// Accounts `wave` for one period and returns the sample to transmit;
-  /// `elapsed` (s) is the measured time since the previous send, for which
-  /// the previous sample was in force (dt when omitted). O(1).
-  WaveSample send(const Vec3& wave, double elapsed);
-  WaveSample send(const Vec3& wave) { return send(wave, dt_); }
+  /// Accounts `wave` for one period and returns the sample to transmit. O(1).
+  WaveSample send(const Vec3& wave);
   /// Cumulative wave energy sent (J).
   double energy() const { return energy_; }
 
  private:
   double dt_;
   double energy_ = 0.0;
-  Vec3 last_ = Vec3::Zero();
   std::uint64_t sequence_ = 0;
 };
-
-/// A measured tick period (s) as the wave energy accounts use it: clamped to
-/// [0, 10·dt]; non-finite gives dt. O(1).
-double wavePeriod(double elapsed, double dt);
 
 /// What a WaveReceiver outputs on a tick when no newer sample has arrived.
 enum class WaveLossPolicy : std::uint8_t {
@@ -146,32 +126,22 @@ class WaveReceiver {
   /// Takes one arrived sample, in any order, duplicates allowed; a sample
   /// with a non-finite wave or energy is ignored. O(1).
   void receive(const WaveSample& sample);
-  /// The wave to use for the coming period, energy-bounded; `elapsed` (s)
-  /// is the measured time since the previous call, for which the previous
-  /// output was in force (dt when omitted). O(1).
-  Vec3 next(double elapsed);
-  Vec3 next() { return next(options_.dt); }
+  /// The wave to use for the coming period, energy-bounded. O(1).
+  Vec3 next();
   /// Largest cumulative energy received (J).
   double energyIn() const { return energyIn_; }
-  /// Cumulative wave energy output by next() (J); ≤ energyIn() + overrun().
+  /// Cumulative wave energy output by next() (J); ≤ energyIn().
   double energyOut() const { return energyOut_; }
-  /// The largest excess energyOut() − energyIn() there has been (J, ≥ 0):
-  /// the late correction of a period that ran longer than the budget had
-  /// left, at most one sample's energy over 10·dt. Zero when every period
-  /// is dt.
-  double overrun() const { return overrun_; }
   WaveReceiverStats stats() const { return stats_; }
 
  private:
   WaveReceiverOptions options_;
   Vec3 latest_ = Vec3::Zero();
-  Vec3 lastOut_ = Vec3::Zero();
   std::uint64_t latestSequence_ = 0;
   bool haveSample_ = false;
   bool fresh_ = false;
   double energyIn_ = 0.0;
   double energyOut_ = 0.0;
-  double overrun_ = 0.0;
   WaveReceiverStats stats_;
 };
 
@@ -191,8 +161,6 @@ class WavePort {
   /// The outgoing sample produced by the last period.
   const WaveSample& outgoing() const { return out_; }
   const WaveReceiver& receiver() const { return rx_; }
-  /// The nominal sample period dt (s).
-  double period() const { return options_.dt; }
 
  protected:
   /// `options.impedance` and `options.dt` must be > 0 (DM_DEMAND).
@@ -211,10 +179,8 @@ class WaveMasterPort : public WavePort {
  public:
   explicit WaveMasterPort(WavePortOptions options) : WavePort(options) {}
   /// One period: the force (N) the device should display for the measured
-  /// velocity (m/s); the forward-wave sample to send is then outgoing().
-  /// `elapsed` (s) is the measured time since the previous step. O(1).
-  Vec3 step(const Vec3& velocity, double elapsed);
-  Vec3 step(const Vec3& velocity) { return step(velocity, options_.dt); }
+  /// velocity (m/s); the forward-wave sample to send is then outgoing(). O(1).
+  Vec3 step(const Vec3& velocity);
 };
 
 /// The slave port: a virtual tool point the environment is rendered
@@ -229,11 +195,8 @@ class WaveSlavePort : public WavePort {
   explicit WaveSlavePort(WavePortOptions options) : WavePort(options) {}
   /// Places the tool (the master's position when the link starts).
   void reset(const Vec3& position);
-  /// Starts a period: takes the wave u to use for it. `elapsed` (s) is the
-  /// measured time since the previous begin(); the tool moves for that long
-  /// in apply(). O(1).
-  void begin(double elapsed);
-  void begin() { begin(options_.dt); }
+  /// Starts a period: takes the wave u to use for it. O(1).
+  void begin() { u_ = rx_.next(); }
   /// Ends the period with the environment's force on the tool (N): moves
   /// the tool and returns the backward-wave sample to send. O(1).
   const WaveSample& apply(const Vec3& environmentForce);
@@ -243,7 +206,6 @@ class WaveSlavePort : public WavePort {
 
  private:
   Vec3 u_ = Vec3::Zero();
-  double period_ = 0.0;  ///< this period's length, s
   Vec3 x_ = Vec3::Zero();
   Vec3 xDot_ = Vec3::Zero();
 };
