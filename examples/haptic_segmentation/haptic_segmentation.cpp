@@ -234,7 +234,7 @@ int run(const Options& o) {
     return true;
   });
   dm::MasterEngine master;
-  if (auto s = master.addEngine(haptics, {.rateHz = 1000}); !s) return fail(s.error());
+  if (auto s = master.addEngine(haptics, {.rateHz = 1000, .priority = 80}); !s) return fail(s.error());
   if (auto s = master.addEngine(painting, {.rateHz = 20}); !s) return fail(s.error());
   std::vector<dm::EngineStats> stats;
   const dm::Status ran = dm_example::runEngines(master, "haptic segmentation", o.realtime, o.duration, stats);

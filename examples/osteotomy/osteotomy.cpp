@@ -330,7 +330,7 @@ int run(const Options& o) {
     return true;
   });
   dm::MasterEngine master;
-  if (auto s = master.addEngine(haptics, {.rateHz = 1000}); !s) return fail(s.error());
+  if (auto s = master.addEngine(haptics, {.rateHz = 1000, .priority = 80}); !s) return fail(s.error());
   if (auto s = master.addEngine(monitor, {.rateHz = 50}); !s) return fail(s.error());
   std::vector<dm::EngineStats> stats;
   if (auto s = dm_example::runEngines(master, "osteotomy", o.realtime, duration, stats); !s) return fail(s.error());

@@ -304,7 +304,7 @@ dm::Result<std::vector<CurvePoint>> runSimulator(const Options& o, nlohmann::jso
     return true;
   });
   dm::MasterEngine master;
-  if (auto s = master.addEngine(haptics, {.rateHz = 1000}); !s) return s.error();
+  if (auto s = master.addEngine(haptics, {.rateHz = 1000, .priority = 80}); !s) return s.error();
   if (auto s = master.addEngine(physics, {.rateHz = kPhysicsRate}); !s) return s.error();
   std::vector<dm::EngineStats> stats;
   const dm::Status ran = dm_example::runEngines(master, "tissue indentation", o.realtime, duration, stats);
