@@ -48,7 +48,7 @@ class HapticsEngine final : public Engine {
     loop->tick(info);
     const HapticLoopSample& s = loop->lastSample();
     ProbeSample p;
-    p.t = static_cast<double>(info.scheduled_ns) * 1e-9;
+    p.t = time.seconds(info);  // scene time, also in real time
     p.devicePose = s.input.devicePose;
     p.response = s.response;
     p.response.force = loop->config().deviceToWorld.linear() * s.deviceForce;  // what was sent, world frame
@@ -60,6 +60,7 @@ class HapticsEngine final : public Engine {
   std::unique_ptr<HapticLoop> loop;
   SpscRing<ProbeSample, 16384> ring;
   std::atomic<std::uint64_t> dropped{0};
+  TickTime time;
 };
 
 // |F| of the last `seconds` at the haptic rate, shared by the monitor

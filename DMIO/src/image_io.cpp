@@ -102,6 +102,7 @@ struct WriteState {
 struct WriteParams {
   png_uint_32 width = 0, height = 0;
   int bitDepth = 8, colorType = PNG_COLOR_TYPE_GRAY;
+  int compressionLevel = -1;  // zlib level 0..9, -1: zlib's default
 };
 
 void onWrite(png_structp png, png_bytep data, png_size_t n) {
@@ -123,6 +124,11 @@ void onFlush(png_structp) {}
 int writeRows(WriteState* s, const WriteParams* p, png_bytep* rows) {
   if (setjmp(png_jmpbuf(s->png))) return 0;
   png_set_write_fn(s->png, s, onWrite, onFlush);
+  if (p->compressionLevel >= 0) {
+    png_set_compression_level(s->png, p->compressionLevel);
+    // Fast levels: one cheap filter instead of libpng's per-row search.
+    if (p->compressionLevel <= 3) png_set_filter(s->png, PNG_FILTER_TYPE_BASE, PNG_FILTER_SUB);
+  }
   png_set_IHDR(s->png, s->info, p->width, p->height, p->bitDepth, p->colorType, PNG_INTERLACE_NONE,
                PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
   png_write_info(s->png, s->info);
@@ -221,7 +227,11 @@ Result<Image> readPng(const std::filesystem::path& file, const ImageReadOptions&
   return parsePng(*bytes, file.string(), options);
 }
 
-Result<std::vector<std::byte>> encodePng(const Image& image) {
+Result<std::vector<std::byte>> encodePng(const Image& image, int compressionLevel) {
+  if (compressionLevel < -1 || compressionLevel > 9)
+    return fail(ErrorCode::InvalidArgument,
+                "PNG compression level " + std::to_string(compressionLevel) + " is outside -1..9", "encodePng",
+                "use -1 (zlib's default), 1 (fast) .. 9 (small)");
   if (image.empty()) return fail(ErrorCode::InvalidArgument, "cannot encode an empty image", "encodePng");
   if (image.type() == PixelType::F32)
     return fail(ErrorCode::Unsupported, "PNG cannot store 32-bit float pixels", "encodePng",
@@ -236,6 +246,7 @@ Result<std::vector<std::byte>> encodePng(const Image& image) {
   static constexpr int kColorTypes[] = {PNG_COLOR_TYPE_GRAY, PNG_COLOR_TYPE_GRAY_ALPHA, PNG_COLOR_TYPE_RGB,
                                         PNG_COLOR_TYPE_RGBA};
   p.colorType = kColorTypes[image.channels() - 1];
+  p.compressionLevel = compressionLevel;
 
   WriteState s;
   s.png = png_create_write_struct(PNG_LIBPNG_VER_STRING, s.message, onError, onWarning);
@@ -261,8 +272,8 @@ Result<std::vector<std::byte>> encodePng(const Image& image) {
   return std::vector<std::byte>(begin, begin + s.size);
 }
 
-Status writePng(const Image& image, const std::filesystem::path& file) {
-  auto bytes = encodePng(image);
+Status writePng(const Image& image, const std::filesystem::path& file, int compressionLevel) {
+  auto bytes = encodePng(image, compressionLevel);
   if (!bytes) return std::move(bytes).error().within(file.string());
   return writeFileAtomic(file, bytes->data(), bytes->size());
 }

@@ -15,6 +15,22 @@ namespace {
 // ---------------------------------------------------------------------------
 // LatencyHistogram
 
+// Scene time from ticks: a virtual clock from 0 and a monotonic clock from
+// anywhere give the same seconds; a first tick seen late (index 2) still
+// counts from the loop's start.
+TEST(TickTime, SecondsSinceTheLoopStartedOnEitherClock) {
+  for (std::int64_t start : {std::int64_t{0}, std::int64_t{17'245'959'421'937}}) {
+    dm::TickTime time;
+    const std::int64_t period = 1'000'000;
+    EXPECT_DOUBLE_EQ(time.seconds({.index = 0, .scheduled_ns = start, .period_ns = period}), 0.0);
+    EXPECT_NEAR(time.seconds({.index = 3, .scheduled_ns = start + 3 * period, .period_ns = period}), 0.003, 1e-12);
+    // An overrun skipped periods: scheduled time, not the index, is the time.
+    EXPECT_NEAR(time.seconds({.index = 4, .scheduled_ns = start + 9 * period, .period_ns = period}), 0.009, 1e-12);
+    dm::TickTime late;
+    EXPECT_NEAR(late.seconds({.index = 2, .scheduled_ns = start + 2 * period, .period_ns = period}), 0.002, 1e-12);
+  }
+}
+
 TEST(LatencyHistogram, BucketsTileTheRangeWithBoundedWidth) {
   using H = dm::LatencyHistogram;
   EXPECT_EQ(H::bucketLowest(0), 0);

@@ -188,6 +188,26 @@ TEST(Png, WriteAndReadAFile) {
   EXPECT_NE(missing.error().message().find(path.filename().string()), std::string::npos);
 }
 
+// Every compression level is lossless; a level outside -1..9 is refused.
+TEST(Png, CompressionLevelsAreLosslessAndChecked) {
+  auto img = dm::Image::create(64, 48, 4, dm::PixelType::U8);
+  ASSERT_TRUE(img);
+  fillPattern<std::uint8_t>(*img);
+  for (int level : {-1, 0, 1, 3, 6, 9}) {
+    auto png = dm::encodePng(*img, level);
+    ASSERT_TRUE(png) << "level " << level << ": " << png.error();
+    auto back = dm::parsePng(*png, "level");
+    ASSERT_TRUE(back) << back.error();
+    expectSamePixels<std::uint8_t>(*img, *back);
+  }
+  for (int level : {-2, 10}) {
+    auto png = dm::encodePng(*img, level);
+    ASSERT_FALSE(png);
+    EXPECT_EQ(png.error().code, dm::ErrorCode::InvalidArgument);
+    EXPECT_NE(png.error().what.find(std::to_string(level)), std::string::npos);
+  }
+}
+
 TEST(Png, FloatImagesAreRefusedOnWrite) {
   auto img = dm::Image::create(4, 4, 1, dm::PixelType::F32);
   ASSERT_TRUE(img);

@@ -152,6 +152,25 @@ struct TickInfo {
   double dt() const noexcept { return nanosToSeconds(period_ns); }
 };
 
+/// Seconds since a loop started, from its ticks: lockstep's virtual clock
+/// starts at 0, a real-time loop's monotonic clock does not, and a HUD, a
+/// trace or a camera path wants scene time either way. The origin is the
+/// first tick seen, less the periods before it. One per loop thread.
+class TickTime {
+ public:
+  double seconds(const TickInfo& tick) noexcept {
+    if (!started_) {
+      originNs_ = tick.scheduled_ns - static_cast<std::int64_t>(tick.index) * tick.period_ns;
+      started_ = true;
+    }
+    return nanosToSeconds(tick.scheduled_ns - originNs_);
+  }
+
+ private:
+  std::int64_t originNs_ = 0;
+  bool started_ = false;
+};
+
 /// Statistics of a RealTimeLoop since its last start() (or construction).
 /// Durations in MICROSECONDS.
 struct RealTimeLoopStats {
