@@ -233,4 +233,27 @@ std::pair<double, double> Volume::range() const {
   return {lo, hi};
 }
 
+Result<Image> volumeSlice(const Volume& volume, int axis, int index, double lo, double hi) {
+  if (volume.voxelCount() == 0) return fail(ErrorCode::InvalidArgument, "the volume is empty", "volumeSlice");
+  if (axis < 0 || axis > 2)
+    return fail(ErrorCode::InvalidArgument, formatString("axis %d is not 0 (i), 1 (j) or 2 (k)", axis), "volumeSlice");
+  if (!(hi > lo))
+    return fail(ErrorCode::InvalidArgument, formatString("value window [%g, %g] is empty", lo, hi), "volumeSlice",
+                "pass lo < hi, e.g. the volume's range()");
+  const Vec3i d = volume.dims();
+  const int u = axis == 0 ? 1 : 0, w = axis == 2 ? 1 : 2;  // the picture's x and y axes
+  auto img = Image::create(d[u], d[w], 1, PixelType::U8);
+  if (!img) return img.error();
+  Vec3i p;
+  p[axis] = std::clamp(index, 0, d[axis] - 1);
+  for (int y = 0; y < d[w]; ++y)
+    for (int x = 0; x < d[u]; ++x) {
+      p[u] = x;
+      p[w] = d[w] - 1 - y;
+      img->at<std::uint8_t>(x, y) =
+          static_cast<std::uint8_t>(std::clamp(255.0 * (volume.value(p.x(), p.y(), p.z()) - lo) / (hi - lo), 0.0, 255.0));
+    }
+  return img;
+}
+
 }  // namespace dm

@@ -66,12 +66,18 @@ dm::Status SceneDocument::apply(dm::SceneDesc next) {
   return dm::ok();
 }
 
-dm::Status SceneDocument::setObject(const dm::SceneObject& object) {
+template <class T>
+dm::Status SceneDocument::replaceNamed(std::vector<T> dm::SceneDesc::*items, const T& item, const char* what,
+                                       const char* where) {
   dm::SceneDesc next = scene_;
-  dm::SceneObject* o = findNamed(next.objects, object.name);
-  if (!o) return notFound("object", object.name, "/objects");
-  *o = object;
+  T* old = findNamed(next.*items, item.name);
+  if (!old) return notFound(what, item.name, where);
+  *old = item;
   return apply(std::move(next));
+}
+
+dm::Status SceneDocument::setObject(const dm::SceneObject& object) {
+  return replaceNamed(&dm::SceneDesc::objects, object, "object", "/objects");
 }
 
 dm::Status SceneDocument::addObject(const dm::SceneObject& object) {
@@ -92,19 +98,11 @@ dm::Status SceneDocument::removeObject(std::string_view name) {
 }
 
 dm::Status SceneDocument::setMaterial(const dm::SceneMaterial& material) {
-  dm::SceneDesc next = scene_;
-  dm::SceneMaterial* m = findNamed(next.materials, material.name);
-  if (!m) return notFound("material", material.name, "/materials");
-  *m = material;
-  return apply(std::move(next));
+  return replaceNamed(&dm::SceneDesc::materials, material, "material", "/materials");
 }
 
 dm::Status SceneDocument::setVolume(const dm::SceneVolume& volume) {
-  dm::SceneDesc next = scene_;
-  dm::SceneVolume* v = findNamed(next.volumes, volume.name);
-  if (!v) return notFound("volume view", volume.name, "/volumes");
-  *v = volume;
-  return apply(std::move(next));
+  return replaceNamed(&dm::SceneDesc::volumes, volume, "volume view", "/volumes");
 }
 
 dm::Status SceneDocument::setLight(std::size_t index, const dm::SceneLight& light) {

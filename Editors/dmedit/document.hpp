@@ -27,6 +27,7 @@
 #include <filesystem>
 #include <string>
 #include <string_view>
+#include <vector>
 
 namespace dmedit {
 
@@ -80,6 +81,9 @@ class SceneDocument {
 
  private:
   dm::Status apply(dm::SceneDesc next);
+  // Replaces the entry of (scene.*items) named item.name; NotFound otherwise.
+  template <class T>
+  dm::Status replaceNamed(std::vector<T> dm::SceneDesc::*items, const T& item, const char* what, const char* where);
   dm::SceneDesc scene_;
   std::filesystem::path file_;
   std::deque<dm::SceneDesc> undo_, redo_;

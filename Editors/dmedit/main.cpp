@@ -173,30 +173,6 @@ class Viewport {
   std::string key_;
 };
 
-// One axial, coronal or sagittal slice of a volume, windowed to its range.
-dm::Result<dm::Image> volumeSlice(const dm::Volume& v, int axis, int index) {
-  const dm::Vec3i d = v.dims();
-  const int u = axis == 0 ? 1 : 0, w = axis == 2 ? 1 : 2;  // the picture's x and y axes
-  auto img = dm::Image::create(d[u], d[w], 1, dm::PixelType::U8);
-  if (!img) return img.error();
-  double lo = v.valueAt(0), hi = lo;
-  for (std::size_t n = 0; n < v.voxelCount(); n += 7) {
-    lo = std::min(lo, v.valueAt(n));
-    hi = std::max(hi, v.valueAt(n));
-  }
-  if (hi <= lo) hi = lo + 1;
-  for (int y = 0; y < d[w]; ++y)
-    for (int x = 0; x < d[u]; ++x) {
-      dm::Vec3i p;
-      p[axis] = std::clamp(index, 0, d[axis] - 1);
-      p[u] = x;
-      p[w] = d[w] - 1 - y;  // up is up
-      img->at<std::uint8_t>(x, y) =
-          static_cast<std::uint8_t>(std::clamp(255.0 * (v.value(p.x(), p.y(), p.z()) - lo) / (hi - lo), 0.0, 255.0));
-    }
-  return img;
-}
-
 const char* resourceType(const dm::SceneResource& r) {
   switch (r.type) {
     case dm::SceneResource::Type::Mesh: return "mesh";
@@ -596,7 +572,8 @@ class Editor {
     ImGui::SliderInt("slice", &sliceIndex_, 0, n - 1);
     const std::string key = volumeName_ + std::to_string(sliceAxis_) + "/" + std::to_string(sliceIndex_);
     if (key != sliceKey_) {
-      auto img = volumeSlice(*v, sliceAxis_, sliceIndex_);
+      const auto [lo, hi] = v->range();
+      auto img = dm::volumeSlice(*v, sliceAxis_, sliceIndex_, lo, hi > lo ? hi : lo + 1);
       if (img) slice_.upload(*img);
       sliceKey_ = key;
     }

@@ -16,6 +16,37 @@ dm::Affine3 mmAffine() {
   return a;
 }
 
+// volumeSlice: each axis's picture holds exactly the voxels of that slice,
+// the second remaining axis's highest index in the top row, values windowed.
+TEST(Volume, SlicesAreTheRightVoxelsTheRightWayUp) {
+  auto v = dm::Volume::create(dm::Vec3i(4, 5, 6), dm::VoxelType::U16);
+  ASSERT_TRUE(v);
+  for (int k = 0; k < 6; ++k)
+    for (int j = 0; j < 5; ++j)
+      for (int i = 0; i < 4; ++i) v->setValue(i, j, k, 100 * i + 10 * j + k);
+  const double lo = 0, hi = 255;  // values up to 345: clamped above 255
+  auto axial = dm::volumeSlice(*v, 2, 3, lo, hi);  // i across, j up
+  ASSERT_TRUE(axial) << axial.error();
+  EXPECT_EQ(axial->width(), 4);
+  EXPECT_EQ(axial->height(), 5);
+  EXPECT_EQ(axial->at<std::uint8_t>(1, 0), 100 + 40 + 3);  // top row: j = 4
+  EXPECT_EQ(axial->at<std::uint8_t>(0, 4), 3);             // bottom row: j = 0
+  EXPECT_EQ(axial->at<std::uint8_t>(3, 4), 255);           // 303, clamped
+  auto coronal = dm::volumeSlice(*v, 1, 2, lo, hi);  // i across, k up
+  ASSERT_TRUE(coronal);
+  EXPECT_EQ(coronal->width(), 4);
+  EXPECT_EQ(coronal->height(), 6);
+  EXPECT_EQ(coronal->at<std::uint8_t>(1, 0), 100 + 20 + 5);
+  auto sagittal = dm::volumeSlice(*v, 0, 99, lo, 1000);  // clamped to i = 3; j across, k up
+  ASSERT_TRUE(sagittal);
+  EXPECT_EQ(sagittal->width(), 5);
+  EXPECT_EQ(sagittal->height(), 6);
+  EXPECT_EQ(sagittal->at<std::uint8_t>(2, 5), static_cast<int>(255.0 * (300 + 20 + 0) / 1000));
+  EXPECT_FALSE(dm::volumeSlice(*v, 3, 0, lo, hi));
+  EXPECT_FALSE(dm::volumeSlice(*v, 2, 0, 5, 5));
+  EXPECT_FALSE(dm::volumeSlice(dm::Volume{}, 2, 0, lo, hi));
+}
+
 TEST(Volume, AffineSpacingAndBounds) {
   auto v = dm::Volume::create({4, 5, 6}, dm::VoxelType::I16, mmAffine());
   ASSERT_TRUE(v) << v.error();

@@ -111,29 +111,31 @@ Window neighbourhood(const dm::Volume& v, const dm::Vec3i& c) {
   return {mean, std::sqrt(std::max(0.0, sum2 / n - mean * mean))};
 }
 
-// The axial slice through voxel row k: grey values, the mask in red, the
-// probe's path in green.
+// The axial slice through voxel row k (dm::volumeSlice, anterior up): grey
+// values, the mask in red, the probe's path in green.
 dm::Result<dm::Image> slicePicture(const dm::Volume& image, const dm::Volume& mask, int k,
                                    const std::vector<dm::ProbeSample>& trace) {
-  const dm::Vec3i d = image.dims();
-  auto pic = dm::Image::create(d.x(), d.y(), 3, dm::PixelType::U8);
+  const auto [lo, hi] = image.range();
+  auto grey = dm::volumeSlice(image, 2, k, std::min(lo, 0.0), hi > 0 ? hi : 1.0);
+  auto painted = dm::volumeSlice(mask, 2, k, 0.0, 1.0);
+  if (!grey) return grey.error();
+  if (!painted) return painted.error();
+  auto pic = dm::Image::create(grey->width(), grey->height(), 3, dm::PixelType::U8);
   if (!pic) return pic.error();
-  double hi = 1.0;
-  for (std::size_t n = 0; n < image.voxelCount(); ++n) hi = std::max(hi, image.valueAt(n));
-  for (int j = 0; j < d.y(); ++j)
-    for (int i = 0; i < d.x(); ++i) {
-      const auto g = static_cast<std::uint8_t>(std::clamp(255.0 * image.value(i, j, k) / hi, 0.0, 255.0));
-      const int y = d.y() - 1 - j;  // anterior up
-      const bool painted = mask.value(i, j, k) != 0;
-      pic->at<std::uint8_t>(i, y, 0) = painted ? static_cast<std::uint8_t>(std::min(255, g / 2 + 140)) : g;
-      pic->at<std::uint8_t>(i, y, 1) = painted ? static_cast<std::uint8_t>(g / 2) : g;
-      pic->at<std::uint8_t>(i, y, 2) = painted ? static_cast<std::uint8_t>(g / 2) : g;
+  for (int y = 0; y < pic->height(); ++y)
+    for (int x = 0; x < pic->width(); ++x) {
+      const int g = grey->at<std::uint8_t>(x, y);
+      const bool red = painted->at<std::uint8_t>(x, y) != 0;
+      pic->at<std::uint8_t>(x, y, 0) = static_cast<std::uint8_t>(red ? std::min(255, g / 2 + 140) : g);
+      pic->at<std::uint8_t>(x, y, 1) = static_cast<std::uint8_t>(red ? g / 2 : g);
+      pic->at<std::uint8_t>(x, y, 2) = static_cast<std::uint8_t>(red ? g / 2 : g);
     }
+  const dm::Vec3i d = image.dims();
   for (const dm::ProbeSample& s : trace) {
     const dm::Vec3 ijk = image.worldToIndex() * s.devicePose.translation();
     const int i = static_cast<int>(std::lround(ijk.x())), j = static_cast<int>(std::lround(ijk.y()));
     if (i < 0 || j < 0 || i >= d.x() || j >= d.y()) continue;
-    const int y = d.y() - 1 - j;
+    const int y = d.y() - 1 - j;  // as volumeSlice: the highest j on top
     pic->at<std::uint8_t>(i, y, 0) = 0;
     pic->at<std::uint8_t>(i, y, 1) = 255;
     pic->at<std::uint8_t>(i, y, 2) = 0;

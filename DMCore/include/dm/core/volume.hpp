@@ -14,6 +14,7 @@
 // @endcode
 #pragma once
 
+#include <dm/core/image.hpp>
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
 
@@ -146,5 +147,18 @@ class Volume {
   Affine3 indexToWorld_ = Affine3::Identity();
   Affine3 worldToIndex_ = Affine3::Identity();
 };
+
+/// One index-space slice of `volume` as a U8 grey picture: the slice ⟂ index
+/// axis `axis` (0 = i, 1 = j, 2 = k) at `index` (clamped to the grid);
+/// picture x runs along the first remaining axis, picture y along the second
+/// with its highest index in the top row (for an LPS/RAS volume: anterior or
+/// superior up); values map linearly from [lo, hi] to 0..255, clamped.
+/// InvalidArgument for an empty volume, an axis outside 0..2 or hi <= lo.
+/// O(slice).
+/// @code
+///   const auto [lo, hi] = mri.range();
+///   auto axial = dm::volumeSlice(mri, 2, mri.dims().z() / 2, lo, hi);
+/// @endcode
+Result<Image> volumeSlice(const Volume& volume, int axis, int index, double lo, double hi);
 
 }  // namespace dm
