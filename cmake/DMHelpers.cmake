@@ -43,15 +43,23 @@ function(dm_add_module name)
   install(DIRECTORY include/ DESTINATION ${CMAKE_INSTALL_INCLUDEDIR})
 endfunction()
 
-# dm_add_test(NAME SOURCES ... LIBS ... [LABELS ...])
-# One GoogleTest executable; each TEST becomes a ctest case.
+# dm_add_test(NAME SOURCES ... LIBS ... [LABELS ...] [SERIAL gtest-filter])
+# One GoogleTest executable; each TEST becomes a ctest case. The tests the
+# SERIAL filter matches (real-time loops whose figures depend on having the
+# cores) run alone (RUN_SERIAL).
 function(dm_add_test name)
-  cmake_parse_arguments(T "" "" "SOURCES;LIBS;LABELS" ${ARGN})
+  cmake_parse_arguments(T "" "SERIAL" "SOURCES;LIBS;LABELS" ${ARGN})
   add_executable(${name} ${T_SOURCES})
   target_link_libraries(${name} PRIVATE ${T_LIBS} GTest::gtest GTest::gtest_main)
   dm_target_options(${name})
   include(GoogleTest)
-  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60
+  set(filter "")
+  if(T_SERIAL)
+    set(filter TEST_FILTER "-${T_SERIAL}")
+    gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 TEST_FILTER "${T_SERIAL}"
+      PROPERTIES LABELS "${T_LABELS}" ENVIRONMENT "DM_SOURCE_DIR=${PROJECT_SOURCE_DIR}" RUN_SERIAL TRUE)
+  endif()
+  gtest_discover_tests(${name} DISCOVERY_TIMEOUT 60 ${filter}
     PROPERTIES LABELS "${T_LABELS}" ENVIRONMENT "DM_SOURCE_DIR=${PROJECT_SOURCE_DIR}")
 endfunction()
 
