@@ -25,6 +25,7 @@ namespace dm {
 
 namespace {
 constexpr std::int64_t kNoMin = std::numeric_limits<std::int64_t>::max();
+constexpr int kMaxCatchUp = 1000;  // RealTimeLoopConfig::catch_up
 
 // Single-writer increment: a relaxed load and store, no locked instruction.
 template <class A, class V>
@@ -260,6 +261,10 @@ Status RealTimeLoop::validate(const RealTimeLoopConfig& c) {
                 "spin_ns is " + std::to_string(c.spin_ns) +
                     ", must be in [0, period = " + std::to_string(periodFor(c.rate_hz)) + " ns]",
                 loopWhere(c, "spin_ns"), "use about 50000 (50 us), or SpinMode::Off");
+  if (c.catch_up < 0 || c.catch_up > kMaxCatchUp)
+    return fail(ErrorCode::InvalidArgument,
+                "catch_up is " + std::to_string(c.catch_up) + ", must be in [0, " + std::to_string(kMaxCatchUp) + "]",
+                loopWhere(c, "catch_up"), "use 0 for a haptic loop, 1 or 2 for a render loop");
   return ok();
 }
 
@@ -391,11 +396,15 @@ void RealTimeLoop::Impl::threadMain() noexcept {
     const std::int64_t end = monotonicNow();
 
     // Deadline miss: the tick ended after the next deadline. Then skip every
-    // period whose deadline has passed instead of bursting to catch up.
+    // period whose deadline has passed instead of bursting to catch up,
+    // unless they are few enough (catch_up) to run back to back.
     const std::int64_t following = next + period;
     const bool missed = end > following;
     skippedBefore = 0;
-    if (missed) skippedBefore = static_cast<std::uint64_t>((end - following) / period) + 1;
+    if (missed) {
+      const auto passed = static_cast<std::uint64_t>((end - following) / period) + 1;
+      if (passed > static_cast<std::uint64_t>(config.catch_up)) skippedBefore = passed;
+    }
     next = following + static_cast<std::int64_t>(skippedBefore) * period;
     skippedTotal += skippedBefore;
     skipped.store(skippedTotal, std::memory_order_relaxed);

@@ -49,6 +49,17 @@ std::int64_t steadyNowNs() noexcept {
       .count();
 }
 
+// The real-time loop an engine's schedule asks for.
+RealTimeLoopConfig loopConfig(const EngineSchedule& schedule, std::string_view engineName) {
+  RealTimeLoopConfig config;
+  config.rate_hz = schedule.rateHz;
+  config.priority = schedule.priority;
+  config.cpu = schedule.cpu;
+  config.catch_up = schedule.catchUp;
+  config.name = "dm-" + std::string(engineName);
+  return config;
+}
+
 }  // namespace
 
 std::shared_ptr<Engine> makeFunctionEngine(std::string name, std::function<bool(const TickInfo&)> tick) {
@@ -88,11 +99,7 @@ Status MasterEngine::addEngine(std::shared_ptr<Engine> engine, const EngineSched
     if (s->engine->name() == name)
       return fail(ErrorCode::InvalidArgument, "an engine named '" + name + "' was already added", name,
                   "give each engine a unique name");
-  RealTimeLoopConfig config;
-  config.rate_hz = schedule.rateHz;
-  config.priority = schedule.priority;
-  config.cpu = schedule.cpu;
-  if (Status s = RealTimeLoop::validate(config); !s) return s.error().within(name);
+  if (Status s = RealTimeLoop::validate(loopConfig(schedule, name)); !s) return s.error().within(name);
   auto slot = std::make_unique<Slot>();
   slot->engine = std::move(engine);
   slot->schedule = schedule;
@@ -121,12 +128,7 @@ Status MasterEngine::startThreads() {
   for (const auto& slotPtr : slots_) {
     Slot* slot = slotPtr.get();
     if (slot->failed.load()) continue;
-    RealTimeLoopConfig config;
-    config.rate_hz = slot->schedule.rateHz;
-    config.priority = slot->schedule.priority;
-    config.cpu = slot->schedule.cpu;
-    config.name = "dm-" + std::string(slot->engine->name());
-    slot->loop = std::make_unique<RealTimeLoop>(config, [slot](const TickInfo& t) {
+    slot->loop = std::make_unique<RealTimeLoop>(loopConfig(slot->schedule, slot->engine->name()), [slot](const TickInfo& t) {
       if (slot->failed.load(std::memory_order_relaxed)) return;
       if (!slot->engine->tick(t)) {
         slot->failed.store(true, std::memory_order_release);

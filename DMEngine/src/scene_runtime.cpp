@@ -2,6 +2,7 @@
 // loop, and the outputs.
 #include <dm/collide/bvh.hpp>
 #include <dm/core/filesystem.hpp>
+#include <dm/core/host_cpu.hpp>
 #include <dm/core/log.hpp>
 #include <dm/core/plugin.hpp>
 #include <dm/core/ring.hpp>
@@ -37,6 +38,11 @@ namespace dm {
 namespace {
 
 using SteadyClock = std::chrono::steady_clock;
+
+// A late frame is made up by the next ones (at most this many periods
+// behind) instead of dropping a period: the render rate holds its average
+// through one slow frame. Haptics never catch up.
+constexpr int kRenderCatchUp = 2;
 
 // The haptic engine: device servo, god-object, safety — one HapticLoop tick
 // per engine tick; every tick's sample goes to the monitor through an SPSC
@@ -408,7 +414,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
                                    scene.outputs.frameEvery, lockstep);
     if (!render) return render.error();
     im.render = *render;
-    if (auto s = im.master.addEngine(im.render->engine(), {.rateHz = scene.engines.render->rateHz}); !s)
+    if (auto s = im.master.addEngine(im.render->engine(), {.rateHz = scene.engines.render->rateHz, .catchUp = kRenderCatchUp}); !s)
       return s.error();
 #else
     return fail(ErrorCode::Unsupported, "this build has no DMRenderer (EGL was not found at configure time)",
@@ -424,6 +430,9 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   if (auto s = im.master.start(options.mode); !s) return s.error();
 
   // Run: lockstep in 0.1 s chunks of simulated time, real time polling.
+  // The host's CPU accounts bracket the run: steal time says the hypervisor
+  // stopped this machine's CPUs, which no thread priority can prevent.
+  const Result<HostCpuTimes> hostBefore = readHostCpuTimes();
   SceneRunResult result;
   Status runStatus = ok();
   const auto wallStart = SteadyClock::now();
@@ -459,6 +468,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   }
   result.simulatedSeconds = done;
   const std::vector<EngineStats> engineStats = im.master.stats();
+  const Result<HostCpuTimes> hostAfter = readHostCpuTimes();
   Status stopStatus = im.master.stop(result.interrupted ? "interrupted" : "done");
   im.monitor->drain();
 #ifdef DM_ENGINE_HAVE_NETWORK
@@ -498,6 +508,10 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
                             {"wall_s", std::chrono::duration<double>(SteadyClock::now() - wallStart).count()},
                             {"interrupted", result.interrupted},
                             {"engines", engines}};
+  if (hostBefore && hostAfter)
+    summary["host"] = {{"cpus", hostAfter->cpus},
+                       {"cpu_busy_s", hostAfter->busy_s - hostBefore->busy_s},
+                       {"cpu_steal_s", hostAfter->steal_s - hostBefore->steal_s}};
   if (im.haptics) {
     const HapticLoopStats hs = im.haptics->loop->stats();
     summary["haptics"] = {{"renderer", "god-object"},

@@ -113,6 +113,11 @@ int main(int argc, char** argv) {
                 s["render"]["frames_written"].get<unsigned long long>(),
                 s["render"]["gl_renderer"].get<std::string>().c_str(),
                 s["render"]["frame_ms_p50"].get<double>());
+  if (s.contains("host") && s["mode"] == "realtime")
+    std::printf("host: %d CPUs, %.2f CPU-s busy, %.3f s stolen by the hypervisor%s\n",
+                s["host"]["cpus"].get<int>(), s["host"]["cpu_busy_s"].get<double>(),
+                s["host"]["cpu_steal_s"].get<double>(),
+                s["host"]["cpu_steal_s"].get<double>() > 0 ? " (deadline misses may be the host's)" : "");
   std::printf("wrote %s in %s%s\n", s["outputs"].dump().c_str(), outDir.c_str(),
               result->interrupted ? " (interrupted)" : "");
   return result->interrupted ? 130 : 0;

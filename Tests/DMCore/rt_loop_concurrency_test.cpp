@@ -128,6 +128,43 @@ TEST(RealTimeLoopConcurrency, SlowTicksAreDeadlineMissesAndPeriodsAreSkipped) {
   expectMonotone(s.execution, s.ticks);
 }
 
+// With catch_up, the periods a slow tick passed are run back to back, not
+// skipped: every tick k is due at t0 + k * period, and ticks still run late.
+TEST(RealTimeLoopConcurrency, CatchUpRunsLatePeriodsInsteadOfSkippingThem) {
+  constexpr std::uint64_t kSlow = 3, kTicks = 40;
+  std::atomic<std::uint64_t> ticks{0}, lateAfterSlow{0}, skippedSeen{0};
+  std::atomic<std::int64_t> first{0};
+  std::atomic<bool> scheduleKept{true};
+  // 200 periods of slack: only a stall of 0.2 s on a loaded machine skips.
+  dm::RealTimeLoop loop({.rate_hz = 1000, .name = "test-catchup", .catch_up = 200}, [&](const dm::TickInfo& t) {
+    if (t.index == 0) first.store(t.scheduled_ns);
+    if (t.scheduled_ns != first.load() + static_cast<std::int64_t>(t.index) * t.period_ns)
+      scheduleKept.store(false);
+    skippedSeen.fetch_add(t.skipped);
+    if (t.index > kSlow && t.start_ns - t.scheduled_ns > t.period_ns) lateAfterSlow.fetch_add(1);
+    if (t.index == kSlow) std::this_thread::sleep_for(5ms);
+    ticks.fetch_add(1);
+  });
+  ASSERT_TRUE(loop.start());
+  EXPECT_TRUE(waitFor([&] { return ticks.load() >= kTicks; }));
+  loop.stop();
+  const auto s = loop.stats();
+  EXPECT_TRUE(scheduleKept.load());
+  EXPECT_EQ(skippedSeen.load(), 0u);
+  EXPECT_EQ(s.skipped_periods, 0u);
+  EXPECT_GE(s.deadline_misses, 1u);     // the slow tick itself
+  EXPECT_GE(lateAfterSlow.load(), 2u);  // the ticks it delayed ran late, back to back
+}
+
+TEST(RealTimeLoopConcurrency, CatchUpOutOfRangeIsRefused) {
+  for (int c : {-1, 1001}) {
+    dm::RealTimeLoop loop({.name = "test-catchup-bad", .catch_up = c}, [](const dm::TickInfo&) {});
+    const dm::Status s = loop.start();
+    ASSERT_FALSE(s);
+    EXPECT_NE(s.error().where.find("catch_up"), std::string::npos) << s.error().message();
+  }
+}
+
 TEST(RealTimeLoopConcurrency, StatsReadableWhileRunning) {
   std::atomic<std::uint64_t> ticks{0};
   dm::RealTimeLoop loop({.rate_hz = 2000, .name = "test-stats"},

@@ -125,17 +125,19 @@ TEST(SceneFile, BundledHeadProbeSceneHasTheValuesOfTheMainJob) {
 
   ASSERT_EQ(s->objects.size(), 2u);
   EXPECT_EQ(s->objects[0].name, "head_skin");
-  // Touched at full resolution, drawn from the skin averaged over 2x2x2 voxels.
+  // Touched at full resolution, drawn from the skin averaged over 4x4x4 voxels
+  // (light enough for llvmpipe at 30 Hz beside the 1 kHz haptic loop).
   EXPECT_EQ(s->objects[0].mesh, "skin");
   EXPECT_EQ(s->objects[0].renderMesh, "skin_view");
-  EXPECT_EQ(s->resource("skin_view")->downsample, 2);
+  EXPECT_EQ(s->resource("skin_view")->downsample, 4);
   EXPECT_TRUE(s->objects[0].haptic);
   EXPECT_TRUE(s->objects[0].pose.isometry().isApprox(dm::Isometry3::Identity()));
   EXPECT_FALSE(s->objects[1].haptic);
 
-  // A shadow-casting key light and an unshadowed fill.
+  // A key light and a fill, unshadowed: a shadow pass costs llvmpipe more
+  // than the 30 Hz frame budget (docs/performance.md).
   ASSERT_EQ(s->lights.size(), 2u);
-  EXPECT_TRUE(s->lights[0].shadows);
+  EXPECT_FALSE(s->lights[0].shadows);
   EXPECT_FALSE(s->lights[1].shadows);
   EXPECT_NEAR(s->lights[0].direction.norm(), 1.0, 1e-15);
   EXPECT_TRUE(s->lights[0].direction.isApprox(dm::Vec3(-0.6, -0.3, -0.5).normalized(), 1e-15));

@@ -10,9 +10,14 @@
 // stats() says what took effect.
 //
 // Overruns: a tick that ends after the next deadline is a deadline miss.
-// The loop then skips every period whose deadline has already passed (it
-// never runs a burst of ticks to catch up) and counts the skipped periods;
-// the next tick sees how many were skipped in TickInfo::skipped.
+// By default the loop then skips every period whose deadline has already
+// passed (it never runs a burst of ticks to catch up: right for a haptic
+// loop, where a late force is worse than none) and counts the skipped
+// periods; the next tick sees how many were skipped in TickInfo::skipped.
+// A loop given catch_up = N > 0 instead runs the late ticks at once, back to
+// back, while it is at most N periods behind, and skips only beyond that: a
+// render loop then makes up one slow frame with the next ones and keeps its
+// average rate.
 //
 // The loop thread never allocates, locks or logs synchronously: timings go
 // into preallocated histograms (LatencyHistogram), the tick function is
@@ -137,6 +142,10 @@ struct RealTimeLoopConfig {
   std::string name = "dm-rt";  ///< thread name (first 15 characters) and log prefix
   SpinMode spin = SpinMode::Auto;
   std::int64_t spin_ns = 50'000;  ///< busy-wait window before each deadline, in [0, period]
+  /// Periods a late loop may fall behind and still run every one of them,
+  /// back to back; further behind, the passed periods are skipped. 0 skips
+  /// at once (haptics). In [0, 1000].
+  int catch_up = 0;
 };
 
 /// What a tick function is told. Times are in nanoseconds on the loop's
@@ -206,7 +215,8 @@ class RealTimeLoop {
   RealTimeLoop& operator=(const RealTimeLoop&) = delete;
 
   /// Checks a configuration: rate_hz in [0.001, 1e6], priority 0 or within
-  /// SCHED_FIFO's range, cpu -1 or in [0, CPU_SETSIZE), spin_ns in [0, period].
+  /// SCHED_FIFO's range, cpu -1 or in [0, CPU_SETSIZE), spin_ns in [0, period],
+  /// catch_up in [0, 1000].
   /// InvalidArgument naming the field otherwise.
   static Status validate(const RealTimeLoopConfig& config);
 

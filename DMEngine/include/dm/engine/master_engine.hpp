@@ -48,6 +48,9 @@ struct EngineSchedule {
   double rateHz = 1000.0;  ///< ticks per second, [0.001, 1e6]
   int priority = 0;        ///< real time: SCHED_FIFO priority 1..99, 0 = normal
   int cpu = -1;            ///< real time: CPU to pin the thread to, -1 = none
+  /// Real time: periods a late engine may run back to back to catch up
+  /// before it skips them (RealTimeLoopConfig::catch_up); 0 for haptics.
+  int catchUp = 0;
 };
 
 /// Real-time threads or lockstep on a virtual clock (see the file comment).
