@@ -151,6 +151,7 @@ Result<std::unique_ptr<GodObjectRenderer>> GodObjectRenderer::create(std::vector
     if (Status s = o.material.validate(at + ".material"); !s) return s.error();
     ObjectState st;
     st.bvh = o.bvh;
+    st.tree = st.bvh.get();
     st.pose = o.pose;
     st.pendingPose = o.pose;
     st.material = o.material;
@@ -169,10 +170,10 @@ Result<std::unique_ptr<GodObjectRenderer>> GodObjectRenderer::create(std::vector
       st.vertexNormals = std::move(o.vertexNormals);
     }
     st.shaded = options.forceShading && (!st.vertexNormals.empty() || st.bvh->isClosed());
-    if (st.shaded) {
-      st.leafOf.resize(st.bvh->triangleCount());
-      for (std::uint32_t k = 0; k < st.bvh->triangleCount(); ++k) st.leafOf[st.bvh->originalTriangle(k)] = k;
-    }
+    // Mesh triangle → leaf order, for shading and for carrying a proxy with
+    // a deforming surface (refit keeps the leaf order).
+    st.leafOf.resize(st.bvh->triangleCount());
+    for (std::uint32_t k = 0; k < st.bvh->triangleCount(); ++k) st.leafOf[st.bvh->originalTriangle(k)] = k;
     states.push_back(std::move(st));
   }
   return std::unique_ptr<GodObjectRenderer>(new GodObjectRenderer(std::move(states), options));
@@ -192,8 +193,8 @@ void GodObjectRenderer::reset(const Isometry3& devicePose) noexcept {
   for (int round = 0; round < 4; ++round) {
     bool moved = false;
     for (const ObjectState& o : objects_) {
-      if (!o.bvh->isClosed()) continue;
-      const MeshPointQuery q = closestPointOnMesh(*o.bvh, o.pose, proxy_, clearance + 1.0);
+      if (!o.tree->isClosed()) continue;
+      const MeshPointQuery q = closestPointOnMesh(*o.tree, o.pose, proxy_, clearance + 1.0);
       if (q.triangle == kNoTriangle || !(q.distance < clearance) || !q.normal.allFinite()) continue;
       proxy_ = q.point + (clearance * 2.0) * q.normal;
       moved = true;
@@ -203,6 +204,7 @@ void GodObjectRenderer::reset(const Isometry3& devicePose) noexcept {
   inContact_ = false;
   sliding_ = false;
   contactObject_ = 0;
+  contact_ = {};
   planeCount_ = 0;
 }
 
@@ -212,13 +214,60 @@ void GodObjectRenderer::setObjectPose(std::size_t index, const Isometry3& pose) 
   objects_[index].posePending = true;
 }
 
+bool GodObjectRenderer::deformObject(std::size_t index, const MeshBvh* tree) noexcept {
+  if (index >= objects_.size() || tree == nullptr) return false;
+  ObjectState& o = objects_[index];
+  if (!o.vertexNormals.empty() || tree->triangleCount() != o.bvh->triangleCount() ||
+      tree->vertexCount() != o.bvh->vertexCount())
+    return false;
+  // The previous tree is not read again: the contact was recorded by value
+  // at the end of the last tick (its owner may already be rewriting it).
+  o.tree = tree;
+  const double clearance = options_.proxyRadius + options_.skin;
+  if (inContact_ && index == contactObject_ && contact_.triangle < o.leafOf.size()) {
+    // Carried with the surface: the touched point keeps its barycentric
+    // coordinates on its triangle, and the proxy's offset from it turns
+    // with the triangle's normal.
+    const Vec3* c = tree->corners(o.leafOf[contact_.triangle]);
+    const Vec3& bc = contact_.barycentric;
+    const Vec3 moved = bc[0] * c[0] + bc[1] * c[1] + bc[2] * c[2];
+    const Vec3 n1 = (c[1] - c[0]).cross(c[2] - c[0]);
+    Vec3 offset = contactOffset_;
+    if (contactFaceNormal_.squaredNorm() > 0 && n1.squaredNorm() > 0)
+      offset = Eigen::Quaterniond::FromTwoVectors(contactFaceNormal_, n1) * offset;
+    proxy_ = o.pose * (moved + offset);
+    contact_.point = o.pose * moved;
+    recordContactGeometry();
+    return true;
+  }
+  // A free proxy the surface moved over is put back just outside, as
+  // reset() does (closed meshes: open ones have no inside).
+  if (!tree->isClosed()) return true;
+  const MeshPointQuery q = closestPointOnMesh(*tree, o.pose, proxy_, clearance + 1.0);
+  if (q.triangle != kNoTriangle && q.distance < clearance && q.normal.allFinite())
+    proxy_ = q.point + (clearance * 2.0) * q.normal;
+  return true;
+}
+
+void GodObjectRenderer::recordContactGeometry() noexcept {
+  const ObjectState& o = objects_[contact_.object];
+  const std::uint32_t k = o.leafOf[contact_.triangle];
+  const Vec3* c = o.tree->corners(k);
+  const Triangle& tri = o.tree->triangleIndices(k);
+  const Vec3 local = o.pose.inverse() * contact_.point;
+  contact_.barycentric = closestPointOnTriangle(local, c[0], c[1], c[2]).barycentric;
+  contact_.vertices = {tri[0], tri[1], tri[2]};
+  contactFaceNormal_ = (c[1] - c[0]).cross(c[2] - c[0]);
+  contactOffset_ = o.pose.inverse() * proxy_ - local;
+}
+
 GodObjectRenderer::Sweep GodObjectRenderer::sweepAll(const Vec3& from, const Vec3& to) const noexcept {
   Sweep best;
   const double r = options_.proxyRadius;
   for (std::size_t i = 0; i < objects_.size(); ++i) {
     const ObjectState& o = objects_[i];
     const SweepHit h =
-        r > 0 ? sweepSphere(*o.bvh, o.pose, r, from, to) : sweepPoint(*o.bvh, o.pose, from, to);
+        r > 0 ? sweepSphere(*o.tree, o.pose, r, from, to) : sweepPoint(*o.tree, o.pose, from, to);
     if (!h.hit() || (best.hit && h.t >= best.t)) continue;
     best.hit = true;
     best.t = h.t;
@@ -303,13 +352,13 @@ Vec3 GodObjectRenderer::shadedNormal(const Plane& plane) const noexcept {
   const ObjectState& o = objects_[plane.object];
   if (!o.shaded || plane.triangle >= o.leafOf.size()) return Vec3::Zero();
   const std::uint32_t k = o.leafOf[plane.triangle];
-  const Vec3* c = o.bvh->corners(k);
-  const Triangle& tri = o.bvh->triangleIndices(k);
+  const Vec3* c = o.tree->corners(k);
+  const Triangle& tri = o.tree->triangleIndices(k);
   const Vec3 local = o.pose.inverse() * plane.point;
   const Vec3 bc = closestPointOnTriangle(local, c[0], c[1], c[2]).barycentric;
   Vec3 n = Vec3::Zero();
   for (int i = 0; i < 3; ++i)
-    n += bc[i] * (o.vertexNormals.empty() ? o.bvh->vertexNormal(tri[i]) : o.vertexNormals[tri[i]]);
+    n += bc[i] * (o.vertexNormals.empty() ? o.tree->vertexNormal(tri[i]) : o.vertexNormals[tri[i]]);
   n = o.pose.linear() * n;
   const double len = n.norm();
   if (!(len > 1e-12)) return Vec3::Zero();
@@ -332,8 +381,8 @@ void GodObjectRenderer::applyPendingPoses() noexcept {
     // A free proxy is pushed by the object: sweep the proxy's motion
     // relative to the object in its local frame.
     const Vec3 from = oldPose.inverse() * proxy_, to = o.pose.inverse() * proxy_;
-    const SweepHit h = r > 0 ? sweepSphere(*o.bvh, Isometry3::Identity(), r, from, to)
-                             : sweepPoint(*o.bvh, Isometry3::Identity(), from, to);
+    const SweepHit h = r > 0 ? sweepSphere(*o.tree, Isometry3::Identity(), r, from, to)
+                             : sweepPoint(*o.tree, Isometry3::Identity(), from, to);
     if (!h.hit()) continue;
     Vec3 n = h.normal;
     if (r == 0 && n.dot(to - from) > 0) n = -n;
@@ -414,7 +463,17 @@ HapticResponse GodObjectRenderer::tick(const HapticInput& input) noexcept {
 
   proxy_ = p;
   inContact_ = contacts > 0;
-  if (inContact_) contactObject_ = contactPlanes[primary].object;
+  contact_ = {};
+  if (inContact_) {
+    const Plane& pl = contactPlanes[primary];
+    contactObject_ = pl.object;
+    contact_.active = true;
+    contact_.object = pl.object;
+    contact_.triangle = pl.triangle;
+    contact_.point = pl.point;
+    contact_.normal = pl.normal;
+    recordContactGeometry();
+  }
   out.proxyPose.translation() = proxy_;
   out.contacts = contacts;
   if (inContact_) {

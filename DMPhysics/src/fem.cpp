@@ -413,6 +413,30 @@ void FemBody::setExternalForce(std::size_t i, const Vec3& f) {
 
 void FemBody::clearExternalForces() { std::fill(fext_.begin(), fext_.end(), Vec3::Zero()); }
 
+Status FemBody::setContactSpring(const std::array<std::uint32_t, 3>& nodes, const Vec3& weights,
+                                 const Vec3& anchor, double stiffness) {
+  constexpr const char* where = "FemBody::setContactSpring";
+  for (int i = 0; i < 3; ++i)
+    if (nodes[std::size_t(i)] >= x_.size())
+      return invalid(formatString("node %u is out of range (%zu nodes)", nodes[std::size_t(i)], x_.size()),
+                     where, "use indices of positions()");
+  if (!weights.allFinite() || weights.minCoeff() < 0.0 || std::abs(weights.sum() - 1.0) > 1e-6)
+    return invalid(formatString("weights (%g, %g, %g) are not barycentric", weights.x(), weights.y(), weights.z()),
+                   where, "give non-negative weights that sum to 1");
+  if (!anchor.allFinite()) return invalid("the anchor is not finite", where, "give a point in metres");
+  if (!std::isfinite(stiffness) || stiffness < 0.0)
+    return invalid("stiffness " + num(stiffness) + " N/m is negative or not finite", where, "give k >= 0");
+  spring_ = {.active = true, .nodes = nodes, .weights = weights, .anchor = anchor, .stiffness = stiffness};
+  return ok();
+}
+
+Vec3 FemBody::contactSpringForce() const noexcept {
+  if (!spring_.active) return Vec3::Zero();
+  Vec3 point = Vec3::Zero();
+  for (int i = 0; i < 3; ++i) point += spring_.weights[i] * x_[spring_.nodes[std::size_t(i)]];
+  return spring_.stiffness * (spring_.anchor - point);
+}
+
 void FemBody::setSolverOptions(const FemSolverOptions& options) {
   DM_DEMAND(options.tolerance > 0.0 && options.maxIterations >= 1 && options.polarIterations >= 1,
             "FemBody::setSolverOptions: tolerance and iteration counts must be positive");
@@ -575,6 +599,19 @@ void FemBody::applySystem(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out, doubl
           stiffScale * acc + massScale * mass_[r] * in.segment<3>(Eigen::Index(3 * r));
     }
   });
+  // The contact spring: h²·k·w wᵀ (⊗ I) over its three nodes' free rows and columns.
+  if (spring_.active && sysSpringScale_ > 0.0) {
+    Vec3 point = Vec3::Zero();
+    for (int j = 0; j < 3; ++j) {
+      const std::uint32_t c = spring_.nodes[std::size_t(j)];
+      if (!fixed_[c]) point += spring_.weights[j] * in.segment<3>(Eigen::Index(3 * c));
+    }
+    const double k = sysSpringScale_ * spring_.stiffness;
+    for (int i = 0; i < 3; ++i) {
+      const std::uint32_t r = spring_.nodes[std::size_t(i)];
+      if (!fixed_[r]) out.segment<3>(Eigen::Index(3 * r)) += (k * spring_.weights[i]) * point;
+    }
+  }
 }
 
 void FemBody::applyStiffness(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out) const {
@@ -620,6 +657,25 @@ Result<FemStepReport> FemBody::step(double h) {
       invBlockDiag_[i] = d.inverse();
     }
   });
+  // The contact spring, implicitly: f_s = k·w·(a − Σwⱼxⱼ) in the right-hand
+  // side with its −h·k·w(Σwⱼvⱼ) velocity term, h²·k·wᵢ² on the diagonal.
+  sysSpringScale_ = spring_.active ? h * h : 0.0;
+  if (spring_.active) {
+    Vec3 point = Vec3::Zero(), velocity = Vec3::Zero();
+    for (int j = 0; j < 3; ++j) {
+      point += spring_.weights[j] * x_[spring_.nodes[std::size_t(j)]];
+      velocity += spring_.weights[j] * v_[spring_.nodes[std::size_t(j)]];
+    }
+    const Vec3 pull = spring_.stiffness * (spring_.anchor - point - h * velocity);
+    for (int i = 0; i < 3; ++i) {
+      const std::uint32_t r = spring_.nodes[std::size_t(i)];
+      if (fixed_[r]) continue;
+      rhs_.segment<3>(Eigen::Index(3 * r)) += (h * spring_.weights[i]) * pull;
+      Mat3 d = invBlockDiag_[r].inverse();
+      d.diagonal().array() += h * h * spring_.stiffness * spring_.weights[i] * spring_.weights[i];
+      invBlockDiag_[r] = d.inverse();
+    }
+  }
   if (!options_.warmStart) dv_.setZero();
 
   // Stopping test relative to the forces in balance, not only to ‖b‖: near

@@ -29,6 +29,12 @@
 // Moving objects (setObjectPose): a proxy in contact with the object is
 // carried by its pose change; a free proxy is pushed by it (a sweep of the
 // proxy relative to the object).
+// Deforming objects (deformObject): the object's tree is swapped for one
+// refitted to the deformed vertices (built off the haptic thread, e.g. by
+// dm::HapticTissue from a FemBody); a proxy in contact is carried with the
+// point it touches, a free proxy left inside a closed object is put back
+// outside. contact() tells which triangle and point the proxy touches, so
+// the force can be handed back to what deforms the surface.
 //
 // Real time: tick() and setObjectPose() never allocate, lock, log or throw;
 // cost O(maxIterations · objects · log(triangles)).
@@ -66,6 +72,20 @@ struct GodObjectObject {
   /// mesh vertex (bvh->vertexCount()). Empty: the BVH's angle-weighted
   /// pseudonormals for closed meshes, no shading for open ones.
   std::vector<Vec3> vertexNormals;
+};
+
+/// Where the proxy touched in the last tick (the constraint that carries
+/// the most load).
+struct GodObjectContact {
+  bool active = false;        ///< in contact
+  std::uint32_t object = 0;   ///< object index
+  std::uint32_t triangle = 0; ///< mesh triangle index of that object
+  Vec3 point = Vec3::Zero();  ///< contact point on the surface, world, m
+  Vec3 normal = Vec3::Zero(); ///< unit, from the surface toward the proxy, world
+  /// The triangle's vertex indices (the mesh given to the object's tree)
+  /// and the point's barycentric coordinates on them.
+  std::array<std::uint32_t, 3> vertices{};
+  Vec3 barycentric = Vec3::Zero();
 };
 
 /// Options of GodObjectRenderer::create().
@@ -113,6 +133,27 @@ class GodObjectRenderer final : public HapticRenderer {
   /// Out-of-range indices and non-finite or non-rigid poses are ignored.
   void setObjectPose(std::size_t index, const Isometry3& pose) noexcept override;
 
+  /// Deforms object `index` now: `tree` is the object's
+  /// tree refitted to its deformed vertices (MeshBvh::refit of a copy of the
+  /// tree given to create(): same triangle and vertex counts, same leaf
+  /// order). The renderer reads `tree` until the next deformObject() for
+  /// the object or its own destruction; keep it alive and unchanged until
+  /// then (dm::HapticTissue's triple buffer does), but the tree it replaces
+  /// is not read again. Call it from the thread that ticks. A proxy in contact with
+  /// the object moves with the point it touches (same barycentric
+  /// coordinates on the same triangle, its offset turned with the
+  /// triangle's normal); a free proxy the deformation left inside a closed
+  /// object, or within the tip radius, is put just outside, as by reset().
+  /// Returns false, changing nothing, for an index out of range, a null
+  /// tree, other counts, or an object created with vertexNormals (they would
+  /// not follow the deformation; shading then uses the refitted
+  /// pseudonormals). Real-time safe: no allocation.
+  bool deformObject(std::size_t index, const MeshBvh* tree) noexcept;
+  /// The tree object `index` (< objectCount()) is rendered against now.
+  const MeshBvh& objectTree(std::size_t index) const noexcept { return *objects_[index].tree; }
+  /// Where the proxy touched in the last tick; inactive when free.
+  const GodObjectContact& contact() const noexcept { return contact_; }
+
   /// Current proxy position (centre of the ball tip), world, m.
   const Vec3& proxy() const noexcept { return proxy_; }
   /// Current pose of object `index` (< objectCount()), local → world.
@@ -139,13 +180,14 @@ class GodObjectRenderer final : public HapticRenderer {
 
  private:
   struct ObjectState {
-    std::shared_ptr<const MeshBvh> bvh;
+    std::shared_ptr<const MeshBvh> bvh;  // the tree given to create() (owned)
+    const MeshBvh* tree = nullptr;       // the geometry felt now: bvh or a deformed copy
     Isometry3 pose;
     Isometry3 pendingPose;
     bool posePending = false;
     HapticMaterial material;
     std::vector<Vec3> vertexNormals;    // local, unit; empty = bvh pseudonormals or none
-    std::vector<std::uint32_t> leafOf;  // mesh triangle → leaf-order index (shading only)
+    std::vector<std::uint32_t> leafOf;  // mesh triangle → leaf-order index
     bool shaded = false;
   };
   struct Sweep {
@@ -165,6 +207,9 @@ class GodObjectRenderer final : public HapticRenderer {
   Vec3 constrainedMove(const Vec3& start, const Vec3& goal) noexcept;
   Vec3 shadedNormal(const Plane& plane) const noexcept;
   void applyPendingPoses() noexcept;
+  /// Barycentric coordinates, vertices, face normal and proxy offset of
+  /// contact_ in its object's current tree (local frame).
+  void recordContactGeometry() noexcept;
 
   std::vector<ObjectState> objects_;
   GodObjectOptions options_;
@@ -172,6 +217,9 @@ class GodObjectRenderer final : public HapticRenderer {
   bool inContact_ = false;
   bool sliding_ = false;
   std::uint32_t contactObject_ = 0;
+  GodObjectContact contact_;
+  Vec3 contactFaceNormal_ = Vec3::Zero();  // local, unnormalised, at the last tick
+  Vec3 contactOffset_ = Vec3::Zero();      // proxy − contact point, local
   std::array<Plane, 4> planes_{};
   std::array<double, 4> lambda_{};
   int planeCount_ = 0;

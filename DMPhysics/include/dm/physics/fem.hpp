@@ -259,6 +259,30 @@ class FemBody {
   /// Constant external force on node i (N), kept until changed or cleared.
   void setExternalForce(std::size_t i, const Vec3& f);
   void clearExternalForces();
+  /// A zero-length spring of `stiffness` (N/m) from the body point
+  /// Σ wᵢ x_{nodes[i]} to a fixed `anchor` (m), integrated implicitly by
+  /// step() (its h²·k wᵢwⱼ terms join the system matrix): how a tool held by
+  /// a stiff coupling, such as a haptic proxy's spring of several hundred
+  /// N/m, pushes and drags tissue whose nodes weigh milligrams, where the
+  /// same force applied explicitly (setExternalForce from the last state)
+  /// would oscillate and grow. One spring at a time, kept until replaced or
+  /// cleared; a fixed node among `nodes` is not moved by it. Fails
+  /// (InvalidArgument, spring unchanged) on a node index out of range,
+  /// weights that are negative, not finite or do not sum to 1 (±1e-6), a
+  /// non-finite anchor, or a stiffness that is negative or not finite.
+  /// Never allocates on success.
+  /// @code
+  ///   body.setContactSpring(tri, barycentric, devicePointLocal, 800.0);
+  ///   body.step(0.01);
+  ///   dm::Vec3 onHand = -body.contactSpringForce();
+  /// @endcode
+  Status setContactSpring(const std::array<std::uint32_t, 3>& nodes, const Vec3& weights, const Vec3& anchor,
+                          double stiffness);
+  void clearContactSpring() noexcept { spring_.active = false; }
+  bool hasContactSpring() const noexcept { return spring_.active; }
+  /// The force (N) the contact spring applies to the body at the current
+  /// positions, k·(anchor − Σ wᵢxᵢ); zero without one.
+  Vec3 contactSpringForce() const noexcept;
   /// Uniform gravitational acceleration (m/s²), default zero.
   void setGravity(const Vec3& g) noexcept { gravity_ = g; }
   const Vec3& gravity() const noexcept { return gravity_; }
@@ -349,6 +373,15 @@ class FemBody {
   std::vector<Quat> rot_;
   std::vector<Mat3> blocks_;        // K values, per block slot
   std::vector<Mat3> invBlockDiag_;  // block-Jacobi preconditioner
+  struct ContactSpring {
+    bool active = false;
+    std::array<std::uint32_t, 3> nodes{};
+    Vec3 weights = Vec3::Zero();
+    Vec3 anchor = Vec3::Zero();
+    double stiffness = 0.0;
+  };
+  ContactSpring spring_;
+  double sysSpringScale_ = 0.0;  // h² of the current step: the spring's share of the operator
   VecX rhs_, dv_, tmp_;
   double sysMassScale_ = 1.0, sysStiffScale_ = 0.0;  // operator scales of the current step
   PcgSolver pcg_;
