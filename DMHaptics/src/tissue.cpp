@@ -69,4 +69,17 @@ Result<FemStepReport> HapticTissue::step(double h) {
   return report;
 }
 
+TissueGodObject::TissueGodObject(GodObjectRenderer& renderer, std::span<const TissueBinding> tissues)
+    : renderer_(&renderer) {
+  for (const TissueBinding& b : tissues)
+    if (b.tissue != nullptr && b.object < renderer.objectCount()) tissues_.push_back(b);
+}
+
+HapticResponse TissueGodObject::tick(const HapticInput& input) noexcept {
+  for (const TissueBinding& b : tissues_) b.tissue->applyTo(*renderer_, b.object);
+  const HapticResponse out = renderer_->tick(input);
+  for (const TissueBinding& b : tissues_) b.tissue->publishGrip(*renderer_, b.object, input.devicePose.translation());
+  return out;
+}
+
 }  // namespace dm

@@ -26,7 +26,9 @@
 // points are converted with the object's pose in the renderer.
 //
 // Threads: applyTo() and publishGrip() on the haptic thread (no allocation,
-// lock, log or throw); step() on one physics thread.
+// lock, log or throw); step() on one physics thread. dm::TissueGodObject
+// makes the pair one HapticRenderer, so a HapticLoop (real time or lockstep)
+// drives it like any renderer.
 //
 // @code
 //   auto tissue = dm::HapticTissue::create(body, {.stiffness = 800, .tipRadius = 0.002});
@@ -47,6 +49,9 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <span>
+#include <string_view>
+#include <vector>
 
 namespace dm {
 
@@ -116,6 +121,39 @@ class HapticTissue {
   TripleBuffer<Grip> grips_;
   std::uint64_t grippedSteps_ = 0;
   std::atomic<std::uint64_t> published_{0};
+};
+
+/// Which renderer object a HapticTissue deforms.
+struct TissueBinding {
+  HapticTissue* tissue = nullptr;
+  std::size_t object = 0;  ///< object index in the GodObjectRenderer
+};
+
+/// The god-object with its tissues as one HapticRenderer: each tick hands
+/// the newest surfaces to the renderer (HapticTissue::applyTo), ticks it and
+/// publishes the grips at the device point (publishGrip). Poses and reset
+/// go to the god-object. Real-time safe like its parts.
+/// @code
+///   dm::TissueGodObject felt(*godObject, {{tissue.get(), 0}});
+///   auto loop = dm::HapticLoop::create({.device = *device, .renderer = felt});
+/// @endcode
+class TissueGodObject final : public HapticRenderer {
+ public:
+  /// `renderer` and every tissue must outlive this; bindings with a null
+  /// tissue or an object index out of range are dropped.
+  TissueGodObject(GodObjectRenderer& renderer, std::span<const TissueBinding> tissues);
+  std::string_view name() const noexcept override { return "godobject-tissue"; }
+  void reset(const Isometry3& devicePose) noexcept override { renderer_->reset(devicePose); }
+  HapticResponse tick(const HapticInput& input) noexcept override;
+  std::size_t objectCount() const noexcept override { return renderer_->objectCount(); }
+  void setObjectPose(std::size_t index, const Isometry3& pose) noexcept override {
+    renderer_->setObjectPose(index, pose);
+  }
+  GodObjectRenderer& godObject() noexcept { return *renderer_; }
+
+ private:
+  GodObjectRenderer* renderer_;
+  std::vector<TissueBinding> tissues_;
 };
 
 }  // namespace dm
