@@ -42,7 +42,7 @@ void HapticTissue::publishGrip(const GodObjectRenderer& renderer, std::size_t ob
     // The surface point is pulled to where it would be with the proxy on
     // the device point: the device point less the tip radius along the normal.
     const Isometry3& pose = renderer.objectPose(object);
-    g.triangle = c.triangle;
+    g.nodes = c.vertices;
     g.weights = c.barycentric.cwiseMax(0.0);
     const double sum = g.weights.sum();
     g.weights = sum > 0 ? Vec3(g.weights / sum) : Vec3::Constant(1.0 / 3.0);
@@ -54,10 +54,7 @@ void HapticTissue::publishGrip(const GodObjectRenderer& renderer, std::size_t ob
 Result<FemStepReport> HapticTissue::step(double h) {
   const Grip& g = grips_.read();
   bool gripped = false;
-  if (g.active && g.triangle < body_->surfaceTriangles().size()) {
-    const Triangle& t = body_->surfaceTriangles()[g.triangle];
-    gripped = body_->setContactSpring({t[0], t[1], t[2]}, g.weights, g.anchor, options_.stiffness).ok();
-  }
+  if (g.active) gripped = body_->setContactSpring(g.nodes, g.weights, g.anchor, options_.stiffness).ok();
   if (!gripped) body_->clearContactSpring();
   auto report = body_->step(h);
   if (!report) return report;

@@ -46,6 +46,7 @@
 #include <dm/haptics/god_object.hpp>
 #include <dm/physics/fem.hpp>
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <memory>
@@ -108,8 +109,8 @@ class HapticTissue {
  private:
   struct Grip {
     bool active = false;
-    std::uint32_t triangle = 0;  // boundary triangle (mesh index)
-    Vec3 weights = Vec3::Zero();  // barycentric on it
+    std::array<std::uint32_t, 3> nodes{};  // the touched triangle's nodes
+    Vec3 weights = Vec3::Zero();           // barycentric on them
     Vec3 anchor = Vec3::Zero();   // body frame, m
   };
   HapticTissue(FemBody& body, const HapticTissueOptions& options, MeshBvh rest);
