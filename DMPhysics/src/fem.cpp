@@ -1,5 +1,7 @@
 // Co-rotational linear FEM on tetrahedra with implicit integration; see
 // dm/physics/fem.hpp for the model, the references and the step equations.
+#include <dm/collide/bvh.hpp>
+#include <dm/collide/mesh_query.hpp>
 #include <dm/core/assert.hpp>
 #include <dm/core/tasks.hpp>
 #include <dm/core/volume.hpp>
@@ -371,6 +373,10 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
   }
 
   body.surface_ = tetMeshSurface(mesh);
+  for (const Triangle& t : body.surface_) body.surfaceNodes_.insert(body.surfaceNodes_.end(), t.begin(), t.end());
+  std::sort(body.surfaceNodes_.begin(), body.surfaceNodes_.end());
+  body.surfaceNodes_.erase(std::unique(body.surfaceNodes_.begin(), body.surfaceNodes_.end()),
+                           body.surfaceNodes_.end());
   const Eigen::Index dofs = Eigen::Index(3 * n);
   body.rhs_.setZero(dofs);
   body.dv_.setZero(dofs);
@@ -428,6 +434,58 @@ Status FemBody::setContactSpring(const std::array<std::uint32_t, 3>& nodes, cons
     return invalid("stiffness " + num(stiffness) + " N/m is negative or not finite", where, "give k >= 0");
   spring_ = {.active = true, .nodes = nodes, .weights = weights, .anchor = anchor, .stiffness = stiffness};
   return ok();
+}
+
+Status FemBody::setObstacles(std::span<const FemObstacle> obstacles) {
+  for (std::size_t j = 0; j < obstacles.size(); ++j) {
+    const FemObstacle& o = obstacles[j];
+    const std::string where = formatString("FemBody::setObstacles: obstacles[%zu]", j);
+    if (o.tree == nullptr || !o.tree->isClosed())
+      return invalid(o.tree == nullptr ? "the tree is null" : "the tree's mesh is not closed", where,
+                     "give the tree of a closed, consistently oriented mesh (signed distances)");
+    if (!o.pose.matrix().allFinite() ||
+        !(o.pose.linear().transpose() * o.pose.linear()).isApprox(Mat3::Identity(), 1e-9))
+      return invalid("the pose is not rigid and finite", where, "give a rotation and a translation");
+    if (!std::isfinite(o.stiffness) || !(o.stiffness > 0))
+      return invalid("stiffness " + num(o.stiffness) + " N/m is not positive", where, "e.g. 1e4 N/m");
+  }
+  obstacles_.assign(obstacles.begin(), obstacles.end());
+  obstacleForce_.assign(obstacles_.size(), Vec3::Zero());
+  contacts_.clear();
+  contacts_.reserve(surfaceNodes_.size());
+  return ok();
+}
+
+bool FemBody::setObstaclePose(std::size_t i, const Isometry3& pose) noexcept {
+  if (i >= obstacles_.size() || !pose.matrix().allFinite() ||
+      !(pose.linear().transpose() * pose.linear()).isApprox(Mat3::Identity(), 1e-9))
+    return false;
+  obstacles_[i].pose = pose;
+  return true;
+}
+
+Vec3 FemBody::obstacleForce(std::size_t i) const noexcept {
+  return i < obstacleForce_.size() ? obstacleForce_[i] : Vec3::Zero();
+}
+
+// The boundary nodes inside an obstacle, each with its deepest obstacle.
+// contacts_ holds at most one entry per boundary node (its reserved size).
+void FemBody::findObstacleContacts() {
+  contacts_.clear();
+  if (obstacles_.empty()) return;
+  for (const std::uint32_t i : surfaceNodes_) {
+    if (fixed_[i]) continue;
+    NodeContact best;
+    for (std::size_t j = 0; j < obstacles_.size(); ++j) {
+      const FemObstacle& o = obstacles_[j];
+      if (!o.tree->bounds().contains(o.pose.inverse() * x_[i])) continue;
+      const MeshPointQuery q = closestPointOnMesh(*o.tree, o.pose, x_[i]);
+      if (!(q.distance < 0.0) || !(-q.distance > best.depth) || !q.normal.allFinite()) continue;
+      best = {.node = i, .obstacle = std::uint32_t(j), .normal = q.normal, .depth = -q.distance,
+              .stiffness = o.stiffness};
+    }
+    if (best.depth > 0.0) contacts_.push_back(best);
+  }
 }
 
 Vec3 FemBody::contactSpringForce() const noexcept {
@@ -599,6 +657,11 @@ void FemBody::applySystem(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out, doubl
           stiffScale * acc + massScale * mass_[r] * in.segment<3>(Eigen::Index(3 * r));
     }
   });
+  // Obstacle contacts: h²·k·n nᵀ on each contact node's diagonal.
+  for (const NodeContact& c : contacts_) {
+    const Eigen::Index o = Eigen::Index(3 * c.node);
+    out.segment<3>(o) += (sysContactScale_ * c.stiffness * c.normal.dot(in.segment<3>(o))) * c.normal;
+  }
   // The contact spring: h²·k·w wᵀ (⊗ I) over its three nodes' free rows and columns.
   if (spring_.active && sysSpringScale_ > 0.0) {
     Vec3 point = Vec3::Zero();
@@ -676,6 +739,18 @@ Result<FemStepReport> FemBody::step(double h) {
       invBlockDiag_[r] = d.inverse();
     }
   }
+  // Obstacle contacts, implicitly: the penalty k·depth·n less its velocity
+  // term h·k·n(n·v) in the right-hand side, h²·k·n nᵀ on the diagonal.
+  findObstacleContacts();
+  sysContactScale_ = h * h;
+  for (const NodeContact& c : contacts_) {
+    const Eigen::Index o = Eigen::Index(3 * c.node);
+    const Vec3 push = c.stiffness * (c.depth - h * c.normal.dot(v_[c.node])) * c.normal;
+    rhs_.segment<3>(o) += h * push;
+    Mat3 d = invBlockDiag_[c.node].inverse();
+    d += (h * h * c.stiffness) * (c.normal * c.normal.transpose());
+    invBlockDiag_[c.node] = d.inverse();
+  }
   if (!options_.warmStart) dv_.setZero();
 
   // Stopping test relative to the forces in balance, not only to ‖b‖: near
@@ -728,6 +803,13 @@ Result<FemStepReport> FemBody::step(double h) {
       x_[i] += h * v_[i];  // a fixed node: its prescribed motion
     }
   });
+  // What the obstacles took: the penalty springs at the end state (the
+  // linearisation the step solved with), never pulling.
+  std::fill(obstacleForce_.begin(), obstacleForce_.end(), Vec3::Zero());
+  for (const NodeContact& c : contacts_) {
+    const double push = c.stiffness * (c.depth - h * c.normal.dot(v_[c.node]));
+    if (push > 0.0) obstacleForce_[c.obstacle] -= push * c.normal;
+  }
   return report_;
 }
 
