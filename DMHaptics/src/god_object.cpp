@@ -470,7 +470,9 @@ HapticResponse GodObjectRenderer::tick(const HapticInput& input) noexcept {
     contact_.active = true;
     contact_.object = pl.object;
     contact_.triangle = pl.triangle;
-    contact_.point = pl.point;
+    // Under the proxy where it ended (it may have slid since the sweep hit
+    // pl.point): its projection on the contact plane.
+    contact_.point = proxy_ - pl.normal * pl.normal.dot(proxy_ - pl.point);
     contact_.normal = pl.normal;
     recordContactGeometry();
   }

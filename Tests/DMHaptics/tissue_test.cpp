@@ -62,6 +62,15 @@ TEST(GodObjectDeform, ProxyInContactRidesTheSurfaceItTouches) {
   EXPECT_NEAR(out.force.z(), kStiffness * 0.002, 2e-3);
   const Vec3 bc = r->contact().barycentric;
   EXPECT_NEAR(bc.sum(), 1.0, 1e-12);
+  // Sliding (frictionless) 6 mm along the face: the contact point stays
+  // under the proxy, not where the sweep first hit.
+  for (int i = 1; i <= 30; ++i) r->tick(input(device + Vec3(0.0002 * i, 0, 0)));
+  for (int i = 0; i < 30; ++i) r->tick(input(device));
+  for (int i = 1; i <= 30; ++i) out = r->tick(input(device + Vec3(0.0002 * i, 0, 0)));
+  const Vec3 under(r->proxy().x(), r->proxy().y(), 0.01);
+  EXPECT_LT((r->contact().point - under).norm(), 1e-9);
+  EXPECT_NEAR(r->proxy().x(), device.x() + 0.006, 1e-6);
+  for (int i = 0; i < 30; ++i) out = r->tick(input(device));
 
   // The top face rises 1 mm and tilts by 0.5 mm over its 10 cm: the proxy
   // is carried, so the force grows by k x the rise under the device point.

@@ -80,7 +80,7 @@ struct GodObjectContact {
   bool active = false;        ///< in contact
   std::uint32_t object = 0;   ///< object index
   std::uint32_t triangle = 0; ///< mesh triangle index of that object
-  Vec3 point = Vec3::Zero();  ///< contact point on the surface, world, m
+  Vec3 point = Vec3::Zero();  ///< the proxy's projection on the contact plane, world, m
   Vec3 normal = Vec3::Zero(); ///< unit, from the surface toward the proxy, world
   /// The triangle's vertex indices (the mesh given to the object's tree)
   /// and the point's barycentric coordinates on them.
