@@ -189,16 +189,9 @@ void GodObjectRenderer::reset(const Isometry3& devicePose) noexcept {
   // the proxy on the object's nearest surface point instead, just outside,
   // so the proxy starts where it could have got to without penetrating.
   // A few rounds settle overlapping objects.
-  const double clearance = options_.proxyRadius + options_.skin;
   for (int round = 0; round < 4; ++round) {
     bool moved = false;
-    for (const ObjectState& o : objects_) {
-      if (!o.tree->isClosed()) continue;
-      const MeshPointQuery q = closestPointOnMesh(*o.tree, o.pose, proxy_, clearance + 1.0);
-      if (q.triangle == kNoTriangle || !(q.distance < clearance) || !q.normal.allFinite()) continue;
-      proxy_ = q.point + (clearance * 2.0) * q.normal;
-      moved = true;
-    }
+    for (const ObjectState& o : objects_) moved |= pushOutOf(o);
     if (!moved) break;
   }
   inContact_ = false;
@@ -223,7 +216,6 @@ bool GodObjectRenderer::deformObject(std::size_t index, const MeshBvh* tree) noe
   // The previous tree is not read again: the contact was recorded by value
   // at the end of the last tick (its owner may already be rewriting it).
   o.tree = tree;
-  const double clearance = options_.proxyRadius + options_.skin;
   if (inContact_ && index == contactObject_ && contact_.triangle < o.leafOf.size()) {
     // Carried with the surface: the touched point keeps its barycentric
     // coordinates on its triangle, and the proxy's offset from it turns
@@ -241,11 +233,17 @@ bool GodObjectRenderer::deformObject(std::size_t index, const MeshBvh* tree) noe
     return true;
   }
   // A free proxy the surface moved over is put back just outside, as
-  // reset() does (closed meshes: open ones have no inside).
-  if (!tree->isClosed()) return true;
-  const MeshPointQuery q = closestPointOnMesh(*tree, o.pose, proxy_, clearance + 1.0);
-  if (q.triangle != kNoTriangle && q.distance < clearance && q.normal.allFinite())
-    proxy_ = q.point + (clearance * 2.0) * q.normal;
+  // reset() does.
+  pushOutOf(o);
+  return true;
+}
+
+bool GodObjectRenderer::pushOutOf(const ObjectState& o) noexcept {
+  if (!o.tree->isClosed()) return false;  // open meshes have no inside
+  const double clearance = options_.proxyRadius + options_.skin;
+  const MeshPointQuery q = closestPointOnMesh(*o.tree, o.pose, proxy_, clearance + 1.0);
+  if (q.triangle == kNoTriangle || !(q.distance < clearance) || !q.normal.allFinite()) return false;
+  proxy_ = q.point + (clearance * 2.0) * q.normal;
   return true;
 }
 

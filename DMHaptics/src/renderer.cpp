@@ -25,10 +25,4 @@ Status HapticMaterial::validate(std::string_view where) const {
   return ok();
 }
 
-bool isRigidPose(const Isometry3& pose) noexcept {
-  if (!pose.matrix().allFinite()) return false;
-  const Mat3 r = pose.linear();
-  return (r.transpose() * r - Mat3::Identity()).cwiseAbs().maxCoeff() < 1e-6 && r.determinant() > 0.0;
-}
-
 }  // namespace dm

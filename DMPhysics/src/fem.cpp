@@ -3,6 +3,7 @@
 #include <dm/collide/bvh.hpp>
 #include <dm/collide/mesh_query.hpp>
 #include <dm/core/assert.hpp>
+#include <dm/core/pose.hpp>
 #include <dm/core/tasks.hpp>
 #include <dm/core/volume.hpp>
 #include <dm/physics/fem.hpp>
@@ -373,6 +374,7 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
   }
 
   body.surface_ = tetMeshSurface(mesh);
+  body.contactOf_.assign(n, -1);
   for (const Triangle& t : body.surface_) body.surfaceNodes_.insert(body.surfaceNodes_.end(), t.begin(), t.end());
   std::sort(body.surfaceNodes_.begin(), body.surfaceNodes_.end());
   body.surfaceNodes_.erase(std::unique(body.surfaceNodes_.begin(), body.surfaceNodes_.end()),
@@ -443,24 +445,25 @@ Status FemBody::setObstacles(std::span<const FemObstacle> obstacles) {
     if (o.tree == nullptr || !o.tree->isClosed())
       return invalid(o.tree == nullptr ? "the tree is null" : "the tree's mesh is not closed", where,
                      "give the tree of a closed, consistently oriented mesh (signed distances)");
-    if (!o.pose.matrix().allFinite() ||
-        !(o.pose.linear().transpose() * o.pose.linear()).isApprox(Mat3::Identity(), 1e-9))
+    if (!isRigidPose(o.pose))
       return invalid("the pose is not rigid and finite", where, "give a rotation and a translation");
     if (!std::isfinite(o.stiffness) || !(o.stiffness > 0))
       return invalid("stiffness " + num(o.stiffness) + " N/m is not positive", where, "e.g. 1e4 N/m");
   }
-  obstacles_.assign(obstacles.begin(), obstacles.end());
-  obstacleForce_.assign(obstacles_.size(), Vec3::Zero());
+  for (const NodeContact& c : contacts_) contactOf_[c.node] = -1;
   contacts_.clear();
   contacts_.reserve(surfaceNodes_.size());
+  obstacles_.assign(obstacles.begin(), obstacles.end());
+  obstacleInverse_.resize(obstacles_.size());
+  for (std::size_t j = 0; j < obstacles_.size(); ++j) obstacleInverse_[j] = obstacles_[j].pose.inverse();
+  obstacleForce_.assign(obstacles_.size(), Vec3::Zero());
   return ok();
 }
 
 bool FemBody::setObstaclePose(std::size_t i, const Isometry3& pose) noexcept {
-  if (i >= obstacles_.size() || !pose.matrix().allFinite() ||
-      !(pose.linear().transpose() * pose.linear()).isApprox(Mat3::Identity(), 1e-9))
-    return false;
+  if (i >= obstacles_.size() || !isRigidPose(pose)) return false;
   obstacles_[i].pose = pose;
+  obstacleInverse_[i] = pose.inverse();
   return true;
 }
 
@@ -471,6 +474,7 @@ Vec3 FemBody::obstacleForce(std::size_t i) const noexcept {
 // The boundary nodes inside an obstacle, each with its deepest obstacle.
 // contacts_ holds at most one entry per boundary node (its reserved size).
 void FemBody::findObstacleContacts() {
+  for (const NodeContact& c : contacts_) contactOf_[c.node] = -1;
   contacts_.clear();
   if (obstacles_.empty()) return;
   for (const std::uint32_t i : surfaceNodes_) {
@@ -478,13 +482,16 @@ void FemBody::findObstacleContacts() {
     NodeContact best;
     for (std::size_t j = 0; j < obstacles_.size(); ++j) {
       const FemObstacle& o = obstacles_[j];
-      if (!o.tree->bounds().contains(o.pose.inverse() * x_[i])) continue;
+      if (!o.tree->bounds().contains(obstacleInverse_[j] * x_[i])) continue;
       const MeshPointQuery q = closestPointOnMesh(*o.tree, o.pose, x_[i]);
       if (!(q.distance < 0.0) || !(-q.distance > best.depth) || !q.normal.allFinite()) continue;
       best = {.node = i, .obstacle = std::uint32_t(j), .normal = q.normal, .depth = -q.distance,
               .stiffness = o.stiffness};
     }
-    if (best.depth > 0.0) contacts_.push_back(best);
+    if (best.depth > 0.0) {
+      contactOf_[i] = std::int32_t(contacts_.size());
+      contacts_.push_back(best);
+    }
   }
 }
 
@@ -663,13 +670,13 @@ void FemBody::applySystem(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out, doubl
     out.segment<3>(o) += (sysContactScale_ * c.stiffness * c.normal.dot(in.segment<3>(o))) * c.normal;
   }
   // The contact spring: h²·k·w wᵀ (⊗ I) over its three nodes' free rows and columns.
-  if (spring_.active && sysSpringScale_ > 0.0) {
+  if (spring_.active) {
     Vec3 point = Vec3::Zero();
     for (int j = 0; j < 3; ++j) {
       const std::uint32_t c = spring_.nodes[std::size_t(j)];
       if (!fixed_[c]) point += spring_.weights[j] * in.segment<3>(Eigen::Index(3 * c));
     }
-    const double k = sysSpringScale_ * spring_.stiffness;
+    const double k = sysContactScale_ * spring_.stiffness;
     for (int i = 0; i < 3; ++i) {
       const std::uint32_t r = spring_.nodes[std::size_t(i)];
       if (!fixed_[r]) out.segment<3>(Eigen::Index(3 * r)) += (k * spring_.weights[i]) * point;
@@ -702,6 +709,21 @@ Result<FemStepReport> FemBody::step(double h) {
   // tmp = K v, fixed columns included: a fixed node's prescribed velocity
   // (kept through the step, so its Δv is zero) drives the free nodes.
   applyStiffness(Eigen::Map<const VecX>(v_.data()->data(), Eigen::Index(3 * n)), tmp_);
+  // Contact, implicitly. Obstacles: the penalty k·depth·n less its velocity
+  // term h·k·n(n·v) in the right-hand side, h²·k·n nᵀ on the diagonal. The
+  // contact spring: f_s = k·(a − Σwⱼxⱼ − hΣwⱼvⱼ) shared by weight wᵢ, and
+  // h²·k·wᵢ² on the diagonal (its off-diagonal terms live in applySystem).
+  findObstacleContacts();
+  sysContactScale_ = h * h;
+  Vec3 pull = Vec3::Zero();
+  if (spring_.active) {
+    Vec3 point = Vec3::Zero(), velocity = Vec3::Zero();
+    for (int j = 0; j < 3; ++j) {
+      point += spring_.weights[j] * x_[spring_.nodes[std::size_t(j)]];
+      velocity += spring_.weights[j] * v_[spring_.nodes[std::size_t(j)]];
+    }
+    pull = spring_.stiffness * (spring_.anchor - point - h * velocity);
+  }
   forRange(n, 512, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const Eigen::Index o = Eigen::Index(3 * i);
@@ -711,46 +733,25 @@ Result<FemStepReport> FemBody::step(double h) {
         invBlockDiag_[i].setIdentity();
         continue;
       }
-      const Vec3 f =
-          force_[i] + fext_[i] + mass_[i] * (gravity_ - alpha * v_[i]) - (beta + h) * tmp_.segment<3>(o);
-      rhs_.segment<3>(o) = h * f;
+      Vec3 f = force_[i] + fext_[i] + mass_[i] * (gravity_ - alpha * v_[i]) - (beta + h) * tmp_.segment<3>(o);
       // Block-Jacobi: the node's 3×3 diagonal block of A, SPD like A.
       Mat3 d = stiffScale * blocks_[std::size_t(diagSlot_[i])];
       d.diagonal().array() += massScale * mass_[i];
+      if (contactOf_[i] >= 0) {
+        const NodeContact& c = contacts_[std::size_t(contactOf_[i])];
+        f += c.stiffness * (c.depth - h * c.normal.dot(v_[i])) * c.normal;
+        d += (h * h * c.stiffness) * (c.normal * c.normal.transpose());
+      }
+      if (spring_.active)
+        for (int j = 0; j < 3; ++j)
+          if (spring_.nodes[std::size_t(j)] == i) {
+            f += spring_.weights[j] * pull;
+            d.diagonal().array() += h * h * spring_.stiffness * spring_.weights[j] * spring_.weights[j];
+          }
+      rhs_.segment<3>(o) = h * f;
       invBlockDiag_[i] = d.inverse();
     }
   });
-  // The contact spring, implicitly: f_s = k·w·(a − Σwⱼxⱼ) in the right-hand
-  // side with its −h·k·w(Σwⱼvⱼ) velocity term, h²·k·wᵢ² on the diagonal.
-  sysSpringScale_ = spring_.active ? h * h : 0.0;
-  if (spring_.active) {
-    Vec3 point = Vec3::Zero(), velocity = Vec3::Zero();
-    for (int j = 0; j < 3; ++j) {
-      point += spring_.weights[j] * x_[spring_.nodes[std::size_t(j)]];
-      velocity += spring_.weights[j] * v_[spring_.nodes[std::size_t(j)]];
-    }
-    const Vec3 pull = spring_.stiffness * (spring_.anchor - point - h * velocity);
-    for (int i = 0; i < 3; ++i) {
-      const std::uint32_t r = spring_.nodes[std::size_t(i)];
-      if (fixed_[r]) continue;
-      rhs_.segment<3>(Eigen::Index(3 * r)) += (h * spring_.weights[i]) * pull;
-      Mat3 d = invBlockDiag_[r].inverse();
-      d.diagonal().array() += h * h * spring_.stiffness * spring_.weights[i] * spring_.weights[i];
-      invBlockDiag_[r] = d.inverse();
-    }
-  }
-  // Obstacle contacts, implicitly: the penalty k·depth·n less its velocity
-  // term h·k·n(n·v) in the right-hand side, h²·k·n nᵀ on the diagonal.
-  findObstacleContacts();
-  sysContactScale_ = h * h;
-  for (const NodeContact& c : contacts_) {
-    const Eigen::Index o = Eigen::Index(3 * c.node);
-    const Vec3 push = c.stiffness * (c.depth - h * c.normal.dot(v_[c.node])) * c.normal;
-    rhs_.segment<3>(o) += h * push;
-    Mat3 d = invBlockDiag_[c.node].inverse();
-    d += (h * h * c.stiffness) * (c.normal * c.normal.transpose());
-    invBlockDiag_[c.node] = d.inverse();
-  }
   if (!options_.warmStart) dv_.setZero();
 
   // Stopping test relative to the forces in balance, not only to ‖b‖: near

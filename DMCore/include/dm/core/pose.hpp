@@ -58,4 +58,13 @@ struct Wrench {
   }
 };
 
+/// True when `pose` is finite and its linear part a proper rotation (RᵀR = I
+/// within 1e-6 per entry, det > 0): the check applied to every pose a
+/// renderer, a FEM obstacle or a tool is given. O(1), real-time safe.
+inline bool isRigidPose(const Isometry3& pose) noexcept {
+  if (!pose.matrix().allFinite()) return false;
+  const Mat3 r = pose.linear();
+  return (r.transpose() * r - Mat3::Identity()).cwiseAbs().maxCoeff() < 1e-6 && r.determinant() > 0.0;
+}
+
 }  // namespace dm

@@ -207,6 +207,9 @@ class GodObjectRenderer final : public HapticRenderer {
   Vec3 constrainedMove(const Vec3& start, const Vec3& goal) noexcept;
   Vec3 shadedNormal(const Plane& plane) const noexcept;
   void applyPendingPoses() noexcept;
+  /// A proxy inside a closed object, or closer than the tip radius, goes
+  /// just outside its nearest surface point; true if it moved.
+  bool pushOutOf(const ObjectState& o) noexcept;
   /// Barycentric coordinates, vertices, face normal and proxy offset of
   /// contact_ in its object's current tree (local frame).
   void recordContactGeometry() noexcept;

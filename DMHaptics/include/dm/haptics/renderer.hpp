@@ -26,6 +26,7 @@
 // @endcode
 #pragma once
 
+#include <dm/core/pose.hpp>  // isRigidPose
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
 
@@ -47,11 +48,6 @@ struct HapticMaterial {
   /// that is negative, not finite, or μd > μs.
   Status validate(std::string_view where) const;
 };
-
-/// True when `pose` is finite and its linear part a proper rotation (RᵀR = I
-/// within 1e-6 per entry, det > 0): the check every renderer applies to
-/// object poses it is given. O(1), real-time safe.
-bool isRigidPose(const Isometry3& pose) noexcept;
 
 /// One device sample as a renderer sees it, world frame.
 struct HapticInput {

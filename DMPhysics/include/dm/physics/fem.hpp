@@ -425,7 +425,6 @@ class FemBody {
     double stiffness = 0.0;
   };
   ContactSpring spring_;
-  double sysSpringScale_ = 0.0;  // h² of the current step: the spring's share of the operator
   struct NodeContact {
     std::uint32_t node = 0;
     std::uint32_t obstacle = 0;
@@ -434,10 +433,12 @@ class FemBody {
     double stiffness = 0.0;      // N/m
   };
   std::vector<FemObstacle> obstacles_;
+  std::vector<Isometry3> obstacleInverse_;  // body → obstacle frame, per obstacle
   std::vector<Vec3> obstacleForce_;       // per obstacle, from the last step
   std::vector<std::uint32_t> surfaceNodes_;  // nodes of surface_, sorted, unique
   std::vector<NodeContact> contacts_;     // this step's (capacity: surface nodes)
-  double sysContactScale_ = 0.0;          // h² of the current step
+  std::vector<std::int32_t> contactOf_;   // per node: index into contacts_, or -1
+  double sysContactScale_ = 0.0;          // h² of the current step: contact's share of the operator
   void findObstacleContacts();
   VecX rhs_, dv_, tmp_;
   double sysMassScale_ = 1.0, sysStiffScale_ = 0.0;  // operator scales of the current step
