@@ -13,6 +13,8 @@
 #include <cstdio>
 #include <limits>
 #include <string>
+#include <tuple>
+#include <unordered_map>
 #include <utility>
 
 namespace dm {
@@ -48,6 +50,16 @@ constexpr int kKuhn[6][4] = {
     {0, 4, 5, 7},  // (z, x, y) even
     {0, 4, 7, 6},  // (z, y, x) odd, swapped
 };
+
+// The six Kuhn tetrahedra of a cube with corners corner[c] (c = x + 2y + 4z),
+// positively oriented also under a mirroring grid-to-world map.
+void appendKuhnTets(const std::uint32_t (&corner)[8], bool mirrored, std::vector<Tet>& out) {
+  for (const auto& t : kKuhn) {
+    Tet tet{corner[t[0]], corner[t[1]], corner[t[2]], corner[t[3]]};
+    if (mirrored) std::swap(tet[2], tet[3]);
+    out.push_back(tet);
+  }
+}
 
 // Kuhn tetrahedra of the occupied cells of a dims grid; gridToWorld maps
 // node grid coordinates (0..dims) to metres. Nodes are numbered in first-use
@@ -89,11 +101,7 @@ Result<TetMesh> buildKuhnMesh(const Vec3i& dims, const Occupied& occupied, const
           }
           corner[c] = id;
         }
-        for (const auto& t : kKuhn) {
-          Tet tet{corner[t[0]], corner[t[1]], corner[t[2]], corner[t[3]]};
-          if (mirrored) std::swap(tet[2], tet[3]);
-          mesh.tets.push_back(tet);
-        }
+        appendKuhnTets(corner, mirrored, mesh.tets);
       }
     std::swap(lower, upper);
   }
@@ -114,6 +122,79 @@ Status checkPositive(const Vec3& v, const char* field, const char* where) {
       return invalid(
           std::string(field) + "." + "xyz"[a] + " = " + num(v[a]) + " is not a positive finite length", where,
           "give sizes in metres, > 0");
+  return ok();
+}
+
+// Hanging nodes resolved to independent nodes: hanging node node[k] is
+// Σ weight[s]·(node master[s]) for s in [start[k], start[k+1]), the weights
+// summing to 1, masters distinct and sorted.
+struct ResolvedHanging {
+  std::vector<std::uint32_t> node, start{0}, master;
+  std::vector<double> weight;
+};
+
+// Expands every entry of mesh.hanging through chains of hanging masters.
+// Needs indices in range (validate() checks them first). Fails, naming the
+// entry, on a cycle or on a chain that expands to more than kMaxTerms terms.
+Result<ResolvedHanging> resolveHanging(const TetMesh& mesh, const char* where) {
+  constexpr std::size_t kMaxTerms = 256;
+  std::vector<std::int32_t> entryOf(mesh.nodes.size(), -1);
+  for (std::size_t k = 0; k < mesh.hanging.size(); ++k) entryOf[mesh.hanging[k].node] = std::int32_t(k);
+  ResolvedHanging out;
+  struct Item {
+    std::uint32_t node;
+    double weight;
+    std::size_t depth;
+  };
+  std::vector<Item> stack;
+  std::vector<std::pair<std::uint32_t, double>> terms;
+  for (std::size_t k = 0; k < mesh.hanging.size(); ++k) {
+    const HangingNode& h = mesh.hanging[k];
+    terms.clear();
+    stack.assign({{h.masters[0], 0.5, 1}, {h.masters[1], 0.5, 1}});
+    while (!stack.empty()) {
+      const Item it = stack.back();
+      stack.pop_back();
+      const std::int32_t e = entryOf[it.node];
+      if (e < 0) {
+        terms.emplace_back(it.node, it.weight);
+      } else if (it.depth > mesh.hanging.size() || it.node == h.node) {
+        return invalid("hanging[" + std::to_string(k) + "] (node " + std::to_string(h.node) +
+                           ") depends on itself through its masters",
+                       where, "a hanging node's masters must resolve to nodes that do not hang");
+      } else {
+        const auto& m = mesh.hanging[std::size_t(e)].masters;
+        stack.push_back({m[0], 0.5 * it.weight, it.depth + 1});
+        stack.push_back({m[1], 0.5 * it.weight, it.depth + 1});
+      }
+      if (terms.size() + stack.size() > kMaxTerms)
+        return invalid("hanging[" + std::to_string(k) + "] expands to more than " + std::to_string(kMaxTerms) +
+                           " independent nodes",
+                       where, "chains of hanging nodes must be short (2:1 balanced grids give ≤ 2 per level)");
+    }
+    std::sort(terms.begin(), terms.end());
+    out.node.push_back(h.node);
+    for (std::size_t t = 0; t < terms.size(); ++t) {
+      if (t > 0 && terms[t].first == terms[t - 1].first)
+        out.weight.back() += terms[t].second;
+      else
+        out.master.push_back(terms[t].first), out.weight.push_back(terms[t].second);
+    }
+    out.start.push_back(std::uint32_t(out.master.size()));
+  }
+  return out;
+}
+
+Status checkOccupancy(std::span<const std::uint8_t> occupancy, const Vec3i& dims, const Vec3& spacing,
+                      const Vec3& origin, const char* where) {
+  if (Status s = checkDims(dims, where); !s) return s;
+  if (Status s = checkPositive(spacing, "spacing", where); !s) return s;
+  if (!origin.allFinite()) return invalid("origin is not finite", where);
+  const std::size_t nx = std::size_t(dims.x()), ny = std::size_t(dims.y()), nz = std::size_t(dims.z());
+  if (occupancy.size() / nx / ny != nz || occupancy.size() != nx * ny * nz)
+    return invalid("occupancy has " + std::to_string(occupancy.size()) + " entries but dims need " +
+                       std::to_string(nx) + "×" + std::to_string(ny) + "×" + std::to_string(nz),
+                   where, "pass one byte per voxel, x fastest");
   return ok();
 }
 
@@ -158,6 +239,28 @@ Status TetMesh::validate() const {
       return invalid("tets[" + std::to_string(t) + "] has volume " + num(v) + " m³ (must be > 0)", where,
                      "orient tetrahedra so that det[x1−x0, x2−x0, x3−x0] > 0 and drop flat ones");
   }
+  if (hanging.empty()) return ok();
+  std::vector<std::uint8_t> seen(nodes.size(), 0);
+  for (std::size_t k = 0; k < hanging.size(); ++k) {
+    const HangingNode& h = hanging[k];
+    const std::string name = "hanging[" + std::to_string(k) + "]";
+    for (std::uint32_t i : {h.node, h.masters[0], h.masters[1]})
+      if (i >= nodes.size())
+        return invalid(name + " names node " + std::to_string(i) + ", out of range (" +
+                           std::to_string(nodes.size()) + " nodes)",
+                       where);
+    if (h.masters[0] == h.masters[1] || h.node == h.masters[0] || h.node == h.masters[1])
+      return invalid(name + " needs two distinct masters other than node " + std::to_string(h.node), where);
+    if (seen[h.node]++)
+      return invalid(name + ": node " + std::to_string(h.node) + " hangs twice", where,
+                     "give one entry per hanging node");
+    const Vec3 &a = nodes[h.masters[0]], &b = nodes[h.masters[1]];
+    if ((nodes[h.node] - 0.5 * (a + b)).norm() > 1e-9 * (a - b).norm())
+      return invalid(name + ": node " + std::to_string(h.node) + " is not at the midpoint of its masters " +
+                         std::to_string(h.masters[0]) + " and " + std::to_string(h.masters[1]),
+                     where, "a hanging node lies on the coarse edge or face diagonal it splits");
+  }
+  if (auto r = resolveHanging(*this, where); !r) return std::move(r).error();
   return ok();
 }
 
@@ -165,14 +268,8 @@ Result<TetMesh> tetMeshFromOccupancy(std::span<const std::uint8_t> occupancy, co
                                      const Vec3& spacing, const Vec3& origin,
                                      const VoxelTetOptions& options) {
   constexpr const char* where = "tetMeshFromOccupancy";
-  if (Status s = checkDims(dims, where); !s) return std::move(s).error();
-  if (Status s = checkPositive(spacing, "spacing", where); !s) return std::move(s).error();
-  if (!origin.allFinite()) return invalid("origin is not finite", where);
-  const std::size_t nx = std::size_t(dims.x()), ny = std::size_t(dims.y()), nz = std::size_t(dims.z());
-  if (occupancy.size() / nx / ny != nz || occupancy.size() != nx * ny * nz)
-    return invalid("occupancy has " + std::to_string(occupancy.size()) + " entries but dims need " +
-                       std::to_string(nx) + "×" + std::to_string(ny) + "×" + std::to_string(nz),
-                   where, "pass one byte per voxel, x fastest");
+  if (Status s = checkOccupancy(occupancy, dims, spacing, origin, where); !s) return std::move(s).error();
+  const std::size_t nx = std::size_t(dims.x()), ny = std::size_t(dims.y());
   Affine3 gridToWorld = Affine3::Identity();
   gridToWorld.linear() = spacing.asDiagonal();
   gridToWorld.translation() = origin;
@@ -216,6 +313,225 @@ Result<TetMesh> tetMeshBox(const Vec3i& cells, const Vec3& size, const Vec3& ori
       cells, [](std::size_t, std::size_t, std::size_t) { return true; }, gridToWorld, maxTets, where);
 }
 
+Result<TetMesh> tetMeshHierarchical(std::span<const std::uint8_t> occupancy, const Vec3i& dims,
+                                    const Vec3& spacing, const Vec3& origin, const HierarchicalTetOptions& options) {
+  constexpr const char* where = "tetMeshHierarchical";
+  if (Status s = checkOccupancy(occupancy, dims, spacing, origin, where); !s) return std::move(s).error();
+  if (options.levels < 0 || options.levels > 10)
+    return invalid("options.levels = " + std::to_string(options.levels) + " is outside 0..10", where,
+                   "coarsest cells are 2^levels voxels across; 2–4 is typical");
+  if (!(options.grading >= 0.0) || !std::isfinite(options.grading))
+    return invalid("options.grading = " + num(options.grading) + " is not finite and ≥ 0", where);
+  const Aabb& region = options.fineRegion;
+  if (!region.isEmpty() && (!region.min().allFinite() || !region.max().allFinite()))
+    return invalid("options.fineRegion is not finite", where, "give a box in metres, or an empty one");
+  for (int a = 0; a < 3; ++a)
+    if (dims[a] > (1 << 20))
+      return invalid("dims[" + std::to_string(a) + "] = " + std::to_string(dims[a]) + " exceeds 2^20", where,
+                     "crop or downsample the grid");
+
+  // Occupancy pyramid: level l has cells of 2^l voxels; `any` = some voxel
+  // occupied, `full` = all voxels inside the grid and occupied.
+  struct Level {
+    Vec3i dims;
+    std::vector<std::uint8_t> any, full;
+    std::size_t at(int i, int j, int k) const {
+      return std::size_t(i) + std::size_t(dims.x()) * (std::size_t(j) + std::size_t(dims.y()) * std::size_t(k));
+    }
+  };
+  const int L = options.levels;
+  std::vector<Level> pyr(std::size_t(L) + 1);
+  pyr[0].dims = dims;
+  pyr[0].any.resize(occupancy.size());
+  std::size_t occupied = 0;
+  for (std::size_t v = 0; v < occupancy.size(); ++v) occupied += (pyr[0].any[v] = occupancy[v] != 0);
+  pyr[0].full = pyr[0].any;
+  if (occupied == 0)
+    return invalid("no voxel is occupied (occupancy is empty or below the threshold)", where,
+                   "check the threshold and that the mask is not empty");
+  for (std::size_t l = 1; l <= std::size_t(L); ++l) {
+    const Level& f = pyr[l - 1];
+    Level& c = pyr[l];
+    c.dims = (f.dims.array() + 1) / 2;
+    c.any.assign(std::size_t(c.dims.prod()), 0);
+    c.full.assign(c.any.size(), 0);
+    for (int k = 0; k < c.dims.z(); ++k)
+      for (int j = 0; j < c.dims.y(); ++j)
+        for (int i = 0; i < c.dims.x(); ++i) {
+          bool any = false, full = true;
+          for (int q = 0; q < 8; ++q) {
+            const int x = 2 * i + (q & 1), y = 2 * j + ((q >> 1) & 1), z = 2 * k + ((q >> 2) & 1);
+            if (x >= f.dims.x() || y >= f.dims.y() || z >= f.dims.z()) {
+              full = false;
+              continue;
+            }
+            any = any || f.any[f.at(x, y, z)];
+            full = full && f.full[f.at(x, y, z)];
+          }
+          c.any[c.at(i, j, k)] = any;
+          c.full[c.at(i, j, k)] = full;
+        }
+  }
+
+  // Leaves of the octree, origin in voxels. A cell stays whole when it is
+  // full and at least grading·side away from the fine region.
+  struct Cell {
+    int x, y, z, level;
+  };
+  const double voxelSide = spacing.maxCoeff();
+  auto nearRegion = [&](const Cell& c) {
+    if (region.isEmpty()) return false;
+    const double side = double(1 << c.level);
+    const Vec3 lo = origin + spacing.cwiseProduct(Vec3(c.x, c.y, c.z));
+    const Aabb box(lo, lo + side * spacing);
+    return std::sqrt(region.squaredExteriorDistance(box)) < options.grading * side * voxelSide;
+  };
+  std::vector<Cell> leaves, stack;
+  for (int k = 0; k < pyr[std::size_t(L)].dims.z(); ++k)
+    for (int j = 0; j < pyr[std::size_t(L)].dims.y(); ++j)
+      for (int i = 0; i < pyr[std::size_t(L)].dims.x(); ++i) stack.push_back({i << L, j << L, k << L, L});
+  while (!stack.empty()) {
+    const Cell c = stack.back();
+    stack.pop_back();
+    const Level& lv = pyr[std::size_t(c.level)];
+    const std::size_t at = lv.at(c.x >> c.level, c.y >> c.level, c.z >> c.level);
+    if (!lv.any[at]) continue;
+    if (c.level == 0 || (lv.full[at] && !nearRegion(c))) {
+      leaves.push_back(c);
+      continue;
+    }
+    const int h = 1 << (c.level - 1);
+    for (int q = 0; q < 8; ++q) {
+      const Cell child{c.x + h * (q & 1), c.y + h * ((q >> 1) & 1), c.z + h * ((q >> 2) & 1), c.level - 1};
+      if (child.x < dims.x() && child.y < dims.y() && child.z < dims.z()) stack.push_back(child);
+    }
+  }
+
+  // 2:1 balance across faces and edges: split a leaf while a neighbour
+  // leaf touching one of its faces or edges is more than one level finer.
+  // Also split a leaf whose face is partly on the boundary and partly
+  // against occupied voxels, so that each face of a coarse cell is either
+  // all boundary or all interface (its surface triangles are then whole).
+  std::vector<std::int8_t> levelOf(occupancy.size(), -1);
+  auto voxel = [&](int x, int y, int z) { return pyr[0].at(x, y, z); };
+  auto paint = [&](const Cell& c) {
+    const int s = 1 << c.level;
+    for (int z = c.z; z < c.z + s; ++z)
+      for (int y = c.y; y < c.y + s; ++y)
+        for (int x = c.x; x < c.x + s; ++x) levelOf[voxel(x, y, z)] = std::int8_t(c.level);
+  };
+  for (const Cell& c : leaves) paint(c);
+  auto mustSplit = [&](const Cell& c) {
+    const int s = 1 << c.level;
+    const int lo[3] = {c.x, c.y, c.z};
+    for (int d = 0; d < 27; ++d) {
+      const int off[3] = {d % 3 - 1, (d / 3) % 3 - 1, d / 9 - 1};
+      const int nonzero = (off[0] != 0) + (off[1] != 0) + (off[2] != 0);
+      if (nonzero == 0 || nonzero == 3) continue;  // itself; corner neighbours share no edge
+      int from[3], to[3];
+      std::size_t cells = 1;
+      for (int a = 0; a < 3; ++a) {
+        from[a] = off[a] < 0 ? lo[a] - 1 : off[a] > 0 ? lo[a] + s : lo[a];
+        to[a] = off[a] == 0 ? lo[a] + s : from[a] + 1;
+        cells *= std::size_t(to[a] - from[a]);
+        from[a] = std::max(from[a], 0);
+        to[a] = std::min(to[a], dims[a]);
+      }
+      std::size_t filled = 0;
+      for (int z = from[2]; z < to[2]; ++z)
+        for (int y = from[1]; y < to[1]; ++y)
+          for (int x = from[0]; x < to[0]; ++x)
+            if (const int n = levelOf[voxel(x, y, z)]; n >= 0) {
+              if (n < c.level - 1) return true;
+              ++filled;
+            }
+      if (nonzero == 1 && filled > 0 && filled < cells) return true;
+    }
+    return false;
+  };
+  for (bool changed = true; changed;) {
+    changed = false;
+    for (std::size_t i = 0; i < leaves.size(); ++i) {
+      const Cell c = leaves[i];
+      if (c.level < 1 || !mustSplit(c)) continue;
+      const int h = 1 << (c.level - 1);
+      for (int q = 0; q < 8; ++q) {  // a split leaf was full: all children are inside and occupied
+        const Cell child{c.x + h * (q & 1), c.y + h * ((q >> 1) & 1), c.z + h * ((q >> 2) & 1), c.level - 1};
+        if (q == 0)
+          leaves[i] = child;
+        else
+          leaves.push_back(child);
+        paint(child);
+      }
+      changed = true;
+    }
+  }
+  if (leaves.size() > options.maxTets / 6)
+    return invalid(std::to_string(leaves.size()) + " cells need " + std::to_string(leaves.size() * 6) +
+                       " tetrahedra, more than maxTets = " + std::to_string(options.maxTets),
+                   where, "raise levels, shrink the fine region or raise maxTets");
+  std::sort(leaves.begin(), leaves.end(), [](const Cell& a, const Cell& b) {
+    return std::tie(a.z, a.y, a.x) < std::tie(b.z, b.y, b.x);
+  });
+
+  // Corners on the voxel lattice, numbered in first-use order.
+  TetMesh mesh;
+  mesh.tets.reserve(leaves.size() * 6);
+  std::unordered_map<std::uint64_t, std::uint32_t> nodeAt;
+  nodeAt.reserve(leaves.size() * 2);
+  auto key = [](int x, int y, int z) {
+    return std::uint64_t(x) | (std::uint64_t(y) << 21) | (std::uint64_t(z) << 42);
+  };
+  auto node = [&](int x, int y, int z) {
+    auto [it, fresh] = nodeAt.try_emplace(key(x, y, z), std::uint32_t(mesh.nodes.size()));
+    if (fresh) mesh.nodes.push_back(origin + spacing.cwiseProduct(Vec3(x, y, z)));
+    return it->second;
+  };
+  for (const Cell& c : leaves) {
+    const int s = 1 << c.level;
+    std::uint32_t corner[8];
+    for (int q = 0; q < 8; ++q) corner[q] = node(c.x + s * (q & 1), c.y + s * ((q >> 1) & 1), c.z + s * ((q >> 2) & 1));
+    appendKuhnTets(corner, false, mesh.tets);
+  }
+
+  // Hanging nodes: fine corners at the midpoint of a coarse leaf's edge, or
+  // at the centre of its face (the midpoint of the face's Kuhn diagonal,
+  // from its lowest to its highest corner).
+  std::vector<std::uint8_t> hangs(mesh.nodes.size(), 0);
+  auto constrain = [&](const int (&mid)[3], const int (&a)[3], const int (&b)[3]) {
+    const auto it = nodeAt.find(key(mid[0], mid[1], mid[2]));
+    if (it == nodeAt.end() || hangs[it->second]) return;
+    hangs[it->second] = 1;
+    mesh.hanging.push_back({it->second, {nodeAt.at(key(a[0], a[1], a[2])), nodeAt.at(key(b[0], b[1], b[2]))}});
+  };
+  for (const Cell& c : leaves) {
+    if (c.level == 0) continue;
+    const int s = 1 << c.level, h = s / 2;
+    const int lo[3] = {c.x, c.y, c.z};
+    for (int a = 0; a < 3; ++a) {
+      const int b = (a + 1) % 3, d = (a + 2) % 3;
+      for (int q = 0; q < 4; ++q) {  // the four edges along axis a
+        int p0[3] = {lo[0], lo[1], lo[2]};
+        p0[b] += s * (q & 1);
+        p0[d] += s * (q >> 1);
+        int p1[3] = {p0[0], p0[1], p0[2]}, mid[3] = {p0[0], p0[1], p0[2]};
+        p1[a] += s;
+        mid[a] += h;
+        constrain(mid, p0, p1);
+      }
+      for (int side = 0; side < 2; ++side) {  // the two faces normal to axis a
+        int p0[3] = {lo[0], lo[1], lo[2]};
+        p0[a] += s * side;
+        int p1[3] = {p0[0], p0[1], p0[2]}, mid[3] = {p0[0], p0[1], p0[2]};
+        p1[b] += s, p1[d] += s;
+        mid[b] += h, mid[d] += h;
+        constrain(mid, p0, p1);
+      }
+    }
+  }
+  return mesh;
+}
+
 std::vector<Triangle> tetMeshSurface(const TetMesh& mesh) {
   // Outward faces of a positive tetrahedron (0, 1, 2, 3).
   constexpr int kFaces[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
@@ -232,13 +548,48 @@ std::vector<Triangle> tetMeshSurface(const TetMesh& mesh) {
       faces.push_back(face);
     }
   std::sort(faces.begin(), faces.end(), [](const Face& a, const Face& b) { return a.key < b.key; });
-  std::vector<Triangle> out;
+  std::vector<Face> unmatched;
   for (std::size_t i = 0; i < faces.size();) {
     std::size_t j = i + 1;
     while (j < faces.size() && faces[j].key == faces[i].key) ++j;
-    if (j - i == 1) out.push_back(faces[i].tri);
+    if (j - i == 1) unmatched.push_back(faces[i]);
     i = j;
   }
+  // Coarse–fine interfaces: a fine face inside a coarse one has hanging
+  // nodes whose masters, with its other nodes, are the coarse face's three
+  // nodes. Both sides are interior.
+  std::vector<std::uint8_t> interior(unmatched.size(), 0);
+  if (!mesh.hanging.empty()) {
+    std::vector<std::int32_t> entryOf(mesh.nodes.size(), -1);
+    for (std::size_t k = 0; k < mesh.hanging.size(); ++k) entryOf[mesh.hanging[k].node] = std::int32_t(k);
+    for (std::size_t f = 0; f < unmatched.size(); ++f) {
+      std::uint32_t support[6];
+      int count = 0;
+      bool hangs = false;
+      for (std::uint32_t v : unmatched[f].key) {
+        if (const std::int32_t e = entryOf[v]; e >= 0) {
+          hangs = true;
+          for (std::uint32_t m : mesh.hanging[std::size_t(e)].masters) support[count++] = m;
+        } else {
+          support[count++] = v;
+        }
+      }
+      if (!hangs) continue;
+      for (int a = 1; a < count; ++a)  // insertion sort of at most six
+        for (int b = a; b > 0 && support[b - 1] > support[b]; --b) std::swap(support[b - 1], support[b]);
+      count = int(std::unique(support, support + count) - support);
+      if (count != 3) continue;
+      const std::array<std::uint32_t, 3> coarse{support[0], support[1], support[2]};
+      const auto it = std::lower_bound(unmatched.begin(), unmatched.end(), coarse,
+                                       [](const Face& a, const std::array<std::uint32_t, 3>& k) { return a.key < k; });
+      if (it == unmatched.end() || it->key != coarse) continue;
+      interior[f] = 1;
+      interior[std::size_t(it - unmatched.begin())] = 1;
+    }
+  }
+  std::vector<Triangle> out;
+  for (std::size_t f = 0; f < unmatched.size(); ++f)
+    if (!interior[f]) out.push_back(unmatched[f].tri);
   return out;
 }
 
@@ -273,7 +624,15 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
                    where);
   body.options_ = options;
 
+  auto resolved = resolveHanging(mesh, where);
+  if (!resolved) return std::move(resolved).error();
   const std::size_t n = mesh.nodes.size(), T = mesh.tets.size();
+  body.hanging_.assign(n, 0);
+  for (std::uint32_t h : resolved->node) body.hanging_[h] = 1;
+  body.hangNode_ = std::move(resolved->node);
+  body.hangStart_ = std::move(resolved->start);
+  body.hangMaster_ = std::move(resolved->master);
+  body.hangWeight_ = std::move(resolved->weight);
   body.x0_ = mesh.nodes;
   body.tets_ = mesh.tets;
   body.x_ = mesh.nodes;
@@ -383,6 +742,7 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
   body.rhs_.setZero(dofs);
   body.dv_.setZero(dofs);
   body.tmp_.setZero(dofs);
+  if (!body.hangNode_.empty()) body.full_.setZero(dofs);
   body.invBlockDiag_.assign(n, Mat3::Identity());
   body.pcg_.reserve(dofs);
   return body;
@@ -395,21 +755,35 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
 void FemBody::setPositions(std::span<const Vec3> x) {
   DM_DEMAND(x.size() == x_.size(), "FemBody::setPositions: one position per node");
   std::copy(x.begin(), x.end(), x_.begin());
+  syncHanging();
 }
 
 void FemBody::setVelocities(std::span<const Vec3> v) {
   DM_DEMAND(v.size() == v_.size(), "FemBody::setVelocities: one velocity per node");
   std::copy(v.begin(), v.end(), v_.begin());
+  syncHanging();
+}
+
+void FemBody::syncHanging() {
+  for (std::size_t k = 0; k < hangNode_.size(); ++k) {
+    Vec3 x = Vec3::Zero(), v = Vec3::Zero();
+    for (std::uint32_t s = hangStart_[k]; s < hangStart_[k + 1]; ++s)
+      x += hangWeight_[s] * x_[hangMaster_[s]], v += hangWeight_[s] * v_[hangMaster_[s]];
+    x_[hangNode_[k]] = x;
+    v_[hangNode_[k]] = v;
+  }
 }
 
 void FemBody::setVelocity(std::size_t i, const Vec3& v) {
   DM_DEMAND(i < v_.size(), "FemBody::setVelocity: node index out of range");
+  DM_DEMAND(!hanging_[i], "FemBody::setVelocity: the node hangs (it follows its masters)");
   DM_DEMAND(v.allFinite(), "FemBody::setVelocity: velocity must be finite");
   v_[i] = v;
 }
 
 void FemBody::setFixed(std::size_t i, bool fixed) {
   DM_DEMAND(i < fixed_.size(), "FemBody::setFixed: node index out of range");
+  DM_DEMAND(!hanging_[i], "FemBody::setFixed: the node hangs (it follows its masters: fix those)");
   fixed_[i] = fixed ? 1 : 0;
   if (fixed) v_[i].setZero();
 }
@@ -646,8 +1020,22 @@ void FemBody::assemble() {
 
 // out = massScale·M·in + stiffScale·K·in on free nodes; fixed nodes are the
 // identity (rows and columns), which keeps the operator symmetric.
-void FemBody::applySystem(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out, double massScale,
-                          double stiffScale) const {
+// With hanging nodes the operator is Pᵀ A P: `in` is expanded (hanging
+// rows from their free masters), multiplied, and the hanging rows of the
+// product are folded into their masters; hanging rows are then the
+// identity, like fixed ones (their right-hand side is zero).
+void FemBody::applySystem(const VecX& input, VecX& out, double massScale, double stiffScale) {
+  const bool hangs = !hangNode_.empty();
+  if (hangs) {
+    full_ = input;
+    for (std::size_t k = 0; k < hangNode_.size(); ++k) {
+      Vec3 value = Vec3::Zero();
+      for (std::uint32_t s = hangStart_[k]; s < hangStart_[k + 1]; ++s)
+        if (!fixed_[hangMaster_[s]]) value += hangWeight_[s] * input.segment<3>(Eigen::Index(3 * hangMaster_[s]));
+      full_.segment<3>(Eigen::Index(3 * hangNode_[k])) = value;
+    }
+  }
+  const VecX& in = hangs ? full_ : input;
   forRange(x_.size(), 256, [&](std::size_t b, std::size_t e) {
     for (std::size_t r = b; r < e; ++r) {
       if (fixed_[r]) {
@@ -681,6 +1069,20 @@ void FemBody::applySystem(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out, doubl
       const std::uint32_t r = spring_.nodes[std::size_t(i)];
       if (!fixed_[r]) out.segment<3>(Eigen::Index(3 * r)) += (k * spring_.weights[i]) * point;
     }
+  }
+  if (hangs) foldHanging(out, &input);
+}
+
+void FemBody::foldHanging(VecX& v, const VecX* identityFrom) const {
+  for (std::size_t k = 0; k < hangNode_.size(); ++k) {
+    const Eigen::Index h = Eigen::Index(3 * hangNode_[k]);
+    const Vec3 value = v.segment<3>(h);
+    for (std::uint32_t s = hangStart_[k]; s < hangStart_[k + 1]; ++s)
+      if (!fixed_[hangMaster_[s]]) v.segment<3>(Eigen::Index(3 * hangMaster_[s])) += hangWeight_[s] * value;
+    if (identityFrom)
+      v.segment<3>(h) = identityFrom->segment<3>(h);
+    else
+      v.segment<3>(h).setZero();
   }
 }
 
@@ -749,8 +1151,26 @@ Result<FemStepReport> FemBody::step(double h) {
             d.diagonal().array() += h * h * spring_.stiffness * spring_.weights[j] * spring_.weights[j];
           }
       rhs_.segment<3>(o) = h * f;
-      invBlockDiag_[i] = d.inverse();
+      invBlockDiag_[i] = d;
     }
+  });
+  // Hanging nodes: their loads act on their masters (Pᵀb). The
+  // preconditioner takes the diagonal part of Pᵀ A P that each master's own
+  // block and its hanging nodes' blocks give (w²·A_hh; SPD, which is all
+  // PCG needs of it).
+  if (!hangNode_.empty()) {
+    foldHanging(rhs_, nullptr);
+    for (std::size_t k = 0; k < hangNode_.size(); ++k) {
+      const std::uint32_t node = hangNode_[k];
+      for (std::uint32_t s = hangStart_[k]; s < hangStart_[k + 1]; ++s)
+        if (!fixed_[hangMaster_[s]])
+          invBlockDiag_[hangMaster_[s]] += hangWeight_[s] * hangWeight_[s] * invBlockDiag_[node];
+      invBlockDiag_[node].setIdentity();
+      dv_.segment<3>(Eigen::Index(3 * node)).setZero();
+    }
+  }
+  forRange(n, 512, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) invBlockDiag_[i] = invBlockDiag_[i].inverse();
   });
   if (!options_.warmStart) dv_.setZero();
 
@@ -800,10 +1220,12 @@ Result<FemStepReport> FemBody::step(double h) {
 
   forRange(n, 1024, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
+      if (hanging_[i]) continue;
       if (!fixed_[i]) v_[i] += dv_.segment<3>(Eigen::Index(3 * i));
       x_[i] += h * v_[i];  // a fixed node: its prescribed motion
     }
   });
+  syncHanging();
   // What the obstacles took: the penalty springs at the end state (the
   // linearisation the step solved with), never pulling.
   std::fill(obstacleForce_.begin(), obstacleForce_.end(), Vec3::Zero());
@@ -842,17 +1264,21 @@ void FemBody::computeElasticForces(std::vector<Vec3>& out) const {
 
 void FemBody::computeConstraintForces(std::vector<Vec3>& out) const {
   computeElasticForces(out);
+  // The forces on node i (fixed or hanging), its share of what the
+  // constraints must balance.
   for (std::size_t i = 0; i < x_.size(); ++i) {
-    if (!fixed_[i]) {
-      out[i].setZero();
-      continue;
-    }
+    if (!fixed_[i] && !hanging_[i]) continue;
     Vec3 kv = Vec3::Zero();  // row i of K·v
     for (int s = rowStart_[i]; s < rowStart_[i + 1]; ++s)
       kv.noalias() += blocks_[std::size_t(s)] * v_[std::size_t(colIndex_[std::size_t(s)])];
     const Vec3 damping = -damping_.alpha * mass_[i] * v_[i] - damping_.beta * kv;
-    out[i] = -(out[i] + damping + fext_[i] + mass_[i] * gravity_);
+    out[i] += damping + fext_[i] + mass_[i] * gravity_;
   }
+  // A hanging node's forces act on its masters; fixed masters hold them.
+  for (std::size_t k = 0; k < hangNode_.size(); ++k)
+    for (std::uint32_t s = hangStart_[k]; s < hangStart_[k + 1]; ++s)
+      if (fixed_[hangMaster_[s]]) out[hangMaster_[s]] += hangWeight_[s] * out[hangNode_[k]];
+  for (std::size_t i = 0; i < x_.size(); ++i) out[i] = fixed_[i] ? Vec3(-out[i]) : Vec3::Zero();
 }
 
 }  // namespace dm

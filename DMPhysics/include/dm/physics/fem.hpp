@@ -11,6 +11,13 @@
 //    Kuhn (Freudenthal) split of each cube into six tetrahedra around its
 //    main diagonal, so neighbouring cubes' faces are split the same way and
 //    the mesh is conforming; nodes shared by voxels are deduplicated.
+//  * Hierarchical grids (tetMeshHierarchical): an octree over the voxels,
+//    voxel-sized cells where the tool works and cells of 2, 4, … voxels
+//    away from it, 2:1 balanced, each cell split the same Kuhn way. Where a
+//    fine cell meets a coarse one, the fine corners on the coarse edge or
+//    face are hanging nodes constrained to the midpoint of the coarse edge
+//    or of the face's Kuhn diagonal (so every fine face lies inside a coarse
+//    triangle and the displacement stays continuous).
 //  * Linear elasticity (Young's modulus E in Pa, Poisson ratio ν), constant
 //    strain tetrahedra: the 12×12 element stiffness Kₑ is fixed by the rest
 //    shape, K_ij = V(μ(g_i·g_j)I + μ g_j g_iᵀ + λ g_i g_jᵀ) with g_i the shape
@@ -43,6 +50,11 @@
 // identity and their right-hand side is zero; a fixed node moves with its
 // prescribed velocity (zero unless set), which enters the free rows'
 // right-hand side through −h(β + h)·K v.
+// Hanging nodes are eliminated the same way as fixed ones: with P the map
+// from independent to all node velocities, PCG solves Pᵀ A P Δv = Pᵀ b
+// matrix-free (assembly is unchanged; the product expands the input to the
+// hanging rows and folds their output back onto the masters), and a
+// hanging node's state is its masters' mean after every step.
 // Contact: rigid obstacles (FemObstacle, closed meshes) push the boundary
 // nodes they contain out along their normal with penalty springs, and one
 // contact spring pulls a boundary point toward an anchor (a haptic tool);
@@ -91,10 +103,24 @@ struct FemObstacle {
 /// Four node indices of a tetrahedron, positively oriented.
 using Tet = std::array<std::uint32_t, 4>;
 
+/// A node that is a corner of fine tetrahedra but lies on an edge or face
+/// of a coarser neighbour (a T-junction of a hierarchical grid): its position
+/// and velocity are the mean of its two masters', which keeps the
+/// displacement field continuous across the coarse–fine interface. A master
+/// may itself hang (chains resolve to independent nodes). Its rest position
+/// must be the masters' midpoint.
+struct HangingNode {
+  std::uint32_t node = 0;
+  std::array<std::uint32_t, 2> masters{};
+};
+
 /// A tetrahedral mesh at rest. Positions in metres.
 struct TetMesh {
   std::vector<Vec3> nodes;  ///< rest positions, m
   std::vector<Tet> tets;    ///< det[x1−x0, x2−x0, x3−x0] > 0 for each
+  /// Constrained nodes (empty for a conforming mesh); tetMeshHierarchical()
+  /// fills it, at most one entry per node.
+  std::vector<HangingNode> hanging;
 
   std::size_t nodeCount() const noexcept { return nodes.size(); }
   std::size_t tetCount() const noexcept { return tets.size(); }
@@ -103,7 +129,10 @@ struct TetMesh {
   /// Σ tetVolume over all tetrahedra, m³. O(T).
   double totalVolume() const;
   /// Checks indices in range, no repeated index within a tetrahedron, finite
-  /// positions and positive volumes; errors name the tetrahedron or node.
+  /// positions and positive volumes, and hanging nodes (indices in range,
+  /// two distinct masters other than the node, at their masters' midpoint,
+  /// one entry per node, no cycle); errors name the tetrahedron, node or
+  /// hanging entry.
   Status validate() const;
 };
 
@@ -156,9 +185,53 @@ Result<TetMesh> tetMeshFromVolume(const Volume& volume, const VoxelTetOptions& o
 Result<TetMesh> tetMeshBox(const Vec3i& cells, const Vec3& size, const Vec3& origin = Vec3::Zero(),
                            std::size_t maxTets = VoxelTetOptions{}.maxTets);
 
+/// Options of tetMeshHierarchical(): how coarse cells grow away from the
+/// region of interest.
+struct HierarchicalTetOptions {
+  /// Coarsest cells are 2^levels voxels across (0: every voxel its own cell,
+  /// the mesh of tetMeshFromOccupancy). 0..10.
+  int levels = 2;
+  /// Box (m, the mesh's frame) kept at voxel resolution: where the tool
+  /// works. Empty (the default) = no such region: cells are as coarse as
+  /// the occupancy allows.
+  Aabb fineRegion;
+  /// A cell of side s stays whole only while its distance to fineRegion is
+  /// at least grading·s (finite, ≥ 0): larger values keep more fine cells
+  /// around the region.
+  double grading = 1.0;
+  /// Upper bound on the number of tetrahedra, checked before any is made.
+  std::size_t maxTets = 4'000'000;
+};
+
+/// Hierarchical (octree) tetrahedral mesh of the occupied voxels of a dense
+/// grid (same layout, spacing and origin as tetMeshFromOccupancy()): voxels
+/// in and near options.fineRegion, and cells of 2, 4, … voxels further away
+/// wherever all their voxels are occupied (so the boundary keeps the voxel
+/// shape).
+/// Neighbouring cells across a face or an edge differ by one level at most
+/// (2:1 balance); each cell is split into the same six Kuhn tetrahedra, and
+/// the fine corners on a coarse neighbour's edge or face are hanging nodes
+/// (TetMesh::hanging) at the midpoint of that edge or of the face's Kuhn
+/// diagonal, so the displacement is continuous. The cells cover exactly the
+/// occupied voxels (volume = count · voxel volume). O(voxels + cells) time;
+/// memory one byte per voxel plus the mesh. Fails like tetMeshFromOccupancy()
+/// and on levels outside 0..10 or a negative or non-finite grading.
+/// @code
+///   dm::HierarchicalTetOptions opt{.levels = 3, .fineRegion = dm::Aabb(lo, hi)};
+///   auto organ = dm::tetMeshHierarchical(mask, dims, spacing, origin, opt);
+///   // organ->hanging.size() nodes follow their coarse neighbours
+/// @endcode
+Result<TetMesh> tetMeshHierarchical(std::span<const std::uint8_t> occupancy, const Vec3i& dims,
+                                    const Vec3& spacing, const Vec3& origin = Vec3::Zero(),
+                                    const HierarchicalTetOptions& options = {});
+
 /// Boundary faces of a tetrahedral mesh (faces that belong to exactly one
 /// tetrahedron), counter-clockwise seen from outside, indexing mesh.nodes.
 /// For a conforming mesh the result is closed and consistently oriented.
+/// Faces on a coarse–fine interface of a hierarchical mesh (a coarse face
+/// and the fine faces inside it, found through TetMesh::hanging) are
+/// interior and left out; the boundary then has T-junctions where a fine
+/// face meets a coarse one (no gap: hanging nodes stay on the coarse edge).
 /// O(T log T) time, O(T) memory.
 std::vector<Triangle> tetMeshSurface(const TetMesh& mesh);
 
@@ -249,7 +322,8 @@ class FemBody {
 
   /// Overwrites all positions / velocities (sizes must equal nodeCount();
   /// DM_DEMAND). Fixed nodes take the given values too: a fixed node's
-  /// velocity is its prescribed velocity (see setFixed).
+  /// velocity is its prescribed velocity (see setFixed). Hanging nodes take
+  /// their masters' mean instead of the given value.
   void setPositions(std::span<const Vec3> x);
   void setVelocities(std::span<const Vec3> v);
 
@@ -258,20 +332,29 @@ class FemBody {
   /// setVelocities) is prescribed: step(h) moves the node by h·v, and the
   /// free nodes feel that motion implicitly (their stiffness and damping
   /// rows include it), which is how a tool pushes tissue (an indenter, a
-  /// clamp). Out-of-range i is a DM_DEMAND failure.
+  /// clamp). Out-of-range i, or a hanging node (it follows its masters: fix
+  /// those), is a DM_DEMAND failure.
   void setFixed(std::size_t i, bool fixed);
   /// Velocity of node i (m/s); for a fixed node, its prescribed velocity.
-  /// Out-of-range i or a non-finite v is a DM_DEMAND failure.
+  /// Out-of-range i, a hanging node or a non-finite v is a DM_DEMAND failure.
   void setVelocity(std::size_t i, const Vec3& v);
   bool isFixed(std::size_t i) const { return fixed_[i] != 0; }
-  /// Fixes every node whose rest position p satisfies pred(p). Returns count.
+  /// Fixes every node whose rest position p satisfies pred(p), hanging nodes
+  /// excepted (on a clamped plane their masters are clamped too). Returns
+  /// the count fixed.
   template <class Pred>
   std::size_t fixNodesWhere(Pred&& pred) {
     std::size_t n = 0;
     for (std::size_t i = 0; i < x0_.size(); ++i)
-      if (pred(x0_[i])) setFixed(i, true), ++n;
+      if (!hanging_[i] && pred(x0_[i])) setFixed(i, true), ++n;
     return n;
   }
+  /// Hanging nodes (TetMesh::hanging): their position and velocity are
+  /// weighted means of independent nodes, re-derived by every step(),
+  /// setPositions() and setVelocities(); forces on them (external, contact,
+  /// elastic) act on those nodes with the same weights.
+  bool isHanging(std::size_t i) const { return hanging_[i] != 0; }
+  std::size_t hangingCount() const noexcept { return hangNode_.size(); }
 
   /// Constant external force on node i (N), kept until changed or cleared.
   void setExternalForce(std::size_t i, const Vec3& f);
@@ -383,8 +466,12 @@ class FemBody {
   double elementForces(std::size_t e, const Mat3& R, const std::vector<Vec3>& x, Vec3 (&f)[4],
                        Vec3 (&g)[4]) const;
   void assemble();
-  void applySystem(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out, double massScale,
-                   double stiffScale) const;
+  void applySystem(const VecX& in, VecX& out, double massScale, double stiffScale);
+  // Hanging nodes' positions and velocities from their masters'.
+  void syncHanging();
+  // v ← Pᵀv: each hanging row added to its free masters with its weights,
+  // then set from identityFrom (the identity row) or to zero.
+  void foldHanging(VecX& v, const VecX* identityFrom) const;
   // out = K·in over every row and column (fixed ones included).
   void applyStiffness(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out) const;
   template <class F>
@@ -410,6 +497,11 @@ class FemBody {
   std::vector<std::uint32_t> colourOrder_;  // elements grouped by colour
   std::vector<std::size_t> colourStart_;
   std::vector<Triangle> surface_;
+  // Hanging nodes, resolved to independent masters: node hangNode_[k] =
+  // Σ hangWeight_[s]·(node hangMaster_[s]), s in [hangStart_[k], hangStart_[k+1]).
+  std::vector<std::uint8_t> hanging_;  // per node
+  std::vector<std::uint32_t> hangNode_, hangStart_, hangMaster_;
+  std::vector<double> hangWeight_;
 
   // State.
   std::vector<Vec3> x_, v_, fext_, force_;
@@ -441,6 +533,7 @@ class FemBody {
   double sysContactScale_ = 0.0;          // h² of the current step: contact's share of the operator
   void findObstacleContacts();
   VecX rhs_, dv_, tmp_;
+  VecX full_;  // applySystem's input with hanging rows filled in (P·in)
   double sysMassScale_ = 1.0, sysStiffScale_ = 0.0;  // operator scales of the current step
   PcgSolver pcg_;
   FemStepReport report_;
