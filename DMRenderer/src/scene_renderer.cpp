@@ -207,6 +207,8 @@ Status validateMaterial(const Material& m) {
   if (!(m.metallic >= 0 && m.metallic <= 1)) return bad("metallic", "use [0, 1]");
   if (!(m.roughness >= 0 && m.roughness <= 1)) return bad("roughness", "use [0, 1]");
   if (!m.emissive.allFinite() || (m.emissive.array() < 0).any()) return bad("emissive", "use >= 0");
+  if (!(m.heightScale >= 0 && std::isfinite(m.heightScale)))
+    return bad("heightScale", "use a finite depth >= 0 in metres (0 turns the relief off)");
   return ok();
 }
 
@@ -283,9 +285,10 @@ struct SceneRenderer::Impl {
 
   SceneRendererOptions options;
   // Programs by ShadingModel x variant flags (kColorTex, kNormalTex,
-  // kVertexColor, kShadows) x light count 0..kMaxLights, compiled on first
-  // use: slot = (model * kVariants + flags) * kLightCounts + lights.
-  static constexpr int kColorTex = 1, kNormalTex = 2, kVertexColor = 4, kShadows = 8, kVariants = 16;
+  // kVertexColor, kShadows, kHeightTex) x light count 0..kMaxLights, compiled
+  // on first use: slot = (model * kVariants + flags) * kLightCounts + lights.
+  static constexpr int kColorTex = 1, kNormalTex = 2, kVertexColor = 4, kShadows = 8, kHeightTex = 16;
+  static constexpr int kVariants = 32;
   static constexpr int kLightCounts = kMaxLights + 1;
   std::array<ShaderProgram, 3 * kVariants * kLightCounts> programs;
   std::string normalOffset;
@@ -294,6 +297,11 @@ struct SceneRenderer::Impl {
     int flags = 0;
     if (textures.get(m.colorTexture) != nullptr) flags |= kColorTex;
     if (textures.get(m.normalTexture) != nullptr) flags |= kNormalTex;
+    // No relief (scale 0) or nothing to shift (no colour or normal map): the
+    // parallax march would change no pixel, so that variant is not paid for.
+    if (textures.get(m.heightTexture) != nullptr && m.heightScale > 0 &&
+        (flags & (kColorTex | kNormalTex)) != 0)
+      flags |= kHeightTex;
     if (m.useVertexColors && mesh.hasColors) flags |= kVertexColor;
     return int(m.model) * kVariants + flags;
   }
@@ -311,6 +319,7 @@ struct SceneRenderer::Impl {
          {"NORMAL_OFFSET", normalOffset},
          {"COLOR_TEX", bit(kColorTex)},
          {"NORMAL_TEX", bit(kNormalTex)},
+         {"HEIGHT_TEX", bit(kHeightTex)},
          {"VERTEX_COLOR", bit(kVertexColor)},
          {"SHADOWS", bit(kShadows)},
          {"NUM_LIGHTS", std::to_string(lightCount)}});
@@ -549,6 +558,10 @@ struct SceneRenderer::Impl {
                         std::span<const Light> lights, const RenderSettings& settings) {
     p.set("u_viewProj", viewProj);
     p.set("u_cameraPos", Vec3f(cam.position.cast<float>()));
+    // Orthographic: every eye ray runs along -forward (the parallax march needs it exact).
+    const bool ortho = cam.projection == Camera::Projection::Orthographic;
+    const Vec3f toEye = -cam.forward().cast<float>();
+    p.set("u_orthoToEye", ortho ? Vec4f(toEye.x(), toEye.y(), toEye.z(), 1) : Vec4f::Zero());
     p.set("u_ambient", settings.ambient);
     const int n = static_cast<int>(lights.size());
     std::array<int, kMaxLights> type{}, shadow{};
@@ -605,9 +618,12 @@ struct SceneRenderer::Impl {
     p.set("u_emissive", m.emissive);
     const TextureSlot* color = textures.get(m.colorTexture);
     const TextureSlot* normal = textures.get(m.normalTexture);
+    const TextureSlot* height = textures.get(m.heightTexture);
     p.set("u_doubleSided", m.doubleSided ? 1 : 0);
+    p.set("u_heightScale", m.heightScale);
     glBindTextureUnit(0, color != nullptr ? color->texture : 0);
     glBindTextureUnit(1, normal != nullptr ? normal->texture : 0);
+    glBindTextureUnit(3, height != nullptr ? height->texture : 0);  // unit 2: the shadow maps
     if (m.doubleSided)
       glDisable(GL_CULL_FACE);
     else
@@ -1060,7 +1076,7 @@ Status SceneRenderer::removeTexture(TextureId id) {
 Result<MaterialId> SceneRenderer::addMaterial(const Material& material) {
   DM_DEMAND(impl_ != nullptr, "SceneRenderer used after move or default construction");
   if (Status s = validateMaterial(material); !s) return s.error();
-  for (const TextureId t : {material.colorTexture, material.normalTexture})
+  for (const TextureId t : {material.colorTexture, material.normalTexture, material.heightTexture})
     if (t.valid() && impl_->textures.get(t) == nullptr) return staleHandle("texture", t.index, t.generation);
   const MaterialId id = impl_->materials.allocate<MaterialId>();
   impl_->materials.slots[id.index].material = material;
@@ -1072,7 +1088,7 @@ Status SceneRenderer::setMaterial(MaterialId id, const Material& material) {
   MaterialSlot* slot = impl_->materials.get(id);
   if (slot == nullptr) return staleHandle("material", id.index, id.generation);
   if (Status s = validateMaterial(material); !s) return s;
-  for (const TextureId t : {material.colorTexture, material.normalTexture})
+  for (const TextureId t : {material.colorTexture, material.normalTexture, material.heightTexture})
     if (t.valid() && impl_->textures.get(t) == nullptr) return staleHandle("texture", t.index, t.generation);
   slot->material = material;
   return ok();

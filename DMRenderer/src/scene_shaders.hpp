@@ -4,15 +4,23 @@
 // shadow pass. Vertex attributes: 0 position, 1 normal, 2 uv, 3 colour,
 // 4 tangent (xyz, w = bitangent sign); 5..8 the per-instance model matrix,
 // 9..11 its normal matrix. Features a material or frame does not use are
-// compiled out (COLOR_TEX, NORMAL_TEX, VERTEX_COLOR, SHADOWS), not branched
-// over at run time, and the light loop runs to the constant NUM_LIGHTS.
+// compiled out (COLOR_TEX, NORMAL_TEX, HEIGHT_TEX, VERTEX_COLOR, SHADOWS), not
+// branched over at run time, and the light loop runs to the constant NUM_LIGHTS.
+//
+// HEIGHT_TEX: parallax occlusion mapping. The height map's red channel is the
+// relief (1 = the mesh surface, 0 = u_heightScale metres below it). The uv
+// offset per metre of depth comes from the screen-space derivatives of the
+// world position and uv (the world gradients of u and v in the surface plane),
+// so the scale is metres whatever the uv mapping, model scale or tiling; it is
+// exact on flat triangles and piecewise constant across curved ones.
 #pragma once
 
 namespace dm::scene_glsl {
 
 inline constexpr const char* kMeshVs = R"(
-// Variant macros (0 or 1): COLOR_TEX, NORMAL_TEX, VERTEX_COLOR. Only what a
-// variant reads is interpolated: llvmpipe pays per varying and per branch.
+// Variant macros (0 or 1): COLOR_TEX, NORMAL_TEX, HEIGHT_TEX, VERTEX_COLOR.
+// Only what a variant reads is interpolated: llvmpipe pays per varying and
+// per branch.
 layout(location = 0) in vec3 a_position;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in vec2 a_uv;
@@ -27,7 +35,7 @@ uniform mat4 u_viewProj;
 
 out vec3 v_worldPos;
 out vec3 v_normal;
-#if COLOR_TEX || NORMAL_TEX
+#if COLOR_TEX || NORMAL_TEX || HEIGHT_TEX
 out vec2 v_uv;
 #endif
 #if VERTEX_COLOR
@@ -44,7 +52,7 @@ void main() {
 #if NORMAL_TEX
   v_tangent = vec4(mat3(a_model) * a_tangent.xyz, a_tangent.w);
 #endif
-#if COLOR_TEX || NORMAL_TEX
+#if COLOR_TEX || NORMAL_TEX || HEIGHT_TEX
   v_uv = a_uv;
 #endif
 #if VERTEX_COLOR
@@ -61,7 +69,7 @@ inline constexpr const char* kMeshFs = R"(
 
 in vec3 v_worldPos;
 in vec3 v_normal;
-#if COLOR_TEX || NORMAL_TEX
+#if COLOR_TEX || NORMAL_TEX || HEIGHT_TEX
 in vec2 v_uv;
 #endif
 #if VERTEX_COLOR
@@ -78,11 +86,14 @@ uniform float u_metallic;
 uniform float u_roughness;
 uniform vec3 u_emissive;
 uniform int u_doubleSided;
+uniform float u_heightScale;  // m of relief between height 1 and height 0
 layout(binding = 0) uniform sampler2D u_colorTex;
 layout(binding = 1) uniform sampler2D u_normalTex;
 layout(binding = 2) uniform sampler2DArrayShadow u_shadowMaps;
+layout(binding = 3) uniform sampler2D u_heightTex;
 
 uniform vec3 u_cameraPos;
+uniform vec4 u_orthoToEye;  // orthographic camera: (-forward, 1); perspective: 0
 uniform vec3 u_ambient;
 uniform int u_lightType[MAX_LIGHTS];      // 0 directional, 1 point, 2 spot
 uniform vec3 u_lightPos[MAX_LIGHTS];
@@ -128,13 +139,63 @@ float smithSchlick(float nv, float nl, float roughness) {
 
 vec3 schlick(float c, vec3 f0) { return f0 + (1.0 - f0) * pow(1.0 - c, 5.0); }
 
+#if HEIGHT_TEX
+// Parallax occlusion mapping: march the view ray below the surface in depth
+// layers (8 looking straight down to 32 at grazing angles) until it passes
+// under the height field, then intersect the segment between the last two
+// samples with the linearly interpolated height field. Returns the uv the ray
+// hits. `duvdx`, `duvdy`: the uv derivatives of the unshifted fragment, used
+// for every lookup (the loop is non-uniform control flow, and the shifted uv
+// jumps at steps, so implicit derivatives would pick wrong mip levels).
+vec2 parallaxUv(vec2 uv, vec3 n, vec3 toEye, vec2 duvdx, vec2 duvdy) {
+  // World gradients of u and v in the surface plane (n x dp1, dp2 x n basis).
+  vec3 dp1 = dFdx(v_worldPos), dp2 = dFdy(v_worldPos);
+  vec3 dp2perp = cross(dp2, n), dp1perp = cross(n, dp1);
+  float det = dot(dp1, dp2perp);
+  float nv = dot(n, toEye);
+  if (abs(det) < 1e-30 || nv <= 1e-3) return uv;
+  vec3 gradU = (dp2perp * duvdx.x + dp1perp * duvdy.x) / det;
+  vec3 gradV = (dp2perp * duvdx.y + dp1perp * duvdy.y) / det;
+  // Going one metre deeper along the view ray moves -(toEye - n nv) / nv along the surface.
+  vec2 uvPerMetre = -vec2(dot(gradU, toEye), dot(gradV, toEye)) / nv;
+  float layers = mix(32.0, 8.0, clamp(nv, 0.0, 1.0));
+  float layerDepth = 1.0 / layers;  // in units of u_heightScale
+  vec2 layerUv = uvPerMetre * (u_heightScale * layerDepth);
+  float rayDepth = 0.0;
+  float mapDepth = 1.0 - textureGrad(u_heightTex, uv, duvdx, duvdy).r;
+  for (int i = 0; i < 33 && rayDepth < mapDepth; ++i) {  // <= 32 layers reach depth 1; 33 bounds rounding
+    uv += layerUv;
+    rayDepth += layerDepth;
+    mapDepth = 1.0 - textureGrad(u_heightTex, uv, duvdx, duvdy).r;
+  }
+  // The ray is now at or below the field; the previous sample was above it.
+  float after = mapDepth - rayDepth;
+  float before = 1.0 - textureGrad(u_heightTex, uv - layerUv, duvdx, duvdy).r - (rayDepth - layerDepth);
+  float denom = after - before;
+  float w = abs(denom) > 1e-6 ? clamp(after / denom, 0.0, 1.0) : 0.0;
+  return uv - layerUv * w;
+}
+#endif
+
 void main() {
+#if HEIGHT_TEX
+  // Derivatives before any branch (uniform control flow).
+  vec2 duvdx = dFdx(v_uv), duvdy = dFdy(v_uv);
+  vec3 surfN = normalize(v_normal);
+  if (!gl_FrontFacing) surfN = -surfN;
+  vec3 toEye = u_orthoToEye.w != 0.0 ? u_orthoToEye.xyz : normalize(u_cameraPos - v_worldPos);
+  vec2 uv = parallaxUv(v_uv, surfN, toEye, duvdx, duvdy);
+#define SAMPLE(tex) textureGrad(tex, uv, duvdx, duvdy)
+#elif COLOR_TEX || NORMAL_TEX
+  vec2 uv = v_uv;
+#define SAMPLE(tex) texture(tex, uv)
+#endif
   vec4 base = u_baseColor;
 #if VERTEX_COLOR
   base *= v_color;
 #endif
 #if COLOR_TEX
-  base *= texture(u_colorTex, v_uv);
+  base *= SAMPLE(u_colorTex);
 #endif
 #if MODEL == 0
   o_color = vec4(base.rgb + u_emissive, 1.0);
@@ -148,7 +209,7 @@ void main() {
     if (dot(t, t) > 1e-12) {
       t = normalize(t);
       vec3 b = cross(n, t) * (v_tangent.w < 0.0 ? -1.0 : 1.0);
-      vec3 m = texture(u_normalTex, v_uv).xyz * 2.0 - 1.0;
+      vec3 m = SAMPLE(u_normalTex).xyz * 2.0 - 1.0;
       n = normalize(mat3(t, b, n) * m);
     }
   }

@@ -6,17 +6,21 @@
 // dm::Mesh once (float vertices, uint32 indices; normals and per-vertex
 // tangents computed on upload when missing), updateMesh() rewrites the vertex
 // data in place while the topology stays the same (a deforming organ from
-// physics), addTexture() uploads a dm::Image (any stride, RGB or OpenCV's BGR order)
-// with or without mipmaps, updateTexture() replaces its pixels (a video
-// frame per render frame), and
-// addMaterial() registers a material. A frame is a span of DrawItems and a
-// span of Lights: render() culls each item's world box against the view
-// frustum, picks a level of detail by projected size, sorts what is left by
-// program, material and mesh, and draws items sharing mesh and material as
-// one instanced draw call. Shadow maps (one per shadow-casting directional or
-// spot light, at most kMaxShadowMaps) are rendered first: orthographic light
-// frusta fitted to the bounds of the visible items for directional lights,
-// perspective ones for spot lights, slope-scaled depth bias, 3x3 PCF.
+// physics), addTexture() uploads a dm::Image (any stride, RGB or OpenCV's BGR
+// order) with or without mipmaps, updateTexture() replaces its pixels (a
+// video frame per render frame), and addMaterial() registers a material:
+// colour, normal and height textures. A height texture gives the surface
+// relief by parallax occlusion mapping (a ray march through the height field,
+// 8..32 layers by view angle, then a linear refinement; Material::heightScale
+// metres deep); it moves the texturing, not the silhouette, depth or shadows.
+// A frame is a span of DrawItems and a span of Lights: render() culls each
+// item's world box against the view frustum, picks a level of detail by
+// projected size, sorts what is left by program, material and mesh, and
+// draws items sharing mesh and material as one instanced draw call. Shadow
+// maps (one per shadow-casting directional or spot light, at most
+// kMaxShadowMaps) are rendered first: orthographic light frusta fitted to
+// the bounds of the visible items for directional lights, perspective ones
+// for spot lights, slope-scaled depth bias, 3x3 PCF.
 //
 // Photometry: shaders work in linear colour (the target stores sRGB). A
 // white diffuse surface facing a directional light of intensity 1 renders 1;
@@ -90,8 +94,16 @@ struct Material {
   Vec3f emissive{0, 0, 0};                  ///< added to the lit colour, linear
   TextureId colorTexture;                   ///< optional; sRGB textures are decoded to linear
   TextureId normalTexture;                  ///< optional tangent-space normal map (upload with srgb = false)
-  bool useVertexColors = true;              ///< multiply by the mesh's per-vertex colours when it has them
-  bool doubleSided = false;  ///< draw back faces too (normals flipped); else back faces are culled
+  /// Optional height map for parallax occlusion mapping (upload with srgb =
+  /// false): red channel, 1 = the mesh surface, 0 = `heightScale` below it.
+  /// Shifts the uv of the colour, normal and height lookups; the silhouette,
+  /// depth and shadows stay those of the mesh.
+  TextureId heightTexture;
+  /// Relief depth from height 1 to height 0, metres (world units, so the same
+  /// whatever the uv mapping or tiling); finite, >= 0; 0 turns the relief off.
+  float heightScale = 0;
+  bool useVertexColors = true;  ///< multiply by the mesh's per-vertex colours when it has them
+  bool doubleSided = false;     ///< draw back faces too (normals flipped); else back faces are culled
 };
 
 /// A light source. Directions are the way the light travels (need not be unit).
