@@ -573,14 +573,14 @@ class SceneParser {
       if (!model) continue;
       m.model = *model;
       if (m.model == SceneMaterial::Model::BlinnPhong) {
-        r.knownKeys(
-            {"model", "color", "specular", "shininess", "emissive", "texture", "normal_map", "haptic"});
+        r.knownKeys({"model", "color", "specular", "shininess", "emissive", "texture", "normal_map",
+                     "height_map", "height_scale", "haptic"});
         m.specular =
             readColor(r, "specular", {m.specular.x(), m.specular.y(), m.specular.z(), 1.0}, false).head<3>();
         m.shininess = r.number("shininess", {.min = 1.0, .max = 10000.0}, m.shininess);
       } else {
-        r.knownKeys(
-            {"model", "color", "metallic", "roughness", "emissive", "texture", "normal_map", "haptic"});
+        r.knownKeys({"model", "color", "metallic", "roughness", "emissive", "texture", "normal_map",
+                     "height_map", "height_scale", "haptic"});
         m.metallic = r.number("metallic", {.min = 0.0, .max = 1.0}, m.metallic);
         m.roughness = r.number("roughness", {.min = 0.0, .max = 1.0}, m.roughness);
       }
@@ -590,6 +590,14 @@ class SceneParser {
               .head<3>();
       imageRef(r, "texture", m.texture);
       imageRef(r, "normal_map", m.normalMap);
+      imageRef(r, "height_map", m.heightMap);
+      // The relief depth has no sensible default, so it comes with the map
+      // (required), and never without it.
+      if (r.has("height_map"))
+        m.heightScale = r.number("height_scale", {.min = 0.0, .max = 1.0});
+      else if (r.has("height_scale"))
+        r.addError("height_scale without a height_map", "height_scale",
+                   "add \"height_map\" (an image resource) or remove \"height_scale\"");
       ConfigReader h = r.child("haptic");
       if (expectObject(h)) {
         h.knownKeys({"stiffness", "damping", "static_friction", "dynamic_friction"});
@@ -1207,6 +1215,10 @@ Json toJson(const SceneDesc& scene) {
     }
     if (!m.texture.empty()) o["texture"] = m.texture;
     if (!m.normalMap.empty()) o["normal_map"] = m.normalMap;
+    if (!m.heightMap.empty()) {
+      o["height_map"] = m.heightMap;
+      o["height_scale"] = m.heightScale;
+    }
     if (m.haptic)
       o["haptic"] = {{"stiffness", m.haptic->stiffness},
                      {"damping", m.haptic->damping},

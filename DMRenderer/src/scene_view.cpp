@@ -156,6 +156,10 @@ Result<SceneView> SceneView::create(const SceneDesc& scene, const SceneResources
     auto normal = texture(m.normalMap, false, where + "/normal_map");
     if (!normal) return normal.error();
     mat.normalTexture = *normal;
+    auto height = texture(m.heightMap, false, where + "/height_map");
+    if (!height) return height.error();
+    mat.heightTexture = *height;
+    mat.heightScale = static_cast<float>(m.heightScale);
     auto id = im.meshes.addMaterial(mat);
     if (!id) return id.error().within(where);
     materials.emplace(m.name, *id);

@@ -314,6 +314,36 @@ TEST(SceneFile, DanglingReferencesGetSuggestions) {
   EXPECT_EQ(e->hint, "define it under \"resources\"");
 }
 
+TEST(SceneFile, HeightMapComesWithItsScaleInMetres) {
+  Json j = baseScene();
+  j["materials"]["skin"]["height_map"] = "bump";
+  j["materials"]["skin"]["height_scale"] = 0.003;
+  auto scene = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(scene) << scene.error();
+  const dm::SceneMaterial* skin = scene->material("skin");
+  ASSERT_TRUE(skin);
+  EXPECT_EQ(skin->heightMap, "bump");
+  EXPECT_EQ(skin->heightScale, 0.003);
+
+  j["materials"]["skin"].erase("height_scale");     // a map needs its depth
+  j["materials"]["plain"]["height_scale"] = 0.001;  // a depth needs its map
+  j["materials"]["plain"]["normal_map"] = "bump";   // (a valid key beside it)
+  Json tooDeep = baseScene();
+  tooDeep["materials"]["skin"]["height_map"] = "bump";
+  tooDeep["materials"]["skin"]["height_scale"] = 2;  // 2 m: a unit mistake
+  auto p = problemsOf(j);
+  ASSERT_EQ(p.size(), 2u) << dm::formatSceneErrors(p);
+  ASSERT_TRUE(at(p, "/materials/skin/height_scale"));
+  const dm::Error* e = at(p, "/materials/plain/height_scale");
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->what, "height_scale without a height_map");
+  p = problemsOf(tooDeep);
+  ASSERT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);
+  e = at(p, "/materials/skin/height_scale");
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->what, "value 2 is outside [0, 1]");
+}
+
 TEST(SceneFile, ReferenceToTheWrongKindOfResource) {
   Json j = baseScene();
   j["objects"][0]["mesh"] = "head";               // a volume
@@ -513,11 +543,13 @@ Json fullScene() {
       "iso": {"type": "isosurface", "volume": "ct", "level": 300.5, "largest_component": true, "smooth": 4,
               "downsample": 3},
       "albedo": {"type": "image", "source": "textures/albedo.png"},
-      "normals": {"type": "image", "source": "textures/normals.png"}
+      "normals": {"type": "image", "source": "textures/normals.png"},
+      "relief": {"type": "image", "source": "textures/relief.png"}
     },
     "materials": {
       "metal": {"model": "pbr", "color": [0.1, 0.2, 0.3, 0.4], "emissive": [2.0, 0.0, 0.5],
-                "metallic": 0.9, "roughness": 0.1, "texture": "albedo", "normal_map": "normals"},
+                "metallic": 0.9, "roughness": 0.1, "texture": "albedo", "normal_map": "normals",
+                "height_map": "relief", "height_scale": 0.002},
       "tissue": {"model": "blinn-phong", "color": [0.9, 0.5, 0.4, 1.0], "emissive": [0.0, 0.0, 0.0],
                  "specular": [0.3, 0.3, 0.3], "shininess": 12.0,
                  "haptic": {"stiffness": 350.0, "damping": 1.5, "static_friction": 0.4, "dynamic_friction": 0.25}}

@@ -99,6 +99,8 @@ struct SceneMaterial {
   Vec3 emissive = Vec3::Zero();    ///< linear RGB, ≥ 0
   std::string texture;             ///< name of an Image resource, or empty
   std::string normalMap;           ///< name of an Image resource, or empty
+  std::string heightMap;           ///< name of an Image resource (red: 1 = surface, 0 = deepest), or empty
+  double heightScale = 0.0;        ///< m of relief from height 1 to 0, 0..1; given with heightMap only
   std::optional<SceneHapticMaterial> haptic;
 
   bool operator==(const SceneMaterial&) const = default;
