@@ -823,14 +823,37 @@ Status FemBody::setObstacles(std::span<const FemObstacle> obstacles) {
       return invalid("the pose is not rigid and finite", where, "give a rotation and a translation");
     if (!std::isfinite(o.stiffness) || !(o.stiffness > 0))
       return invalid("stiffness " + num(o.stiffness) + " N/m is not positive", where, "e.g. 1e4 N/m");
+    if (!std::isfinite(o.mass) || o.mass < 0)
+      return invalid("mass " + num(o.mass) + " kg is negative or not finite", where, "0 = kinematic, > 0 = dynamic");
+    if (!o.centerOfMass.allFinite()) return invalid("centerOfMass is not finite", where);
+    if (o.mass > 0 && (!o.inertia.allFinite() || !o.inertia.isApprox(o.inertia.transpose(), 1e-9) ||
+                       o.inertia.llt().info() != Eigen::Success))
+      return invalid("inertia is not symmetric positive definite", where,
+                     "give the tensor about the centre of mass, kg·m² (e.g. from dm::computeMassProperties)");
   }
   for (const NodeContact& c : contacts_) contactOf_[c.node] = -1;
   contacts_.clear();
   contacts_.reserve(surfaceNodes_.size());
   obstacles_.assign(obstacles.begin(), obstacles.end());
-  obstacleInverse_.resize(obstacles_.size());
-  for (std::size_t j = 0; j < obstacles_.size(); ++j) obstacleInverse_[j] = obstacles_[j].pose.inverse();
-  obstacleForce_.assign(obstacles_.size(), Vec3::Zero());
+  const std::size_t m = obstacles_.size();
+  obstacleInverse_.resize(m);
+  for (std::size_t j = 0; j < m; ++j) obstacleInverse_[j] = obstacles_[j].pose.inverse();
+  obstacleWrench_.assign(m, Wrench{});
+  obstacleVelocity_.assign(m, Twist{});
+  obstacleCenter_.assign(m, Vec3::Zero());
+  obstacleInertia_.assign(m, Mat3::Zero());
+  obstacleRow_.assign(m, -1);
+  rigidRows_ = 0;
+  for (std::size_t j = 0; j < m; ++j)
+    if (obstacles_[j].mass > 0) obstacleRow_[j] = std::int32_t(3 * x_.size() + rigidRows_), rigidRows_ += 6;
+  obstaclePre_.assign(rigidRows_ / 6, Eigen::Matrix<double, 6, 6>::Identity());
+  const Eigen::Index rows = Eigen::Index(3 * x_.size() + rigidRows_);
+  if (rhs_.size() != rows) {
+    rhs_.setZero(rows);
+    dv_.setZero(rows);
+    if (!hangNode_.empty()) full_.setZero(rows);
+    pcg_.reserve(rows);
+  }
   return ok();
 }
 
@@ -841,8 +864,22 @@ bool FemBody::setObstaclePose(std::size_t i, const Isometry3& pose) noexcept {
   return true;
 }
 
+bool FemBody::setObstacleVelocity(std::size_t i, const Twist& velocity) noexcept {
+  if (i >= obstacles_.size() || !velocity.linear.allFinite() || !velocity.angular.allFinite()) return false;
+  obstacleVelocity_[i] = velocity;
+  return true;
+}
+
+Twist FemBody::obstacleVelocity(std::size_t i) const noexcept {
+  return i < obstacleVelocity_.size() ? obstacleVelocity_[i] : Twist{};
+}
+
 Vec3 FemBody::obstacleForce(std::size_t i) const noexcept {
-  return i < obstacleForce_.size() ? obstacleForce_[i] : Vec3::Zero();
+  return i < obstacleWrench_.size() ? obstacleWrench_[i].force : Vec3::Zero();
+}
+
+Wrench FemBody::obstacleWrench(std::size_t i) const noexcept {
+  return i < obstacleWrench_.size() ? obstacleWrench_[i] : Wrench{};
 }
 
 // The boundary nodes inside an obstacle, each with its deepest obstacle.
@@ -860,13 +897,26 @@ void FemBody::findObstacleContacts() {
       const MeshPointQuery q = closestPointOnMesh(*o.tree, o.pose, x_[i]);
       if (!(q.distance < 0.0) || !(-q.distance > best.depth) || !q.normal.allFinite()) continue;
       best = {.node = i, .obstacle = std::uint32_t(j), .normal = q.normal, .depth = -q.distance,
-              .stiffness = o.stiffness};
+              .stiffness = o.stiffness, .arm = x_[i] - obstacleCenter_[j]};
     }
     if (best.depth > 0.0) {
       contactOf_[i] = std::int32_t(contacts_.size());
       contacts_.push_back(best);
     }
   }
+}
+
+// k·(n·(v_node − u)): how fast contact c closes, times its stiffness, with
+// u the obstacle's velocity at the contact (V + Ω × arm).
+double FemBody::contactRate(const NodeContact& c) const noexcept {
+  const Twist& u = obstacleVelocity_[c.obstacle];
+  return c.stiffness * c.normal.dot(v_[c.node] - u.linear - u.angular.cross(c.arm));
+}
+
+// The penalty force on contact c's node over a step of h at the current
+// velocities: k·depth·n less the damping-like term h·k·(n·(v − u))·n.
+Vec3 FemBody::contactForce(const NodeContact& c, double h) const noexcept {
+  return (c.stiffness * c.depth - h * contactRate(c)) * c.normal;
 }
 
 Vec3 FemBody::contactSpringForce() const noexcept {
@@ -1052,10 +1102,26 @@ void FemBody::applySystem(const VecX& input, VecX& out, double massScale, double
           stiffScale * acc + massScale * mass_[r] * in.segment<3>(Eigen::Index(3 * r));
     }
   });
-  // Obstacle contacts: h²·k·n nᵀ on each contact node's diagonal.
+  // Dynamic obstacles' rows: their mass and world inertia.
+  for (std::size_t j = 0; j < obstacles_.size(); ++j)
+    if (const Eigen::Index r = obstacleRow_[j]; r >= 0) {
+      out.segment<3>(r) = obstacles_[j].mass * in.segment<3>(r);
+      out.segment<3>(r + 3) = obstacleInertia_[j] * in.segment<3>(r + 3);
+    }
+  // Obstacle contacts: h²·k·g·n with g = n·(Δv_node − Δu), Δu the dynamic
+  // obstacle's velocity change at the contact (ΔV + ΔΩ × arm); the obstacle
+  // takes −h²·k·g·(n, arm × n).
   for (const NodeContact& c : contacts_) {
     const Eigen::Index o = Eigen::Index(3 * c.node);
-    out.segment<3>(o) += (sysContactScale_ * c.stiffness * c.normal.dot(in.segment<3>(o))) * c.normal;
+    const Eigen::Index r = obstacleRow_[c.obstacle];
+    double g = c.normal.dot(in.segment<3>(o));
+    if (r >= 0) g -= c.normal.dot(in.segment<3>(r) + Vec3(in.segment<3>(r + 3)).cross(c.arm));
+    const double kg = sysContactScale_ * c.stiffness * g;
+    out.segment<3>(o) += kg * c.normal;
+    if (r >= 0) {
+      out.segment<3>(r) -= kg * c.normal;
+      out.segment<3>(r + 3) -= kg * c.arm.cross(c.normal);
+    }
   }
   // The contact spring: h²·k·w wᵀ (⊗ I) over its three nodes' free rows and columns.
   if (spring_.active) {
@@ -1115,6 +1181,11 @@ Result<FemStepReport> FemBody::step(double h) {
   // term h·k·n(n·v) in the right-hand side, h²·k·n nᵀ on the diagonal. The
   // contact spring: f_s = k·(a − Σwⱼxⱼ − hΣwⱼvⱼ) shared by weight wᵢ, and
   // h²·k·wᵢ² on the diagonal (its off-diagonal terms live in applySystem).
+  for (std::size_t j = 0; j < obstacles_.size(); ++j) {
+    const FemObstacle& o = obstacles_[j];
+    obstacleCenter_[j] = o.pose * o.centerOfMass;
+    if (o.mass > 0) obstacleInertia_[j] = o.pose.linear() * o.inertia * o.pose.linear().transpose();
+  }
   findObstacleContacts();
   sysContactScale_ = h * h;
   Vec3 pull = Vec3::Zero();
@@ -1141,7 +1212,7 @@ Result<FemStepReport> FemBody::step(double h) {
       d.diagonal().array() += massScale * mass_[i];
       if (contactOf_[i] >= 0) {
         const NodeContact& c = contacts_[std::size_t(contactOf_[i])];
-        f += c.stiffness * (c.depth - h * c.normal.dot(v_[i])) * c.normal;
+        f += contactForce(c, h);
         d += (h * h * c.stiffness) * (c.normal * c.normal.transpose());
       }
       if (spring_.active)
@@ -1172,6 +1243,31 @@ Result<FemStepReport> FemBody::step(double h) {
   forRange(n, 512, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) invBlockDiag_[i] = invBlockDiag_[i].inverse();
   });
+  // Dynamic obstacles: −h·Jᵀf of their contacts' start forces on the
+  // right, and their mass, inertia and contact terms (h²k·JᵀnnᵀJ) as one
+  // 6×6 block of the preconditioner. They start from zero velocity change.
+  if (rigidRows_ > 0) {
+    rhs_.tail(Eigen::Index(rigidRows_)).setZero();
+    dv_.tail(Eigen::Index(rigidRows_)).setZero();
+    for (std::size_t j = 0; j < obstacles_.size(); ++j)
+      if (obstacleRow_[j] >= 0) {
+        auto& p = obstaclePre_[std::size_t(obstacleRow_[j] - Eigen::Index(3 * n)) / 6];
+        p.setZero();
+        p.topLeftCorner<3, 3>().diagonal().setConstant(obstacles_[j].mass);
+        p.bottomRightCorner<3, 3>() = obstacleInertia_[j];
+      }
+    for (const NodeContact& c : contacts_) {
+      const Eigen::Index r = obstacleRow_[c.obstacle];
+      if (r < 0) continue;
+      const Vec3 f = contactForce(c, h);
+      rhs_.segment<3>(r) -= h * f;
+      rhs_.segment<3>(r + 3) -= h * c.arm.cross(f);
+      Eigen::Matrix<double, 6, 1> jn;
+      jn << c.normal, c.arm.cross(c.normal);
+      obstaclePre_[std::size_t(r - Eigen::Index(3 * n)) / 6] += (h * h * c.stiffness) * jn * jn.transpose();
+    }
+    for (auto& p : obstaclePre_) p = p.inverse().eval();
+  }
   if (!options_.warmStart) dv_.setZero();
 
   // Stopping test relative to the forces in balance, not only to ‖b‖: near
@@ -1199,6 +1295,9 @@ Result<FemStepReport> FemBody::step(double h) {
   const LinearOperator applyM = [this](const VecX& r, VecX& z) {
     for (std::size_t i = 0; i < x_.size(); ++i)
       z.segment<3>(Eigen::Index(3 * i)).noalias() = invBlockDiag_[i] * r.segment<3>(Eigen::Index(3 * i));
+    const Eigen::Index base = Eigen::Index(3 * x_.size());
+    for (std::size_t d = 0; d < obstaclePre_.size(); ++d)
+      z.segment<6>(base + Eigen::Index(6 * d)).noalias() = obstaclePre_[d] * r.segment<6>(base + Eigen::Index(6 * d));
   };
   pcg_.setOptions({.tolerance = tolerance,
                    .maxIterations = options_.maxIterations,
@@ -1226,12 +1325,18 @@ Result<FemStepReport> FemBody::step(double h) {
     }
   });
   syncHanging();
+  // Dynamic obstacles leave the step with what the contact did to them.
+  for (std::size_t j = 0; j < obstacles_.size(); ++j)
+    if (const Eigen::Index r = obstacleRow_[j]; r >= 0) {
+      obstacleVelocity_[j].linear += dv_.segment<3>(r);
+      obstacleVelocity_[j].angular += dv_.segment<3>(r + 3);
+    }
   // What the obstacles took: the penalty springs at the end state (the
   // linearisation the step solved with), never pulling.
-  std::fill(obstacleForce_.begin(), obstacleForce_.end(), Vec3::Zero());
+  std::fill(obstacleWrench_.begin(), obstacleWrench_.end(), Wrench{});
   for (const NodeContact& c : contacts_) {
-    const double push = c.stiffness * (c.depth - h * c.normal.dot(v_[c.node]));
-    if (push > 0.0) obstacleForce_[c.obstacle] -= push * c.normal;
+    const double push = c.stiffness * c.depth - h * contactRate(c);
+    if (push > 0.0) obstacleWrench_[c.obstacle] += Wrench{-push * c.normal, -push * c.arm.cross(c.normal)};
   }
   return report_;
 }

@@ -59,6 +59,9 @@
 // nodes they contain out along their normal with penalty springs, and one
 // contact spring pulls a boundary point toward an anchor (a haptic tool);
 // both enter the system matrix (h²k terms), so stiff contact stays stable.
+// A dynamic obstacle (mass > 0, a free rigid body) adds six unknowns, its
+// velocity change, to that system: the contact springs act on both sides
+// (dm/physics/soft_rigid.hpp couples such bodies to a PhysicsWorld).
 // Element loops run in parallel with dm::parallelFor over a greedy element
 // colouring (elements of one colour share no node), so the result does not
 // depend on the thread count.
@@ -73,6 +76,7 @@
 #pragma once
 
 #include <dm/core/mesh.hpp>
+#include <dm/core/pose.hpp>
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
 #include <dm/math/linear.hpp>
@@ -92,12 +96,24 @@ class Volume;
 /// instrument, a table): a closed mesh's tree (MeshBvh::isClosed(), so
 /// distances are signed) at a pose, moved by the caller between steps.
 /// Contact is frictionless.
+///
+/// Kinematic (mass 0): the caller moves it (setObstaclePose, and
+/// setObstacleVelocity for the contact's damping term); the tissue does not
+/// move it. Dynamic (mass > 0): a free rigid body (a bone fragment, a
+/// dropped instrument) whose velocity each step solves together with the
+/// tissue's, with the same implicit contact springs between them (two-way
+/// coupling, stable for stiff contact on light bodies); its other forces
+/// (gravity, joints) are the caller's, e.g. dm::SoftRigidCoupling applies
+/// the solved velocity change to a PhysicsWorld body.
 struct FemObstacle {
   const MeshBvh* tree = nullptr;  ///< closed, local frame; must outlive its use
   Isometry3 pose = Isometry3::Identity();  ///< local → body frame, rigid
   /// N/m per boundary node in contact, > 0: the implicit penalty spring
   /// along the obstacle's normal. A node sinks about (its load) / stiffness.
   double stiffness = 1e4;
+  double mass = 0.0;                  ///< kg, ≥ 0; 0 = kinematic
+  Mat3 inertia = Mat3::Identity();    ///< kg·m², about the centre of mass, local frame (dynamic only; SPD)
+  Vec3 centerOfMass = Vec3::Zero();   ///< m, local frame: where velocities and torques refer to
 };
 
 /// Four node indices of a tetrahedron, positively oriented.
@@ -391,8 +407,11 @@ class FemBody {
   /// spring (h²k·nnᵀ in the node's diagonal block): stable for stiff
   /// obstacles on light nodes. Fixed nodes are not pushed. Fails
   /// (InvalidArgument naming the obstacle, set unchanged) on a null or open
-  /// tree, a non-rigid or non-finite pose, or a stiffness that is not
-  /// positive and finite. Allocates the per-node contact storage once.
+  /// tree, a non-rigid or non-finite pose, a stiffness that is not positive
+  /// and finite, a negative or non-finite mass, or (dynamic) an inertia that
+  /// is not symmetric positive definite. Velocities start at zero.
+  /// Allocates the per-node contact storage and the solver's rows for the
+  /// dynamic obstacles (six each) once.
   /// @code
   ///   dm::FemObstacle bone{.tree = &boneTree, .pose = bonePose, .stiffness = 5e4};
   ///   body.setObstacles({&bone, 1});
@@ -403,11 +422,24 @@ class FemBody {
   /// Moves obstacle i (a tool following a device) for the next steps;
   /// false (unchanged) for an index out of range or a non-rigid pose.
   bool setObstaclePose(std::size_t i, const Isometry3& pose) noexcept;
+  /// Velocity of obstacle i's centre of mass (m/s) and its angular velocity
+  /// (rad/s), body frame, at the start of the next step: a kinematic
+  /// obstacle keeps it (the contact damps the relative velocity), a dynamic
+  /// one starts the step from it. False (unchanged) for an index out of
+  /// range or non-finite values.
+  bool setObstacleVelocity(std::size_t i, const Twist& velocity) noexcept;
+  /// Obstacle i's velocity: for a dynamic obstacle, after the last step's
+  /// contact (its start velocity plus what the tissue did to it); zero
+  /// twist for an index out of range.
+  Twist obstacleVelocity(std::size_t i) const noexcept;
   std::size_t obstacleCount() const noexcept { return obstacles_.size(); }
   /// The force (N, body frame) the tissue applied to obstacle i in the last
   /// step (the penalty springs at the step's end state); zero for an index
   /// out of range.
   Vec3 obstacleForce(std::size_t i) const noexcept;
+  /// That force with its torque (N·m) about the obstacle's centre of mass
+  /// (pose · centerOfMass); zero for an index out of range.
+  Wrench obstacleWrench(std::size_t i) const noexcept;
   /// Boundary nodes in contact with an obstacle during the last step.
   std::size_t obstacleContactCount() const noexcept { return contacts_.size(); }
   /// Uniform gravitational acceleration (m/s²), default zero.
@@ -523,15 +555,24 @@ class FemBody {
     Vec3 normal = Vec3::Zero();  // unit, out of the obstacle
     double depth = 0.0;          // m, > 0
     double stiffness = 0.0;      // N/m
+    Vec3 arm = Vec3::Zero();     // m, node − obstacle's centre of mass, at the step's start
   };
   std::vector<FemObstacle> obstacles_;
   std::vector<Isometry3> obstacleInverse_;  // body → obstacle frame, per obstacle
-  std::vector<Vec3> obstacleForce_;       // per obstacle, from the last step
+  std::vector<Wrench> obstacleWrench_;    // per obstacle, from the last step
+  std::vector<Twist> obstacleVelocity_;   // per obstacle, of its centre of mass
+  std::vector<std::int32_t> obstacleRow_;  // per obstacle: first solver row (dynamic) or -1
+  std::vector<Eigen::Matrix<double, 6, 6>> obstaclePre_;  // per dynamic obstacle: inverse diagonal block
+  std::vector<Vec3> obstacleCenter_;  // centre of mass in the body frame, this step
+  std::vector<Mat3> obstacleInertia_;  // body-frame inertia tensor of the dynamic ones, this step
+  std::size_t rigidRows_ = 0;          // 6 per dynamic obstacle, after the 3n node rows
   std::vector<std::uint32_t> surfaceNodes_;  // nodes of surface_, sorted, unique
   std::vector<NodeContact> contacts_;     // this step's (capacity: surface nodes)
   std::vector<std::int32_t> contactOf_;   // per node: index into contacts_, or -1
   double sysContactScale_ = 0.0;          // h² of the current step: contact's share of the operator
   void findObstacleContacts();
+  double contactRate(const NodeContact& c) const noexcept;
+  Vec3 contactForce(const NodeContact& c, double h) const noexcept;
   VecX rhs_, dv_, tmp_;
   VecX full_;  // applySystem's input with hanging rows filled in (P·in)
   double sysMassScale_ = 1.0, sysStiffScale_ = 0.0;  // operator scales of the current step

@@ -114,6 +114,7 @@ class WorldState {
  private:
   friend class PhysicsWorld;
   friend class OdeWorld;
+  friend class SoftRigidCoupling;  // writes the contact's velocity change
   std::uint32_t check(BodyId id) const noexcept {
     DM_ASSERT(id.index < s_.position.size(), "BodyId out of range");
     return id.index;
