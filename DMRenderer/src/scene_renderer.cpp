@@ -1,5 +1,6 @@
 // scene_renderer.cpp — GPU meshes, textures and materials behind generational
 // handles; the render queue (cull, LOD, sort, instance); shadow and camera passes.
+#include <dm/collide/bvh.hpp>
 #include <dm/renderer/scene_renderer.hpp>
 #include <dm/renderer/shader.hpp>
 
@@ -31,6 +32,13 @@ static_assert(sizeof(GpuVertex) == 64);
 // instance on the CPU instead of per vertex in the shader.
 using InstanceMatrix = std::array<float, 28>;
 
+// A run of triangles of the index buffer and the box of their vertices
+// (mesh frame).
+struct MeshCluster {
+  std::uint32_t first = 0, count = 0;
+  Aabb box;
+};
+
 struct MeshSlot {
   std::uint32_t generation = 0;
   bool alive = false;
@@ -43,6 +51,11 @@ struct MeshSlot {
   double sphereRadius = 0;
   int uploads = 0, inPlaceUpdates = 0;
   std::vector<LodLevel> lods;  // by maxScreenFraction, largest first
+  // Cluster culling (setMeshTree): the index buffer holds the triangles in
+  // the tree's leaf order (GPU triangle k = triangles[leafOrder[k]]), cut
+  // into runs of whole subtrees with their local-frame boxes. Empty: none.
+  std::vector<std::uint32_t> leafOrder;
+  std::vector<MeshCluster> clusters;
 };
 
 struct TextureSlot {
@@ -252,6 +265,7 @@ RenderStats& RenderStats::operator+=(const RenderStats& o) {
   instances += o.instances;
   triangles += o.triangles;
   itemsCulled += o.itemsCulled;
+  clustersCulled += o.clustersCulled;
   lodSwitches += o.lodSwitches;
   shadowMaps += o.shadowMaps;
   shadowDrawCalls += o.shadowDrawCalls;
@@ -270,6 +284,7 @@ struct SceneRenderer::Impl {
     std::uint32_t mesh = 0;
     std::uint32_t first = 0;
     std::uint32_t count = 0;
+    std::uint32_t item = 0;  // the first item's index
   };
   struct Record {
     std::uint64_t key = 0;
@@ -339,6 +354,8 @@ struct SceneRenderer::Impl {
   RenderStats stats;
 
   // Scratch reused across frames and uploads (no allocation once warm).
+  std::vector<GLsizei> rangeCounts;
+  std::vector<const void*> rangeOffsets;
   std::vector<GpuVertex> vertices;
   Mesh normalScratch;
   std::vector<Vec4f> tangents;
@@ -398,6 +415,15 @@ struct SceneRenderer::Impl {
     }
   }
 
+  // Each cluster's box over the vertices of its triangles, from `positions`.
+  static void setClusterBoxes(MeshSlot& s, std::span<const Vec3> positions) {
+    for (MeshCluster& c : s.clusters) {
+      c.box.setEmpty();
+      for (std::uint32_t k = c.first; k < c.first + c.count; ++k)
+        for (std::uint32_t v : s.triangles[s.leafOrder[k]]) c.box.extend(positions[v]);
+    }
+  }
+
   static void setBounds(MeshSlot& s, const Mesh& mesh) {
     s.bounds = mesh.bounds();
     s.sphereCenter = s.bounds.center();
@@ -440,6 +466,8 @@ struct SceneRenderer::Impl {
     glVertexArrayBindingDivisor(s.vao, 1, 1);
     s.vertexCount = mesh.positions.size();
     s.triangles = mesh.triangles;
+    s.leafOrder.clear();  // new triangles: a tree of the old ones no longer applies
+    s.clusters.clear();
     s.hasColors = !mesh.colors.empty();
     setBounds(s, mesh);
     ++s.uploads;
@@ -505,6 +533,7 @@ struct SceneRenderer::Impl {
         b.material = byMaterial ? it.material.index : 0;
         b.program = byMaterial ? programIndex(materials.get(it.material)->material, meshes.slots[r.mesh]) : 0;
         b.first = static_cast<std::uint32_t>(instances.size());
+        b.item = r.item;
         out.push_back(b);
       }
       InstanceMatrix m{};
@@ -637,6 +666,40 @@ struct SceneRenderer::Impl {
     glBindVertexArray(m.vao);
     glDrawElementsInstanced(GL_TRIANGLES, GLsizei(m.triangles.size() * 3), GL_UNSIGNED_INT, nullptr,
                             GLsizei(b.count));
+  }
+
+  // A single item of a clustered mesh: only the clusters whose box meets
+  // the view frustum (tested in the mesh's frame, planes · model), adjacent
+  // ones merged into one range, all ranges in one glMultiDrawElements.
+  // Returns the triangles drawn and counts the clusters culled.
+  std::size_t drawClusters(const Batch& b, const Mat4& viewProj, const Affine3& model, int& culled) {
+    const MeshSlot& m = meshes.slots[b.mesh];
+    const Frustum local(viewProj * model.matrix());
+    rangeCounts.clear();
+    rangeOffsets.clear();
+    std::size_t drawn = 0;
+    std::uint32_t end = ~0u;
+    for (const MeshCluster& c : m.clusters) {
+      if (local.outside(c.box)) {
+        ++culled;
+        continue;
+      }
+      drawn += c.count;
+      if (c.first == end) {
+        rangeCounts.back() += GLsizei(3 * c.count);
+      } else {
+        rangeCounts.push_back(GLsizei(3 * c.count));
+        rangeOffsets.push_back(reinterpret_cast<const void*>(std::uintptr_t(c.first) * sizeof(Triangle)));
+      }
+      end = c.first + c.count;
+    }
+    if (rangeCounts.empty()) return 0;
+    glVertexArrayVertexBuffer(m.vao, 1, instanceBuffer, GLintptr(b.first * sizeof(InstanceMatrix)),
+                              sizeof(InstanceMatrix));
+    glBindVertexArray(m.vao);
+    glMultiDrawElements(GL_TRIANGLES, rangeCounts.data(), GL_UNSIGNED_INT, rangeOffsets.data(),
+                        GLsizei(rangeCounts.size()));
+    return drawn;
   }
 
   Result<RenderStats> renderViews(const RenderTarget& target, std::span<const View> views,
@@ -807,10 +870,14 @@ Result<RenderStats> SceneRenderer::Impl::renderViews(const RenderTarget& target,
         material = b.material;
         setMaterialUniforms(programs[std::size_t(program)], materials.slots[material].material);
       }
-      drawBatch(b);
+      if (b.count == 1 && !meshes.slots[b.mesh].clusters.empty()) {
+        st.triangles += drawClusters(b, viewProjs[v].cast<double>(), items[b.item].model, st.clustersCulled);
+      } else {
+        drawBatch(b);
+        st.triangles += b.count * meshes.slots[b.mesh].triangles.size();
+      }
       ++st.drawCalls;
       st.instances += int(b.count);
-      st.triangles += b.count * meshes.slots[b.mesh].triangles.size();
     }
   }
 
@@ -906,8 +973,83 @@ Status SceneRenderer::updateMesh(MeshId id, const Mesh& mesh) {
   glNamedBufferSubData(slot->vbo, 0, GLsizeiptr(impl_->vertices.size() * sizeof(GpuVertex)),
                        impl_->vertices.data());
   Impl::setBounds(*slot, mesh);
+  Impl::setClusterBoxes(*slot, mesh.positions);
   ++slot->inPlaceUpdates;
   return gl::check("SceneRenderer::updateMesh");
+}
+
+Status SceneRenderer::setMeshTree(MeshId id, const MeshBvh& tree, std::size_t clusterTriangles) {
+  DM_DEMAND(impl_ != nullptr, "SceneRenderer used after move or default construction");
+  constexpr const char* where = "SceneRenderer::setMeshTree";
+  MeshSlot* slot = impl_->meshes.get(id);
+  if (slot == nullptr) return staleHandle("mesh", id.index, id.generation);
+  const std::size_t n = slot->triangles.size();
+  if (tree.triangleCount() != n)
+    return fail(ErrorCode::InvalidArgument,
+                formatString("the tree has %zu triangles, the mesh %zu", tree.triangleCount(), n), where,
+                "build the tree from the mesh given to addMesh/updateMesh");
+  for (std::uint32_t k = 0; k < n; ++k)
+    if (tree.originalTriangle(k) >= n || tree.triangleIndices(k) != slot->triangles[tree.originalTriangle(k)])
+      return fail(ErrorCode::InvalidArgument,
+                  formatString("the tree's triangle %u is not the mesh's triangle %u", k, tree.originalTriangle(k)),
+                  where, "build the tree from the mesh given to addMesh/updateMesh");
+  if (clusterTriangles == 0)
+    return fail(ErrorCode::InvalidArgument, "clusterTriangles is 0", where, "e.g. 2048 triangles per cluster");
+  // Triangle range of every node reachable from the root (children have
+  // larger indices, so a reverse walk of the visiting order is bottom-up).
+  const auto nodes = tree.nodes();
+  std::vector<std::uint32_t> order{0};
+  for (std::size_t i = 0; i < order.size(); ++i)
+    if (const BvhNode& nd = nodes[order[i]]; !nd.isLeaf()) order.insert(order.end(), {nd.first, nd.first + 1});
+  std::vector<std::array<std::uint32_t, 2>> range(nodes.size());
+  for (auto it = order.rbegin(); it != order.rend(); ++it) {
+    const BvhNode& nd = nodes[*it];
+    if (nd.isLeaf()) {
+      range[*it] = {nd.first, nd.first + nd.count};
+      continue;
+    }
+    const auto &l = range[nd.first], &r = range[nd.first + 1];
+    if (l[1] != r[0])
+      return fail(ErrorCode::Unsupported, formatString("node %u's subtrees are not contiguous in leaf order", *it),
+                  where, "use a dm::MeshBvh built by MeshBvh::build");
+    range[*it] = {l[0], r[1]};
+  }
+  // Clusters: the largest subtrees of at most clusterTriangles triangles.
+  std::vector<MeshCluster> clusters;
+  std::vector<std::uint32_t> stack{0};
+  while (!stack.empty()) {
+    const std::uint32_t i = stack.back();
+    stack.pop_back();
+    const BvhNode& nd = nodes[i];
+    if (nd.isLeaf() || range[i][1] - range[i][0] <= clusterTriangles) {
+      clusters.push_back({range[i][0], range[i][1] - range[i][0], Aabb()});
+      continue;
+    }
+    stack.push_back(nd.first + 1);
+    stack.push_back(nd.first);
+  }
+  std::sort(clusters.begin(), clusters.end(),
+            [](const MeshCluster& a, const MeshCluster& b) { return a.first < b.first; });
+  // The index buffer in leaf order (its storage is immutable: a new buffer).
+  std::vector<Triangle> ordered(n);
+  slot->leafOrder.resize(n);
+  for (std::uint32_t k = 0; k < n; ++k) {
+    slot->leafOrder[k] = tree.originalTriangle(k);
+    ordered[k] = slot->triangles[slot->leafOrder[k]];
+  }
+  GLuint ibo = 0;
+  glCreateBuffers(1, &ibo);
+  glNamedBufferStorage(ibo, GLsizeiptr(n * sizeof(Triangle)), ordered.data(), 0);
+  glVertexArrayElementBuffer(slot->vao, ibo);
+  glDeleteBuffers(1, &slot->ibo);
+  slot->ibo = ibo;
+  slot->clusters = std::move(clusters);
+  for (MeshCluster& c : slot->clusters) {
+    c.box.setEmpty();
+    for (std::uint32_t k = c.first; k < c.first + c.count; ++k)
+      for (int v = 0; v < 3; ++v) c.box.extend(tree.corners(k)[v]);
+  }
+  return gl::check(where);
 }
 
 Status SceneRenderer::removeMesh(MeshId id) {
@@ -931,6 +1073,7 @@ Result<MeshInfo> SceneRenderer::meshInfo(MeshId id) const {
   info.bounds = slot->bounds;
   info.uploads = slot->uploads;
   info.inPlaceUpdates = slot->inPlaceUpdates;
+  info.clusters = slot->clusters.size();
   info.vertexBuffer = slot->vbo;
   return info;
 }

@@ -52,6 +52,8 @@
 
 namespace dm {
 
+class MeshBvh;
+
 /// A generational handle to an object a SceneRenderer owns; a default one
 /// (generation 0) is invalid, and a handle goes stale when its object is
 /// removed (the slot may be reused under a new generation).
@@ -153,6 +155,7 @@ struct RenderStats {
   int instances = 0;          ///< camera-pass instances drawn
   std::size_t triangles = 0;  ///< camera-pass triangles submitted (instances x mesh triangles)
   int itemsCulled = 0;        ///< visible items outside the view frustum
+  int clustersCulled = 0;     ///< clusters of clustered meshes (setMeshTree) outside the view frustum
   int lodSwitches = 0;        ///< items drawn with a coarser level than their base mesh
   int shadowMaps = 0;         ///< shadow maps rendered
   int shadowDrawCalls = 0;    ///< draw calls of the shadow passes
@@ -166,6 +169,7 @@ struct MeshInfo {
   Aabb bounds;                     ///< local frame, m
   int uploads = 0;                 ///< full uploads (addMesh, topology-changing updateMesh)
   int inPlaceUpdates = 0;          ///< updateMesh calls that rewrote the vertex buffer in place
+  std::size_t clusters = 0;        ///< culling clusters from setMeshTree (0: drawn whole)
   std::uint32_t vertexBuffer = 0;  ///< GL name of the vertex buffer; kept by in-place updates
 };
 
@@ -214,6 +218,22 @@ class SceneRenderer {
   /// buffer is rewritten in place (glNamedBufferSubData, no reallocation);
   /// otherwise the mesh is re-uploaded. NotFound for a stale id. O(n).
   Status updateMesh(MeshId id, const Mesh& mesh);
+  /// Cluster culling through a DMCollide tree of the mesh (one the
+  /// application already has for collision or haptics, built from the same
+  /// triangles): the index buffer is reordered into the tree's leaf order
+  /// and cut into clusters, the largest subtrees of at most
+  /// `clusterTriangles` triangles, each with its box. A single instance of
+  /// the mesh then draws only the clusters inside the view frustum (one
+  /// glMultiDrawElements); instanced draws and shadow passes draw it whole.
+  /// In-place updateMesh() keeps the clusters and recomputes their boxes
+  /// (O(n)); a topology change drops them. Fails (InvalidArgument) on a
+  /// tree of other triangles or clusterTriangles = 0, NotFound for a stale
+  /// id. O(n).
+  /// @code
+  ///   auto tree = dm::MeshBvh::build(skin);              // also the god-object's
+  ///   scene->setMeshTree(skinId, *tree);                 // zoomed in: draws what is in view
+  /// @endcode
+  Status setMeshTree(MeshId id, const MeshBvh& tree, std::size_t clusterTriangles = 2048);
   /// Frees a mesh and its LOD list (not the LOD meshes). NotFound for a stale id.
   Status removeMesh(MeshId id);
   /// What the renderer holds for `id`; NotFound for a stale id.
