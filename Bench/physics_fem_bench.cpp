@@ -20,6 +20,7 @@
 //
 //   cmake -S . -B build-phf-bench -G Ninja -DDM_BUILD_BENCH=ON -DCMAKE_BUILD_TYPE=Release
 //   ninja -C build-phf-bench physics_fem_bench && build-phf-bench/Bench/physics_fem_bench
+// (`physics_fem_bench quick`: the goal's row alone, ours on one thread, best of 5).
 //
 // A second table times hierarchical grids (tetMeshHierarchical) against the
 // uniform voxel mesh of the same slab (levels = 0), with the tool point's
@@ -231,7 +232,21 @@ bool gradedOrgan() {
 
 }  // namespace
 
-int main() {
+int main(int argc, char** argv) {
+  if (argc > 1 && std::string(argv[1]) == "quick") {
+    // The goal's row alone: 10k tetrahedra, one thread, best of 5 runs.
+    auto mesh = dm::tetMeshBox({12, 12, 12}, dm::Vec3(kSize, kSize, kSize));
+    if (!mesh) return 1;
+    double best = 1e9, cg = 0;
+    for (int r = 0; r < 5; ++r) {
+      const Timing t = timeOurs(*mesh, false);
+      if (!t.ok) return 1;
+      if (t.msPerStep < best) best = t.msPerStep, cg = t.cgPerStep;
+    }
+    std::printf("10k tetrahedra, 1 thread, best of 5: %.2f ms per step (%.0f Hz), %.0f CG iterations\n", best,
+                1e3 / best, cg);
+    return 0;
+  }
   const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
   std::printf(
       "dm::FemBody implicit step (h = %.0f ms, PCG tolerance 1e-4 unless stated, block Jacobi), tissue cube "
