@@ -10,10 +10,10 @@ namespace dm {
 namespace {
 
 // The body's shape frame in the world: position · orientation · shapeOffset.
-Isometry3 shapePose(const WorldState& state, BodyId id, const BodyDesc& desc) {
+Isometry3 shapePose(const Vec3& position, const Quat& orientation, const BodyDesc& desc) {
   Isometry3 pose = Isometry3::Identity();
-  pose.translation() = state.position(id);
-  pose.linear() = state.orientation(id).toRotationMatrix();
+  pose.translation() = position;
+  pose.linear() = orientation.normalized().toRotationMatrix();
   return pose * desc.shapeOffset;
 }
 
@@ -23,7 +23,6 @@ Result<SoftRigidCoupling> SoftRigidCoupling::create(const PhysicsWorld& world, F
                                                     std::span<const SoftRigidContact> contacts) {
   std::vector<FemObstacle> obstacles;
   SoftRigidCoupling c;
-  const WorldState initial = world.makeState();
   for (std::size_t i = 0; i < contacts.size(); ++i) {
     const SoftRigidContact& k = contacts[i];
     const std::string where = "SoftRigidCoupling::create: contacts[" + std::to_string(i) + "]";
@@ -38,7 +37,7 @@ Result<SoftRigidCoupling> SoftRigidCoupling::create(const PhysicsWorld& world, F
     // mass (the body origin) in the shape frame: shapeOffset⁻¹ · 0.
     const Mat3 rs = d.shapeOffset.linear();
     obstacles.push_back({.tree = k.tree,
-                         .pose = shapePose(initial, k.body, d),
+                         .pose = shapePose(d.position, d.orientation, d),
                          .stiffness = k.stiffness,
                          .mass = dynamic ? d.mass : 0.0,
                          .inertia = dynamic ? Mat3(rs.transpose() * d.inertia * rs) : Mat3::Identity(),
@@ -60,7 +59,7 @@ Result<FemStepReport> SoftRigidCoupling::step(WorldState& state, double dt) {
                 "make the state with the world's makeState()");
   for (std::size_t i = 0; i < contacts_.size(); ++i) {
     const BodyId id = contacts_[i].body;
-    tissue_->setObstaclePose(i, shapePose(state, id, world_->bodies()[id.index]));
+    tissue_->setObstaclePose(i, shapePose(state.position(id), state.orientation(id), world_->bodies()[id.index]));
     tissue_->setObstacleVelocity(i, {state.linearVelocity(id), state.angularVelocity(id)});
   }
   auto report = tissue_->step(dt);

@@ -52,7 +52,7 @@ struct SoftRigidContact {
 };
 
 /// Steps a FemBody and a PhysicsWorld together (see the file comment).
-/// Holds pointers to both: they must outlive it. Move-only.
+/// Holds pointers to both: they must outlive it.
 class SoftRigidCoupling {
  public:
   /// Couples `tissue` to the bodies named in `contacts`; replaces the
