@@ -300,10 +300,12 @@ struct SceneRenderer::Impl {
 
   SceneRendererOptions options;
   // Programs by ShadingModel x variant flags (kColorTex, kNormalTex,
-  // kVertexColor, kShadows, kHeightTex) x light count 0..kMaxLights, compiled
-  // on first use: slot = (model * kVariants + flags) * kLightCounts + lights.
-  static constexpr int kColorTex = 1, kNormalTex = 2, kVertexColor = 4, kShadows = 8, kHeightTex = 16;
-  static constexpr int kVariants = 32;
+  // kVertexColor, kShadows, kHeightTex, kDirectionalOnly) x light count
+  // 0..kMaxLights, compiled on first use: slot = (model * kVariants + flags)
+  // * kLightCounts + lights. kShadows and kDirectionalOnly are per frame.
+  static constexpr int kColorTex = 1, kNormalTex = 2, kVertexColor = 4, kShadows = 8, kHeightTex = 16,
+                       kDirectionalOnly = 32;
+  static constexpr int kVariants = 64;
   static constexpr int kLightCounts = kMaxLights + 1;
   std::array<ShaderProgram, 3 * kVariants * kLightCounts> programs;
   std::string normalOffset;
@@ -337,6 +339,7 @@ struct SceneRenderer::Impl {
          {"HEIGHT_TEX", bit(kHeightTex)},
          {"VERTEX_COLOR", bit(kVertexColor)},
          {"SHADOWS", bit(kShadows)},
+         {"DIRECTIONAL_ONLY", bit(kDirectionalOnly)},
          {"NUM_LIGHTS", std::to_string(lightCount)}});
     if (!p) return p.error();
     programs[std::size_t(index)] = std::move(*p);
@@ -786,8 +789,9 @@ Result<RenderStats> SceneRenderer::Impl::renderViews(const RenderTarget& target,
       if (mesh != it.mesh.index) ++st.lodSwitches;
       const std::uint64_t program =
           std::uint64_t(programIndex(materials.get(it.material)->material, meshes.slots[mesh]));
+      // Key: program (8 bits: 3 models x kVariants), material, mesh (28 bits each).
       records.push_back(
-          {(program << 60) | (std::uint64_t(it.material.index) << 30) | mesh, std::uint32_t(i), mesh});
+          {(program << 56) | (std::uint64_t(it.material.index) << 28) | mesh, std::uint32_t(i), mesh});
     }
     makeBatches(items, viewBatches[v], true);
   }
@@ -851,9 +855,14 @@ Result<RenderStats> SceneRenderer::Impl::renderViews(const RenderTarget& target,
       glDisable(GL_SCISSOR_TEST);
     }
     // Every variant this view draws exists before the frame uniforms go out.
-    const int shadowFlag = shadowLights.empty() ? 0 : kShadows;
+    // Per-frame flags: shadow maps, and every light directional (the
+    // point/spot attenuation is compiled out: llvmpipe would run both sides
+    // of the light-type branch for every fragment).
+    int frameFlags = shadowLights.empty() ? 0 : kShadows;
+    if (std::all_of(lights.begin(), lights.end(), [](const Light& l) { return l.type == Light::Type::Directional; }))
+      frameFlags |= kDirectionalOnly;
     const int lightCount = int(lights.size());
-    auto slot = [&](const Batch& b) { return (b.program | shadowFlag) * kLightCounts + lightCount; };
+    auto slot = [&](const Batch& b) { return (b.program | frameFlags) * kLightCounts + lightCount; };
     for (const Batch& b : viewBatches[v])
       if (Status s = compileProgram(slot(b)); !s) return s.error();
     for (ShaderProgram& p : programs)

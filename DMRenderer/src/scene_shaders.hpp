@@ -4,7 +4,8 @@
 // shadow pass. Vertex attributes: 0 position, 1 normal, 2 uv, 3 colour,
 // 4 tangent (xyz, w = bitangent sign); 5..8 the per-instance model matrix,
 // 9..11 its normal matrix. Features a material or frame does not use are
-// compiled out (COLOR_TEX, NORMAL_TEX, HEIGHT_TEX, VERTEX_COLOR, SHADOWS), not
+// compiled out (COLOR_TEX, NORMAL_TEX, HEIGHT_TEX, VERTEX_COLOR, SHADOWS,
+// DIRECTIONAL_ONLY: no point or spot light this frame), not
 // branched over at run time, and the light loop runs to the constant NUM_LIGHTS.
 //
 // HEIGHT_TEX: parallax occlusion mapping. The height map's red channel is the
@@ -229,6 +230,9 @@ void main() {
     vec3 l;
     float atten = 1.0;
     float dist = 1.0;
+#if DIRECTIONAL_ONLY
+    l = -u_lightDir[i];
+#else
     if (u_lightType[i] == 0) {
       l = -u_lightDir[i];
     } else {
@@ -241,6 +245,7 @@ void main() {
       if (u_lightType[i] == 2)
         atten *= smoothstep(u_lightCone[i].y, u_lightCone[i].x, dot(-l, u_lightDir[i]));
     }
+#endif
     float nl = dot(n, l);
     if (nl <= 0.0 || atten <= 0.0) continue;
 #if SHADOWS
