@@ -22,8 +22,10 @@
 // tested against every box instead.
 //
 // Hierarchical grid: level l has cell edge c0·2^l; a box lives on the finest
-// level whose cell is at least twice its largest edge, so it covers at most
-// 2×2×2 cells there. Pairs on one level are found as above; a box finds
+// level whose cell is at least its largest edge, so it covers at most 2×2×2
+// cells there and the cell is less than twice its edge. (The expected box
+// tests per box grow like (c + e)⁶ / c³ for cell c and edge e, least at
+// c = e: a cell of 2–4 edges costs about three times as much.) Pairs on one level are found as above; a box finds
 // partners on each coarser occupied level by looking up the (at most 8)
 // cells it covers there and applying the same corner rule with that level's
 // cells, so each cross-level pair is found once, from its finer member.
@@ -143,8 +145,8 @@ class GridBroadPhase final : public BroadPhase {
     return std::max({b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]});
   }
 
-  // Hashed: cell = 2 × mean largest edge. Hierarchical: finest cell = 2 ×
-  // the smallest largest edge, but at most 8 levels below the mean. Either
+  // Hashed: cell = 2 × mean largest edge. Hierarchical: finest cell = the
+  // smallest largest edge, but at most 8 levels below the mean. Either
   // is kept until the wanted value drifts by more than a factor 2, so the
   // cells stay put while the boxes merely move.
   void chooseCellSize() {
@@ -166,7 +168,7 @@ class GridBroadPhase final : public BroadPhase {
       }
       if (n == 0) return;
       const double mean = sum / double(n);
-      double want = hierarchical_ ? 2.0 * std::max(smallest, mean / 256.0) : 2.0 * mean;
+      double want = hierarchical_ ? std::max(smallest, mean / 256.0) : 2.0 * mean;
       if (!(want > 0) || !std::isfinite(want)) {
         // All boxes are points: spread them over about n cells.
         want = largestEdge(bounds) / std::cbrt(double(n));
@@ -179,11 +181,12 @@ class GridBroadPhase final : public BroadPhase {
 
   int levelOf(const Box& b) const noexcept {
     if (!hierarchical_) return 0;
-    const double r = 2.0 * largestEdge(b) * inv_[0];
+    const double r = largestEdge(b) * inv_[0];
     if (!(r > 1.0)) return 0;
     if (!(r < 0x1p62)) return kMaxLevels - 1;  // also an infinite edge
-    const int l = static_cast<int>(std::ceil(std::log2(r)));
-    return std::clamp(l, 0, kMaxLevels - 1);
+    int e = 0;
+    const double m = std::frexp(r, &e);  // r = m·2^e, m in [0.5, 1): ceil(log2 r), exactly
+    return std::clamp(m == 0.5 ? e - 1 : e, 0, kMaxLevels - 1);
   }
 
   void buildEntries() {
