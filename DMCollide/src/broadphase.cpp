@@ -103,8 +103,7 @@ bool isUsableBox(const Aabb& box) noexcept {
   return true;
 }
 
-void emitSortedPairs(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& scratch,
-                     std::vector<ProxyPair>& out) {
+void sortPairKeys(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& scratch) {
   const std::size_t n = keys.size();
   if (n < 512) {
     std::sort(keys.begin(), keys.end());
@@ -137,6 +136,12 @@ void emitSortedPairs(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t
     const std::uint64_t lowMask = (std::uint64_t(1) << w) - 1;
     for (std::uint64_t& k : keys) k = ((k >> w) << 32) | (k & lowMask);
   }
+}
+
+void emitSortedPairs(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& scratch,
+                     std::vector<ProxyPair>& out) {
+  sortPairKeys(keys, scratch);
+  const std::size_t n = keys.size();
   out.resize(n);
   for (std::size_t i = 0; i < n; ++i)
     out[i] = {static_cast<ProxyId>(keys[i] >> 32), static_cast<ProxyId>(keys[i] & 0xffffffffu)};

@@ -25,10 +25,11 @@
 // level whose cell is at least its largest edge, so it covers at most 2×2×2
 // cells there and the cell is less than twice its edge. (The expected box
 // tests per box grow like (c + e)⁶ / c³ for cell c and edge e, least at
-// c = e: a cell of 2–4 edges costs about three times as much.) Pairs on one level are found as above; a box finds
-// partners on each coarser occupied level by looking up the (at most 8)
-// cells it covers there and applying the same corner rule with that level's
-// cells, so each cross-level pair is found once, from its finer member.
+// c = e: a cell of 2–4 edges costs about three times as much.) Pairs on one
+// level are found as above; a box finds partners on each coarser occupied
+// level by looking up the (at most 8) cells it covers there and applying the
+// same corner rule with that level's cells, so each cross-level pair is
+// found once, from its finer member.
 #include <dm/core/assert.hpp>
 
 #include <algorithm>

@@ -46,9 +46,12 @@ inline std::uint64_t pairKey(std::uint32_t a, std::uint32_t b) noexcept {
   return a < b ? (std::uint64_t(a) << 32) | b : (std::uint64_t(b) << 32) | a;
 }
 
-/// Sorts `keys` (pairKey values, no duplicates needed) ascending with an LSD
-/// radix sort over the bits the ids use, and writes them as pairs to `out`.
-/// O(k) for k keys; `scratch` is reused working memory.
+/// Sorts `keys` (pairKey values) ascending with an LSD radix sort over the
+/// bits the ids use (std::sort below 512 keys). O(k) for k keys; `scratch`
+/// is reused working memory.
+void sortPairKeys(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& scratch);
+
+/// sortPairKeys(), then writes the keys as pairs to `out`.
 void emitSortedPairs(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& scratch,
                      std::vector<ProxyPair>& out);
 

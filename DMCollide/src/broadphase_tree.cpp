@@ -1,30 +1,45 @@
 // Dynamic AABB tree broad phase (after Box2D's b2DynamicTree and Bullet's
-// btDbvt), in 3D with doubles.
+// btDbvt), in 3D.
 //
-// Data layout: one array of 128-byte, cache-line aligned nodes {fat box,
-// exact box of a leaf (six doubles each), parent or next-free, child1,
-// child2 (−1 for a leaf), height (0 for a leaf), proxy id, moved flag} with
-// a free list threaded through `parent`; `leafOf_` maps a proxy id to its
-// leaf node (or kParked for an id whose box is not finite, which lives
-// outside the tree). A leaf keeps its node while it moves.
+// Data layout, hot and cold apart:
+//  - `nodes_`: 32-byte nodes, two per cache line: the fat box as six floats
+//    rounded outwards (it only has to contain the exact box), child1 and
+//    child2; a leaf has child1 = −1 and its proxy id in child2. The tree
+//    walks touch nothing else.
+//  - `parent_` and `height_` (0 for a leaf, −1 while free) by node, used
+//    when the tree changes; the free list is threaded through `parent_`.
+//  - by proxy id: `real_`, the exact box (six doubles, what the reported
+//    pairs are tested on), `fat_`, a copy of the leaf's fat box (so update()
+//    reads only id-ordered memory), `leafOf_` (the leaf node, kAbsent, or
+//    kParked for an id whose box is not finite and lives outside the tree)
+//    and a `dirty_` flag. A leaf keeps its node while it moves.
 //
-// Leaves store "fat" boxes, enlarged on each side by options.fatMargin times
-// the box's largest edge, so a box that moves a little stays inside its fat
-// box and needs no tree change; one that leaves it is removed and inserted
-// again. Insertion descends by the surface-area cost of Box2D (create a new
-// parent here, or push the box down the cheaper child) and the path back to
-// the root is re-balanced with AVL rotations, so the height stays O(log n)
-// even for many identical boxes.
+// Fat boxes: a (re)inserted leaf stores its box enlarged on each side by
+// options.fatMargin times its largest edge, and further, along each axis in
+// the direction it last moved, by kPredict times that displacement (at most
+// its largest edge; Box2D's aabbMultiplier is 4, 8 measured better in
+// Bench/collide_broadphase_bench) — a box in steady motion stays inside its
+// fat box about kPredict steps longer. A box that leaves its fat
+// box is removed and inserted again. Insertion descends by the surface-area
+// cost of Box2D (create a new parent here, or push the box down the cheaper
+// child) and the path back to the root is re-balanced with AVL rotations, so
+// the height stays O(log n) even for many identical boxes.
 //
-// Pairs (as in Box2D): a persistent hash set of the leaf-node pairs whose
-// fat boxes overlap. Fat boxes change only when a leaf is (re)inserted, so only
-// those leaves ("moved", listed once each) query the tree for new partners;
-// every step one pass over the set drops the pairs whose fat boxes parted or
-// whose proxies left, and reports those whose exact boxes overlap. Cost per
-// step: O(moved · log n + fat pairs); memory O(n + fat pairs).
+// Pairs, maintained incrementally: `pairs_`, the sorted list of the id pairs
+// whose fat boxes overlap. Fat boxes change only when a leaf is (re)inserted
+// or removed, which marks its id dirty. Each step drops every pair with a
+// dirty member (a pass over flags, no boxes read), queries the tree once per
+// dirty leaf for its current fat partners (a partner that is itself dirty
+// and has the smaller id finds the pair instead; the queries run in Morton
+// order of the boxes so that consecutive ones share cached upper nodes),
+// radix-sorts those and merges them in; the reported pairs are those of the
+// list whose exact boxes overlap, already in order. Cost per step: O(moved · log n + fat pairs);
+// memory O(n + fat pairs).
 #include <dm/core/assert.hpp>
 
 #include <algorithm>
+#include <cfloat>
+#include <cmath>
 
 #include "broadphase_impl.hpp"
 
@@ -35,36 +50,76 @@ namespace {
 constexpr std::int32_t kNull = -1;
 constexpr std::int32_t kAbsent = -1;
 constexpr std::int32_t kParked = -2;
+/// Fat boxes reach this many last displacements ahead of a moving box.
+constexpr double kPredict = 8.0;
 
 using Box = FlatBox;
 
-inline Box merged(const Box& a, const Box& b) noexcept {
-  Box r;
+/// A box as six floats; the tree's boxes.
+struct FBox {
+  float lo[3], hi[3];
+};
+
+/// Largest float ≤ x (−∞ below the float range).
+inline float floatDown(double x) noexcept {
+  if (!(x <= double(FLT_MAX))) return x > 0 ? FLT_MAX : -INFINITY;  // NaN: −∞, never excludes
+  if (x < -double(FLT_MAX)) return -INFINITY;
+  const float f = static_cast<float>(x);
+  return double(f) > x ? std::nextafter(f, -INFINITY) : f;
+}
+
+/// Smallest float ≥ x (+∞ above the float range).
+inline float floatUp(double x) noexcept {
+  if (!(x >= -double(FLT_MAX))) return x < 0 ? -FLT_MAX : INFINITY;
+  if (x > double(FLT_MAX)) return INFINITY;
+  const float f = static_cast<float>(x);
+  return double(f) < x ? std::nextafter(f, INFINITY) : f;
+}
+
+inline FBox merged(const FBox& a, const FBox& b) noexcept {
+  FBox r;
   for (int k = 0; k < 3; ++k) r.lo[k] = std::min(a.lo[k], b.lo[k]), r.hi[k] = std::max(a.hi[k], b.hi[k]);
   return r;
 }
 
 /// Half the surface area: the insertion cost measure.
-inline double area(const Box& b) noexcept {
-  const double x = b.hi[0] - b.lo[0], y = b.hi[1] - b.lo[1], z = b.hi[2] - b.lo[2];
+inline double area(const FBox& b) noexcept {
+  const double x = double(b.hi[0]) - b.lo[0], y = double(b.hi[1]) - b.lo[1], z = double(b.hi[2]) - b.lo[2];
   return x * y + y * z + z * x;
 }
 
-inline bool contains(const Box& outer, const Box& inner) noexcept {
+inline bool contains(const FBox& outer, const Box& inner) noexcept {
   return outer.lo[0] <= inner.lo[0] && outer.lo[1] <= inner.lo[1] && outer.lo[2] <= inner.lo[2] &&
          inner.hi[0] <= outer.hi[0] && inner.hi[1] <= outer.hi[1] && inner.hi[2] <= outer.hi[2];
 }
 
-struct alignas(64) Node {
-  Box box;              // fat box of a leaf, union of the children otherwise
-  Box real;             // leaf: the exact box
-  std::int32_t parent;  // next free node while on the free list
+inline bool overlapF(const FBox& a, const FBox& b) noexcept {
+  return a.lo[0] <= b.hi[0] && b.lo[0] <= a.hi[0] && a.lo[1] <= b.hi[1] && b.lo[1] <= a.hi[1] &&
+         a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
+}
+
+inline bool overlapFD(const FBox& a, const Box& b) noexcept {
+  return a.lo[0] <= b.hi[0] && b.lo[0] <= a.hi[0] && a.lo[1] <= b.hi[1] && b.lo[1] <= a.hi[1] &&
+         a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
+}
+
+/// The low 10 bits of v spread to every third bit (a Morton code axis).
+inline std::uint64_t spreadBits(std::uint32_t v) noexcept {
+  std::uint64_t x = v & 0x3ffu;
+  x = (x | (x << 16)) & 0x30000ffull;
+  x = (x | (x << 8)) & 0x300f00full;
+  x = (x | (x << 4)) & 0x30c30c3ull;
+  x = (x | (x << 2)) & 0x9249249ull;
+  return x;
+}
+
+struct alignas(32) Node {
+  FBox box;             // fat box of a leaf, union of the children otherwise
   std::int32_t child1;  // kNull for a leaf
-  std::int32_t child2;
-  std::int32_t height;  // 0 for a leaf, −1 while free
-  ProxyId id;
-  std::uint32_t moved;  // leaf: (re)inserted since the last overlappingPairs()
+  std::int32_t child2;  // a leaf's proxy id
+  bool leaf() const noexcept { return child1 < 0; }
 };
+static_assert(sizeof(Node) == 32, "two nodes per cache line");
 
 class DynamicAabbTreeBroadPhase final : public BroadPhase {
  public:
@@ -79,33 +134,47 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
       update(id, box);
       return;
     }
-    if (id >= leafOf_.size()) leafOf_.resize(std::size_t(id) + 1, kAbsent);
+    if (id >= leafOf_.size()) {
+      const std::size_t n = std::size_t(id) + 1;
+      leafOf_.resize(n, kAbsent);
+      real_.resize(n);
+      fat_.resize(n);
+      dirty_.resize(n, 0);
+    }
     ++count_;
-    leafOf_[id] = isUsableBox(box) ? createLeaf(id, toFlatBox(box)) : kParked;
+    const Box b = toFlatBox(box);
+    real_[id] = b;
+    leafOf_[id] = isUsableBox(box) ? createLeaf(id, b) : kParked;
+    markDirty(id);
   }
 
   void update(ProxyId id, const Aabb& box) override {
     if (id >= leafOf_.size() || leafOf_[id] == kAbsent) return;
     const std::int32_t leaf = leafOf_[id];
+    const Box b = toFlatBox(box);
     if (!isUsableBox(box)) {
+      real_[id] = b;
       if (leaf != kParked) {
         removeLeaf(leaf);
         freeNode(leaf);
         leafOf_[id] = kParked;
+        markDirty(id);
       }
       return;
     }
-    const Box b = toFlatBox(box);
     if (leaf == kParked) {
+      real_[id] = b;
       leafOf_[id] = createLeaf(id, b);
+      markDirty(id);
       return;
     }
-    nodes_[leaf].real = b;
-    if (contains(nodes_[leaf].box, b)) return;
+    const Box old = real_[id];
+    real_[id] = b;
+    if (contains(fat_[id], b)) return;
     removeLeaf(leaf);
-    nodes_[leaf].box = fatten(b);
+    setFat(leaf, id, b, &old);
     insertLeaf(leaf);
-    markMoved(leaf);
+    markDirty(id);
   }
 
   void remove(ProxyId id) override {
@@ -116,60 +185,60 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
       freeNode(leaf);
     }
     leafOf_[id] = kAbsent;
+    markDirty(id);
     --count_;
   }
 
-  void clear() override {
-    nodes_.clear();
-    leafOf_.clear();
-    root_ = kNull;
-    free_ = kNull;
-    count_ = 0;
-    fatPairs_.clear();
-    moved_.clear();
-  }
+  void clear() override { *this = DynamicAabbTreeBroadPhase(BroadPhaseOptions{0.0, margin_}); }
 
   std::size_t size() const noexcept override { return count_; }
 
   void overlappingPairs(std::vector<ProxyPair>& out) override {
-    // New pairs of fat boxes: only a (re)inserted leaf can start one.
-    for (ProxyId id : moved_) {
-      const std::int32_t leaf = leafOf_[id];
-      if (leaf < 0 || !nodes_[leaf].moved) continue;
-      nodes_[leaf].moved = 0;
-      const Box fat = nodes_[leaf].box;
-      stack_.clear();
-      stack_.push_back(root_);
-      while (!stack_.empty()) {
-        const std::int32_t i = stack_.back();
-        stack_.pop_back();
-        const Node& n = nodes_[i];
-        if (!overlap(n.box, fat)) continue;
-        if (n.height > 0) {
-          stack_.push_back(n.child1);
-          stack_.push_back(n.child2);
-        } else if (i != leaf) {
-          fatPairs_.insert(pairKey(static_cast<std::uint32_t>(leaf), static_cast<std::uint32_t>(i)));
+    if (!moved_.empty()) {
+      // Fat pairs of dirty ids are found again below (or are gone).
+      kept_.clear();
+      for (std::uint64_t key : pairs_)
+        if (!dirty_[key >> 32] && !dirty_[key & 0xffffffffu]) kept_.push_back(key);
+      // Query in Morton order of the fat boxes' centres: consecutive queries
+      // then walk mostly the same upper nodes, which stay in cache.
+      order_.clear();
+      if (root_ != kNull) {
+        const FBox& r = nodes_[root_].box;
+        double lo[3], scale[3];
+        for (int k = 0; k < 3; ++k) {
+          lo[k] = r.lo[k];
+          const double extent = double(r.hi[k]) - r.lo[k];
+          scale[k] = extent > 0 && extent < INFINITY ? 1023.0 / extent : 0.0;
         }
+        for (ProxyId id : moved_) {
+          if (leafOf_[id] < 0) continue;
+          const FBox& f = fat_[id];
+          std::uint64_t code = 0;
+          for (int k = 0; k < 3; ++k) {
+            const double c = (0.5 * (double(f.lo[k]) + f.hi[k]) - lo[k]) * scale[k];
+            code |= spreadBits(c >= 0 && c <= 1023.0 ? static_cast<std::uint32_t>(c) : 0u) << k;
+          }
+          order_.push_back((code << 32) | id);
+        }
+        sortPairKeys(order_, scratch_);
       }
+      fresh_.clear();
+      for (std::uint64_t key : order_) {
+        const auto id = static_cast<ProxyId>(key & 0xffffffffu);
+        findPartners(id, fat_[id]);
+      }
+      for (ProxyId id : moved_) dirty_[id] = 0;
+      moved_.clear();
+      sortPairKeys(fresh_, scratch_);
+      pairs_.resize(kept_.size() + fresh_.size());
+      std::merge(kept_.begin(), kept_.end(), fresh_.begin(), fresh_.end(), pairs_.begin());
     }
-    moved_.clear();
-    // Drop pairs whose fat boxes parted (or whose proxies left the tree);
-    // report the remaining pairs whose exact boxes overlap. eraseIf may
-    // visit a key twice, hence the unique() after sorting.
-    keys_.clear();
-    fatPairs_.eraseIf([&](std::uint64_t key) {
-      // A freed node has height −1 and a reused one is a leaf whose pairs
-      // are as valid as any: only "both leaves with overlapping fat boxes"
-      // keeps a pair.
-      const Node& a = nodes_[key >> 32];
-      const Node& b = nodes_[key & 0xffffffffu];
-      if (a.height != 0 || b.height != 0 || !overlap(a.box, b.box)) return true;
-      if (overlap(a.real, b.real)) keys_.push_back(pairKey(a.id, b.id));
-      return false;
-    });
-    emitSortedPairs(keys_, scratch_, out);
-    out.erase(std::unique(out.begin(), out.end()), out.end());
+    // The pairs whose exact boxes overlap, in the list's (ascending) order.
+    out.clear();
+    for (std::uint64_t key : pairs_) {
+      const auto a = static_cast<ProxyId>(key >> 32), b = static_cast<ProxyId>(key & 0xffffffffu);
+      if (overlap(real_[a], real_[b])) out.push_back({a, b});
+    }
   }
 
   void query(const Aabb& box, std::vector<ProxyId>& out) const override {
@@ -181,9 +250,10 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
       const std::int32_t i = stack.back();
       stack.pop_back();
       const Node& n = nodes_[i];
-      if (!overlap(n.box, q)) continue;
-      if (n.height == 0) {
-        if (overlap(n.real, q)) out.push_back(n.id);
+      if (!overlapFD(n.box, q)) continue;
+      if (n.leaf()) {
+        const auto id = static_cast<ProxyId>(n.child2);
+        if (overlap(real_[id], q)) out.push_back(id);
       } else {
         stack.push_back(n.child1);
         stack.push_back(n.child2);
@@ -193,60 +263,90 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
   }
 
  private:
-  Box fatten(const Box& b) const noexcept {
-    const double m = margin_ * std::max({b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]});
-    if (!(m >= 0)) return b;  // 0 · ∞ for an edge that overflows
-    Box f = b;
-    for (int k = 0; k < 3; ++k) f.lo[k] -= m, f.hi[k] += m;
-    return f;
+  // Appends to fresh_ the keys of id's fat partners that id reports.
+  void findPartners(ProxyId id, const FBox& fat) {
+    stack_.clear();
+    stack_.push_back(root_);
+    while (!stack_.empty()) {
+      const std::int32_t i = stack_.back();
+      stack_.pop_back();
+      const Node& n = nodes_[i];
+      if (!overlapF(n.box, fat)) continue;
+      if (!n.leaf()) {
+        stack_.push_back(n.child1);
+        stack_.push_back(n.child2);
+        continue;
+      }
+      const auto other = static_cast<ProxyId>(n.child2);
+      if (other != id && !(dirty_[other] && other < id)) fresh_.push_back(pairKey(id, other));
+    }
+  }
+
+  // Stores the fat box of `b` in leaf and fat_[id]; `old` (the previous
+  // exact box, or null) gives the displacement to predict along.
+  void setFat(std::int32_t leaf, ProxyId id, const Box& b, const Box* old) {
+    const double edge = std::max({b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]});
+    double m = margin_ * edge;
+    if (!(m >= 0)) m = 0;  // 0 · ∞ for an edge that overflows
+    FBox f;
+    for (int k = 0; k < 3; ++k) {
+      double lo = b.lo[k] - m, hi = b.hi[k] + m;
+      if (old && m > 0) {
+        const double d = kPredict * 0.5 * ((b.lo[k] - old->lo[k]) + (b.hi[k] - old->hi[k]));
+        if (d > 0) hi += std::min(d, edge);
+        if (d < 0) lo += std::max(d, -edge);
+      }
+      f.lo[k] = floatDown(lo);
+      f.hi[k] = floatUp(hi);
+    }
+    nodes_[leaf].box = f;
+    fat_[id] = f;
   }
 
   std::int32_t allocNode() {
     if (free_ == kNull) {
       DM_DEMAND(nodes_.size() < 0x7fffffffu, "dynamic AABB tree: too many nodes");
       nodes_.push_back({});
-      nodes_.back().parent = kNull;
+      parent_.push_back(kNull);
+      height_.push_back(-1);
       free_ = static_cast<std::int32_t>(nodes_.size() - 1);
     }
     const std::int32_t i = free_;
-    free_ = nodes_[i].parent;
-    nodes_[i].parent = nodes_[i].child1 = nodes_[i].child2 = kNull;
-    nodes_[i].height = 0;
-    nodes_[i].moved = 0;
+    free_ = parent_[i];
+    parent_[i] = nodes_[i].child1 = nodes_[i].child2 = kNull;
+    height_[i] = 0;
     return i;
   }
 
   void freeNode(std::int32_t i) {
-    nodes_[i].parent = free_;
-    nodes_[i].height = -1;
+    parent_[i] = free_;
+    height_[i] = -1;
     free_ = i;
   }
 
-  void markMoved(std::int32_t leaf) {
-    if (nodes_[leaf].moved) return;
-    nodes_[leaf].moved = 1;
-    moved_.push_back(nodes_[leaf].id);
+  void markDirty(ProxyId id) {
+    if (dirty_[id]) return;
+    dirty_[id] = 1;
+    moved_.push_back(id);
   }
 
   std::int32_t createLeaf(ProxyId id, const Box& b) {
     const std::int32_t leaf = allocNode();
-    nodes_[leaf].id = id;
-    nodes_[leaf].box = fatten(b);
-    nodes_[leaf].real = b;
+    nodes_[leaf].child2 = static_cast<std::int32_t>(id);
+    setFat(leaf, id, b, nullptr);
     insertLeaf(leaf);
-    markMoved(leaf);
     return leaf;
   }
 
   void insertLeaf(std::int32_t leaf) {
     if (root_ == kNull) {
       root_ = leaf;
-      nodes_[leaf].parent = kNull;
+      parent_[leaf] = kNull;
       return;
     }
-    const Box leafBox = nodes_[leaf].box;
+    const FBox leafBox = nodes_[leaf].box;
     std::int32_t index = root_;
-    while (nodes_[index].height > 0) {
+    while (!nodes_[index].leaf()) {
       const Node& n = nodes_[index];
       const double combinedArea = area(merged(n.box, leafBox));
       // Cost of a new parent of this node and the leaf, and the area every
@@ -256,22 +356,21 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
       auto descendCost = [&](std::int32_t c) {
         const Node& cn = nodes_[c];
         const double grown = area(merged(leafBox, cn.box));
-        return (cn.height == 0 ? grown : grown - area(cn.box)) + inheritance;
+        return (cn.leaf() ? grown : grown - area(cn.box)) + inheritance;
       };
       const double cost1 = descendCost(n.child1), cost2 = descendCost(n.child2);
       if (cost < cost1 && cost < cost2) break;
       index = cost1 < cost2 ? n.child1 : n.child2;
     }
     const std::int32_t sibling = index;
-    const std::int32_t oldParent = nodes_[sibling].parent;
+    const std::int32_t oldParent = parent_[sibling];
     const std::int32_t newParent = allocNode();
     Node& p = nodes_[newParent];
-    p.parent = oldParent;
+    parent_[newParent] = oldParent;
     p.box = merged(leafBox, nodes_[sibling].box);
-    p.height = nodes_[sibling].height + 1;
+    height_[newParent] = height_[sibling] + 1;
     p.child1 = sibling;
     p.child2 = leaf;
-    p.id = 0;
     if (oldParent != kNull) {
       if (nodes_[oldParent].child1 == sibling) {
         nodes_[oldParent].child1 = newParent;
@@ -281,8 +380,8 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
     } else {
       root_ = newParent;
     }
-    nodes_[sibling].parent = newParent;
-    nodes_[leaf].parent = newParent;
+    parent_[sibling] = newParent;
+    parent_[leaf] = newParent;
     refitUpwards(newParent);
   }
 
@@ -291,14 +390,14 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
       root_ = kNull;
       return;
     }
-    const std::int32_t parent = nodes_[leaf].parent;
-    const std::int32_t grandParent = nodes_[parent].parent;
+    const std::int32_t parent = parent_[leaf];
+    const std::int32_t grandParent = parent_[parent];
     const std::int32_t sibling =
         nodes_[parent].child1 == leaf ? nodes_[parent].child2 : nodes_[parent].child1;
     freeNode(parent);
     if (grandParent == kNull) {
       root_ = sibling;
-      nodes_[sibling].parent = kNull;
+      parent_[sibling] = kNull;
       return;
     }
     if (nodes_[grandParent].child1 == parent) {
@@ -306,7 +405,7 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
     } else {
       nodes_[grandParent].child2 = sibling;
     }
-    nodes_[sibling].parent = grandParent;
+    parent_[sibling] = grandParent;
     refitUpwards(grandParent);
   }
 
@@ -315,9 +414,9 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
     while (index != kNull) {
       index = balance(index);
       Node& n = nodes_[index];
-      n.height = 1 + std::max(nodes_[n.child1].height, nodes_[n.child2].height);
+      height_[index] = 1 + std::max(height_[n.child1], height_[n.child2]);
       n.box = merged(nodes_[n.child1].box, nodes_[n.child2].box);
-      index = n.parent;
+      index = parent_[index];
     }
   }
 
@@ -335,63 +434,43 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
   // returns the node now at A's place.
   std::int32_t balance(std::int32_t iA) {
     Node& A = nodes_[iA];
-    if (A.height < 2) return iA;
+    if (height_[iA] < 2) return iA;
     const std::int32_t iB = A.child1, iC = A.child2;
     Node& B = nodes_[iB];
     Node& C = nodes_[iC];
-    const std::int32_t diff = C.height - B.height;
+    const std::int32_t diff = height_[iC] - height_[iB];
     if (diff > 1) {  // rotate C up
       const std::int32_t iF = C.child1, iG = C.child2;
-      Node& F = nodes_[iF];
-      Node& G = nodes_[iG];
       C.child1 = iA;
-      C.parent = A.parent;
-      A.parent = iC;
-      replaceChild(C.parent, iA, iC);
-      if (F.height > G.height) {
-        C.child2 = iF;
-        A.child2 = iG;
-        G.parent = iA;
-        A.box = merged(B.box, G.box);
-        C.box = merged(A.box, F.box);
-        A.height = 1 + std::max(B.height, G.height);
-        C.height = 1 + std::max(A.height, F.height);
-      } else {
-        C.child2 = iG;
-        A.child2 = iF;
-        F.parent = iA;
-        A.box = merged(B.box, F.box);
-        C.box = merged(A.box, G.box);
-        A.height = 1 + std::max(B.height, F.height);
-        C.height = 1 + std::max(A.height, G.height);
-      }
+      parent_[iC] = parent_[iA];
+      parent_[iA] = iC;
+      replaceChild(parent_[iC], iA, iC);
+      const bool keepF = height_[iF] > height_[iG];
+      const std::int32_t iUp = keepF ? iF : iG, iDown = keepF ? iG : iF;
+      C.child2 = iUp;
+      A.child2 = iDown;
+      parent_[iDown] = iA;
+      A.box = merged(B.box, nodes_[iDown].box);
+      C.box = merged(A.box, nodes_[iUp].box);
+      height_[iA] = 1 + std::max(height_[iB], height_[iDown]);
+      height_[iC] = 1 + std::max(height_[iA], height_[iUp]);
       return iC;
     }
     if (diff < -1) {  // rotate B up
       const std::int32_t iD = B.child1, iE = B.child2;
-      Node& D = nodes_[iD];
-      Node& E = nodes_[iE];
       B.child1 = iA;
-      B.parent = A.parent;
-      A.parent = iB;
-      replaceChild(B.parent, iA, iB);
-      if (D.height > E.height) {
-        B.child2 = iD;
-        A.child1 = iE;
-        E.parent = iA;
-        A.box = merged(C.box, E.box);
-        B.box = merged(A.box, D.box);
-        A.height = 1 + std::max(C.height, E.height);
-        B.height = 1 + std::max(A.height, D.height);
-      } else {
-        B.child2 = iE;
-        A.child1 = iD;
-        D.parent = iA;
-        A.box = merged(C.box, D.box);
-        B.box = merged(A.box, E.box);
-        A.height = 1 + std::max(C.height, D.height);
-        B.height = 1 + std::max(A.height, E.height);
-      }
+      parent_[iB] = parent_[iA];
+      parent_[iA] = iB;
+      replaceChild(parent_[iB], iA, iB);
+      const bool keepD = height_[iD] > height_[iE];
+      const std::int32_t iUp = keepD ? iD : iE, iDown = keepD ? iE : iD;
+      B.child2 = iUp;
+      A.child1 = iDown;
+      parent_[iDown] = iA;
+      A.box = merged(C.box, nodes_[iDown].box);
+      B.box = merged(A.box, nodes_[iUp].box);
+      height_[iA] = 1 + std::max(height_[iC], height_[iDown]);
+      height_[iB] = 1 + std::max(height_[iA], height_[iUp]);
       return iB;
     }
     return iA;
@@ -399,11 +478,15 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
 
   double margin_;
   std::vector<Node> nodes_;
-  std::vector<std::int32_t> leafOf_;  // by id: leaf node, kAbsent or kParked
+  std::vector<std::int32_t> parent_, height_;  // by node
+  std::vector<std::int32_t> leafOf_;           // by id: leaf node, kAbsent or kParked
+  std::vector<Box> real_;                      // by id: exact box
+  std::vector<FBox> fat_;                      // by id: the leaf's fat box
+  std::vector<unsigned char> dirty_;           // by id: listed in moved_
+  std::vector<ProxyId> moved_;                 // ids (re)inserted, parked or removed
   std::vector<std::int32_t> stack_;
-  std::vector<ProxyId> moved_;  // ids whose leaf was (re)inserted
-  PairKeySet fatPairs_;         // leaf node pairs whose fat boxes overlap
-  std::vector<std::uint64_t> keys_, scratch_;
+  std::vector<std::uint64_t> pairs_;  // sorted id-pair keys whose fat boxes overlap
+  std::vector<std::uint64_t> kept_, fresh_, order_, scratch_;
   std::int32_t root_ = kNull;
   std::int32_t free_ = kNull;
   std::size_t count_ = 0;

@@ -13,9 +13,10 @@
 // | SweepAndPrune     | O(1) amort.  | O(n + k + swaps), incremental | coherent motion, few movers     |
 // | HashedGrid        | O(1)         | O(n + k), rebuilt per step    | similar sizes, uniform density  |
 // | HierarchicalGrid  | O(1)         | O(n + k), levels by size      | mixed sizes                     |
-// | DynamicAabbTree   | O(log n)     | O(m log n + k), m = re-fitted | general scenes, ray/box queries |
+// | DynamicAabbTree   | O(log n)     | O(m log n + k), m = moved     | general scenes, ray/box queries |
 //
-// (k = overlapping pairs.) Incremental sweep-and-prune keeps the pair set
+// (k = overlapping pairs; m = boxes that left their enlarged "fat" box in
+// the tree and were re-inserted.) Incremental sweep-and-prune keeps the pair set
 // between steps in a hash set (memory O(n + k), never an n² bit matrix); it
 // suits moderate n — at fixed density its swaps per step grow like n^(5/3).
 // query() is O(log n + hits) on the tree and an O(n) scan on the others.
@@ -74,7 +75,8 @@ struct BroadPhaseOptions {
   /// by more than a factor 2). HierarchicalGrid: edge of the finest level.
   double cellSize = 0.0;
   /// DynamicAabbTree: stored boxes are enlarged by this fraction of their
-  /// extent so that small motions need no tree update.
+  /// extent, and a re-inserted box further along its last displacement, so
+  /// that small and steady motions need no tree update; 0 = exact boxes.
   double fatMargin = 0.1;
 };
 
