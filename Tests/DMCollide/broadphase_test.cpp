@@ -334,6 +334,24 @@ TEST(BroadPhase, SteadyMotionReversalsAndLargeMovesMatchBruteForce) {
   }
 }
 
+TEST(BroadPhase, HugeBoxesAmongManyMatchBruteForce) {
+  // Enough boxes that the tree rebuilds itself, with boxes whose centres
+  // overflow (−1e308…1e308) or lie far out among them.
+  for (const Variant& v : variants()) {
+    SCOPED_TRACE(v.label);
+    std::mt19937_64 rng(5);
+    Lockstep ls(v);
+    ls.insert(0, box(-1e308, -1e308, -1e308, 1e308, 1e308, 1e308));
+    ls.insert(1, box(1e300, 1e300, 1e300, 1e301, 1e301, 1e301));
+    ls.insert(2, box(-1e308, 0, 0, 1e308, 1, 1));
+    for (ProxyId id = 3; id < 400; ++id) ls.insert(id, randomBox(rng, 10.0));
+    ls.check({box(0, 0, 0, 1, 1, 1), box(2e300, 2e300, 2e300, 3e300, 3e300, 3e300)}, "huge among many");
+    for (ProxyId id = 3; id < 400; id += 2) ls.update(id, randomBox(rng, 10.0));
+    ls.update(1, box(0, 0, 0, 1e301, 1e301, 1e301));
+    ls.check({box(0, 0, 0, 1, 1, 1)}, "huge among many, moved");
+  }
+}
+
 TEST(BroadPhase, BulkInsertAndRemoveMatchBruteForce) {
   for (const Variant& v : variants()) {
     SCOPED_TRACE(v.label);
