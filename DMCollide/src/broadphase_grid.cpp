@@ -146,8 +146,9 @@ class GridBroadPhase final : public BroadPhase {
     return std::max({b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]});
   }
 
-  // Hashed: cell = 2 × mean largest edge. Hierarchical: finest cell = the
-  // smallest largest edge, but at most 8 levels below the mean. Either
+  // Hashed: cell = 2 × mean largest edge. Hierarchical: finest cell = √2 ×
+  // the mean largest edge halved until it is at most the smallest largest
+  // edge, but at most 8 levels below the mean. Either
   // is kept until the wanted value drifts by more than a factor 2, so the
   // cells stay put while the boxes merely move.
   void chooseCellSize() {
@@ -169,7 +170,15 @@ class GridBroadPhase final : public BroadPhase {
       }
       if (n == 0) return;
       const double mean = sum / double(n);
-      double want = hierarchical_ ? std::max(smallest, mean / 256.0) : 2.0 * mean;
+      double want = 2.0 * mean;
+      if (hierarchical_) {
+        // Level l holds edges in (c0·2^(l−1), c0·2^l]: put the mean in the
+        // middle of one (at c0·2^l / √2, in log scale) so that a population
+        // of similar boxes shares a level instead of straddling two.
+        const double finest = std::max(smallest, mean / 256.0);
+        want = mean * std::sqrt(2.0);
+        while (want > finest && std::isfinite(want)) want *= 0.5;
+      }
       if (!(want > 0) || !std::isfinite(want)) {
         // All boxes are points: spread them over about n cells.
         want = largestEdge(bounds) / std::cbrt(double(n));
