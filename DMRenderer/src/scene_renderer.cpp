@@ -300,12 +300,13 @@ struct SceneRenderer::Impl {
 
   SceneRendererOptions options;
   // Programs by ShadingModel x variant flags (kColorTex, kNormalTex,
-  // kVertexColor, kShadows, kHeightTex, kDirectionalOnly) x light count
-  // 0..kMaxLights, compiled on first use: slot = (model * kVariants + flags)
-  // * kLightCounts + lights. kShadows and kDirectionalOnly are per frame.
+  // kVertexColor, kShadows, kHeightTex, kDirectionalOnly, kSingle) x light
+  // count 0..kMaxLights, compiled on first use: slot = (model * kVariants +
+  // flags) * kLightCounts + lights. kShadows and kDirectionalOnly are per
+  // frame, kSingle per draw (one instance).
   static constexpr int kColorTex = 1, kNormalTex = 2, kVertexColor = 4, kShadows = 8, kHeightTex = 16,
-                       kDirectionalOnly = 32;
-  static constexpr int kVariants = 64;
+                       kDirectionalOnly = 32, kSingle = 64;
+  static constexpr int kVariants = 128;
   static constexpr int kLightCounts = kMaxLights + 1;
   std::array<ShaderProgram, 3 * kVariants * kLightCounts> programs;
   std::string normalOffset;
@@ -340,6 +341,7 @@ struct SceneRenderer::Impl {
          {"VERTEX_COLOR", bit(kVertexColor)},
          {"SHADOWS", bit(kShadows)},
          {"DIRECTIONAL_ONLY", bit(kDirectionalOnly)},
+         {"SINGLE", bit(kSingle)},
          {"NUM_LIGHTS", std::to_string(lightCount)}});
     if (!p) return p.error();
     programs[std::size_t(index)] = std::move(*p);
@@ -789,9 +791,9 @@ Result<RenderStats> SceneRenderer::Impl::renderViews(const RenderTarget& target,
       if (mesh != it.mesh.index) ++st.lodSwitches;
       const std::uint64_t program =
           std::uint64_t(programIndex(materials.get(it.material)->material, meshes.slots[mesh]));
-      // Key: program (8 bits: 3 models x kVariants), material, mesh (28 bits each).
+      // Key: program (9 bits: 3 models x kVariants), material, mesh (27 bits each).
       records.push_back(
-          {(program << 56) | (std::uint64_t(it.material.index) << 28) | mesh, std::uint32_t(i), mesh});
+          {(program << 55) | (std::uint64_t(it.material.index) << 27) | mesh, std::uint32_t(i), mesh});
     }
     makeBatches(items, viewBatches[v], true);
   }
@@ -862,7 +864,9 @@ Result<RenderStats> SceneRenderer::Impl::renderViews(const RenderTarget& target,
     if (std::all_of(lights.begin(), lights.end(), [](const Light& l) { return l.type == Light::Type::Directional; }))
       frameFlags |= kDirectionalOnly;
     const int lightCount = int(lights.size());
-    auto slot = [&](const Batch& b) { return (b.program | frameFlags) * kLightCounts + lightCount; };
+    auto slot = [&](const Batch& b) {
+      return (b.program | frameFlags | (b.count == 1 ? kSingle : 0)) * kLightCounts + lightCount;
+    };
     for (const Batch& b : viewBatches[v])
       if (Status s = compileProgram(slot(b)); !s) return s.error();
     for (ShaderProgram& p : programs)
@@ -878,6 +882,14 @@ Result<RenderStats> SceneRenderer::Impl::renderViews(const RenderTarget& target,
       if (b.material != material) {
         material = b.material;
         setMaterialUniforms(programs[std::size_t(program)], materials.slots[material].material);
+      }
+      if (b.count == 1) {  // SINGLE: the instance's matrices as uniforms
+        const InstanceMatrix& m = instances[b.first];
+        ShaderProgram& p = programs[std::size_t(program)];
+        p.set("u_model", Mat4f(Eigen::Map<const Mat4f>(m.data())));
+        Mat3f normal;
+        for (int c = 0; c < 3; ++c) normal.col(c) = Eigen::Map<const Vec3f>(m.data() + 16 + 4 * c);
+        p.set("u_normalMatrix", normal);
       }
       if (b.count == 1 && !meshes.slots[b.mesh].clusters.empty()) {
         st.triangles += drawClusters(b, viewProjs[v].cast<double>(), items[b.item].model, st.clustersCulled);

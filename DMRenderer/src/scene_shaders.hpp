@@ -5,7 +5,8 @@
 // 4 tangent (xyz, w = bitangent sign); 5..8 the per-instance model matrix,
 // 9..11 its normal matrix. Features a material or frame does not use are
 // compiled out (COLOR_TEX, NORMAL_TEX, HEIGHT_TEX, VERTEX_COLOR, SHADOWS,
-// DIRECTIONAL_ONLY: no point or spot light this frame), not
+// DIRECTIONAL_ONLY: no point or spot light this frame; SINGLE: a draw of one
+// instance takes its matrices as uniforms), not
 // branched over at run time, and the light loop runs to the constant NUM_LIGHTS.
 //
 // HEIGHT_TEX: parallax occlusion mapping. The height map's red channel is the
@@ -19,7 +20,7 @@
 namespace dm::scene_glsl {
 
 inline constexpr const char* kMeshVs = R"(
-// Variant macros (0 or 1): COLOR_TEX, NORMAL_TEX, HEIGHT_TEX, VERTEX_COLOR.
+// Variant macros (0 or 1): COLOR_TEX, NORMAL_TEX, HEIGHT_TEX, VERTEX_COLOR, SINGLE.
 // Only what a variant reads is interpolated: llvmpipe pays per varying and
 // per branch.
 layout(location = 0) in vec3 a_position;
@@ -33,6 +34,17 @@ layout(location = 10) in vec4 a_normalMatrix1;
 layout(location = 11) in vec4 a_normalMatrix2;
 
 uniform mat4 u_viewProj;
+#if SINGLE
+// One instance: the matrices as uniforms (llvmpipe would fetch seven
+// per-instance attributes for every vertex).
+uniform mat4 u_model;
+uniform mat3 u_normalMatrix;
+#define MODEL_MATRIX u_model
+#define NORMAL_MATRIX u_normalMatrix
+#else
+#define MODEL_MATRIX a_model
+#define NORMAL_MATRIX mat3(a_normalMatrix0.xyz, a_normalMatrix1.xyz, a_normalMatrix2.xyz)
+#endif
 
 out vec3 v_worldPos;
 out vec3 v_normal;
@@ -47,11 +59,11 @@ out vec4 v_tangent;
 #endif
 
 void main() {
-  vec4 world = a_model * vec4(a_position, 1.0);
+  vec4 world = MODEL_MATRIX * vec4(a_position, 1.0);
   v_worldPos = world.xyz;
-  v_normal = mat3(a_normalMatrix0.xyz, a_normalMatrix1.xyz, a_normalMatrix2.xyz) * a_normal;
+  v_normal = NORMAL_MATRIX * a_normal;
 #if NORMAL_TEX
-  v_tangent = vec4(mat3(a_model) * a_tangent.xyz, a_tangent.w);
+  v_tangent = vec4(mat3(MODEL_MATRIX) * a_tangent.xyz, a_tangent.w);
 #endif
 #if COLOR_TEX || NORMAL_TEX || HEIGHT_TEX
   v_uv = a_uv;
