@@ -12,18 +12,19 @@
 //    pairs are tested on), `fat_`, a copy of the leaf's fat box (so update()
 //    reads only id-ordered memory), `leafOf_` (the leaf node, kAbsent, or
 //    kParked for an id whose box is not finite and lives outside the tree)
-//    and a `dirty_` flag. A leaf keeps its node while it moves.
+//    and a `dirty_` flag. A leaf keeps its node while it moves (a rebuild,
+//    below, renumbers every node).
 //
 // Fat boxes: a (re)inserted leaf stores its box enlarged on each side by
 // options.fatMargin times its largest edge, and further, along each axis in
 // the direction it last moved, by kPredict times that displacement (at most
 // its largest edge; Box2D's aabbMultiplier is 4, 8 measured better in
 // Bench/collide_broadphase_bench) — a box in steady motion stays inside its
-// fat box about kPredict steps longer. A box that leaves its fat
-// box is removed and inserted again. Insertion descends by the surface-area
-// cost of Box2D (create a new parent here, or push the box down the cheaper
-// child) and the path back to the root is re-balanced with AVL rotations, so
-// the height stays O(log n) even for many identical boxes. Trees grown that
+// fat box about kPredict steps longer. A box that leaves its fat box is
+// removed and inserted again. Insertion descends by the surface-area cost of
+// Box2D (create a new parent here, or push the box down the cheaper child)
+// and the path back to the root is re-balanced with AVL rotations, so the
+// height stays O(log n) even for many identical boxes. Trees grown that
 // way, one box at a time in no spatial order, are loose (a partner query
 // visited ~250 nodes in the 100k-box bench, ~80 on a rebuilt tree), so once
 // half as many leaves as there are proxies have been inserted since the last
@@ -39,8 +40,8 @@
 // and has the smaller id finds the pair instead; the queries run in Morton
 // order of the boxes so that consecutive ones share cached upper nodes),
 // radix-sorts those and merges them in; the reported pairs are those of the
-// list whose exact boxes overlap, already in order. Cost per step: O(moved · log n + fat pairs);
-// memory O(n + fat pairs).
+// list whose exact boxes overlap, already in order. Cost per step:
+// O(moved · log n + fat pairs); memory O(n + fat pairs).
 #include <dm/core/assert.hpp>
 
 #include <algorithm>
