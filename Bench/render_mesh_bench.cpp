@@ -10,7 +10,8 @@
 // 10 cm, filling about 60% of the image height), viewed at 1280x720 and
 // 1920x1080, one directional light, Blinn–Phong, no MSAA, no shadows.
 // A frame is: clear, draw, glFinish (so the rasteriser's work is inside the
-// timed interval). Columns: ms per frame (median of the timed frames) for
+// timed interval); ours and the minimal program's frames alternate, so a
+// change of load during the run affects both. Columns: ms per frame (median of the timed frames) for
 // ours and the minimal program, their ratio (goal: at most 1.10), and
 // triangles per second (ours). The read-back table: per-frame cost on the
 // rendering thread of readColor() against request() + the previous frame's
@@ -152,6 +153,28 @@ struct Minimal {
   }
 };
 
+// Frames of two programs alternately (a, b, a, b, ...) for `seconds`, so
+// that a change in the machine's load during the run hits both alike.
+template <class A, class B>
+std::pair<std::vector<double>, std::vector<double>> timeInterleaved(A&& a, B&& b, double seconds) {
+  a();
+  b();
+  glFinish();
+  std::vector<double> ta, tb;
+  const auto start = Clock::now();
+  while (ta.size() < 3 || (msSince(start) < 2 * seconds * 1000 && ta.size() < 200)) {
+    auto t0 = Clock::now();
+    a();
+    glFinish();
+    ta.push_back(msSince(t0));
+    t0 = Clock::now();
+    b();
+    glFinish();
+    tb.push_back(msSince(t0));
+  }
+  return {ta, tb};
+}
+
 template <class F>
 std::vector<double> timeFrames(F&& frame, double seconds) {
   frame();  // warm-up: shader variants, first-touch of buffers
@@ -260,12 +283,11 @@ int main(int argc, char** argv) {
       auto rt = dm::RenderTarget::create({.width = w, .height = h, .samples = 1});
       if (!rt) return 1;
       bool failed = false;
-      const auto ours = timeFrames(
+      const auto [ours, mini] = timeInterleaved(
           [&] {
             if (!scene->render(*rt, cam, {&item, 1}, {&light, 1}, settings)) failed = true;
           },
-          seconds);
-      const auto mini = timeFrames([&] { minimal.draw(*rt, cam, lightDir); }, seconds);
+          [&] { minimal.draw(*rt, cam, lightDir); }, seconds);
       if (failed) return 1;
       const double o = median(ours), m = median(mini);
       std::printf("%-10zu %4dx%-5d %12.2f %12.2f %8.3f %14.1f\n", mesh.triangleCount(), w, h, o, m, o / m,
