@@ -500,47 +500,35 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
   // AVL rotation at `iA` when its children's heights differ by more than 1;
   // returns the node now at A's place.
   std::int32_t balance(std::int32_t iA) {
-    Node& A = nodes_[iA];
     if (height_[iA] < 2) return iA;
-    const std::int32_t iB = A.child1, iC = A.child2;
-    Node& B = nodes_[iB];
-    Node& C = nodes_[iC];
+    const std::int32_t iB = nodes_[iA].child1, iC = nodes_[iA].child2;
     const std::int32_t diff = height_[iC] - height_[iB];
-    if (diff > 1) {  // rotate C up
-      const std::int32_t iF = C.child1, iG = C.child2;
-      C.child1 = iA;
-      parent_[iC] = parent_[iA];
-      parent_[iA] = iC;
-      replaceChild(parent_[iC], iA, iC);
-      const bool keepF = height_[iF] > height_[iG];
-      const std::int32_t iUp = keepF ? iF : iG, iDown = keepF ? iG : iF;
-      C.child2 = iUp;
-      A.child2 = iDown;
-      parent_[iDown] = iA;
-      A.box = merged(B.box, nodes_[iDown].box);
-      C.box = merged(A.box, nodes_[iUp].box);
-      height_[iA] = 1 + std::max(height_[iB], height_[iDown]);
-      height_[iC] = 1 + std::max(height_[iA], height_[iUp]);
-      return iC;
-    }
-    if (diff < -1) {  // rotate B up
-      const std::int32_t iD = B.child1, iE = B.child2;
-      B.child1 = iA;
-      parent_[iB] = parent_[iA];
-      parent_[iA] = iB;
-      replaceChild(parent_[iB], iA, iB);
-      const bool keepD = height_[iD] > height_[iE];
-      const std::int32_t iUp = keepD ? iD : iE, iDown = keepD ? iE : iD;
-      B.child2 = iUp;
-      A.child1 = iDown;
-      parent_[iDown] = iA;
-      A.box = merged(C.box, nodes_[iDown].box);
-      B.box = merged(A.box, nodes_[iUp].box);
-      height_[iA] = 1 + std::max(height_[iC], height_[iDown]);
-      height_[iB] = 1 + std::max(height_[iA], height_[iUp]);
-      return iB;
-    }
+    if (diff > 1) return rotateUp(iA, iC, iB, true);
+    if (diff < -1) return rotateUp(iA, iB, iC, false);
     return iA;
+  }
+
+  // Puts A's child `iU` (its second child when `second`, else its first) in
+  // A's place: A becomes U's first child and keeps `iOther`; U keeps its
+  // taller child and hands the shorter one to A. Returns iU.
+  std::int32_t rotateUp(std::int32_t iA, std::int32_t iU, std::int32_t iOther, bool second) {
+    Node& A = nodes_[iA];
+    Node& U = nodes_[iU];
+    const std::int32_t i1 = U.child1, i2 = U.child2;
+    U.child1 = iA;
+    parent_[iU] = parent_[iA];
+    parent_[iA] = iU;
+    replaceChild(parent_[iU], iA, iU);
+    const bool keep1 = height_[i1] > height_[i2];
+    const std::int32_t iUp = keep1 ? i1 : i2, iDown = keep1 ? i2 : i1;
+    U.child2 = iUp;
+    (second ? A.child2 : A.child1) = iDown;
+    parent_[iDown] = iA;
+    A.box = merged(nodes_[iOther].box, nodes_[iDown].box);
+    U.box = merged(A.box, nodes_[iUp].box);
+    height_[iA] = 1 + std::max(height_[iOther], height_[iDown]);
+    height_[iU] = 1 + std::max(height_[iA], height_[iUp]);
+    return iU;
   }
 
   double margin_;
