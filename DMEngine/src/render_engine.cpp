@@ -145,6 +145,22 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     return s;
   }
 
+  // A frame while loading, neither counted nor written: the driver compiles
+  // the frame's shader variants (llvmpipe JIT-compiles them at the first
+  // draw, ~200 ms) and the HUD's atlas and plot here, not in the first
+  // real-time period, which would cost the run its first frames.
+  Status warmUp() {
+    if (auto r = view_.render(target_, camera_, 0.0); !r) return r.error();
+    hud(0.0, false, Vec3::Zero());
+    overlay_.begin(target_);
+    const float values[2] = {0.0f, 1.0f};
+    const PlotSeries series{.values = values};
+    (void)overlay_.plot(OverlayRect{0, 0, 64, 32}, {&series, 1}, PlotOptions{});
+    if (auto s = overlay_.end(); !s) return s;
+    if (auto img = target_.readColor(); !img) return img.error();
+    return ok();
+  }
+
   std::weak_ptr<RenderEngine> self_;
   std::unique_ptr<GlContext> ctx_;
   SceneView view_;
@@ -268,18 +284,7 @@ Result<std::shared_ptr<RenderEngineHandle>> makeRenderEngine(const SceneDesc& sc
       return fail(ErrorCode::Io, "cannot create the frames folder: " + ec.message(), framesDir.string());
     e->writer_ = std::make_unique<FrameWriter>(framesDir, blockOnWriter);
   }
-  // Warm-up frame while loading, neither counted nor written: the driver
-  // compiles the frame's shader variants (llvmpipe JIT-compiles them at the
-  // first draw, ~200 ms) and the HUD's atlas and plot here, not in the first
-  // real-time period, which would cost the run its first frames.
-  if (auto r = e->view_.render(e->target_, e->camera_, 0.0); !r) return r.error().within("engines/render");
-  e->overlay_.begin(e->target_);
-  const float warm[2] = {0.0f, 1.0f};
-  e->overlay_.text(4, 4, "t = 0.00 s |F| = 0.00 N", 12, Vec4f(1, 1, 1, 1));
-  const PlotSeries warmSeries{.values = warm};
-  (void)e->overlay_.plot(OverlayRect{0, 0, 64, 32}, {&warmSeries, 1}, PlotOptions{});
-  if (auto s = e->overlay_.end(); !s) return s.error().within("engines/render");
-  if (auto img = e->target_.readColor(); !img) return img.error().within("engines/render");
+  if (auto s = e->warmUp(); !s) return s.error().within("engines/render");
   e->ctx_->release();  // the ticking thread makes it current
   return std::shared_ptr<RenderEngineHandle>(e);
 }
