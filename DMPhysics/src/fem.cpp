@@ -668,34 +668,51 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
       return invalid("node " + std::to_string(i) + " belongs to no tetrahedron (zero mass)", where,
                      "remove unreferenced nodes from the mesh");
 
-  // Node-by-node block pattern (rows sorted), and each element's 16 slots.
+  // Node-by-node block pattern: the upper triangle (column ≥ row, rows
+  // sorted, so a row's first block is its diagonal), each element's 10
+  // slots (transposed ones as ~slot), and per row the blocks below the
+  // diagonal as the transposes of stored ones.
   std::vector<std::uint64_t> pairs;
-  pairs.reserve(T * 16);
+  pairs.reserve(T * 10);
   for (const Tet& t : mesh.tets)
     for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j) pairs.push_back((std::uint64_t(t[i]) << 32) | t[j]);
+      for (int j = 0; j < 4; ++j)
+        if (t[i] <= t[j]) pairs.push_back((std::uint64_t(t[i]) << 32) | t[j]);
   std::sort(pairs.begin(), pairs.end());
   pairs.erase(std::unique(pairs.begin(), pairs.end()), pairs.end());
-  if (pairs.size() > std::size_t(std::numeric_limits<int>::max()))
+  if (pairs.size() > std::size_t(std::numeric_limits<int>::max() / 2))
     return invalid("the mesh is too large for the solver's index type", where);
   body.rowStart_.assign(n + 1, 0);
   body.colIndex_.resize(pairs.size());
+  body.lowerStart_.assign(n + 1, 0);
   for (std::size_t p = 0; p < pairs.size(); ++p) {
-    ++body.rowStart_[(pairs[p] >> 32) + 1];
-    body.colIndex_[p] = int(pairs[p] & 0xffffffffu);
+    const std::size_t row = pairs[p] >> 32, col = pairs[p] & 0xffffffffu;
+    ++body.rowStart_[row + 1];
+    if (col != row) ++body.lowerStart_[col + 1];
+    body.colIndex_[p] = int(col);
   }
-  for (std::size_t i = 0; i < n; ++i) body.rowStart_[i + 1] += body.rowStart_[i];
+  for (std::size_t i = 0; i < n; ++i) {
+    body.rowStart_[i + 1] += body.rowStart_[i];
+    body.lowerStart_[i + 1] += body.lowerStart_[i];
+  }
+  body.lower_.resize(std::size_t(body.lowerStart_[n]));
+  {
+    std::vector<int> fill(body.lowerStart_.begin(), body.lowerStart_.end() - 1);
+    for (std::size_t row = 0; row < n; ++row)
+      for (int s = body.rowStart_[row] + 1; s < body.rowStart_[row + 1]; ++s)
+        body.lower_[std::size_t(fill[std::size_t(body.colIndex_[std::size_t(s)])]++)] = {s, int(row)};
+  }
   auto slotOf = [&](std::uint32_t a, std::uint32_t b) {
-    const int* begin = body.colIndex_.data() + body.rowStart_[a];
-    const int* end = body.colIndex_.data() + body.rowStart_[a + 1];
-    return int(std::lower_bound(begin, end, int(b)) - body.colIndex_.data());
+    const std::uint32_t row = std::min(a, b), col = std::max(a, b);
+    const int* begin = body.colIndex_.data() + body.rowStart_[row];
+    const int* end = body.colIndex_.data() + body.rowStart_[row + 1];
+    const int slot = int(std::lower_bound(begin, end, int(col)) - body.colIndex_.data());
+    return a > b ? ~slot : slot;
   };
-  body.diagSlot_.resize(n);
-  for (std::size_t i = 0; i < n; ++i) body.diagSlot_[i] = slotOf(std::uint32_t(i), std::uint32_t(i));
   body.slot_.resize(T);
   for (std::size_t e = 0; e < T; ++e)
-    for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j) body.slot_[e][i * 4 + j] = slotOf(mesh.tets[e][i], mesh.tets[e][j]);
+    for (int i = 0, k = 0; i < 4; ++i)
+      for (int j = i; j < 4; ++j) body.slot_[e][std::size_t(k++)] = slotOf(mesh.tets[e][i], mesh.tets[e][j]);
   body.blocks_.assign(pairs.size(), Mat3::Zero());
 
   // Greedy colouring: elements sharing a node get different colours, so one
@@ -744,6 +761,7 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
   body.tmp_.setZero(dofs);
   if (!body.hangNode_.empty()) body.full_.setZero(dofs);
   body.invBlockDiag_.assign(n, Mat3::Identity());
+  body.sweepSkip_.assign(n, 0);
   body.pcg_.reserve(dofs);
   return body;
 }
@@ -997,9 +1015,15 @@ Mat3 FemBody::elementRotation(std::size_t e, const std::vector<Vec3>& x, Quat& q
     if (!newton) delta = g / (std::abs(tr) + 1e-12);
     const double angle = delta.norm();
     if (!(angle > 1e-15)) break;
-    q = (q * Quat(AngleAxis(angle, delta / angle))).normalized();
+    // Small steps as the first-order quaternion (1, δ/2), normalised: a
+    // rotation about δ by 2·atan(|δ|/2) = |δ| − |δ|³/12 + …, no sincos.
+    if (angle < 0.1)
+      q = (q * Quat(1.0, 0.5 * delta.x(), 0.5 * delta.y(), 0.5 * delta.z())).normalized();
+    else
+      q = (q * Quat(AngleAxis(angle, delta / angle))).normalized();
     R = q.toRotationMatrix();
-    if (angle < 1e-9) break;
+    // A Newton step of δ leaves an error of order |δ|²: below 1e-8 here.
+    if (angle < (newton ? 1e-4 : 1e-9)) break;
   }
   return R;
 }
@@ -1056,12 +1080,15 @@ void FemBody::assemble() {
           r[i] = R * g[i];
         }
         const auto& slot = slot_[e];
-        for (int i = 0; i < 4; ++i)
-          for (int j = i; j < 4; ++j) {
+        for (int i = 0, pair = 0; i < 4; ++i)
+          for (int j = i; j < 4; ++j, ++pair) {
             Mat3 kij = (V * mu) * r[j] * r[i].transpose() + (V * lambda) * r[i] * r[j].transpose();
             kij.diagonal().array() += V * mu * r[i].dot(r[j]);
-            blocks_[std::size_t(slot[std::size_t(i * 4 + j)])] += kij;
-            if (i != j) blocks_[std::size_t(slot[std::size_t(j * 4 + i)])] += kij.transpose();
+            const int s = slot[std::size_t(pair)];
+            if (s >= 0)
+              blocks_[std::size_t(s)] += kij;
+            else
+              blocks_[std::size_t(~s)] += kij.transpose();
           }
       }
     });
@@ -1086,22 +1113,41 @@ void FemBody::applySystem(const VecX& input, VecX& out, double massScale, double
     }
   }
   const VecX& in = hangs ? full_ : input;
-  forRange(x_.size(), 256, [&](std::size_t b, std::size_t e) {
-    for (std::size_t r = b; r < e; ++r) {
+  const auto node = [](const VecX& v, std::size_t i) { return v.segment<3>(Eigen::Index(3 * i)); };
+  const auto finish = [&](std::size_t r, const Vec3& kx) {
+    out.segment<3>(Eigen::Index(3 * r)) = stiffScale * kx + massScale * mass_[r] * node(in, r);
+  };
+  if (options_.parallel) {
+    // Row by row (rows in parallel), lower blocks read transposed.
+    forRange(x_.size(), 256, [&](std::size_t b, std::size_t e) {
+      for (std::size_t r = b; r < e; ++r) {
+        if (fixed_[r])
+          out.segment<3>(Eigen::Index(3 * r)) = node(in, r);
+        else
+          finish(r, stiffnessRow(r, in.data(), true));
+      }
+    });
+  } else {
+    // One pass over the stored blocks: block (r, c) adds B·in_c to row r
+    // and Bᵀ·in_r to row c > r, which is complete when the pass reaches it.
+    out.head(Eigen::Index(3 * x_.size())).setZero();
+    for (std::size_t r = 0; r < x_.size(); ++r) {
       if (fixed_[r]) {
-        out.segment<3>(Eigen::Index(3 * r)) = in.segment<3>(Eigen::Index(3 * r));
+        out.segment<3>(Eigen::Index(3 * r)) = node(in, r);
         continue;
       }
-      Vec3 acc = Vec3::Zero();
-      for (int s = rowStart_[r]; s < rowStart_[r + 1]; ++s) {
+      const Vec3 inR = node(in, r);
+      Vec3 acc = blocks_[std::size_t(rowStart_[r])] * inR;
+      for (int s = rowStart_[r] + 1; s < rowStart_[r + 1]; ++s) {
         const std::size_t col = std::size_t(colIndex_[std::size_t(s)]);
         if (fixed_[col]) continue;
-        acc.noalias() += blocks_[std::size_t(s)] * in.segment<3>(Eigen::Index(3 * col));
+        const Mat3& B = blocks_[std::size_t(s)];
+        acc.noalias() += B * node(in, col);
+        out.segment<3>(Eigen::Index(3 * col)).noalias() += B.transpose() * inR;
       }
-      out.segment<3>(Eigen::Index(3 * r)) =
-          stiffScale * acc + massScale * mass_[r] * in.segment<3>(Eigen::Index(3 * r));
+      finish(r, acc + out.segment<3>(Eigen::Index(3 * r)));
     }
-  });
+  }
   // Dynamic obstacles' rows: their mass and world inertia.
   for (std::size_t j = 0; j < obstacles_.size(); ++j)
     if (const Eigen::Index r = obstacleRow_[j]; r >= 0) {
@@ -1152,15 +1198,64 @@ void FemBody::foldHanging(VecX& v, const VecX* identityFrom) const {
   }
 }
 
+Vec3 FemBody::stiffnessRow(std::size_t r, const double* in, bool skipFixed) const {
+  const auto node = [in](std::size_t i) { return Eigen::Map<const Vec3>(in + 3 * i); };
+  Vec3 acc = Vec3::Zero();
+  for (int s = rowStart_[r]; s < rowStart_[r + 1]; ++s) {
+    const std::size_t col = std::size_t(colIndex_[std::size_t(s)]);
+    if (!(skipFixed && fixed_[col])) acc.noalias() += blocks_[std::size_t(s)] * node(col);
+  }
+  for (int k = lowerStart_[r]; k < lowerStart_[r + 1]; ++k) {
+    const LowerBlock& l = lower_[std::size_t(k)];
+    if (!(skipFixed && fixed_[std::size_t(l.col)]))
+      acc.noalias() += blocks_[std::size_t(l.slot)].transpose() * node(std::size_t(l.col));
+  }
+  return acc;
+}
+
+// z = M⁻¹ r. Node rows: block Jacobi, z_i = D_i⁻¹ r_i, or block symmetric
+// Gauss–Seidel over A's node blocks (D_i as assembled for block Jacobi,
+// off-diagonal blocks stiffScale·K_ij between free nodes):
+// (D + L) y = r forward, then (D + U) z = D y backward. M is SPD for any
+// off-diagonal blocks once every D_i is, so the contact spring's and the
+// hanging nodes' couplings can be left out. Dynamic obstacles' rows: their
+// inverse 6×6 diagonal block.
+void FemBody::applyPreconditioner(const VecX& r, VecX& z) const {
+  const std::size_t n = x_.size();
+  const auto node = [](auto& v, std::size_t i) { return v.template segment<3>(Eigen::Index(3 * i)); };
+  if (options_.preconditioner == FemPreconditioner::BlockJacobi) {
+    for (std::size_t i = 0; i < n; ++i) node(z, i).noalias() = invBlockDiag_[i] * node(r, i);
+  } else {
+    const double scale = sysStiffScale_;
+    z.head(Eigen::Index(3 * n)) = r.head(Eigen::Index(3 * n));
+    for (std::size_t i = 0; i < n; ++i) {
+      const Vec3 y = invBlockDiag_[i] * node(z, i);
+      node(z, i) = y;
+      if (sweepSkip_[i]) continue;
+      const Vec3 ys = scale * y;
+      for (int s = rowStart_[i] + 1; s < rowStart_[i + 1]; ++s) {
+        const std::size_t c = std::size_t(colIndex_[std::size_t(s)]);
+        if (!sweepSkip_[c]) node(z, c).noalias() -= blocks_[std::size_t(s)].transpose() * ys;
+      }
+    }
+    for (std::size_t i = n; i-- > 0;) {
+      if (sweepSkip_[i]) continue;
+      Vec3 acc = Vec3::Zero();
+      for (int s = rowStart_[i] + 1; s < rowStart_[i + 1]; ++s) {
+        const std::size_t c = std::size_t(colIndex_[std::size_t(s)]);
+        if (!sweepSkip_[c]) acc.noalias() += blocks_[std::size_t(s)] * node(z, c);
+      }
+      node(z, i) -= invBlockDiag_[i] * (scale * acc);
+    }
+  }
+  const Eigen::Index base = Eigen::Index(3 * n);
+  for (std::size_t d = 0; d < obstaclePre_.size(); ++d)
+    z.segment<6>(base + Eigen::Index(6 * d)).noalias() = obstaclePre_[d] * r.segment<6>(base + Eigen::Index(6 * d));
+}
+
 void FemBody::applyStiffness(Eigen::Ref<const VecX> in, Eigen::Ref<VecX> out) const {
   forRange(x_.size(), 256, [&](std::size_t b, std::size_t e) {
-    for (std::size_t r = b; r < e; ++r) {
-      Vec3 acc = Vec3::Zero();
-      for (int s = rowStart_[r]; s < rowStart_[r + 1]; ++s)
-        acc.noalias() +=
-            blocks_[std::size_t(s)] * in.segment<3>(Eigen::Index(3 * std::size_t(colIndex_[std::size_t(s)])));
-      out.segment<3>(Eigen::Index(3 * r)) = acc;
-    }
+    for (std::size_t r = b; r < e; ++r) out.segment<3>(Eigen::Index(3 * r)) = stiffnessRow(r, in.data(), false);
   });
 }
 
@@ -1204,11 +1299,12 @@ Result<FemStepReport> FemBody::step(double h) {
         rhs_.segment<3>(o).setZero();
         dv_.segment<3>(o).setZero();
         invBlockDiag_[i].setIdentity();
+        sweepSkip_[i] = 1;
         continue;
       }
       Vec3 f = force_[i] + fext_[i] + mass_[i] * (gravity_ - alpha * v_[i]) - (beta + h) * tmp_.segment<3>(o);
       // Block-Jacobi: the node's 3×3 diagonal block of A, SPD like A.
-      Mat3 d = stiffScale * blocks_[std::size_t(diagSlot_[i])];
+      Mat3 d = stiffScale * blocks_[std::size_t(rowStart_[i])];
       d.diagonal().array() += massScale * mass_[i];
       if (contactOf_[i] >= 0) {
         const NodeContact& c = contacts_[std::size_t(contactOf_[i])];
@@ -1223,6 +1319,7 @@ Result<FemStepReport> FemBody::step(double h) {
           }
       rhs_.segment<3>(o) = h * f;
       invBlockDiag_[i] = d;
+      sweepSkip_[i] = 0;
     }
   });
   // Hanging nodes: their loads act on their masters (Pᵀb). The
@@ -1237,6 +1334,7 @@ Result<FemStepReport> FemBody::step(double h) {
         if (!fixed_[hangMaster_[s]])
           invBlockDiag_[hangMaster_[s]] += hangWeight_[s] * hangWeight_[s] * invBlockDiag_[node];
       invBlockDiag_[node].setIdentity();
+      sweepSkip_[node] = 1;
       dv_.segment<3>(Eigen::Index(3 * node)).setZero();
     }
   }
@@ -1285,20 +1383,14 @@ Result<FemStepReport> FemBody::step(double h) {
 
   // Both operators capture only `this`, so std::function keeps them in its
   // small buffer: no allocation per step. The preconditioner is applied on
-  // the calling thread (3n·3 flops; a parallel loop would cost more in
-  // synchronisation than it saves).
+  // the calling thread (Gauss–Seidel sweeps are sequential; block Jacobi's
+  // 3n·3 flops would cost more in synchronisation than they save).
   sysMassScale_ = massScale;
   sysStiffScale_ = stiffScale;
   const LinearOperator applyA = [this](const VecX& in, VecX& out) {
     applySystem(in, out, sysMassScale_, sysStiffScale_);
   };
-  const LinearOperator applyM = [this](const VecX& r, VecX& z) {
-    for (std::size_t i = 0; i < x_.size(); ++i)
-      z.segment<3>(Eigen::Index(3 * i)).noalias() = invBlockDiag_[i] * r.segment<3>(Eigen::Index(3 * i));
-    const Eigen::Index base = Eigen::Index(3 * x_.size());
-    for (std::size_t d = 0; d < obstaclePre_.size(); ++d)
-      z.segment<6>(base + Eigen::Index(6 * d)).noalias() = obstaclePre_[d] * r.segment<6>(base + Eigen::Index(6 * d));
-  };
+  const LinearOperator applyM = [this](const VecX& r, VecX& z) { applyPreconditioner(r, z); };
   pcg_.setOptions({.tolerance = tolerance,
                    .maxIterations = options_.maxIterations,
                    .preconditioner = Preconditioner::None,
@@ -1373,9 +1465,7 @@ void FemBody::computeConstraintForces(std::vector<Vec3>& out) const {
   // constraints must balance.
   for (std::size_t i = 0; i < x_.size(); ++i) {
     if (!fixed_[i] && !hanging_[i]) continue;
-    Vec3 kv = Vec3::Zero();  // row i of K·v
-    for (int s = rowStart_[i]; s < rowStart_[i + 1]; ++s)
-      kv.noalias() += blocks_[std::size_t(s)] * v_[std::size_t(colIndex_[std::size_t(s)])];
+    const Vec3 kv = stiffnessRow(i, v_.data()->data(), false);  // row i of K·v
     const Vec3 damping = -damping_.alpha * mass_[i] * v_[i] - damping_.beta * kv;
     out[i] += damping + fext_[i] + mass_[i] * gravity_;
   }
