@@ -2,12 +2,19 @@
 //
 // Both algorithms run in A's local frame: B's support points are mapped by
 // the relative pose once per query, which saves a rotation per support call.
+// MPR on small hulls goes further: it copies both hulls' vertices into A's
+// frame once and scans them as structure-of-arrays coordinates, carrying
+// vertex indices instead of points through the portal updates.
 #include <dm/collide/gjk.hpp>
 #include <dm/math/geometry.hpp>
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace dm {
 
@@ -21,9 +28,85 @@ struct Vertex {
   Vec3 w, a, b;
 };
 
+// A small hull's vertices in A's frame as structure-of-arrays coordinates,
+// padded to a multiple of 4 with copies of vertex 0 (never chosen: ties go
+// to the lower index). Worth building for the queries that call the support
+// mapping a dozen times and more (MPR): each call is then a branch-free
+// 2-wide scan with no rotation of the direction or of the answer.
+constexpr std::uint32_t kFrameVertices = 64;
+
+struct FrameVertices {
+  alignas(16) double x[kFrameVertices];
+  alignas(16) double y[kFrameVertices];
+  alignas(16) double z[kFrameVertices];
+  std::uint32_t n = 0;  // vertices; the padding runs to (n + 3) & ~3
+
+  // Fills from hull vertices v[0, n) mapped by (r, t); false (and empty)
+  // when there are too many.
+  bool assign(const std::vector<Vec3>& v, const Mat3& r, const Vec3& t) noexcept {
+    if (v.empty() || v.size() > kFrameVertices) return false;
+    n = static_cast<std::uint32_t>(v.size());
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const Vec3 p = r * v[i] + t;
+      x[i] = p.x(), y[i] = p.y(), z[i] = p.z();
+    }
+    for (std::uint32_t i = n; i < ((n + 3) & ~3u); ++i) x[i] = x[0], y[i] = y[0], z[i] = z[0];
+    return true;
+  }
+
+  Vec3 operator[](std::uint32_t i) const noexcept { return Vec3(x[i], y[i], z[i]); }
+
+  // Index of the vertex furthest along d (the first on ties).
+  std::uint32_t furthest(const Vec3& d) const noexcept {
+    const std::uint32_t padded = (n + 3) & ~3u;
+#if defined(__SSE2__)
+    // Two interleaved pairs of lanes; indices ride along as doubles so that
+    // one compare mask selects both the value and the index.
+    const __m128d dx = _mm_set1_pd(d.x()), dy = _mm_set1_pd(d.y()), dz = _mm_set1_pd(d.z());
+    const __m128d four = _mm_set1_pd(4.0);
+    __m128d i0 = _mm_set_pd(1.0, 0.0), i1 = _mm_set_pd(3.0, 2.0);
+    auto dot = [&](std::uint32_t i) {
+      return _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, _mm_load_pd(x + i)), _mm_mul_pd(dy, _mm_load_pd(y + i))),
+                        _mm_mul_pd(dz, _mm_load_pd(z + i)));
+    };
+    __m128d b0 = dot(0), b1 = dot(2), a0 = i0, a1 = i1;
+    for (std::uint32_t i = 4; i < padded; i += 4) {
+      i0 = _mm_add_pd(i0, four), i1 = _mm_add_pd(i1, four);
+      const __m128d p0 = dot(i), p1 = dot(i + 2);
+      const __m128d m0 = _mm_cmpgt_pd(p0, b0), m1 = _mm_cmpgt_pd(p1, b1);
+      b0 = _mm_or_pd(_mm_and_pd(m0, p0), _mm_andnot_pd(m0, b0));
+      b1 = _mm_or_pd(_mm_and_pd(m1, p1), _mm_andnot_pd(m1, b1));
+      a0 = _mm_or_pd(_mm_and_pd(m0, i0), _mm_andnot_pd(m0, a0));
+      a1 = _mm_or_pd(_mm_and_pd(m1, i1), _mm_andnot_pd(m1, a1));
+    }
+    alignas(16) double best[4], at[4];
+    _mm_store_pd(best, b0), _mm_store_pd(best + 2, b1);
+    _mm_store_pd(at, a0), _mm_store_pd(at + 2, a1);
+#else
+    double best[4], at[4];
+    for (std::uint32_t k = 0; k < 4; ++k) best[k] = d.x() * x[k] + d.y() * y[k] + d.z() * z[k], at[k] = k;
+    for (std::uint32_t i = 4; i < padded; i += 4)
+      for (std::uint32_t k = 0; k < 4; ++k) {
+        const double p = d.x() * x[i + k] + d.y() * y[i + k] + d.z() * z[i + k];
+        at[k] = p > best[k] ? double(i + k) : at[k];
+        best[k] = p > best[k] ? p : best[k];
+      }
+#endif
+    // Branches here (rather than selects) let the query run ahead on the
+    // predicted index instead of waiting for the compares.
+    int k = 0;
+    for (int j = 1; j < 4; ++j)
+      if (best[j] > best[k] || (best[j] == best[k] && at[j] < at[k])) k = j;
+    return static_cast<std::uint32_t>(at[k]);
+  }
+};
+
 struct MinkowskiPair {
   const ConvexShape& A;
   const ConvexShape& B;
+  // Set by scanInFrameA(): the hulls' vertices, both in A's frame.
+  const FrameVertices* frameA = nullptr;
+  const FrameVertices* frameB = nullptr;
   Mat3 r;  // B's frame → A's frame
   Vec3 t;
   std::uint32_t hintA = 0, hintB = 0;
@@ -35,16 +118,33 @@ struct MinkowskiPair {
     t = ra.transpose() * (poseB.translation() - poseA.translation());
   }
 
-  // Support point of A − B along d (A's frame), without its two parts.
-  Vec3 supportW(const Vec3& d) noexcept {
-    return A.supportCore(d, hintA) - (r * B.supportCore(-(r.transpose() * d), hintB) + t);
+  // Copies the shapes that are small hulls into `bufA`/`bufB` in A's frame,
+  // and answers their supports from there from now on.
+  void scanInFrameA(FrameVertices& bufA, FrameVertices& bufB) noexcept {
+    if (A.type() == ShapeType::ConvexHull &&
+        bufA.assign(static_cast<const ConvexHull&>(A).vertices(), Mat3::Identity(), Vec3::Zero()))
+      frameA = &bufA;
+    if (B.type() == ShapeType::ConvexHull && bufB.assign(static_cast<const ConvexHull&>(B).vertices(), r, t))
+      frameB = &bufB;
   }
+
+  Vec3 pointA(const Vec3& d) noexcept {
+    if (frameA) return (*frameA)[hintA = frameA->furthest(d)];
+    return A.supportCore(d, hintA);
+  }
+  Vec3 pointB(const Vec3& d) noexcept {  // B's support along −d, A's frame
+    if (frameB) return (*frameB)[hintB = frameB->furthest(-d)];
+    return r * B.supportCore(-(r.transpose() * d), hintB) + t;
+  }
+
+  // Support point of A − B along d (A's frame), without its two parts.
+  Vec3 supportW(const Vec3& d) noexcept { return pointA(d) - pointB(d); }
 
   // Support of A − B along d (A's frame).
   Vertex support(const Vec3& d) noexcept {
     Vertex v;
-    v.a = A.supportCore(d, hintA);
-    v.b = r * B.supportCore(-(r.transpose() * d), hintB) + t;
+    v.a = pointA(d);
+    v.b = pointB(d);
     v.w = v.a - v.b;
     return v;
   }
@@ -603,19 +703,49 @@ struct MprOut {
   Vec3 pa, pb;   // A's frame
 };
 
-MprStop runMpr(MinkowskiPair& m, const GjkOptions& opt, MprOut& out, Vec3& sep, int& iterations) noexcept {
-  const double scale = m.A.boundingSphere().radius + m.B.boundingSphere().radius + m.t.norm();
+// Support mappings of A − B for runMpr(). A Point is a point of A − B with
+// what it takes to recover the two shapes' points it came from.
+struct ShapeSupports {  // any convex shapes
+  MinkowskiPair& m;
+  using Point = Vertex;
+  Point operator()(const Vec3& d) const noexcept { return m.support(d); }
+  static Vec3 pointA(const Point& p) noexcept { return p.a; }
+  static Vec3 pointB(const Point& p) noexcept { return p.b; }
+};
+
+struct HullSupports {  // two small hulls, both in A's frame: points carry vertex indices
+  const FrameVertices& A;
+  const FrameVertices& B;
+  struct Point {
+    Vec3 w;
+    std::uint32_t ia, ib;
+  };
+  Point operator()(const Vec3& d) const noexcept {
+    Point p;
+    p.ia = A.furthest(d);
+    p.ib = B.furthest(-d);
+    p.w = A[p.ia] - B[p.ib];
+    return p;
+  }
+  Vec3 pointA(const Point& p) const noexcept { return A[p.ia]; }
+  Vec3 pointB(const Point& p) const noexcept { return B[p.ib]; }
+};
+
+// `interior`: a point inside A − B (A's frame); `scale`: the pair's size,
+// which the tolerances are relative to.
+template <class Supports>
+MprStop runMpr(const Supports& support, Vec3 interior, double scale, const GjkOptions& opt, MprOut& out,
+               Vec3& sep, int& iterations) noexcept {
+  using Point = typename Supports::Point;
   const double tol = opt.mprTolerance * scale;
-  Vertex v0;
-  v0.a = m.A.interiorPoint();
-  v0.b = m.r * m.B.interiorPoint() + m.t;
-  v0.w = v0.a - v0.b;
+  Point v0;
+  v0.w = interior;
   // The centres coincide: any direction is as good as another for the ray.
   if (v0.w.squaredNorm() <= 1e-24 * scale * scale) v0.w = Vec3(1e-10 * scale, 0, 0);
 
   // Portal discovery.
   Vec3 dir = -v0.w;
-  Vertex v1 = m.support(dir);
+  Point v1 = support(dir);
   if (v1.w.dot(dir) <= 0) {
     sep = dir;
     return MprStop::Separated;
@@ -626,10 +756,10 @@ MprStop runMpr(MinkowskiPair& m, const GjkOptions& opt, MprOut& out, Vec3& sep, 
     const double d = v1.w.norm();
     out.n = d > 0 ? Vec3(v1.w / d) : Vec3(-v0.w.normalized());
     out.depth = d;
-    out.pa = v1.a, out.pb = v1.b;
+    out.pa = support.pointA(v1), out.pb = support.pointB(v1);
     return MprStop::Overlap;
   }
-  Vertex v2 = m.support(dir);
+  Point v2 = support(dir);
   if (v2.w.dot(dir) <= 0) {
     sep = dir;
     return MprStop::Separated;
@@ -639,10 +769,10 @@ MprStop runMpr(MinkowskiPair& m, const GjkOptions& opt, MprOut& out, Vec3& sep, 
     std::swap(v1, v2);
     dir = -dir;
   }
-  Vertex v3;
+  Point v3;
   for (iterations = 0;; ++iterations) {
     if (iterations == opt.maxMprIterations || dir.squaredNorm() == 0) return MprStop::Degenerate;
-    v3 = m.support(dir);
+    v3 = support(dir);
     if (v3.w.dot(dir) <= 0) {
       sep = dir;
       return MprStop::Separated;
@@ -660,34 +790,37 @@ MprStop runMpr(MinkowskiPair& m, const GjkOptions& opt, MprOut& out, Vec3& sep, 
     }
   }
 
-  // Refinement: the portal's outward normal points away from v0.
+  // Refinement: the portal's outward normal points away from v0. It is
+  // left unnormalised (the square root and division would sit on the
+  // loop's critical path): the gain along it is |n| times the distance, so
+  // it is compared with tol · |n| by squares.
   bool inside = false;
+  const double tol2 = tol * tol;
   for (; iterations < opt.maxMprIterations; ++iterations) {
-    Vec3 n = (v2.w - v1.w).cross(v3.w - v1.w);
-    const double len = n.norm();
-    if (!(len > 0)) return MprStop::Degenerate;
-    n /= len;
+    const Vec3 n = (v2.w - v1.w).cross(v3.w - v1.w);
+    const double nn = n.squaredNorm();
+    if (!(nn > 0)) return MprStop::Degenerate;
     const double d1 = n.dot(v1.w);
     if (d1 >= 0) inside = true;  // the origin is behind the portal
-    const Vertex v4 = m.support(n);
+    const Point v4 = support(n);
     const double d4 = n.dot(v4.w);
     if (!inside && d4 < 0) {  // the boundary along n is below the origin
       sep = n;
       return MprStop::Separated;
     }
     const double gain = std::min({d4 - d1, d4 - n.dot(v2.w), d4 - n.dot(v3.w)});
-    if (gain <= tol) {
+    if (gain <= 0 || gain * gain <= tol2 * nn) {
       if (!inside) {  // the origin is on the boundary within tolerance: touching
         sep = n;
         return MprStop::Separated;
       }
       const TriangleClosest c = closestPointOnTriangle(Vec3::Zero(), v1.w, v2.w, v3.w);
       const double d = std::sqrt(c.distanceSq);
-      out.n = d > 0 ? Vec3(c.point / d) : n;
+      out.n = d > 0 ? Vec3(c.point / d) : Vec3(n / std::sqrt(nn));
       out.depth = d;
       const Vec3& l = c.barycentric;
-      out.pa = l[0] * v1.a + l[1] * v2.a + l[2] * v3.a;
-      out.pb = l[0] * v1.b + l[1] * v2.b + l[2] * v3.b;
+      out.pa = l[0] * support.pointA(v1) + l[1] * support.pointA(v2) + l[2] * support.pointA(v3);
+      out.pb = l[0] * support.pointB(v1) + l[1] * support.pointB(v2) + l[2] * support.pointB(v3);
       return MprStop::Overlap;
     }
     // Replace the portal vertex so that the ray v0 → origin still passes
@@ -768,10 +901,16 @@ GjkResult gjkDistance(const ConvexShape& a, const Isometry3& poseA, const Convex
   Quick quick = Quick::Unsure;
   GjkResult r;
   const Mat3 ra3 = poseA.linear();
+  FrameVertices frameA, frameB;
   if (options.penetration && options.method == PenetrationMethod::Mpr) {
+    m.scanInFrameA(frameA, frameB);
+    const double scale = a.boundingSphere().radius + b.boundingSphere().radius + m.t.norm();
+    const Vec3 interior = a.interiorPoint() - (m.r * b.interiorPoint() + m.t);
     MprOut mo;
     Vec3 sep;
-    const MprStop ms = runMpr(m, options, mo, sep, it);
+    const MprStop ms = m.frameA && m.frameB
+                           ? runMpr(HullSupports{*m.frameA, *m.frameB}, interior, scale, options, mo, sep, it)
+                           : runMpr(ShapeSupports{m}, interior, scale, options, mo, sep, it);
     if (ms == MprStop::Overlap) {
       storeCache(cache, poseA, v, false, m, it);
       r.distance = -mo.depth - ra - rb;

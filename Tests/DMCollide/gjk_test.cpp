@@ -476,6 +476,58 @@ TEST(Gjk, MprFaceContactAndSpheresAreExact) {
   EXPECT_NEAR(be.normal.z(), 1.0, 1e-6);
 }
 
+// MPR scans small hulls' vertices in A's frame (two 2-wide lanes, padded to
+// a multiple of 4): a hull of a box's corners must answer like the box,
+// also where an axis direction finds four corners tied, against a hull,
+// against another shape on either side, and at every padding (6, 7 and 8
+// vertices). Overlapping pairs: MPR's depth bounds EPA's exact one.
+TEST(Gjk, MprOnSmallHullsMatchesTheShapes) {
+  const Vec3 h(0.3, 0.2, 0.1);
+  std::vector<Vec3> corners;
+  for (int i = 0; i < 8; ++i)
+    corners.emplace_back(i & 1 ? h.x() : -h.x(), i & 2 ? h.y() : -h.y(), i & 4 ? h.z() : -h.z());
+  auto cube = dm::ConvexHull::create(corners);
+  // A wedge (six corners) and a wedge with a cap (seven).
+  auto wedge = dm::ConvexHull::create(std::vector<Vec3>(corners.begin(), corners.begin() + 6));
+  std::vector<Vec3> capped(corners.begin(), corners.begin() + 6);
+  capped.emplace_back(0.0, 0.0, 0.4);
+  auto cap = dm::ConvexHull::create(capped);
+  ASSERT_TRUE(cube.ok() && wedge.ok() && cap.ok());
+  ASSERT_EQ((*cube)->vertices().size(), 8u);
+  ASSERT_EQ((*wedge)->vertices().size(), 6u);
+  ASSERT_EQ((*cap)->vertices().size(), 7u);
+  const dm::Box box(h);
+  const dm::Sphere ball(0.15);
+  const dm::GjkOptions mpr = mprOptions();
+  std::mt19937_64 rng(17);
+  int overlapping = 0;
+  for (int k = 0; k < 300; ++k) {
+    Isometry3 pa = randomPose(rng, 0.1), pb = randomPose(rng, 0.6);
+    if (k % 10 == 0) pa.linear().setIdentity(), pb.linear().setIdentity();  // ties between corners
+    struct Case {
+      const dm::ConvexShape& a;
+      const dm::ConvexShape& b;
+      const dm::ConvexShape& refA;
+      const dm::ConvexShape& refB;
+    };
+    for (const Case& c : {Case{**cube, **cube, box, box}, Case{**cube, ball, box, ball},
+                          Case{ball, **cube, ball, box}, Case{**wedge, **cap, **wedge, **cap}}) {
+      const dm::GjkResult exact = dm::gjkDistance(c.refA, pa, c.refB, pb);
+      const dm::GjkResult r = dm::gjkDistance(c.a, pa, c.b, pb, nullptr, mpr);
+      if (exact.distance > 1e-7) {
+        ASSERT_NEAR(r.distance, exact.distance, 1e-12) << k;
+        continue;
+      }
+      if (exact.distance > -1e-7) continue;  // touching within rounding
+      ++overlapping;
+      ASSERT_GE(-r.distance, -exact.distance - 1e-9) << k;
+      ASSERT_NEAR(r.normal.norm(), 1.0, 1e-12) << k;
+      ASSERT_NEAR((r.pointA - r.pointB).dot(r.normal), -r.distance, 1e-9) << k;
+    }
+  }
+  EXPECT_GT(overlapping, 300);
+}
+
 // Flat shapes: two coplanar overlapping triangles give a finite answer,
 // through EPA and through MPR (which falls back to EPA there).
 TEST(Gjk, DegenerateFlatPairIsFinite) {
