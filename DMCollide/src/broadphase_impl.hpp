@@ -12,7 +12,8 @@
 
 namespace dm::detail {
 
-/// Incremental sweep-and-prune on three axes (broadphase_sap.cpp).
+/// Sweep-and-prune: one sorted list per column of a coarse grid in the plane
+/// of two axes, swept along the third (broadphase_sap.cpp).
 std::unique_ptr<BroadPhase> makeSweepAndPrune(const BroadPhaseOptions& options);
 /// Uniform spatial hash, one grid (broadphase_grid.cpp).
 std::unique_ptr<BroadPhase> makeHashedGrid(const BroadPhaseOptions& options);

@@ -1,37 +1,48 @@
-// Incremental sweep-and-prune on three axes with temporal coherence.
+// Segmented sweep-and-prune: sorted lists in the columns of a coarse grid.
+//
+// One sorted list along one axis has the flaw the issue names: at fixed
+// density the boxes whose projections overlap a box's grow like n^(2/3),
+// so the swaps of an incremental sort (and the candidates of a sweep) grow
+// like n^(5/3). Here the plane of the two other axes is cut into square
+// columns of edge `cell_` (twice the median box extent there); a box enters
+// every column its box touches, and each column keeps its own list sorted
+// along the sweep axis. A column holds O(1) boxes per metre of the sweep
+// axis at fixed density, so sorting and sweeping all of them is O(n + k).
 //
 // Data layout (slot = dense internal index; ids map to slots through
-// `slotOf_`, so a removed id can be re-inserted before the next step):
-//  - per axis k, `axis_[k]`: the sorted endpoint array, 16-byte entries
-//    {value, slot << 1 | isMax}, ordered by (value, isMax) so that a min sorts
-//    before a max of equal value — touching boxes overlap;
-//  - per slot: the target box the user last gave (per axis k, `target_[k]`
-//    holds min and max of slot s at 2s and 2s + 1, so an endpoint's tag is
-//    its index there) and the box the endpoint arrays currently encode
-//    ("committed", `cur_`, one 48-byte struct per slot);
-//  - the current pair set, a PairKeySet of slot-pair keys: memory O(n + k).
+// `slotOf_`):
+//  - per slot, one 64-byte `SlotData`: the box the user last gave and the
+//    range of columns the slot currently has entries in (empty when it has
+//    none, e.g. a parked slot with an unusable box or a wide one);
+//  - per column, a vector of 64-byte entries {sweep-axis min and max, the
+//    four bucket-axis bounds, slot, first column of the slot on each bucket
+//    axis}, sorted by sweep-axis min.
 //
-// update() only writes the target (O(1)). overlappingPairs() processes the
-// axes one at a time: it copies the targets of axis k into the endpoints,
-// re-sorts that array by insertion sort (nearly sorted after coherent
-// motion: O(n + swaps)), then commits axis k. Elements only move left, so a
-// box's min stays left of its max and each swap of a min of A with a max of
-// B flips exactly the axis-k overlap of {A, B}: a min passing a max left
-// starts it (the pair is added if the committed boxes overlap on the other
-// two axes), a max passing a min left ends it (the pair is removed if it
-// overlapped on the other two). Invariant between steps: the pair set is
-// exactly the set of committed boxes that overlap on all three axes.
-//
-// New boxes are appended at the end of each array (committed as empty) and
-// sorted in like moved ones. Removed slots are purged in one O(n + k) pass
-// at the next step. When many boxes arrive at once or the insertion sort
-// exceeds a swap budget (teleports of many boxes), the step falls back to a
-// full rebuild: std::sort of the three arrays and the pairs from a hashed grid.
+// overlappingPairs():
+//  1. every live slot recomputes its column range from its box; the columns
+//     it newly touches get an entry appended (rare under coherent motion);
+//  2. every column refreshes its entries from the slots' boxes, dropping the
+//     entries of slots whose range no longer holds the column (left, parked,
+//     removed — a reused slot is harmless: the entry then belongs to its new
+//     box), re-sorts by insertion sort (nearly sorted: O(m + swaps)) and
+//     sweeps: each entry against the following ones while their mins are
+//     within its max. A pair that overlaps lies in every column both boxes
+//     touch on the overlap; it is reported only in the column holding the
+//     corner (max of the mins) of the overlap — with the column index a
+//     monotone function of the coordinate that column is the pair of the
+//     larger first columns, which the entries carry, so each pair comes out
+//     once;
+//  3. boxes spanning more than kMaxColumns columns are kept out of the
+//     columns and tested against every live box (O(wide · n)).
+// The sweep axis and the column edge are chosen at the first step and again
+// when the number of boxes or their median size changes by 2× (the sweep
+// axis: the one with the largest spread of box centres).
 #include <dm/core/assert.hpp>
 
 #include <algorithm>
-#include <array>
+#include <cmath>
 #include <limits>
+#include <unordered_map>
 
 #include "broadphase_impl.hpp"
 
@@ -40,23 +51,37 @@ namespace dm::detail {
 namespace {
 
 constexpr std::uint32_t kNoSlot = ~std::uint32_t(0);
-constexpr double kInf = std::numeric_limits<double>::infinity();
+// Column indices are clamped to ±kCellClamp (boxes out at ±1e308 land in
+// the outermost columns; clamping keeps the index monotone).
+constexpr double kCellClamp = 1 << 28;
+// A box spanning more columns than this is tested against all boxes.
+constexpr std::int64_t kMaxColumns = 64;
 
-/// The committed box of a slot, 48 contiguous bytes: the other-axis tests of a
-/// swap read two of these.
-using SlotBox = FlatBox;
+enum class SlotState : std::uint8_t { Free, Parked, Live };
 
-struct Endpoint {
-  double value;
-  std::uint32_t tag;  // slot << 1 | isMax
+struct SlotData {
+  FlatBox box;
+  // Columns [c1lo, c1hi] × [c2lo, c2hi] holding an entry of the slot; empty
+  // (c1lo > c1hi) when none do.
+  std::int32_t c1lo = 0, c1hi = -1, c2lo = 0, c2hi = -1;
+  bool holds(std::int32_t c1, std::int32_t c2) const noexcept {
+    return c1lo <= c1 && c1 <= c1hi && c2lo <= c2 && c2 <= c2hi;
+  }
+};
+static_assert(sizeof(SlotData) == 64);
+
+struct Entry {
+  double lo, hi;    // sweep axis
+  double lo1, hi1;  // first bucket axis
+  double lo2, hi2;  // second bucket axis
+  std::uint32_t slot;
+  std::int32_t c1, c2;  // the slot's first column on each bucket axis
 };
 
-inline bool endpointLess(const Endpoint& a, const Endpoint& b) noexcept {
-  // Bitwise, not short-circuit: no branch to mispredict in the sort loops.
-  return (a.value < b.value) | ((a.value == b.value) & ((a.tag & 1u) < (b.tag & 1u)));
-}
-
-enum class SlotState : std::uint8_t { Free, Parked, Pending, Live, Dead };
+struct Column {
+  std::int32_t c1, c2;
+  std::vector<Entry> entries;
+};
 
 class SweepAndPruneBroadPhase final : public BroadPhase {
  public:
@@ -69,46 +94,26 @@ class SweepAndPruneBroadPhase final : public BroadPhase {
       return;
     }
     if (id >= slotOf_.size()) slotOf_.resize(std::size_t(id) + 1, kNoSlot);
-    const std::uint32_t s = allocSlot(id);
-    slotOf_[id] = s;
-    ++count_;
-    setTarget(s, box);
-    if (isUsableBox(box)) {
-      state_[s] = SlotState::Pending;
-      pending_.push_back(s);
+    std::uint32_t s;
+    if (!free_.empty()) {
+      s = free_.back();
+      free_.pop_back();
+    } else {
+      s = static_cast<std::uint32_t>(state_.size());
+      DM_DEMAND(s < kNoSlot, "sweep and prune: too many proxies");
+      state_.push_back(SlotState::Free);
+      idOf_.push_back(0);
+      slots_.emplace_back();
     }
+    slotOf_[id] = s;
+    idOf_[s] = id;
+    ++count_;
+    setBox(s, box);
   }
 
   void update(ProxyId id, const Aabb& box) override {
     if (id >= slotOf_.size() || slotOf_[id] == kNoSlot) return;
-    const std::uint32_t s = slotOf_[id];
-    const bool usable = isUsableBox(box);
-    switch (state_[s]) {
-      case SlotState::Live:
-        if (usable) {
-          setTarget(s, box);
-        } else {
-          // Leave the arrays: the slot dies, the id continues in a parked slot.
-          killLiveSlot(s);
-          const std::uint32_t p = allocSlot(id);
-          slotOf_[id] = p;
-          setTarget(p, box);
-        }
-        break;
-      case SlotState::Pending:
-        setTarget(s, box);
-        if (!usable) state_[s] = SlotState::Parked;
-        break;
-      case SlotState::Parked:
-        setTarget(s, box);
-        if (usable) {
-          state_[s] = SlotState::Pending;
-          pending_.push_back(s);
-        }
-        break;
-      default:
-        break;
-    }
+    setBox(slotOf_[id], box);
   }
 
   void remove(ProxyId id) override {
@@ -116,14 +121,11 @@ class SweepAndPruneBroadPhase final : public BroadPhase {
     const std::uint32_t s = slotOf_[id];
     slotOf_[id] = kNoSlot;
     --count_;
-    if (state_[s] == SlotState::Live) {
-      killLiveSlot(s);
-    } else {
-      // Not in the arrays and in no pair: reusable at once (a stale entry in
-      // pending_ is skipped because activation checks the state).
-      state_[s] = SlotState::Free;
-      free_.push_back(s);
-    }
+    --(state_[s] == SlotState::Live ? live_ : parked_);
+    // The slot's column entries go at the next step (its range is reset
+    // then, or belongs to the box of whichever id reuses the slot).
+    state_[s] = SlotState::Free;
+    free_.push_back(s);
   }
 
   void clear() override { *this = SweepAndPruneBroadPhase(); }
@@ -131,178 +133,202 @@ class SweepAndPruneBroadPhase final : public BroadPhase {
   std::size_t size() const noexcept override { return count_; }
 
   void overlappingPairs(std::vector<ProxyPair>& out) override {
-    if (!dead_.empty()) purgeDead();
-    std::size_t added = 0;
-    for (std::uint32_t s : pending_) {
-      if (state_[s] != SlotState::Pending) continue;
-      state_[s] = SlotState::Live;
-      for (int k = 0; k < 3; ++k) {
-        // Appended after everything, and new boxes are appended one after
-        // the other: until axis k is sorted the box overlaps no box on it,
-        // which the empty interval [+inf, -inf] encodes.
-        cur_[s].lo[k] = kInf;
-        cur_[s].hi[k] = -kInf;
-        axis_[k].push_back({target_[k][2 * s], s << 1});
-        axis_[k].push_back({target_[k][2 * s + 1], (s << 1) | 1u});
-      }
-      ++added;
-    }
-    pending_.clear();
-    const std::size_t live = axis_[0].size() / 2;
-    const bool bulk = added > 32 && 8 * added > live;
-    if (bulk || !sortIncremental()) rebuild();
-
     keys_.clear();
-    pairs_.forEach(
-        [&](std::uint64_t k) { keys_.push_back(pairKey(idOf_[k >> 32], idOf_[k & 0xffffffffu])); });
+    if (needsRebuild()) rebuild();
+    enterColumns();
+    for (Column& col : columns_) sweepColumn(col);
+    pairsOfWide();
+    fresh_ = false;
     emitSortedPairs(keys_, scratch_, out);
   }
 
   void query(const Aabb& box, std::vector<ProxyId>& out) const override {
-    // O(n) scan of the targets: the endpoint arrays may lag behind update().
+    // O(n) scan of the slots' boxes.
     out.clear();
-    const Vec3 lo = box.min(), hi = box.max();
-    for (std::uint32_t s = 0; s < state_.size(); ++s) {
-      if (state_[s] != SlotState::Live && state_[s] != SlotState::Pending) continue;
-      if (lo.x() <= target_[0][2 * s + 1] && target_[0][2 * s] <= hi.x() && lo.y() <= target_[1][2 * s + 1] &&
-          target_[1][2 * s] <= hi.y() && lo.z() <= target_[2][2 * s + 1] && target_[2][2 * s] <= hi.z())
-        out.push_back(idOf_[s]);
-    }
+    const FlatBox q = toFlatBox(box);
+    for (std::uint32_t s = 0; s < state_.size(); ++s)
+      if (state_[s] == SlotState::Live && overlap(q, slots_[s].box)) out.push_back(idOf_[s]);
     std::sort(out.begin(), out.end());
   }
 
  private:
-  std::uint32_t allocSlot(ProxyId id) {
-    std::uint32_t s;
-    if (!free_.empty()) {
-      s = free_.back();
-      free_.pop_back();
-    } else {
-      s = static_cast<std::uint32_t>(state_.size());
-      DM_DEMAND(s < (kNoSlot >> 1), "sweep and prune: too many proxies");
-      state_.push_back(SlotState::Free);
-      idOf_.push_back(0);
-      cur_.push_back({{kInf, kInf, kInf}, {-kInf, -kInf, -kInf}});
-      for (int k = 0; k < 3; ++k) {
-        target_[k].push_back(kInf), target_[k].push_back(kInf);
+  void setBox(std::uint32_t s, const Aabb& box) {
+    const bool usable = isUsableBox(box);
+    if (state_[s] != SlotState::Free) --(state_[s] == SlotState::Live ? live_ : parked_);
+    state_[s] = usable ? SlotState::Live : SlotState::Parked;
+    ++(usable ? live_ : parked_);
+    slots_[s].box = toFlatBox(box);
+  }
+
+  // Column of coordinate x on a bucket axis: floor(x / cell_), clamped;
+  // monotone in x.
+  std::int32_t columnOf(double x) const noexcept {
+    const double v = std::clamp(x * inverseCell_, -kCellClamp, kCellClamp);
+    const auto i = static_cast<std::int32_t>(v);
+    return i - static_cast<std::int32_t>(static_cast<double>(i) > v);
+  }
+
+  double medianExtent(std::vector<double>& scratch) const {
+    scratch.clear();
+    for (std::uint32_t s = 0; s < state_.size(); ++s)
+      if (state_[s] == SlotState::Live) {
+        const FlatBox& b = slots_[s].box;
+        scratch.push_back(0.5 * ((b.hi[axis1_] - b.lo[axis1_]) + (b.hi[axis2_] - b.lo[axis2_])));
       }
-    }
-    state_[s] = SlotState::Parked;
-    idOf_[s] = id;
-    return s;
+    if (scratch.empty()) return 0.0;
+    auto mid = scratch.begin() + static_cast<std::ptrdiff_t>(scratch.size() / 2);
+    std::nth_element(scratch.begin(), mid, scratch.end());
+    return *mid;
   }
 
-  void setTarget(std::uint32_t s, const Aabb& box) {
-    for (int k = 0; k < 3; ++k) target_[k][2 * s] = box.min()[k], target_[k][2 * s + 1] = box.max()[k];
+  bool needsRebuild() {
+    if (builtFor_ == 0) return live_ > 0;
+    if (live_ > 2 * builtFor_ || 2 * live_ < builtFor_) return true;
+    // The median size, every 64 steps (O(n)).
+    if (++sinceCheck_ < 64) return false;
+    sinceCheck_ = 0;
+    const double m = medianExtent(extents_);
+    return m > 2 * builtExtent_ || 2 * m < builtExtent_;
   }
 
-  void killLiveSlot(std::uint32_t s) {
-    state_[s] = SlotState::Dead;
-    dead_.push_back(s);
-  }
-
-  // Drops the endpoints and pairs of dead slots and frees them: O(n + k).
-  void purgeDead() {
-    pairs_.eraseIf([&](std::uint64_t k) {
-      return state_[k >> 32] == SlotState::Dead || state_[k & 0xffffffffu] == SlotState::Dead;
-    });
-    for (auto& a : axis_)
-      a.erase(std::remove_if(a.begin(), a.end(),
-                             [&](const Endpoint& e) { return state_[e.tag >> 1] == SlotState::Dead; }),
-              a.end());
-    for (std::uint32_t s : dead_) {
-      state_[s] = SlotState::Free;
-      free_.push_back(s);
-    }
-    dead_.clear();
-  }
-
-  bool overlapOnAxis(int j, std::uint32_t a, std::uint32_t b) const noexcept {
-    return (cur_[a].lo[j] <= cur_[b].hi[j]) & (cur_[b].lo[j] <= cur_[a].hi[j]);
-  }
-
-  void commitAxis(int k) {
-    const double* t = target_[k].data();
-    for (std::size_t s = 0; s < cur_.size(); ++s) cur_[s].lo[k] = t[2 * s], cur_[s].hi[k] = t[2 * s + 1];
-  }
-
-  // Insertion sort of the three axes with pair updates at each crossing.
-  // False if the swap budget ran out (the caller rebuilds from scratch).
-  bool sortIncremental() {
-    const std::size_t m = axis_[0].size();
-    // About what a rebuild costs, counted in swaps.
-    std::size_t budget = 1024 + 32 * m;
+  // Chooses the sweep axis and the column edge, and empties the columns.
+  void rebuild() {
+    // Sweep along the axis of the widest spread (10th to 90th percentile)
+    // of box centres.
+    double spread[3] = {0, 0, 0};
     for (int k = 0; k < 3; ++k) {
-      const int j1 = (k + 1) % 3, j2 = (k + 2) % 3;
-      std::vector<Endpoint>& a = axis_[k];
-      const double* t = target_[k].data();
-      for (Endpoint& e : a) e.value = t[e.tag];
+      extents_.clear();
+      for (std::uint32_t s = 0; s < state_.size(); ++s)
+        if (state_[s] == SlotState::Live)
+          extents_.push_back(0.5 * slots_[s].box.lo[k] + 0.5 * slots_[s].box.hi[k]);
+      if (extents_.size() < 2) break;
+      const auto at = [&](std::size_t q) {
+        auto it = extents_.begin() + static_cast<std::ptrdiff_t>(q);
+        std::nth_element(extents_.begin(), it, extents_.end());
+        return *it;
+      };
+      const double lo = at(extents_.size() / 10), hi = at(extents_.size() - 1 - extents_.size() / 10);
+      spread[k] = hi - lo;
+    }
+    axis0_ = int(std::max_element(spread, spread + 3) - spread);
+    axis1_ = (axis0_ + 1) % 3, axis2_ = (axis0_ + 2) % 3;
+    builtExtent_ = medianExtent(extents_);
+    double cell = 2 * builtExtent_;
+    if (!(cell > 0) || !std::isfinite(cell)) {
+      // Points or flat boxes: about √n columns across the spread.
+      cell = std::max(spread[axis1_], spread[axis2_]) / std::sqrt(double(live_));
+      if (!(cell > 0) || !std::isfinite(cell)) cell = 1.0;
+    }
+    inverseCell_ = 1.0 / cell;
+    if (!std::isfinite(inverseCell_)) inverseCell_ = 1.0;
+    builtFor_ = live_;
+    sinceCheck_ = 0;
+    columns_.clear();
+    columnOfCell_.clear();
+    for (SlotData& d : slots_) d.c1lo = 0, d.c1hi = -1, d.c2lo = 0, d.c2hi = -1;
+    fresh_ = true;
+  }
+
+  Column& column(std::int32_t c1, std::int32_t c2) {
+    const std::uint64_t key = (std::uint64_t(std::uint32_t(c1)) << 32) | std::uint32_t(c2);
+    const auto [it, added] = columnOfCell_.try_emplace(key, static_cast<std::uint32_t>(columns_.size()));
+    if (added) columns_.push_back({c1, c2, {}});
+    return columns_[it->second];
+  }
+
+  // Step 1: column ranges of the live slots, entries for newly touched
+  // columns, and the list of wide slots.
+  void enterColumns() {
+    wide_.clear();
+    for (std::uint32_t s = 0; s < state_.size(); ++s) {
+      SlotData& d = slots_[s];
+      if (state_[s] != SlotState::Live) {
+        d.c1lo = 0, d.c1hi = -1, d.c2lo = 0, d.c2hi = -1;
+        continue;
+      }
+      const std::int32_t a1 = columnOf(d.box.lo[axis1_]), b1 = columnOf(d.box.hi[axis1_]);
+      const std::int32_t a2 = columnOf(d.box.lo[axis2_]), b2 = columnOf(d.box.hi[axis2_]);
+      if ((std::int64_t(b1) - a1 + 1) * (std::int64_t(b2) - a2 + 1) > kMaxColumns) {
+        wide_.push_back(s);
+        d.c1lo = 0, d.c1hi = -1, d.c2lo = 0, d.c2hi = -1;
+        continue;
+      }
+      if (a1 == d.c1lo && b1 == d.c1hi && a2 == d.c2lo && b2 == d.c2hi) continue;
+      for (std::int32_t c1 = a1; c1 <= b1; ++c1)
+        for (std::int32_t c2 = a2; c2 <= b2; ++c2)
+          if (!d.holds(c1, c2)) column(c1, c2).entries.push_back({0, 0, 0, 0, 0, 0, s, a1, a2});
+      d.c1lo = a1, d.c1hi = b1, d.c2lo = a2, d.c2hi = b2;
+    }
+  }
+
+  // Step 2 for one column: refresh, drop, sort, sweep.
+  void sweepColumn(Column& col) {
+    std::vector<Entry>& e = col.entries;
+    std::size_t m = 0;
+    for (std::size_t i = 0; i < e.size(); ++i) {
+      const std::uint32_t s = e[i].slot;
+      const SlotData& d = slots_[s];
+      if (!d.holds(col.c1, col.c2)) continue;
+      const FlatBox& b = d.box;
+      e[m++] = {b.lo[axis0_], b.hi[axis0_], b.lo[axis1_], b.hi[axis1_], b.lo[axis2_], b.hi[axis2_], s,
+                d.c1lo,       d.c2lo};
+    }
+    e.resize(m);
+    if (fresh_) {
+      std::sort(e.begin(), e.end(), [](const Entry& a, const Entry& b) { return a.lo < b.lo; });
+    } else {
       for (std::size_t i = 1; i < m; ++i) {
-        const Endpoint x = a[i];
-        if (!endpointLess(x, a[i - 1])) continue;
-        const std::uint32_t sx = x.tag >> 1;
-        const bool xMax = x.tag & 1u;
+        if (!(e[i].lo < e[i - 1].lo)) continue;
+        const Entry x = e[i];
         std::size_t j = i;
         do {
-          const Endpoint y = a[j - 1];
-          if (xMax != bool(y.tag & 1u)) {
-            const std::uint32_t sy = y.tag >> 1;
-            if (overlapOnAxis(j1, sx, sy) && overlapOnAxis(j2, sx, sy)) {
-              const std::uint64_t key = pairKey(sx, sy);
-              if (xMax) {
-                pairs_.erase(key);  // x's max passed y's min: axis k separates
-              } else {
-                pairs_.insert(key);  // x's min passed y's max: axis k overlaps
-              }
-            }
-          }
-          a[j] = y;
+          e[j] = e[j - 1];
           --j;
-        } while (j > 0 && endpointLess(x, a[j - 1]));
-        a[j] = x;
-        const std::size_t swaps = i - j;
-        if (swaps > budget) return false;
-        budget -= swaps;
+        } while (j > 0 && x.lo < e[j - 1].lo);
+        e[j] = x;
       }
-      commitAxis(k);
     }
-    return true;
+    for (std::size_t i = 0; i < m; ++i) {
+      const Entry& a = e[i];
+      for (std::size_t j = i + 1; j < m && e[j].lo <= a.hi; ++j) {
+        const Entry& b = e[j];
+        const bool hit = (a.lo1 <= b.hi1) & (b.lo1 <= a.hi1) & (a.lo2 <= b.hi2) & (b.lo2 <= a.hi2) &
+                         (std::max(a.c1, b.c1) == col.c1) & (std::max(a.c2, b.c2) == col.c2);
+        if (hit) keys_.push_back(pairKey(idOf_[a.slot], idOf_[b.slot]));
+      }
+    }
   }
 
-  // Full re-sort of the three arrays and a fresh pair set, found by the
-  // hashed grid on the committed boxes (slots as ids): O(n log n + k), where
-  // a sort-and-sweep on one axis would cost the pairs overlapping in x,
-  // O(n^(5/3)) at fixed density.
-  void rebuild() {
-    for (int k = 0; k < 3; ++k) {
-      std::vector<Endpoint>& a = axis_[k];
-      for (Endpoint& e : a) e.value = target_[k][e.tag];
-      std::sort(a.begin(), a.end(), endpointLess);
-      commitAxis(k);
+  // Step 3: wide slots against every live slot (each wide pair once).
+  void pairsOfWide() {
+    for (const std::uint32_t w : wide_) {
+      const FlatBox& bw = slots_[w].box;
+      for (std::uint32_t s = 0; s < state_.size(); ++s) {
+        if (state_[s] != SlotState::Live || s == w || !overlap(bw, slots_[s].box)) continue;
+        // A live slot in no column is wide: that pair comes from the lower slot.
+        const SlotData& d = slots_[s];
+        if (d.c1lo > d.c1hi && s < w) continue;
+        keys_.push_back(pairKey(idOf_[w], idOf_[s]));
+      }
     }
-    pairs_.clear();
-    auto grid = makeHashedGrid({});
-    for (const Endpoint& e : axis_[0]) {
-      if (e.tag & 1u) continue;
-      const std::uint32_t s = e.tag >> 1;
-      grid->insert(s, Aabb(Vec3(cur_[s].lo[0], cur_[s].lo[1], cur_[s].lo[2]),
-                           Vec3(cur_[s].hi[0], cur_[s].hi[1], cur_[s].hi[2])));
-    }
-    grid->overlappingPairs(gridPairs_);
-    for (const ProxyPair& p : gridPairs_) pairs_.insert(pairKey(p.a, p.b));
   }
 
-  std::vector<std::uint32_t> slotOf_;          // by id
-  std::vector<ProxyId> idOf_;                  // by slot
-  std::vector<SlotState> state_;               // by slot
-  std::array<std::vector<double>, 3> target_;  // per axis: min, max by slot
-  std::vector<SlotBox> cur_;                   // committed, by slot
-  std::array<std::vector<Endpoint>, 3> axis_;
-  std::vector<std::uint32_t> free_, pending_, dead_;
-  std::vector<ProxyPair> gridPairs_;
-  PairKeySet pairs_;
+  std::vector<std::uint32_t> slotOf_;  // by id
+  std::vector<ProxyId> idOf_;          // by slot
+  std::vector<SlotState> state_;       // by slot
+  std::vector<SlotData> slots_;        // by slot
+  std::vector<std::uint32_t> free_, wide_;
+  std::vector<Column> columns_;
+  std::unordered_map<std::uint64_t, std::uint32_t> columnOfCell_;
+  std::vector<double> extents_;
   std::vector<std::uint64_t> keys_, scratch_;
-  std::size_t count_ = 0;
+  int axis0_ = 0, axis1_ = 1, axis2_ = 2;
+  double inverseCell_ = 1.0;
+  double builtExtent_ = 0.0;
+  std::size_t builtFor_ = 0;  // live boxes at the last rebuild; 0: never built
+  int sinceCheck_ = 0;
+  bool fresh_ = false;  // columns refilled since the last step: sort them from scratch
+  std::size_t count_ = 0, live_ = 0, parked_ = 0;
 };
 
 }  // namespace

@@ -366,6 +366,80 @@ TEST(BroadPhase, BulkInsertAndRemoveMatchBruteForce) {
   }
 }
 
+// Sweep-and-prune keeps one sorted list per column of a coarse grid (edge:
+// twice the median box size, re-chosen when the count or the median size
+// changes by 2x) and reports a pair only in the column holding the corner of
+// its overlap. Boxes crossing column edges every step, spanning several
+// columns or more than the column limit (plates), arriving and leaving in
+// numbers that re-choose the grid, growing threefold, vanishing and
+// returning, and slots reused within a step must still give brute force's
+// pairs.
+TEST(BroadPhase, SweepAndPruneColumnsMatchBruteForce) {
+  const Variant v{BroadPhaseKind::SweepAndPrune, {}, "sweep-and-prune"};
+  std::mt19937_64 rng(77);
+  std::uniform_real_distribution<double> u(0.0, 12.0), dir(-0.4, 0.4);
+  Lockstep ls(v);
+  std::vector<Aabb> boxes(700);
+  std::vector<Vec3> vel(700);
+  std::vector<char> live(700, 0);
+  auto place = [&](ProxyId id, const Vec3& lo, const Vec3& size) {
+    boxes[id] = Aabb(lo, lo + size);
+    vel[id] = Vec3(snap(dir(rng)), snap(dir(rng)), snap(dir(rng)));
+    if (live[id]) {
+      ls.update(id, boxes[id]);
+    } else {
+      ls.insert(id, boxes[id]);
+      live[id] = 1;
+    }
+  };
+  auto randomLo = [&] { return Vec3(snap(u(rng)), snap(u(rng)), snap(u(rng))); };
+  for (ProxyId id = 0; id < 150; ++id) place(id, randomLo(), Vec3(1, 1, 1));
+  place(150, Vec3(-74, 5, -74), Vec3(160, 0.125, 160));  // plates: more columns than the limit
+  place(151, Vec3(5, -74, -74), Vec3(0.125, 160, 160));
+  place(152, Vec3(-74, -74, 5), Vec3(160, 160, 0.125));
+  place(153, Vec3(0, 6, 6), Vec3(12, 0.25, 0.25));  // rods: a few columns, or a long list entry
+  place(154, Vec3(6, 0, 6), Vec3(0.25, 12, 0.25));
+  place(155, Vec3(6, 6, 0), Vec3(0.25, 0.25, 12));
+  std::size_t total = 0;
+  for (int step = 0; step < 110; ++step) {
+    const std::string where = "step " + std::to_string(step);
+    for (ProxyId id = 0; id < boxes.size(); ++id) {
+      if (!live[id]) continue;
+      Vec3 d = vel[id];
+      for (int k = 0; k < 3; ++k)
+        if ((boxes[id].min()[k] + d[k] < -2 && d[k] < 0) || (boxes[id].max()[k] + d[k] > 14 && d[k] > 0))
+          vel[id][k] = -vel[id][k], d[k] = 0;
+      boxes[id] = Aabb(boxes[id].min() + d, boxes[id].max() + d);
+      ls.update(id, boxes[id]);
+    }
+    if (step == 10)  // three times as many boxes: the grid is re-chosen
+      for (ProxyId id = 200; id < 500; ++id) place(id, randomLo(), Vec3(0.5, 1.5, 1));
+    if (step == 20)  // and back
+      for (ProxyId id = 200; id < 480; ++id) ls.remove(id), live[id] = 0;
+    if (step == 30)  // every box three times the size: re-chosen at the next size check
+      for (ProxyId id = 0; id < boxes.size(); ++id)
+        if (live[id] && id < 150) place(id, boxes[id].min(), 3 * (boxes[id].max() - boxes[id].min()));
+    if (step % 5 == 2) {  // a slot freed and taken by another id in the same step
+      const ProxyId gone = ProxyId(step % 150), fresh = ProxyId(500 + step);
+      ls.remove(gone), live[gone] = 0;
+      place(fresh, randomLo(), Vec3(2, 0.5, 1));
+      place(gone, randomLo(), Vec3(1, 1, 1));
+    }
+    if (step == 15) ls.update(5, box(std::nan(""), 0, 0, 1, 1, 1));  // parked, out of its columns
+    if (step == 17) ls.update(5, boxes[5]);
+    total += ls.check({box(5, 5, 5, 6, 6, 6)}, where);
+    if (::testing::Test::HasFailure()) return;
+  }
+  EXPECT_GT(total, 110u * 150u);
+  // Points only: no size to take a column edge from.
+  Lockstep points(v);
+  for (ProxyId id = 0; id < 300; ++id) {
+    const Vec3 p(double(id % 4), double(id % 3), double(id % 5));  // 60 spots
+    points.insert(id, Aabb(p, p));
+  }
+  EXPECT_GT(points.check({box(1, 1, 1, 2, 2, 2)}, "points"), 300u);
+}
+
 TEST(BroadPhase, NamesRoundTrip) {
   for (BroadPhaseKind k :
        {BroadPhaseKind::BruteForce, BroadPhaseKind::SweepAndPrune, BroadPhaseKind::HashedGrid,
