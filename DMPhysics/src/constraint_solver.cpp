@@ -24,67 +24,50 @@ void tangentBasis(const Vec3& n, Vec3& t1, Vec3& t2) noexcept {
 }
 
 using Row = ConstraintSolver::Row;
-using BodyState = ConstraintSolver::BodyState;
+using ContactRow = ConstraintSolver::ContactRow;
+using Velocity = ConstraintSolver::Velocity;
 
 // Effective mass and I⁻¹·J of a row whose Jacobian is set.
-void finishRow(Row& r, const std::vector<BodyState>& s) noexcept {
-  const BodyState& A = s[r.a];
-  const BodyState& B = s[r.b];
-  r.mAngA = A.invInertia * r.angA;
-  r.mAngB = B.invInertia * r.angB;
-  const double k = A.invMass * r.linA.squaredNorm() + r.angA.dot(r.mAngA) + B.invMass * r.linB.squaredNorm() +
-                   r.angB.dot(r.mAngB);
+void finishRow(Row& r, const std::vector<double>& invMass, const std::vector<Mat3>& invInertia) noexcept {
+  r.imA = invMass[static_cast<std::size_t>(r.a)];
+  r.imB = invMass[static_cast<std::size_t>(r.b)];
+  r.mAngA = invInertia[static_cast<std::size_t>(r.a)] * r.angA;
+  r.mAngB = invInertia[static_cast<std::size_t>(r.b)] * r.angB;
+  const double k =
+      r.imA * r.linA.squaredNorm() + r.angA.dot(r.mAngA) + r.imB * r.linB.squaredNorm() + r.angB.dot(r.mAngB);
   r.effMass = k > 1e-300 ? 1.0 / k : 0.0;
 }
 
-double rowVelocity(const Row& r, const std::vector<BodyState>& s) noexcept {
-  const BodyState& A = s[r.a];
-  const BodyState& B = s[r.b];
+double rowVelocity(const Row& r, const Velocity& A, const Velocity& B) noexcept {
   return r.linA.dot(A.v) + r.angA.dot(A.w) + r.linB.dot(B.v) + r.angB.dot(B.w);
 }
 
-double rowPushVelocity(const Row& r, const std::vector<BodyState>& s) noexcept {
-  const BodyState& A = s[r.a];
-  const BodyState& B = s[r.b];
-  return r.linA.dot(A.pv) + r.angA.dot(A.pw) + r.linB.dot(B.pv) + r.angB.dot(B.pw);
-}
-
-void applyImpulse(const Row& r, std::vector<BodyState>& s, double lambda) noexcept {
-  BodyState& A = s[r.a];
-  BodyState& B = s[r.b];
-  A.v += (A.invMass * lambda) * r.linA;
+void applyImpulse(const Row& r, Velocity& A, Velocity& B, double lambda) noexcept {
+  A.v += (r.imA * lambda) * r.linA;
   A.w += lambda * r.mAngA;
-  B.v += (B.invMass * lambda) * r.linB;
+  B.v += (r.imB * lambda) * r.linB;
   B.w += lambda * r.mAngB;
 }
 
-void applyPush(const Row& r, std::vector<BodyState>& s, double lambda) noexcept {
-  BodyState& A = s[r.a];
-  BodyState& B = s[r.b];
-  A.pv += (A.invMass * lambda) * r.linA;
-  A.pw += lambda * r.mAngA;
-  B.pv += (B.invMass * lambda) * r.linB;
-  B.pw += lambda * r.mAngB;
-}
-
-// One projected Gauss–Seidel update of a row; returns the velocity
-// correction it made (m/s).
-double solveRow(Row& r, std::vector<BodyState>& s) noexcept {
+// One projected Gauss–Seidel update of a joint row on the velocities `vel`
+// (or pseudo-velocities, with `target`/`impulse` the push ones); returns the
+// impulse change.
+double solveRow(const Row& r, std::vector<Velocity>& vel, double target, double& impulse) noexcept {
   if (r.effMass == 0.0) return 0.0;
-  const double delta = r.effMass * (r.target - rowVelocity(r, s));
-  const double next = std::clamp(r.impulse + delta, r.lo, r.hi);
-  const double applied = next - r.impulse;
-  r.impulse = next;
-  applyImpulse(r, s, applied);
-  return std::abs(applied) / r.effMass;
+  Velocity& A = vel[static_cast<std::size_t>(r.a)];
+  Velocity& B = vel[static_cast<std::size_t>(r.b)];
+  const double delta = r.effMass * (target - rowVelocity(r, A, B));
+  const double next = std::clamp(impulse + delta, r.lo, r.hi);
+  const double applied = next - impulse;
+  impulse = next;
+  applyImpulse(r, A, B, applied);
+  return applied;
 }
 
-void solvePushRow(Row& r, std::vector<BodyState>& s) noexcept {
-  if (r.effMass == 0.0) return;
-  const double delta = r.effMass * (r.pushTarget - rowPushVelocity(r, s));
-  const double next = std::clamp(r.pushImpulse + delta, r.lo, r.hi);
-  applyPush(r, s, next - r.pushImpulse);
-  r.pushImpulse = next;
+// Velocity of a contact row along direction k: u·(v_B − v_A) + angA·ω_A + angB·ω_B.
+inline double contactVelocity(const ContactRow& c, int k, const Vec3& dv, const Velocity& A,
+                              const Velocity& B) noexcept {
+  return c.u[k].dot(dv) + c.angA[k].dot(A.w) + c.angB[k].dot(B.w);
 }
 
 bool isUnit(const Vec3& v) noexcept { return v.allFinite() && std::abs(v.squaredNorm() - 1.0) < 1e-6; }
@@ -219,8 +202,11 @@ Result<Joint> Joint::fixed(std::span<const SolverBody> bodies, int a, int b, con
 // ---------------------------------------------------------------- solver ---
 
 void ConstraintSolver::reserve(std::size_t bodies, std::size_t contacts, std::size_t joints) {
-  state_.reserve(bodies + 1);
-  contactRows_.reserve(3 * contacts);
+  velocity_.reserve(bodies + 1);
+  push_.reserve(bodies + 1);
+  invMass_.reserve(bodies + 1);
+  invInertia_.reserve(bodies + 1);
+  contactRows_.reserve(contacts);
   jointRows_.reserve(kMaxJointRows * joints);
 }
 
@@ -254,10 +240,10 @@ Status ConstraintSolver::validate(std::span<const SolverBody> bodies,
   for (std::size_t i = 0; i < contacts.size(); ++i) {
     const ContactConstraint& c = contacts[i];
     const auto where = [i] { return "contacts[" + std::to_string(i) + "]"; };
-    if (!inRange(c.bodyA) || !inRange(c.bodyB))
+    if (!inRange(c.bodyA) || !inRange(c.bodyB) || c.bodyA == c.bodyB)
       return bad("body index (" + std::to_string(c.bodyA) + ", " + std::to_string(c.bodyB) +
-                     ") out of range [-1, " + std::to_string(n) + ")",
-                 where(), "pass indices into the body span or dm::kWorldBody");
+                     ") out of range [-1, " + std::to_string(n) + ") or equal",
+                 where(), "pass two different indices into the body span or dm::kWorldBody");
     if (!isUnit(c.point.normal) || !c.point.position.allFinite() || !std::isfinite(c.point.depth))
       return bad("normal not unit or position/depth not finite", where() + ".point",
                  "pass contacts as dm::collide() returns them");
@@ -303,7 +289,7 @@ void ConstraintSolver::buildJointRows(std::span<const SolverBody> bodies, Joint&
     r.angA = angA;
     r.linB = linB;
     r.angB = angB;
-    finishRow(r, state_);
+    finishRow(r, invMass_, invInertia_);
     if (inequality) {
       // C ≥ 0 wanted: speculative when C > 0 (may approach by C this step).
       r.lo = 0.0;
@@ -391,139 +377,205 @@ void ConstraintSolver::buildJointRows(std::span<const SolverBody> bodies, Joint&
   }
 }
 
+void ConstraintSolver::buildContactRows(std::span<const SolverBody> bodies,
+                                        std::span<const ContactConstraint> contacts, double dt,
+                                        const SolverOptions& o) {
+  const int worldIndex = static_cast<int>(bodies.size());
+  const double inv = 1.0 / dt;
+  const double scale = o.warmStart ? o.warmStartFactor : 0.0;
+  contactRows_.resize(contacts.size());
+  for (std::size_t i = 0; i < contacts.size(); ++i) {
+    const ContactConstraint& c = contacts[i];
+    ContactRow& r = contactRows_[i];
+    r.a = c.bodyA == kWorldBody ? worldIndex : c.bodyA;
+    r.b = c.bodyB == kWorldBody ? worldIndex : c.bodyB;
+    const auto ia = static_cast<std::size_t>(r.a), ib = static_cast<std::size_t>(r.b);
+    const Vec3 xa = c.bodyA == kWorldBody ? Vec3::Zero() : bodies[ia].position;
+    const Vec3 xb = c.bodyB == kWorldBody ? Vec3::Zero() : bodies[ib].position;
+    const Vec3 rA = c.point.position - xa;
+    const Vec3 rB = c.point.position - xb;
+    r.imA = invMass_[ia];
+    r.imB = invMass_[ib];
+    r.friction = c.friction;
+    r.u[0] = c.point.normal;
+    tangentBasis(r.u[0], r.u[1], r.u[2]);
+    const Mat3& iA = invInertia_[ia];
+    const Mat3& iB = invInertia_[ib];
+    for (int k = 0; k < 3; ++k) {
+      r.angA[k] = -rA.cross(r.u[k]);
+      r.angB[k] = rB.cross(r.u[k]);
+      r.mAngA[k] = iA * r.angA[k];
+      r.mAngB[k] = iB * r.angB[k];
+      const double m = r.imA * r.u[k].squaredNorm() + r.angA[k].dot(r.mAngA[k]) +
+                       r.imB * r.u[k].squaredNorm() + r.angB[k].dot(r.mAngB[k]);
+      r.effMass[k] = m > 1e-300 ? 1.0 / m : 0.0;
+    }
+    // Targets from the approach speed before any impulse of this step.
+    const Velocity& A = velocity_[ia];
+    const Velocity& B = velocity_[ib];
+    const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
+    r.target = 0.0;
+    r.pushTarget = 0.0;
+    r.pushImpulse = 0.0;
+    if (c.point.depth < 0.0) {
+      r.target = c.point.depth * inv;  // speculative: may close the gap this step
+    } else {
+      if (vn < -o.restitutionThreshold) r.target = -c.restitution * vn;
+      const double corr = std::min(std::max(c.point.depth - o.slop, 0.0) * inv, o.maxCorrectionVelocity);
+      if (o.splitImpulse)
+        r.pushTarget = o.pushFactor * corr;
+      else
+        r.target = std::max(r.target, o.baumgarte * corr);
+    }
+    r.impulse[0] = scale * std::max(c.normalImpulse, 0.0);
+    r.impulse[1] = scale * c.frictionImpulse.dot(r.u[1]);
+    r.impulse[2] = scale * c.frictionImpulse.dot(r.u[2]);
+  }
+}
+
+// One velocity sweep: joint rows, then per contact the friction pair
+// (projected onto the Coulomb disk |λt| ≤ μ·λn) and the normal row, so that
+// non-penetration is the last word. With kResidual, returns the largest
+// velocity correction |Δλ|/m_eff of the sweep (else 0).
+template <bool kResidual>
+double ConstraintSolver::sweep() {
+  double change = 0.0;
+  for (Row& r : jointRows_) {
+    const double applied = solveRow(r, velocity_, r.target, r.impulse);
+    if constexpr (kResidual)
+      if (r.effMass > 0.0) change = std::max(change, std::abs(applied) / r.effMass);
+  }
+  // The contacts of one body pair are consecutive (one manifold): their
+  // bodies' velocities stay in locals for the run, which spares the
+  // store-to-load round trips of a contact-by-contact update.
+  const std::size_t m = contactRows_.size();
+  for (std::size_t i = 0; i < m;) {
+    const int ia = contactRows_[i].a, ib = contactRows_[i].b;
+    Velocity& sa = velocity_[static_cast<std::size_t>(ia)];
+    Velocity& sb = velocity_[static_cast<std::size_t>(ib)];
+    Velocity A = sa, B = sb;
+    for (; i < m && contactRows_[i].a == ia && contactRows_[i].b == ib; ++i) {
+      ContactRow& r = contactRows_[i];
+      if (r.effMass[0] == 0.0) continue;  // two non-dynamic bodies
+      if (r.effMass[1] > 0.0 && r.effMass[2] > 0.0) {
+        const Vec3 dv = B.v - A.v;
+        const double limit = r.friction * r.impulse[0];
+        double l1 = r.impulse[1] - r.effMass[1] * contactVelocity(r, 1, dv, A, B);
+        double l2 = r.impulse[2] - r.effMass[2] * contactVelocity(r, 2, dv, A, B);
+        const double len2 = l1 * l1 + l2 * l2;
+        if (len2 > limit * limit) {
+          const double f = len2 > 0.0 ? limit / std::sqrt(len2) : 0.0;
+          l1 *= f;
+          l2 *= f;
+        }
+        const double d1 = l1 - r.impulse[1], d2 = l2 - r.impulse[2];
+        r.impulse[1] = l1;
+        r.impulse[2] = l2;
+        const Vec3 p = d1 * r.u[1] + d2 * r.u[2];
+        A.v -= r.imA * p;
+        A.w += d1 * r.mAngA[1] + d2 * r.mAngA[2];
+        B.v += r.imB * p;
+        B.w += d1 * r.mAngB[1] + d2 * r.mAngB[2];
+        if constexpr (kResidual)
+          change = std::max({change, std::abs(d1) / r.effMass[1], std::abs(d2) / r.effMass[2]});
+      }
+      const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
+      const double next = std::max(r.impulse[0] + r.effMass[0] * (r.target - vn), 0.0);
+      const double applied = next - r.impulse[0];
+      r.impulse[0] = next;
+      A.v -= (r.imA * applied) * r.u[0];
+      A.w += applied * r.mAngA[0];
+      B.v += (r.imB * applied) * r.u[0];
+      B.w += applied * r.mAngB[0];
+      if constexpr (kResidual) change = std::max(change, std::abs(applied) / r.effMass[0]);
+    }
+    sa = A;
+    sb = B;
+  }
+  return change;
+}
+
 Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
                                             std::span<ContactConstraint> contacts, std::span<Joint> joints,
                                             double dt, const SolverOptions& o) {
   if (Status s = validate(bodies, contacts, joints, dt, o); !s) return std::move(s).error();
   const std::size_t n = bodies.size();
-  const double inv = 1.0 / dt;
 
-  // Copy velocities into the scratch; index n is the static world.
-  state_.resize(n + 1);
+  // Copy velocities and mass properties into the scratch; index n is the
+  // static world.
+  velocity_.resize(n + 1);
+  push_.resize(n + 1);
+  invMass_.resize(n + 1);
+  invInertia_.resize(n + 1);
   for (std::size_t i = 0; i < n; ++i) {
     const SolverBody& b = bodies[i];
-    BodyState& s = state_[i];
-    s.v = b.linearVelocity;
-    s.w = b.angularVelocity;
-    s.pv.setZero();
-    s.pw.setZero();
-    s.invMass = b.invMass;
-    s.invInertia = b.invMass > 0.0 ? b.invInertia : Mat3(Mat3::Zero());
+    velocity_[i] = {b.linearVelocity, b.angularVelocity};
+    push_[i] = {Vec3::Zero(), Vec3::Zero()};
+    invMass_[i] = b.invMass;
+    invInertia_[i] = b.invMass > 0.0 ? b.invInertia : Mat3(Mat3::Zero());
   }
-  BodyState& world = state_[n];
-  world.v.setZero();
-  world.w.setZero();
-  world.pv.setZero();
-  world.pw.setZero();
-  world.invMass = 0.0;
-  world.invInertia.setZero();
+  velocity_[n] = push_[n] = {Vec3::Zero(), Vec3::Zero()};
+  invMass_[n] = 0.0;
+  invInertia_[n].setZero();
 
-  // Joint rows.
   jointRows_.clear();
   for (Joint& j : joints) buildJointRows(bodies, j, dt, o);
-
-  // Contact rows: normal, tangent 1, tangent 2.
-  contactRows_.resize(3 * contacts.size());
-  const int world_index = static_cast<int>(n);
-  for (std::size_t i = 0; i < contacts.size(); ++i) {
-    ContactConstraint& c = contacts[i];
-    const int ia = c.bodyA == kWorldBody ? world_index : c.bodyA;
-    const int ib = c.bodyB == kWorldBody ? world_index : c.bodyB;
-    const Vec3 xa = c.bodyA == kWorldBody ? Vec3::Zero() : bodies[static_cast<std::size_t>(ia)].position;
-    const Vec3 xb = c.bodyB == kWorldBody ? Vec3::Zero() : bodies[static_cast<std::size_t>(ib)].position;
-    const Vec3& nrm = c.point.normal;
-    const Vec3 rA = c.point.position - xa;
-    const Vec3 rB = c.point.position - xb;
-    Vec3 t1, t2;
-    tangentBasis(nrm, t1, t2);
-    Row* rows = &contactRows_[3 * i];
-    const Vec3* dirs[3] = {&nrm, &t1, &t2};
-    for (int k = 0; k < 3; ++k) {
-      Row& r = rows[k];
-      const Vec3& u = *dirs[k];
-      r.a = ia;
-      r.b = ib;
-      r.linA = -u;
-      r.angA = -rA.cross(u);
-      r.linB = u;
-      r.angB = rB.cross(u);
-      finishRow(r, state_);
-      r.target = 0.0;
-      r.pushTarget = 0.0;
-      r.pushImpulse = 0.0;
-      r.out = nullptr;
-    }
-    Row& rn = rows[0];
-    rn.lo = 0.0;
-    rn.hi = kInf;
-    // Targets from the approach speed before any impulse of this step.
-    const double vn = rowVelocity(rn, state_);
-    if (c.point.depth < 0.0) {
-      rn.target = c.point.depth * inv;  // speculative: may close the gap this step
-    } else {
-      if (vn < -o.restitutionThreshold) rn.target = -c.restitution * vn;
-      const double corr = std::min(std::max(c.point.depth - o.slop, 0.0) * inv, o.maxCorrectionVelocity);
-      if (o.splitImpulse)
-        rn.pushTarget = o.pushFactor * corr;
-      else
-        rn.target = std::max(rn.target, o.baumgarte * corr);
-    }
-    const double scale = o.warmStart ? o.warmStartFactor : 0.0;
-    rn.impulse = scale * std::max(c.normalImpulse, 0.0);
-    rows[1].impulse = scale * c.frictionImpulse.dot(t1);
-    rows[2].impulse = scale * c.frictionImpulse.dot(t2);
-    // Friction bounds are set per sweep from the normal impulse.
-    rows[1].lo = rows[2].lo = -kInf;
-    rows[1].hi = rows[2].hi = kInf;
-  }
+  buildContactRows(bodies, contacts, dt, o);
 
   // Warm start.
   SolverStats stats;
-  stats.rows = static_cast<int>(jointRows_.size() + contactRows_.size());
+  stats.rows = static_cast<int>(jointRows_.size() + 3 * contactRows_.size());
   if (o.warmStart) {
-    for (const Row& r : jointRows_) applyImpulse(r, state_, r.impulse);
-    for (const Row& r : contactRows_) applyImpulse(r, state_, r.impulse);
+    for (const Row& r : jointRows_)
+      applyImpulse(r, velocity_[static_cast<std::size_t>(r.a)], velocity_[static_cast<std::size_t>(r.b)],
+                   r.impulse);
+    for (const ContactRow& r : contactRows_) {
+      Velocity& A = velocity_[static_cast<std::size_t>(r.a)];
+      Velocity& B = velocity_[static_cast<std::size_t>(r.b)];
+      const Vec3 p = r.impulse[0] * r.u[0] + r.impulse[1] * r.u[1] + r.impulse[2] * r.u[2];
+      A.v -= r.imA * p;
+      A.w += r.impulse[0] * r.mAngA[0] + r.impulse[1] * r.mAngA[1] + r.impulse[2] * r.mAngA[2];
+      B.v += r.imB * p;
+      B.w += r.impulse[0] * r.mAngB[0] + r.impulse[1] * r.mAngB[1] + r.impulse[2] * r.mAngB[2];
+    }
   }
 
-  // Velocity sweeps.
+  // Velocity sweeps; the residual is measured only where it is used (the
+  // early exit, or the last sweep for the stats).
   for (int it = 0; it < o.velocityIterations; ++it) {
-    double change = 0.0;
-    for (Row& r : jointRows_) change = std::max(change, solveRow(r, state_));
-    for (std::size_t i = 0; i < contacts.size(); ++i) {
-      Row* rows = &contactRows_[3 * i];
-      Row& r1 = rows[1];
-      Row& r2 = rows[2];
-      // Friction: both tangent rows, then the accumulated tangential impulse
-      // projected onto the Coulomb disk |λt| ≤ μ·λn.
-      if (r1.effMass > 0.0 && r2.effMass > 0.0) {
-        const double limit = contacts[i].friction * rows[0].impulse;
-        double l1 = r1.impulse - r1.effMass * rowVelocity(r1, state_);
-        double l2 = r2.impulse - r2.effMass * rowVelocity(r2, state_);
-        const double len = std::hypot(l1, l2);
-        if (len > limit) {
-          const double f = len > 0.0 ? limit / len : 0.0;
-          l1 *= f;
-          l2 *= f;
-        }
-        const double d1 = l1 - r1.impulse, d2 = l2 - r2.impulse;
-        r1.impulse = l1;
-        r2.impulse = l2;
-        applyImpulse(r1, state_, d1);
-        applyImpulse(r2, state_, d2);
-        change = std::max({change, std::abs(d1) / r1.effMass, std::abs(d2) / r2.effMass});
-      }
-      change = std::max(change, solveRow(rows[0], state_));
-    }
+    const bool measure = o.tolerance > 0.0 || it + 1 == o.velocityIterations;
+    const double change = measure ? sweep<true>() : sweep<false>();
     stats.iterations = it + 1;
     stats.residual = change;
     if (o.tolerance > 0.0 && change < o.tolerance) break;
   }
 
-  // Split-impulse position sweeps on pseudo-velocities.
+  // Split-impulse position sweeps on pseudo-velocities (contact normals and
+  // joint rows).
   if (o.splitImpulse) {
     for (int it = 0; it < o.positionIterations; ++it) {
-      for (Row& r : jointRows_) solvePushRow(r, state_);
-      for (std::size_t i = 0; i < contacts.size(); ++i) solvePushRow(contactRows_[3 * i], state_);
+      for (Row& r : jointRows_) solveRow(r, push_, r.pushTarget, r.pushImpulse);
+      const std::size_t m = contactRows_.size();
+      for (std::size_t i = 0; i < m;) {  // per manifold, as in sweep()
+        const int ia = contactRows_[i].a, ib = contactRows_[i].b;
+        Velocity& sa = push_[static_cast<std::size_t>(ia)];
+        Velocity& sb = push_[static_cast<std::size_t>(ib)];
+        Velocity A = sa, B = sb;
+        for (; i < m && contactRows_[i].a == ia && contactRows_[i].b == ib; ++i) {
+          ContactRow& r = contactRows_[i];
+          if (r.effMass[0] == 0.0) continue;
+          const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
+          const double next = std::max(r.pushImpulse + r.effMass[0] * (r.pushTarget - vn), 0.0);
+          const double applied = next - r.pushImpulse;
+          r.pushImpulse = next;
+          A.v -= (r.imA * applied) * r.u[0];
+          A.w += applied * r.mAngA[0];
+          B.v += (r.imB * applied) * r.u[0];
+          B.w += applied * r.mAngB[0];
+        }
+        sa = A;
+        sb = B;
+      }
     }
   }
 
@@ -531,21 +583,20 @@ Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
   for (std::size_t i = 0; i < n; ++i) {
     SolverBody& b = bodies[i];
     if (b.invMass <= 0.0) continue;
-    const BodyState& s = state_[i];
-    b.linearVelocity = s.v;
-    b.angularVelocity = s.w;
-    b.pushVelocity = s.pv;
-    b.turnVelocity = s.pw;
+    b.linearVelocity = velocity_[i].v;
+    b.angularVelocity = velocity_[i].w;
+    b.pushVelocity = push_[i].v;
+    b.turnVelocity = push_[i].w;
   }
   for (const Row& r : jointRows_) {
     *r.out = r.impulse;
     stats.maxImpulse = std::max(stats.maxImpulse, std::abs(r.impulse));
   }
   for (std::size_t i = 0; i < contacts.size(); ++i) {
-    const Row* rows = &contactRows_[3 * i];
+    const ContactRow& r = contactRows_[i];
     ContactConstraint& c = contacts[i];
-    c.normalImpulse = rows[0].impulse;
-    c.frictionImpulse = rows[1].impulse * rows[1].linB + rows[2].impulse * rows[2].linB;
+    c.normalImpulse = r.impulse[0];
+    c.frictionImpulse = r.impulse[1] * r.u[1] + r.impulse[2] * r.u[2];
     stats.maxImpulse = std::max(stats.maxImpulse, c.normalImpulse);
   }
   return stats;

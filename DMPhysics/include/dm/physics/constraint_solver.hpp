@@ -236,8 +236,8 @@ class ConstraintSolver {
   /// the external forces of the step (integrateVelocities()). Cost
   /// O((contacts + joints)·iterations). Fails with InvalidArgument (naming
   /// the offending field and index) on dt ≤ 0 or not finite, a body index out
-  /// of range, a non-unit contact normal, or bad options; bodies are left
-  /// untouched then.
+  /// of range, a contact of a body with itself, a non-unit contact normal, or
+  /// bad options; bodies are left untouched then.
   /// @code
   ///   auto stats = solver.solve(bodies, contacts, joints, 1.0 / 1000, {.velocityIterations = 20});
   ///   if (!stats) dm::log::warn("%s", stats.error().message().c_str());
@@ -245,10 +245,11 @@ class ConstraintSolver {
   Result<SolverStats> solve(std::span<SolverBody> bodies, std::span<ContactConstraint> contacts,
                             std::span<Joint> joints, double dt, const SolverOptions& options);
 
-  /// Internal row of the solver (exposed only so that the scratch vector can
-  /// be declared here).
+  /// Internal joint row of the solver (exposed only so that the scratch
+  /// vector can be declared here).
   struct Row {
     int a = 0, b = 0;
+    double imA = 0.0, imB = 0.0;  // inverse masses of A and B
     Vec3 linA, angA, linB, angB;  // Jacobian
     Vec3 mAngA, mAngB;            // I⁻¹·angA, I⁻¹·angB
     double effMass = 0.0;
@@ -259,20 +260,40 @@ class ConstraintSolver {
     double pushImpulse = 0.0;
     double* out = nullptr;  // where the accumulated impulse goes back (joints)
   };
-  /// Internal per-body velocity state (see Row).
-  struct BodyState {
-    Vec3 v, w, pv, pw;
-    double invMass = 0.0;
-    Mat3 invInertia;
+  /// Internal: the three rows of one contact point (normal k = 0, tangents
+  /// k = 1, 2) packed together. The linear Jacobian is ∓u on A/B, so only the
+  /// directions are stored; angular parts are angA = −rA × u, angB = rB × u.
+  struct ContactRow {
+    int a = 0, b = 0;
+    double imA = 0.0, imB = 0.0;
+    double friction = 0.0;
+    double target = 0.0, pushTarget = 0.0, pushImpulse = 0.0;
+    Vec3 u[3];                // normal, tangent 1, tangent 2
+    Vec3 angA[3], angB[3];    // angular Jacobians
+    Vec3 mAngA[3], mAngB[3];  // I⁻¹·angA, I⁻¹·angB
+    double effMass[3] = {0.0, 0.0, 0.0};
+    double impulse[3] = {0.0, 0.0, 0.0};
+  };
+  /// Internal per-body velocity pair (v, ω) or pseudo-velocity pair (see Row).
+  struct Velocity {
+    Vec3 v, w;
   };
 
  private:
   Status validate(std::span<const SolverBody> bodies, std::span<const ContactConstraint> contacts,
                   std::span<const Joint> joints, double dt, const SolverOptions& options) const;
   void buildJointRows(std::span<const SolverBody> bodies, Joint& joint, double dt, const SolverOptions& o);
-  std::vector<BodyState> state_;
+  void buildContactRows(std::span<const SolverBody> bodies, std::span<const ContactConstraint> contacts,
+                        double dt, const SolverOptions& o);
+  template <bool kResidual>
+  double sweep();
+  // Per body (index n: the static world): velocities, pseudo-velocities and
+  // mass properties, kept apart so the sweeps touch only velocities.
+  std::vector<Velocity> velocity_, push_;
+  std::vector<double> invMass_;
+  std::vector<Mat3> invInertia_;
   std::vector<Row> jointRows_;
-  std::vector<Row> contactRows_;  // 3 per contact: normal, tangent 1, tangent 2
+  std::vector<ContactRow> contactRows_;  // one per contact
 };
 
 /// Keeps the accumulated impulses of the contacts of the last step and hands
