@@ -9,6 +9,7 @@
 #include <dm/math/geometry.hpp>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 
@@ -56,48 +57,41 @@ struct FrameVertices {
 
   Vec3 operator[](std::uint32_t i) const noexcept { return Vec3(x[i], y[i], z[i]); }
 
-  // Index of the vertex furthest along d (the first on ties).
+  // Index of the vertex furthest along d (the first on ties). The largest
+  // dot product first (independent 2-wide maxima), then the lanes equal to
+  // it as a bit mask: the index comes out of registers, with no branch and
+  // no store on the way.
   std::uint32_t furthest(const Vec3& d) const noexcept {
     const std::uint32_t padded = (n + 3) & ~3u;
 #if defined(__SSE2__)
-    // Two interleaved pairs of lanes; indices ride along as doubles so that
-    // one compare mask selects both the value and the index.
     const __m128d dx = _mm_set1_pd(d.x()), dy = _mm_set1_pd(d.y()), dz = _mm_set1_pd(d.z());
-    const __m128d four = _mm_set1_pd(4.0);
-    __m128d i0 = _mm_set_pd(1.0, 0.0), i1 = _mm_set_pd(3.0, 2.0);
-    auto dot = [&](std::uint32_t i) {
-      return _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, _mm_load_pd(x + i)), _mm_mul_pd(dy, _mm_load_pd(y + i))),
-                        _mm_mul_pd(dz, _mm_load_pd(z + i)));
-    };
-    __m128d b0 = dot(0), b1 = dot(2), a0 = i0, a1 = i1;
-    for (std::uint32_t i = 4; i < padded; i += 4) {
-      i0 = _mm_add_pd(i0, four), i1 = _mm_add_pd(i1, four);
-      const __m128d p0 = dot(i), p1 = dot(i + 2);
-      const __m128d m0 = _mm_cmpgt_pd(p0, b0), m1 = _mm_cmpgt_pd(p1, b1);
-      b0 = _mm_or_pd(_mm_and_pd(m0, p0), _mm_andnot_pd(m0, b0));
-      b1 = _mm_or_pd(_mm_and_pd(m1, p1), _mm_andnot_pd(m1, b1));
-      a0 = _mm_or_pd(_mm_and_pd(m0, i0), _mm_andnot_pd(m0, a0));
-      a1 = _mm_or_pd(_mm_and_pd(m1, i1), _mm_andnot_pd(m1, a1));
+    __m128d dots[kFrameVertices / 2];
+    __m128d m0 = _mm_set1_pd(-std::numeric_limits<double>::infinity()), m1 = m0;
+    for (std::uint32_t i = 0; i < padded; i += 4) {
+      const __m128d p0 =
+          _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, _mm_load_pd(x + i)), _mm_mul_pd(dy, _mm_load_pd(y + i))),
+                     _mm_mul_pd(dz, _mm_load_pd(z + i)));
+      const __m128d p1 = _mm_add_pd(
+          _mm_add_pd(_mm_mul_pd(dx, _mm_load_pd(x + i + 2)), _mm_mul_pd(dy, _mm_load_pd(y + i + 2))),
+          _mm_mul_pd(dz, _mm_load_pd(z + i + 2)));
+      dots[i / 2] = p0, dots[i / 2 + 1] = p1;
+      m0 = _mm_max_pd(m0, p0), m1 = _mm_max_pd(m1, p1);
     }
-    alignas(16) double best[4], at[4];
-    _mm_store_pd(best, b0), _mm_store_pd(best + 2, b1);
-    _mm_store_pd(at, a0), _mm_store_pd(at + 2, a1);
+    m0 = _mm_max_pd(m0, m1);
+    m0 = _mm_max_pd(m0, _mm_shuffle_pd(m0, m0, 1));
+    std::uint64_t bits = 0;
+    for (std::uint32_t c = 0; c < padded / 2; ++c)
+      bits |= std::uint64_t(static_cast<unsigned>(_mm_movemask_pd(_mm_cmpeq_pd(dots[c], m0)))) << (2 * c);
+    return bits ? static_cast<std::uint32_t>(std::countr_zero(bits)) : 0u;  // none: NaN direction
 #else
-    double best[4], at[4];
-    for (std::uint32_t k = 0; k < 4; ++k) best[k] = d.x() * x[k] + d.y() * y[k] + d.z() * z[k], at[k] = k;
-    for (std::uint32_t i = 4; i < padded; i += 4)
-      for (std::uint32_t k = 0; k < 4; ++k) {
-        const double p = d.x() * x[i + k] + d.y() * y[i + k] + d.z() * z[i + k];
-        at[k] = p > best[k] ? double(i + k) : at[k];
-        best[k] = p > best[k] ? p : best[k];
-      }
+    std::uint32_t best = 0;
+    double top = d.x() * x[0] + d.y() * y[0] + d.z() * z[0];
+    for (std::uint32_t i = 1; i < padded; ++i) {
+      const double p = d.x() * x[i] + d.y() * y[i] + d.z() * z[i];
+      if (p > top) top = p, best = i;
+    }
+    return best;
 #endif
-    // Branches here (rather than selects) let the query run ahead on the
-    // predicted index instead of waiting for the compares.
-    int k = 0;
-    for (int j = 1; j < 4; ++j)
-      if (best[j] > best[k] || (best[j] == best[k] && at[j] < at[k])) k = j;
-    return static_cast<std::uint32_t>(at[k]);
   }
 };
 
