@@ -44,14 +44,37 @@ struct FrameVertices {
 
   // Fills from hull vertices v[0, n) mapped by (r, t); false (and empty)
   // when there are too many.
-  bool assign(const std::vector<Vec3>& v, const Mat3& r, const Vec3& t) noexcept {
+  // `moved`: false when (r, t) is the identity (A's own vertices).
+  bool assign(const std::vector<Vec3>& v, const Mat3& r, const Vec3& t, bool moved) noexcept {
     if (v.empty() || v.size() > kFrameVertices) return false;
     n = static_cast<std::uint32_t>(v.size());
-    for (std::uint32_t i = 0; i < n; ++i) {
-      const Vec3 p = r * v[i] + t;
-      x[i] = p.x(), y[i] = p.y(), z[i] = p.z();
+    std::uint32_t i = 0;
+#if defined(__SSE2__)
+    // Two vertices at a time: three loads of the interleaved coordinates,
+    // three shuffles to x, y and z pairs, then 2-wide transforms.
+    static_assert(sizeof(Vec3) == 3 * sizeof(double));
+    const double* p = v.data()->data();
+    for (; i + 2 <= n; i += 2, p += 6) {
+      const __m128d l0 = _mm_loadu_pd(p), l1 = _mm_loadu_pd(p + 2), l2 = _mm_loadu_pd(p + 4);
+      __m128d px = _mm_shuffle_pd(l0, l1, 2), py = _mm_shuffle_pd(l0, l2, 1), pz = _mm_shuffle_pd(l1, l2, 2);
+      if (moved) {
+        auto row = [&](int k) {
+          return _mm_add_pd(_mm_add_pd(_mm_add_pd(_mm_mul_pd(_mm_set1_pd(r(k, 0)), px),
+                                                  _mm_mul_pd(_mm_set1_pd(r(k, 1)), py)),
+                                       _mm_mul_pd(_mm_set1_pd(r(k, 2)), pz)),
+                            _mm_set1_pd(t[k]));
+        };
+        const __m128d qx = row(0), qy = row(1), qz = row(2);
+        px = qx, py = qy, pz = qz;
+      }
+      _mm_store_pd(x + i, px), _mm_store_pd(y + i, py), _mm_store_pd(z + i, pz);
     }
-    for (std::uint32_t i = n; i < ((n + 3) & ~3u); ++i) x[i] = x[0], y[i] = y[0], z[i] = z[0];
+#endif
+    for (; i < n; ++i) {
+      const Vec3 q = moved ? Vec3(r * v[i] + t) : v[i];
+      x[i] = q.x(), y[i] = q.y(), z[i] = q.z();
+    }
+    for (i = n; i < ((n + 3) & ~3u); ++i) x[i] = x[0], y[i] = y[0], z[i] = z[0];
     return true;
   }
 
@@ -116,9 +139,10 @@ struct MinkowskiPair {
   // and answers their supports from there from now on.
   void scanInFrameA(FrameVertices& bufA, FrameVertices& bufB) noexcept {
     if (A.type() == ShapeType::ConvexHull &&
-        bufA.assign(static_cast<const ConvexHull&>(A).vertices(), Mat3::Identity(), Vec3::Zero()))
+        bufA.assign(static_cast<const ConvexHull&>(A).vertices(), Mat3::Identity(), Vec3::Zero(), false))
       frameA = &bufA;
-    if (B.type() == ShapeType::ConvexHull && bufB.assign(static_cast<const ConvexHull&>(B).vertices(), r, t))
+    if (B.type() == ShapeType::ConvexHull &&
+        bufB.assign(static_cast<const ConvexHull&>(B).vertices(), r, t, true))
       frameB = &bufB;
   }
 
