@@ -347,6 +347,10 @@ struct SceneRenderer::Impl {
     programs[std::size_t(index)] = std::move(*p);
     return ok();
   }
+  // The frame's lights as the last setFrameUniforms call saw them.
+  Vec3f frameAmbient = Vec3f::Zero();
+  std::array<Vec3f, kMaxLights> frameLightColor{};
+  int frameLightCount = 0;
   ShaderProgram depthProgram;
   GLuint shadowTex = 0, shadowFbo = 0;
   GLuint instanceBuffer = 0;
@@ -598,6 +602,8 @@ struct SceneRenderer::Impl {
     p.set("u_orthoToEye", ortho ? Vec4f(toEye.x(), toEye.y(), toEye.z(), 1) : Vec4f::Zero());
     p.set("u_ambient", settings.ambient);
     const int n = static_cast<int>(lights.size());
+    frameAmbient = settings.ambient;
+    frameLightCount = n;
     std::array<int, kMaxLights> type{}, shadow{};
     std::array<float, 3 * kMaxLights> pos{}, dir{}, color{};
     std::array<float, kMaxLights> range{};
@@ -608,6 +614,7 @@ struct SceneRenderer::Impl {
       shadow[std::size_t(i)] = lightLayer[std::size_t(i)];
       const Vec3 d = l.type == Light::Type::Point ? Vec3::UnitZ() : Vec3(l.direction.normalized());
       const Vec3f c = l.color * l.intensity;
+      frameLightColor[std::size_t(i)] = c;
       for (int k = 0; k < 3; ++k) {
         pos[std::size_t(3 * i + k)] = float(l.position[k]);
         dir[std::size_t(3 * i + k)] = float(d[k]);
@@ -643,7 +650,30 @@ struct SceneRenderer::Impl {
     }
   }
 
-  void setMaterialUniforms(ShaderProgram& p, const Material& m) {
+  // Material uniforms, and for Blinn–Phong the material × light products of
+  // the frame's lights (set by setFrameUniforms before): the light's colour
+  // times the specular colour and, where the base colour is the same for
+  // every fragment (no vertex colours, no colour texture: `flags`), times the
+  // base colour, with ambient × base + emissive as one term. llvmpipe loads
+  // and broadcasts every uniform for every block of fragments, so each
+  // product folded here is work the fragment stage does not repeat.
+  void setMaterialUniforms(ShaderProgram& p, const Material& m, int flags) {
+    if (m.model == ShadingModel::BlinnPhong) {
+      const bool constBase = (flags & (kColorTex | kVertexColor)) == 0;
+      const Vec3f base = constBase ? Vec3f(m.baseColor.head<3>()) : Vec3f::Ones();
+      if (frameLightCount > 0) {
+        std::array<float, 3 * kMaxLights> diffuse{}, specular{};
+        for (int i = 0; i < frameLightCount; ++i)
+          for (int k = 0; k < 3; ++k) {
+            const float c = frameLightColor[std::size_t(i)][k];
+            diffuse[std::size_t(3 * i + k)] = c * base[k];
+            specular[std::size_t(3 * i + k)] = c * m.specular[k];
+          }
+        glProgramUniform3fv(p.id(), p.location("u_lightDiffuse"), frameLightCount, diffuse.data());
+        glProgramUniform3fv(p.id(), p.location("u_lightSpecular"), frameLightCount, specular.data());
+      }
+      if (constBase) p.set("u_ambientEmissive", Vec3f(frameAmbient.cwiseProduct(base) + m.emissive));
+    }
     p.set("u_baseColor", m.baseColor);
     p.set("u_specular", m.specular);
     p.set("u_shininess", m.shininess);
@@ -881,7 +911,8 @@ Result<RenderStats> SceneRenderer::Impl::renderViews(const RenderTarget& target,
       }
       if (b.material != material) {
         material = b.material;
-        setMaterialUniforms(programs[std::size_t(program)], materials.slots[material].material);
+        setMaterialUniforms(programs[std::size_t(program)], materials.slots[material].material,
+                            (program / kLightCounts) % kVariants);
       }
       if (b.count == 1) {  // SINGLE: the instance's matrices as uniforms
         const InstanceMatrix& m = instances[b.first];

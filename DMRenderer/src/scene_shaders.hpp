@@ -112,6 +112,13 @@ uniform int u_lightType[MAX_LIGHTS];      // 0 directional, 1 point, 2 spot
 uniform vec3 u_lightPos[MAX_LIGHTS];
 uniform vec3 u_lightDir[MAX_LIGHTS];      // unit, direction of travel
 uniform vec3 u_lightColor[MAX_LIGHTS];    // colour x intensity
+// Blinn-Phong: light colour x specular colour, and x base colour where that
+// is the same for every fragment (CONST_BASE), folded on the CPU; then the
+// ambient and emissive terms are one uniform too.
+#define CONST_BASE (!VERTEX_COLOR && !COLOR_TEX)
+uniform vec3 u_lightDiffuse[MAX_LIGHTS];
+uniform vec3 u_lightSpecular[MAX_LIGHTS];
+uniform vec3 u_ambientEmissive;
 uniform float u_lightRange[MAX_LIGHTS];
 uniform vec2 u_lightCone[MAX_LIGHTS];     // cos(inner), cos(outer)
 uniform int u_lightShadow[MAX_LIGHTS];    // shadow map layer or -1
@@ -235,8 +242,10 @@ void main() {
   vec3 f0 = mix(vec3(0.04), base.rgb, u_metallic);
   vec3 diffuseColor = base.rgb * (1.0 - u_metallic);
   vec3 color = u_ambient * (diffuseColor + schlick(nv, f0) * (1.0 - 0.5 * rough));
+#elif CONST_BASE
+  vec3 color = u_ambientEmissive;
 #else
-  vec3 color = u_ambient * base.rgb;
+  vec3 color = u_ambient * base.rgb + u_emissive;
 #endif
   for (int i = 0; i < NUM_LIGHTS; ++i) {  // a constant: llvmpipe runs dynamic loops far slower
     vec3 l;
@@ -263,19 +272,24 @@ void main() {
 #if SHADOWS
     if (u_lightShadow[i] >= 0) atten *= shadowFactor(u_lightShadow[i], v_worldPos, geomN, l, dist);
 #endif
-    vec3 e = u_lightColor[i] * atten;
     vec3 h = normalize(l + v);
     float nh = max(dot(n, h), 0.0);
 #if MODEL == 2
+    vec3 e = u_lightColor[i] * atten;
     vec3 f = schlick(max(dot(h, v), 0.0), f0);
     vec3 spec = f * ggx(nh, alpha) * smithSchlick(nv, nl, rough) / (4.0 * nv * nl);
     vec3 kd = (1.0 - f) * diffuseColor / PI;
     color += PI * (kd + spec) * e * nl;
+#elif CONST_BASE
+    color += (u_lightDiffuse[i] * nl + u_lightSpecular[i] * pow(nh, u_shininess)) * atten;
 #else
-    color += (base.rgb * nl + u_specular * pow(nh, u_shininess)) * e;
+    color += (base.rgb * u_lightDiffuse[i] * nl + u_lightSpecular[i] * pow(nh, u_shininess)) * atten;
 #endif
   }
-  o_color = vec4(color + u_emissive, 1.0);
+#if MODEL == 2
+  color += u_emissive;
+#endif
+  o_color = vec4(color, 1.0);
 #endif
 }
 )";

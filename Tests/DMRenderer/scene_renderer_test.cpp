@@ -228,6 +228,44 @@ TEST(SceneRenderer, VertexColoursEmissiveAndWireframe) {
   EXPECT_LT(lines, 32u * 32u / 2);
 }
 
+// Blinn-Phong under a directional light 60° off the view axis, against
+// ambient·c + emissive + I(c cos θ + s cos(θ/2)^shininess): once with the
+// colour c as the material's (the renderer folds base × light on the CPU)
+// and once as white × per-vertex colours c (multiplied per fragment).
+TEST(SceneRenderer, BlinnPhongMatchesTheFormulaWithPlainAndVertexColours) {
+  DM_REQUIRE_GL();
+  Scene s = makeScene(64, 64, 1);
+  const dm::Vec3f c(0.5f, 0.25f, 1.0f), spec(0.2f, 0.1f, 0.05f), emissive(0.02f, 0, 0);
+  dm::Mesh quad = makeQuad(1, 1);
+  auto plain = s.renderer.addMesh(quad);
+  quad.colors.assign(4, dm::Vec4f(c.x(), c.y(), c.z(), 1));
+  auto coloured = s.renderer.addMesh(quad);
+  auto plainMat = s.renderer.addMaterial({.baseColor = dm::Vec4f(c.x(), c.y(), c.z(), 1),
+                                          .specular = spec, .shininess = 8, .emissive = emissive});
+  auto vertexMat = s.renderer.addMaterial(
+      {.baseColor = dm::Vec4f(1, 1, 1, 1), .specular = spec, .shininess = 8, .emissive = emissive});
+  ASSERT_TRUE(plain && coloured && plainMat && vertexMat);
+  const double theta = 60 * kPi / 180, intensity = 0.6, ambient = 0.05;
+  const dm::Light sun = dm::Light::directional({-std::sin(theta), 0, -std::cos(theta)}, float(intensity));
+  const dm::RenderSettings settings{.background = dm::Vec4f(0, 0, 0, 1),
+                                    .ambient = dm::Vec3f::Constant(float(ambient))};
+  const dm::DrawItem items[2] = {{.mesh = *plain, .material = *plainMat},
+                                 {.mesh = *coloured, .material = *vertexMat}};
+  double got[2][3];
+  for (int k = 0; k < 2; ++k) {
+    ASSERT_TRUE(s.renderer.render(s.target, orthoFront(0.5), {&items[k], 1}, {&sun, 1}, settings));
+    auto img = s.target.readColor();
+    ASSERT_TRUE(img);
+    for (int ch = 0; ch < 3; ++ch) got[k][ch] = linearAt(*img, 32, 32, ch);
+  }
+  const double specTerm = std::pow(std::cos(theta / 2), 8.0);
+  for (int ch = 0; ch < 3; ++ch) {
+    const double want = ambient * c[ch] + emissive[ch] + intensity * (c[ch] * std::cos(theta) + spec[ch] * specTerm);
+    EXPECT_NEAR(got[0][ch], want, 0.01 * want + 0.002) << "plain, channel " << ch;
+    EXPECT_NEAR(got[1][ch], want, 0.01 * want + 0.002) << "vertex colours, channel " << ch;
+  }
+}
+
 TEST(SceneRenderer, PointLightFallsOffWithInverseSquare) {
   DM_REQUIRE_GL();
   Scene s = makeScene(32, 32, 1);
