@@ -61,7 +61,18 @@ struct Entry {
 /// box's cell range.
 inline std::uint64_t cellCoord(double x, double inv) noexcept {
   const double v = std::clamp(x * inv, -kCoordHalf, kCoordHalf - 1.0);
-  return static_cast<std::uint64_t>(static_cast<std::int64_t>(std::floor(v)) + std::int64_t(kCoordHalf));
+  // floor(v) without a libm call (not inlined without SSE4.1): truncate,
+  // then step down where truncation went up. Exact: |v| < 2^18.
+  const auto t = static_cast<std::int64_t>(v);
+  const std::int64_t f = t - static_cast<std::int64_t>(static_cast<double>(t) > v);
+  return static_cast<std::uint64_t>(f + std::int64_t(kCoordHalf));
+}
+
+/// overlap() with no branches: in the cell loops the outcome is a coin toss
+/// to the predictor.
+inline bool overlapNoBranch(const Box& a, const Box& b) noexcept {
+  return (a.lo[0] <= b.hi[0]) & (b.lo[0] <= a.hi[0]) & (a.lo[1] <= b.hi[1]) & (b.lo[1] <= a.hi[1]) &
+         (a.lo[2] <= b.hi[2]) & (b.lo[2] <= a.hi[2]);
 }
 
 inline std::uint64_t cellKey(int level, std::uint64_t x, std::uint64_t y, std::uint64_t z) noexcept {
@@ -194,9 +205,12 @@ class GridBroadPhase final : public BroadPhase {
     const double r = largestEdge(b) * inv_[0];
     if (!(r > 1.0)) return 0;
     if (!(r < 0x1p62)) return kMaxLevels - 1;  // also an infinite edge
-    int e = 0;
-    const double m = std::frexp(r, &e);  // r = m·2^e, m in [0.5, 1): ceil(log2 r), exactly
-    return std::clamp(m == 0.5 ? e - 1 : e, 0, kMaxLevels - 1);
+    // ceil(log2 r), exactly, from the bits: r = 1.f · 2^e, so e when the
+    // fraction f is zero, else e + 1.
+    const auto bits = std::bit_cast<std::uint64_t>(r);
+    const int e = static_cast<int>((bits >> 52) & 0x7ff) - 1023;
+    const bool fraction = (bits & ((std::uint64_t(1) << 52) - 1)) != 0;
+    return std::clamp(fraction ? e + 1 : e, 0, kMaxLevels - 1);
   }
 
   void buildEntries() {
@@ -258,7 +272,7 @@ class GridBroadPhase final : public BroadPhase {
           const Entry eq = sorted_[q];
           if (eq.key != ep.key) continue;
           const Box& b = boxes_[eq.index];
-          if (overlap(a, b) && cornerKey(keyLevel(ep.key), a, b) == ep.key) emit(ep.index, eq.index);
+          if (overlapNoBranch(a, b) && cornerKey(keyLevel(ep.key), a, b) == ep.key) emit(ep.index, eq.index);
         }
       }
     }
@@ -285,7 +299,7 @@ class GridBroadPhase final : public BroadPhase {
               for (std::uint32_t q = bucketStart_[bk]; q < bucketStart_[bk + 1]; ++q) {
                 if (sorted_[q].key != key) continue;
                 const Box& b = boxes_[sorted_[q].index];
-                if (overlap(a, b) && cornerKey(l, a, b) == key) emit(i, sorted_[q].index);
+                if (overlapNoBranch(a, b) && cornerKey(l, a, b) == key) emit(i, sorted_[q].index);
               }
             }
       }
