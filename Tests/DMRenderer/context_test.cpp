@@ -62,6 +62,42 @@ TEST(GlContext, SecondContextCoexistsAndFirstStaysUsable) {
   EXPECT_EQ(img->at<std::uint8_t>(3, 3, 0), 255);
 }
 
+// The EGL device platform end to end on whichever device is enumerated
+// (Mesa's software device on CI machines, a GPU where there is one): a
+// context on it draws, and asking for a device that is not there names the
+// index and the count.
+TEST(GlContext, DevicePlatformDrawsOnAnEnumeratedDevice) {
+  DM_REQUIRE_GL();
+  const auto devices = dm::listEglDevices();
+  if (devices.empty()) GTEST_SKIP() << "no EGL device is enumerated here";
+  {
+    auto ctx = dm::GlContext::create({.platform = dm::EglPlatform::Device, .deviceIndex = 0, .ignoreEnvironment = true});
+    ASSERT_TRUE(ctx) << ctx.error();
+    EXPECT_EQ((*ctx)->info().platform, dm::EglPlatform::Device);
+    EXPECT_EQ((*ctx)->info().deviceIndex, 0);
+    EXPECT_NE((*ctx)->info().glVersion.find("4."), std::string::npos) << (*ctx)->info().glVersion;
+    auto rt = dm::RenderTarget::create({.width = 16, .height = 16, .samples = 1});
+    ASSERT_TRUE(rt) << rt.error();
+    rt->bind();
+    rt->clear(dm::Vec4f(0, 0, 1, 1));
+    ASSERT_TRUE(dm::test::drawNdcRect(-1, -1, 0, 1, 0, dm::Vec4f(1, 0, 0, 1)));  // the left half red
+    auto img = rt->readColor();
+    ASSERT_TRUE(img);
+    EXPECT_EQ(img->at<std::uint8_t>(4, 8, 0), 255);
+    EXPECT_EQ(img->at<std::uint8_t>(4, 8, 2), 0);
+    EXPECT_EQ(img->at<std::uint8_t>(12, 8, 0), 0);
+    EXPECT_EQ(img->at<std::uint8_t>(12, 8, 2), 255);
+  }
+  auto missing = dm::GlContext::create({.platform = dm::EglPlatform::Device,
+                                        .deviceIndex = int(devices.size()) + 3,
+                                        .ignoreEnvironment = true});
+  ASSERT_FALSE(missing);
+  EXPECT_NE(missing.error().message().find("index " + std::to_string(devices.size() + 3) + " requested"),
+            std::string::npos)
+      << missing.error().message();
+  ASSERT_TRUE(dm::test::renderContext()->makeCurrent());
+}
+
 TEST(RenderTarget, ClearReadsBackSrgbEncoded) {
   DM_REQUIRE_GL();
   auto rt = dm::RenderTarget::create({.width = 32, .height = 16, .samples = 4});
