@@ -3,8 +3,10 @@
 // Both algorithms run in A's local frame: B's support points are mapped by
 // the relative pose once per query, which saves a rotation per support call.
 // MPR on small hulls goes further: it copies both hulls' vertices into A's
-// frame once and scans them as structure-of-arrays coordinates, carrying
-// vertex indices instead of points through the portal updates.
+// frame once and scans them as structure-of-arrays coordinates (above 16
+// vertices, the refinement climbs the hull's edges from the last support
+// instead), carrying vertex indices instead of points through the portal
+// updates.
 #include <dm/collide/gjk.hpp>
 #include <dm/math/geometry.hpp>
 
@@ -33,20 +35,29 @@ struct Vertex {
 // padded to a multiple of 4 with copies of vertex 0 (never chosen: ties go
 // to the lower index). Worth building for the queries that call the support
 // mapping a dozen times and more (MPR): each call is then a branch-free
-// 2-wide scan with no rotation of the direction or of the answer.
+// 2-wide scan, or on larger hulls a short climb along the hull's edges, with
+// no rotation of the direction or of the answer.
 constexpr std::uint32_t kFrameVertices = 64;
 
 struct FrameVertices {
   alignas(16) double x[kFrameVertices];
   alignas(16) double y[kFrameVertices];
   alignas(16) double z[kFrameVertices];
-  std::uint32_t n = 0;  // vertices; the padding runs to (n + 3) & ~3
+  std::uint32_t n = 0;               // vertices; the padding runs to (n + 3) & ~3
+  const ConvexHull* hull = nullptr;  // for its vertex adjacency
+
+  // Above this many vertices, a search that starts next to the answer
+  // (MPR's refinement: the portal normal turns a little per step) climbs
+  // the hull's edges instead of scanning: a handful of dot products.
+  static constexpr std::uint32_t kClimbVertices = 16;
 
   // Fills from hull vertices v[0, n) mapped by (r, t); false (and empty)
   // when there are too many.
   // `moved`: false when (r, t) is the identity (A's own vertices).
-  bool assign(const std::vector<Vec3>& v, const Mat3& r, const Vec3& t, bool moved) noexcept {
+  bool assign(const ConvexHull& h, const Mat3& r, const Vec3& t, bool moved) noexcept {
+    const std::vector<Vec3>& v = h.vertices();
     if (v.empty() || v.size() > kFrameVertices) return false;
+    hull = &h;
     n = static_cast<std::uint32_t>(v.size());
     std::uint32_t i = 0;
 #if defined(__SSE2__)
@@ -79,6 +90,24 @@ struct FrameVertices {
   }
 
   Vec3 operator[](std::uint32_t i) const noexcept { return Vec3(x[i], y[i], z[i]); }
+
+  // furthest(d), starting the search from vertex `start` (a recent answer).
+  // A linear function on a convex polytope has no local maximum along its
+  // edges but the global one, so the climb ends at the answer (on ties, at
+  // one of the tied vertices).
+  std::uint32_t furthestFrom(const Vec3& d, std::uint32_t start) const noexcept {
+    if (n <= kClimbVertices) return furthest(d);
+    std::uint32_t cur = start;
+    double best = d.x() * x[cur] + d.y() * y[cur] + d.z() * z[cur];
+    for (bool moved = true; moved;) {
+      moved = false;
+      for (const std::uint32_t v : hull->neighbors(cur)) {
+        const double p = d.x() * x[v] + d.y() * y[v] + d.z() * z[v];
+        if (p > best) best = p, cur = v, moved = true;
+      }
+    }
+    return cur;
+  }
 
   // Index of the vertex furthest along d (the first on ties). The largest
   // dot product first (independent 2-wide maxima), then the lanes equal to
@@ -139,10 +168,9 @@ struct MinkowskiPair {
   // and answers their supports from there from now on.
   void scanInFrameA(FrameVertices& bufA, FrameVertices& bufB) noexcept {
     if (A.type() == ShapeType::ConvexHull &&
-        bufA.assign(static_cast<const ConvexHull&>(A).vertices(), Mat3::Identity(), Vec3::Zero(), false))
+        bufA.assign(static_cast<const ConvexHull&>(A), Mat3::Identity(), Vec3::Zero(), false))
       frameA = &bufA;
-    if (B.type() == ShapeType::ConvexHull &&
-        bufB.assign(static_cast<const ConvexHull&>(B).vertices(), r, t, true))
+    if (B.type() == ShapeType::ConvexHull && bufB.assign(static_cast<const ConvexHull&>(B), r, t, true))
       frameB = &bufB;
   }
 
@@ -727,6 +755,7 @@ struct ShapeSupports {  // any convex shapes
   MinkowskiPair& m;
   using Point = Vertex;
   Point operator()(const Vec3& d) const noexcept { return m.support(d); }
+  Point refine(const Vec3& d, const Point& /*near*/) const noexcept { return m.support(d); }
   static Vec3 pointA(const Point& p) noexcept { return p.a; }
   static Vec3 pointB(const Point& p) noexcept { return p.b; }
 };
@@ -742,6 +771,15 @@ struct HullSupports {  // two small hulls, both in A's frame: points carry verte
     Point p;
     p.ia = A.furthest(d);
     p.ib = B.furthest(-d);
+    p.w = A[p.ia] - B[p.ib];
+    return p;
+  }
+  // The support along d, which is close to the one along the direction that
+  // gave `near`.
+  Point refine(const Vec3& d, const Point& near) const noexcept {
+    Point p;
+    p.ia = A.furthestFrom(d, near.ia);
+    p.ib = B.furthestFrom(-d, near.ib);
     p.w = A[p.ia] - B[p.ib];
     return p;
   }
@@ -814,13 +852,15 @@ MprStop runMpr(const Supports& support, Vec3 interior, double scale, const GjkOp
   // it is compared with tol · |n| by squares.
   bool inside = false;
   const double tol2 = tol * tol;
+  Point last = v3;  // the latest support: where the next search starts
   for (; iterations < opt.maxMprIterations; ++iterations) {
     const Vec3 n = (v2.w - v1.w).cross(v3.w - v1.w);
     const double nn = n.squaredNorm();
     if (!(nn > 0)) return MprStop::Degenerate;
     const double d1 = n.dot(v1.w);
     if (d1 >= 0) inside = true;  // the origin is behind the portal
-    const Point v4 = support(n);
+    const Point v4 = support.refine(n, last);
+    last = v4;
     const double d4 = n.dot(v4.w);
     if (!inside && d4 < 0) {  // the boundary along n is below the origin
       sep = n;
