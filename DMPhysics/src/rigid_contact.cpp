@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <span>
 #include <string>
 
@@ -80,6 +81,13 @@ void PhysicsWorld::reserveContacts(WorldState& state) const {
   }
   c.joints = joints_;
   c.constrained.assign(n, 0);
+  c.asleep.assign(n, 0);
+  c.sleepBlocked.assign(n, 0);
+  c.stillTime.assign(n, 0.0);
+  c.islandTime.assign(n, 0.0);
+  c.island.resize(n);
+  for (std::uint32_t i = 0; i < n; ++i) c.island[i] = i;
+  c.sleeping = 0;
   std::size_t colliders = 0, planes = 0;
   for (std::uint32_t i = 0; i < n; ++i) {
     if (!collider(i)) continue;
@@ -142,10 +150,28 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
 
 void PhysicsWorld::narrowPhase(WorldState& state) const {
   RigidContactState& c = state.contact_;
+  const auto awake = [this, &c](std::uint32_t i) { return model_[i].inverseMass > 0.0 && !c.asleep[i]; };
+  const auto pose = [this, &c](std::uint32_t i) {
+    return posed(c.bodies[i].position, c.bodies[i].orientation, bodies_[i].shapeOffset);
+  };
+  if (c.sleeping > 0) {
+    // An awake dynamic body colliding with a sleeper wakes the sleeper's
+    // island before any contact is made, so the island takes part in full.
+    const CollisionRequest test{.contacts = false, .maxContacts = 1};
+    for (const ProxyPair& pair : c.pairs) {
+      const std::uint32_t a = pair.a, b = pair.b;
+      if (c.asleep[a] == c.asleep[b]) continue;
+      const std::uint32_t sleeper = c.asleep[a] ? a : b, other = c.asleep[a] ? b : a;
+      if (!awake(other) || !c.asleep[sleeper]) continue;  // static bodies wake nothing
+      collide(*bodies_[a].shape, pose(a), *bodies_[b].shape, pose(b), test, c.narrow);
+      if (c.narrow.colliding) wakeIsland(state, sleeper);
+    }
+  }
   const CollisionRequest request{.contacts = true,
                                  .maxContacts = std::max(contactSettings_.maxContactsPerPair, 1)};
   for (const ProxyPair& pair : c.pairs) {
     const std::uint32_t a = pair.a, b = pair.b;
+    if (c.sleeping > 0 && !awake(a) && !awake(b)) continue;  // sleepers among themselves or on the ground
     const BodyDesc& da = bodies_[a];
     const BodyDesc& db = bodies_[b];
     const SolverBody& ba = c.bodies[a];
@@ -221,6 +247,7 @@ void PhysicsWorld::continuousCollision(WorldState& state) const {
 
 void PhysicsWorld::beginContacts(WorldState& state) const {
   RigidContactState& c = state.contact_;
+  if (c.sleeping > 0 && !(contactSettings_.sleep && contactSettings_.enabled)) wakeAll(state);
   c.stats = ContactStats{};
   c.contacts.clear();
   for (std::size_t i = 0; i < bodies_.size(); ++i) {
@@ -248,6 +275,7 @@ Status PhysicsWorld::finishContacts(WorldState& state, double dt) const {
   }
   if (c.contacts.empty() && c.joints.empty()) {
     c.cache.clear();
+    if (contactSettings_.sleep) updateSleep(state, dt);
     return ok();
   }
   for (std::size_t i = 0; i < n; ++i)
@@ -270,7 +298,127 @@ Status PhysicsWorld::finishContacts(WorldState& state, double dt) const {
     s.linearVelocity[i] = b.linearVelocity;
     if (model_[i].kind == BodyKind::Rigid) s.angularVelocity[i] = b.angularVelocity;
   }
+  if (contactSettings_.sleep) updateSleep(state, dt);
   return ok();
+}
+
+// ---------------------------------------------------------------------------
+// Sleeping
+
+void PhysicsWorld::wakeIsland(WorldState& state, std::uint32_t body) const noexcept {
+  RigidContactState& c = state.contact_;
+  if (body >= c.asleep.size() || !c.asleep[body]) return;
+  const std::uint32_t id = c.island[body];
+  for (std::size_t j = 0; j < c.asleep.size(); ++j) {
+    if (!c.asleep[j] || c.island[j] != id) continue;
+    c.asleep[j] = 0;
+    c.stillTime[j] = 0.0;
+    --c.sleeping;
+  }
+  c.stats.sleeping = c.sleeping;
+}
+
+void PhysicsWorld::wakeAll(WorldState& state) const noexcept {
+  RigidContactState& c = state.contact_;
+  std::fill(c.asleep.begin(), c.asleep.end(), std::uint8_t{0});
+  std::fill(c.stillTime.begin(), c.stillTime.end(), 0.0);
+  c.sleeping = 0;
+  c.stats.sleeping = 0;
+}
+
+void PhysicsWorld::holdSleepers(WorldState& state) const noexcept {
+  // The integrators advanced every body; sleepers go back to where they lie.
+  RigidContactState& c = state.contact_;
+  WorldSnapshot& s = state.s_;
+  for (std::size_t i = 0; i < c.asleep.size(); ++i) {
+    if (!c.asleep[i]) continue;
+    s.position[i] = c.bodies[i].position;
+    s.orientation[i] = c.bodies[i].orientation;
+    s.linearVelocity[i].setZero();
+    s.angularVelocity[i].setZero();
+  }
+}
+
+void PhysicsWorld::updateSleep(WorldState& state, double dt) const noexcept {
+  RigidContactState& c = state.contact_;
+  WorldSnapshot& s = state.s_;
+  const auto n = static_cast<std::uint32_t>(bodies_.size());
+  // A contact that reached a sleeper anyway (a CCD hit) wakes its island.
+  for (const ContactConstraint& k : c.contacts)
+    for (const int side : {k.bodyA, k.bodyB})
+      if (side != kWorldBody) wakeIsland(state, static_cast<std::uint32_t>(side));
+  const auto awake = [this, &c](std::uint32_t i) { return model_[i].inverseMass > 0.0 && !c.asleep[i]; };
+
+  // Bodies something outside the contacts acts on stay awake.
+  std::fill(c.sleepBlocked.begin(), c.sleepBlocked.end(), std::uint8_t{!forces_.user.empty()});
+  const auto block = [&c](BodyId id) {
+    if (id.valid() && id.index < c.sleepBlocked.size()) c.sleepBlocked[id.index] = 1;
+  };
+  for (const ExternalForce& f : forces_.forces) block(f.body);
+  for (const ExternalTorque& t : forces_.torques) block(t.body);
+  for (const Spring& sp : forces_.springs) {
+    block(sp.a);
+    block(sp.b);
+  }
+  for (const NewtonianGravity& g : forces_.newtonian) {
+    if (g.bodies.empty()) std::fill(c.sleepBlocked.begin(), c.sleepBlocked.end(), std::uint8_t{1});
+    for (const BodyId id : g.bodies) block(id);
+  }
+  for (const Impulse& imp : impulses_)
+    if (imp.time >= s.time) block(imp.body);
+  for (const Joint& j : c.joints)
+    for (const int side : {j.bodyA, j.bodyB})
+      if (side != kWorldBody) c.sleepBlocked[static_cast<std::size_t>(side)] = 1;
+
+  // Stillness, then islands by union–find over the contacts and joints
+  // between awake dynamic bodies (the smaller index is the root, so the
+  // result does not depend on the order of the unions).
+  const double lin2 = contactSettings_.sleepLinearVelocity * contactSettings_.sleepLinearVelocity;
+  const double ang2 = contactSettings_.sleepAngularVelocity * contactSettings_.sleepAngularVelocity;
+  for (std::uint32_t i = 0; i < n; ++i) {
+    if (!awake(i)) continue;
+    c.island[i] = i;
+    const bool still = !c.sleepBlocked[i] && c.constrained[i] && s.linearVelocity[i].squaredNorm() <= lin2 &&
+                       s.angularVelocity[i].squaredNorm() <= ang2;
+    c.stillTime[i] = still ? c.stillTime[i] + dt : 0.0;
+  }
+  const auto find = [&c](std::uint32_t i) {
+    while (c.island[i] != i) {
+      c.island[i] = c.island[c.island[i]];
+      i = c.island[i];
+    }
+    return i;
+  };
+  const auto unite = [&](int a, int b) {
+    if (a == kWorldBody || b == kWorldBody) return;
+    const auto ua = static_cast<std::uint32_t>(a), ub = static_cast<std::uint32_t>(b);
+    if (!awake(ua) || !awake(ub)) return;
+    const std::uint32_t ra = find(ua), rb = find(ub);
+    if (ra < rb)
+      c.island[rb] = ra;
+    else if (rb < ra)
+      c.island[ra] = rb;
+  };
+  for (const ContactConstraint& k : c.contacts) unite(k.bodyA, k.bodyB);
+  for (const Joint& j : c.joints) unite(j.bodyA, j.bodyB);
+  for (std::uint32_t i = 0; i < n; ++i)
+    if (awake(i)) c.islandTime[i] = std::numeric_limits<double>::infinity();
+  for (std::uint32_t i = 0; i < n; ++i) {
+    if (!awake(i)) continue;
+    const std::uint32_t r = find(i);
+    c.islandTime[r] = std::min(c.islandTime[r], c.stillTime[i]);
+  }
+  for (std::uint32_t i = 0; i < n; ++i) {
+    if (!awake(i)) continue;
+    const std::uint32_t r = find(i);
+    if (!(c.islandTime[r] >= contactSettings_.timeToSleep)) continue;
+    c.island[i] = r;  // the island's id: its smallest body index
+    c.asleep[i] = 1;
+    ++c.sleeping;
+    s.linearVelocity[i].setZero();
+    s.angularVelocity[i].setZero();
+  }
+  c.stats.sleeping = c.sleeping;
 }
 
 }  // namespace dm

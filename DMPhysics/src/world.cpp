@@ -215,6 +215,14 @@ Status PhysicsWorld::setContactSettings(const ContactSettings& settings) {
   if (!std::isfinite(settings.ccdTolerance) || !(settings.ccdTolerance > 0.0))
     return fail(ErrorCode::InvalidArgument, "ccdTolerance is " + std::to_string(settings.ccdTolerance),
                 "ContactSettings::ccdTolerance", "give a distance > 0 in m, e.g. 1e-6");
+  if (!std::isfinite(settings.sleepLinearVelocity) || settings.sleepLinearVelocity < 0.0 ||
+      !std::isfinite(settings.sleepAngularVelocity) || settings.sleepAngularVelocity < 0.0)
+    return fail(ErrorCode::InvalidArgument, "a sleep velocity threshold is negative or not finite",
+                "ContactSettings::sleepLinearVelocity / sleepAngularVelocity",
+                "give thresholds >= 0, e.g. 0.05 m/s and 0.05 rad/s");
+  if (!std::isfinite(settings.timeToSleep) || !(settings.timeToSleep > 0.0))
+    return fail(ErrorCode::InvalidArgument, "timeToSleep is " + std::to_string(settings.timeToSleep),
+                "ContactSettings::timeToSleep", "give a time > 0 in s, e.g. 0.5");
   contactSettings_ = settings;
   return ok();
 }
@@ -377,8 +385,9 @@ Status PhysicsWorld::restore(WorldState& state, const WorldSnapshot& snap) const
   state.s_.linearVelocity = snap.linearVelocity;
   state.s_.angularVelocity = snap.angularVelocity;
   updateBounds(state);
-  // Warm-start impulses are not part of a snapshot: start them afresh.
+  // Warm-start impulses and sleep are not part of a snapshot: start them afresh.
   state.contact_.cache.clear();
+  wakeAll(state);
   for (Joint& j : state.contact_.joints) j.impulses.fill(0.0);
   return ok();
 }
@@ -404,6 +413,7 @@ Status PhysicsWorld::setBodyState(WorldState& state, BodyId id, const Vec3& posi
   state.s_.linearVelocity[i] = kind == BodyKind::Static ? Vec3::Zero() : linearVelocity;
   state.s_.angularVelocity[i] = kind == BodyKind::Rigid ? angularVelocity : Vec3::Zero();
   updateBounds(state);
+  wakeIsland(state, i);
   return ok();
 }
 
@@ -428,6 +438,7 @@ Status PhysicsWorld::applyImpulse(WorldState& state, BodyId id, const Vec3& impu
     return fail(ErrorCode::InvalidArgument, "the body is static", where, "apply impulses to dynamic bodies");
   if (!impulse.allFinite() || !point.allFinite())
     return fail(ErrorCode::InvalidArgument, "impulse or point is not finite", where, "give finite values");
+  wakeIsland(state, id.index);
   applyImpulseAt(state, id.index, impulse, point - state.s_.position[id.index]);
   return ok();
 }
@@ -650,6 +661,7 @@ Status PhysicsWorld::step(WorldState& state, double dt) const {
   if (members_[0].empty() && members_[1].empty() && members_[kRk4Kind].empty()) evaluate(state, t0);
   for (int k = 0; k < kSecondOrderKinds; ++k) stepSecondOrder(state, k, t0, dt);
   stepRk4(state, t0, dt);
+  if (contacts && state.contact_.sleeping > 0) holdSleepers(state);
 
   // 2. Contacts and joints.
   if (contacts) {

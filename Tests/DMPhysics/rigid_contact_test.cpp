@@ -270,4 +270,110 @@ TEST(RigidContact, BadMaterialsAndJointsAreRejectedWithNames) {
   EXPECT_FALSE(w.step(s, 1e-3).ok());
 }
 
+// Sleeping (ContactSettings::sleep): a resting stack falls asleep where it
+// stands and then costs no contacts; a box dropped on it wakes the island,
+// and the impact leaves the same stack as in a run without sleeping.
+std::unique_ptr<PhysicsWorld> sleepyStack(int count, bool sleep) {
+  auto w = stackWorld(count);
+  dm::ContactSettings cs;
+  cs.sleep = sleep;
+  EXPECT_TRUE(w->setContactSettings(cs).ok());
+  return w;
+}
+
+TEST(RigidContact, RestingStackFallsAsleepInPlaceAndStaysThere) {
+  const int count = 5;
+  const auto w = sleepyStack(count, true);
+  WorldState s = w->makeState();
+  const WorldState initial = s;
+  for (int i = 0; i < 1500; ++i) ASSERT_TRUE(w->step(s, 1e-3).ok());
+  EXPECT_EQ(s.contactStats().sleeping, static_cast<std::size_t>(count));
+  EXPECT_EQ(s.contactStats().contacts, 0u);  // sleepers on the ground make no contacts
+  for (int k = 1; k <= count; ++k) {
+    const BodyId b{static_cast<std::uint32_t>(k)};
+    EXPECT_TRUE(s.asleep(b));
+    const Vec3 d = s.position(b) - initial.position(b);
+    EXPECT_LT(d.norm(), 5e-3) << "box " << k;  // as the stack test without sleeping
+    EXPECT_EQ(s.linearVelocity(b), Vec3::Zero());
+  }
+  // Asleep, nothing moves: only time advances.
+  WorldState later = s;
+  for (int i = 0; i < 100; ++i) ASSERT_TRUE(w->step(later, 1e-3).ok());
+  for (int k = 1; k <= count; ++k) {
+    const BodyId b{static_cast<std::uint32_t>(k)};
+    EXPECT_EQ(later.position(b), s.position(b)) << "box " << k;
+    EXPECT_EQ(later.orientation(b).coeffs(), s.orientation(b).coeffs()) << "box " << k;
+  }
+}
+
+TEST(RigidContact, SleepingIslandWakesOnImpactAndOnImpulse) {
+  // Two stacks 1 m apart; a small box falls on the first once both sleep
+  // (a box, not a ball: a ball would keep rolling on the top face).
+  const auto build = [](bool sleep) {
+    auto w = std::make_unique<PhysicsWorld>();
+    addGround(*w);
+    const Vec3 half(0.1, 0.1, 0.1);
+    for (int stack = 0; stack < 2; ++stack)
+      for (int k = 0; k < 3; ++k) EXPECT_TRUE(w->addBody(boxBody(half, 1.0, {1.0 * stack, 0, 0.1 * (2 * k + 1)})).ok());
+    BodyDesc lid = boxBody(Vec3(0.05, 0.05, 0.05), 0.5, {0.02, 0, 2.0});
+    lid.name = "lid";
+    EXPECT_TRUE(w->addBody(lid).ok());
+    EXPECT_TRUE(w->setGravity({0, 0, -kG}).ok());
+    dm::ContactSettings cs;
+    cs.sleep = sleep;
+    EXPECT_TRUE(w->setContactSettings(cs).ok());
+    return w;
+  };
+  const auto w = build(true), ref = build(false);
+  WorldState s = w->makeState(), r = ref->makeState();
+  const BodyId top{3}, other{6}, lid{7};
+  bool sleptBeforeImpact = false, wokeOnImpact = false;
+  for (int i = 0; i < 1200; ++i) {  // the lid lands on the top box at t ≈ 0.55 s
+    const bool before = s.asleep(top);
+    ASSERT_TRUE(w->step(s, 1e-3).ok());
+    ASSERT_TRUE(ref->step(r, 1e-3).ok());
+    if (before && !s.asleep(top)) wokeOnImpact = true;
+    if (before && s.position(lid).z() > 0.7) sleptBeforeImpact = true;
+  }
+  EXPECT_TRUE(sleptBeforeImpact);
+  EXPECT_TRUE(wokeOnImpact);
+  EXPECT_TRUE(s.asleep(other));  // the far stack is another island
+  // The impact plays out as without sleeping (to solver accuracy: the stacks
+  // were at rest when they fell asleep).
+  for (std::uint32_t k = 1; k <= 7; ++k) {
+    const BodyId b{k};
+    EXPECT_LT((s.position(b) - r.position(b)).norm(), 2e-3) << "body " << k;
+  }
+  // An impulse wakes its body's island only.
+  for (int i = 0; i < 1500; ++i) ASSERT_TRUE(w->step(s, 1e-3).ok());
+  ASSERT_TRUE(s.asleep(BodyId{1}) && s.asleep(other));
+  ASSERT_TRUE(w->applyImpulse(s, BodyId{1}, {0.5, 0, 0}, s.position(BodyId{1})).ok());
+  EXPECT_FALSE(s.asleep(BodyId{1}));
+  EXPECT_FALSE(s.asleep(top));
+  EXPECT_TRUE(s.asleep(other));
+  ASSERT_TRUE(w->step(s, 1e-3).ok());
+  EXPECT_GT(s.linearVelocity(BodyId{1}).x(), 0.1);
+  // Lockstep runs with sleeping are bit-identical too.
+  const auto w2 = build(true);
+  WorldState a = w2->makeState(), b = w2->makeState();
+  for (int i = 0; i < 1500; ++i) {
+    ASSERT_TRUE(w2->step(a, 1e-3).ok());
+    ASSERT_TRUE(w2->step(b, 1e-3).ok());
+  }
+  EXPECT_EQ(dm::stateHash(a.data()), dm::stateHash(b.data()));
+  EXPECT_GT(a.contactStats().sleeping, 0u);
+}
+
+TEST(RigidContact, BadSleepSettingsAreRejected) {
+  PhysicsWorld w;
+  dm::ContactSettings cs;
+  cs.sleepLinearVelocity = -1.0;
+  EXPECT_FALSE(w.setContactSettings(cs).ok());
+  cs = {};
+  cs.timeToSleep = 0.0;
+  const auto st = w.setContactSettings(cs);
+  ASSERT_FALSE(st.ok());
+  EXPECT_NE(st.error().message().find("timeToSleep"), std::string::npos) << st.error().message();
+}
+
 }  // namespace

@@ -31,6 +31,19 @@
 //      dm::integratePositions (semi-implicit Euler, whatever their
 //      integrator kind: constrained bodies are first order). Bodies without
 //      contacts or joints keep their integrator's result bit for bit.
+//   6. sleeping (ContactSettings::sleep): bodies joined by contacts form
+//      islands (static bodies join nothing); a dynamic body counts as still
+//      while it touches something and |v|, |ω| stay below the thresholds;
+//      an island whose bodies have all been still for timeToSleep falls
+//      asleep: velocities zero, no integration, no narrow phase among
+//      sleepers and the ground, no solver rows. An island wakes when an awake
+//      dynamic body collides with one of its bodies, and every body wakes on
+//      PhysicsWorld::applyImpulse, setBodyState (that body's island) and
+//      restore (all). Bodies that a joint, an external force or torque, a
+//      spring, Newtonian gravity or a pending timed impulse acts on never
+//      sleep, nor does any body while the world has a user force (those
+//      forces may change without the world seeing it). Sleeping is
+//      deterministic like the rest; a snapshot does not hold it.
 // Materials combine per contact as friction √(μa·μb) and restitution
 // max(ea, eb) (Box2D's rules); a static body's material counts as well.
 // Everything runs on the calling thread in a fixed order: the same model,
@@ -78,6 +91,12 @@ struct ContactSettings {
   std::size_t pairCapacity = 0;
   /// CCD: distance at which conservative advancement reports an impact, m.
   double ccdTolerance = 1e-6;
+  /// Sleeping (step 6 in the file comment); off by default, so every body is
+  /// simulated every step unless asked otherwise.
+  bool sleep = false;
+  double sleepLinearVelocity = 0.05;   ///< |v| below which a body counts as still, m/s (≥ 0)
+  double sleepAngularVelocity = 0.05;  ///< |ω| below which a rigid body counts as still, rad/s (≥ 0)
+  double timeToSleep = 0.5;            ///< s an island must stay still before it sleeps (> 0)
 };
 
 /// A joint between two bodies, built from their initial poses (the BodyDesc
@@ -100,6 +119,7 @@ struct ContactStats {
   std::size_t contacts = 0;     ///< contact points solved (CCD ones included)
   std::size_t ccdHits = 0;      ///< bodies moved back to a time of impact
   std::size_t warmStarted = 0;  ///< contacts matched by the ContactCache
+  std::size_t sleeping = 0;     ///< bodies asleep after the step (ContactSettings::sleep)
   SolverStats solver;           ///< the ConstraintSolver's report (zero when nothing was solved)
 };
 
@@ -112,6 +132,12 @@ struct RigidContactState {
   std::vector<std::uint32_t> order;         ///< broad phase: bounded colliders sorted by min x
   std::vector<ProxyPair> pairs;             ///< broad phase: body index pairs (a < b), bottom-up
   std::vector<std::uint8_t> constrained;    ///< per body: in a contact or joint this step
+  std::vector<std::uint8_t> asleep;         ///< per body: 1 while asleep
+  std::vector<std::uint8_t> sleepBlocked;   ///< per body, per step: a force or joint keeps it awake
+  std::vector<double> stillTime;            ///< per body: s spent still and touching (awake bodies)
+  std::vector<double> islandTime;           ///< per body: scratch, an island's least stillTime
+  std::vector<std::uint32_t> island;        ///< per body: union-find parent; a sleeper's island id
+  std::size_t sleeping = 0;                 ///< bodies asleep
   CollisionResult narrow;                   ///< narrow-phase result, reused
   ConstraintSolver solver;
   ContactCache cache;

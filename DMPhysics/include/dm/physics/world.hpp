@@ -24,6 +24,10 @@
 //      the bodies in contacts or joints, which are re-advanced from their
 //      start-of-step poses with the solved velocities;
 //   3. orientations are renormalised and world AABBs of shapes updated.
+// With ContactSettings::sleep (off by default), islands of bodies at rest in
+// contact fall asleep: they keep their pose, take no part in the narrow phase
+// or the solver, and wake on impact, impulse or setBodyState (see
+// rigid_contact.hpp, step 6).
 // Kinds are advanced one after another: a later kind sees the earlier kinds'
 // bodies at their end-of-step state (a Gauss–Seidel splitting, first-order in
 // the coupling between kinds). Bodies of one kind are integrated as one
@@ -96,6 +100,11 @@ class WorldState {
   const Vec3& torque(BodyId id) const noexcept { return torque_[check(id)]; }
   /// What the contact pipeline did in the last step.
   const ContactStats& contactStats() const noexcept { return contact_.stats; }
+  /// True while the body sleeps (ContactSettings::sleep; see rigid_contact.hpp).
+  bool asleep(BodyId id) const noexcept {
+    const std::uint32_t i = check(id);
+    return i < contact_.asleep.size() && contact_.asleep[i] != 0;
+  }
   /// Contacts solved in the last step, with their accumulated impulses
   /// (N·s); body indices are BodyId::index values (ContactConstraint).
   std::span<const ContactConstraint> contacts() const noexcept { return contact_.contacts; }
@@ -261,7 +270,7 @@ class PhysicsWorld {
   /// Restores `state` to `snapshot` (made from a state of this world) and
   /// recomputes the bounds; the following steps reproduce the original run
   /// bit for bit while no contact or joint is active (warm-start impulses
-  /// are not in a snapshot: restore clears them, so constrained runs replay
+  /// and sleep are not in a snapshot: restore clears them and wakes every body, so constrained runs replay
   /// to solver accuracy, and two restores of one snapshot replay alike). Fails with InvalidArgument on a size
   /// mismatch or a non-finite value (naming the body and field). No allocation.
   /// @code
@@ -272,13 +281,15 @@ class PhysicsWorld {
   Status restore(WorldState& state, const WorldSnapshot& snapshot) const;
 
   /// Sets one body's position (m), orientation and velocities (world) in
-  /// `state`. Fails with NotFound for an unknown id, InvalidArgument on
-  /// non-finite values or a zero quaternion; orientation is normalised.
+  /// `state`, waking the body's island if it sleeps. Fails with NotFound for
+  /// an unknown id, InvalidArgument on non-finite values or a zero
+  /// quaternion; orientation is normalised.
   Status setBodyState(WorldState& state, BodyId id, const Vec3& position, const Quat& orientation,
                       const Vec3& linearVelocity, const Vec3& angularVelocity) const;
 
   /// Applies an impulse J (N·s, world) at world point `point` (m) now:
-  /// v += J/m, and for rigid bodies ω += I_w⁻¹ ((point − x) × J). Fails with
+  /// v += J/m, and for rigid bodies ω += I_w⁻¹ ((point − x) × J); a sleeping
+  /// body's island wakes. Fails with
   /// NotFound for an unknown id, InvalidArgument for a static body or
   /// non-finite input. O(1), no allocation.
   Status applyImpulse(WorldState& state, BodyId id, const Vec3& impulse, const Vec3& point) const;
@@ -311,6 +322,11 @@ class PhysicsWorld {
   void broadPhase(WorldState& state) const;
   void narrowPhase(WorldState& state) const;
   void continuousCollision(WorldState& state) const;
+  // Sleeping (rigid_contact.cpp).
+  void wakeIsland(WorldState& state, std::uint32_t body) const noexcept;
+  void wakeAll(WorldState& state) const noexcept;
+  void holdSleepers(WorldState& state) const noexcept;
+  void updateSleep(WorldState& state, double dt) const noexcept;
   bool jointed(std::uint32_t a, std::uint32_t b) const noexcept;
   bool collider(std::uint32_t i) const noexcept;
 
