@@ -618,12 +618,15 @@ void ContactCache::reserve(std::size_t contacts) {
 void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<const SolverBody> bodies) {
   entries_.clear();
   for (const ContactConstraint& c : contacts) {
-    const PoseRef pa = poseOf(bodies, c.bodyA);
+    const PoseRef pa = poseOf(bodies, c.bodyA), pb = poseOf(bodies, c.bodyB);
     Entry e;
     e.a = c.bodyA;
     e.b = c.bodyB;
     e.key = c.featureKey;
     e.localA = pa.q.conjugate() * (c.point.position - pa.x);
+    e.localB = pb.q.conjugate() * (c.point.position - pb.x);
+    e.normalLocalA = pa.q.conjugate() * c.point.normal;
+    e.depth = c.point.depth;
     e.normal = c.point.normal;
     e.normalImpulse = c.normalImpulse;
     e.frictionLocalA = pa.q.conjugate() * c.frictionImpulse;
@@ -631,6 +634,27 @@ void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<
   }
   std::sort(entries_.begin(), entries_.end(),
             [](const Entry& x, const Entry& y) { return pairLess(x.a, x.b, y.a, y.b); });
+}
+
+int ContactCache::persist(int a, int b, std::span<const SolverBody> bodies, double margin, double mu, double e,
+                          std::vector<ContactConstraint>& out) const {
+  const auto first =
+      std::lower_bound(entries_.begin(), entries_.end(), std::pair{a, b},
+                       [](const Entry& x, const std::pair<int, int>& k) { return pairLess(x.a, x.b, k.first, k.second); });
+  const PoseRef pa = poseOf(bodies, a), pb = poseOf(bodies, b);
+  int added = 0;
+  for (auto it = first; it != entries_.end() && it->a == a && it->b == b; ++it) {
+    const Vec3 onA = pa.x + pa.q * it->localA;
+    const Vec3 onB = pb.x + pb.q * it->localB;
+    const Vec3 n = pa.q * it->normalLocalA;
+    const Vec3 d = onB - onA;
+    const double apart = d.dot(n);
+    const double depth = std::min(it->depth - apart, 0.0);
+    if (depth < -margin || (d - apart * n).squaredNorm() > margin * margin) continue;
+    out.push_back(ContactConstraint::make(a, b, {0.5 * (onA + onB), n.normalized(), depth}, mu, e));
+    ++added;
+  }
+  return added;
 }
 
 int ContactCache::warmStart(std::span<ContactConstraint> contacts, std::span<const SolverBody> bodies) {

@@ -26,6 +26,13 @@ Isometry3 posed(const Vec3& x, const Quat& q, const Isometry3& offset) {
 
 bool unbounded(const Aabb& box) noexcept { return !(box.min().allFinite() && box.max().allFinite()); }
 
+// Boxes overlapping once each is grown by `margin` (m); boxesOverlap at 0.
+bool boxesWithin(const Aabb& a, const Aabb& b, double margin) noexcept {
+  return a.min().x() <= b.max().x() + margin && b.min().x() <= a.max().x() + margin &&
+         a.min().y() <= b.max().y() + margin && b.min().y() <= a.max().y() + margin &&
+         a.min().z() <= b.max().z() + margin && b.min().z() <= a.max().z() + margin;
+}
+
 // Half the thinnest extent of a shape, m: a body moving less than this per
 // step cannot pass through anything its own thickness would hit.
 double thickness(const Shape& shape) noexcept {
@@ -125,12 +132,14 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
     const double xa = box[a].min().x(), xb = box[b].min().x();
     return xa < xb || (xa == xb && a < b);
   });
+  // Boxes within the contact margin pair up too (persistent contacts).
+  const double margin = contactSettings_.contactMargin;
   for (std::size_t k = 0; k < c.order.size(); ++k) {
     const std::uint32_t a = c.order[k];
-    const double end = box[a].max().x();
+    const double end = box[a].max().x() + margin;
     for (std::size_t l = k + 1; l < c.order.size() && box[c.order[l]].min().x() <= end; ++l) {
       const std::uint32_t b = c.order[l];
-      if (boxesOverlap(box[a], box[b]) && eligible(a, b)) push(a, b);
+      if (boxesWithin(box[a], box[b], margin) && eligible(a, b)) push(a, b);
     }
   }
   // Unbounded shapes (planes) against every bounded collider.
@@ -169,6 +178,7 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
   }
   const CollisionRequest request{.contacts = true,
                                  .maxContacts = std::max(contactSettings_.maxContactsPerPair, 1)};
+  const double margin = contactSettings_.contactMargin;
   for (const ProxyPair& pair : c.pairs) {
     const std::uint32_t a = pair.a, b = pair.b;
     if (c.sleeping > 0 && !awake(a) && !awake(b)) continue;  // sleepers among themselves or on the ground
@@ -176,11 +186,23 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
     const BodyDesc& db = bodies_[b];
     const SolverBody& ba = c.bodies[a];
     const SolverBody& bb = c.bodies[b];
-    collide(*da.shape, posed(ba.position, ba.orientation, da.shapeOffset), *db.shape,
-            posed(bb.position, bb.orientation, db.shapeOffset), request, c.narrow);
-    if (!c.narrow.colliding) continue;
     const double mu = std::sqrt(materials_[a].friction * materials_[b].friction);
     const double e = std::max(materials_[a].restitution, materials_[b].restitution);
+    const Aabb& boxA = state.bounds_[a];
+    const Aabb& boxB = state.bounds_[b];
+    bool colliding = false;
+    if (unbounded(boxA) || unbounded(boxB) || boxesOverlap(boxA, boxB)) {
+      collide(*da.shape, posed(ba.position, ba.orientation, da.shapeOffset), *db.shape,
+              posed(bb.position, bb.orientation, db.shapeOffset), request, c.narrow);
+      colliding = c.narrow.colliding;
+    }
+    if (!colliding) {
+      // Apart now: last step's contacts, if still close, as speculative ones.
+      if (margin > 0.0 && c.cache.size() > 0 &&
+          c.cache.persist(static_cast<int>(a), static_cast<int>(b), c.bodies, margin, mu, e, c.contacts) > 0)
+        c.constrained[a] = c.constrained[b] = 1;
+      continue;
+    }
     for (const ContactPoint& p : c.narrow.contacts)
       c.contacts.push_back(ContactConstraint::make(static_cast<int>(a), static_cast<int>(b), p, mu, e));
     c.constrained[a] = c.constrained[b] = 1;

@@ -220,6 +220,9 @@ Status PhysicsWorld::setContactSettings(const ContactSettings& settings) {
     return fail(ErrorCode::InvalidArgument, "a sleep velocity threshold is negative or not finite",
                 "ContactSettings::sleepLinearVelocity / sleepAngularVelocity",
                 "give thresholds >= 0, e.g. 0.05 m/s and 0.05 rad/s");
+  if (!std::isfinite(settings.contactMargin) || settings.contactMargin < 0.0)
+    return fail(ErrorCode::InvalidArgument, "contactMargin is " + std::to_string(settings.contactMargin),
+                "ContactSettings::contactMargin", "give a distance >= 0 in m (0 turns persistent contacts off)");
   if (!std::isfinite(settings.timeToSleep) || !(settings.timeToSleep > 0.0))
     return fail(ErrorCode::InvalidArgument, "timeToSleep is " + std::to_string(settings.timeToSleep),
                 "ContactSettings::timeToSleep", "give a time > 0 in s, e.g. 0.5");

@@ -364,6 +364,40 @@ TEST(RigidContact, SleepingIslandWakesOnImpactAndOnImpulse) {
   EXPECT_GT(a.contactStats().sleeping, 0u);
 }
 
+// Persistent contacts (ContactSettings::contactMargin): a box that leaves the
+// ground keeps its last contact points as speculative ones for a few steps;
+// they must never pull it back (free flight stays ballistic) nor push it.
+TEST(RigidContact, PersistentContactsAreSpeculativeAndNeverPull) {
+  PhysicsWorld w;
+  addGround(w);
+  const Vec3 half(0.1, 0.1, 0.1);
+  const BodyId box = *w.addBody(boxBody(half, 1.0, {0, 0, half.z()}));
+  ASSERT_TRUE(w.setGravity({0, 0, -kG}).ok());
+  WorldState s = w.makeState();
+  const double dt = 1e-3;
+  for (int i = 0; i < 200; ++i) ASSERT_TRUE(w.step(s, dt).ok());
+  ASSERT_EQ(s.contactStats().contacts, 4u);
+  // Throw it up at 1 m/s: the next steps see it apart by less than the margin.
+  const double vz = 1.0;
+  ASSERT_TRUE(w.setBodyState(s, box, s.position(box), s.orientation(box), {0, 0, vz}, Vec3::Zero()).ok());
+  const double z0 = s.position(box).z();
+  bool speculative = false;
+  for (int i = 1; i <= 100; ++i) {
+    ASSERT_TRUE(w.step(s, dt).ok());
+    for (const dm::ContactConstraint& c : s.contacts()) {
+      if (c.point.depth < 0.0) speculative = true;
+      EXPECT_EQ(c.normalImpulse, 0.0) << "step " << i;
+    }
+    // Symplectic Euler of free flight: z_i = z0 + i dt vz − i(i+1)/2 g dt².
+    const double expected = z0 + i * dt * vz - 0.5 * i * (i + 1) * kG * dt * dt;
+    EXPECT_NEAR(s.position(box).z(), expected, 1e-9) << "step " << i;
+  }
+  EXPECT_TRUE(speculative);
+  dm::ContactSettings cs;
+  cs.contactMargin = -1.0;
+  EXPECT_FALSE(w.setContactSettings(cs).ok());
+}
+
 TEST(RigidContact, BadSleepSettingsAreRejected) {
   PhysicsWorld w;
   dm::ContactSettings cs;

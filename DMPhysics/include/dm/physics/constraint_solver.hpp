@@ -318,6 +318,15 @@ class ContactCache {
   int warmStart(std::span<ContactConstraint> contacts, std::span<const SolverBody> bodies);
   /// Replaces the stored contacts by `contacts` (after solve()). O(n log n).
   void store(std::span<const ContactConstraint> contacts, std::span<const SolverBody> bodies);
+  /// Speculative contacts for the pair (a, b) (as stored, a before b) whose
+  /// shapes no longer overlap: each stored contact of the pair is carried by
+  /// both bodies to their poses in `bodies`; one whose anchors moved apart by
+  /// less than `margin` (m) along the normal and across it is appended to
+  /// `out` with depth = its old depth − that separation (≤ 0: the solver lets
+  /// the gap close, no more), friction `mu` and restitution `e`. Returns how
+  /// many. O(log n + contacts of the pair); appends within `out`'s capacity.
+  int persist(int a, int b, std::span<const SolverBody> bodies, double margin, double mu, double e,
+              std::vector<ContactConstraint>& out) const;
   /// Forgets everything.
   void clear() noexcept { entries_.clear(); }
   std::size_t size() const noexcept { return entries_.size(); }
@@ -326,7 +335,10 @@ class ContactCache {
   struct Entry {
     int a = 0, b = 0;
     std::uint64_t key = 0;
-    Vec3 localA;  // anchor in A's frame
+    Vec3 localA;        // anchor in A's frame
+    Vec3 localB;        // the same point in B's frame
+    Vec3 normalLocalA;  // normal in A's frame
+    double depth = 0.0;
     Vec3 normal;  // world
     double normalImpulse = 0.0;
     Vec3 frictionLocalA;  // friction impulse in A's frame

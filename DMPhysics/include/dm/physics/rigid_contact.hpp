@@ -13,7 +13,11 @@
 //      indices) so that Gauss–Seidel sweeps carry support up a stack;
 //   2. narrow phase: dm::collide (DMCollide's collider table) per pair, up
 //      to ContactSettings::maxContactsPerPair contacts, normals from the
-//      lower to the higher body index;
+//      lower to the higher body index; a pair that does not collide now but
+//      had contacts in the last step keeps them as speculative contacts
+//      (depth < 0) while both bodies carry their anchors apart by less than
+//      ContactSettings::contactMargin (the broad phase pairs boxes that
+//      close, too);
 //   3. the force accumulators and integrators advance every body as before;
 //   4. continuous collision (bodies whose material has `ccd` set): the
 //      motion of the shape from its start-of-step pose to the integrated
@@ -91,6 +95,12 @@ struct ContactSettings {
   std::size_t pairCapacity = 0;
   /// CCD: distance at which conservative advancement reports an impact, m.
   double ccdTolerance = 1e-6;
+  /// Persistent contacts (step 2): a pair that touched in the last step and
+  /// now lies apart by less than this keeps its last contact points as
+  /// speculative ones (they stop the bodies from closing the gap by more than
+  /// it, nothing else), so resting bodies that lift by a hair at large dt do
+  /// not fall back in free flight. 0: off. m, ≥ 0.
+  double contactMargin = 0.002;
   /// Sleeping (step 6 in the file comment); off by default, so every body is
   /// simulated every step unless asked otherwise.
   bool sleep = false;
