@@ -409,6 +409,66 @@ TriangleDistance closestOf15(const Vec3& a0, const Vec3& a1, const Vec3& a2, con
   return r;
 }
 
+// Distance of triangles known not to intersect. Their closest pair is an
+// edge–edge pair or a vertex over the interior of the other face (a vertex
+// closest to an edge or corner of the other triangle is an edge–edge pair
+// already), so the vertex cases need only the projection and three edge
+// signs, not a full closest point on the triangle. An edge–edge pair whose
+// connecting direction has both triangles' third corners on the far sides
+// (of the slab between the two points) is the global minimum: the points
+// are each segment's optimum, so every corner of both triangles lies
+// outside the slab (Larsen/Gottschalk's test, as in PQP and FCL), and the
+// search stops there.
+TriangleDistance closestFeatures(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3& b0,
+                                 const Vec3& b1, const Vec3& b2) noexcept {
+  const std::array<const Vec3*, 3> a{&a0, &a1, &a2}, b{&b0, &b1, &b2};
+  const double ea[3] = {(a1 - a0).squaredNorm(), (a2 - a1).squaredNorm(), (a0 - a2).squaredNorm()};
+  const double eb[3] = {(b1 - b0).squaredNorm(), (b2 - b1).squaredNorm(), (b0 - b2).squaredNorm()};
+  double best = std::numeric_limits<double>::infinity();
+  TriangleDistance r;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const SegmentClosest s = closestPointsSegmentSegment(*a[i], *a[(i + 1) % 3], *b[j], *b[(j + 1) % 3]);
+      if (s.distanceSq < best) {
+        best = s.distanceSq;
+        r.pointA = s.pointA;
+        r.pointB = s.pointB;
+      }
+      const Vec3 v = s.pointB - s.pointA;
+      // Not for pairs (nearly) touching: there the side tests are rounding
+      // noise and could stop at a pair that is not the closest.
+      if (s.distanceSq > 1e-16 * (ea[i] + eb[j]) && v.dot(*a[(i + 2) % 3] - s.pointA) <= 0 && v.dot(*b[(j + 2) % 3] - s.pointB) >= 0) {
+        r.pointA = s.pointA;
+        r.pointB = s.pointB;
+        r.distance = std::sqrt(s.distanceSq);
+        return r;
+      }
+    }
+  // Vertex over the other face: p's projection inside triangle t (normal n,
+  // non-zero), on the inner side of all three edges.
+  auto vertexFace = [&](const Vec3& p, const std::array<const Vec3*, 3>& t, const Vec3& n, double nn,
+                        bool pIsA) {
+    const Vec3 w = p - *t[0];
+    const double h = n.dot(w);
+    if (h * h >= best * nn) return;
+    if (n.dot((*t[1] - *t[0]).cross(w)) < 0 || n.dot((*t[2] - *t[1]).cross(p - *t[1])) < 0 ||
+        n.dot((*t[0] - *t[2]).cross(p - *t[2])) < 0)
+      return;
+    const Vec3 q = p - (h / nn) * n;
+    best = h * h / nn;
+    r.pointA = pIsA ? p : q;
+    r.pointB = pIsA ? q : p;
+  };
+  const Vec3 na = (a1 - a0).cross(a2 - a0), nb = (b1 - b0).cross(b2 - b0);
+  const double nna = na.squaredNorm(), nnb = nb.squaredNorm();
+  if (nnb > 0)
+    for (int i = 0; i < 3; ++i) vertexFace(*a[i], b, nb, nnb, true);
+  if (nna > 0)
+    for (int i = 0; i < 3; ++i) vertexFace(*b[i], a, na, nna, false);
+  r.distance = std::sqrt((r.pointA - r.pointB).squaredNorm());
+  return r;
+}
+
 TriangleIntersection intersectionPoints(const Vec3& p1, const Vec3& q1, const Vec3& r1, const Vec3& p2,
                                         const Vec3& q2, const Vec3& r2, bool coplanar,
                                         bool anyDegenerate) noexcept {
@@ -493,12 +553,12 @@ TriangleDistance triangleDistance(const Vec3& a0, const Vec3& a1, const Vec3& a2
     const TriangleIntersection x = intersectionPoints(a0, a1, a2, b0, b1, b2, coplanar, anyDegenerate);
     return {0.0, x.points[0], x.points[0]};
   }
-  return closestOf15(a0, a1, a2, b0, b1, b2);
+  return closestFeatures(a0, a1, a2, b0, b1, b2);
 }
 
 TriangleDistance separatedTriangleDistance(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3& b0,
                                            const Vec3& b1, const Vec3& b2) noexcept {
-  return closestOf15(a0, a1, a2, b0, b1, b2);
+  return closestFeatures(a0, a1, a2, b0, b1, b2);
 }
 
 TriangleDistance segmentTriangleDistance(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b,
