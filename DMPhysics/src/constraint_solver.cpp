@@ -65,7 +65,7 @@ double solveRow(const Row& r, std::vector<Velocity>& vel, double target, double&
 }
 
 // Velocity of a contact row along direction k: u·(v_B − v_A) + angA·ω_A + angB·ω_B.
-inline double contactVelocity(const ContactRow& c, int k, const Vec3& dv, const Velocity& A,
+[[gnu::always_inline]] inline double contactVelocity(const ContactRow& c, int k, const Vec3& dv, const Velocity& A,
                               const Velocity& B) noexcept {
   return c.u[k].dot(dv) + c.angA[k].dot(A.w) + c.angB[k].dot(B.w);
 }
@@ -207,6 +207,9 @@ void ConstraintSolver::reserve(std::size_t bodies, std::size_t contacts, std::si
   invMass_.reserve(bodies + 1);
   invInertia_.reserve(bodies + 1);
   contactRows_.reserve(contacts);
+  manifolds_.reserve(contacts);
+  scheduled_.reserve(contacts);
+  schedule_.reserve(contacts);
   jointRows_.reserve(kMaxJointRows * joints);
 }
 
@@ -433,10 +436,157 @@ void ConstraintSolver::buildContactRows(std::span<const SolverBody> bodies,
   }
 }
 
-// One velocity sweep: joint rows, then per contact the friction pair
-// (projected onto the Coulomb disk |λt| ≤ μ·λn) and the normal row, so that
-// non-penetration is the last word. With kResidual, returns the largest
-// velocity correction |Δλ|/m_eff of the sweep (else 0).
+// Groups the contact rows by body pair and pairs each manifold with the
+// nearest later one (within a short window) that shares no dynamic body.
+// Solving two independent manifolds interleaved gives exactly the result of
+// solving one after the other, while the CPU overlaps their (long, serial)
+// dependency chains; the sweep order becomes the schedule's order.
+void ConstraintSolver::scheduleManifolds() {
+  manifolds_.clear();
+  const auto m = static_cast<std::uint32_t>(contactRows_.size());
+  for (std::uint32_t i = 0; i < m;) {
+    const int a = contactRows_[i].a, b = contactRows_[i].b;
+    std::uint32_t j = i + 1;
+    while (j < m && contactRows_[j].a == a && contactRows_[j].b == b) ++j;
+    manifolds_.push_back({i, j});
+    i = j;
+  }
+  const auto count = static_cast<std::uint32_t>(manifolds_.size());
+  scheduled_.assign(count, 0);
+  schedule_.clear();
+  const auto dynamic = [this](int i) { return invMass_[static_cast<std::size_t>(i)] > 0.0 ||
+                                              invInertia_[static_cast<std::size_t>(i)] != Mat3::Zero(); };
+  const auto shares = [&](std::uint32_t x, std::uint32_t y) {
+    const ContactRow& p = contactRows_[manifolds_[x].begin];
+    const ContactRow& q = contactRows_[manifolds_[y].begin];
+    for (const int u : {p.a, p.b})
+      if (dynamic(u) && (u == q.a || u == q.b)) return true;
+    return false;
+  };
+  constexpr std::uint32_t kWindow = 8;
+  for (std::uint32_t x = 0; x < count; ++x) {
+    if (scheduled_[x]) continue;
+    scheduled_[x] = 1;
+    std::uint32_t partner = kNoManifold;
+    for (std::uint32_t y = x + 1; y < count && y <= x + kWindow; ++y) {
+      if (scheduled_[y] || shares(x, y)) continue;
+      partner = y;
+      scheduled_[y] = 1;
+      break;
+    }
+    schedule_.push_back({x, partner});
+  }
+}
+
+namespace {
+
+// One contact of a sweep: the friction pair (projected onto the Coulomb disk
+// |λt| ≤ μ·λn), then the normal row, so that non-penetration is the last
+// word. A and B are the manifold's body velocities (locals of the caller).
+template <bool kResidual>
+[[gnu::always_inline]] inline void solveContact(ContactRow& r, Velocity& A, Velocity& B, double& change) noexcept {
+  if (r.effMass[0] == 0.0) return;  // two non-dynamic bodies
+  if (r.effMass[1] > 0.0 && r.effMass[2] > 0.0) {
+    const Vec3 dv = B.v - A.v;
+    const double limit = r.friction * r.impulse[0];
+    double l1 = r.impulse[1] - r.effMass[1] * contactVelocity(r, 1, dv, A, B);
+    double l2 = r.impulse[2] - r.effMass[2] * contactVelocity(r, 2, dv, A, B);
+    const double len2 = l1 * l1 + l2 * l2;
+    if (len2 > limit * limit) {
+      const double f = len2 > 0.0 ? limit / std::sqrt(len2) : 0.0;
+      l1 *= f;
+      l2 *= f;
+    }
+    const double d1 = l1 - r.impulse[1], d2 = l2 - r.impulse[2];
+    r.impulse[1] = l1;
+    r.impulse[2] = l2;
+    const Vec3 p = d1 * r.u[1] + d2 * r.u[2];
+    A.v -= r.imA * p;
+    A.w += d1 * r.mAngA[1] + d2 * r.mAngA[2];
+    B.v += r.imB * p;
+    B.w += d1 * r.mAngB[1] + d2 * r.mAngB[2];
+    if constexpr (kResidual)
+      change = std::max({change, std::abs(d1) / r.effMass[1], std::abs(d2) / r.effMass[2]});
+  }
+  const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
+  const double next = std::max(r.impulse[0] + r.effMass[0] * (r.target - vn), 0.0);
+  const double applied = next - r.impulse[0];
+  r.impulse[0] = next;
+  A.v -= (r.imA * applied) * r.u[0];
+  A.w += applied * r.mAngA[0];
+  B.v += (r.imB * applied) * r.u[0];
+  B.w += applied * r.mAngB[0];
+  if constexpr (kResidual) change = std::max(change, std::abs(applied) / r.effMass[0]);
+}
+
+// The split-impulse update of a contact's normal row on pseudo-velocities.
+[[gnu::always_inline]] inline void pushContact(ContactRow& r, Velocity& A, Velocity& B) noexcept {
+  if (r.effMass[0] == 0.0) return;
+  const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
+  const double next = std::max(r.pushImpulse + r.effMass[0] * (r.pushTarget - vn), 0.0);
+  const double applied = next - r.pushImpulse;
+  r.pushImpulse = next;
+  A.v -= (r.imA * applied) * r.u[0];
+  A.w += applied * r.mAngA[0];
+  B.v += (r.imB * applied) * r.u[0];
+  B.w += applied * r.mAngB[0];
+}
+
+// One contact of a sweep; kMode 0: velocities, 1: velocities with the
+// residual, 2: split-impulse pseudo-velocities.
+template <int kMode>
+[[gnu::always_inline]] inline void visitContact(ContactRow& r, Velocity& A, Velocity& B, double& change) noexcept {
+  if constexpr (kMode == 2)
+    pushContact(r, A, B);
+  else
+    solveContact<kMode == 1>(r, A, B, change);
+}
+
+// Runs visitContact over the scheduled manifolds with each manifold's body
+// velocities in locals; paired manifolds advance contact by contact together.
+// Returns the residual (kMode 1).
+template <int kMode>
+double forSchedule(const std::vector<std::array<std::uint32_t, 2>>& schedule,
+                   const std::vector<ConstraintSolver::Manifold>& manifolds, std::vector<ContactRow>& rows,
+                   std::vector<Velocity>& vel) noexcept {
+  double change = 0.0;
+  for (const auto& [x, y] : schedule) {
+    const ConstraintSolver::Manifold& mx = manifolds[x];
+    const ContactRow& hx = rows[mx.begin];
+    Velocity& sax = vel[static_cast<std::size_t>(hx.a)];
+    Velocity& sbx = vel[static_cast<std::size_t>(hx.b)];
+    Velocity ax = sax, bx = sbx;
+    if (y == ConstraintSolver::kNoManifold) {
+      for (std::uint32_t k = mx.begin; k < mx.end; ++k) visitContact<kMode>(rows[k], ax, bx, change);
+      sax = ax;
+      sbx = bx;
+      continue;
+    }
+    const ConstraintSolver::Manifold& my = manifolds[y];
+    const ContactRow& hy = rows[my.begin];
+    Velocity& say = vel[static_cast<std::size_t>(hy.a)];
+    Velocity& sby = vel[static_cast<std::size_t>(hy.b)];
+    Velocity ay = say, by = sby;
+    const std::uint32_t nx = mx.end - mx.begin, ny = my.end - my.begin, common = std::min(nx, ny);
+    for (std::uint32_t k = 0; k < common; ++k) {
+      visitContact<kMode>(rows[mx.begin + k], ax, bx, change);
+      visitContact<kMode>(rows[my.begin + k], ay, by, change);
+    }
+    for (std::uint32_t k = common; k < nx; ++k) visitContact<kMode>(rows[mx.begin + k], ax, bx, change);
+    for (std::uint32_t k = common; k < ny; ++k) visitContact<kMode>(rows[my.begin + k], ay, by, change);
+    // A body both manifolds name is non-dynamic: both copies are unchanged.
+    sax = ax;
+    sbx = bx;
+    say = ay;
+    sby = by;
+  }
+  return change;
+}
+
+}  // namespace
+
+// One velocity sweep: joint rows, then the contacts in schedule order. With
+// kResidual, returns the largest velocity correction |Δλ|/m_eff (else 0).
 template <bool kResidual>
 double ConstraintSolver::sweep() {
   double change = 0.0;
@@ -445,54 +595,13 @@ double ConstraintSolver::sweep() {
     if constexpr (kResidual)
       if (r.effMass > 0.0) change = std::max(change, std::abs(applied) / r.effMass);
   }
-  // The contacts of one body pair are consecutive (one manifold): their
-  // bodies' velocities stay in locals for the run, which spares the
-  // store-to-load round trips of a contact-by-contact update.
-  const std::size_t m = contactRows_.size();
-  for (std::size_t i = 0; i < m;) {
-    const int ia = contactRows_[i].a, ib = contactRows_[i].b;
-    Velocity& sa = velocity_[static_cast<std::size_t>(ia)];
-    Velocity& sb = velocity_[static_cast<std::size_t>(ib)];
-    Velocity A = sa, B = sb;
-    for (; i < m && contactRows_[i].a == ia && contactRows_[i].b == ib; ++i) {
-      ContactRow& r = contactRows_[i];
-      if (r.effMass[0] == 0.0) continue;  // two non-dynamic bodies
-      if (r.effMass[1] > 0.0 && r.effMass[2] > 0.0) {
-        const Vec3 dv = B.v - A.v;
-        const double limit = r.friction * r.impulse[0];
-        double l1 = r.impulse[1] - r.effMass[1] * contactVelocity(r, 1, dv, A, B);
-        double l2 = r.impulse[2] - r.effMass[2] * contactVelocity(r, 2, dv, A, B);
-        const double len2 = l1 * l1 + l2 * l2;
-        if (len2 > limit * limit) {
-          const double f = len2 > 0.0 ? limit / std::sqrt(len2) : 0.0;
-          l1 *= f;
-          l2 *= f;
-        }
-        const double d1 = l1 - r.impulse[1], d2 = l2 - r.impulse[2];
-        r.impulse[1] = l1;
-        r.impulse[2] = l2;
-        const Vec3 p = d1 * r.u[1] + d2 * r.u[2];
-        A.v -= r.imA * p;
-        A.w += d1 * r.mAngA[1] + d2 * r.mAngA[2];
-        B.v += r.imB * p;
-        B.w += d1 * r.mAngB[1] + d2 * r.mAngB[2];
-        if constexpr (kResidual)
-          change = std::max({change, std::abs(d1) / r.effMass[1], std::abs(d2) / r.effMass[2]});
-      }
-      const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
-      const double next = std::max(r.impulse[0] + r.effMass[0] * (r.target - vn), 0.0);
-      const double applied = next - r.impulse[0];
-      r.impulse[0] = next;
-      A.v -= (r.imA * applied) * r.u[0];
-      A.w += applied * r.mAngA[0];
-      B.v += (r.imB * applied) * r.u[0];
-      B.w += applied * r.mAngB[0];
-      if constexpr (kResidual) change = std::max(change, std::abs(applied) / r.effMass[0]);
-    }
-    sa = A;
-    sb = B;
-  }
+  change = std::max(change, forSchedule<kResidual ? 1 : 0>(schedule_, manifolds_, contactRows_, velocity_));
   return change;
+}
+
+void ConstraintSolver::pushSweep() {
+  for (Row& r : jointRows_) solveRow(r, push_, r.pushTarget, r.pushImpulse);
+  forSchedule<2>(schedule_, manifolds_, contactRows_, push_);
 }
 
 Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
@@ -521,6 +630,7 @@ Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
   jointRows_.clear();
   for (Joint& j : joints) buildJointRows(bodies, j, dt, o);
   buildContactRows(bodies, contacts, dt, o);
+  scheduleManifolds();
 
   // Warm start.
   SolverStats stats;
@@ -552,32 +662,8 @@ Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
 
   // Split-impulse position sweeps on pseudo-velocities (contact normals and
   // joint rows).
-  if (o.splitImpulse) {
-    for (int it = 0; it < o.positionIterations; ++it) {
-      for (Row& r : jointRows_) solveRow(r, push_, r.pushTarget, r.pushImpulse);
-      const std::size_t m = contactRows_.size();
-      for (std::size_t i = 0; i < m;) {  // per manifold, as in sweep()
-        const int ia = contactRows_[i].a, ib = contactRows_[i].b;
-        Velocity& sa = push_[static_cast<std::size_t>(ia)];
-        Velocity& sb = push_[static_cast<std::size_t>(ib)];
-        Velocity A = sa, B = sb;
-        for (; i < m && contactRows_[i].a == ia && contactRows_[i].b == ib; ++i) {
-          ContactRow& r = contactRows_[i];
-          if (r.effMass[0] == 0.0) continue;
-          const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
-          const double next = std::max(r.pushImpulse + r.effMass[0] * (r.pushTarget - vn), 0.0);
-          const double applied = next - r.pushImpulse;
-          r.pushImpulse = next;
-          A.v -= (r.imA * applied) * r.u[0];
-          A.w += applied * r.mAngA[0];
-          B.v += (r.imB * applied) * r.u[0];
-          B.w += applied * r.mAngB[0];
-        }
-        sa = A;
-        sb = B;
-      }
-    }
-  }
+  if (o.splitImpulse)
+    for (int it = 0; it < o.positionIterations; ++it) pushSweep();
 
   // Write back.
   for (std::size_t i = 0; i < n; ++i) {

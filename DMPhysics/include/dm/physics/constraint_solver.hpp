@@ -278,6 +278,11 @@ class ConstraintSolver {
   struct Velocity {
     Vec3 v, w;
   };
+  /// Internal: contacts [begin, end) of one body pair (consecutive in the input).
+  struct Manifold {
+    std::uint32_t begin = 0, end = 0;
+  };
+  static constexpr std::uint32_t kNoManifold = 0xffffffffu;  ///< internal: no partner manifold
 
  private:
   Status validate(std::span<const SolverBody> bodies, std::span<const ContactConstraint> contacts,
@@ -285,8 +290,10 @@ class ConstraintSolver {
   void buildJointRows(std::span<const SolverBody> bodies, Joint& joint, double dt, const SolverOptions& o);
   void buildContactRows(std::span<const SolverBody> bodies, std::span<const ContactConstraint> contacts,
                         double dt, const SolverOptions& o);
+  void scheduleManifolds();
   template <bool kResidual>
   double sweep();
+  void pushSweep();
   // Per body (index n: the static world): velocities, pseudo-velocities and
   // mass properties, kept apart so the sweeps touch only velocities.
   std::vector<Velocity> velocity_, push_;
@@ -294,6 +301,11 @@ class ConstraintSolver {
   std::vector<Mat3> invInertia_;
   std::vector<Row> jointRows_;
   std::vector<ContactRow> contactRows_;  // one per contact
+  std::vector<Manifold> manifolds_;
+  std::vector<std::uint8_t> scheduled_;
+  // Sweep order: manifold pairs (second kNoManifold: alone) that share no
+  // dynamic body, solved interleaved so their dependency chains overlap.
+  std::vector<std::array<std::uint32_t, 2>> schedule_;
 };
 
 /// Keeps the accumulated impulses of the contacts of the last step and hands
