@@ -150,9 +150,6 @@ struct FrameVertices {
 struct MinkowskiPair {
   const ConvexShape& A;
   const ConvexShape& B;
-  // Set by scanInFrameA(): the hulls' vertices, both in A's frame.
-  const FrameVertices* frameA = nullptr;
-  const FrameVertices* frameB = nullptr;
   Mat3 r;  // B's frame → A's frame
   Vec3 t;
   std::uint32_t hintA = 0, hintB = 0;
@@ -164,33 +161,16 @@ struct MinkowskiPair {
     t = ra.transpose() * (poseB.translation() - poseA.translation());
   }
 
-  // Copies the shapes that are small hulls into `bufA`/`bufB` in A's frame,
-  // and answers their supports from there from now on.
-  void scanInFrameA(FrameVertices& bufA, FrameVertices& bufB) noexcept {
-    if (A.type() == ShapeType::ConvexHull &&
-        bufA.assign(static_cast<const ConvexHull&>(A), Mat3::Identity(), Vec3::Zero(), false))
-      frameA = &bufA;
-    if (B.type() == ShapeType::ConvexHull && bufB.assign(static_cast<const ConvexHull&>(B), r, t, true))
-      frameB = &bufB;
-  }
-
-  Vec3 pointA(const Vec3& d) noexcept {
-    if (frameA) return (*frameA)[hintA = frameA->furthest(d)];
-    return A.supportCore(d, hintA);
-  }
-  Vec3 pointB(const Vec3& d) noexcept {  // B's support along −d, A's frame
-    if (frameB) return (*frameB)[hintB = frameB->furthest(-d)];
-    return r * B.supportCore(-(r.transpose() * d), hintB) + t;
-  }
-
   // Support point of A − B along d (A's frame), without its two parts.
-  Vec3 supportW(const Vec3& d) noexcept { return pointA(d) - pointB(d); }
+  Vec3 supportW(const Vec3& d) noexcept {
+    return A.supportCore(d, hintA) - (r * B.supportCore(-(r.transpose() * d), hintB) + t);
+  }
 
   // Support of A − B along d (A's frame).
   Vertex support(const Vec3& d) noexcept {
     Vertex v;
-    v.a = pointA(d);
-    v.b = pointB(d);
+    v.a = A.supportCore(d, hintA);
+    v.b = r * B.supportCore(-(r.transpose() * d), hintB) + t;
     v.w = v.a - v.b;
     return v;
   }
@@ -899,6 +879,23 @@ MprStop runMpr(const Supports& support, Vec3 interior, double scale, const GjkOp
   return MprStop::Degenerate;
 }
 
+// MPR on the cores of the pair. Two hulls of up to kFrameVertices vertices
+// go through HullSupports, with their vertices copied into A's frame; the
+// copies (3 KB) live in this function's frame, out of line so that the
+// other queries of gjkDistance() do not carry them.
+[[gnu::noinline]] MprStop mprOnCores(MinkowskiPair& m, const GjkOptions& opt, MprOut& out, Vec3& sep,
+                                     int& iterations) noexcept {
+  const double scale = m.A.boundingSphere().radius + m.B.boundingSphere().radius + m.t.norm();
+  const Vec3 interior = m.A.interiorPoint() - (m.r * m.B.interiorPoint() + m.t);
+  if (m.A.type() == ShapeType::ConvexHull && m.B.type() == ShapeType::ConvexHull) {
+    FrameVertices a, b;
+    if (a.assign(static_cast<const ConvexHull&>(m.A), Mat3::Identity(), Vec3::Zero(), false) &&
+        b.assign(static_cast<const ConvexHull&>(m.B), m.r, m.t, true))
+      return runMpr(HullSupports{a, b}, interior, scale, opt, out, sep, iterations);
+  }
+  return runMpr(ShapeSupports{m}, interior, scale, opt, out, sep, iterations);
+}
+
 void storeCache(GjkCache* cache, const Isometry3& poseA, const Vec3& v, bool separated,
                 const MinkowskiPair& m, int iterations) {
   if (!cache) return;
@@ -959,16 +956,10 @@ GjkResult gjkDistance(const ConvexShape& a, const Isometry3& poseA, const Convex
   Quick quick = Quick::Unsure;
   GjkResult r;
   const Mat3 ra3 = poseA.linear();
-  FrameVertices frameA, frameB;
   if (options.penetration && options.method == PenetrationMethod::Mpr) {
-    m.scanInFrameA(frameA, frameB);
-    const double scale = a.boundingSphere().radius + b.boundingSphere().radius + m.t.norm();
-    const Vec3 interior = a.interiorPoint() - (m.r * b.interiorPoint() + m.t);
     MprOut mo;
     Vec3 sep;
-    const MprStop ms = m.frameA && m.frameB
-                           ? runMpr(HullSupports{*m.frameA, *m.frameB}, interior, scale, options, mo, sep, it)
-                           : runMpr(ShapeSupports{m}, interior, scale, options, mo, sep, it);
+    const MprStop ms = mprOnCores(m, options, mo, sep, it);
     if (ms == MprStop::Overlap) {
       storeCache(cache, poseA, v, false, m, it);
       r.distance = -mo.depth - ra - rb;
