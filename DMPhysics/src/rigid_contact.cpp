@@ -164,16 +164,24 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
     return posed(c.bodies[i].position, c.bodies[i].orientation, bodies_[i].shapeOffset);
   };
   if (c.sleeping > 0) {
-    // An awake dynamic body colliding with a sleeper wakes the sleeper's
-    // island before any contact is made, so the island takes part in full.
+    // An awake dynamic body colliding with a sleeper, or within the contact
+    // margin of it, wakes the sleeper's island before any contact is made,
+    // so the island takes part in full.
     const CollisionRequest test{.contacts = false, .maxContacts = 1};
     for (const ProxyPair& pair : c.pairs) {
       const std::uint32_t a = pair.a, b = pair.b;
       if (c.asleep[a] == c.asleep[b]) continue;
       const std::uint32_t sleeper = c.asleep[a] ? a : b, other = c.asleep[a] ? b : a;
       if (!awake(other) || !c.asleep[sleeper]) continue;  // static bodies wake nothing
-      collide(*bodies_[a].shape, pose(a), *bodies_[b].shape, pose(b), test, c.narrow);
-      if (c.narrow.colliding) wakeIsland(state, sleeper);
+      // Colliding, or close enough for speculative contacts (step 2).
+      const Isometry3 pa = pose(a), pb = pose(b);
+      collide(*bodies_[a].shape, pa, *bodies_[b].shape, pb, test, c.narrow);
+      bool near = c.narrow.colliding;
+      if (!near && contactSettings_.contactMargin > 0.0) {
+        const DistanceResult d = distance(*bodies_[a].shape, pa, *bodies_[b].shape, pb);
+        near = d.supported && d.distance < contactSettings_.contactMargin;
+      }
+      if (near) wakeIsland(state, sleeper);
     }
   }
   const CollisionRequest request{.contacts = true,
@@ -197,10 +205,47 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
       colliding = c.narrow.colliding;
     }
     if (!colliding) {
+      if (!(margin > 0.0)) continue;
       // Apart now: last step's contacts, if still close, as speculative ones.
-      if (margin > 0.0 && c.cache.size() > 0 &&
-          c.cache.persist(static_cast<int>(a), static_cast<int>(b), c.bodies, margin, mu, e, c.contacts) > 0)
-        c.constrained[a] = c.constrained[b] = 1;
+      int kept = c.cache.size() > 0
+                     ? c.cache.persist(static_cast<int>(a), static_cast<int>(b), c.bodies, margin, mu, e, c.contacts)
+                     : 0;
+      if (kept == 0) {
+        // No history (say, a scene built touching): the manifold the pair
+        // would have if B were moved onto A, moved back, as speculative
+        // contacts.
+        const Isometry3 pa = posed(ba.position, ba.orientation, da.shapeOffset);
+        const Isometry3 pb = posed(bb.position, bb.orientation, db.shapeOffset);
+        const DistanceResult d = distance(*da.shape, pa, *db.shape, pb);
+        Vec3 n = d.pointB - d.pointA;
+        const double len = n.norm();
+        if (len > 1e-9 * margin) {
+          n /= len;
+        } else {
+          // Touching to rounding: the closest points give no direction; take
+          // the axis along which the boxes are farthest apart.
+          const Vec3 apart = (boxB.min() - boxA.max()).cwiseMax(boxA.min() - boxB.max());
+          Eigen::Index k = 0;
+          apart.maxCoeff(&k);
+          n = Vec3::Unit(k) * (boxB.center()[k] >= boxA.center()[k] ? 1.0 : -1.0);
+        }
+        if (d.supported && d.distance >= 0.0 && d.distance < margin && !unbounded(boxA) && !unbounded(boxB)) {
+          const double shift = d.distance + std::min(1e-6, 0.01 * margin);
+          Isometry3 moved = pb;
+          moved.translation() -= shift * n;
+          collide(*da.shape, pa, *db.shape, moved, request, c.narrow);
+          if (c.narrow.colliding) {
+            for (const ContactPoint& q : c.narrow.contacts) {
+              const ContactPoint p{q.position + 0.5 * shift * n, q.normal,
+                                   std::min(q.depth - shift * n.dot(q.normal), 0.0)};
+              c.contacts.push_back(
+                  ContactConstraint::make(static_cast<int>(a), static_cast<int>(b), p, mu, e));
+            }
+            kept = static_cast<int>(c.narrow.contacts.size());
+          }
+        }
+      }
+      if (kept > 0) c.constrained[a] = c.constrained[b] = 1;
       continue;
     }
     for (const ContactPoint& p : c.narrow.contacts)

@@ -17,7 +17,9 @@
 //      had contacts in the last step keeps them as speculative contacts
 //      (depth < 0) while both bodies carry their anchors apart by less than
 //      ContactSettings::contactMargin (the broad phase pairs boxes that
-//      close, too);
+//      close, too); a pair with no such history closer than the margin
+//      (dm::distance) gets the manifold it would have if B were moved onto
+//      A, moved back, as speculative contacts (a scene built touching);
 //   3. the force accumulators and integrators advance every body as before;
 //   4. continuous collision (bodies whose material has `ccd` set): the
 //      motion of the shape from its start-of-step pose to the integrated
@@ -41,7 +43,8 @@
 //      an island whose bodies have all been still for timeToSleep falls
 //      asleep: velocities zero, no integration, no narrow phase among
 //      sleepers and the ground, no solver rows. An island wakes when an awake
-//      dynamic body collides with one of its bodies, and every body wakes on
+//      dynamic body collides with one of its bodies or comes within
+//      contactMargin of it, and every body wakes on
 //      PhysicsWorld::applyImpulse, setBodyState (that body's island) and
 //      restore (all). Bodies that a joint, an external force or torque, a
 //      spring, Newtonian gravity or a pending timed impulse acts on never
@@ -95,11 +98,12 @@ struct ContactSettings {
   std::size_t pairCapacity = 0;
   /// CCD: distance at which conservative advancement reports an impact, m.
   double ccdTolerance = 1e-6;
-  /// Persistent contacts (step 2): a pair that touched in the last step and
-  /// now lies apart by less than this keeps its last contact points as
-  /// speculative ones (they stop the bodies from closing the gap by more than
-  /// it, nothing else), so resting bodies that lift by a hair at large dt do
-  /// not fall back in free flight. 0: off. m, ≥ 0.
+  /// Persistent and speculative contacts (step 2): a pair that touched in
+  /// the last step and now lies apart by less than this keeps its last
+  /// contact points as speculative ones, and a new pair that close gets
+  /// speculative contacts (they stop the bodies from closing the gap by more
+  /// than it, nothing else), so resting bodies that lift by a hair at large
+  /// dt, or were placed touching, do not fall in free flight. 0: off. m, ≥ 0.
   double contactMargin = 0.002;
   /// Sleeping (step 6 in the file comment); off by default, so every body is
   /// simulated every step unless asked otherwise.
