@@ -249,6 +249,8 @@ Result<MeshBvh> MeshBvh::build(const Mesh& mesh, const BvhBuildOptions& options)
     for (int c = 0; c < 3; ++c) bvh.corners_[3 * k + c] = mesh.positions[tri[c]];
   }
   bvh.bounds_ = temp[0].box;
+  bvh.faceNormals_.resize(n);
+  bvh.computeFaceNormals();
 
   // Pseudonormals for closed, oriented manifolds: neighbours across edges.
   const MeshTopology topo = analyzeTopology(mesh);
@@ -276,7 +278,6 @@ Result<MeshBvh> MeshBvh::build(const Mesh& mesh, const BvhBuildOptions& options)
       bvh.neighbours_[3 * half[i].tri + half[i].edge] = half[i + 1].tri;
       bvh.neighbours_[3 * half[i + 1].tri + half[i + 1].edge] = half[i].tri;
     }
-    bvh.faceNormals_.resize(n);
     bvh.edgeNormals_.resize(3 * n);
     bvh.vertexNormals_.resize(nv);
     bvh.computeNormals();
@@ -379,7 +380,7 @@ void MeshBvh::computeObbExtents() noexcept {
     if (i != 1) fitObb(obbs_[i], corners_, nodeSpan_[2 * i], nodeSpan_[2 * i + 1]);
 }
 
-void MeshBvh::computeNormals() noexcept {
+void MeshBvh::computeFaceNormals() noexcept {
   const std::size_t n = tris_.size();
   for (std::size_t k = 0; k < n; ++k) {
     const Vec3* c = &corners_[3 * k];
@@ -387,6 +388,11 @@ void MeshBvh::computeNormals() noexcept {
     const double len = nrm.norm();
     faceNormals_[k] = len > 0 ? Vec3(nrm / len) : Vec3::Zero();
   }
+}
+
+// Edge and vertex pseudonormals of a closed mesh, from the face normals.
+void MeshBvh::computeNormals() noexcept {
+  const std::size_t n = tris_.size();
   for (Vec3& v : vertexNormals_) v.setZero();
   for (std::size_t k = 0; k < n; ++k) {
     const Vec3* c = &corners_[3 * k];
@@ -448,6 +454,7 @@ Status MeshBvh::refit(std::span<const Vec3> positions) {
   computeBoxes();
   bounds_ = all;
   computeObbExtents();
+  computeFaceNormals();
   if (closed_) computeNormals();
   return ok();
 }

@@ -64,6 +64,10 @@ struct MappedObb {
 inline MappedObb mapObb(const BvhObb& b, const Relative& m) noexcept {
   return {m.r * b.axes, m.map(b.center), b.half};
 }
+// A's oriented node box mapped into B's frame (the inverse of mapObb).
+inline MappedObb mapObbInverse(const BvhObb& a, const Relative& m) noexcept {
+  return {m.r.transpose() * a.axes, m.r.transpose() * (a.center - m.t), a.half};
+}
 
 // Lower bound of the squared distance between oriented boxes a and b (one
 // frame): the largest gap between their projections on the centre line and
@@ -71,13 +75,15 @@ inline MappedObb mapObb(const BvhObb& b, const Relative& m) noexcept {
 // cross products); any unit direction's projection gap is at most the
 // distance. Zero when they overlap on every axis. `best` is the distance
 // so far: when the centre line alone proves the pair farther, the rest is
-// skipped.
-double obbDistanceSq(const BvhObb& a, const MappedObb& b, double best) noexcept {
+// skipped. The test is symmetric, so either box may be the mapped one;
+// `scale` is the size of the frames' offset (the mapping's rounding is
+// relative to it as well as to the coordinates).
+double obbDistanceSq(const BvhObb& a, const MappedObb& b, double best, double scale) noexcept {
   const Vec3& ha = a.half;
   const Vec3& hb = b.half;
   // Rounding of the box transforms is relative to the coordinates' size.
-  const double slack =
-      1e-12 * (a.center.cwiseAbs().maxCoeff() + b.center.cwiseAbs().maxCoeff() + ha.sum() + hb.sum());
+  const double slack = 1e-12 * (a.center.cwiseAbs().maxCoeff() + b.center.cwiseAbs().maxCoeff() + scale +
+                                ha.sum() + hb.sum());
   // The centre line: |d| minus both boxes' support along it, from the axes
   // as they are (no 3×3 product). Tighter than the face axes for boxes apart
   // along a diagonal.
@@ -153,7 +159,7 @@ struct MappedLeaf {
       const Vec3* src = b.corners(leaf.first + i);
       for (int k = 0; k < 3; ++k) c[3 * i + k] = m.map(src[k]);
       box[i] = triBox(&c[3 * i]);
-      if (normals) normal[i] = unitNormal(&c[3 * i]);
+      if (normals) normal[i] = m.r * b.faceNormal(leaf.first + i);
     }
   }
 };
@@ -368,7 +374,8 @@ MeshDistance meshMeshDistance(const MeshBvh& a, const Isometry3& poseA, const Me
   };
   std::array<Item, kPairStack> stack;
   int sp = 0;
-  const double rootLb = obbDistanceSq(a.obb(0), mapObb(b.obb(0), m), best);
+  const double scale = m.t.cwiseAbs().maxCoeff();
+  const double rootLb = obbDistanceSq(a.obb(0), mapObb(b.obb(0), m), best, scale);
   if (rootLb <= bestSq()) stack[sp++] = {0, 0, rootLb};
   MappedLeaf leafB;
   while (sp > 0) {
@@ -381,7 +388,7 @@ MeshDistance meshMeshDistance(const MeshBvh& a, const Isometry3& poseA, const Me
       for (std::uint32_t i = 0; i < na.count; ++i) {
         const Vec3* ta = a.corners(na.first + i);
         const TriBox boxA = triBox(ta);
-        const Vec3 normalA = unitNormal(ta);
+        const Vec3& normalA = a.faceNormal(na.first + i);
         for (std::uint32_t j = 0; j < nb.count; ++j) {
           if (triBoxGapSq(boxA, leafB.box[j]) > bestSq()) continue;
           const Vec3* tb = &leafB.c[3 * j];
@@ -403,14 +410,16 @@ MeshDistance meshMeshDistance(const MeshBvh& a, const Isometry3& poseA, const Me
     const bool descendA = !na.isLeaf() && (nb.isLeaf() || size(na) >= size(nb));
     Item c0, c1;
     // Oriented boxes: on curved surfaces far tighter than the float boxes.
+    // The undivided node's box is mapped into the other tree's frame once,
+    // and both children are tested in their own frame.
     if (descendA) {
       const MappedObb bb = mapObb(b.obb(it.b), m);
-      c0 = {na.first, it.b, obbDistanceSq(a.obb(na.first), bb, best)};
-      c1 = {na.first + 1, it.b, obbDistanceSq(a.obb(na.first + 1), bb, best)};
+      c0 = {na.first, it.b, obbDistanceSq(a.obb(na.first), bb, best, scale)};
+      c1 = {na.first + 1, it.b, obbDistanceSq(a.obb(na.first + 1), bb, best, scale)};
     } else {
-      const BvhObb& ab = a.obb(it.a);
-      c0 = {it.a, nb.first, obbDistanceSq(ab, mapObb(b.obb(nb.first), m), best)};
-      c1 = {it.a, nb.first + 1, obbDistanceSq(ab, mapObb(b.obb(nb.first + 1), m), best)};
+      const MappedObb ab = mapObbInverse(a.obb(it.a), m);
+      c0 = {it.a, nb.first, obbDistanceSq(b.obb(nb.first), ab, best, scale)};
+      c1 = {it.a, nb.first + 1, obbDistanceSq(b.obb(nb.first + 1), ab, best, scale)};
     }
     if (c1.lb < c0.lb) std::swap(c0, c1);  // c0 nearer: pushed last, popped first
     DM_ASSERT(sp + 2 <= kPairStack, "traversal stack bound");

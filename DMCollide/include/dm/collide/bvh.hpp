@@ -136,7 +136,8 @@ class MeshBvh {
   /// without degenerate triangles: then the pseudonormals below exist and
   /// point-mesh distances are signed (negative inside).
   bool isClosed() const noexcept { return closed_; }
-  /// Unit face normal of leaf-order triangle k (closed meshes only).
+  /// Unit face normal of leaf-order triangle k (right-handed corner order;
+  /// zero for a degenerate triangle). Every mesh, kept by refit().
   const Vec3& faceNormal(std::uint32_t k) const noexcept { return faceNormals_[k]; }
   /// Edge pseudonormal (normalised sum of the two adjacent face normals) of
   /// edge e of leaf-order triangle k; e = 0: corners 0–1, 1: 1–2, 2: 2–0
@@ -164,7 +165,7 @@ class MeshBvh {
   std::vector<Vec3> corners_;            // 3 per triangle, leaf order
   std::vector<Triangle> tris_;           // vertex indices, leaf order
   std::vector<std::uint32_t> order_;     // leaf order -> mesh triangle
-  std::vector<Vec3> faceNormals_;        // closed meshes: per triangle, leaf order
+  std::vector<Vec3> faceNormals_;        // per triangle, leaf order
   std::vector<Vec3> edgeNormals_;        // closed meshes: 3 per triangle, leaf order
   std::vector<Vec3> vertexNormals_;      // closed meshes: per vertex
   std::vector<std::uint32_t>
@@ -174,6 +175,7 @@ class MeshBvh {
   int depth_ = 0;
   bool closed_ = false;
 
+  void computeFaceNormals() noexcept;
   void computeNormals() noexcept;
   void computeBoxes() noexcept;
   void computeObbExtents() noexcept;
