@@ -703,19 +703,31 @@ void ContactCache::reserve(std::size_t contacts) {
 
 void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<const SolverBody> bodies) {
   entries_.clear();
-  for (const ContactConstraint& c : contacts) {
-    const PoseRef pa = poseOf(bodies, c.bodyA), pb = poseOf(bodies, c.bodyB);
+  // A pair's contacts are consecutive: its rotations are made once.
+  int lastA = 0, lastB = 0;
+  PoseRef pa, pb;
+  Mat3 toA, toB;  // world → body frames
+  for (std::size_t i = 0; i < contacts.size(); ++i) {
+    const ContactConstraint& c = contacts[i];
+    if (i == 0 || c.bodyA != lastA || c.bodyB != lastB) {
+      lastA = c.bodyA;
+      lastB = c.bodyB;
+      pa = poseOf(bodies, c.bodyA);
+      pb = poseOf(bodies, c.bodyB);
+      toA = pa.q.toRotationMatrix().transpose();
+      toB = pb.q.toRotationMatrix().transpose();
+    }
     Entry e;
     e.a = c.bodyA;
     e.b = c.bodyB;
     e.key = c.featureKey;
-    e.localA = pa.q.conjugate() * (c.point.position - pa.x);
-    e.localB = pb.q.conjugate() * (c.point.position - pb.x);
-    e.normalLocalA = pa.q.conjugate() * c.point.normal;
+    e.localA = toA * (c.point.position - pa.x);
+    e.localB = toB * (c.point.position - pb.x);
+    e.normalLocalA = toA * c.point.normal;
     e.depth = c.point.depth;
     e.normal = c.point.normal;
     e.normalImpulse = c.normalImpulse;
-    e.frictionLocalA = pa.q.conjugate() * c.frictionImpulse;
+    e.frictionLocalA = toA * c.frictionImpulse;
     entries_.push_back(e);
   }
   std::sort(entries_.begin(), entries_.end(),
@@ -747,17 +759,30 @@ int ContactCache::warmStart(std::span<ContactConstraint> contacts, std::span<con
   used_.assign(entries_.size(), 0);
   const int n = static_cast<int>(bodies.size());
   int matched = 0;
+  // A pair's contacts are consecutive: search and rotation once per pair.
+  bool haveRun = false;
+  int lastA = 0, lastB = 0;
+  std::vector<Entry>::const_iterator first = entries_.end();
+  PoseRef pa;
+  Mat3 fromA;  // A's frame → world
   for (ContactConstraint& c : contacts) {
     c.normalImpulse = 0.0;
     c.frictionImpulse.setZero();
     if ((c.bodyA != kWorldBody && (c.bodyA < 0 || c.bodyA >= n)) ||
         (c.bodyB != kWorldBody && (c.bodyB < 0 || c.bodyB >= n)))
       continue;  // solve() reports the bad index
-    const auto first = std::lower_bound(
-        entries_.begin(), entries_.end(), c,
-        [](const Entry& e, const ContactConstraint& k) { return pairLess(e.a, e.b, k.bodyA, k.bodyB); });
-    const PoseRef pa = poseOf(bodies, c.bodyA);
-    const Vec3 localA = pa.q.conjugate() * (c.point.position - pa.x);
+    if (!haveRun || c.bodyA != lastA || c.bodyB != lastB) {
+      haveRun = true;
+      lastA = c.bodyA;
+      lastB = c.bodyB;
+      first = std::lower_bound(
+          entries_.begin(), entries_.end(), c,
+          [](const Entry& e, const ContactConstraint& k) { return pairLess(e.a, e.b, k.bodyA, k.bodyB); });
+      pa = poseOf(bodies, c.bodyA);
+      fromA = pa.q.toRotationMatrix();
+    }
+    if (first == entries_.end() || first->a != c.bodyA || first->b != c.bodyB) continue;  // a new pair
+    const Vec3 localA = fromA.transpose() * (c.point.position - pa.x);
     std::ptrdiff_t best = -1;
     double bestDist = matchDistance * matchDistance;
     for (auto it = first; it != entries_.end() && it->a == c.bodyA && it->b == c.bodyB; ++it) {
@@ -781,7 +806,7 @@ int ContactCache::warmStart(std::span<ContactConstraint> contacts, std::span<con
     const Entry& e = entries_[static_cast<std::size_t>(best)];
     used_[static_cast<std::size_t>(best)] = 1;
     c.normalImpulse = e.normalImpulse;
-    c.frictionImpulse = pa.q * e.frictionLocalA;
+    c.frictionImpulse = fromA * e.frictionLocalA;
     ++matched;
   }
   return matched;
