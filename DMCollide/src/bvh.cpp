@@ -84,40 +84,61 @@ struct BvhBuilder {
     if (depth < kSahDepth) {
       // Binned SAH over the three axes.
       constexpr int kMaxBins = 64;
+      // Plain bins, initialised only up to `bins` (a default-constructed
+      // Aabb array of kMaxBins per axis cost more than the binning itself).
       struct Bin {
-        Aabb box;
-        std::uint32_t count = 0;
+        Vec3 lo, hi;
+        std::uint32_t count;
       };
-      double bestCost = std::numeric_limits<double>::infinity();
+      constexpr double kInf = std::numeric_limits<double>::infinity();
+      double bestCost = kInf;
       int bestAxis = -1, bestBin = 0;
       const Vec3 cmin = cbox.min(), cext = cbox.sizes();
+      // One pass over the triangles bins all three axes (an axis without
+      // extent puts everything in bin 0 and is skipped below).
+      std::array<std::array<Bin, kMaxBins>, 3> bin;  // NOLINT: only the first `bins` are initialised
+      for (int axis = 0; axis < 3; ++axis)
+        for (int b = 0; b < bins; ++b) bin[axis][b] = Bin{Vec3::Constant(kInf), Vec3::Constant(-kInf), 0};
+      Vec3 binScale;
+      for (int axis = 0; axis < 3; ++axis) binScale[axis] = cext[axis] > 0 ? bins / cext[axis] : 0.0;
+      for (std::uint32_t i = begin; i < end; ++i) {
+        const std::uint32_t t = index[i];
+        const Vec3 rel = (centroids[t] - cmin).cwiseProduct(binScale);
+        const Vec3 tlo = boxes[t].min(), thi = boxes[t].max();
+        for (int axis = 0; axis < 3; ++axis) {
+          Bin& into = bin[axis][std::min(bins - 1, static_cast<int>(rel[axis]))];
+          into.count++;
+          into.lo = into.lo.cwiseMin(tlo);
+          into.hi = into.hi.cwiseMax(thi);
+        }
+      }
+      auto area = [](const Vec3& lo, const Vec3& hi) {
+        const Vec3 d = hi - lo;
+        return d.x() * d.y() + d.y() * d.z() + d.z() * d.x();
+      };
       for (int axis = 0; axis < 3; ++axis) {
         if (!(cext[axis] > 0)) continue;
-        std::array<Bin, kMaxBins> bin;  // only the first `bins` are used
-        for (int b = 0; b < bins; ++b) bin[b] = Bin{};
-        const double scale = bins / cext[axis];
-        for (std::uint32_t i = begin; i < end; ++i) {
-          const std::uint32_t t = index[i];
-          const int b = std::min(bins - 1, static_cast<int>((centroids[t][axis] - cmin[axis]) * scale));
-          bin[b].count++;
-          bin[b].box.extend(boxes[t]);
-        }
-        // Right-to-left sweep of areas, then left-to-right evaluation.
+        const std::array<Bin, kMaxBins>& binA = bin[axis];
+        // Right-to-left sweep of areas, then left-to-right evaluation (empty
+        // prefixes and suffixes are skipped, so their infinite boxes never
+        // reach the area).
         std::array<double, kMaxBins> rightCost;
-        Aabb acc;
+        Vec3 lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
         std::uint32_t accCount = 0;
         for (int b = bins - 1; b > 0; --b) {
-          acc.extend(bin[b].box);
-          accCount += bin[b].count;
-          rightCost[b] = halfArea(acc) * accCount;
+          lo = lo.cwiseMin(binA[b].lo);
+          hi = hi.cwiseMax(binA[b].hi);
+          accCount += binA[b].count;
+          rightCost[b] = accCount ? area(lo, hi) * accCount : 0.0;
         }
-        acc.setEmpty();
+        lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
         accCount = 0;
         for (int b = 0; b < bins - 1; ++b) {
-          acc.extend(bin[b].box);
-          accCount += bin[b].count;
+          lo = lo.cwiseMin(binA[b].lo);
+          hi = hi.cwiseMax(binA[b].hi);
+          accCount += binA[b].count;
           if (accCount == 0 || accCount == count) continue;
-          const double cost = halfArea(acc) * accCount + rightCost[b + 1];
+          const double cost = area(lo, hi) * accCount + rightCost[b + 1];
           if (cost < bestCost) {
             bestCost = cost;
             bestAxis = axis;
