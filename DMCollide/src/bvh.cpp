@@ -278,27 +278,33 @@ Result<MeshBvh> MeshBvh::build(const Mesh& mesh, const BvhBuildOptions& options)
   bvh.closed_ =
       topo.isClosed && topo.isManifold && topo.isOrientedConsistently && topo.degenerateTriangles == 0;
   if (bvh.closed_) {
-    struct HalfEdge {
-      std::uint32_t from, to, tri;
-      int edge;
-    };
-    std::vector<HalfEdge> half;
-    half.reserve(3 * n);
+    // Half-edges bucketed by their start vertex (counting sort, O(n)); the
+    // twin of u->v is the one v->u in v's bucket, unique in a closed,
+    // oriented manifold. (A sort of all 3n half-edges took ~8 % of the build.)
+    std::vector<std::uint32_t> first(nv + 1, 0), out(3 * n);
     for (std::uint32_t k = 0; k < n; ++k)
-      for (int e = 0; e < 3; ++e) half.push_back({bvh.tris_[k][e], bvh.tris_[k][(e + 1) % 3], k, e});
-    auto key = [](std::uint32_t a, std::uint32_t b) {
-      return (std::uint64_t(std::min(a, b)) << 32) | std::uint64_t(std::max(a, b));
-    };
-    std::sort(half.begin(), half.end(),
-              [&](const HalfEdge& x, const HalfEdge& y) { return key(x.from, x.to) < key(y.from, y.to); });
-    bvh.neighbours_.assign(3 * n, 0);
-    for (std::size_t i = 0; i + 1 < half.size(); i += 2) {
-      // Closed + manifold + oriented: every undirected edge appears exactly twice.
-      DM_ASSERT(key(half[i].from, half[i].to) == key(half[i + 1].from, half[i + 1].to),
-                "edge pairing of a closed mesh");
-      bvh.neighbours_[3 * half[i].tri + half[i].edge] = half[i + 1].tri;
-      bvh.neighbours_[3 * half[i + 1].tri + half[i + 1].edge] = half[i].tri;
+      for (int e = 0; e < 3; ++e) ++first[bvh.tris_[k][e] + 1];
+    for (std::size_t v = 0; v < nv; ++v) first[v + 1] += first[v];
+    {
+      std::vector<std::uint32_t> fill(first.begin(), first.end() - 1);
+      for (std::uint32_t k = 0; k < n; ++k)
+        for (std::uint32_t e = 0; e < 3; ++e) out[fill[bvh.tris_[k][e]]++] = 3 * k + e;
     }
+    bvh.neighbours_.assign(3 * n, 0);
+    for (std::uint32_t k = 0; k < n; ++k)
+      for (int e = 0; e < 3; ++e) {
+        const std::uint32_t u = bvh.tris_[k][e], v = bvh.tris_[k][(e + 1) % 3];
+        [[maybe_unused]] bool found = false;
+        for (std::uint32_t s = first[v]; s < first[v + 1]; ++s) {
+          const std::uint32_t h = out[s];
+          if (bvh.tris_[h / 3][(h % 3 + 1) % 3] == u) {
+            bvh.neighbours_[3 * k + e] = h / 3;
+            found = true;
+            break;
+          }
+        }
+        DM_ASSERT(found, "edge pairing of a closed mesh");
+      }
     bvh.edgeNormals_.resize(3 * n);
     bvh.vertexNormals_.resize(nv);
     bvh.computeNormals();
