@@ -483,9 +483,30 @@ namespace {
 // One contact of a sweep: the friction pair (projected onto the Coulomb disk
 // |λt| ≤ μ·λn), then the normal row, so that non-penetration is the last
 // word. A and B are the manifold's body velocities (locals of the caller).
+// y += s·x, spelled out: GCC otherwise calls Eigen's compound assignment
+// out of line inside the (large) sweep loops.
+[[gnu::always_inline]] inline void addScaled(Vec3& y, double s, const Vec3& x) noexcept {
+  y.x() += s * x.x();
+  y.y() += s * x.y();
+  y.z() += s * x.z();
+}
+
+// Applies impulse magnitudes l[0..2] along the contact's directions (l = 0
+// rows skipped by the caller's choice of `first`/`last`).
+[[gnu::always_inline]] inline void applyContact(const ContactRow& r, Velocity& A, Velocity& B, int first, int last,
+                                                const double* l) noexcept {
+  for (int k = first; k <= last; ++k) {
+    addScaled(A.v, -r.imA * l[k], r.u[k]);
+    addScaled(A.w, l[k], r.mAngA[k]);
+    addScaled(B.v, r.imB * l[k], r.u[k]);
+    addScaled(B.w, l[k], r.mAngB[k]);
+  }
+}
+
 template <bool kResidual>
 [[gnu::always_inline]] inline void solveContact(ContactRow& r, Velocity& A, Velocity& B, double& change) noexcept {
   if (r.effMass[0] == 0.0) return;  // two non-dynamic bodies
+  double l[3] = {0.0, 0.0, 0.0};
   if (r.effMass[1] > 0.0 && r.effMass[2] > 0.0) {
     const Vec3 dv = B.v - A.v;
     const double limit = r.friction * r.impulse[0];
@@ -497,26 +518,20 @@ template <bool kResidual>
       l1 *= f;
       l2 *= f;
     }
-    const double d1 = l1 - r.impulse[1], d2 = l2 - r.impulse[2];
+    l[1] = l1 - r.impulse[1];
+    l[2] = l2 - r.impulse[2];
     r.impulse[1] = l1;
     r.impulse[2] = l2;
-    const Vec3 p = d1 * r.u[1] + d2 * r.u[2];
-    A.v -= r.imA * p;
-    A.w += d1 * r.mAngA[1] + d2 * r.mAngA[2];
-    B.v += r.imB * p;
-    B.w += d1 * r.mAngB[1] + d2 * r.mAngB[2];
+    applyContact(r, A, B, 1, 2, l);
     if constexpr (kResidual)
-      change = std::max({change, std::abs(d1) / r.effMass[1], std::abs(d2) / r.effMass[2]});
+      change = std::max({change, std::abs(l[1]) / r.effMass[1], std::abs(l[2]) / r.effMass[2]});
   }
   const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
   const double next = std::max(r.impulse[0] + r.effMass[0] * (r.target - vn), 0.0);
-  const double applied = next - r.impulse[0];
+  l[0] = next - r.impulse[0];
   r.impulse[0] = next;
-  A.v -= (r.imA * applied) * r.u[0];
-  A.w += applied * r.mAngA[0];
-  B.v += (r.imB * applied) * r.u[0];
-  B.w += applied * r.mAngB[0];
-  if constexpr (kResidual) change = std::max(change, std::abs(applied) / r.effMass[0]);
+  applyContact(r, A, B, 0, 0, l);
+  if constexpr (kResidual) change = std::max(change, std::abs(l[0]) / r.effMass[0]);
 }
 
 // The split-impulse update of a contact's normal row on pseudo-velocities.
@@ -524,12 +539,9 @@ template <bool kResidual>
   if (r.effMass[0] == 0.0) return;
   const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
   const double next = std::max(r.pushImpulse + r.effMass[0] * (r.pushTarget - vn), 0.0);
-  const double applied = next - r.pushImpulse;
+  const double l[1] = {next - r.pushImpulse};
   r.pushImpulse = next;
-  A.v -= (r.imA * applied) * r.u[0];
-  A.w += applied * r.mAngA[0];
-  B.v += (r.imB * applied) * r.u[0];
-  B.w += applied * r.mAngB[0];
+  applyContact(r, A, B, 0, 0, l);
 }
 
 // One contact of a sweep; kMode 0: velocities, 1: velocities with the
