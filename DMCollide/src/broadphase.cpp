@@ -1,12 +1,6 @@
 // Broad-phase names, the factory, the brute-force reference every other
 // broad phase is tested against, and the pieces the accelerated broad phases
-// share (broadphase_impl.hpp): the box validity rule, the pair radix sort and
-// the pair-key hash set.
-//
-// PairKeySet layout: one power-of-two array of 64-bit keys, empty = ~0, home
-// slot = Fibonacci hash of the key, linear probing; erase shifts the rest of
-// the probe run back so no tombstones accumulate and memory stays O(size)
-// (the table shrinks when it is less than 1/8 full).
+// share (broadphase_impl.hpp): the box validity rule and the pair radix sort.
 #include <dm/collide/broadphase.hpp>
 #include <dm/core/assert.hpp>
 
@@ -147,82 +141,6 @@ void emitSortedPairs(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t
     out[i] = {static_cast<ProxyId>(keys[i] >> 32), static_cast<ProxyId>(keys[i] & 0xffffffffu)};
 }
 
-bool PairKeySet::insert(std::uint64_t key) {
-  DM_ASSERT(key != kEmpty, "pair key set: reserved key");
-  if (2 * (size_ + 1) > slots_.size()) rehash(std::max<std::size_t>(64, 2 * slots_.size()));
-  const std::size_t mask = slots_.size() - 1;
-  for (std::size_t i = home(key);; i = (i + 1) & mask) {
-    if (slots_[i] == key) return false;
-    if (slots_[i] == kEmpty) {
-      slots_[i] = key;
-      ++size_;
-      return true;
-    }
-  }
-}
-
-bool PairKeySet::contains(std::uint64_t key) const noexcept {
-  if (slots_.empty()) return false;
-  const std::size_t mask = slots_.size() - 1;
-  for (std::size_t i = home(key);; i = (i + 1) & mask) {
-    if (slots_[i] == key) return true;
-    if (slots_[i] == kEmpty) return false;
-  }
-}
-
-bool PairKeySet::erase(std::uint64_t key) {
-  if (slots_.empty()) return false;
-  const std::size_t mask = slots_.size() - 1;
-  for (std::size_t i = home(key);; i = (i + 1) & mask) {
-    if (slots_[i] == kEmpty) return false;
-    if (slots_[i] == key) {
-      eraseAt(i);
-      maybeShrink();
-      return true;
-    }
-  }
-}
-
-void PairKeySet::eraseAt(std::size_t i) noexcept {
-  // Backward shift: move later members of the probe run into the hole when
-  // the hole lies on their probe path (between their home and their slot).
-  const std::size_t mask = slots_.size() - 1;
-  std::size_t hole = i;
-  for (std::size_t j = (hole + 1) & mask; slots_[j] != kEmpty; j = (j + 1) & mask) {
-    const std::size_t h = home(slots_[j]);
-    if (((j - h) & mask) >= ((j - hole) & mask)) {
-      slots_[hole] = slots_[j];
-      hole = j;
-    }
-  }
-  slots_[hole] = kEmpty;
-  --size_;
-}
-
-void PairKeySet::clear() noexcept {
-  slots_.clear();
-  slots_.shrink_to_fit();
-  size_ = 0;
-  shift_ = 64;
-}
-
-void PairKeySet::maybeShrink() {
-  if (slots_.size() > 64 && 8 * size_ < slots_.size()) rehash(std::max<std::size_t>(64, 4 * size_));
-}
-
-void PairKeySet::rehash(std::size_t capacity) {
-  capacity = std::bit_ceil(capacity);
-  std::vector<std::uint64_t> old(capacity, kEmpty);
-  old.swap(slots_);
-  shift_ = 64u - static_cast<unsigned>(std::countr_zero(capacity));
-  const std::size_t mask = capacity - 1;
-  for (std::uint64_t k : old) {
-    if (k == kEmpty) continue;
-    std::size_t i = home(k);
-    while (slots_[i] != kEmpty) i = (i + 1) & mask;
-    slots_[i] = k;
-  }
-}
 
 }  // namespace detail
 

@@ -56,43 +56,4 @@ void sortPairKeys(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& 
 void emitSortedPairs(std::vector<std::uint64_t>& keys, std::vector<std::uint64_t>& scratch,
                      std::vector<ProxyPair>& out);
 
-/// Set of 64-bit keys (never ~0) with linear probing and backward-shift
-/// deletion: memory O(size), no tombstones. Used for persistent pair sets.
-class PairKeySet {
- public:
-  /// Adds `key`; false if it was present.
-  bool insert(std::uint64_t key);
-  /// Removes `key`; false if it was absent.
-  bool erase(std::uint64_t key);
-  bool contains(std::uint64_t key) const noexcept;
-  std::size_t size() const noexcept { return size_; }
-  void clear() noexcept;
-  /// Removes every key for which `drop(key)` is true. O(capacity).
-  template <class Pred>
-  void eraseIf(Pred drop) {
-    for (std::size_t i = 0; i < slots_.size(); ++i)
-      while (slots_[i] != kEmpty && drop(slots_[i])) eraseAt(i);
-    maybeShrink();
-  }
-  /// Calls `f(key)` for every key.
-  template <class F>
-  void forEach(F f) const {
-    for (std::uint64_t k : slots_)
-      if (k != kEmpty) f(k);
-  }
-
- private:
-  static constexpr std::uint64_t kEmpty = ~std::uint64_t(0);
-  std::size_t home(std::uint64_t key) const noexcept {
-    return static_cast<std::size_t>((key * 0x9E3779B97F4A7C15ull) >> shift_);
-  }
-  void eraseAt(std::size_t i) noexcept;
-  void rehash(std::size_t capacity);
-  void maybeShrink();
-
-  std::vector<std::uint64_t> slots_;
-  std::size_t size_ = 0;
-  unsigned shift_ = 64;
-};
-
 }  // namespace dm::detail

@@ -10,15 +10,19 @@
 // | kind              | update       | pairs                         | good for                        |
 // |-------------------|--------------|-------------------------------|---------------------------------|
 // | BruteForce        | O(1)         | O(n²)                         | a handful of objects, reference |
-// | SweepAndPrune     | O(1) amort.  | O(n + k + swaps), incremental | coherent motion, few movers     |
+// | SweepAndPrune     | O(1)         | O(n + k), segmented, coherent | coherent motion, similar sizes  |
 // | HashedGrid        | O(1)         | O(n + k), rebuilt per step    | similar sizes, uniform density  |
 // | HierarchicalGrid  | O(1)         | O(n + k), levels by size      | mixed sizes                     |
 // | DynamicAabbTree   | O(log n)     | O(m log n + k), m = moved     | general scenes, ray/box queries |
 //
 // (k = overlapping pairs; m = boxes that left their enlarged "fat" box in
-// the tree and were re-inserted.) Incremental sweep-and-prune keeps the pair set
-// between steps in a hash set (memory O(n + k), never an n² bit matrix); it
-// suits moderate n — at fixed density its swaps per step grow like n^(5/3).
+// the tree and were re-inserted.) Sweep-and-prune is segmented: the plane of
+// two axes is cut into square columns (twice the median box size), and each
+// column keeps its own list sorted along the third axis, re-sorted by
+// insertion sort each step (nearly sorted under coherent motion) and swept;
+// a pair is reported once, by the column holding its overlap's corner. One
+// global sorted list would make its swaps grow like n^(5/3) at fixed
+// density; per column it is O(n + k), with memory O(n), no pair set kept.
 // query() is O(log n + hits) on the tree and an O(n) scan on the others.
 // Measured against Bullet and FCL by Bench/collide_broadphase_bench.cpp.
 //
