@@ -26,13 +26,6 @@ Isometry3 posed(const Vec3& x, const Quat& q, const Isometry3& offset) {
 
 bool unbounded(const Aabb& box) noexcept { return !(box.min().allFinite() && box.max().allFinite()); }
 
-// Boxes overlapping once each is grown by `margin` (m); boxesOverlap at 0.
-bool boxesWithin(const Aabb& a, const Aabb& b, double margin) noexcept {
-  return a.min().x() <= b.max().x() + margin && b.min().x() <= a.max().x() + margin &&
-         a.min().y() <= b.max().y() + margin && b.min().y() <= a.max().y() + margin &&
-         a.min().z() <= b.max().z() + margin && b.min().z() <= a.max().z() + margin;
-}
-
 // Half the thinnest extent of a shape, m: a body moving less than this per
 // step cannot pass through anything its own thickness would hit.
 double thickness(const Shape& shape) noexcept {
@@ -106,7 +99,9 @@ void PhysicsWorld::reserveContacts(WorldState& state) const {
   const auto perPair = static_cast<std::size_t>(std::max(contactSettings_.maxContactsPerPair, 1));
   const std::size_t contacts = pairs * perPair + colliders;
   c.order.reserve(colliders);
+  c.sweep.reserve(colliders);
   c.pairs.reserve(pairs);
+  c.keyedPairs.reserve(pairs);
   c.contacts.reserve(contacts);
   c.narrow.contacts.reserve(std::max<std::size_t>(16, 2 * perPair));
   c.solver.reserve(n, contacts, joints_.size());
@@ -123,23 +118,32 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
     c.pairs.push_back({std::min(a, b), std::max(a, b)});
   };
   c.order.clear();
+  c.sweep.clear();
   c.pairs.clear();
   const auto n = static_cast<std::uint32_t>(bodies_.size());
   for (std::uint32_t i = 0; i < n; ++i)
-    if (collider(i) && !unbounded(box[i])) c.order.push_back(i);
-  // Sort-and-sweep on x; ties broken by index so the order is reproducible.
-  std::sort(c.order.begin(), c.order.end(), [&box](std::uint32_t a, std::uint32_t b) {
-    const double xa = box[a].min().x(), xb = box[b].min().x();
-    return xa < xb || (xa == xb && a < b);
+    if (collider(i) && !unbounded(box[i]))
+      c.sweep.push_back({{box[i].min().x(), box[i].min().y(), box[i].min().z()},
+                         {box[i].max().x(), box[i].max().y(), box[i].max().z()},
+                         i});
+  // Sort-and-sweep on x over the packed boxes; ties broken by index so the
+  // order is reproducible. Boxes within the contact margin pair up too
+  // (persistent and speculative contacts).
+  using SweepBox = RigidContactState::SweepBox;
+  std::sort(c.sweep.begin(), c.sweep.end(), [](const SweepBox& p, const SweepBox& q) {
+    return p.lo[0] < q.lo[0] || (p.lo[0] == q.lo[0] && p.id < q.id);
   });
-  // Boxes within the contact margin pair up too (persistent contacts).
   const double margin = contactSettings_.contactMargin;
-  for (std::size_t k = 0; k < c.order.size(); ++k) {
-    const std::uint32_t a = c.order[k];
-    const double end = box[a].max().x() + margin;
-    for (std::size_t l = k + 1; l < c.order.size() && box[c.order[l]].min().x() <= end; ++l) {
-      const std::uint32_t b = c.order[l];
-      if (boxesWithin(box[a], box[b], margin) && eligible(a, b)) push(a, b);
+  const std::size_t m = c.sweep.size();
+  for (std::size_t k = 0; k < m; ++k) {
+    const SweepBox& p = c.sweep[k];
+    c.order.push_back(p.id);
+    const double end = p.hi[0] + margin;
+    for (std::size_t l = k + 1; l < m && c.sweep[l].lo[0] <= end; ++l) {
+      const SweepBox& q = c.sweep[l];
+      if (q.lo[1] <= p.hi[1] + margin && p.lo[1] <= q.hi[1] + margin && q.lo[2] <= p.hi[2] + margin &&
+          p.lo[2] <= q.hi[2] + margin && p.lo[0] <= q.hi[0] + margin && eligible(p.id, q.id))
+        push(p.id, q.id);
     }
   }
   // Unbounded shapes (planes) against every bounded collider.
@@ -150,11 +154,14 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
   }
   // Bottom-up (ground contacts first): sequential impulses then carry the
   // support up a stack within one sweep, which tall stacks need at large dt.
-  std::sort(c.pairs.begin(), c.pairs.end(), [&box](const ProxyPair& p, const ProxyPair& q) {
-    const double zp = std::min(box[p.a].min().z(), box[p.b].min().z());
-    const double zq = std::min(box[q.a].min().z(), box[q.b].min().z());
-    return zp < zq || (zp == zq && p < q);
+  c.keyedPairs.clear();
+  for (const ProxyPair& p : c.pairs)
+    c.keyedPairs.push_back({std::min(box[p.a].min().z(), box[p.b].min().z()), p});
+  using KeyedPair = RigidContactState::KeyedPair;
+  std::sort(c.keyedPairs.begin(), c.keyedPairs.end(), [](const KeyedPair& p, const KeyedPair& q) {
+    return p.z < q.z || (p.z == q.z && p.pair < q.pair);
   });
+  for (std::size_t k = 0; k < c.pairs.size(); ++k) c.pairs[k] = c.keyedPairs[k].pair;
 }
 
 void PhysicsWorld::narrowPhase(WorldState& state) const {

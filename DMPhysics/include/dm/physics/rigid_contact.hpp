@@ -144,6 +144,16 @@ struct RigidContactState {
   std::vector<ContactConstraint> contacts;  ///< the step's contacts
   std::vector<Joint> joints;                ///< the world's joints with their warm-start impulses
   std::vector<std::uint32_t> order;         ///< broad phase: bounded colliders sorted by min x
+  struct SweepBox {                         ///< broad phase: a collider's box, packed for the sweep
+    double lo[3], hi[3];
+    std::uint32_t id;
+  };
+  std::vector<SweepBox> sweep;  ///< broad phase: bounded colliders' boxes sorted by min x
+  struct KeyedPair {            ///< broad phase: a pair with its sort key (lower box bottom)
+    double z;
+    ProxyPair pair;
+  };
+  std::vector<KeyedPair> keyedPairs;
   std::vector<ProxyPair> pairs;             ///< broad phase: body index pairs (a < b), bottom-up
   std::vector<std::uint8_t> constrained;    ///< per body: in a contact or joint this step
   std::vector<std::uint8_t> asleep;         ///< per body: 1 while asleep
