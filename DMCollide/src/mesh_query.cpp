@@ -442,7 +442,7 @@ MeshPointQuery closestPointOnMesh(const MeshBvh& bvh, const Isometry3& pose, con
   const Vec3 p = pose.inverse(Eigen::Isometry) * point;
   double bestSq = maxDistance * maxDistance;
   std::uint32_t bestK = kNoTriangle;
-  TriangleClosest best;
+  TriangleClosest best{.point = Vec3::Zero(), .distanceSq = 0.0, .barycentric = Vec3::Zero()};
   traverseNearest(
       bvh, bestSq, [&](const BvhNode& n) { return pointBoxDistanceSq(p, n); },
       [&](const BvhNode& n, double& bSq) {
