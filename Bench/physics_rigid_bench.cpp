@@ -13,6 +13,11 @@
 // start (a collapsed pyramid shows metres); then the ratios ours/ODE and ours/Bullet of the step time (below
 // 1: we are faster).
 //
+// Each scene runs twice: all bodies awake (our ContactSettings::sleep off,
+// Bullet's bodies DISABLE_DEACTIVATION, ODE as always), then with resting
+// bodies put to sleep (ours: sleep on; Bullet: its default deactivation;
+// dm::OdeWorld has no sleeping, so no ODE row there).
+//
 // What is matched: shapes, masses, inertia, friction, gravity, dt,
 // iteration counts. What is not: ODE runs through dm::OdeWorld (the state is
 // copied in and out each step, O(n), small next to collision), ODE and our
@@ -85,7 +90,7 @@ struct Outcome {
   double topDrift = 0;     // m, last box (the pyramid's top)
 };
 
-std::unique_ptr<dm::PhysicsWorld> buildOurs(const Scene& scene) {
+std::unique_ptr<dm::PhysicsWorld> buildOurs(const Scene& scene, bool sleep = false) {
   auto w = std::make_unique<dm::PhysicsWorld>();
   dm::BodyDesc ground;
   ground.kind = dm::BodyKind::Static;
@@ -106,6 +111,7 @@ std::unique_ptr<dm::PhysicsWorld> buildOurs(const Scene& scene) {
   (void)w->setGravity({0, 0, -kG});
   dm::ContactSettings cs;
   cs.solver.velocityIterations = kIterations;
+  cs.sleep = sleep;
   (void)w->setContactSettings(cs);
   return w;
 }
@@ -124,8 +130,8 @@ Outcome measure(const Scene& scene, const dm::PhysicsWorld& w, const dm::WorldSt
   return o;
 }
 
-Outcome runOurs(const Scene& scene, double dt) {
-  const auto w = buildOurs(scene);
+Outcome runOurs(const Scene& scene, double dt, bool sleep) {
+  const auto w = buildOurs(scene, sleep);
   dm::WorldState s = w->makeState();
   const int steps = static_cast<int>(std::lround(scene.seconds / dt));
   const double t0 = cpuSeconds();
@@ -155,7 +161,7 @@ Outcome runOde(const Scene& scene, double dt) {
   return measure(scene, *w, s, cpuSeconds() - t0, steps);
 }
 
-Outcome runBullet(const Scene& scene, double dt) {
+Outcome runBullet(const Scene& scene, double dt, bool sleep) {
   btDefaultCollisionConfiguration config;
   btCollisionDispatcher dispatcher(&config);
   btDbvtBroadphase broadphase;
@@ -181,6 +187,7 @@ Outcome runBullet(const Scene& scene, double dt) {
     btRigidBody::btRigidBodyConstructionInfo info(1, motions.back().get(), &box, inertia);
     info.m_friction = btScalar(kMu);
     bodies.push_back(std::make_unique<btRigidBody>(info));
+    if (!sleep) bodies.back()->setActivationState(DISABLE_DEACTIVATION);
     world.addRigidBody(bodies.back().get());
   }
   const int steps = static_cast<int>(std::lround(scene.seconds / dt));
@@ -206,25 +213,35 @@ Outcome runBullet(const Scene& scene, double dt) {
 
 int main() {
   std::printf("rigid contact, 20 iterations each; time per step = thread CPU time\n");
-  std::printf("%-11s %-7s %-7s %12s %14s %13s\n", "scene", "dt", "engine", "ms/step", "penetration mm",
-              "top drift mm");
-  for (const Scene& scene : {rain(), pyramid(20)}) {
-    for (const double dt : {1e-3, 1.0 / 60.0}) {
-      const Outcome ours = runOurs(scene, dt), ode = runOde(scene, dt), bullet = runBullet(scene, dt);
-      const char* dtName = dt < 2e-3 ? "1 ms" : "1/60 s";
-      const std::pair<const char*, const Outcome*> rows[] = {
-          {"ours", &ours}, {"ODE", &ode}, {"Bullet", &bullet}};
-      const bool isPyramid = scene.name[0] == 'p';  // drift only means something for the pyramid
-      for (const auto& [engine, o] : rows) {
-        std::printf("%-11s %-7s %-7s %12.4f %14.3f ", scene.name, dtName, engine, 1e3 * o->secondsPerStep,
-                    1e3 * o->penetration);
-        if (isPyramid)
-          std::printf("%13.3f\n", 1e3 * o->topDrift);
+  for (const bool sleep : {false, true}) {
+    std::printf("\n%s\n", sleep ? "resting bodies sleep (ours: ContactSettings::sleep; Bullet: default deactivation)"
+                                 : "all bodies awake (Bullet: DISABLE_DEACTIVATION)");
+    std::printf("%-11s %-7s %-7s %12s %14s %13s\n", "scene", "dt", "engine", "ms/step", "penetration mm",
+                "top drift mm");
+    for (const Scene& scene : {rain(), pyramid(20)}) {
+      for (const double dt : {1e-3, 1.0 / 60.0}) {
+        const Outcome ours = runOurs(scene, dt, sleep), bullet = runBullet(scene, dt, sleep);
+        const Outcome ode = sleep ? Outcome{} : runOde(scene, dt);
+        const char* dtName = dt < 2e-3 ? "1 ms" : "1/60 s";
+        const std::pair<const char*, const Outcome*> rows[] = {
+            {"ours", &ours}, {"ODE", &ode}, {"Bullet", &bullet}};
+        const bool isPyramid = scene.name[0] == 'p';  // drift only means something for the pyramid
+        for (const auto& [engine, o] : rows) {
+          if (sleep && o == &ode) continue;
+          std::printf("%-11s %-7s %-7s %12.4f %14.3f ", scene.name, dtName, engine, 1e3 * o->secondsPerStep,
+                      1e3 * o->penetration);
+          if (isPyramid)
+            std::printf("%13.3f\n", 1e3 * o->topDrift);
+          else
+            std::printf("%13s\n", "-");
+        }
+        if (sleep)
+          std::printf("%-11s %-7s ratio ours/Bullet = %.2f\n", scene.name, dtName,
+                      ours.secondsPerStep / bullet.secondsPerStep);
         else
-          std::printf("%13s\n", "-");
+          std::printf("%-11s %-7s ratio ours/ODE = %.2f, ours/Bullet = %.2f\n", scene.name, dtName,
+                      ours.secondsPerStep / ode.secondsPerStep, ours.secondsPerStep / bullet.secondsPerStep);
       }
-      std::printf("%-11s %-7s ratio ours/ODE = %.2f, ours/Bullet = %.2f\n", scene.name, dtName,
-                  ours.secondsPerStep / ode.secondsPerStep, ours.secondsPerStep / bullet.secondsPerStep);
     }
   }
   return 0;
