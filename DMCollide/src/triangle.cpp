@@ -377,6 +377,39 @@ int clipPolygon(std::array<Vec3, 9>& poly, int n, const Vec3& a, const Vec3& b, 
   return n;
 }
 
+// The nine edge pairs of triangles a and b, keeping the closest in
+// (best, r). With `stopAtSeparating`, returns true at the first pair whose
+// connecting direction has both triangles' third corners on the far sides
+// (then that pair is the global minimum, see closestFeatures) unless the
+// pair (nearly) touches, where those side tests are rounding noise.
+bool closestEdgePair(const std::array<const Vec3*, 3>& a, const std::array<const Vec3*, 3>& b, double& best,
+                     TriangleDistance& r, bool stopAtSeparating) noexcept {
+  double ea[3], eb[3];  // squared edge lengths
+  for (int i = 0; i < 3; ++i) {
+    ea[i] = (*a[(i + 1) % 3] - *a[i]).squaredNorm();
+    eb[i] = (*b[(i + 1) % 3] - *b[i]).squaredNorm();
+  }
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      const SegmentClosest s = closestPointsSegmentSegment(*a[i], *a[(i + 1) % 3], *b[j], *b[(j + 1) % 3]);
+      if (s.distanceSq < best) {
+        best = s.distanceSq;
+        r.pointA = s.pointA;
+        r.pointB = s.pointB;
+      }
+      if (!stopAtSeparating) continue;
+      const Vec3 v = s.pointB - s.pointA;
+      if (s.distanceSq > 1e-16 * (ea[i] + eb[j]) && v.dot(*a[(i + 2) % 3] - s.pointA) <= 0 &&
+          v.dot(*b[(j + 2) % 3] - s.pointB) >= 0) {
+        best = s.distanceSq;
+        r.pointA = s.pointA;
+        r.pointB = s.pointB;
+        return true;
+      }
+    }
+  return false;
+}
+
 TriangleDistance closestOf15(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3& b0, const Vec3& b1,
                              const Vec3& b2) noexcept {
   const std::array<const Vec3*, 3> a{&a0, &a1, &a2}, b{&b0, &b1, &b2};
@@ -396,15 +429,7 @@ TriangleDistance closestOf15(const Vec3& a0, const Vec3& a1, const Vec3& a2, con
       r.pointB = *b[i];
     }
   }
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) {
-      const SegmentClosest s = closestPointsSegmentSegment(*a[i], *a[(i + 1) % 3], *b[j], *b[(j + 1) % 3]);
-      if (s.distanceSq < best) {
-        best = s.distanceSq;
-        r.pointA = s.pointA;
-        r.pointB = s.pointB;
-      }
-    }
+  closestEdgePair(a, b, best, r, false);
   r.distance = std::sqrt(best);
   return r;
 }
@@ -422,28 +447,12 @@ TriangleDistance closestOf15(const Vec3& a0, const Vec3& a1, const Vec3& a2, con
 TriangleDistance closestFeatures(const Vec3& a0, const Vec3& a1, const Vec3& a2, const Vec3& b0,
                                  const Vec3& b1, const Vec3& b2) noexcept {
   const std::array<const Vec3*, 3> a{&a0, &a1, &a2}, b{&b0, &b1, &b2};
-  const double ea[3] = {(a1 - a0).squaredNorm(), (a2 - a1).squaredNorm(), (a0 - a2).squaredNorm()};
-  const double eb[3] = {(b1 - b0).squaredNorm(), (b2 - b1).squaredNorm(), (b0 - b2).squaredNorm()};
   double best = std::numeric_limits<double>::infinity();
   TriangleDistance r;
-  for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) {
-      const SegmentClosest s = closestPointsSegmentSegment(*a[i], *a[(i + 1) % 3], *b[j], *b[(j + 1) % 3]);
-      if (s.distanceSq < best) {
-        best = s.distanceSq;
-        r.pointA = s.pointA;
-        r.pointB = s.pointB;
-      }
-      const Vec3 v = s.pointB - s.pointA;
-      // Not for pairs (nearly) touching: there the side tests are rounding
-      // noise and could stop at a pair that is not the closest.
-      if (s.distanceSq > 1e-16 * (ea[i] + eb[j]) && v.dot(*a[(i + 2) % 3] - s.pointA) <= 0 && v.dot(*b[(j + 2) % 3] - s.pointB) >= 0) {
-        r.pointA = s.pointA;
-        r.pointB = s.pointB;
-        r.distance = std::sqrt(s.distanceSq);
-        return r;
-      }
-    }
+  if (closestEdgePair(a, b, best, r, true)) {
+    r.distance = std::sqrt(best);
+    return r;
+  }
   // Vertex over the other face: p's projection inside triangle t (normal n,
   // non-zero), on the inner side of all three edges.
   auto vertexFace = [&](const Vec3& p, const std::array<const Vec3*, 3>& t, const Vec3& n, double nn,
