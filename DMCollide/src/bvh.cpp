@@ -374,8 +374,9 @@ void MeshBvh::computeObbs() {
     }
   }
   // Axes (principal directions of the corners) and exact extents, node by
-  // node in parallel: O(n log n) work over the levels.
-  parallelFor(0, count, 256, [&](std::size_t begin, std::size_t end) {
+  // node in parallel: O(n log n) work over the levels. A small tree runs on
+  // the calling thread (task start-up would cost more than it saves).
+  auto fit = [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       if (i == 1) continue;
       const Moments& m = moments[i];
@@ -399,7 +400,11 @@ void MeshBvh::computeObbs() {
       obbs_[i].axes = axes;
       fitObb(obbs_[i], corners_, nodeSpan_[2 * i], nodeSpan_[2 * i + 1]);
     }
-  });
+  };
+  if (count < 4096)
+    fit(0, count);
+  else
+    parallelFor(0, count, 256, fit);
 }
 
 void MeshBvh::computeObbExtents() noexcept {
@@ -423,14 +428,18 @@ void MeshBvh::computeNormals() noexcept {
   for (Vec3& v : vertexNormals_) v.setZero();
   for (std::size_t k = 0; k < n; ++k) {
     const Vec3* c = &corners_[3 * k];
+    // Interior angles weight the vertex pseudonormals: two by atan2 (|u × w|
+    // is twice the area at every corner), the third as π minus them.
+    const double twiceArea = (c[1] - c[0]).cross(c[2] - c[0]).norm();
+    double angle[3];
+    for (int e = 0; e < 2; ++e)
+      angle[e] = std::atan2(twiceArea, (c[(e + 1) % 3] - c[e]).dot(c[(e + 2) % 3] - c[e]));
+    angle[2] = std::max(0.0, std::numbers::pi - angle[0] - angle[1]);
     for (int e = 0; e < 3; ++e) {
       const Vec3 s = faceNormals_[k] + faceNormals_[neighbours_[3 * k + e]];
       const double len = s.norm();
       edgeNormals_[3 * k + e] = len > 0 ? Vec3(s / len) : faceNormals_[k];
-      // Interior angle at corner e weights the vertex pseudonormal.
-      const Vec3 u = c[(e + 1) % 3] - c[e], w = c[(e + 2) % 3] - c[e];
-      const double angle = std::atan2(u.cross(w).norm(), u.dot(w));
-      vertexNormals_[tris_[k][e]] += angle * faceNormals_[k];
+      vertexNormals_[tris_[k][e]] += angle[e] * faceNormals_[k];
     }
   }
   for (Vec3& v : vertexNormals_) {
