@@ -26,6 +26,9 @@
 //
 //   cmake -S . -B build-phm-bench -G Ninja -DCMAKE_BUILD_TYPE=Release -DDM_BUILD_BENCH=ON
 //   ninja -C build-phm-bench physics_cloth_bench && build-phm-bench/Bench/physics_cloth_bench
+//
+// Arguments (optional): "--implicit" runs only the h = 1/60 s table; sheet
+// sizes (e.g. "64 128") replace the default 64 128 256.
 #include <dm/physics/mass_spring.hpp>
 
 #include <BulletSoftBody/btSoftBody.h>
@@ -35,9 +38,12 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <ctime>
 #include <functional>
 #include <memory>
+#include <string>
+#include <vector>
 
 namespace {
 
@@ -172,16 +178,32 @@ int stepsFor(int n) { return std::max(10, int(1e6 / (double(n) * n))); }
 
 }  // namespace
 
-int main() {
+int main(int argc, char** argv) {
+  bool implicitOnly = false;
+  std::vector<int> sizes;
+  for (int a = 1; a < argc; ++a) {
+    if (std::string(argv[a]) == "--implicit")
+      implicitOnly = true;
+    else if (const int n = std::atoi(argv[a]); n >= 4 && n <= 2048)
+      sizes.push_back(n);
+    else {
+      std::fprintf(stderr, "usage: %s [--implicit] [n ...]  (n: sheet size, 4 to 2048)\n", argv[0]);
+      return 2;
+    }
+  }
+  if (sizes.empty()) sizes = {64, 128, 256};
   std::printf(
       "Mass-spring sheets, structural + shear (both diagonals) + bend (2 apart), 2 corners pinned.\n");
   std::printf("ns per node-step; ratio = ours / Bullet (< 1: ours faster).\n\n");
 
   // Table 1: explicit, h = 1 ms (parameters explicitly stable).
-  std::printf("h = 1 ms: ours symplectic Euler (1 force evaluation) vs btSoftBody piterations = 1\n");
-  std::printf("%6s %8s %12s %12s %12s %8s %14s %14s\n", "n", "links", "ours", "ours par.", "Bullet", "ratio",
-              "sag ours [m]", "sag Bullet [m]");
-  for (int n : {64, 128, 256}) {
+  if (!implicitOnly) {
+    std::printf("h = 1 ms: ours symplectic Euler (1 force evaluation) vs btSoftBody piterations = 1\n");
+    std::printf("%6s %8s %12s %12s %12s %8s %14s %14s\n", "n", "links", "ours", "ours par.", "Bullet",
+                "ratio", "sag ours [m]", "sag Bullet [m]");
+  }
+  for (int n : sizes) {
+    if (implicitOnly) break;
     const Params p = paramsFor(n, 1e-3);
     const int steps = stepsFor(n);
     const double nodes = double(n) * n;
@@ -205,11 +227,12 @@ int main() {
 
   // Table 2: implicit at a frame-rate step where the explicit path is unstable.
   const double hFrame = 1.0 / 60;
-  std::printf("\nh = 1/60 s (same springs, h*omega_max ~ 8): ours backward Euler + CG (tol 1e-4)\n");
+  std::printf("%sh = 1/60 s (same springs, h*omega_max ~ 8): ours backward Euler + CG (tol 1e-4)\n",
+              implicitOnly ? "" : "\n");
   std::printf("vs btSoftBody with piterations = our mean CG iterations, and = 1\n");
   std::printf("%6s %8s %12s %12s %8s %12s %8s %12s\n", "n", "CG it.", "ours", "ours par.", "Bullet", "ratio",
               "Bt it=1", "ratio");
-  for (int n : {64, 128, 256}) {
+  for (int n : sizes) {
     Params p = paramsFor(n, 1e-3);
     p.h = hFrame;
     const int steps = std::max(3, stepsFor(n) / 20);

@@ -5,8 +5,6 @@
 #include <dm/core/tasks.hpp>
 #include <dm/physics/mass_spring.hpp>
 
-#include <Eigen/LU>
-
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -29,6 +27,7 @@ Vec3 load3(const std::vector<double>& a, std::size_t i) { return Vec3(a[3 * i], 
 void store3(std::vector<double>& a, std::size_t i, const Vec3& v) {
   a[3 * i] = v.x(), a[3 * i + 1] = v.y(), a[3 * i + 2] = v.z();
 }
+void store3(VecX& a, std::size_t i, const Vec3& v) { a.segment<3>(3 * Eigen::Index(i)) = v; }
 
 // Chunk size of the parallel loops: large enough that a chunk costs tens of
 // microseconds, so task overhead stays small.
@@ -421,16 +420,33 @@ void MassSpringBody::prepare() {
     incElem_[fill[ei_[e]]++] = std::uint32_t(e);
     incElem_[fill[ej_[e]]++] = std::uint32_t(e);
   }
-  dir_.assign(3 * m, 0.0);
+  // Implicit path: slots sorted (stably) by owner = lower end, so that a
+  // sweep in owner order finishes particle i once owner i is done.
+  ownStart_.assign(n + 1, 0);
+  for (std::size_t e = 0; e < m; ++e) ++ownStart_[std::min(ei_[e], ej_[e]) + 1];
+  for (std::size_t i = 0; i < n; ++i) ownStart_[i + 1] += ownStart_[i];
+  linkElem_.resize(m);
+  linkOther_.resize(m);
+  fill.assign(ownStart_.begin(), ownStart_.end() - 1);
+  for (std::size_t e = 0; e < m; ++e) {
+    const std::uint32_t s = fill[std::min(ei_[e], ej_[e])]++;
+    linkElem_[s] = std::uint32_t(e);
+    linkOther_[s] = std::max(ei_[e], ej_[e]);
+  }
+  leadUntil_.resize(n);
+  std::uint32_t reach = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    reach = std::max(reach, std::uint32_t(i + 1));
+    for (std::uint32_t s = ownStart_[i]; s < ownStart_[i + 1]; ++s)
+      reach = std::max(reach, linkOther_[s] + 1);
+    leadUntil_[i] = reach;
+  }
+  block_.assign(m, LinkBlock{});
   ef_.assign(3 * m, 0.0);
-  axial_.assign(m, 0.0);
-  iso_.assign(m, 0.0);
   decay_.assign(m, 1.0);
   decayH_ = -1.0;
-  dinv_.assign(9 * n, 0.0);
-  rhs_ = VecX::Zero(Eigen::Index(3 * n));
-  dv_ = VecX::Zero(Eigen::Index(3 * n));
-  pcg_.reserve(Eigen::Index(3 * n));
+  dinv_.assign(6 * n, 0.0);
+  for (VecX* vec : {&rhs_, &dv_, &cgR_, &cgZ_, &cgP_, &cgQ_}) *vec = VecX::Zero(Eigen::Index(3 * n));
   prepared_ = true;
 }
 
@@ -495,51 +511,178 @@ Status MassSpringBody::stepSymplectic(double h) {
   return ok();
 }
 
-void MassSpringBody::applyImplicitMatrix(const VecX& p, VecX& y) const {
-  // y = (M + h C + h² K) p on the free particles, 0 on pinned ones; pinned
-  // entries of p are taken as 0 (their velocity change is fixed at zero).
-  forEachRange(particleCount(), [this, &p, &y](std::size_t b, std::size_t end) {
-    for (std::size_t i = b; i < end; ++i) {
-      const Eigen::Index k = 3 * Eigen::Index(i);
-      if (pinned_[i]) {
-        y.segment<3>(k).setZero();
-        continue;
-      }
-      const Vec3 pi = p.segment<3>(k);
-      Vec3 acc = (massScale_ * mass_[i]) * pi;
-      for (std::uint32_t s = incStart_[i]; s < incStart_[i + 1]; ++s) {
-        const std::uint32_t e = incElem_[s];
-        const std::uint32_t other = ei_[e] == i ? ej_[e] : ei_[e];
-        const Vec3 w = pinned_[other] ? pi : Vec3(pi - load3(p, other));
-        const Vec3 n = load3(dir_, e);
-        acc += (axial_[e] * n.dot(w)) * n + iso_[e] * w;
-      }
-      y.segment<3>(k) = acc;
+// One sweep over the slots in owner order, accumulating y = (M + h C + h² K) v
+// restricted to the free particles, with v taken as 0 on pinned particles
+// (the callers keep it so). Each slot's block is applied once: it adds
+// B (v_i − v_j) to the owner i, held in registers, and subtracts it from the
+// other end j, in y. Before owner i, lead(k) runs for every particle k not
+// yet led up to leadUntil_[i]: it must set v_k and y_k = (1 + h·drag) m_k v_k,
+// which is the first write to y_k. After owner i, no slot touches particle i
+// again: trail(i, y_i) receives its finished row (y_i is not stored; pinned
+// particles get a meaningless row that trail must ignore). The row of i thus
+// sums the mass term, then the slots of lower owners, then i's own, in slot
+// order.
+template <class Lead, class Trail>
+void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const {
+  const std::size_t n = particleCount();
+  const std::uint32_t* own = ownStart_.data();
+  const std::uint32_t* other = linkOther_.data();
+  const LinkBlock* blk = block_.data();
+  std::size_t front = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    for (const std::size_t until = leadUntil_[i]; front < until; ++front) lead(front);
+    const double v0 = v[3 * i], v1 = v[3 * i + 1], v2 = v[3 * i + 2];
+    double a0 = y[3 * i], a1 = y[3 * i + 1], a2 = y[3 * i + 2];
+    for (std::uint32_t s = own[i], end = own[i + 1]; s < end; ++s) {
+      const LinkBlock& L = blk[s];
+      const double Ba = L.a, Bb = L.b, n0 = L.n[0], n1 = L.n[1], n2 = L.n[2];
+      double* yj = y + 3 * std::size_t(other[s]);
+      const double* vj = v + 3 * std::size_t(other[s]);
+      const double w0 = v0 - vj[0], w1 = v1 - vj[1], w2 = v2 - vj[2];
+      const double t = Bb * (n0 * w0 + n1 * w1 + n2 * w2);
+      const double f0 = Ba * w0 + t * n0, f1 = Ba * w1 + t * n1, f2 = Ba * w2 + t * n2;
+      a0 += f0, a1 += f1, a2 += f2;
+      yj[0] -= f0, yj[1] -= f1, yj[2] -= f2;
     }
-  });
+    trail(i, a0, a1, a2);
+  }
 }
 
-void MassSpringBody::applyBlockJacobi(const VecX& r, VecX& z) const {
-  forEachRange(particleCount(), [this, &r, &z](std::size_t b, std::size_t end) {
-    for (std::size_t i = b; i < end; ++i) {
-      const Eigen::Map<const Mat3> dinv(&dinv_[9 * i]);
-      z.segment<3>(3 * Eigen::Index(i)) = dinv * r.segment<3>(3 * Eigen::Index(i));
+// Preconditioned CG on (M + h C + h² K) Δv = rhs_ from Δv = dv_, with the
+// block-Jacobi preconditioner dinv_; the same iteration and stopping rule as
+// dm::PcgSolver (relative residual ≤ tolerance, confirmed on the true
+// residual, restarting from it otherwise), fused into two sweeps per
+// iteration: sweepLinks() forms the new direction p just ahead of itself and
+// returns A p and pᵀAp; one particle loop then updates Δv and r, applies the
+// preconditioner and sums rᵀr and rᵀz. Serial: the sweep scatters.
+MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, ImplicitStepReport& report) {
+  const std::size_t n = particleCount();
+  const double tol = options_.cgTolerance, ms = massScale_;
+  double* x = dv_.data();
+  const double* b = rhs_.data();
+  double *r = cgR_.data(), *z = cgZ_.data(), *p = cgP_.data(), *q = cgQ_.data();
+  const double* mass = mass_.data();
+  const std::uint8_t* pinned = pinned_.data();
+  const double* dinv = dinv_.data();
+  // z_i = D_i⁻¹ r_i; returns r_i·z_i.
+  const auto precondition = [&](std::size_t i) {
+    const double* d = dinv + 6 * i;
+    const double r0 = r[3 * i], r1 = r[3 * i + 1], r2 = r[3 * i + 2];
+    const double z0 = d[0] * r0 + d[1] * r1 + d[2] * r2;
+    const double z1 = d[1] * r0 + d[3] * r1 + d[4] * r2;
+    const double z2 = d[2] * r0 + d[4] * r1 + d[5] * r2;
+    z[3 * i] = z0, z[3 * i + 1] = z1, z[3 * i + 2] = z2;
+    return r0 * z0 + r1 * z1 + r2 * z2;
+  };
+  // r = b − A x, z = M⁻¹ r; returns rᵀr and sets rz = rᵀz.
+  const auto trueResidual = [&](double& rz) {
+    double rr = 0.0, rzSum = 0.0;
+    sweepLinks(
+        x, q,
+        [&](std::size_t k) {
+          const double m = ms * mass[k];
+          q[3 * k] = m * x[3 * k], q[3 * k + 1] = m * x[3 * k + 1], q[3 * k + 2] = m * x[3 * k + 2];
+        },
+        [&](std::size_t i, double y0, double y1, double y2) {
+          if (pinned[i]) y0 = y1 = y2 = 0.0;  // b_i = 0 and D_i⁻¹ = 0 there too
+          const double r0 = b[3 * i] - y0, r1 = b[3 * i + 1] - y1, r2 = b[3 * i + 2] - y2;
+          r[3 * i] = r0, r[3 * i + 1] = r1, r[3 * i + 2] = r2;
+          rr += r0 * r0 + r1 * r1 + r2 * r2;
+          rzSum += precondition(i);
+        });
+    rz = rzSum;
+    return rr;
+  };
+
+  double rz = 0.0;
+  double rnorm = std::sqrt(trueResidual(rz));
+  report.relativeResidual = rnorm / bnorm;
+  if (!std::isfinite(rnorm)) return CgStop::NotFinite;
+  if (report.relativeResidual <= tol) return CgStop::Converged;
+  if (!(rz > 0.0) || !std::isfinite(rz)) return CgStop::NotPositive;
+  bool restart = true;  // p = z, else p = z + beta p
+  double beta = 0.0;
+  for (int it = 1; it <= options_.cgMaxIterations; ++it) {
+    double pAp = 0.0;
+    const auto trail = [&](std::size_t i, double y0, double y1, double y2) {
+      if (pinned[i]) {
+        q[3 * i] = q[3 * i + 1] = q[3 * i + 2] = 0.0;
+        return;
+      }
+      q[3 * i] = y0, q[3 * i + 1] = y1, q[3 * i + 2] = y2;
+      pAp += p[3 * i] * y0 + p[3 * i + 1] * y1 + p[3 * i + 2] * y2;
+    };
+    const auto massRow = [&](std::size_t k) {
+      const double m = ms * mass[k];
+      q[3 * k] = m * p[3 * k], q[3 * k + 1] = m * p[3 * k + 1], q[3 * k + 2] = m * p[3 * k + 2];
+    };
+    if (restart)
+      sweepLinks(
+          p, q,
+          [&](std::size_t k) {
+            p[3 * k] = z[3 * k], p[3 * k + 1] = z[3 * k + 1], p[3 * k + 2] = z[3 * k + 2];
+            massRow(k);
+          },
+          trail);
+    else
+      sweepLinks(
+          p, q,
+          [&](std::size_t k) {
+            const double p0 = z[3 * k] + beta * p[3 * k], p1 = z[3 * k + 1] + beta * p[3 * k + 1],
+                         p2 = z[3 * k + 2] + beta * p[3 * k + 2];
+            const double m = ms * mass[k];
+            p[3 * k] = p0, p[3 * k + 1] = p1, p[3 * k + 2] = p2;
+            q[3 * k] = m * p0, q[3 * k + 1] = m * p1, q[3 * k + 2] = m * p2;
+          },
+          trail);
+    if (!std::isfinite(pAp)) return CgStop::NotFinite;
+    if (pAp <= 0.0) return CgStop::NotPositive;
+    const double alpha = rz / pAp;
+    double rr = 0.0, rzNew = 0.0;
+    for (std::size_t i = 0; i < n; ++i) {
+      const double p0 = p[3 * i], p1 = p[3 * i + 1], p2 = p[3 * i + 2];
+      const double q0 = q[3 * i], q1 = q[3 * i + 1], q2 = q[3 * i + 2];
+      const double r0 = r[3 * i] - alpha * q0, r1 = r[3 * i + 1] - alpha * q1, r2 = r[3 * i + 2] - alpha * q2;
+      x[3 * i] += alpha * p0, x[3 * i + 1] += alpha * p1, x[3 * i + 2] += alpha * p2;
+      r[3 * i] = r0, r[3 * i + 1] = r1, r[3 * i + 2] = r2;
+      rr += r0 * r0 + r1 * r1 + r2 * r2;
+      rzNew += precondition(i);
     }
-  });
+    report.cgIterations = it;
+    rnorm = std::sqrt(rr);
+    report.relativeResidual = rnorm / bnorm;
+    if (report.relativeResidual <= tol) {
+      // The recurrence drifts from the true residual: confirm before
+      // stopping, and restart from the true residual if it is not small yet.
+      rnorm = std::sqrt(trueResidual(rz));
+      report.relativeResidual = rnorm / bnorm;
+      if (report.relativeResidual <= tol) return CgStop::Converged;
+      if (!(rz > 0.0) || !std::isfinite(rz)) return CgStop::NotPositive;
+      restart = true;
+      continue;
+    }
+    if (!(rzNew > 0.0) || !std::isfinite(rzNew)) return CgStop::NotPositive;
+    beta = rzNew / rz;
+    rz = rzNew;
+    restart = false;
+  }
+  return CgStop::MaxIterations;
 }
 
 Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
+  constexpr const char* where = "MassSpringBody::stepImplicit";
   if (!std::isfinite(h) || h <= 0)
-    return invalid(formatString("time step is %g s", h), "MassSpringBody::stepImplicit: h",
+    return invalid(formatString("time step is %g s", h), formatString("%s: h", where),
                    "give a finite h > 0 s");
   if (!prepared_) prepare();
   const double h2 = h * h;
   massScale_ = 1.0 + h * drag_;  // M + h·drag·M: the drag's velocity Jacobian
 
-  // Per element: direction n, the block B = axial·n nᵀ + iso·I of h C + h² K,
-  // and the right-hand-side term h f₀ − h² K (v_i − v_j) acting on i.
+  // Per slot: the block B = iso·I + axial·n nᵀ of h C + h² K, and the
+  // right-hand-side term h f₀ − h² K (v_i − v_j) on the owner.
   forEachRange(elementCount(), [this, h, h2](std::size_t b, std::size_t end) {
-    for (std::size_t e = b; e < end; ++e) {
+    for (std::size_t s = b; s < end; ++s) {
+      const std::uint32_t e = linkElem_[s];
       const Vec3 d = load3(x_, ej_[e]) - load3(x_, ei_[e]);
       const double len = d.norm();
       const Vec3 n = len > 0 ? Vec3(d / len) : Vec3::Zero();
@@ -561,54 +704,90 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
       }
       // Transverse (geometric) stiffness T/L, kept only while stretched.
       const double geo = len > 0 && springTension > 0 ? springTension / len : 0.0;
-      axial_[e] = h * cAxial + h2 * (kAxial - geo);
-      iso_[e] = h2 * geo;
-      store3(dir_, e, n);
-      store3(ef_, e, (h * tension + h2 * (kAxial - geo) * rate) * n + (h2 * geo) * w);
+      block_[s] = {float(h2 * geo),
+                   float(h * cAxial + h2 * (kAxial - geo)),
+                   {float(n.x()), float(n.y()), float(n.z())}};
+      const Vec3 onI = (h * tension + h2 * (kAxial - geo) * rate) * n + (h2 * geo) * w;
+      store3(ef_, s, ei_[e] < ej_[e] ? onI : Vec3(-onI));
     }
   });
 
+  // Right-hand side and diagonal blocks D_i = (1 + h·drag) m_i I + Σ B, in one
+  // sweep in owner order (rhs_ and dinv_ hold the running sums of the
+  // particles ahead of it); D_i is inverted as soon as owner i is done.
   const Vec3 g = gravity_;
-  forEachRange(particleCount(), [this, h, &g](std::size_t b, std::size_t end) {
-    for (std::size_t i = b; i < end; ++i) {
-      const Eigen::Index k = 3 * Eigen::Index(i);
-      Eigen::Map<Mat3> dinv(&dinv_[9 * i]);
-      if (pinned_[i]) {
-        rhs_.segment<3>(k).setZero();
-        dv_.segment<3>(k).setZero();
-        dinv.setZero();
-        continue;
-      }
-      Vec3 bi = h * (mass_[i] * (g - drag_ * load3(v_, i)) + load3(fext_, i));
-      Mat3 diag = (massScale_ * mass_[i]) * Mat3::Identity();
-      for (std::uint32_t s = incStart_[i]; s < incStart_[i + 1]; ++s) {
-        const std::uint32_t e = incElem_[s];
-        const Vec3 re = load3(ef_, e);
-        bi += ei_[e] == i ? re : Vec3(-re);
-        const Vec3 n = load3(dir_, e);
-        diag += axial_[e] * (n * n.transpose()) + iso_[e] * Mat3::Identity();
-      }
-      rhs_.segment<3>(k) = bi;
-      dinv = diag.inverse();
+  double* dsum = dinv_.data();
+  std::size_t front = 0;
+  double bb = 0.0;
+  for (std::size_t i = 0; i < particleCount(); ++i) {
+    for (const std::size_t until = leadUntil_[i]; front < until; ++front) {
+      const std::size_t k = front;
+      store3(rhs_, k, h * (mass_[k] * (g - drag_ * load3(v_, k)) + load3(fext_, k)));
+      double* d = dsum + 6 * k;
+      d[0] = d[3] = d[5] = massScale_ * mass_[k];
+      d[1] = d[2] = d[4] = 0.0;
     }
-  });
+    Vec3 bi = load3(rhs_, i);
+    double* di = dsum + 6 * i;
+    for (std::uint32_t s = ownStart_[i]; s < ownStart_[i + 1]; ++s) {
+      const std::size_t j = linkOther_[s];
+      const LinkBlock& L = block_[s];
+      const double Ba = L.a, Bb = L.b, n0 = L.n[0], n1 = L.n[1], n2 = L.n[2];
+      const Vec3 t = load3(ef_, s);
+      bi += t;
+      store3(rhs_, j, load3(rhs_, j) - t);
+      const double blk[6] = {Ba + Bb * n0 * n0, Bb * n0 * n1, Bb * n0 * n2,
+                             Ba + Bb * n1 * n1, Bb * n1 * n2, Ba + Bb * n2 * n2};
+      double* dj = dsum + 6 * j;
+      for (int c = 0; c < 6; ++c) di[c] += blk[c], dj[c] += blk[c];
+    }
+    if (pinned_[i]) {
+      bi.setZero();
+      store3(dv_, i, Vec3::Zero());
+      std::fill(di, di + 6, 0.0);
+    } else {
+      // Inverse of the symmetric block by cofactors.
+      const double c00 = di[3] * di[5] - di[4] * di[4], c01 = di[2] * di[4] - di[1] * di[5],
+                   c02 = di[1] * di[4] - di[2] * di[3];
+      const double inv = 1.0 / (di[0] * c00 + di[1] * c01 + di[2] * c02);
+      const double c11 = di[0] * di[5] - di[2] * di[2], c12 = di[1] * di[2] - di[0] * di[4],
+                   c22 = di[0] * di[3] - di[1] * di[1];
+      di[0] = c00 * inv, di[1] = c01 * inv, di[2] = c02 * inv;
+      di[3] = c11 * inv, di[4] = c12 * inv, di[5] = c22 * inv;
+    }
+    store3(rhs_, i, bi);
+    bb += bi.squaredNorm();
+  }
 
-  pcg_.setOptions({.tolerance = options_.cgTolerance,
-                   .maxIterations = options_.cgMaxIterations,
-                   .preconditioner = Preconditioner::None,
-                   .useInitialGuess = true});
-  const LinearOperator applyA = [this](const VecX& p, VecX& y) { applyImplicitMatrix(p, y); };
-  const LinearOperator applyM = [this](const VecX& r, VecX& z) { applyBlockJacobi(r, z); };
   ImplicitStepReport report;
-  auto solved = pcg_.solve(applyA, rhs_, dv_, applyM);
-  report.cgIterations = pcg_.lastReport().iterations;
-  report.relativeResidual = pcg_.lastReport().relativeResidual;
-  if (!solved) {
-    if (solved.error().code != ErrorCode::Timeout || !dv_.allFinite()) {
-      dv_.setZero();
-      return std::move(solved).error().within("MassSpringBody::stepImplicit");
+  const double bnorm = std::sqrt(bb);
+  if (!std::isfinite(bnorm) || !dv_.allFinite()) {
+    dv_.setZero();
+    return invalid("the right-hand side is not finite", where,
+                   "check the state (positions, velocities, forces) for NaN or Inf");
+  }
+  if (bnorm == 0.0) {
+    dv_.setZero();
+  } else {
+    switch (solveImplicit(bnorm, report)) {
+      case CgStop::Converged:
+        break;
+      case CgStop::MaxIterations:
+        if (dv_.allFinite()) {
+          report.converged = false;
+          break;
+        }
+        [[fallthrough]];
+      case CgStop::NotFinite:
+        dv_.setZero();
+        return invalid(formatString("CG produced a non-finite value at iteration %d", report.cgIterations),
+                       where, "check the state and the materials for NaN, Inf or extreme values");
+      case CgStop::NotPositive:
+        dv_.setZero();
+        return invalid(
+            formatString("the system lost positive definiteness at CG iteration %d", report.cgIterations),
+            where, "check for Maxwell elements compressed past their rest length, or reduce h");
     }
-    report.converged = false;
   }
 
   forEachRange(particleCount(), [this, h](std::size_t b, std::size_t end) {

@@ -27,8 +27,9 @@
 // energy drift without damping. stepImplicit(): linearly implicit backward
 // Euler (Baraff & Witkin 1998): one Newton step on the springs linearised at
 // the start of the step, (M + h C + h² K) Δv = h (f₀ − h K v₀), solved
-// matrix-free by preconditioned CG (dm::PcgSolver, block-Jacobi
-// preconditioner); stable at any step for stiff tissue, with numerical
+// matrix-free by CG with a block-Jacobi preconditioner, warm-started from the
+// previous step's Δv, with dm::PcgSolver's iteration and stopping rule; stable
+// at any step for stiff tissue, with numerical
 // damping that grows with h. The geometric stiffness of compressed elements
 // is dropped (Choi & Ko 2002) so the system stays positive definite. Maxwell
 // damper states advance exactly (exponential) in the explicit path and by
@@ -43,7 +44,13 @@
 // nothing once the workspace is sized, which the first step after a topology
 // change does (serial path; the parallel path runs oneTBB tasks, see
 // dm/core/tasks.hpp, and is meant for physics threads, not the haptic loop).
-//
+// The implicit step keeps each element's block of h C + h² K in rank-one
+// form a·I + b·n nᵀ (5 floats: rounding perturbs the matrix by about 1e-7
+// relative, far below any useful CG tolerance; sums are in double), with the
+// elements sorted by their lower end. One CG iteration is then one sweep in
+// that order that forms the search direction just ahead of itself and
+// applies every block once (adding to one end, subtracting from the other),
+// and one pass over the particles; both run serially.//
 // References: X. Provot, "Deformation constraints in a mass-spring model to
 // describe rigid cloth behavior", Graphics Interface 1995. D. Baraff and
 // A. Witkin, "Large steps in cloth simulation", SIGGRAPH 1998. K.-J. Choi and
@@ -62,7 +69,6 @@
 #include <dm/core/mesh.hpp>
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
-#include <dm/math/linear.hpp>
 
 #include <cstddef>
 #include <cstdint>
@@ -144,8 +150,9 @@ struct MassSpringSolverOptions {
   /// reports converged = false).
   int cgMaxIterations = 200;
   /// Run the element and node loops with dm::parallelFor when the body has at
-  /// least `parallelMinParticles` particles. Results are bitwise identical to
-  /// the serial loops (every write is to a distinct element or node). Off by
+  /// least `parallelMinParticles` particles; stepImplicit's assembly and CG
+  /// sweeps scatter and stay serial. Results are bitwise identical to the
+  /// serial loops (every write is to a distinct element or node). Off by
   /// default: it did not pay on the 2-core build machine (see
   /// Bench/physics_cloth_bench.cpp); measure before turning it on, and never
   /// on a real-time thread (oneTBB tasks allocate and block).
@@ -315,8 +322,7 @@ class MassSpringBody {
   /// (Baraff & Witkin 1998; see the top of this header). O((n + elements) ·
   /// CG iterations). Fails on a bad h, or when CG breaks down (non-finite
   /// state); then nothing changes. Hitting cgMaxIterations is not a failure:
-  /// the last iterate is applied and the report says converged = false (this
-  /// case allocates its diagnostic message).
+  /// the last iterate is applied and the report says converged = false.
   /// @code
   ///   auto r = body.stepImplicit(1e-2);
   ///   if (!r) dm::log::warn("%s", r.error().message().c_str());
@@ -325,11 +331,21 @@ class MassSpringBody {
   Result<ImplicitStepReport> stepImplicit(double h);
 
  private:
+  // One element's block of h C + h² K in the implicit step, B = a·I + b·n nᵀ
+  // (n: unit direction; B acts on v_i − v_j for the force on i).
+  struct LinkBlock {
+    float a, b;
+    float n[3];
+  };
+  // Why the implicit solve stopped, when it did not converge.
+  enum class CgStop : std::uint8_t { Converged, NotFinite, NotPositive, MaxIterations };
+
   void prepare();  // sizes the workspace and the incidence lists after a topology change
   template <class F>
   void forEachRange(std::size_t count, F&& fn) const;
-  void applyImplicitMatrix(const VecX& p, VecX& y) const;
-  void applyBlockJacobi(const VecX& r, VecX& z) const;
+  template <class Lead, class Trail>
+  void sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const;
+  CgStop solveImplicit(double bnorm, ImplicitStepReport& report);
   void updateMaxwellDecay(double h);
 
   // Particles (structure of arrays).
@@ -350,16 +366,20 @@ class MassSpringBody {
   // Workspace (derived; rebuilt by prepare()).
   bool prepared_ = false;
   std::vector<std::uint32_t> incStart_, incElem_;  // CSR: elements incident to each particle
-  std::vector<double> dir_;                        // 3 per element: unit direction n
-  std::vector<double> ef_;     // 3 per element: force on i (explicit) or rhs term (implicit)
-  std::vector<double> axial_;  // per element: B = axial·n nᵀ + iso·I (implicit)
-  std::vector<double> iso_;
+  // Implicit path: the elements in "slots" sorted by their lower end, the
+  // owner. ownStart_: CSR of the slots over owners; linkElem_: the element in
+  // each slot, linkOther_: its higher end; leadUntil_[i]: one past the highest
+  // particle reached by the slots of owners 0 … i.
+  std::vector<std::uint32_t> ownStart_, linkElem_, linkOther_, leadUntil_;
+  std::vector<LinkBlock> block_;  // per slot (implicit)
+  std::vector<double>
+      ef_;  // 3 per element: force on i (explicit); 3 per slot: rhs term on the owner (implicit)
   std::vector<double> decay_;  // per element: exp(−h k/c) for Maxwell, at decayH_
   double decayH_ = -1.0;
-  double massScale_ = 1.0;    // 1 + h·drag during an implicit step
-  std::vector<double> dinv_;  // 9 per particle: inverse diagonal block (implicit)
-  VecX rhs_, dv_;
-  PcgSolver pcg_;
+  double massScale_ = 1.0;      // 1 + h·drag during an implicit step
+  std::vector<double> dinv_;    // 6 per particle: inverse diagonal block xx xy xz yy yz zz (implicit)
+  VecX rhs_, dv_;               // 3n: right-hand side and solution Δv of the implicit step
+  VecX cgR_, cgZ_, cgP_, cgQ_;  // 3n: CG residual, preconditioned residual, direction, A·direction
 };
 
 }  // namespace dm
