@@ -14,6 +14,8 @@
 #include <numbers>
 #include <string>
 
+#include "lanes.hpp"
+
 namespace dm {
 
 namespace {
@@ -34,16 +36,26 @@ void setBox(BvhNode& n, const Aabb& b) noexcept {
   }
 }
 
-double halfArea(const Aabb& b) noexcept {
-  if (b.isEmpty()) return 0.0;
-  const Vec3 d = b.sizes();
-  return d.x() * d.y() + d.y() * d.z() + d.z() * d.x();
-}
-
 // Depth below which SAH is used; deeper nodes split at the object median so
 // that the depth stays below MeshBvh::kMaxDepth (2^30 triangles need 30 more).
 constexpr int kSahDepth = 64;
 static_assert(kSahDepth + 31 < MeshBvh::kMaxDepth);
+
+// The builder's boxes are the triangles' exact bounds rounded outward to
+// float, so the union over a node is exactly setBox() of its exact box.
+using lanes::F4;
+
+// Half the surface area of the box [lo, hi] (lanes x, y, z).
+float halfArea(F4 lo, F4 hi) noexcept {
+  float d[4];
+  (hi - lo).store(d);
+  return d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
+}
+
+// A node's bounds: its triangles' box and their centroids' box.
+struct NodeBounds {
+  F4 lo, hi, clo, chi;
+};
 
 }  // namespace
 
@@ -51,71 +63,89 @@ static_assert(kSahDepth + 31 < MeshBvh::kMaxDepth);
 // the adjacent-children layout.
 struct BvhBuilder {
   struct TempNode {
-    Aabb box;
+    F4 lo, hi;
     std::uint32_t left = 0, right = 0;  // temp indices; both 0 for a leaf
     std::uint32_t begin = 0, count = 0;
   };
-  const std::vector<Aabb>& boxes;
-  const std::vector<Vec3>& centroids;
+  const std::vector<F4>& lows;  // per triangle: box, rounded outward
+  const std::vector<F4>& highs;
+  const std::vector<F4>& centroids;
   std::vector<std::uint32_t>& index;
   std::vector<TempNode>& temp;
   std::atomic<std::uint32_t> next{1};
-  int bins = 16;
+  int binLimit = 16;  // SAH bins per axis of a large node
   int maxLeaf = 4;
   std::size_t parallelThreshold = 4096;
 
   std::uint32_t allocate() { return next.fetch_add(1, std::memory_order_relaxed); }
 
-  void build(std::uint32_t node, std::uint32_t begin, std::uint32_t end, int depth) {
+  NodeBounds boundsOf(std::uint32_t begin, std::uint32_t end) const noexcept {
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    NodeBounds b{F4::all(kInf), F4::all(-kInf), F4::all(kInf), F4::all(-kInf)};
+    for (std::uint32_t i = begin; i < end; ++i) {
+      const std::uint32_t t = index[i];
+      b.lo = min(b.lo, lows[t]), b.hi = max(b.hi, highs[t]);
+      b.clo = min(b.clo, centroids[t]), b.chi = max(b.chi, centroids[t]);
+    }
+    return b;
+  }
+
+  // Builds the subtree of `node` over index[begin, end) with bounds `nb`.
+  void build(std::uint32_t node, std::uint32_t begin, std::uint32_t end, int depth, const NodeBounds& nb) {
     TempNode& n = temp[node];
     n.begin = begin;
     n.count = end - begin;
-    Aabb box, cbox;
-    for (std::uint32_t i = begin; i < end; ++i) {
-      box.extend(boxes[index[i]]);
-      cbox.extend(centroids[index[i]]);
-    }
-    n.box = box;
+    n.lo = nb.lo, n.hi = nb.hi;
     const std::uint32_t count = end - begin;
     if (count == 1) return;
 
     std::uint32_t mid = begin;
     bool split = false;
+    NodeBounds left{}, right{};
     if (depth < kSahDepth) {
-      // Binned SAH over the three axes.
+      // Binned SAH over the three axes, one pass over the triangles. Bins
+      // also gather their centroids' box, so the children's bounds come from
+      // the bins and need no pass of their own.
       constexpr int kMaxBins = 64;
-      // Plain bins, initialised only up to `bins` (a default-constructed
-      // Aabb array of kMaxBins per axis cost more than the binning itself).
+      constexpr float kInf = std::numeric_limits<float>::infinity();
       struct Bin {
-        Vec3 lo, hi;
+        NodeBounds b;
         std::uint32_t count;
       };
-      constexpr double kInf = std::numeric_limits<double>::infinity();
-      double bestCost = kInf;
-      int bestAxis = -1, bestBin = 0;
-      const Vec3 cmin = cbox.min(), cext = cbox.sizes();
-      // One pass over the triangles bins all three axes (an axis without
-      // extent puts everything in bin 0 and is skipped below).
-      std::array<std::array<Bin, kMaxBins>, 3> bin;  // NOLINT: only the first `bins` are initialised
+      // A small node gets as many bins as triangles: setting up and sweeping
+      // the bins is most of a small node's cost, and more bins than
+      // triangles add few distinct candidates.
+      const int bins = std::min(binLimit, std::max(4, static_cast<int>(count)));
+      float cext[4];
+      (nb.chi - nb.clo).store(cext);
+      float scale[4] = {0, 0, 0, 0};
+      for (int axis = 0; axis < 3; ++axis) scale[axis] = cext[axis] > 0 ? float(bins) / cext[axis] : 0.0f;
+      const F4 binScale = F4::of(scale[0], scale[1], scale[2]);
+      // Bin of centroid c along every axis (the partition below recomputes
+      // it the same way, so both agree to the bit).
+      auto binsOf = [&](std::uint32_t t, std::int32_t* out) {
+        ((centroids[t] - nb.clo) * binScale).truncate(out);
+        for (int axis = 0; axis < 3; ++axis) out[axis] = std::min(bins - 1, out[axis]);
+      };
+      // Only the first `bins` of each axis are initialised and read.
+      std::array<std::array<Bin, kMaxBins>, 3> bin;  // NOLINT
+      const NodeBounds empty{F4::all(kInf), F4::all(-kInf), F4::all(kInf), F4::all(-kInf)};
       for (int axis = 0; axis < 3; ++axis)
-        for (int b = 0; b < bins; ++b) bin[axis][b] = Bin{Vec3::Constant(kInf), Vec3::Constant(-kInf), 0};
-      Vec3 binScale;
-      for (int axis = 0; axis < 3; ++axis) binScale[axis] = cext[axis] > 0 ? bins / cext[axis] : 0.0;
+        for (int b = 0; b < bins; ++b) bin[axis][b] = Bin{empty, 0};
       for (std::uint32_t i = begin; i < end; ++i) {
         const std::uint32_t t = index[i];
-        const Vec3 rel = (centroids[t] - cmin).cwiseProduct(binScale);
-        const Vec3 tlo = boxes[t].min(), thi = boxes[t].max();
+        std::int32_t at[4];
+        binsOf(t, at);
+        const F4 tlo = lows[t], thi = highs[t], c = centroids[t];
         for (int axis = 0; axis < 3; ++axis) {
-          Bin& into = bin[axis][std::min(bins - 1, static_cast<int>(rel[axis]))];
+          Bin& into = bin[axis][at[axis]];
           into.count++;
-          into.lo = into.lo.cwiseMin(tlo);
-          into.hi = into.hi.cwiseMax(thi);
+          into.b.lo = min(into.b.lo, tlo), into.b.hi = max(into.b.hi, thi);
+          into.b.clo = min(into.b.clo, c), into.b.chi = max(into.b.chi, c);
         }
       }
-      auto area = [](const Vec3& lo, const Vec3& hi) {
-        const Vec3 d = hi - lo;
-        return d.x() * d.y() + d.y() * d.z() + d.z() * d.x();
-      };
+      double bestCost = std::numeric_limits<double>::infinity();
+      int bestAxis = -1, bestBin = 0;
       for (int axis = 0; axis < 3; ++axis) {
         if (!(cext[axis] > 0)) continue;
         const std::array<Bin, kMaxBins>& binA = bin[axis];
@@ -123,22 +153,20 @@ struct BvhBuilder {
         // prefixes and suffixes are skipped, so their infinite boxes never
         // reach the area).
         std::array<double, kMaxBins> rightCost;
-        Vec3 lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
+        F4 lo = empty.lo, hi = empty.hi;
         std::uint32_t accCount = 0;
         for (int b = bins - 1; b > 0; --b) {
-          lo = lo.cwiseMin(binA[b].lo);
-          hi = hi.cwiseMax(binA[b].hi);
+          lo = min(lo, binA[b].b.lo), hi = max(hi, binA[b].b.hi);
           accCount += binA[b].count;
-          rightCost[b] = accCount ? area(lo, hi) * accCount : 0.0;
+          rightCost[b] = accCount ? double(halfArea(lo, hi)) * accCount : 0.0;
         }
-        lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
+        lo = empty.lo, hi = empty.hi;
         accCount = 0;
         for (int b = 0; b < bins - 1; ++b) {
-          lo = lo.cwiseMin(binA[b].lo);
-          hi = hi.cwiseMax(binA[b].hi);
+          lo = min(lo, binA[b].b.lo), hi = max(hi, binA[b].b.hi);
           accCount += binA[b].count;
           if (accCount == 0 || accCount == count) continue;
-          const double cost = area(lo, hi) * accCount + rightCost[b + 1];
+          const double cost = double(halfArea(lo, hi)) * accCount + rightCost[b + 1];
           if (cost < bestCost) {
             bestCost = cost;
             bestAxis = axis;
@@ -148,36 +176,48 @@ struct BvhBuilder {
       }
       // Cost model: traversal step 1, triangle test 1, both relative to the
       // parent's area.
-      const double parentArea = halfArea(box);
+      const double parentArea = halfArea(nb.lo, nb.hi);
       const double splitCost = 1.0 + (parentArea > 0 ? bestCost / parentArea : 0.0);
       if (bestAxis >= 0 && count <= static_cast<std::uint32_t>(maxLeaf) && splitCost >= count) return;
       if (bestAxis >= 0) {
-        const double cm = cmin[bestAxis], scale = bins / cext[bestAxis];
         auto* it = std::partition(index.data() + begin, index.data() + end, [&](std::uint32_t t) {
-          return std::min(bins - 1, static_cast<int>((centroids[t][bestAxis] - cm) * scale)) <= bestBin;
+          std::int32_t at[4];
+          binsOf(t, at);
+          return at[bestAxis] <= bestBin;
         });
         mid = static_cast<std::uint32_t>(it - index.data());
         split = mid > begin && mid < end;
+        if (split) {
+          left = right = empty;
+          auto merge = [](NodeBounds& into, const NodeBounds& b) {
+            into.lo = min(into.lo, b.lo), into.hi = max(into.hi, b.hi);
+            into.clo = min(into.clo, b.clo), into.chi = max(into.chi, b.chi);
+          };
+          for (int b = 0; b < bins; ++b) merge(b <= bestBin ? left : right, bin[bestAxis][b].b);
+        }
       }
     }
     if (!split) {
       if (count <= static_cast<std::uint32_t>(maxLeaf)) return;
       // All centroids equal, or too deep: object median on the widest axis.
-      int axis = 0;
-      cbox.sizes().maxCoeff(&axis);
+      float cext[4];
+      (nb.chi - nb.clo).store(cext);
+      const int axis = cext[0] >= cext[1] ? (cext[0] >= cext[2] ? 0 : 2) : (cext[1] >= cext[2] ? 1 : 2);
       mid = begin + count / 2;
-      std::nth_element(
-          index.data() + begin, index.data() + mid, index.data() + end,
-          [&](std::uint32_t a, std::uint32_t b) { return centroids[a][axis] < centroids[b][axis]; });
+      std::nth_element(index.data() + begin, index.data() + mid, index.data() + end,
+                       [&](std::uint32_t a, std::uint32_t b) { return centroids[a][axis] < centroids[b][axis]; });
+      left = boundsOf(begin, mid);
+      right = boundsOf(mid, end);
     }
     const std::uint32_t l = allocate(), r = allocate();
     n.left = l;
     n.right = r;
     if (count > parallelThreshold) {
-      tbb::parallel_invoke([&] { build(l, begin, mid, depth + 1); }, [&] { build(r, mid, end, depth + 1); });
+      tbb::parallel_invoke([&] { build(l, begin, mid, depth + 1, left); },
+                           [&] { build(r, mid, end, depth + 1, right); });
     } else {
-      build(l, begin, mid, depth + 1);
-      build(r, mid, end, depth + 1);
+      build(l, begin, mid, depth + 1, left);
+      build(r, mid, end, depth + 1, right);
     }
   }
 };
@@ -206,24 +246,28 @@ Result<MeshBvh> MeshBvh::build(const Mesh& mesh, const BvhBuildOptions& options)
                         std::to_string(nv),
                     where, "check Mesh::validate()");
 
-  std::vector<Aabb> boxes(n);
-  std::vector<Vec3> centroids(n);
+  // Triangle boxes rounded outward to float, and their centroids; the exact
+  // bounds of the whole mesh on the side.
+  std::vector<F4> lows(n), highs(n), centroids(n);
+  Aabb all;
   for (std::size_t t = 0; t < n; ++t) {
     const Triangle& tri = mesh.triangles[t];
-    Aabb b(mesh.positions[tri[0]]);
-    b.extend(mesh.positions[tri[1]]);
-    b.extend(mesh.positions[tri[2]]);
-    boxes[t] = b;
-    centroids[t] = b.center();
+    const Vec3 &p0 = mesh.positions[tri[0]], &p1 = mesh.positions[tri[1]], &p2 = mesh.positions[tri[2]];
+    const Vec3 lo = p0.cwiseMin(p1).cwiseMin(p2), hi = p0.cwiseMax(p1).cwiseMax(p2);
+    all.extend(lo), all.extend(hi);
+    lows[t] = F4::of(roundDown(lo.x()), roundDown(lo.y()), roundDown(lo.z()));
+    highs[t] = F4::of(roundUp(hi.x()), roundUp(hi.y()), roundUp(hi.z()));
+    const Vec3 c = 0.5 * (lo + hi);
+    centroids[t] = F4::of(float(c.x()), float(c.y()), float(c.z()));
   }
   std::vector<std::uint32_t> index(n);
   for (std::size_t t = 0; t < n; ++t) index[t] = static_cast<std::uint32_t>(t);
   std::vector<BvhBuilder::TempNode> temp(2 * n);
-  BvhBuilder builder{boxes, centroids, index, temp};
-  builder.bins = std::clamp(options.bins, 4, 64);
+  BvhBuilder builder{lows, highs, centroids, index, temp};
+  builder.binLimit = std::clamp(options.bins, 4, 64);
   builder.maxLeaf = std::clamp(options.maxLeafSize, 1, 8);
   builder.parallelThreshold = std::max<std::size_t>(options.parallelThreshold, 64);
-  builder.build(0, 0, static_cast<std::uint32_t>(n), 0);
+  builder.build(0, 0, static_cast<std::uint32_t>(n), 0, builder.boundsOf(0, static_cast<std::uint32_t>(n)));
   const std::size_t tempCount = builder.next.load();
 
   MeshBvh bvh;
@@ -245,7 +289,9 @@ Result<MeshBvh> MeshBvh::build(const Mesh& mesh, const BvhBuildOptions& options)
     stack.pop_back();
     const BvhBuilder::TempNode& tn = temp[it.tempIndex];
     BvhNode& out = nodes[it.slot];
-    setBox(out, tn.box);
+    float lo[4], hi[4];
+    tn.lo.store(lo), tn.hi.store(hi);
+    std::copy(lo, lo + 3, out.lo), std::copy(hi, hi + 3, out.hi);
     bvh.depth_ = std::max(bvh.depth_, it.depth);
     if (tn.left == 0) {
       out.first = tn.begin;
@@ -269,7 +315,7 @@ Result<MeshBvh> MeshBvh::build(const Mesh& mesh, const BvhBuildOptions& options)
     bvh.tris_[k] = tri;
     for (int c = 0; c < 3; ++c) bvh.corners_[3 * k + c] = mesh.positions[tri[c]];
   }
-  bvh.bounds_ = temp[0].box;
+  bvh.bounds_ = all;
   bvh.faceNormals_.resize(n);
   bvh.computeFaceNormals();
 

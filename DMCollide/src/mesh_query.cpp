@@ -4,6 +4,8 @@
 #include <dm/core/assert.hpp>
 #include <dm/math/geometry.hpp>
 
+#include "lanes.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -69,56 +71,83 @@ inline MappedObb mapObbInverse(const BvhObb& a, const Relative& m) noexcept {
   return {m.r.transpose() * a.axes, m.r.transpose() * (a.center - m.t), a.half};
 }
 
-// Lower bound of the squared distance between oriented boxes a and b (one
-// frame): the largest gap between their projections on the centre line and
-// the 15 separating axis candidates (the 3 + 3 face normals and the 9 edge
-// cross products); any unit direction's projection gap is at most the
-// distance. Zero when they overlap on every axis. `best` is the distance
-// so far: when the centre line alone proves the pair farther, the rest is
-// skipped. The test is symmetric, so either box may be the mapped one;
-// `scale` is the size of the frames' offset (the mapping's rounding is
-// relative to it as well as to the coordinates).
-double obbDistanceSq(const BvhObb& a, const MappedObb& b, double best, double scale) noexcept {
-  const Vec3& ha = a.half;
-  const Vec3& hb = b.half;
-  // Rounding of the box transforms is relative to the coordinates' size.
-  const double slack = 1e-12 * (a.center.cwiseAbs().maxCoeff() + b.center.cwiseAbs().maxCoeff() + scale +
-                                ha.sum() + hb.sum());
-  // The centre line: |d| minus both boxes' support along it, from the axes
-  // as they are (no 3×3 product). Tighter than the face axes for boxes apart
-  // along a diagonal.
-  const Vec3 d = b.center - a.center;
-  const double dd = d.squaredNorm();
-  const Vec3 t = a.axes.transpose() * d;  // centre offset in a's frame
-  const double line = dd - ha.dot(t.cwiseAbs()) - hb.dot((b.axes.transpose() * d).cwiseAbs());  // |d| · gap
-  double gap = 0;
-  if (line > 0) {
-    if (line * line > (best + slack) * (best + slack) * dd) {
-      const double g = line / std::sqrt(dd) - slack;
-      return g * g;
-    }
-    gap = line / std::sqrt(dd);
+// Lower bounds of the squared distances from oriented boxes a0 and a1 (two
+// siblings, tested at once in the lanes of a D2) to box b (one frame): the
+// largest gap between the boxes' projections on the centre line and on the
+// 15 separating axis candidates (the 3 + 3 face normals and the 9 edge cross
+// products); any unit direction's projection gap is at most the distance.
+// Zero when they overlap on every axis. `best` is the distance so far: when
+// the centre line alone proves both boxes farther, the rest is skipped. The
+// test is symmetric, so either side may be the mapped one; `scale` is the
+// size of the frames' offset (the mapping's rounding is relative to it as
+// well as to the coordinates).
+std::array<double, 2> obbDistanceSq(const BvhObb& a0, const BvhObb& a1, const MappedObb& b, double best,
+                                    double scale) noexcept {
+  using lanes::D2;
+  auto pair = [](double x0, double x1) { return D2::of(x0, x1); };
+  D2 ax[3][3], ha[3], ca[3], hb[3], d[3];
+  for (int i = 0; i < 3; ++i) {
+    for (int j = 0; j < 3; ++j) ax[i][j] = pair(a0.axes(i, j), a1.axes(i, j));
+    ha[i] = pair(a0.half[i], a1.half[i]);
+    ca[i] = pair(a0.center[i], a1.center[i]);
+    hb[i] = D2::all(b.half[i]);
+    d[i] = D2::all(b.center[i]) - ca[i];
   }
-  const Mat3 r = a.axes.transpose() * b.axes;  // b's axes in a's frame (columns)
-  const Mat3 ar = r.cwiseAbs();
-  gap = std::max(gap, (t.cwiseAbs() - ha - ar * hb).maxCoeff());
-  gap = std::max(gap, ((r.transpose() * t).cwiseAbs() - hb - ar.transpose() * ha).maxCoeff());
+  // Rounding of the box transforms is relative to the coordinates' size.
+  const D2 slack =
+      D2::all(1e-12) * (max(max(abs(ca[0]), abs(ca[1])), abs(ca[2])) +
+                        D2::all(b.center.cwiseAbs().maxCoeff() + scale + b.half.sum()) + ha[0] + ha[1] + ha[2]);
+  // The centre line: |d| minus both boxes' support along it. Tighter than
+  // the face axes for boxes apart along a diagonal.
+  D2 t[3], u[3];  // centre offset in a's frame and in b's
+  for (int i = 0; i < 3; ++i) {
+    t[i] = ax[0][i] * d[0] + ax[1][i] * d[1] + ax[2][i] * d[2];
+    u[i] = D2::all(b.axes(0, i)) * d[0] + D2::all(b.axes(1, i)) * d[1] + D2::all(b.axes(2, i)) * d[2];
+  }
+  const D2 zero = D2::all(0.0);
+  const D2 dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  D2 line = dd;  // |d| · gap
+  for (int i = 0; i < 3; ++i) line = line - ha[i] * abs(t[i]) - hb[i] * abs(u[i]);
+  const D2 apart = line > zero;
+  const D2 lineGap = select(apart, line / sqrt(dd), zero);
+  const D2 reach = D2::all(best) + slack;
+  if (allOf(apart & (line * line > reach * reach * dd))) {
+    const D2 g = max(zero, lineGap - slack);
+    const D2 g2 = g * g;
+    return {g2[0], g2[1]};
+  }
+  // b's axes in a's frame: r(i, j) = a_i · b_j.
+  D2 r[3][3], ar[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) {
+      r[i][j] = ax[0][i] * D2::all(b.axes(0, j)) + ax[1][i] * D2::all(b.axes(1, j)) +
+                ax[2][i] * D2::all(b.axes(2, j));
+      ar[i][j] = abs(r[i][j]);
+    }
+  D2 gap = lineGap;
+  for (int i = 0; i < 3; ++i) {
+    gap = max(gap, abs(t[i]) - ha[i] - (ar[i][0] * hb[0] + ar[i][1] * hb[1] + ar[i][2] * hb[2]));
+    gap = max(gap, abs(r[0][i] * t[0] + r[1][i] * t[1] + r[2][i] * t[2]) - hb[i] -
+                       (ar[0][i] * ha[0] + ar[1][i] * ha[1] + ar[2][i] * ha[2]));
+  }
+  // Edge axes a_i × b_j, of length sqrt(1 − r_ij²), tracked squared; not
+  // for (nearly) parallel edges, whose cross product is noise.
+  D2 gapSq = gap * gap;
+  const D2 parallel = D2::all(1e-6), one = D2::all(1.0);
   for (int i = 0; i < 3; ++i) {
     const int i1 = (i + 1) % 3, i2 = (i + 2) % 3;
     for (int j = 0; j < 3; ++j) {
       const int j1 = (j + 1) % 3, j2 = (j + 2) % 3;
-      // Axis a_i × b_j, of length sqrt(1 − r_ij²).
-      const double proj = std::abs(t[i2] * r(i1, j) - t[i1] * r(i2, j));
-      const double num =
-          proj - ha[i1] * ar(i2, j) - ha[i2] * ar(i1, j) - hb[j1] * ar(i, j2) - hb[j2] * ar(i, j1);
-      const double len2 = 1.0 - r(i, j) * r(i, j);
-      // Only when it beats the current gap (num / len ≥ num), and not for
-      // (nearly) parallel edges, whose cross product is noise.
-      if (num > gap && len2 > 1e-6 && num * num > gap * gap * len2) gap = num / std::sqrt(len2);
+      const D2 proj = abs(t[i2] * r[i1][j] - t[i1] * r[i2][j]);
+      const D2 num = proj - ha[i1] * ar[i2][j] - ha[i2] * ar[i1][j] - hb[j1] * ar[i][j2] - hb[j2] * ar[i][j1];
+      const D2 len2 = one - r[i][j] * r[i][j];
+      const D2 better = (num > zero) & (len2 > parallel) & (num * num > gapSq * len2);
+      gapSq = select(better, num * num / len2, gapSq);
     }
   }
-  gap = std::max(0.0, gap - slack);
-  return gap * gap;
+  const D2 g = max(zero, sqrt(gapSq) - slack);
+  const D2 g2 = g * g;
+  return {g2[0], g2[1]};
 }
 
 double pointBoxDistanceSq(const Vec3& p, const BvhNode& n) noexcept {
@@ -375,7 +404,7 @@ MeshDistance meshMeshDistance(const MeshBvh& a, const Isometry3& poseA, const Me
   std::array<Item, kPairStack> stack;
   int sp = 0;
   const double scale = m.t.cwiseAbs().maxCoeff();
-  const double rootLb = obbDistanceSq(a.obb(0), mapObb(b.obb(0), m), best, scale);
+  const double rootLb = obbDistanceSq(a.obb(0), a.obb(0), mapObb(b.obb(0), m), best, scale)[0];
   if (rootLb <= bestSq()) stack[sp++] = {0, 0, rootLb};
   MappedLeaf leafB;
   while (sp > 0) {
@@ -411,15 +440,16 @@ MeshDistance meshMeshDistance(const MeshBvh& a, const Isometry3& poseA, const Me
     Item c0, c1;
     // Oriented boxes: on curved surfaces far tighter than the float boxes.
     // The undivided node's box is mapped into the other tree's frame once,
-    // and both children are tested in their own frame.
+    // and both children are tested together in their own frame.
     if (descendA) {
-      const MappedObb bb = mapObb(b.obb(it.b), m);
-      c0 = {na.first, it.b, obbDistanceSq(a.obb(na.first), bb, best, scale)};
-      c1 = {na.first + 1, it.b, obbDistanceSq(a.obb(na.first + 1), bb, best, scale)};
+      const auto lb = obbDistanceSq(a.obb(na.first), a.obb(na.first + 1), mapObb(b.obb(it.b), m), best, scale);
+      c0 = {na.first, it.b, lb[0]};
+      c1 = {na.first + 1, it.b, lb[1]};
     } else {
-      const MappedObb ab = mapObbInverse(a.obb(it.a), m);
-      c0 = {it.a, nb.first, obbDistanceSq(b.obb(nb.first), ab, best, scale)};
-      c1 = {it.a, nb.first + 1, obbDistanceSq(b.obb(nb.first + 1), ab, best, scale)};
+      const auto lb =
+          obbDistanceSq(b.obb(nb.first), b.obb(nb.first + 1), mapObbInverse(a.obb(it.a), m), best, scale);
+      c0 = {it.a, nb.first, lb[0]};
+      c1 = {it.a, nb.first + 1, lb[1]};
     }
     if (c1.lb < c0.lb) std::swap(c0, c1);  // c0 nearer: pushed last, popped first
     DM_ASSERT(sp + 2 <= kPairStack, "traversal stack bound");

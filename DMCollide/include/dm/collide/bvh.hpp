@@ -27,7 +27,9 @@
 //    originalTriangle(k) maps back to the mesh's triangle index.
 //
 // Build: binned SAH (surface-area heuristic) on the centroids, over all three
-// axes, with subtrees of large nodes built in parallel on oneTBB. Time
+// axes in one pass per node (float boxes, SSE2 lanes; a node of fewer than
+// `bins` triangles gets one bin per triangle, and the children's bounds come
+// from the bins), with subtrees of large nodes built in parallel on oneTBB. Time
 // O(n log n) for n triangles (each of the O(log n) levels bins and partitions
 // O(n) centroids), memory O(n). Depth is capped (object-median splits below
 // depth 64), so the fixed traversal stacks of mesh_query.hpp cannot overflow.

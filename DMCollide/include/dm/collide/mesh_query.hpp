@@ -93,8 +93,8 @@ struct MeshDistance {
 /// point when they intersect, found first by the boolean traversal). Then a
 /// depth-first BVH–BVH traversal, nearer box pair first, pruned by the best
 /// distance so far (the nodes' oriented boxes, MeshBvh::obb(), bounded by
-/// their 15 separating axes and the centre line; face-plane bounds per
-/// triangle pair); pairs farther than
+/// their 15 separating axes and the centre line, two sibling boxes per test
+/// in SIMD lanes; face-plane bounds per triangle pair); pairs farther than
 /// `maxDistance` are not searched (result distance +inf, kNoTriangle, when
 /// nothing is within it). No allocation.
 /// @code
