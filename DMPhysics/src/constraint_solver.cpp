@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <string>
 
@@ -24,8 +25,8 @@ void tangentBasis(const Vec3& n, Vec3& t1, Vec3& t2) noexcept {
 }
 
 using Row = ConstraintSolver::Row;
-using ContactRow = ConstraintSolver::ContactRow;
 using Velocity = ConstraintSolver::Velocity;
+using WideRow = ConstraintSolver::WideRow;
 
 // Effective mass and I⁻¹·J of a row whose Jacobian is set.
 void finishRow(Row& r, const std::vector<double>& invMass, const std::vector<Mat3>& invInertia) noexcept {
@@ -62,12 +63,6 @@ double solveRow(const Row& r, std::vector<Velocity>& vel, double target, double&
   impulse = next;
   applyImpulse(r, A, B, applied);
   return applied;
-}
-
-// Velocity of a contact row along direction k: u·(v_B − v_A) + angA·ω_A + angB·ω_B.
-[[gnu::always_inline]] inline double contactVelocity(const ContactRow& c, int k, const Vec3& dv, const Velocity& A,
-                              const Velocity& B) noexcept {
-  return c.u[k].dot(dv) + c.angA[k].dot(A.w) + c.angB[k].dot(B.w);
 }
 
 bool isUnit(const Vec3& v) noexcept { return v.allFinite() && std::abs(v.squaredNorm() - 1.0) < 1e-6; }
@@ -206,10 +201,10 @@ void ConstraintSolver::reserve(std::size_t bodies, std::size_t contacts, std::si
   push_.reserve(bodies + 1);
   invMass_.reserve(bodies + 1);
   invInertia_.reserve(bodies + 1);
-  contactRows_.reserve(contacts);
   manifolds_.reserve(contacts);
   scheduled_.reserve(contacts);
-  schedule_.reserve(contacts);
+  groups_.reserve(contacts);
+  wideRows_.reserve(contacts);
   jointRows_.reserve(kMaxJointRows * joints);
 }
 
@@ -380,224 +375,412 @@ void ConstraintSolver::buildJointRows(std::span<const SolverBody> bodies, Joint&
   }
 }
 
-void ConstraintSolver::buildContactRows(std::span<const SolverBody> bodies,
-                                        std::span<const ContactConstraint> contacts, double dt,
-                                        const SolverOptions& o) {
-  const int worldIndex = static_cast<int>(bodies.size());
-  const double inv = 1.0 / dt;
-  const double scale = o.warmStart ? o.warmStartFactor : 0.0;
-  contactRows_.resize(contacts.size());
-  for (std::size_t i = 0; i < contacts.size(); ++i) {
-    const ContactConstraint& c = contacts[i];
-    ContactRow& r = contactRows_[i];
-    r.a = c.bodyA == kWorldBody ? worldIndex : c.bodyA;
-    r.b = c.bodyB == kWorldBody ? worldIndex : c.bodyB;
-    const auto ia = static_cast<std::size_t>(r.a), ib = static_cast<std::size_t>(r.b);
-    const Vec3 xa = c.bodyA == kWorldBody ? Vec3::Zero() : bodies[ia].position;
-    const Vec3 xb = c.bodyB == kWorldBody ? Vec3::Zero() : bodies[ib].position;
-    const Vec3 rA = c.point.position - xa;
-    const Vec3 rB = c.point.position - xb;
-    r.imA = invMass_[ia];
-    r.imB = invMass_[ib];
-    r.friction = c.friction;
-    r.u[0] = c.point.normal;
-    tangentBasis(r.u[0], r.u[1], r.u[2]);
-    const Mat3& iA = invInertia_[ia];
-    const Mat3& iB = invInertia_[ib];
-    for (int k = 0; k < 3; ++k) {
-      r.angA[k] = -rA.cross(r.u[k]);
-      r.angB[k] = rB.cross(r.u[k]);
-      r.mAngA[k] = iA * r.angA[k];
-      r.mAngB[k] = iB * r.angB[k];
-      const double m = r.imA * r.u[k].squaredNorm() + r.angA[k].dot(r.mAngA[k]) +
-                       r.imB * r.u[k].squaredNorm() + r.angB[k].dot(r.mAngB[k]);
-      r.effMass[k] = m > 1e-300 ? 1.0 / m : 0.0;
-    }
-    // Targets from the approach speed before any impulse of this step.
-    const Velocity& A = velocity_[ia];
-    const Velocity& B = velocity_[ib];
-    const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
-    r.target = 0.0;
-    r.pushTarget = 0.0;
-    r.pushImpulse = 0.0;
-    if (c.point.depth < 0.0) {
-      r.target = c.point.depth * inv;  // speculative: may close the gap this step
-    } else {
-      if (vn < -o.restitutionThreshold) r.target = -c.restitution * vn;
-      const double corr = std::min(std::max(c.point.depth - o.slop, 0.0) * inv, o.maxCorrectionVelocity);
-      if (o.splitImpulse)
-        r.pushTarget = o.pushFactor * corr;
-      else
-        r.target = std::max(r.target, o.baumgarte * corr);
-    }
-    r.impulse[0] = scale * std::max(c.normalImpulse, 0.0);
-    r.impulse[1] = scale * c.frictionImpulse.dot(r.u[1]);
-    r.impulse[2] = scale * c.frictionImpulse.dot(r.u[2]);
-  }
-}
-
-// Groups the contact rows by body pair and pairs each manifold with the
-// nearest later one (within a short window) that shares no dynamic body.
-// Solving two independent manifolds interleaved gives exactly the result of
-// solving one after the other, while the CPU overlaps their (long, serial)
-// dependency chains; the sweep order becomes the schedule's order.
-void ConstraintSolver::scheduleManifolds() {
+// Groups the contacts by body pair (consecutive contacts of one pair form a
+// manifold) and gathers each manifold with up to kLanes − 1 later ones (the
+// first free ones within a short window) that share no dynamic body with it
+// or each other. Solving independent manifolds side by side gives exactly
+// the result of solving them one after the other, while SIMD lanes do their
+// arithmetic at once and the CPU overlaps their (long, serial) dependency
+// chains; the sweep order becomes the groups' order, which keeps the input's
+// bottom-up order up to the window.
+void ConstraintSolver::scheduleManifolds(std::span<const ContactConstraint> contacts) {
+  const int world = static_cast<int>(velocity_.size()) - 1;
+  const auto index = [world](int i) { return i == kWorldBody ? world : i; };
   manifolds_.clear();
-  const auto m = static_cast<std::uint32_t>(contactRows_.size());
+  const auto m = static_cast<std::uint32_t>(contacts.size());
   for (std::uint32_t i = 0; i < m;) {
-    const int a = contactRows_[i].a, b = contactRows_[i].b;
+    const int a = contacts[i].bodyA, b = contacts[i].bodyB;
     std::uint32_t j = i + 1;
-    while (j < m && contactRows_[j].a == a && contactRows_[j].b == b) ++j;
+    while (j < m && contacts[j].bodyA == a && contacts[j].bodyB == b) ++j;
     manifolds_.push_back({i, j});
     i = j;
   }
   const auto count = static_cast<std::uint32_t>(manifolds_.size());
   scheduled_.assign(count, 0);
-  schedule_.clear();
+  groups_.clear();
   const auto dynamic = [this](int i) { return invMass_[static_cast<std::size_t>(i)] > 0.0 ||
                                               invInertia_[static_cast<std::size_t>(i)] != Mat3::Zero(); };
   const auto shares = [&](std::uint32_t x, std::uint32_t y) {
-    const ContactRow& p = contactRows_[manifolds_[x].begin];
-    const ContactRow& q = contactRows_[manifolds_[y].begin];
-    for (const int u : {p.a, p.b})
-      if (dynamic(u) && (u == q.a || u == q.b)) return true;
+    const ContactConstraint& p = contacts[manifolds_[x].begin];
+    const ContactConstraint& q = contacts[manifolds_[y].begin];
+    const int qa = index(q.bodyA), qb = index(q.bodyB);
+    for (const int u : {index(p.bodyA), index(p.bodyB)})
+      if (dynamic(u) && (u == qa || u == qb)) return true;
     return false;
   };
-  constexpr std::uint32_t kWindow = 8;
+  constexpr std::uint32_t kWindow = 16;
+  std::uint32_t rows = 0;
   for (std::uint32_t x = 0; x < count; ++x) {
     if (scheduled_[x]) continue;
     scheduled_[x] = 1;
-    std::uint32_t partner = kNoManifold;
-    for (std::uint32_t y = x + 1; y < count && y <= x + kWindow; ++y) {
-      if (scheduled_[y] || shares(x, y)) continue;
-      partner = y;
+    Group g;
+    int lanes = 1;
+    g.manifold[0] = x;
+    for (std::uint32_t y = x + 1; y < count && y <= x + kWindow && lanes < kLanes; ++y) {
+      if (scheduled_[y]) continue;
+      bool free = true;
+      for (int l = 0; l < lanes && free; ++l) free = !shares(g.manifold[l], y);
+      if (!free) continue;
+      g.manifold[lanes++] = y;
       scheduled_[y] = 1;
-      break;
     }
-    schedule_.push_back({x, partner});
+    std::uint32_t most = 0;
+    for (int l = 0; l < kLanes; ++l) {
+      if (l >= lanes) {
+        g.manifold[l] = kNoManifold;
+        g.a[l] = g.b[l] = world;
+        continue;
+      }
+      const Manifold& mf = manifolds_[g.manifold[l]];
+      g.a[l] = index(contacts[mf.begin].bodyA);
+      g.b[l] = index(contacts[mf.begin].bodyB);
+      most = std::max(most, mf.end - mf.begin);
+    }
+    g.rowBegin = rows;
+    g.rowEnd = rows += most;
+    groups_.push_back(g);
   }
 }
 
 namespace {
 
-// One contact of a sweep: the friction pair (projected onto the Coulomb disk
-// |λt| ≤ μ·λn), then the normal row, so that non-penetration is the last
-// word. A and B are the manifold's body velocities (locals of the caller).
-// y += s·x, spelled out: GCC otherwise calls Eigen's compound assignment
-// out of line inside the (large) sweep loops.
-[[gnu::always_inline]] inline void addScaled(Vec3& y, double s, const Vec3& x) noexcept {
-  y.x() += s * x.x();
-  y.y() += s * x.y();
-  y.z() += s * x.z();
-}
-
-// Applies impulse magnitudes l[0..2] along the contact's directions (l = 0
-// rows skipped by the caller's choice of `first`/`last`).
-[[gnu::always_inline]] inline void applyContact(const ContactRow& r, Velocity& A, Velocity& B, int first, int last,
-                                                const double* l) noexcept {
-  for (int k = first; k <= last; ++k) {
-    addScaled(A.v, -r.imA * l[k], r.u[k]);
-    addScaled(A.w, l[k], r.mAngA[k]);
-    addScaled(B.v, r.imB * l[k], r.u[k]);
-    addScaled(B.w, l[k], r.mAngB[k]);
+// Lane l of a WideRow as an empty contact: all zero.
+void clearLane(WideRow& w, int l) noexcept {
+  for (int d = 0; d < 3; ++d) {
+    for (int c = 0; c < 3; ++c)
+      w.u[d][c][l] = w.angA[d][c][l] = w.angB[d][c][l] = w.mAngA[d][c][l] = w.mAngB[d][c][l] = 0.0;
+    w.effMass[d][l] = w.impulse[d][l] = 0.0;
   }
-}
-
-template <bool kResidual>
-[[gnu::always_inline]] inline void solveContact(ContactRow& r, Velocity& A, Velocity& B, double& change) noexcept {
-  if (r.effMass[0] == 0.0) return;  // two non-dynamic bodies
-  double l[3] = {0.0, 0.0, 0.0};
-  if (r.effMass[1] > 0.0 && r.effMass[2] > 0.0) {
-    const Vec3 dv = B.v - A.v;
-    const double limit = r.friction * r.impulse[0];
-    double l1 = r.impulse[1] - r.effMass[1] * contactVelocity(r, 1, dv, A, B);
-    double l2 = r.impulse[2] - r.effMass[2] * contactVelocity(r, 2, dv, A, B);
-    const double len2 = l1 * l1 + l2 * l2;
-    if (len2 > limit * limit) {
-      const double f = len2 > 0.0 ? limit / std::sqrt(len2) : 0.0;
-      l1 *= f;
-      l2 *= f;
-    }
-    l[1] = l1 - r.impulse[1];
-    l[2] = l2 - r.impulse[2];
-    r.impulse[1] = l1;
-    r.impulse[2] = l2;
-    applyContact(r, A, B, 1, 2, l);
-    if constexpr (kResidual)
-      change = std::max({change, std::abs(l[1]) / r.effMass[1], std::abs(l[2]) / r.effMass[2]});
-  }
-  const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
-  const double next = std::max(r.impulse[0] + r.effMass[0] * (r.target - vn), 0.0);
-  l[0] = next - r.impulse[0];
-  r.impulse[0] = next;
-  applyContact(r, A, B, 0, 0, l);
-  if constexpr (kResidual) change = std::max(change, std::abs(l[0]) / r.effMass[0]);
-}
-
-// The split-impulse update of a contact's normal row on pseudo-velocities.
-[[gnu::always_inline]] inline void pushContact(ContactRow& r, Velocity& A, Velocity& B) noexcept {
-  if (r.effMass[0] == 0.0) return;
-  const double vn = contactVelocity(r, 0, B.v - A.v, A, B);
-  const double next = std::max(r.pushImpulse + r.effMass[0] * (r.pushTarget - vn), 0.0);
-  const double l[1] = {next - r.pushImpulse};
-  r.pushImpulse = next;
-  applyContact(r, A, B, 0, 0, l);
-}
-
-// One contact of a sweep; kMode 0: velocities, 1: velocities with the
-// residual, 2: split-impulse pseudo-velocities.
-template <int kMode>
-[[gnu::always_inline]] inline void visitContact(ContactRow& r, Velocity& A, Velocity& B, double& change) noexcept {
-  if constexpr (kMode == 2)
-    pushContact(r, A, B);
-  else
-    solveContact<kMode == 1>(r, A, B, change);
-}
-
-// Runs visitContact over the scheduled manifolds with each manifold's body
-// velocities in locals; paired manifolds advance contact by contact together.
-// Returns the residual (kMode 1).
-template <int kMode>
-double forSchedule(const std::vector<std::array<std::uint32_t, 2>>& schedule,
-                   const std::vector<ConstraintSolver::Manifold>& manifolds, std::vector<ContactRow>& rows,
-                   std::vector<Velocity>& vel) noexcept {
-  double change = 0.0;
-  for (const auto& [x, y] : schedule) {
-    const ConstraintSolver::Manifold& mx = manifolds[x];
-    const ContactRow& hx = rows[mx.begin];
-    Velocity& sax = vel[static_cast<std::size_t>(hx.a)];
-    Velocity& sbx = vel[static_cast<std::size_t>(hx.b)];
-    Velocity ax = sax, bx = sbx;
-    if (y == ConstraintSolver::kNoManifold) {
-      for (std::uint32_t k = mx.begin; k < mx.end; ++k) visitContact<kMode>(rows[k], ax, bx, change);
-      sax = ax;
-      sbx = bx;
-      continue;
-    }
-    const ConstraintSolver::Manifold& my = manifolds[y];
-    const ContactRow& hy = rows[my.begin];
-    Velocity& say = vel[static_cast<std::size_t>(hy.a)];
-    Velocity& sby = vel[static_cast<std::size_t>(hy.b)];
-    Velocity ay = say, by = sby;
-    const std::uint32_t nx = mx.end - mx.begin, ny = my.end - my.begin, common = std::min(nx, ny);
-    for (std::uint32_t k = 0; k < common; ++k) {
-      visitContact<kMode>(rows[mx.begin + k], ax, bx, change);
-      visitContact<kMode>(rows[my.begin + k], ay, by, change);
-    }
-    for (std::uint32_t k = common; k < nx; ++k) visitContact<kMode>(rows[mx.begin + k], ax, bx, change);
-    for (std::uint32_t k = common; k < ny; ++k) visitContact<kMode>(rows[my.begin + k], ay, by, change);
-    // A body both manifolds name is non-dynamic: both copies are unchanged.
-    sax = ax;
-    sbx = bx;
-    say = ay;
-    sby = by;
-  }
-  return change;
+  w.imA[l] = w.imB[l] = w.friction[l] = w.target[l] = w.pushTarget[l] = w.pushImpulse[l] = 0.0;
 }
 
 }  // namespace
 
-// One velocity sweep: joint rows, then the contacts in schedule order. With
+// The three rows of every contact, written straight into its group's lane.
+void ConstraintSolver::buildContactRows(std::span<const SolverBody> bodies,
+                                        std::span<const ContactConstraint> contacts, double dt,
+                                        const SolverOptions& o) {
+  const double inv = 1.0 / dt;
+  const double scale = o.warmStart ? o.warmStartFactor : 0.0;
+  wideRows_.resize(groups_.empty() ? 0 : groups_.back().rowEnd);
+  for (const Group& g : groups_) {
+    for (int l = 0; l < kLanes; ++l) {
+      const std::uint32_t x = g.manifold[l];
+      const std::uint32_t size = x == kNoManifold ? 0 : manifolds_[x].end - manifolds_[x].begin;
+      for (std::uint32_t k = size; k < g.rowEnd - g.rowBegin; ++k) clearLane(wideRows_[g.rowBegin + k], l);
+      if (size == 0) continue;
+      const auto ia = static_cast<std::size_t>(g.a[l]), ib = static_cast<std::size_t>(g.b[l]);
+      const double imA = invMass_[ia], imB = invMass_[ib];
+      const Mat3& iA = invInertia_[ia];
+      const Mat3& iB = invInertia_[ib];
+      const Velocity& A = velocity_[ia];
+      const Velocity& B = velocity_[ib];
+      for (std::uint32_t k = 0; k < size; ++k) {
+        const ContactConstraint& c = contacts[manifolds_[x].begin + k];
+        WideRow& w = wideRows_[g.rowBegin + k];
+        const Vec3 xa = c.bodyA == kWorldBody ? Vec3::Zero() : bodies[ia].position;
+        const Vec3 xb = c.bodyB == kWorldBody ? Vec3::Zero() : bodies[ib].position;
+        const Vec3 rA = c.point.position - xa;
+        const Vec3 rB = c.point.position - xb;
+        Vec3 u[3];
+        u[0] = c.point.normal;
+        tangentBasis(u[0], u[1], u[2]);
+        Vec3 angA[3], angB[3];
+        for (int d = 0; d < 3; ++d) {
+          angA[d] = -rA.cross(u[d]);
+          angB[d] = rB.cross(u[d]);
+          const Vec3 mA = iA * angA[d], mB = iB * angB[d];
+          const double m = imA * u[d].squaredNorm() + angA[d].dot(mA) + imB * u[d].squaredNorm() + angB[d].dot(mB);
+          w.effMass[d][l] = m > 1e-300 ? 1.0 / m : 0.0;
+          for (int e = 0; e < 3; ++e) {
+            w.u[d][e][l] = u[d][e];
+            w.angA[d][e][l] = angA[d][e];
+            w.angB[d][e][l] = angB[d][e];
+            w.mAngA[d][e][l] = mA[e];
+            w.mAngB[d][e][l] = mB[e];
+          }
+        }
+        w.imA[l] = imA;
+        w.imB[l] = imB;
+        w.friction[l] = c.friction;
+        // Targets from the approach speed before any impulse of this step.
+        const double vn = u[0].dot(B.v - A.v) + angA[0].dot(A.w) + angB[0].dot(B.w);
+        double target = 0.0, pushTarget = 0.0;
+        if (c.point.depth < 0.0) {
+          target = c.point.depth * inv;  // speculative: may close the gap this step
+        } else {
+          if (vn < -o.restitutionThreshold) target = -c.restitution * vn;
+          const double corr = std::min(std::max(c.point.depth - o.slop, 0.0) * inv, o.maxCorrectionVelocity);
+          if (o.splitImpulse)
+            pushTarget = o.pushFactor * corr;
+          else
+            target = std::max(target, o.baumgarte * corr);
+        }
+        w.target[l] = target;
+        w.pushTarget[l] = pushTarget;
+        w.pushImpulse[l] = 0.0;
+        w.impulse[0][l] = scale * std::max(c.normalImpulse, 0.0);
+        w.impulse[1][l] = scale * c.frictionImpulse.dot(u[1]);
+        w.impulse[2][l] = scale * c.frictionImpulse.dot(u[2]);
+      }
+    }
+  }
+}
+
+namespace {
+
+// kLanes doubles as one value: two SSE2 registers with GCC/Clang vector
+// extensions (every x86-64 has them), a plain array elsewhere (or with
+// DM_SOLVER_PLAIN_LANES defined). Lane by lane the arithmetic is the scalar
+// one, IEEE operation for operation, so both give the same bits.
+#if defined(__GNUC__) && !defined(DM_SOLVER_PLAIN_LANES)
+#define DM_SOLVER_VECTOR_LANES 1
+using Pair = double __attribute__((vector_size(16)));
+using Mask = decltype(Pair{} > Pair{});
+struct Lanes {
+  Pair h[2];
+};
+struct LaneMask {
+  Mask h[2];
+};
+#define DM_LANEWISE(expr) {{expr(0), expr(1)}}
+#else
+struct Lanes {
+  double h[4];
+};
+struct LaneMask {
+  long long h[4];  // 0 or 1
+};
+#define DM_LANEWISE(expr) {{expr(0), expr(1), expr(2), expr(3)}}
+#endif
+static_assert(ConstraintSolver::kLanes == 4, "Lanes holds four doubles");
+
+// Four doubles as Lanes, and lane l of Lanes (built and read lane by lane,
+// not through memory: a vector load of four scalar stores stalls).
+[[gnu::always_inline]] inline Lanes make(double x0, double x1, double x2, double x3) noexcept {
+#if defined(DM_SOLVER_VECTOR_LANES)
+  return {{Pair{x0, x1}, Pair{x2, x3}}};
+#else
+  return {{x0, x1, x2, x3}};
+#endif
+}
+[[gnu::always_inline]] inline double lane(const Lanes& x, int l) noexcept {
+#if defined(DM_SOLVER_VECTOR_LANES)
+  return x.h[l >> 1][l & 1];
+#else
+  return x.h[l];
+#endif
+}
+
+[[gnu::always_inline]] inline Lanes load(const double (&p)[4]) noexcept {
+  Lanes r;
+  std::memcpy(&r, p, sizeof r);
+  return r;
+}
+[[gnu::always_inline]] inline void store(double (&p)[4], const Lanes& v) noexcept { std::memcpy(p, &v, sizeof v); }
+[[gnu::always_inline]] inline Lanes splat(double x) noexcept { return make(x, x, x, x); }
+#define DM_BINARY(op)                                                                  \
+  [[gnu::always_inline]] inline Lanes operator op(const Lanes& a, const Lanes& b) noexcept { \
+    const auto f = [&](int i) { return a.h[i] op b.h[i]; };                            \
+    return DM_LANEWISE(f);                                                              \
+  }
+DM_BINARY(+)
+DM_BINARY(-)
+DM_BINARY(*)
+DM_BINARY(/)
+#undef DM_BINARY
+#define DM_COMPARE(name, op)                                                              \
+  [[gnu::always_inline]] inline LaneMask name(const Lanes& a, const Lanes& b) noexcept { \
+    const auto f = [&](int i) { return a.h[i] op b.h[i]; };                              \
+    return DM_LANEWISE(f);                                                                \
+  }
+DM_COMPARE(greater, >)
+#undef DM_COMPARE
+[[gnu::always_inline]] inline LaneMask operator&(const LaneMask& a, const LaneMask& b) noexcept {
+  const auto f = [&](int i) { return a.h[i] & b.h[i]; };
+  return DM_LANEWISE(f);
+}
+// m ? a : b per lane.
+[[gnu::always_inline]] inline Lanes select(const LaneMask& m, const Lanes& a, const Lanes& b) noexcept {
+  const auto f = [&](int i) { return m.h[i] ? a.h[i] : b.h[i]; };
+  return DM_LANEWISE(f);
+}
+[[gnu::always_inline]] inline bool any(const LaneMask& m) noexcept {
+#if defined(DM_SOLVER_VECTOR_LANES)
+  const Mask o = m.h[0] | m.h[1];
+  return (o[0] | o[1]) != 0;
+#else
+  return (m.h[0] | m.h[1] | m.h[2] | m.h[3]) != 0;
+#endif
+}
+// std::max(a, b) per lane (a when b is not larger, as std::max).
+[[gnu::always_inline]] inline Lanes max(const Lanes& a, const Lanes& b) noexcept { return select(greater(b, a), b, a); }
+[[gnu::always_inline]] inline Lanes abs(const Lanes& a) noexcept { return select(greater(splat(0.0), a), splat(0.0) - a, a); }
+[[gnu::always_inline]] inline Lanes sqrt(const Lanes& a) noexcept {
+  return make(std::sqrt(lane(a, 0)), std::sqrt(lane(a, 1)), std::sqrt(lane(a, 2)), std::sqrt(lane(a, 3)));
+}
+#undef DM_LANEWISE
+
+// The two bodies' velocities (or pseudo-velocities) of each lane.
+struct LaneVelocity {
+  Lanes v[3], w[3];
+};
+
+[[gnu::always_inline]] inline void gather(const std::vector<Velocity>& vel, const int (&index)[4],
+                                          LaneVelocity& out) noexcept {
+  const Velocity& s0 = vel[static_cast<std::size_t>(index[0])];
+  const Velocity& s1 = vel[static_cast<std::size_t>(index[1])];
+  const Velocity& s2 = vel[static_cast<std::size_t>(index[2])];
+  const Velocity& s3 = vel[static_cast<std::size_t>(index[3])];
+  for (int c = 0; c < 3; ++c) {
+    out.v[c] = make(s0.v[c], s1.v[c], s2.v[c], s3.v[c]);
+    out.w[c] = make(s0.w[c], s1.w[c], s2.w[c], s3.w[c]);
+  }
+}
+
+[[gnu::always_inline]] inline void scatter(const LaneVelocity& in, const int (&index)[4],
+                                           std::vector<Velocity>& vel) noexcept {
+  // A body two lanes name is non-dynamic: every lane holds it unchanged.
+  for (int l = 0; l < 4; ++l) {
+    Velocity& s = vel[static_cast<std::size_t>(index[l])];
+    for (int c = 0; c < 3; ++c) {
+      s.v[c] = lane(in.v[c], l);
+      s.w[c] = lane(in.w[c], l);
+    }
+  }
+}
+
+// u·(v_B − v_A) + angA·ω_A + angB·ω_B along direction k, lane by lane.
+[[gnu::always_inline]] inline Lanes wideVelocity(const WideRow& r, int k, const Lanes (&dv)[3],
+                                                 const LaneVelocity& A, const LaneVelocity& B) noexcept {
+  const auto dot = [](const double (&x)[3][4], const Lanes (&y)[3]) {
+    return (load(x[0]) * y[0] + load(x[1]) * y[1]) + load(x[2]) * y[2];
+  };
+  return (dot(r.u[k], dv) + dot(r.angA[k], A.w)) + dot(r.angB[k], B.w);
+}
+
+// Applies impulse changes l along direction k of every lane.
+[[gnu::always_inline]] inline void wideApply(const WideRow& r, int k, const Lanes& l, const Lanes& sA,
+                                             const Lanes& sB, LaneVelocity& A, LaneVelocity& B) noexcept {
+  for (int c = 0; c < 3; ++c) {
+    A.v[c] = A.v[c] + sA * load(r.u[k][c]);
+    A.w[c] = A.w[c] + l * load(r.mAngA[k][c]);
+    B.v[c] = B.v[c] + sB * load(r.u[k][c]);
+    B.w[c] = B.w[c] + l * load(r.mAngB[k][c]);
+  }
+}
+
+// One contact of every lane of a WideRow: the friction pair (projected onto
+// the Coulomb disk |λt| ≤ μ·λn), then the normal row, so that
+// non-penetration is the last word. Lanes without friction (a zero tangent
+// effective mass) and empty lanes (all zero) keep their impulses. With
+// kResidual, `change` takes the largest |Δλ|/m_eff per lane (0/0 of an empty
+// lane is NaN, which max() passes over).
+template <bool kResidual>
+[[gnu::always_inline]] inline void wideContact(WideRow& r, LaneVelocity& A, LaneVelocity& B, Lanes& change) noexcept {
+  const Lanes zero = splat(0.0);
+  const Lanes imA = load(r.imA), imB = load(r.imB), negImA = zero - imA;
+  const Lanes e1 = load(r.effMass[1]), e2 = load(r.effMass[2]);
+  const LaneMask rubs = greater(e1, zero) & greater(e2, zero);
+  Lanes dv[3];
+  for (int c = 0; c < 3; ++c) dv[c] = B.v[c] - A.v[c];
+  const Lanes i0 = load(r.impulse[0]), i1 = load(r.impulse[1]), i2 = load(r.impulse[2]);
+  const Lanes limit = load(r.friction) * i0;
+  Lanes l1 = i1 - e1 * wideVelocity(r, 1, dv, A, B);
+  Lanes l2 = i2 - e2 * wideVelocity(r, 2, dv, A, B);
+  const Lanes len2 = l1 * l1 + l2 * l2;
+  const LaneMask slides = greater(len2, limit * limit);
+  if (any(slides)) {
+    const Lanes f = select(greater(len2, zero), limit / sqrt(len2), zero);
+    l1 = select(slides, l1 * f, l1);
+    l2 = select(slides, l2 * f, l2);
+  }
+  const Lanes d1 = select(rubs, l1 - i1, zero), d2 = select(rubs, l2 - i2, zero);
+  store(r.impulse[1], select(rubs, l1, i1));
+  store(r.impulse[2], select(rubs, l2, i2));
+  // Tangent 1 then tangent 2 (as the scalar solver).
+  for (int c = 0; c < 3; ++c) {
+    A.v[c] = A.v[c] + (negImA * d1) * load(r.u[1][c]);
+    A.v[c] = A.v[c] + (negImA * d2) * load(r.u[2][c]);
+    A.w[c] = A.w[c] + d1 * load(r.mAngA[1][c]);
+    A.w[c] = A.w[c] + d2 * load(r.mAngA[2][c]);
+    B.v[c] = B.v[c] + (imB * d1) * load(r.u[1][c]);
+    B.v[c] = B.v[c] + (imB * d2) * load(r.u[2][c]);
+    B.w[c] = B.w[c] + d1 * load(r.mAngB[1][c]);
+    B.w[c] = B.w[c] + d2 * load(r.mAngB[2][c]);
+  }
+  if constexpr (kResidual) change = max(max(change, abs(d1) / e1), abs(d2) / e2);
+  for (int c = 0; c < 3; ++c) dv[c] = B.v[c] - A.v[c];
+  const Lanes e0 = load(r.effMass[0]);
+  const Lanes vn = wideVelocity(r, 0, dv, A, B);
+  const Lanes next = max(i0 + e0 * (load(r.target) - vn), zero);
+  const Lanes d0 = next - i0;
+  store(r.impulse[0], next);
+  wideApply(r, 0, d0, negImA * d0, imB * d0, A, B);
+  if constexpr (kResidual) change = max(change, abs(d0) / e0);
+}
+
+// The split-impulse update of the normal rows of a WideRow on
+// pseudo-velocities.
+[[gnu::always_inline]] inline void widePush(WideRow& r, LaneVelocity& A, LaneVelocity& B) noexcept {
+  const Lanes zero = splat(0.0);
+  Lanes dv[3];
+  for (int c = 0; c < 3; ++c) dv[c] = B.v[c] - A.v[c];
+  const Lanes i0 = load(r.pushImpulse);
+  const Lanes vn = wideVelocity(r, 0, dv, A, B);
+  const Lanes next = max(i0 + load(r.effMass[0]) * (load(r.pushTarget) - vn), zero);
+  const Lanes d0 = next - i0;
+  store(r.pushImpulse, next);
+  wideApply(r, 0, d0, (zero - load(r.imA)) * d0, load(r.imB) * d0, A, B);
+}
+
+// One sweep over the groups; kMode 0: velocities, 1: velocities with the
+// residual (returned), 2: split-impulse pseudo-velocities.
+template <int kMode>
+double sweepGroups(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
+                   std::vector<Velocity>& vel) noexcept {
+  Lanes change = splat(0.0);
+  for (const ConstraintSolver::Group& g : groups) {
+    LaneVelocity A, B;
+    gather(vel, g.a, A);
+    gather(vel, g.b, B);
+    for (std::uint32_t k = g.rowBegin; k < g.rowEnd; ++k) {
+      if constexpr (kMode == 2)
+        widePush(rows[k], A, B);
+      else
+        wideContact<kMode == 1>(rows[k], A, B, change);
+    }
+    scatter(A, g.a, vel);
+    scatter(B, g.b, vel);
+  }
+  double out[4];
+  store(out, change);
+  return std::max({out[0], out[1], out[2], out[3]});
+}
+
+// Applies the contacts' incoming impulses (warm start), group by group.
+void warmStartGroups(const std::vector<ConstraintSolver::Group>& groups, const std::vector<WideRow>& rows,
+                     std::vector<Velocity>& vel) noexcept {
+  for (const ConstraintSolver::Group& g : groups) {
+    LaneVelocity A, B;
+    gather(vel, g.a, A);
+    gather(vel, g.b, B);
+    for (std::uint32_t k = g.rowBegin; k < g.rowEnd; ++k) {
+      const WideRow& r = rows[k];
+      const Lanes negImA = splat(0.0) - load(r.imA), imB = load(r.imB);
+      for (int d = 0; d < 3; ++d) {
+        const Lanes l = load(r.impulse[d]);
+        wideApply(r, d, l, negImA * l, imB * l, A, B);
+      }
+    }
+    scatter(A, g.a, vel);
+    scatter(B, g.b, vel);
+  }
+}
+
+}  // namespace
+
+// One velocity sweep: joint rows, then the contacts group by group. With
 // kResidual, returns the largest velocity correction |Δλ|/m_eff (else 0).
 template <bool kResidual>
 double ConstraintSolver::sweep() {
@@ -607,13 +790,13 @@ double ConstraintSolver::sweep() {
     if constexpr (kResidual)
       if (r.effMass > 0.0) change = std::max(change, std::abs(applied) / r.effMass);
   }
-  change = std::max(change, forSchedule<kResidual ? 1 : 0>(schedule_, manifolds_, contactRows_, velocity_));
+  change = std::max(change, sweepGroups<kResidual ? 1 : 0>(groups_, wideRows_, velocity_));
   return change;
 }
 
 void ConstraintSolver::pushSweep() {
   for (Row& r : jointRows_) solveRow(r, push_, r.pushTarget, r.pushImpulse);
-  forSchedule<2>(schedule_, manifolds_, contactRows_, push_);
+  sweepGroups<2>(groups_, wideRows_, push_);
 }
 
 Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
@@ -641,25 +824,17 @@ Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
 
   jointRows_.clear();
   for (Joint& j : joints) buildJointRows(bodies, j, dt, o);
+  scheduleManifolds(contacts);
   buildContactRows(bodies, contacts, dt, o);
-  scheduleManifolds();
 
   // Warm start.
   SolverStats stats;
-  stats.rows = static_cast<int>(jointRows_.size() + 3 * contactRows_.size());
+  stats.rows = static_cast<int>(jointRows_.size() + 3 * contacts.size());
   if (o.warmStart) {
     for (const Row& r : jointRows_)
       applyImpulse(r, velocity_[static_cast<std::size_t>(r.a)], velocity_[static_cast<std::size_t>(r.b)],
                    r.impulse);
-    for (const ContactRow& r : contactRows_) {
-      Velocity& A = velocity_[static_cast<std::size_t>(r.a)];
-      Velocity& B = velocity_[static_cast<std::size_t>(r.b)];
-      const Vec3 p = r.impulse[0] * r.u[0] + r.impulse[1] * r.u[1] + r.impulse[2] * r.u[2];
-      A.v -= r.imA * p;
-      A.w += r.impulse[0] * r.mAngA[0] + r.impulse[1] * r.mAngA[1] + r.impulse[2] * r.mAngA[2];
-      B.v += r.imB * p;
-      B.w += r.impulse[0] * r.mAngB[0] + r.impulse[1] * r.mAngB[1] + r.impulse[2] * r.mAngB[2];
-    }
+    warmStartGroups(groups_, wideRows_, velocity_);
   }
 
   // Velocity sweeps; the residual is measured only where it is used (the
@@ -690,13 +865,18 @@ Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
     *r.out = r.impulse;
     stats.maxImpulse = std::max(stats.maxImpulse, std::abs(r.impulse));
   }
-  for (std::size_t i = 0; i < contacts.size(); ++i) {
-    const ContactRow& r = contactRows_[i];
-    ContactConstraint& c = contacts[i];
-    c.normalImpulse = r.impulse[0];
-    c.frictionImpulse = r.impulse[1] * r.u[1] + r.impulse[2] * r.u[2];
-    stats.maxImpulse = std::max(stats.maxImpulse, c.normalImpulse);
-  }
+  for (const Group& g : groups_)
+    for (int l = 0; l < kLanes; ++l) {
+      const std::uint32_t x = g.manifold[l];
+      if (x == kNoManifold) continue;
+      for (std::uint32_t i = manifolds_[x].begin; i < manifolds_[x].end; ++i) {
+        const WideRow& w = wideRows_[g.rowBegin + (i - manifolds_[x].begin)];
+        ContactConstraint& c = contacts[i];
+        c.normalImpulse = w.impulse[0][l];
+        for (int e = 0; e < 3; ++e) c.frictionImpulse[e] = w.impulse[1][l] * w.u[1][e][l] + w.impulse[2][l] * w.u[2][e][l];
+        stats.maxImpulse = std::max(stats.maxImpulse, c.normalImpulse);
+      }
+    }
   return stats;
 }
 
@@ -710,11 +890,14 @@ bool pairLess(int a0, int b0, int a1, int b1) noexcept { return a0 < a1 || (a0 =
 
 void ContactCache::reserve(std::size_t contacts) {
   entries_.reserve(contacts);
+  staged_.reserve(contacts);
+  runs_.reserve(contacts);
   used_.reserve(contacts);
 }
 
 void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<const SolverBody> bodies) {
-  entries_.clear();
+  staged_.clear();
+  runs_.clear();
   // A pair's contacts are consecutive: its rotations are made once.
   int lastA = 0, lastB = 0;
   PoseRef pa, pb;
@@ -728,7 +911,9 @@ void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<
       pb = poseOf(bodies, c.bodyB);
       toA = pa.q.toRotationMatrix().transpose();
       toB = pb.q.toRotationMatrix().transpose();
+      runs_.push_back({c.bodyA, c.bodyB, static_cast<std::uint32_t>(i), static_cast<std::uint32_t>(i)});
     }
+    ++runs_.back().end;
     Entry e;
     e.a = c.bodyA;
     e.b = c.bodyB;
@@ -740,10 +925,15 @@ void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<
     e.normal = c.point.normal;
     e.normalImpulse = c.normalImpulse;
     e.frictionLocalA = toA * c.frictionImpulse;
-    entries_.push_back(e);
+    staged_.push_back(e);
   }
-  std::sort(entries_.begin(), entries_.end(),
-            [](const Entry& x, const Entry& y) { return pairLess(x.a, x.b, y.a, y.b); });
+  // Sorted by pair, a pair's contacts in input order: the runs are sorted
+  // (far fewer than the contacts) and the entries copied run by run.
+  std::sort(runs_.begin(), runs_.end(), [](const Run& x, const Run& y) {
+    return pairLess(x.a, x.b, y.a, y.b) || (x.a == y.a && x.b == y.b && x.begin < y.begin);
+  });
+  entries_.clear();
+  for (const Run& r : runs_) entries_.insert(entries_.end(), staged_.begin() + r.begin, staged_.begin() + r.end);
 }
 
 int ContactCache::persist(int a, int b, std::span<const SolverBody> bodies, double margin, double mu, double e,

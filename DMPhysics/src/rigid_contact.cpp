@@ -117,22 +117,50 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
   const auto push = [&c](std::uint32_t a, std::uint32_t b) {
     c.pairs.push_back({std::min(a, b), std::max(a, b)});
   };
-  c.order.clear();
   c.sweep.clear();
   c.pairs.clear();
   const auto n = static_cast<std::uint32_t>(bodies_.size());
-  for (std::uint32_t i = 0; i < n; ++i)
-    if (collider(i) && !unbounded(box[i]))
-      c.sweep.push_back({{box[i].min().x(), box[i].min().y(), box[i].min().z()},
-                         {box[i].max().x(), box[i].max().y(), box[i].max().z()},
-                         i});
-  // Sort-and-sweep on x over the packed boxes; ties broken by index so the
-  // order is reproducible. Boxes within the contact margin pair up too
-  // (persistent and speculative contacts).
+  const auto packed = [&box](std::uint32_t i) {
+    return RigidContactState::SweepBox{{box[i].min().x(), box[i].min().y(), box[i].min().z()},
+                                       {box[i].max().x(), box[i].max().y(), box[i].max().z()},
+                                       i};
+  };
+  // Sort-and-sweep on x over the packed boxes; ties broken by index, so the
+  // sorted order is unique (reproducible whatever the sort). The boxes come
+  // in last step's sorted order (c.order), which bodies change little from
+  // step to step: an insertion sort finishes in about linear time, and falls
+  // back to std::sort when it has to move too much. Boxes within the contact
+  // margin pair up too (persistent and speculative contacts).
   using SweepBox = RigidContactState::SweepBox;
-  std::sort(c.sweep.begin(), c.sweep.end(), [](const SweepBox& p, const SweepBox& q) {
+  const auto before = [](const SweepBox& p, const SweepBox& q) {
     return p.lo[0] < q.lo[0] || (p.lo[0] == q.lo[0] && p.id < q.id);
-  });
+  };
+  std::size_t bounded = 0;
+  for (std::uint32_t i = 0; i < n; ++i) bounded += collider(i) && !unbounded(box[i]);
+  bool sorted = false;
+  if (c.order.size() == bounded && bounded > 0) {
+    bool same = true;  // the same colliders as last step (materials may change)
+    for (const std::uint32_t i : c.order) {
+      same = same && i < n && collider(i) && !unbounded(box[i]);
+      if (same) c.sweep.push_back(packed(i));
+    }
+    const std::size_t budget = same ? 8 * bounded : 0;  // element moves before giving up
+    std::size_t moves = same ? 0 : 1;
+    for (std::size_t k = 1; k < bounded && moves <= budget; ++k) {
+      const SweepBox x = c.sweep[k];
+      std::size_t j = k;
+      for (; j > 0 && before(x, c.sweep[j - 1]) && moves <= budget; --j, ++moves) c.sweep[j] = c.sweep[j - 1];
+      c.sweep[j] = x;
+    }
+    sorted = moves <= budget;
+  }
+  if (!sorted) {
+    c.sweep.clear();
+    for (std::uint32_t i = 0; i < n; ++i)
+      if (collider(i) && !unbounded(box[i])) c.sweep.push_back(packed(i));
+    std::sort(c.sweep.begin(), c.sweep.end(), before);
+  }
+  c.order.clear();
   const double margin = contactSettings_.contactMargin;
   const std::size_t m = c.sweep.size();
   for (std::size_t k = 0; k < m; ++k) {

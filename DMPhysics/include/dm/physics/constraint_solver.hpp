@@ -22,7 +22,13 @@
 //      clamped (contact normal ≥ 0, friction inside the Coulomb cone
 //      |λt| ≤ μ·λn, limit rows ≥ 0) and only the clamped change applied.
 //      Joint rows come first, then per contact the two friction rows and the
-//      normal row, so that non-penetration is the last word of a sweep;
+//      normal row, so that non-penetration is the last word of a sweep.
+//      Contacts are taken manifold by manifold (consecutive contacts of one
+//      body pair); up to four manifolds that share no dynamic body are solved
+//      side by side in SIMD lanes (two SSE2 registers of doubles, lane by
+//      lane the scalar arithmetic), which gives exactly the result of solving
+//      them one after the other. The sweep order is the input order, each
+//      manifold joined by the first independent ones of the next 16;
 //   4. position correction: with split impulses (default) the penetration and
 //      joint drift are removed by *pseudo-velocities* (SolverBody::push*)
 //      solved in separate iterations and integrated into the positions only,
@@ -260,20 +266,6 @@ class ConstraintSolver {
     double pushImpulse = 0.0;
     double* out = nullptr;  // where the accumulated impulse goes back (joints)
   };
-  /// Internal: the three rows of one contact point (normal k = 0, tangents
-  /// k = 1, 2) packed together. The linear Jacobian is ∓u on A/B, so only the
-  /// directions are stored; angular parts are angA = −rA × u, angB = rB × u.
-  struct ContactRow {
-    int a = 0, b = 0;
-    double imA = 0.0, imB = 0.0;
-    double friction = 0.0;
-    double target = 0.0, pushTarget = 0.0, pushImpulse = 0.0;
-    Vec3 u[3];                // normal, tangent 1, tangent 2
-    Vec3 angA[3], angB[3];    // angular Jacobians
-    Vec3 mAngA[3], mAngB[3];  // I⁻¹·angA, I⁻¹·angB
-    double effMass[3] = {0.0, 0.0, 0.0};
-    double impulse[3] = {0.0, 0.0, 0.0};
-  };
   /// Internal per-body velocity pair (v, ω) or pseudo-velocity pair (see Row).
   struct Velocity {
     Vec3 v, w;
@@ -282,7 +274,32 @@ class ConstraintSolver {
   struct Manifold {
     std::uint32_t begin = 0, end = 0;
   };
-  static constexpr std::uint32_t kNoManifold = 0xffffffffu;  ///< internal: no partner manifold
+  /// Internal: manifolds solved side by side, one per SIMD lane.
+  static constexpr int kLanes = 4;
+  /// Internal: the three rows (normal d = 0, tangents d = 1, 2) of contact k
+  /// of each manifold of a Group, lane by lane (structure of arrays; a lane
+  /// whose manifold has fewer contacts holds zeros, which the sweeps leave at
+  /// zero impulse). The linear Jacobian is ∓u on A/B, so only the directions
+  /// are stored; angular parts are angA = −rA × u, angB = rB × u;
+  /// [d][c][lane] is component c of row d.
+  struct WideRow {
+    double u[3][3][kLanes];                          // normal, tangent 1, tangent 2
+    double angA[3][3][kLanes], angB[3][3][kLanes];   // angular Jacobians
+    double mAngA[3][3][kLanes], mAngB[3][3][kLanes];  // I⁻¹·angA, I⁻¹·angB
+    double effMass[3][kLanes], impulse[3][kLanes];
+    double imA[kLanes], imB[kLanes];  // inverse masses
+    double friction[kLanes];
+    double target[kLanes], pushTarget[kLanes], pushImpulse[kLanes];
+  };
+  /// Internal: up to kLanes manifolds that share no dynamic body, with their
+  /// WideRows [rowBegin, rowEnd) and per lane its manifold (kNoManifold: an
+  /// empty lane) and body indices (an empty lane names the static world).
+  struct Group {
+    std::uint32_t rowBegin = 0, rowEnd = 0;
+    std::uint32_t manifold[kLanes];
+    int a[kLanes], b[kLanes];
+  };
+  static constexpr std::uint32_t kNoManifold = 0xffffffffu;  ///< internal: an empty lane
 
  private:
   Status validate(std::span<const SolverBody> bodies, std::span<const ContactConstraint> contacts,
@@ -290,7 +307,7 @@ class ConstraintSolver {
   void buildJointRows(std::span<const SolverBody> bodies, Joint& joint, double dt, const SolverOptions& o);
   void buildContactRows(std::span<const SolverBody> bodies, std::span<const ContactConstraint> contacts,
                         double dt, const SolverOptions& o);
-  void scheduleManifolds();
+  void scheduleManifolds(std::span<const ContactConstraint> contacts);
   template <bool kResidual>
   double sweep();
   void pushSweep();
@@ -300,12 +317,13 @@ class ConstraintSolver {
   std::vector<double> invMass_;
   std::vector<Mat3> invInertia_;
   std::vector<Row> jointRows_;
-  std::vector<ContactRow> contactRows_;  // one per contact
   std::vector<Manifold> manifolds_;
   std::vector<std::uint8_t> scheduled_;
-  // Sweep order: manifold pairs (second kNoManifold: alone) that share no
-  // dynamic body, solved interleaved so their dependency chains overlap.
-  std::vector<std::array<std::uint32_t, 2>> schedule_;
+  // Sweep order: groups of up to kLanes manifolds that share no dynamic
+  // body, solved side by side in SIMD lanes (their rows in wideRows_); the
+  // groups follow the input order of their first manifold.
+  std::vector<Group> groups_;
+  std::vector<WideRow> wideRows_;
 };
 
 /// Keeps the accumulated impulses of the contacts of the last step and hands
@@ -328,7 +346,8 @@ class ContactCache {
   ///   cache.store(contacts, bodies);
   /// @endcode
   int warmStart(std::span<ContactConstraint> contacts, std::span<const SolverBody> bodies);
-  /// Replaces the stored contacts by `contacts` (after solve()). O(n log n).
+  /// Replaces the stored contacts by `contacts` (after solve()). O(n + r log r)
+  /// for r runs of consecutive contacts of one pair.
   void store(std::span<const ContactConstraint> contacts, std::span<const SolverBody> bodies);
   /// Speculative contacts for the pair (a, b) (as stored, a before b) whose
   /// shapes no longer overlap: each stored contact of the pair is carried by
@@ -355,7 +374,13 @@ class ContactCache {
     double normalImpulse = 0.0;
     Vec3 frictionLocalA;  // friction impulse in A's frame
   };
-  std::vector<Entry> entries_;
+  struct Run {  // consecutive input contacts [begin, end) of one pair
+    int a = 0, b = 0;
+    std::uint32_t begin = 0, end = 0;
+  };
+  std::vector<Entry> entries_;  // sorted by pair (a, b); a pair's in input order
+  std::vector<Entry> staged_;   // store(): entries in input order
+  std::vector<Run> runs_;       // store(): the input's pair runs
   std::vector<std::uint8_t> used_;
 };
 

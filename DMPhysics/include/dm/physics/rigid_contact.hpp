@@ -6,7 +6,8 @@
 // Pipeline (PhysicsWorld::step, dm/physics/world.hpp), for bodies with a
 // shape whose material has `collides` set:
 //   1. broad phase at the start-of-step poses: a sort-and-sweep on x of the
-//      world AABBs kept in the WorldState (dm::boxesOverlap), planes
+//      world AABBs kept in the WorldState (dm::boxesOverlap; the sort is an
+//      insertion sort from the last step's order), planes
 //      (unbounded shapes) paired with every bounded collider; pairs of two
 //      non-dynamic bodies and pairs joined by a joint are skipped; pairs
 //      are ordered bottom-up (by the lower box bottom along z, then
@@ -143,7 +144,7 @@ struct RigidContactState {
   std::vector<SolverBody> bodies;           ///< one per world body, start-of-step poses
   std::vector<ContactConstraint> contacts;  ///< the step's contacts
   std::vector<Joint> joints;                ///< the world's joints with their warm-start impulses
-  std::vector<std::uint32_t> order;         ///< broad phase: bounded colliders sorted by min x
+  std::vector<std::uint32_t> order;         ///< broad phase: bounded colliders sorted by min x (next sort's start)
   struct SweepBox {                         ///< broad phase: a collider's box, packed for the sweep
     double lo[3], hi[3];
     std::uint32_t id;
