@@ -6,7 +6,9 @@
 // frame once and scans them as structure-of-arrays coordinates (above 16
 // vertices, the refinement climbs the hull's edges from the last support
 // instead), carrying vertex indices instead of points through the portal
-// updates.
+// updates. The boolean GJK, with a few support calls per query, scans small
+// hulls' own structure-of-arrays coordinates (ConvexHull::coordinates()) in
+// place with the same scan, B's through a rotation per support.
 #include <dm/collide/gjk.hpp>
 #include <dm/math/geometry.hpp>
 
@@ -14,6 +16,8 @@
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <span>
+#include <type_traits>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -38,6 +42,48 @@ struct Vertex {
 // 2-wide scan, or on larger hulls a short climb along the hull's edges, with
 // no rotation of the direction or of the answer.
 constexpr std::uint32_t kFrameVertices = 64;
+// Hulls up to this many vertices are scanned in place by the boolean GJK.
+constexpr std::uint32_t kBooleanScanVertices = 32;
+static_assert(kBooleanScanVertices <= kFrameVertices, "the scan's stack array");
+
+// Index of the vertex furthest along d (the first on ties; 0 for a NaN
+// direction) among `padded` vertices with coordinates x, y, z: padded ≤
+// kFrameVertices, a multiple of 4, the padding copies of vertex 0 (never
+// chosen: ties go to the lower index). The largest dot product first
+// (independent 2-wide maxima), then the lanes equal to it as a bit mask:
+// the index comes out of registers, with no branch on the data.
+[[gnu::always_inline]] inline std::uint32_t furthestScan(const double* x, const double* y, const double* z,
+                                                         std::uint32_t padded, const Vec3& d) noexcept {
+#if defined(__SSE2__)
+  const __m128d dx = _mm_set1_pd(d.x()), dy = _mm_set1_pd(d.y()), dz = _mm_set1_pd(d.z());
+  __m128d dots[kFrameVertices / 2];
+  __m128d m0 = _mm_set1_pd(-std::numeric_limits<double>::infinity()), m1 = m0;
+  for (std::uint32_t i = 0; i < padded; i += 4) {
+    const __m128d p0 =
+        _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, _mm_loadu_pd(x + i)), _mm_mul_pd(dy, _mm_loadu_pd(y + i))),
+                   _mm_mul_pd(dz, _mm_loadu_pd(z + i)));
+    const __m128d p1 = _mm_add_pd(
+        _mm_add_pd(_mm_mul_pd(dx, _mm_loadu_pd(x + i + 2)), _mm_mul_pd(dy, _mm_loadu_pd(y + i + 2))),
+        _mm_mul_pd(dz, _mm_loadu_pd(z + i + 2)));
+    dots[i / 2] = p0, dots[i / 2 + 1] = p1;
+    m0 = _mm_max_pd(m0, p0), m1 = _mm_max_pd(m1, p1);
+  }
+  m0 = _mm_max_pd(m0, m1);
+  m0 = _mm_max_pd(m0, _mm_shuffle_pd(m0, m0, 1));
+  std::uint64_t bits = 0;
+  for (std::uint32_t c = 0; c < padded / 2; ++c)
+    bits |= std::uint64_t(static_cast<unsigned>(_mm_movemask_pd(_mm_cmpeq_pd(dots[c], m0)))) << (2 * c);
+  return bits ? static_cast<std::uint32_t>(std::countr_zero(bits)) : 0u;  // none: NaN direction
+#else
+  std::uint32_t best = 0;
+  double top = d.x() * x[0] + d.y() * y[0] + d.z() * z[0];
+  for (std::uint32_t i = 1; i < padded; ++i) {
+    const double p = d.x() * x[i] + d.y() * y[i] + d.z() * z[i];
+    if (p > top) top = p, best = i;
+  }
+  return best;
+#endif
+}
 
 struct FrameVertices {
   alignas(16) double x[kFrameVertices];
@@ -109,41 +155,36 @@ struct FrameVertices {
     return cur;
   }
 
-  // Index of the vertex furthest along d (the first on ties). The largest
-  // dot product first (independent 2-wide maxima), then the lanes equal to
-  // it as a bit mask: the index comes out of registers, with no branch and
-  // no store on the way.
+  // Index of the vertex furthest along d (the first on ties).
+  std::uint32_t furthest(const Vec3& d) const noexcept { return furthestScan(x, y, z, (n + 3) & ~3u, d); }
+};
+
+// A hull's own coordinates (ConvexHull::coordinates()), searched by the
+// same scan without a copy: for queries that call the support mapping only
+// a few times. kMoved: (r, t) maps them into A's frame, per support (the
+// direction in, the answer out).
+template <bool kMoved>
+struct HullCoordinates {
+  const double* x;
+  const double* y;
+  const double* z;
+  std::uint32_t padded;
+  const Mat3& r;
+  const Vec3& t;
+
+  HullCoordinates(const ConvexHull& h, const Mat3& rot, const Vec3& trans) noexcept : r(rot), t(trans) {
+    const std::span<const double> c = h.coordinates();
+    padded = static_cast<std::uint32_t>(c.size() / 3);
+    x = c.data(), y = x + padded, z = y + padded;
+  }
   std::uint32_t furthest(const Vec3& d) const noexcept {
-    const std::uint32_t padded = (n + 3) & ~3u;
-#if defined(__SSE2__)
-    const __m128d dx = _mm_set1_pd(d.x()), dy = _mm_set1_pd(d.y()), dz = _mm_set1_pd(d.z());
-    __m128d dots[kFrameVertices / 2];
-    __m128d m0 = _mm_set1_pd(-std::numeric_limits<double>::infinity()), m1 = m0;
-    for (std::uint32_t i = 0; i < padded; i += 4) {
-      const __m128d p0 =
-          _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, _mm_load_pd(x + i)), _mm_mul_pd(dy, _mm_load_pd(y + i))),
-                     _mm_mul_pd(dz, _mm_load_pd(z + i)));
-      const __m128d p1 = _mm_add_pd(
-          _mm_add_pd(_mm_mul_pd(dx, _mm_load_pd(x + i + 2)), _mm_mul_pd(dy, _mm_load_pd(y + i + 2))),
-          _mm_mul_pd(dz, _mm_load_pd(z + i + 2)));
-      dots[i / 2] = p0, dots[i / 2 + 1] = p1;
-      m0 = _mm_max_pd(m0, p0), m1 = _mm_max_pd(m1, p1);
-    }
-    m0 = _mm_max_pd(m0, m1);
-    m0 = _mm_max_pd(m0, _mm_shuffle_pd(m0, m0, 1));
-    std::uint64_t bits = 0;
-    for (std::uint32_t c = 0; c < padded / 2; ++c)
-      bits |= std::uint64_t(static_cast<unsigned>(_mm_movemask_pd(_mm_cmpeq_pd(dots[c], m0)))) << (2 * c);
-    return bits ? static_cast<std::uint32_t>(std::countr_zero(bits)) : 0u;  // none: NaN direction
-#else
-    std::uint32_t best = 0;
-    double top = d.x() * x[0] + d.y() * y[0] + d.z() * z[0];
-    for (std::uint32_t i = 1; i < padded; ++i) {
-      const double p = d.x() * x[i] + d.y() * y[i] + d.z() * z[i];
-      if (p > top) top = p, best = i;
-    }
-    return best;
-#endif
+    if constexpr (kMoved) return furthestScan(x, y, z, padded, r.transpose() * d);
+    return furthestScan(x, y, z, padded, d);
+  }
+  Vec3 operator[](std::uint32_t i) const noexcept {
+    const Vec3 v(x[i], y[i], z[i]);
+    if constexpr (kMoved) return r * v + t;
+    return v;
   }
 };
 
@@ -161,6 +202,10 @@ struct MinkowskiPair {
     t = ra.transpose() * (poseB.translation() - poseA.translation());
   }
 
+  // A point inside A − B (A's frame): the difference of the shapes'
+  // interior points.
+  Vec3 interior() const noexcept { return A.interiorPoint() - (r * B.interiorPoint() + t); }
+
   // Support point of A − B along d (A's frame), without its two parts.
   Vec3 supportW(const Vec3& d) noexcept {
     return A.supportCore(d, hintA) - (r * B.supportCore(-(r.transpose() * d), hintB) + t);
@@ -174,6 +219,56 @@ struct MinkowskiPair {
     v.w = v.a - v.b;
     return v;
   }
+};
+
+// Support mappings of A − B for the boolean GJK and MPR. A Point is a point
+// `w` of A − B with what it takes to recover the two shapes' points it came
+// from.
+struct ShapeSupports {  // any convex shapes
+  MinkowskiPair& m;
+  using Point = Vertex;
+  Point operator()(const Vec3& d) const noexcept { return m.support(d); }
+  Point refine(const Vec3& d, const Point& /*near*/) const noexcept { return m.support(d); }
+  static Vec3 pointA(const Point& p) noexcept { return p.a; }
+  static Vec3 pointB(const Point& p) noexcept { return p.b; }
+};
+
+struct ShapeSupportsW {  // any convex shapes, the point of A − B only
+  MinkowskiPair& m;
+  struct Point {
+    Vec3 w;
+  };
+  Point operator()(const Vec3& d) const noexcept { return {m.supportW(d)}; }
+};
+
+// Two hulls, A's and B's vertices in A's frame through FA and FB
+// (FrameVertices or HullCoordinates): points carry vertex indices.
+template <class FA, class FB>
+struct HullSupports {
+  const FA& A;
+  const FB& B;
+  struct Point {
+    Vec3 w;
+    std::uint32_t ia, ib;
+  };
+  Point operator()(const Vec3& d) const noexcept {
+    Point p;
+    p.ia = A.furthest(d);
+    p.ib = B.furthest(-d);
+    p.w = A[p.ia] - B[p.ib];
+    return p;
+  }
+  // The support along d, which is close to the one along the direction that
+  // gave `near`.
+  Point refine(const Vec3& d, const Point& near) const noexcept {
+    Point p;
+    p.ia = A.furthestFrom(d, near.ia);
+    p.ib = B.furthestFrom(-d, near.ib);
+    p.w = A[p.ia] - B[p.ib];
+    return p;
+  }
+  Vec3 pointA(const Point& p) const noexcept { return A[p.ia]; }
+  Vec3 pointB(const Point& p) const noexcept { return B[p.ib]; }
 };
 
 struct Simplex {
@@ -342,14 +437,18 @@ constexpr int kQuickIterations = 32;
 // points holding the origin (overlap). A support gain within rounding of
 // zero (touching), a direction that vanishes (origin on a simplex edge) or
 // no decision within `maxIterations` give Unsure, and the caller runs the
-// exact GJK. `sep` receives the separating direction; on overlap `s` holds
-// the tetrahedron. kFull: also keep the points of A and B (for EPA).
-template <bool kFull>
-Quick quickIntersect(MinkowskiPair& m, Vec3 d, int maxIterations, Vec3& sep, Simplex& s,
-                     int& iterations) noexcept {
-  Vertex* p = s.v;  // simplex, p[0] the newest point
-  int n = 0;
-  double scale = 0;                 // largest |w|² seen: the magnitude rounding is relative to
+// exact GJK. `sep` receives the separating direction; on overlap `p[0..3]`
+// holds the tetrahedron. `Supports` is a support mapping of A − B as for
+// runMpr() (its points need only `w`). The simplex starts as p[0, n): empty,
+// or one point inside A − B (any point of A − B serves a certificate, and
+// a free one saves a support pair when the origin is inside).
+template <class Supports>
+Quick quickIntersect(const Supports& support, Vec3 d, int maxIterations, Vec3& sep,
+                     typename Supports::Point* p, int n, int& iterations) noexcept {
+  using Point = typename Supports::Point;
+  // Simplex p[0, n), p[0] the newest point. `scale`: the largest |w|² seen,
+  // the magnitude rounding is relative to.
+  double scale = n > 0 ? p[0].w.squaredNorm() : 0;
   constexpr double kNoise = 1e-26;  // (1e-13)²
   // Direction towards the origin from segment [a, b] where the origin
   // projects inside it; false when the origin is (nearly) on the line.
@@ -358,10 +457,13 @@ Quick quickIntersect(MinkowskiPair& m, Vec3 d, int maxIterations, Vec3& sep, Sim
     return d.squaredNorm() > kNoise * ab.squaredNorm() * ab.squaredNorm() * scale;
   };
   // Origin region of triangle (a, b, c) with a the newest point (the
-  // regions of b, c and edge bc are excluded by construction). Reorders p.
-  // False: unsure.
-  auto triangle = [&](const Vertex& va, const Vertex& vb, const Vertex& vc) {
-    const Vertex a = va, b = vb, c = vc;
+  // regions of b, c and edge bc are excluded by construction, unless b or c
+  // is the interior point the simplex may start with: then a wrong guess
+  // costs an iteration, never a wrong answer, since the tetrahedron test
+  // checks every face through the newest point and the base's side is set
+  // here). Reorders p. False: unsure.
+  auto triangle = [&](const Point& va, const Point& vb, const Point& vc) {
+    const Point a = va, b = vb, c = vc;
     const Vec3 ab = b.w - a.w, ac = c.w - a.w, ao = -a.w;
     const Vec3 abc = ab.cross(ac);
     if (abc.cross(ac).dot(ao) > 0) {
@@ -387,12 +489,7 @@ Quick quickIntersect(MinkowskiPair& m, Vec3 d, int maxIterations, Vec3& sep, Sim
     return true;
   };
   for (iterations = 0; iterations < maxIterations; ++iterations) {
-    Vertex w;
-    if constexpr (kFull) {
-      w = m.support(d);
-    } else {
-      w = {m.supportW(d), Vec3::Zero(), Vec3::Zero()};  // A's and B's points unused
-    }
+    const Point w = support(d);
     const double dw = d.dot(w.w);
     scale = std::max(scale, w.w.squaredNorm());
     if (dw * dw <= kNoise * d.squaredNorm() * scale) return Quick::Unsure;  // touching within rounding
@@ -430,7 +527,6 @@ Quick quickIntersect(MinkowskiPair& m, Vec3 d, int maxIterations, Vec3& sep, Sim
         } else if (ae.cross(ab).dot(ao) > 0) {
           sure = triangle(p[0], p[3], p[1]);
         } else {
-          s.n = 4;
           return Quick::Overlap;
         }
         break;
@@ -729,44 +825,6 @@ struct MprOut {
   Vec3 pa, pb;   // A's frame
 };
 
-// Support mappings of A − B for runMpr(). A Point is a point of A − B with
-// what it takes to recover the two shapes' points it came from.
-struct ShapeSupports {  // any convex shapes
-  MinkowskiPair& m;
-  using Point = Vertex;
-  Point operator()(const Vec3& d) const noexcept { return m.support(d); }
-  Point refine(const Vec3& d, const Point& /*near*/) const noexcept { return m.support(d); }
-  static Vec3 pointA(const Point& p) noexcept { return p.a; }
-  static Vec3 pointB(const Point& p) noexcept { return p.b; }
-};
-
-struct HullSupports {  // two small hulls, both in A's frame: points carry vertex indices
-  const FrameVertices& A;
-  const FrameVertices& B;
-  struct Point {
-    Vec3 w;
-    std::uint32_t ia, ib;
-  };
-  Point operator()(const Vec3& d) const noexcept {
-    Point p;
-    p.ia = A.furthest(d);
-    p.ib = B.furthest(-d);
-    p.w = A[p.ia] - B[p.ib];
-    return p;
-  }
-  // The support along d, which is close to the one along the direction that
-  // gave `near`.
-  Point refine(const Vec3& d, const Point& near) const noexcept {
-    Point p;
-    p.ia = A.furthestFrom(d, near.ia);
-    p.ib = B.furthestFrom(-d, near.ib);
-    p.w = A[p.ia] - B[p.ib];
-    return p;
-  }
-  Vec3 pointA(const Point& p) const noexcept { return A[p.ia]; }
-  Vec3 pointB(const Point& p) const noexcept { return B[p.ib]; }
-};
-
 // `interior`: a point inside A − B (A's frame); `scale`: the pair's size,
 // which the tolerances are relative to.
 template <class Supports>
@@ -886,14 +944,37 @@ MprStop runMpr(const Supports& support, Vec3 interior, double scale, const GjkOp
 [[gnu::noinline]] MprStop mprOnCores(MinkowskiPair& m, const GjkOptions& opt, MprOut& out, Vec3& sep,
                                      int& iterations) noexcept {
   const double scale = m.A.boundingSphere().radius + m.B.boundingSphere().radius + m.t.norm();
-  const Vec3 interior = m.A.interiorPoint() - (m.r * m.B.interiorPoint() + m.t);
+  const Vec3 interior = m.interior();
   if (m.A.type() == ShapeType::ConvexHull && m.B.type() == ShapeType::ConvexHull) {
     FrameVertices a, b;
     if (a.assign(static_cast<const ConvexHull&>(m.A), Mat3::Identity(), Vec3::Zero(), false) &&
         b.assign(static_cast<const ConvexHull&>(m.B), m.r, m.t, true))
-      return runMpr(HullSupports{a, b}, interior, scale, opt, out, sep, iterations);
+      return runMpr(HullSupports<FrameVertices, FrameVertices>{a, b}, interior, scale, opt, out, sep,
+                    iterations);
   }
   return runMpr(ShapeSupports{m}, interior, scale, opt, out, sep, iterations);
+}
+
+// The boolean GJK on the cores of the pair, its simplex started with the
+// interior point `interior` of A − B. It calls the support mapping a few
+// times only, so hulls are not copied: up to kBooleanScanVertices vertices
+// they are scanned in place (HullCoordinates), B's with a rotation per
+// support; larger hulls climb their edges in supportCore().
+Quick quickOnCores(MinkowskiPair& m, const Vec3& interior, const Vec3& d, int maxIterations, Vec3& sep,
+                   int& iterations) noexcept {
+  const auto run = [&](const auto& support) {
+    typename std::remove_cvref_t<decltype(support)>::Point p[4];
+    p[0] = {};
+    p[0].w = interior;
+    return quickIntersect(support, d, maxIterations, sep, p, 1, iterations);
+  };
+  if (m.A.type() == ShapeType::ConvexHull && m.B.type() == ShapeType::ConvexHull) {
+    const auto& a = static_cast<const ConvexHull&>(m.A);
+    const auto& b = static_cast<const ConvexHull&>(m.B);
+    if (a.vertices().size() <= kBooleanScanVertices && b.vertices().size() <= kBooleanScanVertices)
+      return run(HullSupports<HullCoordinates<false>, HullCoordinates<true>>{{a, m.r, m.t}, {b, m.r, m.t}});
+  }
+  return run(ShapeSupportsW{m});
 }
 
 void storeCache(GjkCache* cache, const Isometry3& poseA, const Vec3& v, bool separated,
@@ -918,8 +999,13 @@ bool gjkIntersect(const ConvexShape& a, const Isometry3& poseA, const ConvexShap
   Vec3 v = Vec3::Zero();
   int it = 0;
   if (margin == 0) {
-    const Quick q = quickIntersect<false>(m, -startDirection(cache, poseA, m),
-                                          std::min(options.maxIterations, kQuickIterations), v, s, it);
+    // The boolean GJK starts from an interior point of A − B: a simplex
+    // vertex for free, so that three support pairs can prove an overlap.
+    const Vec3 interior = m.interior();
+    const Vec3 d = cache && cache->direction.squaredNorm() > 0
+                       ? Vec3(-(poseA.linear().transpose() * cache->direction))
+                       : Vec3(-interior);
+    const Quick q = quickOnCores(m, interior, d, std::min(options.maxIterations, kQuickIterations), v, it);
     if (q != Quick::Unsure) {
       storeCache(cache, poseA, -v, q == Quick::Separated, m, it);
       return q == Quick::Overlap;
@@ -975,7 +1061,9 @@ GjkResult gjkDistance(const ConvexShape& a, const Isometry3& poseA, const Convex
   }
   if (options.penetration && quick == Quick::Unsure) {
     Vec3 sep;
-    quick = quickIntersect<true>(m, -dir0, std::min(options.maxIterations, kQuickIterations), sep, s, it);
+    quick = quickIntersect(ShapeSupports{m}, -dir0, std::min(options.maxIterations, kQuickIterations), sep,
+                           s.v, 0, it);
+    if (quick == Quick::Overlap) s.n = 4;
     if (quick == Quick::Separated) dir0 = -sep;
   }
   if (quick == Quick::Overlap) {

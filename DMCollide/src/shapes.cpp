@@ -261,6 +261,10 @@ Result<std::shared_ptr<const ConvexHull>> ConvexHull::create(std::span<const Vec
           if (d.dot(pos[v]) > d.dot(pos[best])) best = v;
         hull->startVertex_[(face * g + iu) * g + iv] = best;
       }
+  const std::size_t padded = (n + 3) & ~std::size_t(3);
+  hull->coordinates_.resize(3 * padded);
+  for (std::size_t i = 0; i < padded; ++i)
+    for (int k = 0; k < 3; ++k) hull->coordinates_[k * padded + i] = pos[i < n ? i : 0][k];
   hull->bounds_ = hull->mesh_.bounds();
   const Vec3 c = hull->bounds_.center();
   double r2 = 0;

@@ -592,6 +592,48 @@ TEST(Gjk, MprEdgeClimbFindsTheSameSupports) {
   }
 }
 
+// The boolean on hull pairs: small hulls are scanned in place (B's through a
+// rotation per support), larger ones climb their edges, and the simplex
+// starts at an interior point of A − B. Whatever the path, the answer is the
+// sign of the exact distance outside a 1e-9 m band around touching, cold,
+// warm from the previous pose's cache, and with the centres coinciding.
+TEST(Gjk, HullBooleanMatchesTheDistance) {
+  std::mt19937_64 rng(14);
+  std::vector<std::shared_ptr<const dm::ConvexHull>> hulls;
+  for (int nv : {4, 8, 32, 33, 64, 300}) {
+    auto h = dm::ConvexHull::create(spherePoints(rng, nv, 0.3));
+    ASSERT_TRUE(h.ok());
+    hulls.push_back(*h);
+  }
+  for (const auto& a : hulls) {
+    for (const auto& b : hulls) {
+      const std::size_t na = a->vertices().size(), nb = b->vertices().size();
+      dm::GjkCache cache;
+      int hits = 0, misses = 0, near = 0;
+      for (int k = 0; k < 400; ++k) {
+        const Isometry3 pa = randomPose(rng, 0.1);
+        Isometry3 pb = randomPose(rng, 0.7);
+        dm::GjkResult r = dm::gjkDistance(*a, pa, *b, pb);
+        if (k % 4 == 0) {  // near touching, either side
+          pb.translation() += ((k % 8 == 0 ? 1e-7 : -1e-7) - r.distance) * r.normal;
+          r = dm::gjkDistance(*a, pa, *b, pb);
+          ++near;
+        }
+        if (std::abs(r.distance) <= 1e-9) continue;
+        const bool hit = r.distance < 0;
+        (hit ? hits : misses)++;
+        ASSERT_EQ(dm::gjkIntersect(*a, pa, *b, pb), hit) << na << "-" << nb << " pose " << k;
+        ASSERT_EQ(dm::gjkIntersect(*a, pa, *b, pb, &cache), hit) << na << "-" << nb << " pose " << k;
+      }
+      EXPECT_GT(hits, 40) << na << "-" << nb;
+      EXPECT_GT(misses, 40) << na << "-" << nb;
+      EXPECT_GT(near, 50) << na << "-" << nb;
+      const Isometry3 p = randomPose(rng, 0.5);
+      EXPECT_TRUE(dm::gjkIntersect(*a, p, *b, p)) << na << "-" << nb;
+    }
+  }
+}
+
 // Flat shapes: two coplanar overlapping triangles give a finite answer,
 // through EPA and through MPR (which falls back to EPA there).
 TEST(Gjk, DegenerateFlatPairIsFinite) {

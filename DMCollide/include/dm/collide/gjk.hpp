@@ -16,7 +16,9 @@
 // cheaper GJK that tracks only a search direction (Muratori's simplex
 // update) and answers only with a certificate — a separating direction or
 // a tetrahedron around the origin — falling back to the exact GJK when
-// rounding leaves it unsure. Everything works on the stack: no allocation,
+// rounding leaves it unsure. For booleans its simplex starts with a point
+// inside A − B (the shapes' interiorPoint()s), so that three support pairs
+// prove a typical overlap. Everything works on the stack: no allocation,
 // no locks, no exceptions, bounded iterations.
 //
 // @code

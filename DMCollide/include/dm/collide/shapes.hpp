@@ -312,6 +312,10 @@ class ConvexHull final : public ConvexShape {
     return {adjacency_.data() + adjacencyStart_[i], adjacency_.data() + adjacencyStart_[i + 1]};
   }
   Vec3 supportCore(const Vec3& d, std::uint32_t& hint) const noexcept override;
+  /// The vertices as structure of arrays for vectorised scans: the x of
+  /// vertices [0, p), then their y, then their z, where p is the vertex
+  /// count rounded up to a multiple of 4 and the padding repeats vertex 0.
+  std::span<const double> coordinates() const noexcept { return coordinates_; }
   /// The mean of the hull's vertices.
   Vec3 interiorPoint() const noexcept override { return centroid_; }
   Aabb localAabb() const noexcept override { return bounds_; }
@@ -329,6 +333,7 @@ class ConvexHull final : public ConvexShape {
   static constexpr int kCubeGrid = 8;
   static int cubeCell(const Vec3& d) noexcept;
   std::vector<std::uint32_t> startVertex_;
+  std::vector<double> coordinates_;  // see coordinates()
   Aabb bounds_;
   BoundingSphere sphere_;
   Vec3 centroid_ = Vec3::Zero();
