@@ -9,8 +9,13 @@
 #include <array>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <string>
 #include <utility>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 namespace dm {
 
@@ -421,12 +426,16 @@ void MassSpringBody::prepare() {
     incElem_[fill[ej_[e]]++] = std::uint32_t(e);
   }
   // Implicit path: slots sorted (stably) by owner = lower end, so that a
-  // sweep in owner order finishes particle i once owner i is done.
+  // sweep in owner order finishes particle i once owner i is done; runs
+  // padded to even length for the two-lane sweep.
   ownStart_.assign(n + 1, 0);
   for (std::size_t e = 0; e < m; ++e) ++ownStart_[std::min(ei_[e], ej_[e]) + 1];
-  for (std::size_t i = 0; i < n; ++i) ownStart_[i + 1] += ownStart_[i];
-  linkElem_.resize(m);
-  linkOther_.resize(m);
+  for (std::size_t i = 0; i < n; ++i) ownStart_[i + 1] += ownStart_[i] + (ownStart_[i + 1] & 1u);
+  const std::size_t slots = ownStart_[n];
+  linkElem_.assign(slots, kNoElement);
+  linkOther_.resize(slots);
+  for (std::size_t i = 0; i < n; ++i)
+    std::fill(linkOther_.begin() + ownStart_[i], linkOther_.begin() + ownStart_[i + 1], std::uint32_t(i));
   fill.assign(ownStart_.begin(), ownStart_.end() - 1);
   for (std::size_t e = 0; e < m; ++e) {
     const std::uint32_t s = fill[std::min(ei_[e], ej_[e])]++;
@@ -441,8 +450,8 @@ void MassSpringBody::prepare() {
       reach = std::max(reach, linkOther_[s] + 1);
     leadUntil_[i] = reach;
   }
-  block_.assign(m, LinkBlock{});
-  ef_.assign(3 * m, 0.0);
+  blocks_.assign(slots / 2, SlotPair{});
+  ef_.assign(3 * std::max(m, slots), 0.0);
   decay_.assign(m, 1.0);
   decayH_ = -1.0;
   dinv_.assign(6 * n, 0.0);
@@ -511,40 +520,80 @@ Status MassSpringBody::stepSymplectic(double h) {
   return ok();
 }
 
+namespace {
+
+#if defined(__GNUC__)
+// Two doubles in one SSE2 register (GCC/Clang vector extensions), lane by lane
+// the scalar IEEE arithmetic.
+using Lane2 = double __attribute__((vector_size(16)));
+inline Lane2 widen(const float (&f)[2]) noexcept {
+#if defined(__SSE2__)
+  double pair;
+  std::memcpy(&pair, f, sizeof pair);
+  return Lane2(_mm_cvtps_pd(_mm_castpd_ps(_mm_set_sd(pair))));
+#else
+  return Lane2{f[0], f[1]};
+#endif
+}
+inline Lane2 load2(const double* p) noexcept {
+  Lane2 v;
+  std::memcpy(&v, p, sizeof v);
+  return v;
+}
+inline void store2(double* p, Lane2 v) noexcept { std::memcpy(p, &v, sizeof v); }
+#else
+struct Lane2 {
+  double h[2];
+  double operator[](int i) const { return h[i]; }
+};
+inline Lane2 operator+(Lane2 a, Lane2 b) { return {{a.h[0] + b.h[0], a.h[1] + b.h[1]}}; }
+inline Lane2 operator-(Lane2 a, Lane2 b) { return {{a.h[0] - b.h[0], a.h[1] - b.h[1]}}; }
+inline Lane2 operator*(Lane2 a, Lane2 b) { return {{a.h[0] * b.h[0], a.h[1] * b.h[1]}}; }
+inline Lane2& operator+=(Lane2& a, Lane2 b) { return a = a + b; }
+inline Lane2 widen(const float (&f)[2]) noexcept { return {{f[0], f[1]}}; }
+inline Lane2 load2(const double* p) noexcept { return {{p[0], p[1]}}; }
+inline void store2(double* p, Lane2 v) noexcept { p[0] = v.h[0], p[1] = v.h[1]; }
+#endif
+
+}  // namespace
+
 // One sweep over the slots in owner order, accumulating y = (M + h C + h² K) v
 // restricted to the free particles, with v taken as 0 on pinned particles
 // (the callers keep it so). Each slot's block is applied once: it adds
 // B (v_i − v_j) to the owner i, held in registers, and subtracts it from the
-// other end j, in y. Before owner i, lead(k) runs for every particle k not
-// yet led up to leadUntil_[i]: it must set v_k and y_k = (1 + h·drag) m_k v_k,
-// which is the first write to y_k. After owner i, no slot touches particle i
-// again: trail(i, y_i) receives its finished row (y_i is not stored; pinned
-// particles get a meaningless row that trail must ignore). The row of i thus
-// sums the mass term, then the slots of lower owners, then i's own, in slot
-// order.
+// other end j, in y; two slots at a time, one per lane. Before owner i,
+// lead(k) runs for every particle k not yet led up to leadUntil_[i]: it must
+// set v_k and y_k = (1 + h·drag) m_k v_k, which is the first write to y_k.
+// After owner i, no slot touches particle i again: trail(i, y_i) receives its
+// finished row (y_i is not stored; pinned particles get a meaningless row
+// that trail must ignore).
 template <class Lead, class Trail>
 void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const {
   const std::size_t n = particleCount();
   const std::uint32_t* own = ownStart_.data();
   const std::uint32_t* other = linkOther_.data();
-  const LinkBlock* blk = block_.data();
+  const SlotPair* blk = blocks_.data();
   std::size_t front = 0;
   for (std::size_t i = 0; i < n; ++i) {
     for (const std::size_t until = leadUntil_[i]; front < until; ++front) lead(front);
-    const double v0 = v[3 * i], v1 = v[3 * i + 1], v2 = v[3 * i + 2];
-    double a0 = y[3 * i], a1 = y[3 * i + 1], a2 = y[3 * i + 2];
-    for (std::uint32_t s = own[i], end = own[i + 1]; s < end; ++s) {
-      const LinkBlock& L = blk[s];
-      const double Ba = L.a, Bb = L.b, n0 = L.n[0], n1 = L.n[1], n2 = L.n[2];
-      double* yj = y + 3 * std::size_t(other[s]);
-      const double* vj = v + 3 * std::size_t(other[s]);
-      const double w0 = v0 - vj[0], w1 = v1 - vj[1], w2 = v2 - vj[2];
-      const double t = Bb * (n0 * w0 + n1 * w1 + n2 * w2);
-      const double f0 = Ba * w0 + t * n0, f1 = Ba * w1 + t * n1, f2 = Ba * w2 + t * n2;
+    const Lane2 v0 = {v[3 * i], v[3 * i]}, v1 = {v[3 * i + 1], v[3 * i + 1]},
+                v2 = {v[3 * i + 2], v[3 * i + 2]};
+    Lane2 a0 = {y[3 * i], 0.0}, a1 = {y[3 * i + 1], 0.0}, a2 = {y[3 * i + 2], 0.0};
+    for (std::uint32_t s = own[i], end = own[i + 1]; s < end; s += 2) {
+      const SlotPair& B = blk[s / 2];
+      const std::size_t jA = 3 * std::size_t(other[s]), jB = 3 * std::size_t(other[s + 1]);
+      const Lane2 w0 = v0 - Lane2{v[jA], v[jB]}, w1 = v1 - Lane2{v[jA + 1], v[jB + 1]},
+                  w2 = v2 - Lane2{v[jA + 2], v[jB + 2]};
+      const Lane2 n0 = widen(B.n0), n1 = widen(B.n1), n2 = widen(B.n2), ba = widen(B.a);
+      const Lane2 t = widen(B.b) * (n0 * w0 + n1 * w1 + n2 * w2);
+      const Lane2 f0 = ba * w0 + t * n0, f1 = ba * w1 + t * n1, f2 = ba * w2 + t * n2;
       a0 += f0, a1 += f1, a2 += f2;
-      yj[0] -= f0, yj[1] -= f1, yj[2] -= f2;
+      store2(y + jA, load2(y + jA) - Lane2{f0[0], f1[0]});
+      y[jA + 2] -= f2[0];
+      store2(y + jB, load2(y + jB) - Lane2{f0[1], f1[1]});
+      y[jB + 2] -= f2[1];
     }
-    trail(i, a0, a1, a2);
+    trail(i, a0[0] + a0[1], a1[0] + a1[1], a2[0] + a2[1]);
   }
 }
 
@@ -680,12 +729,20 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
 
   // Per slot: the block B = iso·I + axial·n nᵀ of h C + h² K, and the
   // right-hand-side term h f₀ − h² K (v_i − v_j) on the owner.
-  forEachRange(elementCount(), [this, h, h2](std::size_t b, std::size_t end) {
+  forEachRange(linkElem_.size(), [this, h, h2](std::size_t b, std::size_t end) {
     for (std::size_t s = b; s < end; ++s) {
       const std::uint32_t e = linkElem_[s];
+      SlotPair& B = blocks_[s / 2];
+      const std::size_t lane = s % 2;
+      if (e == kNoElement) {
+        B.a[lane] = B.b[lane] = B.n0[lane] = B.n1[lane] = B.n2[lane] = 0.0f;
+        store3(ef_, s, Vec3::Zero());
+        continue;
+      }
       const Vec3 d = load3(x_, ej_[e]) - load3(x_, ei_[e]);
       const double len = d.norm();
-      const Vec3 n = len > 0 ? Vec3(d / len) : Vec3::Zero();
+      const double invLen = len > 0 ? 1.0 / len : 0.0;  // one division serves n and T/L
+      const Vec3 n = invLen * d;
       const double ext = len - rest_[e];
       const Vec3 w = load3(v_, ej_[e]) - load3(v_, ei_[e]);
       const double rate = n.dot(w);
@@ -703,10 +760,10 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
         cAxial = c_[e];
       }
       // Transverse (geometric) stiffness T/L, kept only while stretched.
-      const double geo = len > 0 && springTension > 0 ? springTension / len : 0.0;
-      block_[s] = {float(h2 * geo),
-                   float(h * cAxial + h2 * (kAxial - geo)),
-                   {float(n.x()), float(n.y()), float(n.z())}};
+      const double geo = springTension > 0 ? springTension * invLen : 0.0;
+      B.a[lane] = float(h2 * geo);
+      B.b[lane] = float(h * cAxial + h2 * (kAxial - geo));
+      B.n0[lane] = float(n.x()), B.n1[lane] = float(n.y()), B.n2[lane] = float(n.z());
       const Vec3 onI = (h * tension + h2 * (kAxial - geo) * rate) * n + (h2 * geo) * w;
       store3(ef_, s, ei_[e] < ej_[e] ? onI : Vec3(-onI));
     }
@@ -731,8 +788,9 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
     double* di = dsum + 6 * i;
     for (std::uint32_t s = ownStart_[i]; s < ownStart_[i + 1]; ++s) {
       const std::size_t j = linkOther_[s];
-      const LinkBlock& L = block_[s];
-      const double Ba = L.a, Bb = L.b, n0 = L.n[0], n1 = L.n[1], n2 = L.n[2];
+      const SlotPair& B = blocks_[s / 2];
+      const std::size_t lane = s % 2;
+      const double Ba = B.a[lane], Bb = B.b[lane], n0 = B.n0[lane], n1 = B.n1[lane], n2 = B.n2[lane];
       const Vec3 t = load3(ef_, s);
       bi += t;
       store3(rhs_, j, load3(rhs_, j) - t);

@@ -49,8 +49,9 @@
 // relative, far below any useful CG tolerance; sums are in double), with the
 // elements sorted by their lower end. One CG iteration is then one sweep in
 // that order that forms the search direction just ahead of itself and
-// applies every block once (adding to one end, subtracting from the other),
-// and one pass over the particles; both run serially.//
+// applies every block once (adding to one end, subtracting from the other;
+// two blocks at a time, one per SIMD lane), and one pass over the particles;
+// both run serially.//
 // References: X. Provot, "Deformation constraints in a mass-spring model to
 // describe rigid cloth behavior", Graphics Interface 1995. D. Baraff and
 // A. Witkin, "Large steps in cloth simulation", SIGGRAPH 1998. K.-J. Choi and
@@ -331,11 +332,11 @@ class MassSpringBody {
   Result<ImplicitStepReport> stepImplicit(double h);
 
  private:
-  // One element's block of h C + h² K in the implicit step, B = a·I + b·n nᵀ
-  // (n: unit direction; B acts on v_i − v_j for the force on i).
-  struct LinkBlock {
-    float a, b;
-    float n[3];
+  // The blocks of h C + h² K of two consecutive slots (lanes 0 and 1) in the
+  // implicit step, B = a·I + b·n nᵀ (n: unit direction; B acts on v_i − v_j
+  // for the force on the owner i), so that a sweep applies two at once.
+  struct SlotPair {
+    float a[2], b[2], n0[2], n1[2], n2[2];
   };
   // Why the implicit solve stopped, when it did not converge.
   enum class CgStop : std::uint8_t { Converged, NotFinite, NotPositive, MaxIterations };
@@ -367,11 +368,14 @@ class MassSpringBody {
   bool prepared_ = false;
   std::vector<std::uint32_t> incStart_, incElem_;  // CSR: elements incident to each particle
   // Implicit path: the elements in "slots" sorted by their lower end, the
-  // owner. ownStart_: CSR of the slots over owners; linkElem_: the element in
-  // each slot, linkOther_: its higher end; leadUntil_[i]: one past the highest
-  // particle reached by the slots of owners 0 … i.
+  // owner, each owner's run padded to an even count with empty slots.
+  // ownStart_: CSR of the slots over owners; linkElem_: the element in each
+  // slot (kNoElement: padding), linkOther_: its higher end (padding: the
+  // owner); leadUntil_[i]: one past the highest particle reached by the slots
+  // of owners 0 … i.
+  static constexpr std::uint32_t kNoElement = 0xffffffffu;
   std::vector<std::uint32_t> ownStart_, linkElem_, linkOther_, leadUntil_;
-  std::vector<LinkBlock> block_;  // per slot (implicit)
+  std::vector<SlotPair> blocks_;  // per two slots (implicit)
   std::vector<double>
       ef_;  // 3 per element: force on i (explicit); 3 per slot: rhs term on the owner (implicit)
   std::vector<double> decay_;  // per element: exp(−h k/c) for Maxwell, at decayH_
