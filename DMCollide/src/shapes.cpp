@@ -277,16 +277,22 @@ Result<std::shared_ptr<const ConvexHull>> ConvexHull::create(std::span<const Vec
 }
 
 int ConvexHull::cubeCell(const Vec3& d) noexcept {
-  int axis = 0;
-  if (std::abs(d.y()) > std::abs(d[axis])) axis = 1;
-  if (std::abs(d.z()) > std::abs(d[axis])) axis = 2;
-  const double m = std::abs(d[axis]);
+  // Branch-free: the dominant axis by conditional moves, one division for
+  // both in-face coordinates (the support mappings call this on every
+  // query, with directions that jump around).
+  const double ax = std::abs(d.x()), ay = std::abs(d.y()), az = std::abs(d.z());
+  int axis = ay > ax ? 1 : 0;
+  double m = std::max(ax, ay);
+  axis = az > m ? 2 : axis;
+  m = std::max(m, az);
   if (!(m > 0)) return 0;
-  const auto bin = [m](double x) {
-    return std::clamp(static_cast<int>((x / m + 1.0) * 0.5 * kCubeGrid), 0, kCubeGrid - 1);
+  static constexpr int kNext[3][2] = {{1, 2}, {2, 0}, {0, 1}};
+  const double scale = 0.5 * kCubeGrid / m;
+  const auto bin = [scale](double x) {
+    return std::min(static_cast<int>(x * scale + 0.5 * kCubeGrid), kCubeGrid - 1);  // x·scale ≥ −g/2
   };
   const int face = 2 * axis + (d[axis] >= 0 ? 0 : 1);
-  return (face * kCubeGrid + bin(d[(axis + 1) % 3])) * kCubeGrid + bin(d[(axis + 2) % 3]);
+  return (face * kCubeGrid + bin(d[kNext[axis][0]])) * kCubeGrid + bin(d[kNext[axis][1]]);
 }
 
 Vec3 ConvexHull::supportCore(const Vec3& d, std::uint32_t& hint) const noexcept {
