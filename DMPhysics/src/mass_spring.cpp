@@ -451,6 +451,7 @@ void MassSpringBody::prepare() {
     leadUntil_[i] = reach;
   }
   blocks_.assign(slots / 2, SlotPair{});
+  for (std::size_t s = 0; s < slots; ++s) blocks_[s / 2].j3[s % 2] = 3 * linkOther_[s];
   ef_.assign(3 * std::max(m, slots), 0.0);
   decay_.assign(m, 1.0);
   decayH_ = -1.0;
@@ -571,7 +572,6 @@ template <class Lead, class Trail>
 void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const {
   const std::size_t n = particleCount();
   const std::uint32_t* own = ownStart_.data();
-  const std::uint32_t* other = linkOther_.data();
   const SlotPair* blk = blocks_.data();
   std::size_t front = 0;
   for (std::size_t i = 0; i < n; ++i) {
@@ -579,9 +579,9 @@ void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&&
     const Lane2 v0 = {v[3 * i], v[3 * i]}, v1 = {v[3 * i + 1], v[3 * i + 1]},
                 v2 = {v[3 * i + 2], v[3 * i + 2]};
     Lane2 a0 = {y[3 * i], 0.0}, a1 = {y[3 * i + 1], 0.0}, a2 = {y[3 * i + 2], 0.0};
-    for (std::uint32_t s = own[i], end = own[i + 1]; s < end; s += 2) {
-      const SlotPair& B = blk[s / 2];
-      const std::size_t jA = 3 * std::size_t(other[s]), jB = 3 * std::size_t(other[s + 1]);
+    for (const SlotPair *pair = blk + own[i] / 2, *end = blk + own[i + 1] / 2; pair != end; ++pair) {
+      const SlotPair& B = *pair;
+      const std::size_t jA = B.j3[0], jB = B.j3[1];
       const Lane2 w0 = v0 - Lane2{v[jA], v[jB]}, w1 = v1 - Lane2{v[jA + 1], v[jB + 1]},
                   w2 = v2 - Lane2{v[jA + 2], v[jB + 2]};
       const Lane2 n0 = widen(B.n0), n1 = widen(B.n1), n2 = widen(B.n2), ba = widen(B.a);

@@ -337,6 +337,7 @@ class MassSpringBody {
   // for the force on the owner i), so that a sweep applies two at once.
   struct SlotPair {
     float a[2], b[2], n0[2], n1[2], n2[2];
+    std::uint32_t j3[2];  // 3·(higher end): offset of its x coordinate in a 3n vector
   };
   // Why the implicit solve stopped, when it did not converge.
   enum class CgStop : std::uint8_t { Converged, NotFinite, NotPositive, MaxIterations };
