@@ -14,15 +14,19 @@
 // with viterations = diterations = 0 and piterations position-solver sweeps
 // over the links. The models differ: Bullet projects links as position
 // constraints (stiffness kLST in [0, 1], float precision) where we integrate
-// viscoelastic forces in double precision, so the comparison is cost per
-// node-step at equal work, not equal physics. Equal work: our symplectic
-// step (one force evaluation) against piterations = 1; our implicit step
-// (one Newton step, CG with block-Jacobi; each CG iteration is one sweep over
-// the links) against piterations = our mean CG iteration count.
+// viscoelastic forces in double precision (the implicit step keeps its
+// element blocks in single precision and sums in double), so the comparison
+// is cost per node-step at equal work, not equal physics. Equal work: our
+// symplectic step (one force evaluation) against piterations = 1; our
+// implicit step (one Newton step, CG with block-Jacobi; each CG iteration is
+// one sweep over the links) against piterations = our mean CG iteration
+// count.
 //
 // Timing: single-threaded rows use the thread's CPU time (robust on a shared
-// machine), best of 3 rounds; the "ours ∥" column is wall time with
-// dm::parallelFor on every hardware thread.
+// machine), best of 3 rounds; the "ours par." column is wall time with
+// dm::parallelFor on every hardware thread (in the implicit step only the
+// element loop and the final update run in parallel: its assembly and CG
+// sweeps scatter and stay serial).
 //
 //   cmake -S . -B build-phm-bench -G Ninja -DCMAKE_BUILD_TYPE=Release -DDM_BUILD_BENCH=ON
 //   ninja -C build-phm-bench physics_cloth_bench && build-phm-bench/Bench/physics_cloth_bench
