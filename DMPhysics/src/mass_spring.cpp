@@ -600,7 +600,7 @@ void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&&
 // Preconditioned CG on (M + h C + h² K) Δv = rhs_ from Δv = dv_, with the
 // block-Jacobi preconditioner dinv_; the same iteration and stopping rule as
 // dm::PcgSolver (relative residual ≤ tolerance, confirmed on the true
-// residual, restarting from it otherwise), fused into two sweeps per
+// residual, restarting from it otherwise), in two passes over memory per
 // iteration: sweepLinks() forms the new direction p just ahead of itself and
 // returns A p and pᵀAp; one particle loop then updates Δv and r, applies the
 // preconditioner and sums rᵀr and rᵀz. Serial: the sweep scatters.

@@ -29,12 +29,12 @@
 // the start of the step, (M + h C + h² K) Δv = h (f₀ − h K v₀), solved
 // matrix-free by CG with a block-Jacobi preconditioner, warm-started from the
 // previous step's Δv, with dm::PcgSolver's iteration and stopping rule; stable
-// at any step for stiff tissue, with numerical
-// damping that grows with h. The geometric stiffness of compressed elements
-// is dropped (Choi & Ko 2002) so the system stays positive definite. Maxwell
-// damper states advance exactly (exponential) in the explicit path and by
-// backward Euler in the implicit path, where a Maxwell element acts over one
-// step as a spring of stiffness k c / (c + h k).
+// at any step for stiff tissue, with numerical damping that grows with h.
+// The geometric stiffness of compressed elements is dropped (Choi & Ko 2002)
+// so the system stays positive definite. Maxwell damper states advance
+// exactly (exponential) in the explicit path and by backward Euler in the
+// implicit path, where a Maxwell element acts over one step as a spring of
+// stiffness k c / (c + h k).
 //
 // Units SI: m, kg, s, N; stiffness k in N/m, damping c in N·s/m.
 //
@@ -44,14 +44,15 @@
 // nothing once the workspace is sized, which the first step after a topology
 // change does (serial path; the parallel path runs oneTBB tasks, see
 // dm/core/tasks.hpp, and is meant for physics threads, not the haptic loop).
-// The implicit step keeps each element's block of h C + h² K in rank-one
-// form a·I + b·n nᵀ (5 floats: rounding perturbs the matrix by about 1e-7
+// The implicit step keeps each element's block of h C + h² K in the form
+// a·I + b·n nᵀ (5 floats: rounding perturbs the matrix by about 1e-7
 // relative, far below any useful CG tolerance; sums are in double), with the
 // elements sorted by their lower end. One CG iteration is then one sweep in
 // that order that forms the search direction just ahead of itself and
 // applies every block once (adding to one end, subtracting from the other;
 // two blocks at a time, one per SIMD lane), and one pass over the particles;
-// both run serially.//
+// both run serially.
+//
 // References: X. Provot, "Deformation constraints in a mass-spring model to
 // describe rigid cloth behavior", Graphics Interface 1995. D. Baraff and
 // A. Witkin, "Large steps in cloth simulation", SIGGRAPH 1998. K.-J. Choi and
