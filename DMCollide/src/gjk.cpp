@@ -198,8 +198,8 @@ struct MinkowskiPair {
   MinkowskiPair(const ConvexShape& a, const Isometry3& poseA, const ConvexShape& b, const Isometry3& poseB)
       : A(a), B(b) {
     const Mat3 ra = poseA.linear();
-    r = ra.transpose() * poseB.linear();
-    t = ra.transpose() * (poseB.translation() - poseA.translation());
+    r.noalias() = ra.transpose() * poseB.linear();  // straight into r, no temporary
+    t.noalias() = ra.transpose() * (poseB.translation() - poseA.translation());
   }
 
   // A point inside A − B (A's frame): the difference of the shapes'
