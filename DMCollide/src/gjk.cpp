@@ -51,11 +51,27 @@ static_assert(kBooleanScanVertices <= kFrameVertices, "the scan's stack array");
 // kFrameVertices, a multiple of 4, the padding copies of vertex 0 (never
 // chosen: ties go to the lower index). The largest dot product first
 // (independent 2-wide maxima), then the lanes equal to it as a bit mask:
-// the index comes out of registers, with no branch on the data.
+// the index comes out of registers, with no branch on the data. Up to 8
+// vertices unrolled (MPR on such hulls waits on this scan at every step).
 [[gnu::always_inline]] inline std::uint32_t furthestScan(const double* x, const double* y, const double* z,
                                                          std::uint32_t padded, const Vec3& d) noexcept {
 #if defined(__SSE2__)
   const __m128d dx = _mm_set1_pd(d.x()), dy = _mm_set1_pd(d.y()), dz = _mm_set1_pd(d.z());
+  if (padded <= 8) {  // unrolled: one max tree, one mask
+    const auto dot = [&](std::uint32_t i) {
+      return _mm_add_pd(_mm_add_pd(_mm_mul_pd(dx, _mm_loadu_pd(x + i)), _mm_mul_pd(dy, _mm_loadu_pd(y + i))),
+                        _mm_mul_pd(dz, _mm_loadu_pd(z + i)));
+    };
+    const __m128d p0 = dot(0), p1 = dot(2);
+    const __m128d p2 = padded == 8 ? dot(4) : p0, p3 = padded == 8 ? dot(6) : p1;
+    __m128d m = _mm_max_pd(_mm_max_pd(p0, p1), _mm_max_pd(p2, p3));
+    m = _mm_max_pd(m, _mm_shuffle_pd(m, m, 1));
+    const unsigned bits = static_cast<unsigned>(_mm_movemask_pd(_mm_cmpeq_pd(p0, m))) |
+                          static_cast<unsigned>(_mm_movemask_pd(_mm_cmpeq_pd(p1, m))) << 2 |
+                          static_cast<unsigned>(_mm_movemask_pd(_mm_cmpeq_pd(p2, m))) << 4 |
+                          static_cast<unsigned>(_mm_movemask_pd(_mm_cmpeq_pd(p3, m))) << 6;
+    return bits ? static_cast<std::uint32_t>(std::countr_zero(bits)) : 0u;
+  }
   __m128d dots[kFrameVertices / 2];
   __m128d m0 = _mm_set1_pd(-std::numeric_limits<double>::infinity()), m1 = m0;
   for (std::uint32_t i = 0; i < padded; i += 4) {
