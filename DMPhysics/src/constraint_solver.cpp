@@ -2,6 +2,15 @@
 // the algorithm, conventions and references.
 #include <dm/physics/constraint_solver.hpp>
 
+// No a * b + c fused into an FMA anywhere in this file, so the sweeps'
+// versions for wider vector units (see sweepVelocities) give the bits of
+// the baseline SSE2 one on every x86-64.
+#if defined(__clang__)
+#pragma clang fp contract(off)
+#elif defined(__GNUC__)
+#pragma GCC optimize("fp-contract=off")
+#endif
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -737,8 +746,8 @@ template <bool kResidual>
 // One sweep over the groups; kMode 0: velocities, 1: velocities with the
 // residual (returned), 2: split-impulse pseudo-velocities.
 template <int kMode>
-double sweepGroups(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
-                   std::vector<Velocity>& vel) noexcept {
+[[gnu::always_inline]] inline double sweepGroups(const std::vector<ConstraintSolver::Group>& groups,
+                                                 std::vector<WideRow>& rows, std::vector<Velocity>& vel) noexcept {
   Lanes change = splat(0.0);
   for (const ConstraintSolver::Group& g : groups) {
     LaneVelocity A, B;
@@ -757,6 +766,30 @@ double sweepGroups(const std::vector<ConstraintSolver::Group>& groups, std::vect
   store(out, change);
   return std::max({out[0], out[1], out[2], out[3]});
 }
+
+// The sweeps, compiled for the host's vector units too (chosen at load time
+// by an ifunc): with x86-64-v4 (AVX-512 VL) the lanes fit in 32 registers
+// instead of spilling from 16, with AVX the operations take three operands.
+// The arithmetic is the same IEEE operations (no FMA, see the top of the
+// file), so every version gives the same bits.
+#if defined(__GNUC__) && defined(__x86_64__) && !defined(DM_SOLVER_PLAIN_LANES)
+#define DM_SOLVER_CLONES [[gnu::target_clones("arch=x86-64-v4", "avx", "default")]]
+#else
+#define DM_SOLVER_CLONES
+#endif
+DM_SOLVER_CLONES double sweepVelocities(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
+                                        std::vector<Velocity>& vel) noexcept {
+  return sweepGroups<0>(groups, rows, vel);
+}
+DM_SOLVER_CLONES double sweepResidual(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
+                                      std::vector<Velocity>& vel) noexcept {
+  return sweepGroups<1>(groups, rows, vel);
+}
+DM_SOLVER_CLONES double sweepPush(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
+                                  std::vector<Velocity>& vel) noexcept {
+  return sweepGroups<2>(groups, rows, vel);
+}
+#undef DM_SOLVER_CLONES
 
 // Applies the contacts' incoming impulses (warm start), group by group.
 void warmStartGroups(const std::vector<ConstraintSolver::Group>& groups, const std::vector<WideRow>& rows,
@@ -790,13 +823,14 @@ double ConstraintSolver::sweep() {
     if constexpr (kResidual)
       if (r.effMass > 0.0) change = std::max(change, std::abs(applied) / r.effMass);
   }
-  change = std::max(change, sweepGroups<kResidual ? 1 : 0>(groups_, wideRows_, velocity_));
+  change = std::max(change, kResidual ? sweepResidual(groups_, wideRows_, velocity_)
+                                      : sweepVelocities(groups_, wideRows_, velocity_));
   return change;
 }
 
 void ConstraintSolver::pushSweep() {
   for (Row& r : jointRows_) solveRow(r, push_, r.pushTarget, r.pushImpulse);
-  sweepGroups<2>(groups_, wideRows_, push_);
+  sweepPush(groups_, wideRows_, push_);
 }
 
 Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
