@@ -8,7 +8,9 @@
 // instead), carrying vertex indices instead of points through the portal
 // updates. The boolean GJK, with a few support calls per query, scans small
 // hulls' own structure-of-arrays coordinates (ConvexHull::coordinates()) in
-// place with the same scan, B's through a rotation per support.
+// place with the same scan, B's through a rotation per support. Above 8
+// vertices the scan runs 4 wide where the CPU has AVX2 (GCC on x86-64,
+// chosen at load time), with the same arithmetic as the SSE2 one.
 #include <dm/collide/gjk.hpp>
 #include <dm/math/geometry.hpp>
 
@@ -21,6 +23,10 @@
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
+#endif
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#include <immintrin.h>
+#define DM_GJK_AVX2 1
 #endif
 
 namespace dm {
@@ -45,6 +51,36 @@ constexpr std::uint32_t kFrameVertices = 64;
 // Hulls up to this many vertices are scanned in place by the boolean GJK.
 constexpr std::uint32_t kBooleanScanVertices = 32;
 static_assert(kBooleanScanVertices <= kFrameVertices, "the scan's stack array");
+
+#if defined(DM_GJK_AVX2)
+// furthestScan() above 8 vertices, 4 wide where the CPU (and the OS) has
+// AVX2, which the build does not assume: the same products and sums in the
+// same order as the SSE2 scan, so the same answer. A hull of 32 vertices in
+// 8 steps instead of 16.
+const bool gHasAvx2 = (__builtin_cpu_init(), __builtin_cpu_supports("avx2"));
+
+[[gnu::target("avx2"), gnu::noinline]] std::uint32_t furthestScanAvx(const double* x, const double* y,
+                                                                  const double* z, std::uint32_t padded,
+                                                                  const Vec3& d) noexcept {
+  const __m256d dx = _mm256_set1_pd(d.x()), dy = _mm256_set1_pd(d.y()), dz = _mm256_set1_pd(d.z());
+  __m256d dots[kFrameVertices / 4];
+  __m256d m = _mm256_set1_pd(-std::numeric_limits<double>::infinity());
+  for (std::uint32_t i = 0; i < padded; i += 4) {
+    const __m256d p = _mm256_add_pd(
+        _mm256_add_pd(_mm256_mul_pd(dx, _mm256_loadu_pd(x + i)), _mm256_mul_pd(dy, _mm256_loadu_pd(y + i))),
+        _mm256_mul_pd(dz, _mm256_loadu_pd(z + i)));
+    dots[i / 4] = p;
+    m = _mm256_max_pd(m, p);
+  }
+  m = _mm256_max_pd(m, _mm256_permute2f128_pd(m, m, 1));
+  m = _mm256_max_pd(m, _mm256_shuffle_pd(m, m, 5));
+  std::uint64_t bits = 0;
+  for (std::uint32_t c = 0; c < padded / 4; ++c)
+    bits |= std::uint64_t(static_cast<unsigned>(_mm256_movemask_pd(_mm256_cmp_pd(dots[c], m, _CMP_EQ_OQ))))
+            << (4 * c);
+  return bits ? static_cast<std::uint32_t>(std::countr_zero(bits)) : 0u;
+}
+#endif
 
 // Index of the vertex furthest along d (the first on ties; 0 for a NaN
 // direction) among `padded` vertices with coordinates x, y, z: padded ≤
@@ -72,6 +108,9 @@ static_assert(kBooleanScanVertices <= kFrameVertices, "the scan's stack array");
                           static_cast<unsigned>(_mm_movemask_pd(_mm_cmpeq_pd(p3, m))) << 6;
     return bits ? static_cast<std::uint32_t>(std::countr_zero(bits)) : 0u;
   }
+#if defined(DM_GJK_AVX2)
+  if (gHasAvx2) return furthestScanAvx(x, y, z, padded, d);
+#endif
   __m128d dots[kFrameVertices / 2];
   __m128d m0 = _mm_set1_pd(-std::numeric_limits<double>::infinity()), m1 = m0;
   for (std::uint32_t i = 0; i < padded; i += 4) {
@@ -265,7 +304,7 @@ struct HullSupports {
   const FB& B;
   struct Point {
     Vec3 w;
-    std::uint32_t ia, ib;
+    std::uint32_t ia = 0, ib = 0;
   };
   Point operator()(const Vec3& d) const noexcept {
     Point p;
@@ -980,8 +1019,7 @@ Quick quickOnCores(MinkowskiPair& m, const Vec3& interior, const Vec3& d, int ma
                    int& iterations) noexcept {
   const auto run = [&](const auto& support) {
     typename std::remove_cvref_t<decltype(support)>::Point p[4];
-    p[0] = {};
-    p[0].w = interior;
+    p[0].w = interior;  // not a support point: its vertex indices stay 0 (unused by the boolean)
     return quickIntersect(support, d, maxIterations, sep, p, 1, iterations);
   };
   if (m.A.type() == ShapeType::ConvexHull && m.B.type() == ShapeType::ConvexHull) {
