@@ -556,6 +556,15 @@ inline Lane2 load2(const double* p) noexcept { return {{p[0], p[1]}}; }
 inline void store2(double* p, Lane2 v) noexcept { p[0] = v.h[0], p[1] = v.h[1]; }
 #endif
 
+// The first write of a row y_k of the sweep, in the widths of the scatter
+// that follows it (a pair, then a scalar): a 16-byte load of y_k right after
+// two 8-byte stores cannot be forwarded from them and waits for them to reach
+// the cache (about 4 % of the 64 × 64 sheet step, measured).
+inline void leadRow(double* y, double y0, double y1, double y2) noexcept {
+  store2(y, Lane2{y0, y1});
+  y[2] = y2;
+}
+
 }  // namespace
 
 // One sweep over the slots in owner order, accumulating y = (M + h C + h² K) v
@@ -630,7 +639,7 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, ImplicitStepR
         x, q,
         [&](std::size_t k) {
           const double m = ms * mass[k];
-          q[3 * k] = m * x[3 * k], q[3 * k + 1] = m * x[3 * k + 1], q[3 * k + 2] = m * x[3 * k + 2];
+          leadRow(q + 3 * k, m * x[3 * k], m * x[3 * k + 1], m * x[3 * k + 2]);
         },
         [&](std::size_t i, double y0, double y1, double y2) {
           if (pinned[i]) y0 = y1 = y2 = 0.0;  // b_i = 0 and D_i⁻¹ = 0 there too
@@ -663,7 +672,7 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, ImplicitStepR
     };
     const auto massRow = [&](std::size_t k) {
       const double m = ms * mass[k];
-      q[3 * k] = m * p[3 * k], q[3 * k + 1] = m * p[3 * k + 1], q[3 * k + 2] = m * p[3 * k + 2];
+      leadRow(q + 3 * k, m * p[3 * k], m * p[3 * k + 1], m * p[3 * k + 2]);
     };
     if (restart)
       sweepLinks(
@@ -681,7 +690,7 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, ImplicitStepR
                          p2 = z[3 * k + 2] + beta * p[3 * k + 2];
             const double m = ms * mass[k];
             p[3 * k] = p0, p[3 * k + 1] = p1, p[3 * k + 2] = p2;
-            q[3 * k] = m * p0, q[3 * k + 1] = m * p1, q[3 * k + 2] = m * p2;
+            leadRow(q + 3 * k, m * p0, m * p1, m * p2);
           },
           trail);
     if (!std::isfinite(pAp)) return CgStop::NotFinite;
