@@ -21,6 +21,8 @@ Isometry3 posed(const Vec3& x, const Quat& q, const Isometry3& offset) {
   Isometry3 pose = Isometry3::Identity();
   pose.linear() = q.toRotationMatrix();
   pose.translation() = x;
+  // Most shapes sit at the body's origin: skip the 4 × 4 product then.
+  if (offset.translation().isZero(0.0) && offset.linear() == Mat3::Identity()) return pose;
   return pose * offset;
 }
 
