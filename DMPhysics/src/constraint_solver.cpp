@@ -773,7 +773,11 @@ template <int kMode>
 // instead of spilling from 16, with AVX the operations take three operands.
 // The arithmetic is the same IEEE operations (no FMA, see the top of the
 // file), so every version gives the same bits.
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(DM_SOLVER_PLAIN_LANES)
+// Not under ThreadSanitizer: the clones' ifunc resolver runs while the
+// library is relocated, before the TSan runtime is up, and the instrumented
+// resolver crashes every program that loads the library.
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(DM_SOLVER_PLAIN_LANES) && \
+    !defined(__SANITIZE_THREAD__)
 #define DM_SOLVER_CLONES [[gnu::target_clones("arch=x86-64-v4", "avx", "default")]]
 #else
 #define DM_SOLVER_CLONES
