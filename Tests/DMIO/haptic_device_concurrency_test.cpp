@@ -54,7 +54,10 @@ TEST(HapticDeviceThreads, ServoCommandAndConsumerConcurrently) {
   });
   std::int64_t lastTime = 0, states = 0, torn = 0;  // time 0 is the empty state before the first sample
   consumerReady.store(true, std::memory_order_release);
-  while (!done.load(std::memory_order_acquire)) {
+  // One more read after the servo thread has finished, so a loaded machine
+  // that never ran this thread in between still checks the last state.
+  for (bool finished = false; !finished;) {
+    finished = done.load(std::memory_order_acquire);
     const dm::HapticState& st = dev.state();
     if (st.timeNs > lastTime) {
       lastTime = st.timeNs;
