@@ -28,6 +28,11 @@
 //
 //   cmake -S . -B build-phr-bench -G Ninja -DCMAKE_BUILD_TYPE=Release -DDM_BUILD_BENCH=ON -DDM_WERROR=OFF
 //   ninja -C build-phr-bench physics_rigid_bench && build-phr-bench/Bench/physics_rigid_bench
+//
+// Arguments (optional, any order) pick cases, for profiling one of them:
+// "rain" or "pyramid", "awake" or "sleep", "1ms" or "60hz", and "ours" to
+// run only our engine (no peers, no ratios), e.g.
+//   physics_rigid_bench pyramid awake 60hz ours
 #include <dm/collide/shapes.hpp>
 #include <dm/physics/ode_backend.hpp>
 #include <dm/physics/world.hpp>
@@ -39,6 +44,7 @@
 #include <cstdio>
 #include <ctime>
 #include <memory>
+#include <string_view>
 #include <vector>
 
 namespace {
@@ -211,16 +217,42 @@ Outcome runBullet(const Scene& scene, double dt, bool sleep) {
 
 }  // namespace
 
-int main() {
+int main(int argc, char** argv) {
+  // Optional filters, for profiling one case: a scene ("rain", "pyramid"),
+  // "awake" or "sleep", "1ms" or "60hz", and "ours" (skip the peers).
+  const auto wanted = [&](const char* word, const char* group[], int groupSize) {
+    bool any = false;
+    for (int a = 1; a < argc; ++a)
+      for (int g = 0; g < groupSize; ++g)
+        if (std::string_view(argv[a]) == group[g]) {
+          any = true;
+          if (std::string_view(argv[a]) == word) return true;
+        }
+    return !any;
+  };
+  const char* scenes[] = {"rain", "pyramid"};
+  const char* modes[] = {"awake", "sleep"};
+  const char* steps[] = {"1ms", "60hz"};
+  const char* engines[] = {"ours"};
+  const bool oursOnly = !wanted("peers", engines, 1);
   std::printf("rigid contact, 20 iterations each; time per step = thread CPU time\n");
   for (const bool sleep : {false, true}) {
+    if (!wanted(sleep ? "sleep" : "awake", modes, 2)) continue;
     std::printf("\n%s\n", sleep ? "resting bodies sleep (ours: ContactSettings::sleep; Bullet: default deactivation)"
                                  : "all bodies awake (Bullet: DISABLE_DEACTIVATION)");
     std::printf("%-11s %-7s %-7s %12s %14s %13s\n", "scene", "dt", "engine", "ms/step", "penetration mm",
                 "top drift mm");
     for (const Scene& scene : {rain(), pyramid(20)}) {
+      if (!wanted(scene.name[0] == 'r' ? "rain" : "pyramid", scenes, 2)) continue;
       for (const double dt : {1e-3, 1.0 / 60.0}) {
-        const Outcome ours = runOurs(scene, dt, sleep), bullet = runBullet(scene, dt, sleep);
+        if (!wanted(dt < 2e-3 ? "1ms" : "60hz", steps, 2)) continue;
+        const Outcome ours = runOurs(scene, dt, sleep);
+        if (oursOnly) {
+          std::printf("%-11s %-7s %-7s %12.4f %14.3f\n", scene.name, dt < 2e-3 ? "1 ms" : "1/60 s", "ours",
+                      1e3 * ours.secondsPerStep, 1e3 * ours.penetration);
+          continue;
+        }
+        const Outcome bullet = runBullet(scene, dt, sleep);
         const Outcome ode = sleep ? Outcome{} : runOde(scene, dt);
         const char* dtName = dt < 2e-3 ? "1 ms" : "1/60 s";
         const std::pair<const char*, const Outcome*> rows[] = {
