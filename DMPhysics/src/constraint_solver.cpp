@@ -3,7 +3,7 @@
 #include <dm/physics/constraint_solver.hpp>
 
 // No a * b + c fused into an FMA anywhere in this file, so the sweeps'
-// versions for wider vector units (see sweepVelocities) give the bits of
+// versions for wider vector units (see pickSweep) give the bits of
 // the baseline SSE2 one on every x86-64.
 #if defined(__clang__)
 #pragma clang fp contract(off)
@@ -539,116 +539,153 @@ void ConstraintSolver::buildContactRows(std::span<const SolverBody> bodies,
 
 namespace {
 
-// kLanes doubles as one value: two SSE2 registers with GCC/Clang vector
-// extensions (every x86-64 has them), a plain array elsewhere (or with
+// kLanes doubles as one value Lanes<R>, held in registers of type R: with
+// GCC/Clang vector extensions two SSE2 registers (R = Pair, every x86-64
+// has them) or one AVX register (R = Quad, in the sweeps compiled for AVX,
+// chosen at run time); a plain array of doubles elsewhere (or with
 // DM_SOLVER_PLAIN_LANES defined). Lane by lane the arithmetic is the scalar
-// one, IEEE operation for operation, so both give the same bits.
+// one, IEEE operation for operation (no FMA, see the top of the file), so
+// every representation gives the same bits.
 #if defined(__GNUC__) && !defined(DM_SOLVER_PLAIN_LANES)
 #define DM_SOLVER_VECTOR_LANES 1
 using Pair = double __attribute__((vector_size(16)));
-using Mask = decltype(Pair{} > Pair{});
-struct Lanes {
-  Pair h[2];
-};
-struct LaneMask {
-  Mask h[2];
-};
-#define DM_LANEWISE(expr) {{expr(0), expr(1)}}
+using Quad = double __attribute__((vector_size(32)));
+using Narrow = Pair;
 #else
-struct Lanes {
-  double h[4];
-};
-struct LaneMask {
-  long long h[4];  // 0 or 1
-};
-#define DM_LANEWISE(expr) {{expr(0), expr(1), expr(2), expr(3)}}
+using Narrow = double;
 #endif
 static_assert(ConstraintSolver::kLanes == 4, "Lanes holds four doubles");
 
+template <class R>
+struct Lanes {
+  static constexpr int kWidth = sizeof(R) / sizeof(double);  // doubles per register
+  static constexpr int kCount = 4 / kWidth;                  // registers
+  R h[kCount];
+};
+template <class R>
+struct LaneMask {
+  using M = decltype(R{} > R{});  // all-ones/zero integer lanes, or bool
+  M h[Lanes<R>::kCount];
+};
+
+// Element-wise over the registers (a loop the compiler unrolls; no lambda,
+// which would pass AVX registers through memory outside the AVX code).
+#define DM_LANEWISE(Type, expr)                    \
+  Type out;                                        \
+  _Pragma("GCC unroll 4") for (int i = 0; i < Lanes<R>::kCount; ++i) out.h[i] = (expr); \
+  return out
+
 // Four doubles as Lanes, and lane l of Lanes (built and read lane by lane,
 // not through memory: a vector load of four scalar stores stalls).
-[[gnu::always_inline]] inline Lanes make(double x0, double x1, double x2, double x3) noexcept {
-#if defined(DM_SOLVER_VECTOR_LANES)
-  return {{Pair{x0, x1}, Pair{x2, x3}}};
-#else
-  return {{x0, x1, x2, x3}};
-#endif
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> make(double x0, double x1, double x2, double x3) noexcept {
+  if constexpr (Lanes<R>::kCount == 1)
+    return {{R{x0, x1, x2, x3}}};
+  else if constexpr (Lanes<R>::kCount == 2)
+    return {{R{x0, x1}, R{x2, x3}}};
+  else
+    return {{x0, x1, x2, x3}};
 }
-[[gnu::always_inline]] inline double lane(const Lanes& x, int l) noexcept {
-#if defined(DM_SOLVER_VECTOR_LANES)
-  return x.h[l >> 1][l & 1];
-#else
-  return x.h[l];
-#endif
+template <class R>
+[[gnu::always_inline]] inline double lane(const Lanes<R>& x, int l) noexcept {
+  if constexpr (Lanes<R>::kWidth == 1)
+    return x.h[l];
+  else
+    return x.h[l / Lanes<R>::kWidth][l % Lanes<R>::kWidth];
 }
 
-[[gnu::always_inline]] inline Lanes load(const double (&p)[4]) noexcept {
-  Lanes r;
-  std::memcpy(&r, p, sizeof r);
+// WideRow's lanes are 32-byte aligned (so the 256-bit loads are not split).
+#if defined(__GNUC__)
+#define DM_ALIGNED(p, n) __builtin_assume_aligned(p, n)
+#else
+#define DM_ALIGNED(p, n) (p)
+#endif
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> load(const double (&p)[4]) noexcept {
+  Lanes<R> r;
+  std::memcpy(&r, DM_ALIGNED(p, sizeof(R)), sizeof r);
   return r;
 }
-[[gnu::always_inline]] inline void store(double (&p)[4], const Lanes& v) noexcept { std::memcpy(p, &v, sizeof v); }
-[[gnu::always_inline]] inline Lanes splat(double x) noexcept { return make(x, x, x, x); }
-#define DM_BINARY(op)                                                                  \
-  [[gnu::always_inline]] inline Lanes operator op(const Lanes& a, const Lanes& b) noexcept { \
-    const auto f = [&](int i) { return a.h[i] op b.h[i]; };                            \
-    return DM_LANEWISE(f);                                                              \
+template <class R>
+[[gnu::always_inline]] inline void store(double (&p)[4], const Lanes<R>& v) noexcept {
+  std::memcpy(DM_ALIGNED(p, sizeof(R)), &v, sizeof v);
+}
+#undef DM_ALIGNED
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> splat(double x) noexcept {
+  return make<R>(x, x, x, x);
+}
+#define DM_BINARY(op)                                                                                 \
+  template <class R>                                                                                  \
+  [[gnu::always_inline]] inline Lanes<R> operator op(const Lanes<R>& a, const Lanes<R>& b) noexcept { \
+    DM_LANEWISE(Lanes<R>, a.h[i] op b.h[i]);                                                          \
   }
 DM_BINARY(+)
 DM_BINARY(-)
 DM_BINARY(*)
 DM_BINARY(/)
 #undef DM_BINARY
-#define DM_COMPARE(name, op)                                                              \
-  [[gnu::always_inline]] inline LaneMask name(const Lanes& a, const Lanes& b) noexcept { \
-    const auto f = [&](int i) { return a.h[i] op b.h[i]; };                              \
-    return DM_LANEWISE(f);                                                                \
-  }
-DM_COMPARE(greater, >)
-#undef DM_COMPARE
-[[gnu::always_inline]] inline LaneMask operator&(const LaneMask& a, const LaneMask& b) noexcept {
-  const auto f = [&](int i) { return a.h[i] & b.h[i]; };
-  return DM_LANEWISE(f);
+template <class R>
+[[gnu::always_inline]] inline LaneMask<R> greater(const Lanes<R>& a, const Lanes<R>& b) noexcept {
+  DM_LANEWISE(LaneMask<R>, a.h[i] > b.h[i]);
+}
+template <class R>
+[[gnu::always_inline]] inline LaneMask<R> operator&(const LaneMask<R>& a, const LaneMask<R>& b) noexcept {
+  DM_LANEWISE(LaneMask<R>, a.h[i] & b.h[i]);
 }
 // m ? a : b per lane.
-[[gnu::always_inline]] inline Lanes select(const LaneMask& m, const Lanes& a, const Lanes& b) noexcept {
-  const auto f = [&](int i) { return m.h[i] ? a.h[i] : b.h[i]; };
-  return DM_LANEWISE(f);
-}
-[[gnu::always_inline]] inline bool any(const LaneMask& m) noexcept {
-#if defined(DM_SOLVER_VECTOR_LANES)
-  const Mask o = m.h[0] | m.h[1];
-  return (o[0] | o[1]) != 0;
-#else
-  return (m.h[0] | m.h[1] | m.h[2] | m.h[3]) != 0;
-#endif
-}
-// std::max(a, b) per lane (a when b is not larger, as std::max).
-[[gnu::always_inline]] inline Lanes max(const Lanes& a, const Lanes& b) noexcept { return select(greater(b, a), b, a); }
-[[gnu::always_inline]] inline Lanes abs(const Lanes& a) noexcept { return select(greater(splat(0.0), a), splat(0.0) - a, a); }
-[[gnu::always_inline]] inline Lanes sqrt(const Lanes& a) noexcept {
-  return make(std::sqrt(lane(a, 0)), std::sqrt(lane(a, 1)), std::sqrt(lane(a, 2)), std::sqrt(lane(a, 3)));
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> select(const LaneMask<R>& m, const Lanes<R>& a, const Lanes<R>& b) noexcept {
+  DM_LANEWISE(Lanes<R>, m.h[i] ? a.h[i] : b.h[i]);
 }
 #undef DM_LANEWISE
+template <class R>
+[[gnu::always_inline]] inline bool any(const LaneMask<R>& m) noexcept {
+  bool out = false;
+  for (int i = 0; i < Lanes<R>::kCount; ++i) {
+    if constexpr (Lanes<R>::kWidth == 1) {
+      out = out || m.h[i];
+    } else {
+      for (int k = 0; k < Lanes<R>::kWidth; ++k) out = out || m.h[i][k] != 0;
+    }
+  }
+  return out;
+}
+// std::max(a, b) per lane (a when b is not larger, as std::max).
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> max(const Lanes<R>& a, const Lanes<R>& b) noexcept {
+  return select(greater(b, a), b, a);
+}
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> abs(const Lanes<R>& a) noexcept {
+  return select(greater(splat<R>(0.0), a), splat<R>(0.0) - a, a);
+}
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> sqrt(const Lanes<R>& a) noexcept {
+  return make<R>(std::sqrt(lane(a, 0)), std::sqrt(lane(a, 1)), std::sqrt(lane(a, 2)), std::sqrt(lane(a, 3)));
+}
 
 // The two bodies' velocities (or pseudo-velocities) of each lane.
+template <class R>
 struct LaneVelocity {
-  Lanes v[3], w[3];
+  Lanes<R> v[3], w[3];
 };
 
+template <class R>
 [[gnu::always_inline]] inline void gather(const std::vector<Velocity>& vel, const int (&index)[4],
-                                          LaneVelocity& out) noexcept {
+                                          LaneVelocity<R>& out) noexcept {
   const Velocity& s0 = vel[static_cast<std::size_t>(index[0])];
   const Velocity& s1 = vel[static_cast<std::size_t>(index[1])];
   const Velocity& s2 = vel[static_cast<std::size_t>(index[2])];
   const Velocity& s3 = vel[static_cast<std::size_t>(index[3])];
   for (int c = 0; c < 3; ++c) {
-    out.v[c] = make(s0.v[c], s1.v[c], s2.v[c], s3.v[c]);
-    out.w[c] = make(s0.w[c], s1.w[c], s2.w[c], s3.w[c]);
+    out.v[c] = make<R>(s0.v[c], s1.v[c], s2.v[c], s3.v[c]);
+    out.w[c] = make<R>(s0.w[c], s1.w[c], s2.w[c], s3.w[c]);
   }
 }
 
-[[gnu::always_inline]] inline void scatter(const LaneVelocity& in, const int (&index)[4],
+template <class R>
+[[gnu::always_inline]] inline void scatter(const LaneVelocity<R>& in, const int (&index)[4],
                                            std::vector<Velocity>& vel) noexcept {
   // A body two lanes name is non-dynamic: every lane holds it unchanged.
   for (int l = 0; l < 4; ++l) {
@@ -661,22 +698,24 @@ struct LaneVelocity {
 }
 
 // u·(v_B − v_A) + angA·ω_A + angB·ω_B along direction k, lane by lane.
-[[gnu::always_inline]] inline Lanes wideVelocity(const WideRow& r, int k, const Lanes (&dv)[3],
-                                                 const LaneVelocity& A, const LaneVelocity& B) noexcept {
-  const auto dot = [](const double (&x)[3][4], const Lanes (&y)[3]) {
-    return (load(x[0]) * y[0] + load(x[1]) * y[1]) + load(x[2]) * y[2];
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> wideVelocity(const WideRow& r, int k, const Lanes<R> (&dv)[3],
+                                                    const LaneVelocity<R>& A, const LaneVelocity<R>& B) noexcept {
+  const auto dot = [](const double (&x)[3][4], const Lanes<R> (&y)[3]) {
+    return (load<R>(x[0]) * y[0] + load<R>(x[1]) * y[1]) + load<R>(x[2]) * y[2];
   };
   return (dot(r.u[k], dv) + dot(r.angA[k], A.w)) + dot(r.angB[k], B.w);
 }
 
 // Applies impulse changes l along direction k of every lane.
-[[gnu::always_inline]] inline void wideApply(const WideRow& r, int k, const Lanes& l, const Lanes& sA,
-                                             const Lanes& sB, LaneVelocity& A, LaneVelocity& B) noexcept {
+template <class R>
+[[gnu::always_inline]] inline void wideApply(const WideRow& r, int k, const Lanes<R>& l, const Lanes<R>& sA,
+                                             const Lanes<R>& sB, LaneVelocity<R>& A, LaneVelocity<R>& B) noexcept {
   for (int c = 0; c < 3; ++c) {
-    A.v[c] = A.v[c] + sA * load(r.u[k][c]);
-    A.w[c] = A.w[c] + l * load(r.mAngA[k][c]);
-    B.v[c] = B.v[c] + sB * load(r.u[k][c]);
-    B.w[c] = B.w[c] + l * load(r.mAngB[k][c]);
+    A.v[c] = A.v[c] + sA * load<R>(r.u[k][c]);
+    A.w[c] = A.w[c] + l * load<R>(r.mAngA[k][c]);
+    B.v[c] = B.v[c] + sB * load<R>(r.u[k][c]);
+    B.w[c] = B.w[c] + l * load<R>(r.mAngB[k][c]);
   }
 }
 
@@ -686,45 +725,46 @@ struct LaneVelocity {
 // effective mass) and empty lanes (all zero) keep their impulses. With
 // kResidual, `change` takes the largest |Δλ|/m_eff per lane (0/0 of an empty
 // lane is NaN, which max() passes over).
-template <bool kResidual>
-[[gnu::always_inline]] inline void wideContact(WideRow& r, LaneVelocity& A, LaneVelocity& B, Lanes& change) noexcept {
-  const Lanes zero = splat(0.0);
-  const Lanes imA = load(r.imA), imB = load(r.imB), negImA = zero - imA;
-  const Lanes e1 = load(r.effMass[1]), e2 = load(r.effMass[2]);
-  const LaneMask rubs = greater(e1, zero) & greater(e2, zero);
-  Lanes dv[3];
+template <class R, bool kResidual>
+[[gnu::always_inline]] inline void wideContact(WideRow& r, LaneVelocity<R>& A, LaneVelocity<R>& B,
+                                               Lanes<R>& change) noexcept {
+  const Lanes<R> zero = splat<R>(0.0);
+  const Lanes<R> imA = load<R>(r.imA), imB = load<R>(r.imB), negImA = zero - imA;
+  const Lanes<R> e1 = load<R>(r.effMass[1]), e2 = load<R>(r.effMass[2]);
+  const LaneMask<R> rubs = greater(e1, zero) & greater(e2, zero);
+  Lanes<R> dv[3];
   for (int c = 0; c < 3; ++c) dv[c] = B.v[c] - A.v[c];
-  const Lanes i0 = load(r.impulse[0]), i1 = load(r.impulse[1]), i2 = load(r.impulse[2]);
-  const Lanes limit = load(r.friction) * i0;
-  Lanes l1 = i1 - e1 * wideVelocity(r, 1, dv, A, B);
-  Lanes l2 = i2 - e2 * wideVelocity(r, 2, dv, A, B);
-  const Lanes len2 = l1 * l1 + l2 * l2;
-  const LaneMask slides = greater(len2, limit * limit);
+  const Lanes<R> i0 = load<R>(r.impulse[0]), i1 = load<R>(r.impulse[1]), i2 = load<R>(r.impulse[2]);
+  const Lanes<R> limit = load<R>(r.friction) * i0;
+  Lanes<R> l1 = i1 - e1 * wideVelocity(r, 1, dv, A, B);
+  Lanes<R> l2 = i2 - e2 * wideVelocity(r, 2, dv, A, B);
+  const Lanes<R> len2 = l1 * l1 + l2 * l2;
+  const LaneMask<R> slides = greater(len2, limit * limit);
   if (any(slides)) {
-    const Lanes f = select(greater(len2, zero), limit / sqrt(len2), zero);
+    const Lanes<R> f = select(greater(len2, zero), limit / sqrt(len2), zero);
     l1 = select(slides, l1 * f, l1);
     l2 = select(slides, l2 * f, l2);
   }
-  const Lanes d1 = select(rubs, l1 - i1, zero), d2 = select(rubs, l2 - i2, zero);
+  const Lanes<R> d1 = select(rubs, l1 - i1, zero), d2 = select(rubs, l2 - i2, zero);
   store(r.impulse[1], select(rubs, l1, i1));
   store(r.impulse[2], select(rubs, l2, i2));
   // Tangent 1 then tangent 2 (as the scalar solver).
   for (int c = 0; c < 3; ++c) {
-    A.v[c] = A.v[c] + (negImA * d1) * load(r.u[1][c]);
-    A.v[c] = A.v[c] + (negImA * d2) * load(r.u[2][c]);
-    A.w[c] = A.w[c] + d1 * load(r.mAngA[1][c]);
-    A.w[c] = A.w[c] + d2 * load(r.mAngA[2][c]);
-    B.v[c] = B.v[c] + (imB * d1) * load(r.u[1][c]);
-    B.v[c] = B.v[c] + (imB * d2) * load(r.u[2][c]);
-    B.w[c] = B.w[c] + d1 * load(r.mAngB[1][c]);
-    B.w[c] = B.w[c] + d2 * load(r.mAngB[2][c]);
+    A.v[c] = A.v[c] + (negImA * d1) * load<R>(r.u[1][c]);
+    A.v[c] = A.v[c] + (negImA * d2) * load<R>(r.u[2][c]);
+    A.w[c] = A.w[c] + d1 * load<R>(r.mAngA[1][c]);
+    A.w[c] = A.w[c] + d2 * load<R>(r.mAngA[2][c]);
+    B.v[c] = B.v[c] + (imB * d1) * load<R>(r.u[1][c]);
+    B.v[c] = B.v[c] + (imB * d2) * load<R>(r.u[2][c]);
+    B.w[c] = B.w[c] + d1 * load<R>(r.mAngB[1][c]);
+    B.w[c] = B.w[c] + d2 * load<R>(r.mAngB[2][c]);
   }
   if constexpr (kResidual) change = max(max(change, abs(d1) / e1), abs(d2) / e2);
   for (int c = 0; c < 3; ++c) dv[c] = B.v[c] - A.v[c];
-  const Lanes e0 = load(r.effMass[0]);
-  const Lanes vn = wideVelocity(r, 0, dv, A, B);
-  const Lanes next = max(i0 + e0 * (load(r.target) - vn), zero);
-  const Lanes d0 = next - i0;
+  const Lanes<R> e0 = load<R>(r.effMass[0]);
+  const Lanes<R> vn = wideVelocity(r, 0, dv, A, B);
+  const Lanes<R> next = max(i0 + e0 * (load<R>(r.target) - vn), zero);
+  const Lanes<R> d0 = next - i0;
   store(r.impulse[0], next);
   wideApply(r, 0, d0, negImA * d0, imB * d0, A, B);
   if constexpr (kResidual) change = max(change, abs(d0) / e0);
@@ -732,82 +772,57 @@ template <bool kResidual>
 
 // The split-impulse update of the normal rows of a WideRow on
 // pseudo-velocities.
-[[gnu::always_inline]] inline void widePush(WideRow& r, LaneVelocity& A, LaneVelocity& B) noexcept {
-  const Lanes zero = splat(0.0);
-  Lanes dv[3];
+template <class R>
+[[gnu::always_inline]] inline void widePush(WideRow& r, LaneVelocity<R>& A, LaneVelocity<R>& B) noexcept {
+  const Lanes<R> zero = splat<R>(0.0);
+  Lanes<R> dv[3];
   for (int c = 0; c < 3; ++c) dv[c] = B.v[c] - A.v[c];
-  const Lanes i0 = load(r.pushImpulse);
-  const Lanes vn = wideVelocity(r, 0, dv, A, B);
-  const Lanes next = max(i0 + load(r.effMass[0]) * (load(r.pushTarget) - vn), zero);
-  const Lanes d0 = next - i0;
+  const Lanes<R> i0 = load<R>(r.pushImpulse);
+  const Lanes<R> vn = wideVelocity(r, 0, dv, A, B);
+  const Lanes<R> next = max(i0 + load<R>(r.effMass[0]) * (load<R>(r.pushTarget) - vn), zero);
+  const Lanes<R> d0 = next - i0;
   store(r.pushImpulse, next);
-  wideApply(r, 0, d0, (zero - load(r.imA)) * d0, load(r.imB) * d0, A, B);
+  wideApply(r, 0, d0, (zero - load<R>(r.imA)) * d0, load<R>(r.imB) * d0, A, B);
 }
 
 // One sweep over the groups; kMode 0: velocities, 1: velocities with the
 // residual (returned), 2: split-impulse pseudo-velocities.
-template <int kMode>
+template <class R, int kMode>
 [[gnu::always_inline]] inline double sweepGroups(const std::vector<ConstraintSolver::Group>& groups,
                                                  std::vector<WideRow>& rows, std::vector<Velocity>& vel) noexcept {
-  Lanes change = splat(0.0);
+  Lanes<R> change = splat<R>(0.0);
   for (const ConstraintSolver::Group& g : groups) {
-    LaneVelocity A, B;
+    LaneVelocity<R> A, B;
     gather(vel, g.a, A);
     gather(vel, g.b, B);
     for (std::uint32_t k = g.rowBegin; k < g.rowEnd; ++k) {
       if constexpr (kMode == 2)
         widePush(rows[k], A, B);
       else
-        wideContact<kMode == 1>(rows[k], A, B, change);
+        wideContact<R, kMode == 1>(rows[k], A, B, change);
     }
     scatter(A, g.a, vel);
     scatter(B, g.b, vel);
   }
-  double out[4];
+  alignas(32) double out[4];
   store(out, change);
   return std::max({out[0], out[1], out[2], out[3]});
 }
 
-// The sweeps, compiled for the host's vector units too (GCC target clones on
-// x86-64, chosen at load time by an ifunc): with x86-64-v4 (AVX-512 VL) the lanes fit in 32 registers
-// instead of spilling from 16, with AVX the operations take three operands.
-// The arithmetic is the same IEEE operations (no FMA, see the top of the
-// file), so every version gives the same bits.
-// Not under ThreadSanitizer: the clones' ifunc resolver runs while the
-// library is relocated, before the TSan runtime is up, and the instrumented
-// resolver crashes every program that loads the library.
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(DM_SOLVER_PLAIN_LANES) && \
-    !defined(__SANITIZE_THREAD__)
-#define DM_SOLVER_CLONES [[gnu::target_clones("arch=x86-64-v4", "avx", "default")]]
-#else
-#define DM_SOLVER_CLONES
-#endif
-DM_SOLVER_CLONES double sweepVelocities(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
-                                        std::vector<Velocity>& vel) noexcept {
-  return sweepGroups<0>(groups, rows, vel);
-}
-DM_SOLVER_CLONES double sweepResidual(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
-                                      std::vector<Velocity>& vel) noexcept {
-  return sweepGroups<1>(groups, rows, vel);
-}
-DM_SOLVER_CLONES double sweepPush(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
-                                  std::vector<Velocity>& vel) noexcept {
-  return sweepGroups<2>(groups, rows, vel);
-}
-#undef DM_SOLVER_CLONES
-
 // Applies the contacts' incoming impulses (warm start), group by group.
-void warmStartGroups(const std::vector<ConstraintSolver::Group>& groups, const std::vector<WideRow>& rows,
-                     std::vector<Velocity>& vel) noexcept {
+template <class R>
+[[gnu::always_inline]] inline void warmStartGroups(const std::vector<ConstraintSolver::Group>& groups,
+                                                   const std::vector<WideRow>& rows,
+                                                   std::vector<Velocity>& vel) noexcept {
   for (const ConstraintSolver::Group& g : groups) {
-    LaneVelocity A, B;
+    LaneVelocity<R> A, B;
     gather(vel, g.a, A);
     gather(vel, g.b, B);
     for (std::uint32_t k = g.rowBegin; k < g.rowEnd; ++k) {
       const WideRow& r = rows[k];
-      const Lanes negImA = splat(0.0) - load(r.imA), imB = load(r.imB);
+      const Lanes<R> negImA = splat<R>(0.0) - load<R>(r.imA), imB = load<R>(r.imB);
       for (int d = 0; d < 3; ++d) {
-        const Lanes l = load(r.impulse[d]);
+        const Lanes<R> l = load<R>(r.impulse[d]);
         wideApply(r, d, l, negImA * l, imB * l, A, B);
       }
     }
@@ -815,6 +830,65 @@ void warmStartGroups(const std::vector<ConstraintSolver::Group>& groups, const s
     scatter(B, g.b, vel);
   }
 }
+
+// The sweeps: kMode 0, 1, 2 of sweepGroups and 3: warmStartGroups (returns 0).
+using SweepFn = double (*)(const std::vector<ConstraintSolver::Group>&, std::vector<WideRow>&,
+                           std::vector<Velocity>&) noexcept;
+template <class R, int kMode>
+[[gnu::always_inline]] inline double sweepAs(const std::vector<ConstraintSolver::Group>& groups,
+                                             std::vector<WideRow>& rows, std::vector<Velocity>& vel) noexcept {
+  if constexpr (kMode == 3) {
+    warmStartGroups<R>(groups, rows, vel);
+    return 0.0;
+  } else {
+    return sweepGroups<R, kMode>(groups, rows, vel);
+  }
+}
+
+template <int kMode>
+double sweepNarrow(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
+                   std::vector<Velocity>& vel) noexcept {
+  return sweepAs<Narrow, kMode>(groups, rows, vel);
+}
+
+// Also compiled for AVX2, where the CPU (and the OS) has it, which the build
+// does not assume: the four lanes in one 256-bit register instead of two
+// 128-bit ones, half the instructions (AVX2, not AVX: the lane masks are
+// 256-bit integer operations); and for x86-64-v4 (AVX-512 VL), where 32
+// registers hold the lanes without spilling. GCC only (function targets
+// with vector types); chosen once at load time with __builtin_cpu_supports
+// (not an ifunc: ThreadSanitizer builds crash in an ifunc resolver, which
+// runs before the TSan runtime is up).
+#if defined(DM_SOLVER_VECTOR_LANES) && defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#define DM_SOLVER_AVX 1
+template <int kMode>
+[[gnu::target("avx2"), gnu::noinline]] double sweepAvx(const std::vector<ConstraintSolver::Group>& groups,
+                                                      std::vector<WideRow>& rows,
+                                                      std::vector<Velocity>& vel) noexcept {
+  return sweepAs<Quad, kMode>(groups, rows, vel);
+}
+template <int kMode>
+[[gnu::target("arch=x86-64-v4"), gnu::noinline]] double sweepAvx512(
+    const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
+    std::vector<Velocity>& vel) noexcept {
+  return sweepAs<Quad, kMode>(groups, rows, vel);
+}
+#endif
+
+template <int kMode>
+SweepFn pickSweep() noexcept {
+#if defined(DM_SOLVER_AVX)
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("x86-64-v4")) return &sweepAvx512<kMode>;
+  if (__builtin_cpu_supports("avx2")) return &sweepAvx<kMode>;
+#endif
+  return &sweepNarrow<kMode>;
+}
+
+const SweepFn gSweepVelocities = pickSweep<0>();
+const SweepFn gSweepResidual = pickSweep<1>();
+const SweepFn gSweepPush = pickSweep<2>();
+const SweepFn gWarmStart = pickSweep<3>();
 
 }  // namespace
 
@@ -828,14 +902,14 @@ double ConstraintSolver::sweep() {
     if constexpr (kResidual)
       if (r.effMass > 0.0) change = std::max(change, std::abs(applied) / r.effMass);
   }
-  change = std::max(change, kResidual ? sweepResidual(groups_, wideRows_, velocity_)
-                                      : sweepVelocities(groups_, wideRows_, velocity_));
+  change = std::max(change, kResidual ? gSweepResidual(groups_, wideRows_, velocity_)
+                                      : gSweepVelocities(groups_, wideRows_, velocity_));
   return change;
 }
 
 void ConstraintSolver::pushSweep() {
   for (Row& r : jointRows_) solveRow(r, push_, r.pushTarget, r.pushImpulse);
-  sweepPush(groups_, wideRows_, push_);
+  gSweepPush(groups_, wideRows_, push_);
 }
 
 Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
@@ -873,7 +947,7 @@ Result<SolverStats> ConstraintSolver::solve(std::span<SolverBody> bodies,
     for (const Row& r : jointRows_)
       applyImpulse(r, velocity_[static_cast<std::size_t>(r.a)], velocity_[static_cast<std::size_t>(r.b)],
                    r.impulse);
-    warmStartGroups(groups_, wideRows_, velocity_);
+    gWarmStart(groups_, wideRows_, velocity_);
   }
 
   // Velocity sweeps; the residual is measured only where it is used (the

@@ -26,9 +26,10 @@
 //      Contacts are taken manifold by manifold (consecutive contacts of one
 //      body pair); up to four manifolds that share no dynamic body are solved
 //      side by side in SIMD lanes (two SSE2 registers of doubles; with GCC
-//      on x86-64 also AVX and AVX-512 versions picked at load time; lane by
-//      lane the scalar arithmetic without FMA, so every version gives the
-//      same bits), which gives exactly the result of solving them one after
+//      on x86-64 also one 256-bit register, in AVX2 and AVX-512 versions
+//      picked at load time; lane by lane the scalar arithmetic without FMA,
+//      so every version gives the same bits; the rows are 32-byte aligned
+//      for the wide loads), which gives exactly the result of solving them one after
 //      the other. The sweep order is the input order, each manifold joined
 //      by the first independent ones of the next 8 (a wider window fills
 //      the lanes no better and lets a 20-row pyramid at 1/60 s drift more);
@@ -285,7 +286,7 @@ class ConstraintSolver {
   /// zero impulse). The linear Jacobian is ∓u on A/B, so only the directions
   /// are stored; angular parts are angA = −rA × u, angB = rB × u;
   /// [d][c][lane] is component c of row d.
-  struct WideRow {
+  struct alignas(32) WideRow {
     double u[3][3][kLanes];                          // normal, tangent 1, tangent 2
     double angA[3][3][kLanes], angB[3][3][kLanes];   // angular Jacobians
     double mAngA[3][3][kLanes], mAngB[3][3][kLanes];  // I⁻¹·angA, I⁻¹·angB
