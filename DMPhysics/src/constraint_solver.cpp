@@ -16,6 +16,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <tuple>
 
 namespace dm {
 
@@ -1003,13 +1004,12 @@ bool pairLess(int a0, int b0, int a1, int b1) noexcept { return a0 < a1 || (a0 =
 
 void ContactCache::reserve(std::size_t contacts) {
   entries_.reserve(contacts);
-  staged_.reserve(contacts);
   runs_.reserve(contacts);
   used_.reserve(contacts);
 }
 
 void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<const SolverBody> bodies) {
-  staged_.clear();
+  entries_.clear();
   runs_.clear();
   // A pair's contacts are consecutive: its rotations are made once.
   int lastA = 0, lastB = 0;
@@ -1038,34 +1038,42 @@ void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<
     e.normal = c.point.normal;
     e.normalImpulse = c.normalImpulse;
     e.frictionLocalA = toA * c.frictionImpulse;
-    staged_.push_back(e);
+    entries_.push_back(e);
   }
-  // Sorted by pair, a pair's contacts in input order: the runs are sorted
-  // (far fewer than the contacts) and the entries copied run by run.
+  // The entries stay in input order; the runs (far fewer) are sorted by
+  // pair, a pair's in input order, and index them.
   std::sort(runs_.begin(), runs_.end(), [](const Run& x, const Run& y) {
     return pairLess(x.a, x.b, y.a, y.b) || (x.a == y.a && x.b == y.b && x.begin < y.begin);
   });
-  entries_.clear();
-  for (const Run& r : runs_) entries_.insert(entries_.end(), staged_.begin() + r.begin, staged_.begin() + r.end);
+}
+
+std::pair<const ContactCache::Run*, const ContactCache::Run*> ContactCache::runsOf(int a, int b) const noexcept {
+  const Run* first = std::lower_bound(runs_.data(), runs_.data() + runs_.size(), std::pair{a, b},
+                                      [](const Run& x, const std::pair<int, int>& k) {
+                                        return pairLess(x.a, x.b, k.first, k.second);
+                                      });
+  const Run* last = first;
+  while (last != runs_.data() + runs_.size() && last->a == a && last->b == b) ++last;
+  return {first, last};
 }
 
 int ContactCache::persist(int a, int b, std::span<const SolverBody> bodies, double margin, double mu, double e,
                           std::vector<ContactConstraint>& out) const {
-  const auto first =
-      std::lower_bound(entries_.begin(), entries_.end(), std::pair{a, b},
-                       [](const Entry& x, const std::pair<int, int>& k) { return pairLess(x.a, x.b, k.first, k.second); });
+  const auto [first, last] = runsOf(a, b);
   const PoseRef pa = poseOf(bodies, a), pb = poseOf(bodies, b);
   int added = 0;
-  for (auto it = first; it != entries_.end() && it->a == a && it->b == b; ++it) {
-    const Vec3 onA = pa.x + pa.q * it->localA;
-    const Vec3 onB = pb.x + pb.q * it->localB;
-    const Vec3 n = pa.q * it->normalLocalA;
-    const Vec3 d = onB - onA;
-    const double apart = d.dot(n);
-    const double depth = std::min(it->depth - apart, 0.0);
-    if (depth < -margin || (d - apart * n).squaredNorm() > margin * margin) continue;
-    out.push_back(ContactConstraint::make(a, b, {0.5 * (onA + onB), n.normalized(), depth}, mu, e));
-    ++added;
+  for (const Run* r = first; r != last; ++r) {
+    for (auto it = entries_.begin() + r->begin; it != entries_.begin() + r->end; ++it) {
+      const Vec3 onA = pa.x + pa.q * it->localA;
+      const Vec3 onB = pb.x + pb.q * it->localB;
+      const Vec3 n = pa.q * it->normalLocalA;
+      const Vec3 d = onB - onA;
+      const double apart = d.dot(n);
+      const double depth = std::min(it->depth - apart, 0.0);
+      if (depth < -margin || (d - apart * n).squaredNorm() > margin * margin) continue;
+      out.push_back(ContactConstraint::make(a, b, {0.5 * (onA + onB), n.normalized(), depth}, mu, e));
+      ++added;
+    }
   }
   return added;
 }
@@ -1077,7 +1085,7 @@ int ContactCache::warmStart(std::span<ContactConstraint> contacts, std::span<con
   // A pair's contacts are consecutive: search and rotation once per pair.
   bool haveRun = false;
   int lastA = 0, lastB = 0;
-  std::vector<Entry>::const_iterator first = entries_.end();
+  const Run *first = nullptr, *last = nullptr;
   PoseRef pa;
   Mat3 fromA;  // A's frame → world
   for (ContactConstraint& c : contacts) {
@@ -1090,31 +1098,33 @@ int ContactCache::warmStart(std::span<ContactConstraint> contacts, std::span<con
       haveRun = true;
       lastA = c.bodyA;
       lastB = c.bodyB;
-      first = std::lower_bound(
-          entries_.begin(), entries_.end(), c,
-          [](const Entry& e, const ContactConstraint& k) { return pairLess(e.a, e.b, k.bodyA, k.bodyB); });
+      std::tie(first, last) = runsOf(c.bodyA, c.bodyB);
       pa = poseOf(bodies, c.bodyA);
       fromA = pa.q.toRotationMatrix();
     }
-    if (first == entries_.end() || first->a != c.bodyA || first->b != c.bodyB) continue;  // a new pair
+    if (first == last) continue;  // a new pair
     const Vec3 localA = fromA.transpose() * (c.point.position - pa.x);
     std::ptrdiff_t best = -1;
     double bestDist = matchDistance * matchDistance;
-    for (auto it = first; it != entries_.end() && it->a == c.bodyA && it->b == c.bodyB; ++it) {
-      const std::ptrdiff_t k = it - entries_.begin();
-      if (used_[static_cast<std::size_t>(k)]) continue;
-      if (c.featureKey != 0) {
-        if (it->key == c.featureKey) {
-          best = k;
-          break;
+    bool keyed = false;  // found by feature key: the first match wins
+    for (const Run* r = first; r != last && !keyed; ++r) {
+      for (std::uint32_t k = r->begin; k < r->end; ++k) {
+        const Entry& it = entries_[k];
+        if (used_[k]) continue;
+        if (c.featureKey != 0) {
+          if (it.key == c.featureKey) {
+            best = k;
+            keyed = true;
+            break;
+          }
+          continue;
         }
-        continue;
-      }
-      if (it->normal.dot(c.point.normal) < 0.7) continue;
-      const double dist = (it->localA - localA).squaredNorm();
-      if (dist <= bestDist) {
-        bestDist = dist;
-        best = k;
+        if (it.normal.dot(c.point.normal) < 0.7) continue;
+        const double dist = (it.localA - localA).squaredNorm();
+        if (dist <= bestDist) {
+          bestDist = dist;
+          best = k;
+        }
       }
     }
     if (best < 0) continue;

@@ -363,7 +363,10 @@ class ContactCache {
   int persist(int a, int b, std::span<const SolverBody> bodies, double margin, double mu, double e,
               std::vector<ContactConstraint>& out) const;
   /// Forgets everything.
-  void clear() noexcept { entries_.clear(); }
+  void clear() noexcept {
+    entries_.clear();
+    runs_.clear();
+  }
   std::size_t size() const noexcept { return entries_.size(); }
 
  private:
@@ -382,9 +385,10 @@ class ContactCache {
     int a = 0, b = 0;
     std::uint32_t begin = 0, end = 0;
   };
-  std::vector<Entry> entries_;  // sorted by pair (a, b); a pair's in input order
-  std::vector<Entry> staged_;   // store(): entries in input order
-  std::vector<Run> runs_;       // store(): the input's pair runs
+  // The runs of one pair, [first, last) of runs_.
+  std::pair<const Run*, const Run*> runsOf(int a, int b) const noexcept;
+  std::vector<Entry> entries_;  // in input order
+  std::vector<Run> runs_;       // entries_' pair runs, sorted by pair (a, b), a pair's by begin
   std::vector<std::uint8_t> used_;
 };
 
