@@ -453,90 +453,6 @@ void ConstraintSolver::scheduleManifolds(std::span<const ContactConstraint> cont
   }
 }
 
-namespace {
-
-// Lane l of a WideRow as an empty contact: all zero.
-void clearLane(WideRow& w, int l) noexcept {
-  for (int d = 0; d < 3; ++d) {
-    for (int c = 0; c < 3; ++c)
-      w.u[d][c][l] = w.angA[d][c][l] = w.angB[d][c][l] = w.mAngA[d][c][l] = w.mAngB[d][c][l] = 0.0;
-    w.effMass[d][l] = w.impulse[d][l] = 0.0;
-  }
-  w.imA[l] = w.imB[l] = w.friction[l] = w.target[l] = w.pushTarget[l] = w.pushImpulse[l] = 0.0;
-}
-
-}  // namespace
-
-// The three rows of every contact, written straight into its group's lane.
-void ConstraintSolver::buildContactRows(std::span<const SolverBody> bodies,
-                                        std::span<const ContactConstraint> contacts, double dt,
-                                        const SolverOptions& o) {
-  const double inv = 1.0 / dt;
-  const double scale = o.warmStart ? o.warmStartFactor : 0.0;
-  wideRows_.resize(groups_.empty() ? 0 : groups_.back().rowEnd);
-  for (const Group& g : groups_) {
-    for (int l = 0; l < kLanes; ++l) {
-      const std::uint32_t x = g.manifold[l];
-      const std::uint32_t size = x == kNoManifold ? 0 : manifolds_[x].end - manifolds_[x].begin;
-      for (std::uint32_t k = size; k < g.rowEnd - g.rowBegin; ++k) clearLane(wideRows_[g.rowBegin + k], l);
-      if (size == 0) continue;
-      const auto ia = static_cast<std::size_t>(g.a[l]), ib = static_cast<std::size_t>(g.b[l]);
-      const double imA = invMass_[ia], imB = invMass_[ib];
-      const Mat3& iA = invInertia_[ia];
-      const Mat3& iB = invInertia_[ib];
-      const Velocity& A = velocity_[ia];
-      const Velocity& B = velocity_[ib];
-      for (std::uint32_t k = 0; k < size; ++k) {
-        const ContactConstraint& c = contacts[manifolds_[x].begin + k];
-        WideRow& w = wideRows_[g.rowBegin + k];
-        const Vec3 xa = c.bodyA == kWorldBody ? Vec3::Zero() : bodies[ia].position;
-        const Vec3 xb = c.bodyB == kWorldBody ? Vec3::Zero() : bodies[ib].position;
-        const Vec3 rA = c.point.position - xa;
-        const Vec3 rB = c.point.position - xb;
-        Vec3 u[3];
-        u[0] = c.point.normal;
-        tangentBasis(u[0], u[1], u[2]);
-        Vec3 angA[3], angB[3];
-        for (int d = 0; d < 3; ++d) {
-          angA[d] = -rA.cross(u[d]);
-          angB[d] = rB.cross(u[d]);
-          const Vec3 mA = iA * angA[d], mB = iB * angB[d];
-          const double m = imA * u[d].squaredNorm() + angA[d].dot(mA) + imB * u[d].squaredNorm() + angB[d].dot(mB);
-          w.effMass[d][l] = m > 1e-300 ? 1.0 / m : 0.0;
-          for (int e = 0; e < 3; ++e) {
-            w.u[d][e][l] = u[d][e];
-            w.angA[d][e][l] = angA[d][e];
-            w.angB[d][e][l] = angB[d][e];
-            w.mAngA[d][e][l] = mA[e];
-            w.mAngB[d][e][l] = mB[e];
-          }
-        }
-        w.imA[l] = imA;
-        w.imB[l] = imB;
-        w.friction[l] = c.friction;
-        // Targets from the approach speed before any impulse of this step.
-        const double vn = u[0].dot(B.v - A.v) + angA[0].dot(A.w) + angB[0].dot(B.w);
-        double target = 0.0, pushTarget = 0.0;
-        if (c.point.depth < 0.0) {
-          target = c.point.depth * inv;  // speculative: may close the gap this step
-        } else {
-          if (vn < -o.restitutionThreshold) target = -c.restitution * vn;
-          const double corr = std::min(std::max(c.point.depth - o.slop, 0.0) * inv, o.maxCorrectionVelocity);
-          if (o.splitImpulse)
-            pushTarget = o.pushFactor * corr;
-          else
-            target = std::max(target, o.baumgarte * corr);
-        }
-        w.target[l] = target;
-        w.pushTarget[l] = pushTarget;
-        w.pushImpulse[l] = 0.0;
-        w.impulse[0][l] = scale * std::max(c.normalImpulse, 0.0);
-        w.impulse[1][l] = scale * c.frictionImpulse.dot(u[1]);
-        w.impulse[2][l] = scale * c.frictionImpulse.dot(u[2]);
-      }
-    }
-  }
-}
 
 namespace {
 
@@ -626,6 +542,10 @@ DM_BINARY(-)
 DM_BINARY(*)
 DM_BINARY(/)
 #undef DM_BINARY
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> operator-(const Lanes<R>& a) noexcept {
+  DM_LANEWISE(Lanes<R>, -a.h[i]);
+}
 template <class R>
 [[gnu::always_inline]] inline LaneMask<R> greater(const Lanes<R>& a, const Lanes<R>& b) noexcept {
   DM_LANEWISE(LaneMask<R>, a.h[i] > b.h[i]);
@@ -892,6 +812,145 @@ const SweepFn gSweepPush = pickSweep<2>();
 const SweepFn gWarmStart = pickSweep<3>();
 
 }  // namespace
+
+namespace {
+
+using L = Lanes<Narrow>;
+using LMask = LaneMask<Narrow>;
+
+[[gnu::always_inline]] inline void cross(const L (&a)[3], const L (&b)[3], L (&out)[3]) noexcept {
+  out[0] = a[1] * b[2] - a[2] * b[1];
+  out[1] = a[2] * b[0] - a[0] * b[2];
+  out[2] = a[0] * b[1] - a[1] * b[0];
+}
+[[gnu::always_inline]] inline L dot(const L (&a)[3], const L (&b)[3]) noexcept {
+  return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2];
+}
+// Eigen's Mat3 · Vec3, sum for sum: rows 0 and 1 as one SSE2 packet
+// ((m0·v0 + m1·v1) + m2·v2), row 2 reduced m0·v0 + (m1·v1 + m2·v2).
+[[gnu::always_inline]] inline void times(const L (&m)[3][3], const L (&v)[3], L (&out)[3]) noexcept {
+  for (int r = 0; r < 2; ++r) out[r] = (m[r][0] * v[0] + m[r][1] * v[1]) + m[r][2] * v[2];
+  out[2] = m[2][0] * v[0] + (m[2][1] * v[1] + m[2][2] * v[2]);
+}
+
+}  // namespace
+
+// The three rows of every contact, four lanes at a time: row k of a group
+// holds contact k of each lane's manifold (an empty lane, or a manifold with
+// fewer contacts: all zero). Lane by lane the arithmetic is that of the
+// scalar derivation in Eigen, sum for sum, so the rows are the same bits.
+void ConstraintSolver::buildContactRows(std::span<const SolverBody> bodies,
+                                        std::span<const ContactConstraint> contacts, double dt,
+                                        const SolverOptions& o) {
+  using R = Narrow;
+  const double inv = 1.0 / dt;
+  const double scale = o.warmStart ? o.warmStartFactor : 0.0;
+  const std::size_t world = velocity_.size() - 1;
+  const L zero = splat<R>(0.0);
+  ContactConstraint empty;  // an empty lane's stand-in (any finite contact; the lane is zeroed)
+  empty.point.normal = Vec3::UnitZ();
+  wideRows_.resize(groups_.empty() ? 0 : groups_.back().rowEnd);
+  for (const Group& g : groups_) {
+    // The lanes' bodies: inverse masses and inertias, origins, velocities.
+    std::size_t ia[kLanes], ib[kLanes];
+    std::uint32_t first[kLanes], size[kLanes];
+    for (int l = 0; l < kLanes; ++l) {
+      const std::uint32_t x = g.manifold[l];
+      first[l] = x == kNoManifold ? 0 : manifolds_[x].begin;
+      size[l] = x == kNoManifold ? 0 : manifolds_[x].end - manifolds_[x].begin;
+      ia[l] = static_cast<std::size_t>(g.a[l]);
+      ib[l] = static_cast<std::size_t>(g.b[l]);
+    }
+    const auto lanes = [](auto&& f) { return make<R>(f(0), f(1), f(2), f(3)); };
+    const L mA = lanes([&](int l) { return invMass_[ia[l]]; });
+    const L mB = lanes([&](int l) { return invMass_[ib[l]]; });
+    L IA[3][3], IB[3][3], XA[3], XB[3], VA[3], WA[3], VB[3], WB[3];
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) {
+        IA[r][c] = lanes([&](int l) { return invInertia_[ia[l]](r, c); });
+        IB[r][c] = lanes([&](int l) { return invInertia_[ib[l]](r, c); });
+      }
+      XA[r] = lanes([&](int l) { return ia[l] == world ? 0.0 : bodies[ia[l]].position[r]; });
+      XB[r] = lanes([&](int l) { return ib[l] == world ? 0.0 : bodies[ib[l]].position[r]; });
+      VA[r] = lanes([&](int l) { return velocity_[ia[l]].v[r]; });
+      WA[r] = lanes([&](int l) { return velocity_[ia[l]].w[r]; });
+      VB[r] = lanes([&](int l) { return velocity_[ib[l]].v[r]; });
+      WB[r] = lanes([&](int l) { return velocity_[ib[l]].w[r]; });
+    }
+    for (std::uint32_t k = 0; k < g.rowEnd - g.rowBegin; ++k) {
+      // Contact k of each lane, with its tangent basis.
+      const ContactConstraint* c[kLanes];
+      Vec3 t[kLanes][2];
+      for (int l = 0; l < kLanes; ++l) {
+        c[l] = k < size[l] ? &contacts[first[l] + k] : &empty;
+        tangentBasis(c[l]->point.normal, t[l][0], t[l][1]);
+      }
+      const LMask active = greater(lanes([&](int l) { return k < size[l] ? 1.0 : 0.0; }), zero);
+      WideRow& w = wideRows_[g.rowBegin + k];
+      const auto put = [&](double (&out)[4], const L& x) { store(out, select(active, x, zero)); };
+      L P[3], rA[3], rB[3], U[3][3], F[3];
+      for (int r = 0; r < 3; ++r) {
+        P[r] = lanes([&](int l) { return c[l]->point.position[r]; });
+        U[0][r] = lanes([&](int l) { return c[l]->point.normal[r]; });
+        U[1][r] = lanes([&](int l) { return t[l][0][r]; });
+        U[2][r] = lanes([&](int l) { return t[l][1][r]; });
+        F[r] = lanes([&](int l) { return c[l]->frictionImpulse[r]; });
+        rA[r] = P[r] - XA[r];
+        rB[r] = P[r] - XB[r];
+      }
+      L angA0[3], angB0[3];
+      for (int d = 0; d < 3; ++d) {
+        L angA[3], angB[3], mAngA[3], mAngB[3];
+        cross(rA, U[d], angA);
+        for (L& x : angA) x = -x;  // −rA × u
+        cross(rB, U[d], angB);
+        times(IA, angA, mAngA);
+        times(IB, angB, mAngB);
+        const L sq = dot(U[d], U[d]);
+        const L m = ((mA * sq + dot(angA, mAngA)) + mB * sq) + dot(angB, mAngB);
+        put(w.effMass[d], select(greater(m, splat<R>(1e-300)), splat<R>(1.0) / m, zero));
+        for (int e = 0; e < 3; ++e) {
+          put(w.u[d][e], U[d][e]);
+          put(w.angA[d][e], angA[e]);
+          put(w.angB[d][e], angB[e]);
+          put(w.mAngA[d][e], mAngA[e]);
+          put(w.mAngB[d][e], mAngB[e]);
+        }
+        if (d == 0)
+          for (int e = 0; e < 3; ++e) {
+            angA0[e] = angA[e];
+            angB0[e] = angB[e];
+          }
+      }
+      put(w.imA, mA);
+      put(w.imB, mB);
+      put(w.friction, lanes([&](int l) { return c[l]->friction; }));
+      // Targets from the approach speed before any impulse of this step.
+      L dv[3];
+      for (int e = 0; e < 3; ++e) dv[e] = VB[e] - VA[e];
+      const L vn = (dot(U[0], dv) + dot(angA0, WA)) + dot(angB0, WB);
+      const L depth = lanes([&](int l) { return c[l]->point.depth; });
+      const L restitution = lanes([&](int l) { return c[l]->restitution; });
+      L target = select(greater(splat<R>(-o.restitutionThreshold), vn), -restitution * vn, zero);
+      const L over = max(depth - splat<R>(o.slop), zero) * splat<R>(inv);
+      const L cap = splat<R>(o.maxCorrectionVelocity);
+      const L corr = select(greater(over, cap), cap, over);  // std::min(over, cap)
+      L pushTarget = zero;
+      if (o.splitImpulse)
+        pushTarget = splat<R>(o.pushFactor) * corr;
+      else
+        target = max(target, splat<R>(o.baumgarte) * corr);
+      const LMask speculative = greater(zero, depth);  // may close the gap this step
+      put(w.target, select(speculative, depth * splat<R>(inv), target));
+      put(w.pushTarget, select(speculative, zero, pushTarget));
+      store(w.pushImpulse, zero);
+      const L sc = splat<R>(scale);
+      put(w.impulse[0], sc * max(lanes([&](int l) { return c[l]->normalImpulse; }), zero));
+      put(w.impulse[1], sc * dot(F, U[1]));
+      put(w.impulse[2], sc * dot(F, U[2]));
+    }
+  }
+}
 
 // One velocity sweep: joint rows, then the contacts group by group. With
 // kResidual, returns the largest velocity correction |Δλ|/m_eff (else 0).
