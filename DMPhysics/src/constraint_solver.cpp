@@ -752,6 +752,159 @@ template <class R>
   }
 }
 
+// buildContactRows' inputs and output.
+struct RowBuild {
+  std::span<const SolverBody> bodies;
+  std::span<const ContactConstraint> contacts;
+  double dt;
+  const SolverOptions& o;
+  const std::vector<ConstraintSolver::Group>& groups;
+  const std::vector<ConstraintSolver::Manifold>& manifolds;
+  const std::vector<double>& invMass;
+  const std::vector<Mat3>& invInertia;
+  const std::vector<Velocity>& velocity;
+  std::vector<WideRow>& rows;
+};
+
+template <class R, class F>
+[[gnu::always_inline]] inline Lanes<R> lanesOf(F f) noexcept {
+  return make<R>(f(0), f(1), f(2), f(3));
+}
+template <class R>
+[[gnu::always_inline]] inline void cross(const Lanes<R> (&a)[3], const Lanes<R> (&b)[3], Lanes<R> (&out)[3]) noexcept {
+  out[0] = a[1] * b[2] - a[2] * b[1];
+  out[1] = a[2] * b[0] - a[0] * b[2];
+  out[2] = a[0] * b[1] - a[1] * b[0];
+}
+template <class R>
+[[gnu::always_inline]] inline Lanes<R> dot(const Lanes<R> (&a)[3], const Lanes<R> (&b)[3]) noexcept {
+  return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2];
+}
+// Eigen's Mat3 · Vec3, sum for sum: rows 0 and 1 as one SSE2 packet
+// ((m0·v0 + m1·v1) + m2·v2), row 2 reduced m0·v0 + (m1·v1 + m2·v2).
+template <class R>
+[[gnu::always_inline]] inline void times(const Lanes<R> (&m)[3][3], const Lanes<R> (&v)[3],
+                                         Lanes<R> (&out)[3]) noexcept {
+  for (int r = 0; r < 2; ++r) out[r] = (m[r][0] * v[0] + m[r][1] * v[1]) + m[r][2] * v[2];
+  out[2] = m[2][0] * v[0] + (m[2][1] * v[1] + m[2][2] * v[2]);
+}
+// x in the active lanes, 0 elsewhere.
+template <class R>
+[[gnu::always_inline]] inline void put(double (&out)[4], const LaneMask<R>& active, const Lanes<R>& x) noexcept {
+  store(out, select(active, x, splat<R>(0.0)));
+}
+
+template <class R>
+[[gnu::always_inline]] inline void buildRowsAs(const RowBuild& in) noexcept {
+  using L = Lanes<R>;
+  const SolverOptions& o = in.o;
+  const double inv = 1.0 / in.dt;
+  const double scale = o.warmStart ? o.warmStartFactor : 0.0;
+  const std::size_t world = in.velocity.size() - 1;
+  const L zero = splat<R>(0.0);
+  ContactConstraint empty;  // an empty lane's stand-in (any finite contact; the lane is zeroed)
+  empty.point.normal = Vec3::UnitZ();
+  for (const ConstraintSolver::Group& g : in.groups) {
+    // The lanes' bodies: inverse masses and inertias, origins, velocities.
+    std::size_t ia[4], ib[4];
+    std::uint32_t first[4], size[4];
+    for (int l = 0; l < 4; ++l) {
+      const std::uint32_t x = g.manifold[l];
+      const bool none = x == ConstraintSolver::kNoManifold;
+      first[l] = none ? 0 : in.manifolds[x].begin;
+      size[l] = none ? 0 : in.manifolds[x].end - in.manifolds[x].begin;
+      ia[l] = static_cast<std::size_t>(g.a[l]);
+      ib[l] = static_cast<std::size_t>(g.b[l]);
+    }
+    const L mA = lanesOf<R>([&](int l) { return in.invMass[ia[l]]; });
+    const L mB = lanesOf<R>([&](int l) { return in.invMass[ib[l]]; });
+    L IA[3][3], IB[3][3], XA[3], XB[3], VA[3], WA[3], VB[3], WB[3];
+    for (int r = 0; r < 3; ++r) {
+      for (int c = 0; c < 3; ++c) {
+        IA[r][c] = lanesOf<R>([&](int l) { return in.invInertia[ia[l]](r, c); });
+        IB[r][c] = lanesOf<R>([&](int l) { return in.invInertia[ib[l]](r, c); });
+      }
+      XA[r] = lanesOf<R>([&](int l) { return ia[l] == world ? 0.0 : in.bodies[ia[l]].position[r]; });
+      XB[r] = lanesOf<R>([&](int l) { return ib[l] == world ? 0.0 : in.bodies[ib[l]].position[r]; });
+      VA[r] = lanesOf<R>([&](int l) { return in.velocity[ia[l]].v[r]; });
+      WA[r] = lanesOf<R>([&](int l) { return in.velocity[ia[l]].w[r]; });
+      VB[r] = lanesOf<R>([&](int l) { return in.velocity[ib[l]].v[r]; });
+      WB[r] = lanesOf<R>([&](int l) { return in.velocity[ib[l]].w[r]; });
+    }
+    for (std::uint32_t k = 0; k < g.rowEnd - g.rowBegin; ++k) {
+      // Contact k of each lane, with its tangent basis.
+      const ContactConstraint* c[4];
+      Vec3 t[4][2];
+      for (int l = 0; l < 4; ++l) {
+        c[l] = k < size[l] ? &in.contacts[first[l] + k] : &empty;
+        tangentBasis(c[l]->point.normal, t[l][0], t[l][1]);
+      }
+      const LaneMask<R> active = greater(lanesOf<R>([&](int l) { return k < size[l] ? 1.0 : 0.0; }), zero);
+      WideRow& w = in.rows[g.rowBegin + k];
+      L P[3], rA[3], rB[3], U[3][3], F[3];
+      for (int r = 0; r < 3; ++r) {
+        P[r] = lanesOf<R>([&](int l) { return c[l]->point.position[r]; });
+        U[0][r] = lanesOf<R>([&](int l) { return c[l]->point.normal[r]; });
+        U[1][r] = lanesOf<R>([&](int l) { return t[l][0][r]; });
+        U[2][r] = lanesOf<R>([&](int l) { return t[l][1][r]; });
+        F[r] = lanesOf<R>([&](int l) { return c[l]->frictionImpulse[r]; });
+        rA[r] = P[r] - XA[r];
+        rB[r] = P[r] - XB[r];
+      }
+      L angA0[3], angB0[3];
+      for (int d = 0; d < 3; ++d) {
+        L angA[3], angB[3], mAngA[3], mAngB[3];
+        cross(rA, U[d], angA);
+        for (L& x : angA) x = -x;  // −rA × u
+        cross(rB, U[d], angB);
+        times(IA, angA, mAngA);
+        times(IB, angB, mAngB);
+        const L sq = dot(U[d], U[d]);
+        const L m = ((mA * sq + dot(angA, mAngA)) + mB * sq) + dot(angB, mAngB);
+        put(w.effMass[d], active, select(greater(m, splat<R>(1e-300)), splat<R>(1.0) / m, zero));
+        for (int e = 0; e < 3; ++e) {
+          put(w.u[d][e], active, U[d][e]);
+          put(w.angA[d][e], active, angA[e]);
+          put(w.angB[d][e], active, angB[e]);
+          put(w.mAngA[d][e], active, mAngA[e]);
+          put(w.mAngB[d][e], active, mAngB[e]);
+        }
+        if (d == 0)
+          for (int e = 0; e < 3; ++e) {
+            angA0[e] = angA[e];
+            angB0[e] = angB[e];
+          }
+      }
+      put(w.imA, active, mA);
+      put(w.imB, active, mB);
+      put(w.friction, active, lanesOf<R>([&](int l) { return c[l]->friction; }));
+      // Targets from the approach speed before any impulse of this step.
+      L dv[3];
+      for (int e = 0; e < 3; ++e) dv[e] = VB[e] - VA[e];
+      const L vn = (dot(U[0], dv) + dot(angA0, WA)) + dot(angB0, WB);
+      const L depth = lanesOf<R>([&](int l) { return c[l]->point.depth; });
+      const L restitution = lanesOf<R>([&](int l) { return c[l]->restitution; });
+      L target = select(greater(splat<R>(-o.restitutionThreshold), vn), -restitution * vn, zero);
+      const L over = max(depth - splat<R>(o.slop), zero) * splat<R>(inv);
+      const L cap = splat<R>(o.maxCorrectionVelocity);
+      const L corr = select(greater(over, cap), cap, over);  // std::min(over, cap)
+      L pushTarget = zero;
+      if (o.splitImpulse)
+        pushTarget = splat<R>(o.pushFactor) * corr;
+      else
+        target = max(target, splat<R>(o.baumgarte) * corr);
+      const LaneMask<R> speculative = greater(zero, depth);  // may close the gap this step
+      put(w.target, active, select(speculative, depth * splat<R>(inv), target));
+      put(w.pushTarget, active, select(speculative, zero, pushTarget));
+      store(w.pushImpulse, zero);
+      const L sc = splat<R>(scale);
+      put(w.impulse[0], active, sc * max(lanesOf<R>([&](int l) { return c[l]->normalImpulse; }), zero));
+      put(w.impulse[1], active, sc * dot(F, U[1]));
+      put(w.impulse[2], active, sc * dot(F, U[2]));
+    }
+  }
+}
+
 // The sweeps: kMode 0, 1, 2 of sweepGroups and 3: warmStartGroups (returns 0).
 using SweepFn = double (*)(const std::vector<ConstraintSolver::Group>&, std::vector<WideRow>&,
                            std::vector<Velocity>&) noexcept;
@@ -765,6 +918,8 @@ template <class R, int kMode>
     return sweepGroups<R, kMode>(groups, rows, vel);
   }
 }
+
+void buildRowsNarrow(const RowBuild& in) noexcept { buildRowsAs<Narrow>(in); }
 
 template <int kMode>
 double sweepNarrow(const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
@@ -788,6 +943,10 @@ template <int kMode>
                                                       std::vector<Velocity>& vel) noexcept {
   return sweepAs<Quad, kMode>(groups, rows, vel);
 }
+[[gnu::target("avx2"), gnu::noinline]] void buildRowsAvx(const RowBuild& in) noexcept { buildRowsAs<Quad>(in); }
+[[gnu::target("arch=x86-64-v4"), gnu::noinline]] void buildRowsAvx512(const RowBuild& in) noexcept {
+  buildRowsAs<Quad>(in);
+}
 template <int kMode>
 [[gnu::target("arch=x86-64-v4"), gnu::noinline]] double sweepAvx512(
     const std::vector<ConstraintSolver::Group>& groups, std::vector<WideRow>& rows,
@@ -806,6 +965,17 @@ SweepFn pickSweep() noexcept {
   return &sweepNarrow<kMode>;
 }
 
+using BuildFn = void (*)(const RowBuild&) noexcept;
+BuildFn pickBuild() noexcept {
+#if defined(DM_SOLVER_AVX)
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("x86-64-v4")) return &buildRowsAvx512;
+  if (__builtin_cpu_supports("avx2")) return &buildRowsAvx;
+#endif
+  return &buildRowsNarrow;
+}
+
+const BuildFn gBuildRows = pickBuild();
 const SweepFn gSweepVelocities = pickSweep<0>();
 const SweepFn gSweepResidual = pickSweep<1>();
 const SweepFn gSweepPush = pickSweep<2>();
@@ -813,143 +983,16 @@ const SweepFn gWarmStart = pickSweep<3>();
 
 }  // namespace
 
-namespace {
-
-using L = Lanes<Narrow>;
-using LMask = LaneMask<Narrow>;
-
-[[gnu::always_inline]] inline void cross(const L (&a)[3], const L (&b)[3], L (&out)[3]) noexcept {
-  out[0] = a[1] * b[2] - a[2] * b[1];
-  out[1] = a[2] * b[0] - a[0] * b[2];
-  out[2] = a[0] * b[1] - a[1] * b[0];
-}
-[[gnu::always_inline]] inline L dot(const L (&a)[3], const L (&b)[3]) noexcept {
-  return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2];
-}
-// Eigen's Mat3 · Vec3, sum for sum: rows 0 and 1 as one SSE2 packet
-// ((m0·v0 + m1·v1) + m2·v2), row 2 reduced m0·v0 + (m1·v1 + m2·v2).
-[[gnu::always_inline]] inline void times(const L (&m)[3][3], const L (&v)[3], L (&out)[3]) noexcept {
-  for (int r = 0; r < 2; ++r) out[r] = (m[r][0] * v[0] + m[r][1] * v[1]) + m[r][2] * v[2];
-  out[2] = m[2][0] * v[0] + (m[2][1] * v[1] + m[2][2] * v[2]);
-}
-
-}  // namespace
-
 // The three rows of every contact, four lanes at a time: row k of a group
 // holds contact k of each lane's manifold (an empty lane, or a manifold with
 // fewer contacts: all zero). Lane by lane the arithmetic is that of the
-// scalar derivation in Eigen, sum for sum, so the rows are the same bits.
+// scalar derivation in Eigen, sum for sum, so the rows are the same bits in
+// every lane representation.
 void ConstraintSolver::buildContactRows(std::span<const SolverBody> bodies,
                                         std::span<const ContactConstraint> contacts, double dt,
                                         const SolverOptions& o) {
-  using R = Narrow;
-  const double inv = 1.0 / dt;
-  const double scale = o.warmStart ? o.warmStartFactor : 0.0;
-  const std::size_t world = velocity_.size() - 1;
-  const L zero = splat<R>(0.0);
-  ContactConstraint empty;  // an empty lane's stand-in (any finite contact; the lane is zeroed)
-  empty.point.normal = Vec3::UnitZ();
   wideRows_.resize(groups_.empty() ? 0 : groups_.back().rowEnd);
-  for (const Group& g : groups_) {
-    // The lanes' bodies: inverse masses and inertias, origins, velocities.
-    std::size_t ia[kLanes], ib[kLanes];
-    std::uint32_t first[kLanes], size[kLanes];
-    for (int l = 0; l < kLanes; ++l) {
-      const std::uint32_t x = g.manifold[l];
-      first[l] = x == kNoManifold ? 0 : manifolds_[x].begin;
-      size[l] = x == kNoManifold ? 0 : manifolds_[x].end - manifolds_[x].begin;
-      ia[l] = static_cast<std::size_t>(g.a[l]);
-      ib[l] = static_cast<std::size_t>(g.b[l]);
-    }
-    const auto lanes = [](auto&& f) { return make<R>(f(0), f(1), f(2), f(3)); };
-    const L mA = lanes([&](int l) { return invMass_[ia[l]]; });
-    const L mB = lanes([&](int l) { return invMass_[ib[l]]; });
-    L IA[3][3], IB[3][3], XA[3], XB[3], VA[3], WA[3], VB[3], WB[3];
-    for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) {
-        IA[r][c] = lanes([&](int l) { return invInertia_[ia[l]](r, c); });
-        IB[r][c] = lanes([&](int l) { return invInertia_[ib[l]](r, c); });
-      }
-      XA[r] = lanes([&](int l) { return ia[l] == world ? 0.0 : bodies[ia[l]].position[r]; });
-      XB[r] = lanes([&](int l) { return ib[l] == world ? 0.0 : bodies[ib[l]].position[r]; });
-      VA[r] = lanes([&](int l) { return velocity_[ia[l]].v[r]; });
-      WA[r] = lanes([&](int l) { return velocity_[ia[l]].w[r]; });
-      VB[r] = lanes([&](int l) { return velocity_[ib[l]].v[r]; });
-      WB[r] = lanes([&](int l) { return velocity_[ib[l]].w[r]; });
-    }
-    for (std::uint32_t k = 0; k < g.rowEnd - g.rowBegin; ++k) {
-      // Contact k of each lane, with its tangent basis.
-      const ContactConstraint* c[kLanes];
-      Vec3 t[kLanes][2];
-      for (int l = 0; l < kLanes; ++l) {
-        c[l] = k < size[l] ? &contacts[first[l] + k] : &empty;
-        tangentBasis(c[l]->point.normal, t[l][0], t[l][1]);
-      }
-      const LMask active = greater(lanes([&](int l) { return k < size[l] ? 1.0 : 0.0; }), zero);
-      WideRow& w = wideRows_[g.rowBegin + k];
-      const auto put = [&](double (&out)[4], const L& x) { store(out, select(active, x, zero)); };
-      L P[3], rA[3], rB[3], U[3][3], F[3];
-      for (int r = 0; r < 3; ++r) {
-        P[r] = lanes([&](int l) { return c[l]->point.position[r]; });
-        U[0][r] = lanes([&](int l) { return c[l]->point.normal[r]; });
-        U[1][r] = lanes([&](int l) { return t[l][0][r]; });
-        U[2][r] = lanes([&](int l) { return t[l][1][r]; });
-        F[r] = lanes([&](int l) { return c[l]->frictionImpulse[r]; });
-        rA[r] = P[r] - XA[r];
-        rB[r] = P[r] - XB[r];
-      }
-      L angA0[3], angB0[3];
-      for (int d = 0; d < 3; ++d) {
-        L angA[3], angB[3], mAngA[3], mAngB[3];
-        cross(rA, U[d], angA);
-        for (L& x : angA) x = -x;  // −rA × u
-        cross(rB, U[d], angB);
-        times(IA, angA, mAngA);
-        times(IB, angB, mAngB);
-        const L sq = dot(U[d], U[d]);
-        const L m = ((mA * sq + dot(angA, mAngA)) + mB * sq) + dot(angB, mAngB);
-        put(w.effMass[d], select(greater(m, splat<R>(1e-300)), splat<R>(1.0) / m, zero));
-        for (int e = 0; e < 3; ++e) {
-          put(w.u[d][e], U[d][e]);
-          put(w.angA[d][e], angA[e]);
-          put(w.angB[d][e], angB[e]);
-          put(w.mAngA[d][e], mAngA[e]);
-          put(w.mAngB[d][e], mAngB[e]);
-        }
-        if (d == 0)
-          for (int e = 0; e < 3; ++e) {
-            angA0[e] = angA[e];
-            angB0[e] = angB[e];
-          }
-      }
-      put(w.imA, mA);
-      put(w.imB, mB);
-      put(w.friction, lanes([&](int l) { return c[l]->friction; }));
-      // Targets from the approach speed before any impulse of this step.
-      L dv[3];
-      for (int e = 0; e < 3; ++e) dv[e] = VB[e] - VA[e];
-      const L vn = (dot(U[0], dv) + dot(angA0, WA)) + dot(angB0, WB);
-      const L depth = lanes([&](int l) { return c[l]->point.depth; });
-      const L restitution = lanes([&](int l) { return c[l]->restitution; });
-      L target = select(greater(splat<R>(-o.restitutionThreshold), vn), -restitution * vn, zero);
-      const L over = max(depth - splat<R>(o.slop), zero) * splat<R>(inv);
-      const L cap = splat<R>(o.maxCorrectionVelocity);
-      const L corr = select(greater(over, cap), cap, over);  // std::min(over, cap)
-      L pushTarget = zero;
-      if (o.splitImpulse)
-        pushTarget = splat<R>(o.pushFactor) * corr;
-      else
-        target = max(target, splat<R>(o.baumgarte) * corr);
-      const LMask speculative = greater(zero, depth);  // may close the gap this step
-      put(w.target, select(speculative, depth * splat<R>(inv), target));
-      put(w.pushTarget, select(speculative, zero, pushTarget));
-      store(w.pushImpulse, zero);
-      const L sc = splat<R>(scale);
-      put(w.impulse[0], sc * max(lanes([&](int l) { return c[l]->normalImpulse; }), zero));
-      put(w.impulse[1], sc * dot(F, U[1]));
-      put(w.impulse[2], sc * dot(F, U[2]));
-    }
-  }
+  gBuildRows({bodies, contacts, dt, o, groups_, manifolds_, invMass_, invInertia_, velocity_, wideRows_});
 }
 
 // One velocity sweep: joint rows, then the contacts group by group. With
