@@ -73,6 +73,7 @@ void PhysicsWorld::reserveContacts(WorldState& state) const {
   RigidContactState& c = state.contact_;
   const std::size_t n = bodies_.size();
   c.bodies.resize(n);
+  c.shapePoses.assign(n, Isometry3::Identity());
   for (std::size_t i = 0; i < n; ++i) {
     SolverBody& b = c.bodies[i];
     b.position = state.s_.position[i];
@@ -197,9 +198,6 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
 void PhysicsWorld::narrowPhase(WorldState& state) const {
   RigidContactState& c = state.contact_;
   const auto awake = [this, &c](std::uint32_t i) { return model_[i].inverseMass > 0.0 && !c.asleep[i]; };
-  const auto pose = [this, &c](std::uint32_t i) {
-    return posed(c.bodies[i].position, c.bodies[i].orientation, bodies_[i].shapeOffset);
-  };
   if (c.sleeping > 0) {
     // An awake dynamic body colliding with a sleeper, or within the contact
     // margin of it, wakes the sleeper's island before any contact is made,
@@ -211,7 +209,8 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
       const std::uint32_t sleeper = c.asleep[a] ? a : b, other = c.asleep[a] ? b : a;
       if (!awake(other) || !c.asleep[sleeper]) continue;  // static bodies wake nothing
       // Colliding, or close enough for speculative contacts (step 2).
-      const Isometry3 pa = pose(a), pb = pose(b);
+      const Isometry3& pa = c.shapePoses[a];
+      const Isometry3& pb = c.shapePoses[b];
       collide(*bodies_[a].shape, pa, *bodies_[b].shape, pb, test, c.narrow);
       bool near = c.narrow.colliding;
       if (!near && contactSettings_.contactMargin > 0.0) {
@@ -229,16 +228,13 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
     if (c.sleeping > 0 && !awake(a) && !awake(b)) continue;  // sleepers among themselves or on the ground
     const BodyDesc& da = bodies_[a];
     const BodyDesc& db = bodies_[b];
-    const SolverBody& ba = c.bodies[a];
-    const SolverBody& bb = c.bodies[b];
     const double mu = std::sqrt(materials_[a].friction * materials_[b].friction);
     const double e = std::max(materials_[a].restitution, materials_[b].restitution);
     const Aabb& boxA = state.bounds_[a];
     const Aabb& boxB = state.bounds_[b];
     bool colliding = false;
     if (unbounded(boxA) || unbounded(boxB) || boxesOverlap(boxA, boxB)) {
-      collide(*da.shape, posed(ba.position, ba.orientation, da.shapeOffset), *db.shape,
-              posed(bb.position, bb.orientation, db.shapeOffset), request, c.narrow);
+      collide(*da.shape, c.shapePoses[a], *db.shape, c.shapePoses[b], request, c.narrow);
       colliding = c.narrow.colliding;
     }
     if (!colliding) {
@@ -247,12 +243,13 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
       int kept = c.cache.size() > 0
                      ? c.cache.persist(static_cast<int>(a), static_cast<int>(b), c.bodies, margin, mu, e, c.contacts)
                      : 0;
-      if (kept == 0) {
-        // No history (say, a scene built touching): the manifold the pair
-        // would have if B were moved onto A, moved back, as speculative
-        // contacts.
-        const Isometry3 pa = posed(ba.position, ba.orientation, da.shapeOffset);
-        const Isometry3 pb = posed(bb.position, bb.orientation, db.shapeOffset);
+      // No history (say, a scene built touching): the manifold the pair
+      // would have if B were moved onto A, moved back, as speculative
+      // contacts. Only between two bounded shapes: a plane pair (the broad
+      // phase pairs a plane with every collider) needs no distance query.
+      if (kept == 0 && !unbounded(boxA) && !unbounded(boxB)) {
+        const Isometry3& pa = c.shapePoses[a];
+        const Isometry3& pb = c.shapePoses[b];
         const DistanceResult d = distance(*da.shape, pa, *db.shape, pb);
         Vec3 n = d.pointB - d.pointA;
         const double len = n.norm();
@@ -266,7 +263,7 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
           apart.maxCoeff(&k);
           n = Vec3::Unit(k) * (boxB.center()[k] >= boxA.center()[k] ? 1.0 : -1.0);
         }
-        if (d.supported && d.distance >= 0.0 && d.distance < margin && !unbounded(boxA) && !unbounded(boxB)) {
+        if (d.supported && d.distance >= 0.0 && d.distance < margin) {
           const double shift = d.distance + std::min(1e-6, 0.01 * margin);
           Isometry3 moved = pb;
           moved.translation() -= shift * n;
@@ -307,8 +304,7 @@ void PhysicsWorld::continuousCollision(WorldState& state) const {
     if (!collider(i) || !materials_[i].ccd || !(model_[i].inverseMass > 0.0)) continue;
     const BodyDesc& di = bodies_[i];
     const Shape& shape = *di.shape;
-    const Motion motion{posed(c.bodies[i].position, c.bodies[i].orientation, di.shapeOffset),
-                        posed(s.position[i], s.orientation[i], di.shapeOffset)};
+    const Motion motion{c.shapePoses[i], posed(s.position[i], s.orientation[i], di.shapeOffset)};
     const double thick = thickness(shape);
     const double travel = motion.maxPointDisplacement(shape.boundingSphere().radius);
     if (!(travel > 0.5 * thick)) continue;  // cannot skip over anything in one step
@@ -320,8 +316,7 @@ void PhysicsWorld::continuousCollision(WorldState& state) const {
       if (j == i || !collider(j) || jointed(i, j) || !boxesOverlap(state.bounds_[j], swept)) continue;
       if (touching(i, j)) continue;  // the narrow phase already has this pair
       const BodyDesc& dj = bodies_[j];
-      const Motion other =
-          Motion::stationary(posed(c.bodies[j].position, c.bodies[j].orientation, dj.shapeOffset));
+      const Motion other = Motion::stationary(c.shapePoses[j]);
       ToiResult r = conservativeAdvancement(shape, motion, *dj.shape, other,
                                             {.tolerance = contactSettings_.ccdTolerance});
       if (r.status == ToiStatus::Unsupported) {
@@ -339,6 +334,7 @@ void PhysicsWorld::continuousCollision(WorldState& state) const {
     const Isometry3 pose = motion.at(best.t) * di.shapeOffset.inverse();
     c.bodies[i].position = pose.translation();
     c.bodies[i].orientation = Quat(pose.rotation()).normalized();
+    c.shapePoses[i] = posed(c.bodies[i].position, c.bodies[i].orientation, di.shapeOffset);
     const ContactPoint p{best.point, best.normal, std::max(0.0, -best.distance)};
     c.contacts.push_back(
         ContactConstraint::make(static_cast<int>(i), static_cast<int>(hit), p,
@@ -360,6 +356,11 @@ void PhysicsWorld::beginContacts(WorldState& state) const {
     c.constrained[i] = 0;
   }
   if (!contactSettings_.enabled) return;
+  // Each collider's shape pose once: a body takes part in many pairs of the
+  // narrow phase and CCD. CCD keeps it current when it moves a body back.
+  for (std::uint32_t i = 0; i < bodies_.size(); ++i)
+    if (collider(i))
+      c.shapePoses[i] = posed(c.bodies[i].position, c.bodies[i].orientation, bodies_[i].shapeOffset);
   broadPhase(state);
   narrowPhase(state);
 }

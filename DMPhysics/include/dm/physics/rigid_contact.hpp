@@ -142,6 +142,7 @@ struct ContactStats {
 /// WorldState; copied with it). Internal: read it through WorldState.
 struct RigidContactState {
   std::vector<SolverBody> bodies;           ///< one per world body, start-of-step poses
+  std::vector<Isometry3> shapePoses;        ///< per collider: shape pose at `bodies` (see beginContacts)
   std::vector<ContactConstraint> contacts;  ///< the step's contacts
   std::vector<Joint> joints;                ///< the world's joints with their warm-start impulses
   std::vector<std::uint32_t> order;         ///< broad phase: bounded colliders sorted by min x (next sort's start)
