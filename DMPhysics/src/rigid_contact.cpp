@@ -8,10 +8,15 @@
 #include <dm/physics/world.hpp>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <span>
 #include <string>
+
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
 
 namespace dm {
 
@@ -24,6 +29,18 @@ Isometry3 posed(const Vec3& x, const Quat& q, const Isometry3& offset) {
   // Most shapes sit at the body's origin: skip the 4 × 4 product then.
   if (offset.translation().isZero(0.0) && offset.linear() == Mat3::Identity()) return pose;
   return pose * offset;
+}
+
+// The float nearest x on the side of −∞ (roundedDown) or +∞ (roundedUp):
+// a comparison of such bounds passes whenever the exact one does.
+float roundedDown(double x) noexcept {
+  const auto f = static_cast<float>(x);
+  return static_cast<double>(f) > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
+}
+
+float roundedUp(double x) noexcept {
+  const auto f = static_cast<float>(x);
+  return static_cast<double>(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
 }
 
 bool unbounded(const Aabb& box) noexcept { return !(box.min().allFinite() && box.max().allFinite()); }
@@ -105,6 +122,9 @@ void PhysicsWorld::reserveContacts(WorldState& state) const {
   c.sweep.reserve(colliders);
   c.pairs.reserve(pairs);
   c.keyedPairs.reserve(pairs);
+  c.sweptPairs.reserve(pairs);
+  c.sweepLo.reserve(colliders + 4);
+  c.sweepFilter.reserve(4 * (colliders + 4));
   c.contacts.reserve(contacts);
   c.narrow.contacts.reserve(std::max<std::size_t>(16, 2 * perPair));
   c.solver.reserve(n, contacts, joints_.size());
@@ -166,15 +186,67 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
   c.order.clear();
   const double margin = contactSettings_.contactMargin;
   const std::size_t m = c.sweep.size();
+  // Most boxes within reach along x are far away along y or z (a column of
+  // a stack, a layer of falling bodies): four candidates at a time, the
+  // exact x bound and a float pretest of y and z give a mask of those that
+  // may overlap, and only these take the exact double test below. The same
+  // pairs as one exact test per candidate, in the same order.
+  constexpr std::size_t kPad = 4;  // a block may start at m
+  const std::size_t stride = m + kPad;
+  c.sweepLo.resize(stride);
+  c.sweepFilter.resize(4 * stride);
+  double* const lo0 = c.sweepLo.data();
+  float* const loY = c.sweepFilter.data();
+  float* const loZ = loY + stride;
+  float* const hiY = loZ + stride;
+  float* const hiZ = hiY + stride;
+  for (std::size_t k = 0; k < stride; ++k) {
+    if (k < m) {
+      const SweepBox& p = c.sweep[k];
+      lo0[k] = p.lo[0];
+      loY[k] = roundedDown(p.lo[1]);
+      loZ[k] = roundedDown(p.lo[2]);
+      hiY[k] = roundedUp(p.hi[1] + margin);
+      hiZ[k] = roundedUp(p.hi[2] + margin);
+    } else {
+      lo0[k] = std::numeric_limits<double>::infinity();
+      loY[k] = loZ[k] = hiY[k] = hiZ[k] = 0.0f;
+    }
+  }
   for (std::size_t k = 0; k < m; ++k) {
     const SweepBox& p = c.sweep[k];
     c.order.push_back(p.id);
     const double end = p.hi[0] + margin;
-    for (std::size_t l = k + 1; l < m && c.sweep[l].lo[0] <= end; ++l) {
-      const SweepBox& q = c.sweep[l];
-      if (q.lo[1] <= p.hi[1] + margin && p.lo[1] <= q.hi[1] + margin && q.lo[2] <= p.hi[2] + margin &&
-          p.lo[2] <= q.hi[2] + margin && p.lo[0] <= q.hi[0] + margin && eligible(p.id, q.id))
-        push(p.id, q.id);
+    for (std::size_t l = k + 1;; l += 4) {
+      // Bit j: box l + j may pair with p. The boxes are sorted by min x, so
+      // the x bits are a prefix; a block whose last one fails is the last.
+      unsigned inX = 0, mask = 0;
+#if defined(__SSE2__)
+      const __m128d e = _mm_set1_pd(end);
+      inX = static_cast<unsigned>(_mm_movemask_pd(_mm_cmple_pd(_mm_loadu_pd(lo0 + l), e))) |
+            static_cast<unsigned>(_mm_movemask_pd(_mm_cmple_pd(_mm_loadu_pd(lo0 + l + 2), e))) << 2;
+      const __m128 near = _mm_and_ps(
+          _mm_and_ps(_mm_cmple_ps(_mm_loadu_ps(loY + l), _mm_set1_ps(hiY[k])),
+                     _mm_cmple_ps(_mm_loadu_ps(loZ + l), _mm_set1_ps(hiZ[k]))),
+          _mm_and_ps(_mm_cmpge_ps(_mm_loadu_ps(hiY + l), _mm_set1_ps(loY[k])),
+                     _mm_cmpge_ps(_mm_loadu_ps(hiZ + l), _mm_set1_ps(loZ[k]))));
+      mask = inX & static_cast<unsigned>(_mm_movemask_ps(near));
+#else
+      for (unsigned j = 0; j < 4; ++j) {
+        const std::size_t q = l + j;
+        inX |= unsigned{lo0[q] <= end} << j;
+        mask |= unsigned{lo0[q] <= end && loY[q] <= hiY[k] && loZ[q] <= hiZ[k] && hiY[q] >= loY[k] &&
+                         hiZ[q] >= loZ[k]}
+                << j;
+      }
+#endif
+      for (; mask != 0; mask &= mask - 1) {
+        const SweepBox& q = c.sweep[l + static_cast<std::size_t>(std::countr_zero(mask))];
+        if (q.lo[1] <= p.hi[1] + margin && p.lo[1] <= q.hi[1] + margin && q.lo[2] <= p.hi[2] + margin &&
+            p.lo[2] <= q.hi[2] + margin && p.lo[0] <= q.hi[0] + margin && eligible(p.id, q.id))
+          push(p.id, q.id);
+      }
+      if (inX != 0xF) break;
     }
   }
   // Unbounded shapes (planes) against every bounded collider.
@@ -185,14 +257,41 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
   }
   // Bottom-up (ground contacts first): sequential impulses then carry the
   // support up a stack within one sweep, which tall stacks need at large dt.
-  c.keyedPairs.clear();
-  for (const ProxyPair& p : c.pairs)
-    c.keyedPairs.push_back({std::min(box[p.a].min().z(), box[p.b].min().z()), p});
+  // (z, pair) orders distinct pairs totally, so the result depends on the
+  // set of pairs alone, not on the order the sweep found them in. When the
+  // sweep found the same pairs in the same order as last step (nothing
+  // crossed along x, no pair came or went: resting or free-falling bodies),
+  // last step's sorted order is re-keyed and insertion-sorted, about linear
+  // for keys that moved little; otherwise, or when that moves too much, a
+  // full sort.
   using KeyedPair = RigidContactState::KeyedPair;
-  std::sort(c.keyedPairs.begin(), c.keyedPairs.end(), [](const KeyedPair& p, const KeyedPair& q) {
+  const auto below = [](const KeyedPair& p, const KeyedPair& q) {
     return p.z < q.z || (p.z == q.z && p.pair < q.pair);
-  });
-  for (std::size_t k = 0; k < c.pairs.size(); ++k) c.pairs[k] = c.keyedPairs[k].pair;
+  };
+  const auto key = [&box](const ProxyPair& p) { return std::min(box[p.a].min().z(), box[p.b].min().z()); };
+  const std::size_t count = c.pairs.size();
+  bool sortedPairs = false;
+  if (c.sweptPairs.size() == count && c.keyedPairs.size() == count && c.sweptPairs == c.pairs) {
+    for (KeyedPair& p : c.keyedPairs) p.z = key(p.pair);
+    const std::size_t budget = 8 * count;  // element moves before giving up
+    std::size_t moves = 0;
+    for (std::size_t k = 1; k < count && moves <= budget; ++k) {
+      const KeyedPair x = c.keyedPairs[k];
+      std::size_t j = k;
+      for (; j > 0 && below(x, c.keyedPairs[j - 1]) && moves <= budget; --j, ++moves)
+        c.keyedPairs[j] = c.keyedPairs[j - 1];
+      c.keyedPairs[j] = x;
+    }
+    sortedPairs = moves <= budget;
+  } else {
+    c.sweptPairs = c.pairs;  // reserved alike: no allocation
+  }
+  if (!sortedPairs) {
+    c.keyedPairs.clear();
+    for (std::size_t k = 0; k < count; ++k) c.keyedPairs.push_back({key(c.pairs[k]), c.pairs[k]});
+    std::sort(c.keyedPairs.begin(), c.keyedPairs.end(), below);
+  }
+  for (std::size_t k = 0; k < count; ++k) c.pairs[k] = c.keyedPairs[k].pair;
 }
 
 void PhysicsWorld::narrowPhase(WorldState& state) const {

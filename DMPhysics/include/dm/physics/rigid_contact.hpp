@@ -151,11 +151,20 @@ struct RigidContactState {
     std::uint32_t id;
   };
   std::vector<SweepBox> sweep;  ///< broad phase: bounded colliders' boxes sorted by min x
-  struct KeyedPair {            ///< broad phase: a pair with its sort key (lower box bottom)
+  /// Broad phase: `sweep`'s min x, then 4 entries of +∞ (padding for 4-wide
+  /// loads, which the x test rejects).
+  std::vector<double> sweepLo;
+  /// Broad phase: `sweep`'s y and z extents as floats, lower bounds rounded
+  /// down and upper bounds plus the contact margin rounded up (a cheap test
+  /// that every pair the exact one accepts passes): four runs of m + 4
+  /// entries for m boxes, lo y, lo z, hi y, hi z.
+  std::vector<float> sweepFilter;
+  struct KeyedPair {  ///< broad phase: a pair with its sort key (lower box bottom)
     double z;
     ProxyPair pair;
   };
-  std::vector<KeyedPair> keyedPairs;
+  std::vector<KeyedPair> keyedPairs;  ///< broad phase: the pairs bottom-up (next sort's start)
+  std::vector<ProxyPair> sweptPairs;  ///< broad phase: the pairs in the order the sweep found them
   std::vector<ProxyPair> pairs;             ///< broad phase: body index pairs (a < b), bottom-up
   std::vector<std::uint8_t> constrained;    ///< per body: in a contact or joint this step
   std::vector<std::uint8_t> asleep;         ///< per body: 1 while asleep
