@@ -452,6 +452,12 @@ void MassSpringBody::prepare() {
   }
   blocks_.assign(slots / 2, SlotPair{});
   for (std::size_t s = 0; s < slots; ++s) blocks_[s / 2].j3[s % 2] = 3 * linkOther_[s];
+  slotRest_.assign(slots, 0.0);
+  for (std::size_t s = 0; s < slots; ++s)
+    if (linkElem_[s] != kNoElement) slotRest_[s] = rest_[linkElem_[s]];
+  for (auto* vec : {&slotK_, &slotC_, &slotEd_}) vec->assign(slots, 0.0);
+  slotH_ = -1.0;
+  maxwellCount_ = std::size_t(std::count(maxwell_.begin(), maxwell_.end(), std::uint8_t(1)));
   ef_.assign(3 * std::max(m, slots), 0.0);
   decay_.assign(m, 1.0);
   decayH_ = -1.0;
@@ -542,6 +548,31 @@ inline Lane2 load2(const double* p) noexcept {
   return v;
 }
 inline void store2(double* p, Lane2 v) noexcept { std::memcpy(p, &v, sizeof v); }
+inline Lane2 splat(double x) noexcept { return Lane2{x, x}; }
+inline Lane2 sqrt2(Lane2 x) noexcept {
+#if defined(__SSE2__)
+  return Lane2(_mm_sqrt_pd(__m128d(x)));
+#else
+  return Lane2{std::sqrt(x[0]), std::sqrt(x[1])};
+#endif
+}
+// Lane by lane: `x > 0 ? y : 0` (false for NaN).
+inline Lane2 wherePositive(Lane2 x, Lane2 y) noexcept {
+#if defined(__SSE2__)
+  return Lane2(_mm_and_pd(_mm_cmpgt_pd(__m128d(x), _mm_setzero_pd()), __m128d(y)));
+#else
+  return Lane2{x[0] > 0 ? y[0] : 0.0, x[1] > 0 ? y[1] : 0.0};
+#endif
+}
+// Rounds both lanes to float.
+inline void narrow(float (&f)[2], Lane2 v) noexcept {
+#if defined(__SSE2__)
+  const double pair = _mm_cvtsd_f64(_mm_castps_pd(_mm_cvtpd_ps(__m128d(v))));
+  std::memcpy(f, &pair, sizeof pair);
+#else
+  f[0] = float(v[0]), f[1] = float(v[1]);
+#endif
+}
 #else
 struct Lane2 {
   double h[2];
@@ -554,6 +585,13 @@ inline Lane2& operator+=(Lane2& a, Lane2 b) { return a = a + b; }
 inline Lane2 widen(const float (&f)[2]) noexcept { return {{f[0], f[1]}}; }
 inline Lane2 load2(const double* p) noexcept { return {{p[0], p[1]}}; }
 inline void store2(double* p, Lane2 v) noexcept { p[0] = v.h[0], p[1] = v.h[1]; }
+inline Lane2 operator/(Lane2 a, Lane2 b) { return {{a.h[0] / b.h[0], a.h[1] / b.h[1]}}; }
+inline Lane2 splat(double x) noexcept { return {{x, x}}; }
+inline Lane2 sqrt2(Lane2 x) noexcept { return {{std::sqrt(x.h[0]), std::sqrt(x.h[1])}}; }
+inline Lane2 wherePositive(Lane2 x, Lane2 y) noexcept {
+  return {{x.h[0] > 0 ? y.h[0] : 0.0, x.h[1] > 0 ? y.h[1] : 0.0}};
+}
+inline void narrow(float (&f)[2], Lane2 v) noexcept { f[0] = float(v.h[0]), f[1] = float(v.h[1]); }
 #endif
 
 // The first write of a row y_k of the sweep, in the widths of the scatter
@@ -563,6 +601,26 @@ inline void store2(double* p, Lane2 v) noexcept { p[0] = v.h[0], p[1] = v.h[1]; 
 inline void leadRow(double* y, double y0, double y1, double y2) noexcept {
   store2(y, Lane2{y0, y1});
   y[2] = y2;
+}
+
+// Applies the blocks B of one slot pair (one per lane) to v_i − v_j, with
+// v_i in v0, v1, v2 (both lanes) and v_j read from v at the pair's offsets:
+// adds B (v_i − v_j) to the owner's accumulators a0, a1, a2 and subtracts it
+// from y_j.
+template <class Pair>
+inline void applyPair(const Pair& B, const double* v, Lane2 v0, Lane2 v1, Lane2 v2, double* y, Lane2& a0,
+                      Lane2& a1, Lane2& a2) noexcept {
+  const std::size_t jA = B.j3[0], jB = B.j3[1];
+  const Lane2 w0 = v0 - Lane2{v[jA], v[jB]}, w1 = v1 - Lane2{v[jA + 1], v[jB + 1]},
+              w2 = v2 - Lane2{v[jA + 2], v[jB + 2]};
+  const Lane2 n0 = widen(B.n0), n1 = widen(B.n1), n2 = widen(B.n2), ba = widen(B.a);
+  const Lane2 t = widen(B.b) * (n0 * w0 + n1 * w1 + n2 * w2);
+  const Lane2 f0 = ba * w0 + t * n0, f1 = ba * w1 + t * n1, f2 = ba * w2 + t * n2;
+  a0 += f0, a1 += f1, a2 += f2;
+  store2(y + jA, load2(y + jA) - Lane2{f0[0], f1[0]});
+  y[jA + 2] -= f2[0];
+  store2(y + jB, load2(y + jB) - Lane2{f0[1], f1[1]});
+  y[jB + 2] -= f2[1];
 }
 
 }  // namespace
@@ -588,20 +646,8 @@ void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&&
     const Lane2 v0 = {v[3 * i], v[3 * i]}, v1 = {v[3 * i + 1], v[3 * i + 1]},
                 v2 = {v[3 * i + 2], v[3 * i + 2]};
     Lane2 a0 = {y[3 * i], 0.0}, a1 = {y[3 * i + 1], 0.0}, a2 = {y[3 * i + 2], 0.0};
-    for (const SlotPair *pair = blk + own[i] / 2, *end = blk + own[i + 1] / 2; pair != end; ++pair) {
-      const SlotPair& B = *pair;
-      const std::size_t jA = B.j3[0], jB = B.j3[1];
-      const Lane2 w0 = v0 - Lane2{v[jA], v[jB]}, w1 = v1 - Lane2{v[jA + 1], v[jB + 1]},
-                  w2 = v2 - Lane2{v[jA + 2], v[jB + 2]};
-      const Lane2 n0 = widen(B.n0), n1 = widen(B.n1), n2 = widen(B.n2), ba = widen(B.a);
-      const Lane2 t = widen(B.b) * (n0 * w0 + n1 * w1 + n2 * w2);
-      const Lane2 f0 = ba * w0 + t * n0, f1 = ba * w1 + t * n1, f2 = ba * w2 + t * n2;
-      a0 += f0, a1 += f1, a2 += f2;
-      store2(y + jA, load2(y + jA) - Lane2{f0[0], f1[0]});
-      y[jA + 2] -= f2[0];
-      store2(y + jB, load2(y + jB) - Lane2{f0[1], f1[1]});
-      y[jB + 2] -= f2[1];
-    }
+    for (const SlotPair *pair = blk + own[i] / 2, *end = blk + own[i + 1] / 2; pair != end; ++pair)
+      applyPair(*pair, v, v0, v1, v2, y, a0, a1, a2);
     trail(i, a0[0] + a0[1], a1[0] + a1[1], a2[0] + a2[1]);
   }
 }
@@ -613,7 +659,7 @@ void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&&
 // iteration: sweepLinks() forms the new direction p just ahead of itself and
 // returns A p and pᵀAp; one particle loop then updates Δv and r, applies the
 // preconditioner and sums rᵀr and rᵀz. Serial: the sweep scatters.
-MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, ImplicitStepReport& report) {
+MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, double rz, ImplicitStepReport& report) {
   const std::size_t n = particleCount();
   const double tol = options_.cgTolerance, ms = massScale_;
   double* x = dv_.data();
@@ -633,7 +679,7 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, ImplicitStepR
     return r0 * z0 + r1 * z1 + r2 * z2;
   };
   // r = b − A x, z = M⁻¹ r; returns rᵀr and sets rz = rᵀz.
-  const auto trueResidual = [&](double& rz) {
+  const auto trueResidual = [&](double& rzOut) {
     double rr = 0.0, rzSum = 0.0;
     sweepLinks(
         x, q,
@@ -648,12 +694,11 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, ImplicitStepR
           rr += r0 * r0 + r1 * r1 + r2 * r2;
           rzSum += precondition(i);
         });
-    rz = rzSum;
+    rzOut = rzSum;
     return rr;
   };
 
-  double rz = 0.0;
-  double rnorm = std::sqrt(trueResidual(rz));
+  double rnorm = std::sqrt(rr0);
   report.relativeResidual = rnorm / bnorm;
   if (!std::isfinite(rnorm)) return CgStop::NotFinite;
   if (report.relativeResidual <= tol) return CgStop::Converged;
@@ -736,82 +781,117 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
   const double h2 = h * h;
   massScale_ = 1.0 + h * drag_;  // M + h·drag·M: the drag's velocity Jacobian
 
-  // Per slot: the block B = iso·I + axial·n nᵀ of h C + h² K, and the
-  // right-hand-side term h f₀ − h² K (v_i − v_j) on the owner.
-  forEachRange(linkElem_.size(), [this, h, h2](std::size_t b, std::size_t end) {
-    for (std::size_t s = b; s < end; ++s) {
+  // Per slot: the effective axial stiffness and damping at this h (a Maxwell
+  // element acts over the step as a spring of stiffness k/(1 + h k/c), by
+  // backward Euler on its damper) and the damper extension.
+  if (h != slotH_) {
+    for (std::size_t s = 0; s < linkElem_.size(); ++s) {
       const std::uint32_t e = linkElem_[s];
-      SlotPair& B = blocks_[s / 2];
-      const std::size_t lane = s % 2;
-      if (e == kNoElement) {
-        B.a[lane] = B.b[lane] = B.n0[lane] = B.n1[lane] = B.n2[lane] = 0.0f;
-        store3(ef_, s, Vec3::Zero());
-        continue;
+      if (e == kNoElement) continue;
+      slotK_[s] = maxwell_[e] ? k_[e] / (1.0 + h * k_[e] / c_[e]) : k_[e];
+      slotC_[s] = maxwell_[e] ? 0.0 : c_[e];
+    }
+    slotH_ = h;
+  }
+  if (maxwellCount_ > 0)
+    for (std::size_t s = 0; s < linkElem_.size(); ++s)
+      if (const std::uint32_t e = linkElem_[s]; e != kNoElement && maxwell_[e]) slotEd_[s] = ed_[e];
+
+  // Per slot, two at a time: the block B = a·I + b·n nᵀ of h C + h² K, and
+  // the right-hand-side term h f₀ − h² K (v_i − v_j) on the owner i (n points
+  // from the owner to the other end; padding slots have zero stiffness and
+  // length and give zero blocks and terms).
+  forEachRange(particleCount(), [this, h, h2](std::size_t begin, std::size_t end) {
+    const double *X = x_.data(), *V = v_.data();
+    const Lane2 hh = splat(h), hh2 = splat(h2), one = splat(1.0);
+    for (std::size_t i = begin; i < end; ++i) {
+      const Lane2 xi0 = splat(X[3 * i]), xi1 = splat(X[3 * i + 1]), xi2 = splat(X[3 * i + 2]);
+      const Lane2 vi0 = splat(V[3 * i]), vi1 = splat(V[3 * i + 1]), vi2 = splat(V[3 * i + 2]);
+      for (std::size_t pr = ownStart_[i] / 2; pr < ownStart_[i + 1] / 2; ++pr) {
+        SlotPair& B = blocks_[pr];
+        const std::size_t jA = B.j3[0], jB = B.j3[1];
+        const Lane2 d0 = Lane2{X[jA], X[jB]} - xi0, d1 = Lane2{X[jA + 1], X[jB + 1]} - xi1,
+                    d2 = Lane2{X[jA + 2], X[jB + 2]} - xi2;
+        const Lane2 len = sqrt2(d0 * d0 + d1 * d1 + d2 * d2);
+        const Lane2 invLen = wherePositive(len, one / len);  // one division serves n and T/L
+        const Lane2 n0 = invLen * d0, n1 = invLen * d1, n2 = invLen * d2;
+        const Lane2 w0 = Lane2{V[jA], V[jB]} - vi0, w1 = Lane2{V[jA + 1], V[jB + 1]} - vi1,
+                    w2 = Lane2{V[jA + 2], V[jB + 2]} - vi2;
+        const Lane2 rate = n0 * w0 + n1 * w1 + n2 * w2;
+        const Lane2 kAxial = load2(&slotK_[2 * pr]);
+        const Lane2 spring = kAxial * (len - load2(&slotRest_[2 * pr]) - load2(&slotEd_[2 * pr]));
+        const Lane2 tension = spring + load2(&slotC_[2 * pr]) * rate;
+        // Transverse (geometric) stiffness T/L, kept only while stretched.
+        const Lane2 geo = wherePositive(spring, spring * invLen);
+        const Lane2 iso = hh2 * geo, axial = hh2 * (kAxial - geo);
+        narrow(B.a, iso);
+        narrow(B.b, hh * load2(&slotC_[2 * pr]) + axial);
+        narrow(B.n0, n0), narrow(B.n1, n1), narrow(B.n2, n2);
+        const Lane2 along = hh * tension + axial * rate;
+        double* t = ef_.data() + 6 * pr;
+        store2(t, along * n0 + iso * w0), store2(t + 2, along * n1 + iso * w1);
+        store2(t + 4, along * n2 + iso * w2);
       }
-      const Vec3 d = load3(x_, ej_[e]) - load3(x_, ei_[e]);
-      const double len = d.norm();
-      const double invLen = len > 0 ? 1.0 / len : 0.0;  // one division serves n and T/L
-      const Vec3 n = invLen * d;
-      const double ext = len - rest_[e];
-      const Vec3 w = load3(v_, ej_[e]) - load3(v_, ei_[e]);
-      const double rate = n.dot(w);
-      double springTension, tension, kAxial, cAxial;
-      if (maxwell_[e]) {
-        // Backward Euler on the damper: over the step the element is a spring
-        // of stiffness k/(1 + h k/c) acting on e − e_d.
-        kAxial = k_[e] / (1.0 + h * k_[e] / c_[e]);
-        springTension = tension = kAxial * (ext - ed_[e]);
-        cAxial = 0.0;
-      } else {
-        kAxial = k_[e];
-        springTension = k_[e] * ext;
-        tension = springTension + c_[e] * rate;
-        cAxial = c_[e];
-      }
-      // Transverse (geometric) stiffness T/L, kept only while stretched.
-      const double geo = springTension > 0 ? springTension * invLen : 0.0;
-      B.a[lane] = float(h2 * geo);
-      B.b[lane] = float(h * cAxial + h2 * (kAxial - geo));
-      B.n0[lane] = float(n.x()), B.n1[lane] = float(n.y()), B.n2[lane] = float(n.z());
-      const Vec3 onI = (h * tension + h2 * (kAxial - geo) * rate) * n + (h2 * geo) * w;
-      store3(ef_, s, ei_[e] < ej_[e] ? onI : Vec3(-onI));
     }
   });
 
-  // Right-hand side and diagonal blocks D_i = (1 + h·drag) m_i I + Σ B, in one
-  // sweep in owner order (rhs_ and dinv_ hold the running sums of the
-  // particles ahead of it); D_i is inverted as soon as owner i is done.
+  // One sweep in owner order (rhs_, dinv_ and cgQ_ hold the running sums of
+  // the particles ahead of it) assembles the right-hand side b and the
+  // diagonal blocks D_i = (1 + h·drag) m_i I + Σ B, inverts D_i as soon as
+  // owner i is done, and forms the residual r = b − A Δv of the warm start
+  // and z = D⁻¹ r for the solver.
   const Vec3 g = gravity_;
-  double* dsum = dinv_.data();
+  const std::size_t n = particleCount();
+  const double ms = massScale_;
+  double *dsum = dinv_.data(), *rhs = rhs_.data(), *x = dv_.data(), *q = cgQ_.data();
+  double *r = cgR_.data(), *z = cgZ_.data();
+  const double* ef = ef_.data();
   std::size_t front = 0;
-  double bb = 0.0;
-  for (std::size_t i = 0; i < particleCount(); ++i) {
+  double bb = 0.0, rr = 0.0, rz = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
     for (const std::size_t until = leadUntil_[i]; front < until; ++front) {
       const std::size_t k = front;
       store3(rhs_, k, h * (mass_[k] * (g - drag_ * load3(v_, k)) + load3(fext_, k)));
       double* d = dsum + 6 * k;
-      d[0] = d[3] = d[5] = massScale_ * mass_[k];
+      const double m = ms * mass_[k];
+      d[0] = d[3] = d[5] = m;
       d[1] = d[2] = d[4] = 0.0;
+      if (pinned_[k]) x[3 * k] = x[3 * k + 1] = x[3 * k + 2] = 0.0;
+      leadRow(q + 3 * k, m * x[3 * k], m * x[3 * k + 1], m * x[3 * k + 2]);
     }
-    Vec3 bi = load3(rhs_, i);
     double* di = dsum + 6 * i;
-    for (std::uint32_t s = ownStart_[i]; s < ownStart_[i + 1]; ++s) {
-      const std::size_t j = linkOther_[s];
-      const SlotPair& B = blocks_[s / 2];
-      const std::size_t lane = s % 2;
-      const double Ba = B.a[lane], Bb = B.b[lane], n0 = B.n0[lane], n1 = B.n1[lane], n2 = B.n2[lane];
-      const Vec3 t = load3(ef_, s);
-      bi += t;
-      store3(rhs_, j, load3(rhs_, j) - t);
-      const double blk[6] = {Ba + Bb * n0 * n0, Bb * n0 * n1, Bb * n0 * n2,
-                             Ba + Bb * n1 * n1, Bb * n1 * n2, Ba + Bb * n2 * n2};
-      double* dj = dsum + 6 * j;
-      for (int c = 0; c < 6; ++c) di[c] += blk[c], dj[c] += blk[c];
+    Lane2 b0 = {rhs[3 * i], 0.0}, b1 = {rhs[3 * i + 1], 0.0}, b2 = {rhs[3 * i + 2], 0.0};
+    Lane2 D0 = {di[0], 0.0}, D1 = {di[1], 0.0}, D2 = {di[2], 0.0}, D3 = {di[3], 0.0}, D4 = {di[4], 0.0},
+          D5 = {di[5], 0.0};
+    Lane2 a0 = {q[3 * i], 0.0}, a1 = {q[3 * i + 1], 0.0}, a2 = {q[3 * i + 2], 0.0};
+    const Lane2 x0 = splat(x[3 * i]), x1 = splat(x[3 * i + 1]), x2 = splat(x[3 * i + 2]);
+    for (std::size_t pr = ownStart_[i] / 2; pr < ownStart_[i + 1] / 2; ++pr) {
+      const SlotPair& B = blocks_[pr];
+      const std::size_t jA = B.j3[0], jB = B.j3[1];
+      const Lane2 t0 = load2(ef + 6 * pr), t1 = load2(ef + 6 * pr + 2), t2 = load2(ef + 6 * pr + 4);
+      b0 += t0, b1 += t1, b2 += t2;
+      store2(rhs + jA, load2(rhs + jA) - Lane2{t0[0], t1[0]});
+      rhs[jA + 2] -= t2[0];
+      store2(rhs + jB, load2(rhs + jB) - Lane2{t0[1], t1[1]});
+      rhs[jB + 2] -= t2[1];
+      const Lane2 ba = widen(B.a), bn = widen(B.b), n0 = widen(B.n0), n1 = widen(B.n1), n2 = widen(B.n2);
+      const Lane2 e0 = ba + bn * n0 * n0, e1 = bn * n0 * n1, e2 = bn * n0 * n2, e3 = ba + bn * n1 * n1,
+                  e4 = bn * n1 * n2, e5 = ba + bn * n2 * n2;
+      D0 += e0, D1 += e1, D2 += e2, D3 += e3, D4 += e4, D5 += e5;
+      double *dA = dsum + 2 * jA, *dB = dsum + 2 * jB;  // 6 per particle, j3 = 3 j
+      store2(dA, load2(dA) + Lane2{e0[0], e1[0]}), store2(dB, load2(dB) + Lane2{e0[1], e1[1]});
+      store2(dA + 2, load2(dA + 2) + Lane2{e2[0], e3[0]}), store2(dB + 2, load2(dB + 2) + Lane2{e2[1], e3[1]});
+      store2(dA + 4, load2(dA + 4) + Lane2{e4[0], e5[0]}), store2(dB + 4, load2(dB + 4) + Lane2{e4[1], e5[1]});
+      applyPair(B, x, x0, x1, x2, q, a0, a1, a2);
     }
+    Vec3 bi(b0[0] + b0[1], b1[0] + b1[1], b2[0] + b2[1]);
+    di[0] = D0[0] + D0[1], di[1] = D1[0] + D1[1], di[2] = D2[0] + D2[1];
+    di[3] = D3[0] + D3[1], di[4] = D4[0] + D4[1], di[5] = D5[0] + D5[1];
+    double y0 = a0[0] + a0[1], y1 = a1[0] + a1[1], y2 = a2[0] + a2[1];
     if (pinned_[i]) {
       bi.setZero();
-      store3(dv_, i, Vec3::Zero());
       std::fill(di, di + 6, 0.0);
+      y0 = y1 = y2 = 0.0;
     } else {
       // Inverse of the symmetric block by cofactors.
       const double c00 = di[3] * di[5] - di[4] * di[4], c01 = di[2] * di[4] - di[1] * di[5],
@@ -824,6 +904,14 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
     }
     store3(rhs_, i, bi);
     bb += bi.squaredNorm();
+    const double r0 = bi.x() - y0, r1 = bi.y() - y1, r2 = bi.z() - y2;
+    r[3 * i] = r0, r[3 * i + 1] = r1, r[3 * i + 2] = r2;
+    rr += r0 * r0 + r1 * r1 + r2 * r2;
+    const double z0 = di[0] * r0 + di[1] * r1 + di[2] * r2;
+    const double z1 = di[1] * r0 + di[3] * r1 + di[4] * r2;
+    const double z2 = di[2] * r0 + di[4] * r1 + di[5] * r2;
+    z[3 * i] = z0, z[3 * i + 1] = z1, z[3 * i + 2] = z2;
+    rz += r0 * z0 + r1 * z1 + r2 * z2;
   }
 
   ImplicitStepReport report;
@@ -836,7 +924,7 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
   if (bnorm == 0.0) {
     dv_.setZero();
   } else {
-    switch (solveImplicit(bnorm, report)) {
+    switch (solveImplicit(bnorm, rr, rz, report)) {
       case CgStop::Converged:
         break;
       case CgStop::MaxIterations:

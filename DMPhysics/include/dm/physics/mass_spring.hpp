@@ -348,7 +348,8 @@ class MassSpringBody {
   void forEachRange(std::size_t count, F&& fn) const;
   template <class Lead, class Trail>
   void sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const;
-  CgStop solveImplicit(double bnorm, ImplicitStepReport& report);
+  // CG from the residual r = cgR_ of the warm start dv_ (rr0 = rᵀr, rz = rᵀz, z = cgZ_).
+  CgStop solveImplicit(double bnorm, double rr0, double rz, ImplicitStepReport& report);
   void updateMaxwellDecay(double h);
 
   // Particles (structure of arrays).
@@ -378,6 +379,12 @@ class MassSpringBody {
   static constexpr std::uint32_t kNoElement = 0xffffffffu;
   std::vector<std::uint32_t> ownStart_, linkElem_, linkOther_, leadUntil_;
   std::vector<SlotPair> blocks_;  // per two slots (implicit)
+  // Per slot (padding: zeros): rest length, axial stiffness and damping of
+  // the element over a step of slotH_ (Maxwell: k/(1 + h k/c) and 0), damper
+  // extension (Maxwell only, copied at each implicit step).
+  std::vector<double> slotRest_, slotK_, slotC_, slotEd_;
+  double slotH_ = -1.0;
+  std::size_t maxwellCount_ = 0;
   std::vector<double>
       ef_;  // 3 per element: force on i (explicit); 3 per slot: rhs term on the owner (implicit)
   std::vector<double> decay_;  // per element: exp(−h k/c) for Maxwell, at decayH_
