@@ -121,8 +121,10 @@ void PhysicsWorld::reserveContacts(WorldState& state) const {
   c.order.reserve(colliders);
   c.sweep.reserve(colliders);
   c.pairs.reserve(pairs);
-  c.keyedPairs.reserve(pairs);
-  c.sweptPairs.reserve(pairs);
+  c.zOrder.reserve(colliders);
+  c.zRank.assign(n, 0);
+  c.buckets.reserve(colliders + 1);
+  c.bucketed.reserve(pairs);
   c.sweepLo.reserve(colliders + 4);
   c.sweepFilter.reserve(4 * (colliders + 4));
   c.contacts.reserve(contacts);
@@ -249,49 +251,89 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
       if (inX != 0xF) break;
     }
   }
-  // Unbounded shapes (planes) against every bounded collider.
+  // Unbounded shapes (planes) against every bounded collider, in index
+  // order: a plane's pairs are then already in the order sorted below.
   for (std::uint32_t u = 0; u < n; ++u) {
     if (!collider(u) || !unbounded(box[u])) continue;
-    for (const std::uint32_t b : c.order)
-      if (eligible(u, b)) push(u, b);
+    for (std::uint32_t b = 0; b < n; ++b)
+      if (collider(b) && !unbounded(box[b]) && eligible(u, b)) push(u, b);
   }
+  sortBottomUp(state);
+}
+
+void PhysicsWorld::sortBottomUp(WorldState& state) const {
   // Bottom-up (ground contacts first): sequential impulses then carry the
   // support up a stack within one sweep, which tall stacks need at large dt.
-  // (z, pair) orders distinct pairs totally, so the result depends on the
-  // set of pairs alone, not on the order the sweep found them in. When the
-  // sweep found the same pairs in the same order as last step (nothing
-  // crossed along x, no pair came or went: resting or free-falling bodies),
-  // last step's sorted order is re-keyed and insertion-sorted, about linear
-  // for keys that moved little; otherwise, or when that moves too much, a
-  // full sort.
-  using KeyedPair = RigidContactState::KeyedPair;
-  const auto below = [](const KeyedPair& p, const KeyedPair& q) {
-    return p.z < q.z || (p.z == q.z && p.pair < q.pair);
+  // The order: by the pair's lower box bottom z, then by the pair (a, b).
+  // Sorting the colliders by (z, index) instead — an insertion sort from
+  // last step's order, about linear — gives each pair its lower body, whose
+  // bottom is the pair's z: a counting sort by that body's place then lists
+  // the pairs by z, and only pairs of bodies with equal z (one body's few
+  // pairs, mostly) still need ordering among themselves.
+  RigidContactState& c = state.contact_;
+  const std::vector<Aabb>& box = state.bounds_;
+  const auto n = static_cast<std::uint32_t>(bodies_.size());
+  const auto z = [&box](std::uint32_t i) { return box[i].min().z(); };
+  const auto lower = [&z](std::uint32_t i, std::uint32_t j) {
+    return z(i) < z(j) || (z(i) == z(j) && i < j);
   };
-  const auto key = [&box](const ProxyPair& p) { return std::min(box[p.a].min().z(), box[p.b].min().z()); };
-  const std::size_t count = c.pairs.size();
-  bool sortedPairs = false;
-  if (c.sweptPairs.size() == count && c.keyedPairs.size() == count && c.sweptPairs == c.pairs) {
-    for (KeyedPair& p : c.keyedPairs) p.z = key(p.pair);
-    const std::size_t budget = 8 * count;  // element moves before giving up
-    std::size_t moves = 0;
-    for (std::size_t k = 1; k < count && moves <= budget; ++k) {
-      const KeyedPair x = c.keyedPairs[k];
+  std::size_t colliders = 0;
+  for (std::uint32_t i = 0; i < n; ++i) colliders += collider(i);
+  bool sorted = false;
+  if (c.zOrder.size() == colliders && colliders > 0) {
+    // The same colliders as last step (a permutation of them, all still
+    // colliders, as many): insertion sort, with a budget of moves.
+    bool same = true;
+    for (const std::uint32_t i : c.zOrder) same = same && i < n && collider(i);
+    const std::size_t budget = same ? 8 * colliders : 0;
+    std::size_t moves = same ? 0 : 1;
+    for (std::size_t k = 1; k < colliders && moves <= budget; ++k) {
+      const std::uint32_t x = c.zOrder[k];
       std::size_t j = k;
-      for (; j > 0 && below(x, c.keyedPairs[j - 1]) && moves <= budget; --j, ++moves)
-        c.keyedPairs[j] = c.keyedPairs[j - 1];
-      c.keyedPairs[j] = x;
+      for (; j > 0 && lower(x, c.zOrder[j - 1]) && moves <= budget; --j, ++moves)
+        c.zOrder[j] = c.zOrder[j - 1];
+      c.zOrder[j] = x;
     }
-    sortedPairs = moves <= budget;
-  } else {
-    c.sweptPairs = c.pairs;  // reserved alike: no allocation
+    sorted = moves <= budget;
   }
-  if (!sortedPairs) {
-    c.keyedPairs.clear();
-    for (std::size_t k = 0; k < count; ++k) c.keyedPairs.push_back({key(c.pairs[k]), c.pairs[k]});
-    std::sort(c.keyedPairs.begin(), c.keyedPairs.end(), below);
+  if (!sorted) {
+    c.zOrder.clear();
+    for (std::uint32_t i = 0; i < n; ++i)
+      if (collider(i)) c.zOrder.push_back(i);
+    std::sort(c.zOrder.begin(), c.zOrder.end(), lower);
   }
-  for (std::size_t k = 0; k < count; ++k) c.pairs[k] = c.keyedPairs[k].pair;
+  for (std::uint32_t r = 0; r < colliders; ++r) c.zRank[c.zOrder[r]] = r;
+  // Counting sort of the pairs by the place of their lower body (stable).
+  c.buckets.assign(colliders + 1, 0);
+  const auto place = [&c](const ProxyPair& p) { return std::min(c.zRank[p.a], c.zRank[p.b]); };
+  for (const ProxyPair& p : c.pairs) ++c.buckets[place(p) + 1];
+  for (std::size_t r = 0; r < colliders; ++r) c.buckets[r + 1] += c.buckets[r];
+  c.bucketed.resize(c.pairs.size());
+  for (const ProxyPair& p : c.pairs) c.bucketed[c.buckets[place(p)]++] = p;
+  // buckets[r] is now where place r's pairs end. Within a run of places of
+  // equal z, order the pairs by (a, b): insertion sort (the sweep and the
+  // plane loop list them nearly so), std::sort if that moves too much.
+  std::size_t begin = 0;
+  for (std::size_t r = 0; r < colliders;) {
+    std::size_t last = r;
+    while (last + 1 < colliders && z(c.zOrder[last + 1]) == z(c.zOrder[r])) ++last;
+    const std::size_t end = c.buckets[last];
+    const std::size_t budget = 8 * (end - begin);
+    std::size_t moves = 0;
+    for (std::size_t k = begin + 1; k < end && moves <= budget; ++k) {
+      const ProxyPair x = c.bucketed[k];
+      std::size_t j = k;
+      for (; j > begin && x < c.bucketed[j - 1] && moves <= budget; --j, ++moves)
+        c.bucketed[j] = c.bucketed[j - 1];
+      c.bucketed[j] = x;
+    }
+    if (moves > budget)
+      std::sort(c.bucketed.begin() + static_cast<std::ptrdiff_t>(begin),
+                c.bucketed.begin() + static_cast<std::ptrdiff_t>(end));
+    begin = end;
+    r = last + 1;
+  }
+  std::copy(c.bucketed.begin(), c.bucketed.end(), c.pairs.begin());
 }
 
 void PhysicsWorld::narrowPhase(WorldState& state) const {

@@ -159,12 +159,10 @@ struct RigidContactState {
   /// that every pair the exact one accepts passes): four runs of m + 4
   /// entries for m boxes, lo y, lo z, hi y, hi z.
   std::vector<float> sweepFilter;
-  struct KeyedPair {  ///< broad phase: a pair with its sort key (lower box bottom)
-    double z;
-    ProxyPair pair;
-  };
-  std::vector<KeyedPair> keyedPairs;  ///< broad phase: the pairs bottom-up (next sort's start)
-  std::vector<ProxyPair> sweptPairs;  ///< broad phase: the pairs in the order the sweep found them
+  std::vector<std::uint32_t> zOrder;   ///< broad phase: colliders sorted by min z (next sort's start)
+  std::vector<std::uint32_t> zRank;    ///< broad phase: per body, its place in zOrder
+  std::vector<std::uint32_t> buckets;  ///< broad phase: per zOrder place, where its pairs start
+  std::vector<ProxyPair> bucketed;     ///< broad phase: the pairs grouped by their lower body
   std::vector<ProxyPair> pairs;             ///< broad phase: body index pairs (a < b), bottom-up
   std::vector<std::uint8_t> constrained;    ///< per body: in a contact or joint this step
   std::vector<std::uint8_t> asleep;         ///< per body: 1 while asleep

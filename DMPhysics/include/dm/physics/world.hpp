@@ -320,6 +320,7 @@ class PhysicsWorld {
   void beginContacts(WorldState& state) const;
   Status finishContacts(WorldState& state, double dt) const;
   void broadPhase(WorldState& state) const;
+  void sortBottomUp(WorldState& state) const;  // broadPhase's pairs into solver order
   void narrowPhase(WorldState& state) const;
   void continuousCollision(WorldState& state) const;
   // Sleeping (rigid_contact.cpp).
