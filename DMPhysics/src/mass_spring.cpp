@@ -461,7 +461,8 @@ void MassSpringBody::prepare() {
   ef_.assign(3 * std::max(m, slots), 0.0);
   decay_.assign(m, 1.0);
   decayH_ = -1.0;
-  dinv_.assign(6 * n, 0.0);
+  dsum_.assign(6 * n, 0.0);
+  dinv_.assign(12 * ((n + 1) / 2), 0.0);
   for (VecX* vec : {&rhs_, &dv_, &cgR_, &cgZ_, &cgP_, &cgQ_}) *vec = VecX::Zero(Eigen::Index(3 * n));
   prepared_ = true;
 }
@@ -670,11 +671,11 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
   const double* dinv = dinv_.data();
   // z_i = D_i⁻¹ r_i; returns r_i·z_i.
   const auto precondition = [&](std::size_t i) {
-    const double* d = dinv + 6 * i;
+    const double* d = dinv + 12 * (i / 2) + (i & 1);  // entry c at d[2 c]
     const double r0 = r[3 * i], r1 = r[3 * i + 1], r2 = r[3 * i + 2];
-    const double z0 = d[0] * r0 + d[1] * r1 + d[2] * r2;
-    const double z1 = d[1] * r0 + d[3] * r1 + d[4] * r2;
-    const double z2 = d[2] * r0 + d[4] * r1 + d[5] * r2;
+    const double z0 = d[0] * r0 + d[2] * r1 + d[4] * r2;
+    const double z1 = d[2] * r0 + d[6] * r1 + d[8] * r2;
+    const double z2 = d[4] * r0 + d[8] * r1 + d[10] * r2;
     z[3 * i] = z0, z[3 * i + 1] = z1, z[3 * i + 2] = z2;
     return r0 * z0 + r1 * z1 + r2 * z2;
   };
@@ -741,12 +742,36 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
     if (!std::isfinite(pAp)) return CgStop::NotFinite;
     if (pAp <= 0.0) return CgStop::NotPositive;
     const double alpha = rz / pAp;
-    double rr = 0.0, rzNew = 0.0;
-    for (std::size_t i = 0; i < n; ++i) {
-      const double p0 = p[3 * i], p1 = p[3 * i + 1], p2 = p[3 * i + 2];
-      const double q0 = q[3 * i], q1 = q[3 * i + 1], q2 = q[3 * i + 2];
-      const double r0 = r[3 * i] - alpha * q0, r1 = r[3 * i + 1] - alpha * q1, r2 = r[3 * i + 2] - alpha * q2;
-      x[3 * i] += alpha * p0, x[3 * i + 1] += alpha * p1, x[3 * i + 2] += alpha * p2;
+    // Two particles at a time: their six coordinates as three lane pairs
+    // (x y)(z x')(y' z') for the flat updates, and transposed to one
+    // particle per lane, (x x')(y y')(z z'), for the preconditioner, whose
+    // blocks dinv_ keeps interleaved in that form.
+    const Lane2 al = splat(alpha);
+    Lane2 rr2 = splat(0.0), rz2 = splat(0.0);
+    std::size_t i = 0;
+    for (; i + 2 <= n; i += 2) {
+      double *xi = x + 3 * i, *ri = r + 3 * i, *zi = z + 3 * i;
+      const double *pi = p + 3 * i, *qi = q + 3 * i;
+      store2(xi, load2(xi) + al * load2(pi)), store2(xi + 2, load2(xi + 2) + al * load2(pi + 2));
+      store2(xi + 4, load2(xi + 4) + al * load2(pi + 4));
+      const Lane2 R0 = load2(ri) - al * load2(qi), R1 = load2(ri + 2) - al * load2(qi + 2),
+                  R2 = load2(ri + 4) - al * load2(qi + 4);
+      store2(ri, R0), store2(ri + 2, R1), store2(ri + 4, R2);
+      rr2 += R0 * R0 + R1 * R1 + R2 * R2;
+      const Lane2 rx = Lane2{R0[0], R1[1]}, ry = Lane2{R0[1], R2[0]}, rzc = Lane2{R1[0], R2[1]};
+      const double* d = dinv + 6 * i;
+      const Lane2 d0 = load2(d), d1 = load2(d + 2), d2 = load2(d + 4), d3 = load2(d + 6), d4 = load2(d + 8),
+                  d5 = load2(d + 10);
+      const Lane2 zx = d0 * rx + d1 * ry + d2 * rzc, zy = d1 * rx + d3 * ry + d4 * rzc,
+                  zz = d2 * rx + d4 * ry + d5 * rzc;
+      store2(zi, Lane2{zx[0], zy[0]}), store2(zi + 2, Lane2{zz[0], zx[1]}), store2(zi + 4, Lane2{zy[1], zz[1]});
+      rz2 += rx * zx + ry * zy + rzc * zz;
+    }
+    double rr = rr2[0] + rr2[1], rzNew = rz2[0] + rz2[1];
+    if (i < n) {
+      const double r0 = r[3 * i] - alpha * q[3 * i], r1 = r[3 * i + 1] - alpha * q[3 * i + 1],
+                   r2 = r[3 * i + 2] - alpha * q[3 * i + 2];
+      x[3 * i] += alpha * p[3 * i], x[3 * i + 1] += alpha * p[3 * i + 1], x[3 * i + 2] += alpha * p[3 * i + 2];
       r[3 * i] = r0, r[3 * i + 1] = r1, r[3 * i + 2] = r2;
       rr += r0 * r0 + r1 * r1 + r2 * r2;
       rzNew += precondition(i);
@@ -835,7 +860,7 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
     }
   });
 
-  // One sweep in owner order (rhs_, dinv_ and cgQ_ hold the running sums of
+  // One sweep in owner order (rhs_, dsum_ and cgQ_ hold the running sums of
   // the particles ahead of it) assembles the right-hand side b and the
   // diagonal blocks D_i = (1 + h·drag) m_i I + Σ B, inverts D_i as soon as
   // owner i is done, and forms the residual r = b − A Δv of the warm start
@@ -843,7 +868,7 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
   const Vec3 g = gravity_;
   const std::size_t n = particleCount();
   const double ms = massScale_;
-  double *dsum = dinv_.data(), *rhs = rhs_.data(), *x = dv_.data(), *q = cgQ_.data();
+  double *dsum = dsum_.data(), *dinv = dinv_.data(), *rhs = rhs_.data(), *x = dv_.data(), *q = cgQ_.data();
   double *r = cgR_.data(), *z = cgZ_.data();
   const double* ef = ef_.data();
   std::size_t front = 0;
@@ -888,28 +913,30 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
     di[0] = D0[0] + D0[1], di[1] = D1[0] + D1[1], di[2] = D2[0] + D2[1];
     di[3] = D3[0] + D3[1], di[4] = D4[0] + D4[1], di[5] = D5[0] + D5[1];
     double y0 = a0[0] + a0[1], y1 = a1[0] + a1[1], y2 = a2[0] + a2[1];
+    double inv[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // D_i⁻¹; 0 for a pinned particle
     if (pinned_[i]) {
       bi.setZero();
-      std::fill(di, di + 6, 0.0);
       y0 = y1 = y2 = 0.0;
     } else {
       // Inverse of the symmetric block by cofactors.
       const double c00 = di[3] * di[5] - di[4] * di[4], c01 = di[2] * di[4] - di[1] * di[5],
                    c02 = di[1] * di[4] - di[2] * di[3];
-      const double inv = 1.0 / (di[0] * c00 + di[1] * c01 + di[2] * c02);
+      const double det = 1.0 / (di[0] * c00 + di[1] * c01 + di[2] * c02);
       const double c11 = di[0] * di[5] - di[2] * di[2], c12 = di[1] * di[2] - di[0] * di[4],
                    c22 = di[0] * di[3] - di[1] * di[1];
-      di[0] = c00 * inv, di[1] = c01 * inv, di[2] = c02 * inv;
-      di[3] = c11 * inv, di[4] = c12 * inv, di[5] = c22 * inv;
+      inv[0] = c00 * det, inv[1] = c01 * det, inv[2] = c02 * det;
+      inv[3] = c11 * det, inv[4] = c12 * det, inv[5] = c22 * det;
     }
+    double* dout = dinv + 12 * (i / 2) + (i & 1);
+    for (int c = 0; c < 6; ++c) dout[2 * c] = inv[c];
     store3(rhs_, i, bi);
     bb += bi.squaredNorm();
     const double r0 = bi.x() - y0, r1 = bi.y() - y1, r2 = bi.z() - y2;
     r[3 * i] = r0, r[3 * i + 1] = r1, r[3 * i + 2] = r2;
     rr += r0 * r0 + r1 * r1 + r2 * r2;
-    const double z0 = di[0] * r0 + di[1] * r1 + di[2] * r2;
-    const double z1 = di[1] * r0 + di[3] * r1 + di[4] * r2;
-    const double z2 = di[2] * r0 + di[4] * r1 + di[5] * r2;
+    const double z0 = inv[0] * r0 + inv[1] * r1 + inv[2] * r2;
+    const double z1 = inv[1] * r0 + inv[3] * r1 + inv[4] * r2;
+    const double z2 = inv[2] * r0 + inv[4] * r1 + inv[5] * r2;
     z[3 * i] = z0, z[3 * i + 1] = z1, z[3 * i + 2] = z2;
     rz += r0 * z0 + r1 * z1 + r2 * z2;
   }

@@ -390,7 +390,10 @@ class MassSpringBody {
   std::vector<double> decay_;  // per element: exp(−h k/c) for Maxwell, at decayH_
   double decayH_ = -1.0;
   double massScale_ = 1.0;      // 1 + h·drag during an implicit step
-  std::vector<double> dinv_;    // 6 per particle: inverse diagonal block xx xy xz yy yz zz (implicit)
+  std::vector<double> dsum_;  // 6 per particle: diagonal block xx xy xz yy yz zz while assembled (implicit)
+  // Inverse diagonal blocks, interleaved by particle pairs: entry c of
+  // particle i at 12 (i/2) + 2 c + i%2 (implicit).
+  std::vector<double> dinv_;
   VecX rhs_, dv_;               // 3n: right-hand side and solution Δv of the implicit step
   VecX cgR_, cgZ_, cgP_, cgQ_;  // 3n: CG residual, preconditioned residual, direction, A·direction
 };
