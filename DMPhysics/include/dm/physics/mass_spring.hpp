@@ -341,7 +341,9 @@ class MassSpringBody {
     std::uint32_t j3[2];  // 3·(higher end): offset of its x coordinate in a 3n vector
   };
   // Why the implicit solve stopped, when it did not converge.
-  enum class CgStop : std::uint8_t { Converged, NotFinite, NotPositive, MaxIterations };
+  enum class CgStop : std::uint8_t { Converged, NotFinite, NotPositive, MaxIterations, RhsNotFinite };
+  // The implicit step's entry points per instruction set (mass_spring.cpp).
+  struct Kernels;
 
   void prepare();  // sizes the workspace and the incidence lists after a topology change
   template <class F>
@@ -350,6 +352,7 @@ class MassSpringBody {
   void sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const;
   // CG from the residual r = cgR_ of the warm start dv_ (rr0 = rᵀr, rz = rᵀz, z = cgZ_).
   CgStop solveImplicit(double bnorm, double rr0, double rz, ImplicitStepReport& report);
+  CgStop stepImplicitCore(double h, ImplicitStepReport& report);  // stepImplicit after its checks
   void updateMaxwellDecay(double h);
 
   // Particles (structure of arrays).
