@@ -45,6 +45,10 @@ float roundedUp(double x) noexcept {
 
 bool unbounded(const Aabb& box) noexcept { return !(box.min().allFinite() && box.max().allFinite()); }
 
+// RigidContactState::colliderKind, set once per step in beginContacts: the
+// broad and narrow phases ask it for every body and pair.
+constexpr std::uint8_t kNoCollider = 0, kBounded = 1, kUnbounded = 2;
+
 // Half the thinnest extent of a shape, m: a body moving less than this per
 // step cannot pass through anything its own thickness would hit.
 double thickness(const Shape& shape) noexcept {
@@ -91,6 +95,7 @@ void PhysicsWorld::reserveContacts(WorldState& state) const {
   const std::size_t n = bodies_.size();
   c.bodies.resize(n);
   c.shapePoses.assign(n, Isometry3::Identity());
+  c.colliderKind.assign(n, kNoCollider);
   for (std::size_t i = 0; i < n; ++i) {
     SolverBody& b = c.bodies[i];
     b.position = state.s_.position[i];
@@ -136,6 +141,7 @@ void PhysicsWorld::reserveContacts(WorldState& state) const {
 void PhysicsWorld::broadPhase(WorldState& state) const {
   RigidContactState& c = state.contact_;
   const std::vector<Aabb>& box = state.bounds_;
+  const std::vector<std::uint8_t>& kind = c.colliderKind;
   const auto eligible = [this](std::uint32_t a, std::uint32_t b) {
     return (model_[a].inverseMass > 0.0 || model_[b].inverseMass > 0.0) && !jointed(a, b);
   };
@@ -161,12 +167,12 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
     return p.lo[0] < q.lo[0] || (p.lo[0] == q.lo[0] && p.id < q.id);
   };
   std::size_t bounded = 0;
-  for (std::uint32_t i = 0; i < n; ++i) bounded += collider(i) && !unbounded(box[i]);
+  for (std::uint32_t i = 0; i < n; ++i) bounded += kind[i] == kBounded;
   bool sorted = false;
   if (c.order.size() == bounded && bounded > 0) {
     bool same = true;  // the same colliders as last step (materials may change)
     for (const std::uint32_t i : c.order) {
-      same = same && i < n && collider(i) && !unbounded(box[i]);
+      same = same && i < n && kind[i] == kBounded;
       if (same) c.sweep.push_back(packed(i));
     }
     const std::size_t budget = same ? 8 * bounded : 0;  // element moves before giving up
@@ -182,7 +188,7 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
   if (!sorted) {
     c.sweep.clear();
     for (std::uint32_t i = 0; i < n; ++i)
-      if (collider(i) && !unbounded(box[i])) c.sweep.push_back(packed(i));
+      if (kind[i] == kBounded) c.sweep.push_back(packed(i));
     std::sort(c.sweep.begin(), c.sweep.end(), before);
   }
   c.order.clear();
@@ -254,9 +260,9 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
   // Unbounded shapes (planes) against every bounded collider, in index
   // order: a plane's pairs are then already in the order sorted below.
   for (std::uint32_t u = 0; u < n; ++u) {
-    if (!collider(u) || !unbounded(box[u])) continue;
+    if (kind[u] != kUnbounded) continue;
     for (std::uint32_t b = 0; b < n; ++b)
-      if (collider(b) && !unbounded(box[b]) && eligible(u, b)) push(u, b);
+      if (kind[b] == kBounded && eligible(u, b)) push(u, b);
   }
   sortBottomUp(state);
 }
@@ -278,13 +284,14 @@ void PhysicsWorld::sortBottomUp(WorldState& state) const {
     return z(i) < z(j) || (z(i) == z(j) && i < j);
   };
   std::size_t colliders = 0;
-  for (std::uint32_t i = 0; i < n; ++i) colliders += collider(i);
+  const std::vector<std::uint8_t>& kind = c.colliderKind;
+  for (std::uint32_t i = 0; i < n; ++i) colliders += kind[i] != kNoCollider;
   bool sorted = false;
   if (c.zOrder.size() == colliders && colliders > 0) {
     // The same colliders as last step (a permutation of them, all still
     // colliders, as many): insertion sort, with a budget of moves.
     bool same = true;
-    for (const std::uint32_t i : c.zOrder) same = same && i < n && collider(i);
+    for (const std::uint32_t i : c.zOrder) same = same && i < n && kind[i] != kNoCollider;
     const std::size_t budget = same ? 8 * colliders : 0;
     std::size_t moves = same ? 0 : 1;
     for (std::size_t k = 1; k < colliders && moves <= budget; ++k) {
@@ -299,7 +306,7 @@ void PhysicsWorld::sortBottomUp(WorldState& state) const {
   if (!sorted) {
     c.zOrder.clear();
     for (std::uint32_t i = 0; i < n; ++i)
-      if (collider(i)) c.zOrder.push_back(i);
+      if (kind[i] != kNoCollider) c.zOrder.push_back(i);
     std::sort(c.zOrder.begin(), c.zOrder.end(), lower);
   }
   for (std::uint32_t r = 0; r < colliders; ++r) c.zRank[c.zOrder[r]] = r;
@@ -374,7 +381,8 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
     const Aabb& boxA = state.bounds_[a];
     const Aabb& boxB = state.bounds_[b];
     bool colliding = false;
-    if (unbounded(boxA) || unbounded(boxB) || boxesOverlap(boxA, boxB)) {
+    const bool planar = c.colliderKind[a] == kUnbounded || c.colliderKind[b] == kUnbounded;
+    if (planar || boxesOverlap(boxA, boxB)) {
       collide(*da.shape, c.shapePoses[a], *db.shape, c.shapePoses[b], request, c.narrow);
       colliding = c.narrow.colliding;
     }
@@ -388,7 +396,7 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
       // would have if B were moved onto A, moved back, as speculative
       // contacts. Only between two bounded shapes: a plane pair (the broad
       // phase pairs a plane with every collider) needs no distance query.
-      if (kept == 0 && !unbounded(boxA) && !unbounded(boxB)) {
+      if (kept == 0 && !planar) {
         const Isometry3& pa = c.shapePoses[a];
         const Isometry3& pb = c.shapePoses[b];
         const DistanceResult d = distance(*da.shape, pa, *db.shape, pb);
@@ -497,11 +505,14 @@ void PhysicsWorld::beginContacts(WorldState& state) const {
     c.constrained[i] = 0;
   }
   if (!contactSettings_.enabled) return;
-  // Each collider's shape pose once: a body takes part in many pairs of the
-  // narrow phase and CCD. CCD keeps it current when it moves a body back.
-  for (std::uint32_t i = 0; i < bodies_.size(); ++i)
-    if (collider(i))
+  // Each collider's kind and shape pose once: a body takes part in many
+  // pairs of the broad and narrow phases and CCD. CCD keeps the pose current
+  // when it moves a body back.
+  for (std::uint32_t i = 0; i < bodies_.size(); ++i) {
+    c.colliderKind[i] = !collider(i) ? kNoCollider : unbounded(state.bounds_[i]) ? kUnbounded : kBounded;
+    if (c.colliderKind[i] != kNoCollider)
       c.shapePoses[i] = posed(c.bodies[i].position, c.bodies[i].orientation, bodies_[i].shapeOffset);
+  }
   broadPhase(state);
   narrowPhase(state);
 }

@@ -143,6 +143,7 @@ struct ContactStats {
 struct RigidContactState {
   std::vector<SolverBody> bodies;           ///< one per world body, start-of-step poses
   std::vector<Isometry3> shapePoses;        ///< per collider: shape pose at `bodies` (see beginContacts)
+  std::vector<std::uint8_t> colliderKind;   ///< per body, this step: 0 no collider, 1 bounded, 2 unbounded
   std::vector<ContactConstraint> contacts;  ///< the step's contacts
   std::vector<Joint> joints;                ///< the world's joints with their warm-start impulses
   std::vector<std::uint32_t> order;         ///< broad phase: bounded colliders sorted by min x (next sort's start)
