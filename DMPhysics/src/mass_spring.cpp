@@ -982,9 +982,9 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
 // AVX2 without FMA: operation for operation the same IEEE arithmetic as the
 // SSE2 version, so both give the same bits; VEX encoding (three operands)
 // spares the register copies of the two-operand forms (about 4 % of the 64 x
-// 64 sheet step, measured). Chosen once at load time with
-// __builtin_cpu_supports (not an ifunc, as in constraint_solver.cpp); GCC on
-// x86-64 only, and not under ThreadSanitizer.
+// 64 sheet step, measured). Chosen once with __builtin_cpu_supports (not an
+// ifunc, as in constraint_solver.cpp); GCC on x86-64 only, and not under
+// ThreadSanitizer.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__) && \
     !defined(__SANITIZE_THREAD__)
 #define DM_MASS_SPRING_AVX2 1
@@ -1008,10 +1008,7 @@ struct MassSpringBody::Kernels {
 #endif
     return &step;
   }
-  static const StepFn stepImplicit;
 };
-
-const MassSpringBody::Kernels::StepFn MassSpringBody::Kernels::stepImplicit = MassSpringBody::Kernels::pick();
 
 Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
   constexpr const char* where = "MassSpringBody::stepImplicit";
@@ -1019,8 +1016,11 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
     return invalid(formatString("time step is %g s", h), formatString("%s: h", where),
                    "give a finite h > 0 s");
   if (!prepared_) prepare();
+  // Picked on first use (a function-local static: safe from other static
+  // initialisers that step a body).
+  static const Kernels::StepFn stepFn = Kernels::pick();
   ImplicitStepReport report;
-  switch (Kernels::stepImplicit(*this, h, report)) {
+  switch (stepFn(*this, h, report)) {
     case CgStop::Converged:
       return report;
     case CgStop::MaxIterations:
