@@ -966,14 +966,15 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
   });
   // Maxwell dampers: backward Euler at the new stretch,
   // e_d' = (e_d + β e')/(1 + β), β = h k/c — consistent with kAxial above.
-  forEachRange(elementCount(), [this, h](std::size_t b, std::size_t end) {
-    for (std::size_t e = b; e < end; ++e) {
-      if (!maxwell_[e]) continue;
-      const double ext = (load3(x_, ej_[e]) - load3(x_, ei_[e])).norm() - rest_[e];
-      const double beta = h * k_[e] / c_[e];
-      ed_[e] = (ed_[e] + beta * ext) / (1.0 + beta);
-    }
-  });
+  if (maxwellCount_ > 0)
+    forEachRange(elementCount(), [this, h](std::size_t b, std::size_t end) {
+      for (std::size_t e = b; e < end; ++e) {
+        if (!maxwell_[e]) continue;
+        const double ext = (load3(x_, ej_[e]) - load3(x_, ei_[e])).norm() - rest_[e];
+        const double beta = h * k_[e] / c_[e];
+        ed_[e] = (ed_[e] + beta * ext) / (1.0 + beta);
+      }
+    });
   return stop;
 }
 
