@@ -495,6 +495,40 @@ TEST(MassSpring, ImplicitStepSolvesTheBackwardEulerSystem) {
             1e-6 * dvFree.cwiseAbs().maxCoeff() + 1e-12);
 }
 
+// The implicit step keeps per-element data in its workspace, some of it
+// cached for the last step size (a Maxwell element's effective stiffness
+// k/(1 + h k/c)): a body that steps, gains an element and steps again must
+// step bitwise as a body built with that element from the start.
+TEST(MassSpring, ImplicitStepAfterAddingAnElementMatchesAFreshBody) {
+  const SpringMaterial kv{true, 40, 0.3, SpringModel::KelvinVoigt}, mx{true, 25, 0.4, SpringModel::Maxwell};
+  const auto build = [&](bool withMaxwell) {
+    MassSpringBody body;
+    for (int i = 0; i < 7; ++i)
+      EXPECT_TRUE(body.addParticle({0.3 * i, 0.1 * (i % 2), 0.05 * i * i}, 0.02 + 0.01 * i, i == 0).ok());
+    for (std::uint32_t i = 0; i + 1 < 7; ++i) EXPECT_TRUE(body.addElement(i, i + 1, kv, 0.25).ok());
+    EXPECT_TRUE(body.addElement(1, 4, kv, 0.8).ok());
+    if (withMaxwell) {
+      EXPECT_TRUE(body.addElement(6, 2, mx, 1.0).ok());
+    }
+    body.setGravity({0, 0, -9.81});
+    return body;
+  };
+  MassSpringBody grown = build(false), fresh = build(true);
+  step(grown, Path::Implicit, 1e-2);  // Kelvin–Voigt only: no state but x and v; fills the workspace
+  ASSERT_TRUE(grown.addElement(6, 2, mx, 1.0).ok());
+  for (std::size_t i = 0; i < grown.particleCount(); ++i) {
+    fresh.setPosition(i, grown.position(i));
+    fresh.setVelocity(i, grown.velocity(i));
+  }
+  for (int s = 0; s < 3; ++s) {
+    step(grown, Path::Implicit, 1e-2);  // the step size it has seen
+    step(fresh, Path::Implicit, 1e-2);
+  }
+  EXPECT_TRUE(grown.positions() == fresh.positions());
+  EXPECT_TRUE(grown.velocities() == fresh.velocities());
+  EXPECT_NE(grown.element(grown.elementCount() - 1).damperExtension, 0.0);  // the Maxwell damper moved
+}
+
 TEST(MassSpring, ParallelLoopsGiveBitwiseTheSerialResult) {
   auto make = [](bool parallel) {
     auto sheet = MassSpringBody::makeSheet({.nx = 48, .ny = 48, .mass = 0.4});
