@@ -340,7 +340,7 @@ class MassSpringBody {
     float a[2], b[2], n0[2], n1[2], n2[2];
     std::uint32_t j3[2];  // 3·(higher end): offset of its x coordinate in a 3n vector
   };
-  // Why the implicit solve stopped, when it did not converge.
+  // Why the implicit solve stopped (RhsNotFinite: the step stopped before it).
   enum class CgStop : std::uint8_t { Converged, NotFinite, NotPositive, MaxIterations, RhsNotFinite };
   // The implicit step's entry points per instruction set (mass_spring.cpp).
   struct Kernels;
@@ -388,8 +388,9 @@ class MassSpringBody {
   std::vector<double> slotRest_, slotK_, slotC_, slotEd_;
   double slotH_ = -1.0;
   std::size_t maxwellCount_ = 0;
-  std::vector<double>
-      ef_;  // 3 per element: force on i (explicit); 3 per slot: rhs term on the owner (implicit)
+  // 3 per element: force on i (explicit); 6 per slot pair, x x' y y' z z':
+  // the right-hand-side terms on the owners of its two slots (implicit).
+  std::vector<double> ef_;
   std::vector<double> decay_;  // per element: exp(−h k/c) for Maxwell, at decayH_
   double decayH_ = -1.0;
   double massScale_ = 1.0;      // 1 + h·drag during an implicit step
