@@ -23,7 +23,8 @@ struct Sat {
 };
 
 // Runs the test; returns false as soon as an axis separates (then `sat` is
-// partial), else true with the axis of least penetration in `sat`.
+// partial but for sat.separation: that axis' gap, a lower bound on the
+// distance), else true with the axis of least penetration in `sat`.
 bool separatingAxes(const Box& a, const Isometry3& pa, const Box& b, const Isometry3& pb, Sat& sat) {
   const Mat3 ra = pa.linear(), rb = pb.linear();
   const Mat3 r = ra.transpose() * rb;
@@ -37,13 +38,19 @@ bool separatingAxes(const Box& a, const Isometry3& pa, const Box& b, const Isome
 
   for (int i = 0; i < 3; ++i) {
     const double s = std::abs(t[i]) - (ha[i] + absR.row(i).dot(hb));
-    if (s > 0) return false;
+    if (s > 0) {
+      sat.separation = s;
+      return false;
+    }
     if (s > sat.separation) sat = {s, 0, i, 0, (t[i] >= 0 ? 1.0 : -1.0) * ra.col(i)};
   }
   for (int j = 0; j < 3; ++j) {
     const double tj = t.dot(r.col(j));
     const double s = std::abs(tj) - (absR.col(j).dot(ha) + hb[j]);
-    if (s > 0) return false;
+    if (s > 0) {
+      sat.separation = s;
+      return false;
+    }
     // Prefer A's faces on ties so the manifold is stable frame to frame.
     if (s > 0.95 * sat.separation + faceBias) sat = {s, 1, j, 0, (tj >= 0 ? 1.0 : -1.0) * rb.col(j)};
   }
@@ -57,7 +64,10 @@ bool separatingAxes(const Box& a, const Isometry3& pa, const Box& b, const Isome
       const double rb2 = hb.dot((r.transpose() * l).cwiseAbs());
       const double tl = t.dot(l);
       const double s = (std::abs(tl) - ra2 - rb2) / len;
-      if (s > 0) return false;
+      if (s > 0) {
+      sat.separation = s;
+      return false;
+    }
       if (s > 0.95 * faceSeparation + faceBias && s > sat.separation)
         sat = {s, 2, i, j, (tl >= 0 ? 1.0 : -1.0) * (ra * l / len)};
     }
@@ -119,8 +129,12 @@ void boxBoxContacts(const Shape& sa, const Isometry3& pa, const Shape& sb, const
   const auto& a = static_cast<const Box&>(sa);
   const auto& b = static_cast<const Box&>(sb);
   Sat sat;
-  if (!separatingAxes(a, pa, b, pb, sat)) return;
+  if (!separatingAxes(a, pa, b, pb, sat)) {
+    if (!out.colliding && out.contacts.empty()) out.separation = sat.separation;
+    return;
+  }
   out.colliding = true;
+  out.separation = 0.0;
   if (!request.contacts) return;
   const std::size_t first = out.contacts.size();
   const double depth = -sat.separation;

@@ -100,6 +100,7 @@ void treeShapeContacts(const Shape& a, const Isometry3& pa, const Shape& b, cons
     }
     return !req.contacts && out.colliding ? Walk::Stop : Walk::Skip;
   });
+  out.separation = 0.0;  // one sphere's bound says nothing of the others
   if (out.supported && req.contacts) reduceContacts(out, first, req.maxContacts);
 }
 

@@ -111,6 +111,7 @@ const Collider kCompoundCollider = {
       const std::size_t first = out.contacts.size();
       for (const CompoundChild& c : static_cast<const Compound&>(a).children())
         collideAppend(*c.shape, pa * c.pose, b, pb, req, out, cache);
+      out.separation = 0.0;  // one child's bound says nothing of the others
       detail::reduceContacts(out, first, req.maxContacts);
     },
     [](const Shape& a, const Isometry3& pa, const Shape& b, const Isometry3& pb, PairCache* cache) {

@@ -381,10 +381,12 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
     const Aabb& boxA = state.bounds_[a];
     const Aabb& boxB = state.bounds_[b];
     bool colliding = false;
+    double gapBound = 0.0;  // a lower bound on the shapes' distance, m (0: unknown)
     const bool planar = c.colliderKind[a] == kUnbounded || c.colliderKind[b] == kUnbounded;
     if (planar || boxesOverlap(boxA, boxB)) {
       collide(*da.shape, c.shapePoses[a], *db.shape, c.shapePoses[b], request, c.narrow);
       colliding = c.narrow.colliding;
+      gapBound = c.narrow.separation;
     }
     if (!colliding) {
       if (!(margin > 0.0)) continue;
@@ -395,8 +397,11 @@ void PhysicsWorld::narrowPhase(WorldState& state) const {
       // No history (say, a scene built touching): the manifold the pair
       // would have if B were moved onto A, moved back, as speculative
       // contacts. Only between two bounded shapes: a plane pair (the broad
-      // phase pairs a plane with every collider) needs no distance query.
-      if (kept == 0 && !planar) {
+      // phase pairs a plane with every collider) needs no distance query;
+      // nor does a pair the collision test already found farther apart than
+      // twice the margin (the query's answer would be compared with the
+      // margin only; GJK's error is orders of magnitude below it).
+      if (kept == 0 && !planar && !(gapBound >= 2.0 * margin)) {
         const Isometry3& pa = c.shapePoses[a];
         const Isometry3& pb = c.shapePoses[b];
         const DistanceResult d = distance(*da.shape, pa, *db.shape, pb);

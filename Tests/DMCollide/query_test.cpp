@@ -166,7 +166,7 @@ TEST(Query, BoxBoxManifoldIsConsistent) {
   };
   std::mt19937_64 rng(8);
   dm::CollisionResult res;
-  int hits = 0;
+  int hits = 0, apartCount = 0, tight = 0;
   for (int k = 0; k < 2000; ++k) {
     const Isometry3 pa = pose(rng, 0.05), pb = pose(rng, 0.5);
     dm::collide(a, pa, b, pb, {true, 8}, res);
@@ -177,7 +177,15 @@ TEST(Query, BoxBoxManifoldIsConsistent) {
       ASSERT_EQ(res.colliding, fclDepth >= 0) << k;
       ASSERT_EQ(dm::intersect(a, pa, b, pb), res.colliding) << k;
     }
-    if (!res.colliding) continue;
+    if (!res.colliding) {
+      // The separating axis' gap: a positive lower bound on the distance.
+      ASSERT_GT(res.separation, 0.0) << k;
+      ASSERT_LE(res.separation, exact.distance + 1e-12) << k;
+      ++apartCount;
+      if (res.separation > 0.5 * exact.distance) ++tight;
+      continue;
+    }
+    ASSERT_EQ(res.separation, 0.0) << k;
     ++hits;
     ASSERT_GE(res.contacts.size(), 1u);
     ASSERT_LE(res.contacts.size(), 8u);
@@ -198,6 +206,13 @@ TEST(Query, BoxBoxManifoldIsConsistent) {
     ASSERT_GE(dm::distance(a, pa, b, moved).distance, -1e-9) << k;
   }
   EXPECT_GT(hits, 300);
+  EXPECT_GT(apartCount, 300);
+  EXPECT_GT(tight, apartCount / 2);  // a useful bound, not just a positive number
+  // Face to face along x, 0.05 m apart: the bound is the gap itself.
+  dm::collide(a, Isometry3::Identity(), b, Eigen::Translation3d(0.3 + 0.15 + 0.05, 0, 0) * Isometry3::Identity(),
+              {true, 8}, res);
+  EXPECT_FALSE(res.colliding);
+  EXPECT_NEAR(res.separation, 0.05, 1e-12);  // less the 1e-14 parallel-edge guard on |R|
 }
 
 // A box on a plane, tilted about one axis: the two lower-edge vertices touch;
@@ -252,6 +267,13 @@ TEST(Query, CompoundDispatchesOverChildren) {
   EXPECT_TRUE(dm::intersect(box, at(0.65, 0, 0), dumbbell, Isometry3::Identity()));
   const dm::CollisionResult r = dm::collide(box, at(0.65, 0, 0), dumbbell, Isometry3::Identity());
   ASSERT_EQ(r.contacts.size(), 1u);
+  // Box children apart: one child's gap bounds nothing for the compound.
+  const auto cube = std::make_shared<dm::Box>(Vec3(0.1, 0.1, 0.1));
+  const dm::Compound pair({{cube, at(-0.5, 0, 0)}, {cube, at(0.5, 0, 0)}});
+  EXPECT_GT(dm::collide(box, at(0.3, 0, 0), *cube, Isometry3::Identity()).separation, 0.0);
+  const dm::CollisionResult apart = dm::collide(pair, Isometry3::Identity(), box, at(0.75, 0, 0));
+  EXPECT_FALSE(apart.colliding);
+  EXPECT_EQ(apart.separation, 0.0);
   EXPECT_NEAR(r.contacts[0].depth, 0.05, 1e-15);
   EXPECT_NEAR(r.contacts[0].normal.x(), -1.0, 1e-15);  // from the box to the ball at x = 0.5
   EXPECT_NEAR(dumbbell.aabb(Isometry3::Identity()).max().x(), 0.6, 1e-15);

@@ -53,10 +53,16 @@ struct CollisionResult {
   bool colliding = false;
   std::vector<ContactPoint> contacts;
   bool supported = true;  ///< false: no collider is registered for the pair
+  /// Not colliding: a lower bound on the distance between the shapes that the
+  /// test found on its way (m; box–box: the gap along the separating axis),
+  /// so a caller can skip a distance() query it would only compare with a
+  /// smaller threshold. 0 when unknown or colliding.
+  double separation = 0.0;
   void clear() noexcept {
     colliding = false;
     contacts.clear();
     supported = true;
+    separation = 0.0;
   }
 };
 
