@@ -43,6 +43,7 @@
 // list whose exact boxes overlap, already in order. Cost per step:
 // O(moved · log n + fat pairs); memory O(n + fat pairs).
 #include <dm/core/assert.hpp>
+#include <dm/math/float_bounds.hpp>
 
 #include <algorithm>
 #include <cfloat>
@@ -66,22 +67,6 @@ using Box = FlatBox;
 struct FBox {
   float lo[3], hi[3];
 };
-
-/// Largest float ≤ x (−∞ below the float range).
-inline float floatDown(double x) noexcept {
-  if (!(x <= double(FLT_MAX))) return x > 0 ? FLT_MAX : -INFINITY;  // NaN: −∞, never excludes
-  if (x < -double(FLT_MAX)) return -INFINITY;
-  const float f = static_cast<float>(x);
-  return double(f) > x ? std::nextafter(f, -INFINITY) : f;
-}
-
-/// Smallest float ≥ x (+∞ above the float range).
-inline float floatUp(double x) noexcept {
-  if (!(x >= -double(FLT_MAX))) return x < 0 ? -FLT_MAX : INFINITY;
-  if (x > double(FLT_MAX)) return INFINITY;
-  const float f = static_cast<float>(x);
-  return double(f) < x ? std::nextafter(f, INFINITY) : f;
-}
 
 inline FBox merged(const FBox& a, const FBox& b) noexcept {
   FBox r;

@@ -1,6 +1,7 @@
 // Binned-SAH BVH over mesh triangles; see dm/collide/bvh.hpp.
 #include <dm/collide/bvh.hpp>
 #include <dm/core/tasks.hpp>
+#include <dm/math/float_bounds.hpp>
 #include <dm/math/mesh_topology.hpp>
 
 #include <Eigen/Eigenvalues>
@@ -20,19 +21,10 @@ namespace dm {
 
 namespace {
 
-float roundDown(double x) noexcept {
-  const float f = static_cast<float>(x);
-  return static_cast<double>(f) > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
-}
-float roundUp(double x) noexcept {
-  const float f = static_cast<float>(x);
-  return static_cast<double>(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
-}
-
 void setBox(BvhNode& n, const Aabb& b) noexcept {
   for (int i = 0; i < 3; ++i) {
-    n.lo[i] = roundDown(b.min()[i]);
-    n.hi[i] = roundUp(b.max()[i]);
+    n.lo[i] = floatDown(b.min()[i]);
+    n.hi[i] = floatUp(b.max()[i]);
   }
 }
 
@@ -255,8 +247,8 @@ Result<MeshBvh> MeshBvh::build(const Mesh& mesh, const BvhBuildOptions& options)
     const Vec3 &p0 = mesh.positions[tri[0]], &p1 = mesh.positions[tri[1]], &p2 = mesh.positions[tri[2]];
     const Vec3 lo = p0.cwiseMin(p1).cwiseMin(p2), hi = p0.cwiseMax(p1).cwiseMax(p2);
     all.extend(lo), all.extend(hi);
-    lows[t] = F4::of(roundDown(lo.x()), roundDown(lo.y()), roundDown(lo.z()));
-    highs[t] = F4::of(roundUp(hi.x()), roundUp(hi.y()), roundUp(hi.z()));
+    lows[t] = F4::of(floatDown(lo.x()), floatDown(lo.y()), floatDown(lo.z()));
+    highs[t] = F4::of(floatUp(hi.x()), floatUp(hi.y()), floatUp(hi.z()));
     const Vec3 c = 0.5 * (lo + hi);
     centroids[t] = F4::of(float(c.x()), float(c.y()), float(c.z()));
   }

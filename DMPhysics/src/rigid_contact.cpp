@@ -4,6 +4,7 @@
 // bodies.
 #include <dm/collide/broadphase.hpp>
 #include <dm/collide/toi.hpp>
+#include <dm/math/float_bounds.hpp>
 #include <dm/physics/rigid_contact.hpp>
 #include <dm/physics/world.hpp>
 
@@ -29,18 +30,6 @@ Isometry3 posed(const Vec3& x, const Quat& q, const Isometry3& offset) {
   // Most shapes sit at the body's origin: skip the 4 × 4 product then.
   if (offset.translation().isZero(0.0) && offset.linear() == Mat3::Identity()) return pose;
   return pose * offset;
-}
-
-// The float nearest x on the side of −∞ (roundedDown) or +∞ (roundedUp):
-// a comparison of such bounds passes whenever the exact one does.
-float roundedDown(double x) noexcept {
-  const auto f = static_cast<float>(x);
-  return static_cast<double>(f) > x ? std::nextafter(f, -std::numeric_limits<float>::infinity()) : f;
-}
-
-float roundedUp(double x) noexcept {
-  const auto f = static_cast<float>(x);
-  return static_cast<double>(f) < x ? std::nextafter(f, std::numeric_limits<float>::infinity()) : f;
 }
 
 bool unbounded(const Aabb& box) noexcept { return !(box.min().allFinite() && box.max().allFinite()); }
@@ -212,10 +201,10 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
     if (k < m) {
       const SweepBox& p = c.sweep[k];
       lo0[k] = p.lo[0];
-      loY[k] = roundedDown(p.lo[1]);
-      loZ[k] = roundedDown(p.lo[2]);
-      hiY[k] = roundedUp(p.hi[1] + margin);
-      hiZ[k] = roundedUp(p.hi[2] + margin);
+      loY[k] = floatDown(p.lo[1]);
+      loZ[k] = floatDown(p.lo[2]);
+      hiY[k] = floatUp(p.hi[1] + margin);
+      hiZ[k] = floatUp(p.hi[2] + margin);
     } else {
       lo0[k] = std::numeric_limits<double>::infinity();
       loY[k] = loZ[k] = hiY[k] = hiZ[k] = 0.0f;
