@@ -9,6 +9,7 @@
 #include <condition_variable>
 #include <deque>
 #include <map>
+#include <mutex>
 #include <optional>
 
 #include "io_thread_impl.hpp"
@@ -53,7 +54,17 @@ constexpr std::size_t kMaxGather = 64;  // buffers per gathered write
 struct LinkCounters {
   std::atomic<std::uint64_t> bytesIn{0}, bytesOut{0}, messagesQueued{0}, messagesDropped{0}, bytesDropped{0},
       queuedBytes{0}, reconnects{0};
+  // Bytes leaving the queue (written or discarded) move between two counters
+  // under this lock, and a snapshot takes it too: a snapshot never sees them
+  // in both (bytesOut + queuedBytes would count them twice) or in neither.
+  mutable std::mutex flow;
+  void leaveQueue(std::atomic<std::uint64_t>& to, std::uint64_t n) {
+    std::lock_guard lock(flow);
+    to.fetch_add(n, std::memory_order_relaxed);
+    queuedBytes.fetch_sub(n, std::memory_order_relaxed);
+  }
   ConnectionStats snapshot() const {
+    std::lock_guard lock(flow);
     return {bytesIn.load(),      bytesOut.load(),    messagesQueued.load(), messagesDropped.load(),
             bytesDropped.load(), queuedBytes.load(), reconnects.load()};
   }
@@ -112,8 +123,7 @@ class Link : public std::enable_shared_from_this<Link> {
       d.unsentMessages = queue_.size() + inflightCount_;
       queue_.clear();  // in-flight buffers stay alive until their write handler
     }
-    counters_->bytesDropped.fetch_add(d.unsentBytes, std::memory_order_relaxed);
-    counters_->queuedBytes.fetch_sub(d.unsentBytes, std::memory_order_relaxed);
+    counters_->leaveQueue(counters_->bytesDropped, d.unsentBytes);
     std::error_code ignored;
     socket_.shutdown(tcp::socket::shutdown_both, ignored);
     socket_.close(ignored);
@@ -171,12 +181,11 @@ class Link : public std::enable_shared_from_this<Link> {
     for (const auto& b : inflight_) gather.emplace_back(b.data(), b.size());
     asio::async_write(socket_, gather, [self = shared_from_this()](std::error_code ec, std::size_t n) {
       if (self->closed()) return;
-      self->counters_->bytesOut.fetch_add(n, std::memory_order_relaxed);
       {
         std::lock_guard lock(self->mutex_);
         self->queuedBytes_ -= n;
       }
-      self->counters_->queuedBytes.fetch_sub(n, std::memory_order_relaxed);
+      self->counters_->leaveQueue(self->counters_->bytesOut, n);
       if (ec) {
         self->close(DisconnectReason::Error, ec.message());
         return;

@@ -44,6 +44,9 @@ namespace dm {
 using ConnectionId = std::uint64_t;
 
 /// Counters of one connection (for a TcpClient: summed over its reconnections).
+/// A snapshot is consistent for the bytes leaving the send queue: every
+/// accepted byte is in exactly one of bytesOut, queuedBytes and (at a
+/// disconnect) bytesDropped.
 struct ConnectionStats {
   std::uint64_t bytesIn = 0;          ///< bytes received
   std::uint64_t bytesOut = 0;         ///< bytes written to the socket
