@@ -967,12 +967,22 @@ template <int kMode>
 }
 #endif
 
+// The widest version this CPU runs: 2 AVX-512 (x86-64-v4), 1 AVX2, 0 SSE2.
+int hostVersion() noexcept {
+#if defined(DM_SOLVER_AVX)
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("x86-64-v4")) return 2;
+  if (__builtin_cpu_supports("avx2")) return 1;
+#endif
+  return 0;
+}
+const int gVersion = hostVersion();
+
 template <int kMode>
 SweepFn pickSweep() noexcept {
 #if defined(DM_SOLVER_AVX)
-  __builtin_cpu_init();
-  if (__builtin_cpu_supports("x86-64-v4")) return &sweepAvx512<kMode>;
-  if (__builtin_cpu_supports("avx2")) return &sweepAvx<kMode>;
+  if (gVersion == 2) return &sweepAvx512<kMode>;
+  if (gVersion == 1) return &sweepAvx<kMode>;
 #endif
   return &sweepNarrow<kMode>;
 }
@@ -980,9 +990,8 @@ SweepFn pickSweep() noexcept {
 using BuildFn = void (*)(const RowBuild&) noexcept;
 BuildFn pickBuild() noexcept {
 #if defined(DM_SOLVER_AVX)
-  __builtin_cpu_init();
-  if (__builtin_cpu_supports("x86-64-v4")) return &buildRowsAvx512;
-  if (__builtin_cpu_supports("avx2")) return &buildRowsAvx;
+  if (gVersion == 2) return &buildRowsAvx512;
+  if (gVersion == 1) return &buildRowsAvx;
 #endif
   return &buildRowsNarrow;
 }

@@ -11,6 +11,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <span>
 #include <string>
@@ -33,6 +34,22 @@ Isometry3 posed(const Vec3& x, const Quat& q, const Isometry3& offset) {
 }
 
 bool unbounded(const Aabb& box) noexcept { return !(box.min().allFinite() && box.max().allFinite()); }
+
+// Insertion sort of v[begin, end) by `less`, for input in nearly the order
+// wanted (last step's): about linear time. Gives up after `budget` element
+// moves and returns false (the range is then partly sorted; sort it another
+// way).
+template <class T, class Less>
+bool insertionSort(std::vector<T>& v, std::size_t begin, std::size_t end, Less less, std::size_t budget) {
+  std::size_t moves = 0;
+  for (std::size_t k = begin + 1; k < end && moves <= budget; ++k) {
+    const T x = v[k];
+    std::size_t j = k;
+    for (; j > begin && less(x, v[j - 1]) && moves <= budget; --j, ++moves) v[j] = v[j - 1];
+    v[j] = x;
+  }
+  return moves <= budget;
+}
 
 // RigidContactState::colliderKind, set once per step in beginContacts: the
 // broad and narrow phases ask it for every body and pair.
@@ -164,15 +181,7 @@ void PhysicsWorld::broadPhase(WorldState& state) const {
       same = same && i < n && kind[i] == kBounded;
       if (same) c.sweep.push_back(packed(i));
     }
-    const std::size_t budget = same ? 8 * bounded : 0;  // element moves before giving up
-    std::size_t moves = same ? 0 : 1;
-    for (std::size_t k = 1; k < bounded && moves <= budget; ++k) {
-      const SweepBox x = c.sweep[k];
-      std::size_t j = k;
-      for (; j > 0 && before(x, c.sweep[j - 1]) && moves <= budget; --j, ++moves) c.sweep[j] = c.sweep[j - 1];
-      c.sweep[j] = x;
-    }
-    sorted = moves <= budget;
+    sorted = same && insertionSort(c.sweep, 0, bounded, before, 8 * bounded);
   }
   if (!sorted) {
     c.sweep.clear();
@@ -281,16 +290,7 @@ void PhysicsWorld::sortBottomUp(WorldState& state) const {
     // colliders, as many): insertion sort, with a budget of moves.
     bool same = true;
     for (const std::uint32_t i : c.zOrder) same = same && i < n && kind[i] != kNoCollider;
-    const std::size_t budget = same ? 8 * colliders : 0;
-    std::size_t moves = same ? 0 : 1;
-    for (std::size_t k = 1; k < colliders && moves <= budget; ++k) {
-      const std::uint32_t x = c.zOrder[k];
-      std::size_t j = k;
-      for (; j > 0 && lower(x, c.zOrder[j - 1]) && moves <= budget; --j, ++moves)
-        c.zOrder[j] = c.zOrder[j - 1];
-      c.zOrder[j] = x;
-    }
-    sorted = moves <= budget;
+    sorted = same && insertionSort(c.zOrder, 0, colliders, lower, 8 * colliders);
   }
   if (!sorted) {
     c.zOrder.clear();
@@ -314,16 +314,7 @@ void PhysicsWorld::sortBottomUp(WorldState& state) const {
     std::size_t last = r;
     while (last + 1 < colliders && z(c.zOrder[last + 1]) == z(c.zOrder[r])) ++last;
     const std::size_t end = c.buckets[last];
-    const std::size_t budget = 8 * (end - begin);
-    std::size_t moves = 0;
-    for (std::size_t k = begin + 1; k < end && moves <= budget; ++k) {
-      const ProxyPair x = c.bucketed[k];
-      std::size_t j = k;
-      for (; j > begin && x < c.bucketed[j - 1] && moves <= budget; --j, ++moves)
-        c.bucketed[j] = c.bucketed[j - 1];
-      c.bucketed[j] = x;
-    }
-    if (moves > budget)
+    if (!insertionSort(c.bucketed, begin, end, std::less<ProxyPair>{}, 8 * (end - begin)))
       std::sort(c.bucketed.begin() + static_cast<std::ptrdiff_t>(begin),
                 c.bucketed.begin() + static_cast<std::ptrdiff_t>(end));
     begin = end;
