@@ -36,6 +36,10 @@ function(dm_add_module name)
     PRIVATE ${CMAKE_CURRENT_SOURCE_DIR}/src)
   target_link_libraries(${target} PUBLIC ${M_PUBLIC_DEPS} PRIVATE ${M_PRIVATE_DEPS})
   dm_target_options(${target})
+  # Calls inside a module may be inlined even to its exported functions
+  # (GCC otherwise assumes another library could interpose them): the
+  # instruction-set versions that flatten a kernel (mass_spring.cpp) need it.
+  target_compile_options(${target} PRIVATE $<$<CXX_COMPILER_ID:GNU>:-fno-semantic-interposition>)
   install(TARGETS ${target} EXPORT DMPlatformTargets
     ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}
     LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
