@@ -587,6 +587,7 @@ inline Lane2 operator+(Lane2 a, Lane2 b) { return {{a.h[0] + b.h[0], a.h[1] + b.
 inline Lane2 operator-(Lane2 a, Lane2 b) { return {{a.h[0] - b.h[0], a.h[1] - b.h[1]}}; }
 inline Lane2 operator*(Lane2 a, Lane2 b) { return {{a.h[0] * b.h[0], a.h[1] * b.h[1]}}; }
 inline Lane2& operator+=(Lane2& a, Lane2 b) { return a = a + b; }
+inline Lane2& operator-=(Lane2& a, Lane2 b) { return a = a - b; }
 inline Lane2 widen(const float (&f)[2]) noexcept { return {{f[0], f[1]}}; }
 inline Lane2 load2(const double* p) noexcept { return {{p[0], p[1]}}; }
 inline void store2(double* p, Lane2 v) noexcept { p[0] = v.h[0], p[1] = v.h[1]; }
@@ -608,24 +609,28 @@ inline void leadRow(double* y, double y0, double y1, double y2) noexcept {
   y[2] = y2;
 }
 
-// Applies the blocks B of one slot pair (one per lane) to v_i − v_j, with
+// Applies the blocks B of one slot pair (one per lane) to v_j − v_i, with
 // v_i in v0, v1, v2 (both lanes) and v_j read from v at the pair's offsets:
-// adds B (v_i − v_j) to the owner's accumulators a0, a1, a2 and subtracts it
-// from y_j.
+// adds g = B (v_j − v_i), minus the force on the owner, to y_j and subtracts
+// it from the owner's accumulators a0, a1, a2. Adding g to y_j is a
+// load-add-store (the add takes y_j from memory: one instruction fewer
+// than subtracting the force). v_j − v_i = −(v_i − v_j) and IEEE rounding is
+// symmetric, so g is exactly the negated force: the same bits as applying
+// the force.
 template <class Pair>
 inline void applyPair(const Pair& B, const double* v, Lane2 v0, Lane2 v1, Lane2 v2, double* y, Lane2& a0,
                       Lane2& a1, Lane2& a2) noexcept {
   const std::size_t jA = B.j3[0], jB = B.j3[1];
-  const Lane2 w0 = v0 - Lane2{v[jA], v[jB]}, w1 = v1 - Lane2{v[jA + 1], v[jB + 1]},
-              w2 = v2 - Lane2{v[jA + 2], v[jB + 2]};
+  const Lane2 w0 = Lane2{v[jA], v[jB]} - v0, w1 = Lane2{v[jA + 1], v[jB + 1]} - v1,
+              w2 = Lane2{v[jA + 2], v[jB + 2]} - v2;
   const Lane2 n0 = widen(B.n0), n1 = widen(B.n1), n2 = widen(B.n2), ba = widen(B.a);
   const Lane2 t = widen(B.b) * (n0 * w0 + n1 * w1 + n2 * w2);
-  const Lane2 f0 = ba * w0 + t * n0, f1 = ba * w1 + t * n1, f2 = ba * w2 + t * n2;
-  a0 += f0, a1 += f1, a2 += f2;
-  store2(y + jA, load2(y + jA) - Lane2{f0[0], f1[0]});
-  y[jA + 2] -= f2[0];
-  store2(y + jB, load2(y + jB) - Lane2{f0[1], f1[1]});
-  y[jB + 2] -= f2[1];
+  const Lane2 g0 = ba * w0 + t * n0, g1 = ba * w1 + t * n1, g2 = ba * w2 + t * n2;
+  a0 -= g0, a1 -= g1, a2 -= g2;
+  store2(y + jA, load2(y + jA) + Lane2{g0[0], g1[0]});
+  y[jA + 2] += g2[0];
+  store2(y + jB, load2(y + jB) + Lane2{g0[1], g1[1]});
+  y[jB + 2] += g2[1];
 }
 
 }  // namespace
