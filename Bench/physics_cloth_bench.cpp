@@ -23,10 +23,10 @@
 // count.
 //
 // Timing: single-threaded rows use the thread's CPU time (robust on a shared
-// machine), best of 3 rounds; the "ours par." column is wall time with
-// dm::parallelFor on every hardware thread (in the implicit step only the
-// element loop and the final update run in parallel: its assembly and CG
-// sweeps scatter and stay serial).
+// machine), best of 5 rounds, the contenders taking turns round by round;
+// the "ours par." column is wall time with dm::parallelFor on every hardware
+// thread (in the implicit step only the element loop and the final update
+// run in parallel: its assembly and CG sweeps scatter and stay serial).
 //
 //   cmake -S . -B build-phm-bench -G Ninja -DCMAKE_BUILD_TYPE=Release -DDM_BUILD_BENCH=ON
 //   ninja -C build-phm-bench physics_cloth_bench && build-phm-bench/Bench/physics_cloth_bench
@@ -45,6 +45,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <functional>
+#include <initializer_list>
 #include <memory>
 #include <string>
 #include <vector>
@@ -61,19 +62,28 @@ double wallSeconds() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-// Seconds per call of `stepFn` (best of 3 rounds of `steps` calls, each on a
-// fresh simulation made by `reset`).
-double timePerStep(int steps, const std::function<void()>& reset, const std::function<void()>& stepFn,
-                   bool wall) {
+// One timed contender: `reset` makes a fresh simulation, `step` advances it
+// one step; `best` receives the seconds per step of its fastest round.
+struct Contender {
+  std::function<void()> reset, step;
+  bool wall = false;  // wall-clock time (parallel runs) instead of thread CPU time
   double best = 1e30;
-  for (int round = 0; round < 3; ++round) {
-    reset();
-    const double t0 = wall ? wallSeconds() : cpuSeconds();
-    for (int s = 0; s < steps; ++s) stepFn();
-    best = std::min(best, ((wall ? wallSeconds() : cpuSeconds()) - t0) / steps);
-  }
-  return best;
+};
+
+// Best of `rounds` rounds of `steps` steps for each contender, the
+// contenders taking turns round by round: on a shared host whose speed
+// drifts, every contender sees the same spells of fast and slow rounds, so
+// the ratios do not depend on which ran in a fast spell.
+void timeInterleaved(int steps, int rounds, std::initializer_list<Contender*> contenders) {
+  for (int round = 0; round < rounds; ++round)
+    for (Contender* c : contenders) {
+      c->reset();
+      const double t0 = c->wall ? wallSeconds() : cpuSeconds();
+      for (int s = 0; s < steps; ++s) c->step();
+      c->best = std::min(c->best, ((c->wall ? wallSeconds() : cpuSeconds()) - t0) / steps);
+    }
 }
+constexpr int kRounds = 5;
 
 struct Params {
   int n = 64;
@@ -211,16 +221,14 @@ int main(int argc, char** argv) {
     const Params p = paramsFor(n, 1e-3);
     const int steps = stepsFor(n);
     const double nodes = double(n) * n;
-    dm::MassSpringBody ours = makeOurs(p, false);
-    const double tOurs = timePerStep(
-        steps, [&] { ours = makeOurs(p, false); }, [&] { (void)ours.stepSymplectic(p.h); }, false);
-    const double sagOurs = lowestOurs(ours);
-    dm::MassSpringBody par = makeOurs(p, true);
-    const double tPar = timePerStep(
-        steps, [&] { par = makeOurs(p, true); }, [&] { (void)par.stepSymplectic(p.h); }, true);
+    dm::MassSpringBody ours = makeOurs(p, false), par = makeOurs(p, true);
     std::unique_ptr<BulletSheet> bullet;
-    const double tBullet = timePerStep(
-        steps, [&] { bullet = makeBullet(p, 1); }, [&] { stepBullet(*bullet->body, p.h); }, false);
+    Contender cOurs{[&] { ours = makeOurs(p, false); }, [&] { (void)ours.stepSymplectic(p.h); }};
+    Contender cPar{[&] { par = makeOurs(p, true); }, [&] { (void)par.stepSymplectic(p.h); }, true};
+    Contender cBullet{[&] { bullet = makeBullet(p, 1); }, [&] { stepBullet(*bullet->body, p.h); }};
+    timeInterleaved(steps, kRounds, {&cOurs, &cPar, &cBullet});
+    const double tOurs = cOurs.best, tPar = cPar.best, tBullet = cBullet.best;
+    const double sagOurs = lowestOurs(ours);
     std::printf("%6d %8zu %12.2f %12.2f %12.2f %8.3f %14.4f %14.4f\n", n, ours.elementCount(),
                 1e9 * tOurs / nodes, 1e9 * tPar / nodes, 1e9 * tBullet / nodes, tOurs / tBullet, sagOurs,
                 lowestBullet(*bullet->body));
@@ -241,24 +249,21 @@ int main(int argc, char** argv) {
     p.h = hFrame;
     const int steps = std::max(3, stepsFor(n) / 20);
     const double nodes = double(n) * n;
+    // Our mean CG iteration count (for Bullet's piterations) from an untimed
+    // run of the same steps; the timed runs repeat it exactly.
     dm::MassSpringBody ours = makeOurs(p, false);
     long iterations = 0, calls = 0;
-    const double tOurs = timePerStep(
-        steps, [&] { ours = makeOurs(p, false); },
-        [&] {
-          auto r = ours.stepImplicit(p.h);
-          if (r) iterations += r->cgIterations, ++calls;
-        },
-        false);
+    for (int s = 0; s < steps; ++s)
+      if (auto r = ours.stepImplicit(p.h)) iterations += r->cgIterations, ++calls;
     const int meanIt = std::max(1, int(std::lround(double(iterations) / double(std::max(1L, calls)))));
     dm::MassSpringBody par = makeOurs(p, true);
-    const double tPar = timePerStep(
-        steps, [&] { par = makeOurs(p, true); }, [&] { (void)par.stepImplicit(p.h); }, true);
-    std::unique_ptr<BulletSheet> bullet;
-    const double tBullet = timePerStep(
-        steps, [&] { bullet = makeBullet(p, meanIt); }, [&] { stepBullet(*bullet->body, p.h); }, false);
-    const double tBullet1 = timePerStep(
-        steps, [&] { bullet = makeBullet(p, 1); }, [&] { stepBullet(*bullet->body, p.h); }, false);
+    std::unique_ptr<BulletSheet> bullet, bullet1;
+    Contender cOurs{[&] { ours = makeOurs(p, false); }, [&] { (void)ours.stepImplicit(p.h); }};
+    Contender cPar{[&] { par = makeOurs(p, true); }, [&] { (void)par.stepImplicit(p.h); }, true};
+    Contender cBullet{[&] { bullet = makeBullet(p, meanIt); }, [&] { stepBullet(*bullet->body, p.h); }};
+    Contender cBullet1{[&] { bullet1 = makeBullet(p, 1); }, [&] { stepBullet(*bullet1->body, p.h); }};
+    timeInterleaved(steps, kRounds, {&cOurs, &cPar, &cBullet, &cBullet1});
+    const double tOurs = cOurs.best, tPar = cPar.best, tBullet = cBullet.best, tBullet1 = cBullet1.best;
     std::printf("%6d %8d %12.2f %12.2f %8.2f %12.3f %8.2f %12.3f\n", n, meanIt, 1e9 * tOurs / nodes,
                 1e9 * tPar / nodes, 1e9 * tBullet / nodes, tOurs / tBullet, 1e9 * tBullet1 / nodes,
                 tOurs / tBullet1);
