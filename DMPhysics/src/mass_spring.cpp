@@ -992,10 +992,12 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
 // the same source with everything inlined into it (flatten) and compiled for
 // AVX2 without FMA: operation for operation the same IEEE arithmetic as the
 // SSE2 version, so both give the same bits; VEX encoding (three operands)
-// spares the register copies of the two-operand forms (about 4 % of the 64 x
-// 64 sheet step, measured). Chosen once with __builtin_cpu_supports (not an
-// ifunc, as in constraint_solver.cpp); GCC on x86-64 only, and not under
-// ThreadSanitizer.
+// spares the register copies of the two-operand forms (5-7 % of the 64 x 64
+// sheet step, measured). Flattening inlines stepImplicitCore, an exported
+// member, only because the modules are built with -fno-semantic-interposition
+// (cmake/DMHelpers.cmake); without it stepAvx2 is a jump to the SSE2 code.
+// Chosen once with __builtin_cpu_supports (not an ifunc, as in
+// constraint_solver.cpp); GCC on x86-64 only, and not under ThreadSanitizer.
 #if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__) && \
     !defined(__SANITIZE_THREAD__)
 #define DM_MASS_SPRING_AVX2 1
