@@ -649,11 +649,11 @@ template <class Lead, class Trail>
 void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const {
   static_assert(offsetof(SlotPair, n2) + 4 * sizeof(float) <= sizeof(SlotPair), "widen() reads 16 bytes");
   const std::size_t n = particleCount();
-  const std::uint32_t* own = ownStart_.data();
+  const std::uint32_t *own = ownStart_.data(), *leadUntil = leadUntil_.data();
   const SlotPair* blk = blocks_.data();
   std::size_t front = 0;
   for (std::size_t i = 0; i < n; ++i) {
-    for (const std::size_t until = leadUntil_[i]; front < until; ++front) lead(front);
+    for (const std::size_t until = leadUntil[i]; front < until; ++front) lead(front);
     const Lane2 v0 = {v[3 * i], v[3 * i]}, v1 = {v[3 * i + 1], v[3 * i + 1]},
                 v2 = {v[3 * i + 2], v[3 * i + 2]};
     Lane2 a0 = {y[3 * i], 0.0}, a1 = {y[3 * i + 1], 0.0}, a2 = {y[3 * i + 2], 0.0};
@@ -835,13 +835,20 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
   // from the owner to the other end; padding slots have zero stiffness and
   // length and give zero blocks and terms).
   forEachRange(particleCount(), [this, h, h2](std::size_t begin, std::size_t end) {
+    // The arrays in locals: the stores through B and ef below could alias the
+    // members as far as the compiler knows, which would reload every
+    // member's data pointer after each store.
     const double *X = x_.data(), *V = v_.data();
+    const double *K = slotK_.data(), *C = slotC_.data(), *rest = slotRest_.data(), *ed = slotEd_.data();
+    const std::uint32_t* own = ownStart_.data();
+    SlotPair* blocks = blocks_.data();
+    double* ef = ef_.data();
     const Lane2 hh = splat(h), hh2 = splat(h2), one = splat(1.0);
     for (std::size_t i = begin; i < end; ++i) {
       const Lane2 xi0 = splat(X[3 * i]), xi1 = splat(X[3 * i + 1]), xi2 = splat(X[3 * i + 2]);
       const Lane2 vi0 = splat(V[3 * i]), vi1 = splat(V[3 * i + 1]), vi2 = splat(V[3 * i + 2]);
-      for (std::size_t pr = ownStart_[i] / 2; pr < ownStart_[i + 1] / 2; ++pr) {
-        SlotPair& B = blocks_[pr];
+      for (std::size_t pr = own[i] / 2, last = own[i + 1] / 2; pr < last; ++pr) {
+        SlotPair& B = blocks[pr];
         const std::size_t jA = B.j3[0], jB = B.j3[1];
         const Lane2 d0 = Lane2{X[jA], X[jB]} - xi0, d1 = Lane2{X[jA + 1], X[jB + 1]} - xi1,
                     d2 = Lane2{X[jA + 2], X[jB + 2]} - xi2;
@@ -851,17 +858,17 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
         const Lane2 w0 = Lane2{V[jA], V[jB]} - vi0, w1 = Lane2{V[jA + 1], V[jB + 1]} - vi1,
                     w2 = Lane2{V[jA + 2], V[jB + 2]} - vi2;
         const Lane2 rate = n0 * w0 + n1 * w1 + n2 * w2;
-        const Lane2 kAxial = load2(&slotK_[2 * pr]);
-        const Lane2 spring = kAxial * (len - load2(&slotRest_[2 * pr]) - load2(&slotEd_[2 * pr]));
-        const Lane2 tension = spring + load2(&slotC_[2 * pr]) * rate;
+        const Lane2 kAxial = load2(K + 2 * pr), damping = load2(C + 2 * pr);
+        const Lane2 spring = kAxial * (len - load2(rest + 2 * pr) - load2(ed + 2 * pr));
+        const Lane2 tension = spring + damping * rate;
         // Transverse (geometric) stiffness T/L, kept only while stretched.
         const Lane2 geo = wherePositive(spring, spring * invLen);
         const Lane2 iso = hh2 * geo, axial = hh2 * (kAxial - geo);
         narrow(B.a, iso);
-        narrow(B.b, hh * load2(&slotC_[2 * pr]) + axial);
+        narrow(B.b, hh * damping + axial);
         narrow(B.n0, n0), narrow(B.n1, n1), narrow(B.n2, n2);
         const Lane2 along = hh * tension + axial * rate;
-        double* t = ef_.data() + 6 * pr;
+        double* t = ef + 6 * pr;
         store2(t, along * n0 + iso * w0), store2(t + 2, along * n1 + iso * w1);
         store2(t + 4, along * n2 + iso * w2);
       }
@@ -879,17 +886,23 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
   double *dsum = dsum_.data(), *dinv = dinv_.data(), *rhs = rhs_.data(), *x = dv_.data(), *q = cgQ_.data();
   double *r = cgR_.data(), *z = cgZ_.data();
   const double* ef = ef_.data();
+  // Members in locals, as in the block formation above.
+  const double *mass = mass_.data(), *V = v_.data(), *fext = fext_.data();
+  const std::uint8_t* pinned = pinned_.data();
+  const std::uint32_t *own = ownStart_.data(), *leadUntil = leadUntil_.data();
+  const SlotPair* blocks = blocks_.data();
+  const double drag = drag_;
   std::size_t front = 0;
   double bb = 0.0, rr = 0.0, rz = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
-    for (const std::size_t until = leadUntil_[i]; front < until; ++front) {
+    for (const std::size_t until = leadUntil[i]; front < until; ++front) {
       const std::size_t k = front;
-      store3(rhs_, k, h * (mass_[k] * (g - drag_ * load3(v_, k)) + load3(fext_, k)));
+      for (int c = 0; c < 3; ++c) rhs[3 * k + c] = h * (mass[k] * (g[c] - drag * V[3 * k + c]) + fext[3 * k + c]);
       double* d = dsum + 6 * k;
-      const double m = ms * mass_[k];
+      const double m = ms * mass[k];
       d[0] = d[3] = d[5] = m;
       d[1] = d[2] = d[4] = 0.0;
-      if (pinned_[k]) x[3 * k] = x[3 * k + 1] = x[3 * k + 2] = 0.0;
+      if (pinned[k]) x[3 * k] = x[3 * k + 1] = x[3 * k + 2] = 0.0;
       leadRow(q + 3 * k, m * x[3 * k], m * x[3 * k + 1], m * x[3 * k + 2]);
     }
     double* di = dsum + 6 * i;
@@ -898,8 +911,8 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
           D5 = {di[5], 0.0};
     Lane2 a0 = {q[3 * i], 0.0}, a1 = {q[3 * i + 1], 0.0}, a2 = {q[3 * i + 2], 0.0};
     const Lane2 x0 = splat(x[3 * i]), x1 = splat(x[3 * i + 1]), x2 = splat(x[3 * i + 2]);
-    for (std::size_t pr = ownStart_[i] / 2; pr < ownStart_[i + 1] / 2; ++pr) {
-      const SlotPair& B = blocks_[pr];
+    for (std::size_t pr = own[i] / 2, last = own[i + 1] / 2; pr < last; ++pr) {
+      const SlotPair& B = blocks[pr];
       const std::size_t jA = B.j3[0], jB = B.j3[1];
       const Lane2 t0 = load2(ef + 6 * pr), t1 = load2(ef + 6 * pr + 2), t2 = load2(ef + 6 * pr + 4);
       b0 += t0, b1 += t1, b2 += t2;
@@ -922,7 +935,7 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
     di[3] = D3[0] + D3[1], di[4] = D4[0] + D4[1], di[5] = D5[0] + D5[1];
     double y0 = a0[0] + a0[1], y1 = a1[0] + a1[1], y2 = a2[0] + a2[1];
     double inv[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // D_i⁻¹; 0 for a pinned particle
-    if (pinned_[i]) {
+    if (pinned[i]) {
       bi.setZero();
       y0 = y1 = y2 = 0.0;
     } else {
