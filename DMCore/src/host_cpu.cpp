@@ -1,7 +1,11 @@
-// host_cpu.cpp — /proc/stat's CPU time accounts.
+// host_cpu.cpp — /proc/stat's CPU time accounts; the SIMD level of the
+// run-time picked kernels.
 #include <dm/core/host_cpu.hpp>
+#include <dm/core/log.hpp>
 
+#include <algorithm>
 #include <charconv>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -85,6 +89,52 @@ Result<HostCpuTimes> readHostCpuTimes() {
 #else
   return fail(ErrorCode::Unsupported, "no /proc/stat on this system", "readHostCpuTimes");
 #endif
+}
+
+const char* toString(SimdLevel level) noexcept {
+  switch (level) {
+    case SimdLevel::Sse2:
+      return "sse2";
+    case SimdLevel::Avx2:
+      return "avx2";
+    case SimdLevel::Avx512:
+      return "avx512";
+  }
+  return "?";
+}
+
+Result<SimdLevel> parseSimdLevel(std::string_view text) {
+  for (SimdLevel level : {SimdLevel::Sse2, SimdLevel::Avx2, SimdLevel::Avx512})
+    if (text == toString(level)) return level;
+  return fail(ErrorCode::InvalidArgument, "unknown SIMD level \"" + std::string(text) + "\"", "DM_SIMD",
+              "use sse2, avx2 or avx512");
+}
+
+namespace {
+
+SimdLevel detectSimdLevel() noexcept {
+  SimdLevel level = SimdLevel::Sse2;
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+  __builtin_cpu_init();
+  if (__builtin_cpu_supports("x86-64-v4"))
+    level = SimdLevel::Avx512;
+  else if (__builtin_cpu_supports("avx2"))
+    level = SimdLevel::Avx2;
+#endif
+  if (const char* cap = std::getenv("DM_SIMD")) {
+    if (auto parsed = parseSimdLevel(cap))
+      level = std::min(level, *parsed);
+    else
+      log::warn("%s; ignored", parsed.error().message().c_str());
+  }
+  return level;
+}
+
+}  // namespace
+
+SimdLevel simdLevel() noexcept {
+  static const SimdLevel level = detectSimdLevel();
+  return level;
 }
 
 }  // namespace dm

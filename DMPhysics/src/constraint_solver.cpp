@@ -2,6 +2,8 @@
 // the algorithm, conventions and references.
 #include <dm/physics/constraint_solver.hpp>
 
+#include <dm/core/host_cpu.hpp>
+
 // No a * b + c fused into an FMA anywhere in this file, so the sweeps'
 // versions for wider vector units (see pickSweep) give the bits of
 // the baseline SSE2 one on every x86-64.
@@ -970,9 +972,8 @@ template <int kMode>
 // The widest version this CPU runs: 2 AVX-512 (x86-64-v4), 1 AVX2, 0 SSE2.
 int hostVersion() noexcept {
 #if defined(DM_SOLVER_AVX)
-  __builtin_cpu_init();
-  if (__builtin_cpu_supports("x86-64-v4")) return 2;
-  if (__builtin_cpu_supports("avx2")) return 1;
+  if (simdLevel() == SimdLevel::Avx512) return 2;
+  if (simdLevel() == SimdLevel::Avx2) return 1;
 #endif
   return 0;
 }

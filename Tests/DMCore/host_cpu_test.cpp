@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <cstdlib>
+#include <string>
 #include <thread>
 
 namespace {
@@ -70,5 +72,41 @@ TEST(HostCpu, LiveAccountsGrowWithWork) {
   EXPECT_GE(b->busy_s - a->busy_s, 0.1);  // 0.3 s of spinning, USER_HZ granularity
 }
 #endif
+
+TEST(HostCpu, SimdLevelsParseByNameAndNothingElse) {
+  for (dm::SimdLevel level : {dm::SimdLevel::Sse2, dm::SimdLevel::Avx2, dm::SimdLevel::Avx512}) {
+    auto parsed = dm::parseSimdLevel(dm::toString(level));
+    ASSERT_TRUE(parsed) << parsed.error().message();
+    EXPECT_EQ(*parsed, level);
+  }
+  for (const char* bad : {"", "AVX2", "avx", "avx512f", "sse2 "}) {
+    auto parsed = dm::parseSimdLevel(bad);
+    ASSERT_FALSE(parsed) << bad;
+    EXPECT_EQ(parsed.error().code, dm::ErrorCode::InvalidArgument);
+    EXPECT_NE(parsed.error().message().find('"' + std::string(bad) + '"'), std::string::npos)
+        << parsed.error().message();
+    EXPECT_NE(parsed.error().message().find("DM_SIMD"), std::string::npos) << parsed.error().message();
+  }
+}
+
+// The level never exceeds what the CPU runs (or, where DM_SIMD caps it, the cap).
+TEST(HostCpu, SimdLevelIsWhatTheCpuRunsUnderTheCap) {
+  const dm::SimdLevel level = dm::simdLevel();
+  EXPECT_EQ(dm::simdLevel(), level);  // decided once
+#if defined(__GNUC__) && defined(__x86_64__)
+  __builtin_cpu_init();
+  if (level == dm::SimdLevel::Avx512) {
+    EXPECT_TRUE(__builtin_cpu_supports("x86-64-v4"));
+  }
+  if (level == dm::SimdLevel::Avx2) {
+    EXPECT_TRUE(__builtin_cpu_supports("avx2"));
+  }
+#endif
+  if (const char* cap = std::getenv("DM_SIMD")) {
+    if (auto parsed = dm::parseSimdLevel(cap)) {
+      EXPECT_LE(int(level), int(*parsed));
+    }
+  }
+}
 
 }  // namespace

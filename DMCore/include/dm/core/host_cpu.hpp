@@ -8,6 +8,10 @@
 // the deadline misses (summary.json "host"), so a run on a busy host is told
 // apart from a slow tick.
 //
+// It also says which SIMD instruction set the kernels that are compiled more
+// than once (the mass–spring step, the contact solver) run with here:
+// simdLevel(), which the environment variable DM_SIMD can cap.
+//
 // @code
 //   auto before = dm::readHostCpuTimes();
 //   run();
@@ -41,5 +45,24 @@ Result<HostCpuTimes> parseProcStat(std::string_view text, double ticksPerSecond)
 /// Reads /proc/stat (ticks per second from sysconf(_SC_CLK_TCK)). Unsupported
 /// on systems without it (not Linux); NotFound or Io if it cannot be read.
 Result<HostCpuTimes> readHostCpuTimes();
+
+/// The instruction sets of the kernels compiled once per set and picked at
+/// run time (GCC on x86-64): SSE2 (the baseline), AVX2, and AVX-512 with VL
+/// (x86-64-v4). The mass–spring step gives the same bits with each.
+enum class SimdLevel : int { Sse2 = 0, Avx2 = 1, Avx512 = 2 };
+
+/// "sse2", "avx2" or "avx512".
+const char* toString(SimdLevel level) noexcept;
+
+/// Parses a level by its name (toString); InvalidArgument naming the text
+/// and the accepted names otherwise.
+Result<SimdLevel> parseSimdLevel(std::string_view text);
+
+/// The level the run-time picked kernels use: the widest this CPU runs (Sse2
+/// where they are not built more than once), capped by the environment
+/// variable DM_SIMD when it is set (e.g. DM_SIMD=sse2 to compare a result
+/// with the baseline's). A DM_SIMD that does not parse is logged once as a
+/// warning and ignored. Decided on the first call; thread-safe.
+SimdLevel simdLevel() noexcept;
 
 }  // namespace dm
