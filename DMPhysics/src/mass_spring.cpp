@@ -2,6 +2,7 @@
 // the linearly implicit (Baraff–Witkin) backward-Euler step. See
 // dm/physics/mass_spring.hpp for the model.
 #include <dm/core/assert.hpp>
+#include <dm/core/host_cpu.hpp>
 #include <dm/core/tasks.hpp>
 #include <dm/physics/mass_spring.hpp>
 
@@ -459,6 +460,11 @@ void MassSpringBody::prepare() {
   for (auto* vec : {&slotK_, &slotC_, &slotEd_}) vec->assign(slots, 0.0);
   slotH_ = -1.0;
   maxwellCount_ = std::size_t(std::count(maxwell_.begin(), maxwell_.end(), std::uint8_t(1)));
+  const auto [lightest, heaviest] = std::minmax_element(mass_.begin(), mass_.end());
+  massMin_ = n > 0 ? *lightest : 0.0;
+  massMax_ = n > 0 ? *heaviest : 0.0;
+  degreeMax_ = 0;
+  for (std::size_t i = 0; i < n; ++i) degreeMax_ = std::max(degreeMax_, incStart_[i + 1] - incStart_[i]);
   ef_.assign(3 * std::max(m, slots), 0.0);
   decay_.assign(m, 1.0);
   decayH_ = -1.0;
@@ -569,6 +575,44 @@ inline Lane2 wherePositive(Lane2 x, Lane2 y) noexcept {
   return Lane2{x[0] > 0 ? y[0] : 0.0, x[1] > 0 ? y[1] : 0.0};
 #endif
 }
+// Lane by lane minimum and maximum (either operand for NaN) and |x|.
+inline Lane2 lanesMin(Lane2 a, Lane2 b) noexcept {
+#if defined(__SSE2__)
+  return Lane2(_mm_min_pd(__m128d(a), __m128d(b)));
+#else
+  return Lane2{a[0] < b[0] ? a[0] : b[0], a[1] < b[1] ? a[1] : b[1]};
+#endif
+}
+inline Lane2 lanesMax(Lane2 a, Lane2 b) noexcept {
+#if defined(__SSE2__)
+  return Lane2(_mm_max_pd(__m128d(a), __m128d(b)));
+#else
+  return Lane2{a[0] > b[0] ? a[0] : b[0], a[1] > b[1] ? a[1] : b[1]};
+#endif
+}
+inline Lane2 lanesAbs(Lane2 x) noexcept {
+#if defined(__SSE2__)
+  return Lane2(_mm_andnot_pd(_mm_set1_pd(-0.0), __m128d(x)));
+#else
+  return Lane2{std::fabs(x[0]), std::fabs(x[1])};
+#endif
+}
+// {a[0], b[0]} and {a[1], b[1]}, one unpack each (GCC builds some of them
+// through memory otherwise).
+inline Lane2 lows(Lane2 a, Lane2 b) noexcept {
+#if defined(__SSE2__)
+  return Lane2(_mm_unpacklo_pd(__m128d(a), __m128d(b)));
+#else
+  return Lane2{a[0], b[0]};
+#endif
+}
+inline Lane2 highs(Lane2 a, Lane2 b) noexcept {
+#if defined(__SSE2__)
+  return Lane2(_mm_unpackhi_pd(__m128d(a), __m128d(b)));
+#else
+  return Lane2{a[1], b[1]};
+#endif
+}
 // Rounds both lanes to float.
 inline void narrow(float (&f)[2], Lane2 v) noexcept {
 #if defined(__SSE2__)
@@ -598,6 +642,15 @@ inline Lane2 wherePositive(Lane2 x, Lane2 y) noexcept {
   return {{x.h[0] > 0 ? y.h[0] : 0.0, x.h[1] > 0 ? y.h[1] : 0.0}};
 }
 inline void narrow(float (&f)[2], Lane2 v) noexcept { f[0] = float(v.h[0]), f[1] = float(v.h[1]); }
+inline Lane2 lanesMin(Lane2 a, Lane2 b) noexcept {
+  return {{a.h[0] < b.h[0] ? a.h[0] : b.h[0], a.h[1] < b.h[1] ? a.h[1] : b.h[1]}};
+}
+inline Lane2 lanesMax(Lane2 a, Lane2 b) noexcept {
+  return {{a.h[0] > b.h[0] ? a.h[0] : b.h[0], a.h[1] > b.h[1] ? a.h[1] : b.h[1]}};
+}
+inline Lane2 lanesAbs(Lane2 x) noexcept { return {{std::fabs(x.h[0]), std::fabs(x.h[1])}}; }
+inline Lane2 lows(Lane2 a, Lane2 b) noexcept { return {{a.h[0], b.h[0]}}; }
+inline Lane2 highs(Lane2 a, Lane2 b) noexcept { return {{a.h[1], b.h[1]}}; }
 #endif
 
 // The first write of a row y_k of the sweep, in the widths of the scatter
@@ -627,9 +680,9 @@ inline void applyPair(const Pair& B, const double* v, Lane2 v0, Lane2 v1, Lane2 
   const Lane2 t = widen(B.b) * (n0 * w0 + n1 * w1 + n2 * w2);
   const Lane2 g0 = ba * w0 + t * n0, g1 = ba * w1 + t * n1, g2 = ba * w2 + t * n2;
   a0 -= g0, a1 -= g1, a2 -= g2;
-  store2(y + jA, load2(y + jA) + Lane2{g0[0], g1[0]});
+  store2(y + jA, load2(y + jA) + lows(g0, g1));
   y[jA + 2] += g2[0];
-  store2(y + jB, load2(y + jB) + Lane2{g0[1], g1[1]});
+  store2(y + jB, load2(y + jB) + highs(g0, g1));
   y[jB + 2] += g2[1];
 }
 
@@ -666,11 +719,13 @@ void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&&
 // Preconditioned CG on (M + h C + h² K) Δv = rhs_ from Δv = dv_, with the
 // block-Jacobi preconditioner dinv_; the same iteration and stopping rule as
 // dm::PcgSolver (relative residual ≤ tolerance, confirmed on the true
-// residual, restarting from it otherwise), in two passes over memory per
+// residual, restarting from it otherwise; here the confirming sweep is
+// skipped when a rounding-error bound already confirms it), in two passes over memory per
 // iteration: sweepLinks() forms the new direction p just ahead of itself and
 // returns A p and pᵀAp; one particle loop then updates Δv and r, applies the
 // preconditioner and sums rᵀr and rᵀz. Serial: the sweep scatters.
-MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, double rz, ImplicitStepReport& report) {
+MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, double rz,
+                                                     const SystemBounds& bounds, ImplicitStepReport& report) {
   const std::size_t n = particleCount();
   const double tol = options_.cgTolerance, ms = massScale_;
   double* x = dv_.data();
@@ -714,6 +769,20 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
   if (!std::isfinite(rnorm)) return CgStop::NotFinite;
   if (report.relativeResidual <= tol) return CgStop::Converged;
   if (!(rz > 0.0) || !std::isfinite(rz)) return CgStop::NotPositive;
+  // The recurrence r ← r − α A p drifts from the true residual b − A x by
+  // rounding. The drift is at most u·gap (Greenbaum 1997; van der Vorst and
+  // Ye 2000), gap summing per iteration j (K + 2) ‖A‖ (‖x_j‖ + ‖x_j+1‖) +
+  // 2 (‖r_j‖ + ‖r_j+1‖), from the rounding of x ← x + α p, of r ← r − α q
+  // and of the sweep q = A p, whose every entry is within K u of the exact
+  // one relative to the row's sum of magnitudes (K: twice its operation
+  // count per entry, degreeMax_ + 8). ‖x_j‖ is bounded without a sum over
+  // the particles: ‖α p‖ ≤ α (pᵀAp / λ_min)^½. When the recurrence is below
+  // the tolerance by more than four times that drift, the true residual is
+  // below it too and the confirming sweep is skipped; otherwise it runs.
+  constexpr double u = 0x1p-53;
+  const double kSweep = 2.0 * (double(degreeMax_) + 8.0), anorm = bounds.anorm;
+  double xBound = bounds.x0;                   // ≥ ‖x_j‖ of every iterate so far
+  double gap = kSweep * anorm * xBound + rnorm;  // the warm start's residual
   bool restart = true;  // p = z, else p = z + beta p
   double beta = 0.0;
   for (int it = 1; it <= options_.cgMaxIterations; ++it) {
@@ -774,7 +843,7 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
                   d5 = load2(d + 10);
       const Lane2 zx = d0 * rx + d1 * ry + d2 * rzc, zy = d1 * rx + d3 * ry + d4 * rzc,
                   zz = d2 * rx + d4 * ry + d5 * rzc;
-      store2(zi, Lane2{zx[0], zy[0]}), store2(zi + 2, Lane2{zz[0], zx[1]}), store2(zi + 4, Lane2{zy[1], zz[1]});
+      store2(zi, lows(zx, zy)), store2(zi + 2, Lane2{zz[0], zx[1]}), store2(zi + 4, highs(zy, zz));
       rz2 += rx * zx + ry * zy + rzc * zz;
     }
     double rr = rr2[0] + rr2[1], rzNew = rz2[0] + rz2[1];
@@ -787,15 +856,21 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
       rzNew += precondition(i);
     }
     report.cgIterations = it;
+    const double rnormBefore = rnorm;
     rnorm = std::sqrt(rr);
     report.relativeResidual = rnorm / bnorm;
+    const double stepBound = bounds.lambda > 0.0 ? alpha * std::sqrt(pAp / bounds.lambda) : HUGE_VAL;
+    gap += (kSweep + 2.0) * anorm * (2.0 * xBound + stepBound) + 2.0 * (rnormBefore + rnorm);
+    xBound += stepBound;
     if (report.relativeResidual <= tol) {
-      // The recurrence drifts from the true residual: confirm before
-      // stopping, and restart from the true residual if it is not small yet.
+      if (rnorm + 4.0 * u * gap <= tol * bnorm) return CgStop::Converged;
+      // Confirm on the true residual, and restart from it if it is not
+      // small enough yet.
       rnorm = std::sqrt(trueResidual(rz));
       report.relativeResidual = rnorm / bnorm;
       if (report.relativeResidual <= tol) return CgStop::Converged;
       if (!(rz > 0.0) || !std::isfinite(rz)) return CgStop::NotPositive;
+      gap = kSweep * anorm * xBound + rnorm;
       restart = true;
       continue;
     }
@@ -893,7 +968,13 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
   const SlotPair* blocks = blocks_.data();
   const double drag = drag_;
   std::size_t front = 0;
-  double bb = 0.0, rr = 0.0, rz = 0.0;
+  double bb = 0.0, rr = 0.0, rz = 0.0, xx = 0.0;
+  // For the solve's rounding-error bound, over the blocks B = a I + b n nᵀ:
+  // min(a, a + b |n|²), which is ≥ 0 when all are positive semidefinite
+  // (|n|² ≤ 1 + 1e-6 for the single-precision n), and max |a| + √3 |b|, a
+  // bound on each row sum of |B| (Σ_c |n_r n_c| ≤ √3).
+  Lane2 blockMin = splat(HUGE_VAL), blockRowSum = splat(0.0);
+  const Lane2 unitSq = splat(1.0 + 1e-6), sqrt3 = splat(1.7320508075688772);
   for (std::size_t i = 0; i < n; ++i) {
     for (const std::size_t until = leadUntil[i]; front < until; ++front) {
       const std::size_t k = front;
@@ -911,23 +992,26 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
           D5 = {di[5], 0.0};
     Lane2 a0 = {q[3 * i], 0.0}, a1 = {q[3 * i + 1], 0.0}, a2 = {q[3 * i + 2], 0.0};
     const Lane2 x0 = splat(x[3 * i]), x1 = splat(x[3 * i + 1]), x2 = splat(x[3 * i + 2]);
+    xx += x[3 * i] * x[3 * i] + x[3 * i + 1] * x[3 * i + 1] + x[3 * i + 2] * x[3 * i + 2];
     for (std::size_t pr = own[i] / 2, last = own[i + 1] / 2; pr < last; ++pr) {
       const SlotPair& B = blocks[pr];
       const std::size_t jA = B.j3[0], jB = B.j3[1];
       const Lane2 t0 = load2(ef + 6 * pr), t1 = load2(ef + 6 * pr + 2), t2 = load2(ef + 6 * pr + 4);
       b0 += t0, b1 += t1, b2 += t2;
-      store2(rhs + jA, load2(rhs + jA) - Lane2{t0[0], t1[0]});
+      store2(rhs + jA, load2(rhs + jA) - lows(t0, t1));
       rhs[jA + 2] -= t2[0];
-      store2(rhs + jB, load2(rhs + jB) - Lane2{t0[1], t1[1]});
+      store2(rhs + jB, load2(rhs + jB) - highs(t0, t1));
       rhs[jB + 2] -= t2[1];
       const Lane2 ba = widen(B.a), bn = widen(B.b), n0 = widen(B.n0), n1 = widen(B.n1), n2 = widen(B.n2);
+      blockMin = lanesMin(blockMin, lanesMin(ba, ba + unitSq * bn));
+      blockRowSum = lanesMax(blockRowSum, lanesAbs(ba) + sqrt3 * lanesAbs(bn));
       const Lane2 e0 = ba + bn * n0 * n0, e1 = bn * n0 * n1, e2 = bn * n0 * n2, e3 = ba + bn * n1 * n1,
                   e4 = bn * n1 * n2, e5 = ba + bn * n2 * n2;
       D0 += e0, D1 += e1, D2 += e2, D3 += e3, D4 += e4, D5 += e5;
       double *dA = dsum + 2 * jA, *dB = dsum + 2 * jB;  // 6 per particle, j3 = 3 j
-      store2(dA, load2(dA) + Lane2{e0[0], e1[0]}), store2(dB, load2(dB) + Lane2{e0[1], e1[1]});
-      store2(dA + 2, load2(dA + 2) + Lane2{e2[0], e3[0]}), store2(dB + 2, load2(dB + 2) + Lane2{e2[1], e3[1]});
-      store2(dA + 4, load2(dA + 4) + Lane2{e4[0], e5[0]}), store2(dB + 4, load2(dB + 4) + Lane2{e4[1], e5[1]});
+      store2(dA, load2(dA) + lows(e0, e1)), store2(dB, load2(dB) + highs(e0, e1));
+      store2(dA + 2, load2(dA + 2) + lows(e2, e3)), store2(dB + 2, load2(dB + 2) + highs(e2, e3));
+      store2(dA + 4, load2(dA + 4) + lows(e4, e5)), store2(dB + 4, load2(dB + 4) + highs(e4, e5));
       applyPair(B, x, x0, x1, x2, q, a0, a1, a2);
     }
     Vec3 bi(b0[0] + b0[1], b1[0] + b1[1], b2[0] + b2[1]);
@@ -971,7 +1055,13 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
   if (bnorm == 0.0) {
     dv_.setZero();
   } else {
-    stop = solveImplicit(bnorm, rr, rz, report);
+    // ‖A‖₂ ≤ the largest row sum of its entries' magnitudes (A is
+    // symmetric); A ⪰ (1 + h·drag) M when every block is semidefinite.
+    SystemBounds bounds;
+    bounds.anorm = ms * massMax_ + 2.0 * double(degreeMax_) * std::max(blockRowSum[0], blockRowSum[1]);
+    bounds.lambda = std::min(blockMin[0], blockMin[1]) >= 0.0 ? ms * massMin_ : 0.0;
+    bounds.x0 = std::sqrt(xx);
+    stop = solveImplicit(bnorm, rr, rz, bounds, report);
     if (stop == CgStop::MaxIterations && !dv_.allFinite()) stop = CgStop::NotFinite;
     if (stop == CgStop::NotFinite || stop == CgStop::NotPositive) {
       dv_.setZero();
@@ -1026,11 +1116,15 @@ struct MassSpringBody::Kernels {
                                                                             ImplicitStepReport& report) {
     return body.stepImplicitCore(h, report);
   }
+  [[gnu::target("arch=x86-64-v4"), gnu::noinline, gnu::flatten]] static CgStop stepAvx512(
+      MassSpringBody& body, double h, ImplicitStepReport& report) {
+    return body.stepImplicitCore(h, report);
+  }
 #endif
   static StepFn pick() noexcept {
 #if defined(DM_MASS_SPRING_AVX2)
-    __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx2")) return &stepAvx2;
+    if (simdLevel() == SimdLevel::Avx512) return &stepAvx512;
+    if (simdLevel() == SimdLevel::Avx2) return &stepAvx2;
 #endif
     return &step;
   }

@@ -1,14 +1,29 @@
 // Tests of dm/physics/mass_spring.hpp against analytic viscoelastic
 // solutions (damped oscillator, Maxwell stress relaxation and creep,
 // Kelvin–Voigt creep), static equilibrium, energy behaviour of the
-// integrators, the implicit step against a dense solve of its system, exact
-// element counts of the builders and input validation.
+// integrators, the implicit step against a dense solve of its system (its
+// solution and the true residual it stops at), the same bits from every
+// SIMD version of the step, exact element counts of the builders and input
+// validation.
 #include <dm/physics/mass_spring.hpp>
 
+#include <dm/core/host_cpu.hpp>
+
+#include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
+
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <iterator>
 #include <numbers>
 #include <random>
 #include <string>
@@ -402,48 +417,22 @@ TEST(MassSpring, BadInputIsRejectedWithTheFieldNamed) {
   EXPECT_EQ(body.position(1), Vec3(1, 0, 0));  // a rejected step changes nothing
 }
 
-// The implicit step against the system assembled densely from the model in
-// the header and solved directly: an irregular body (uneven element counts per
-// particle, a duplicated element, Maxwell and Kelvin–Voigt elements, some
-// compressed, pinned particles, drag, external forces).
-TEST(MassSpring, ImplicitStepSolvesTheBackwardEulerSystem) {
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<double> u(-1.0, 1.0);
-  MassSpringBody body;
-  const int n = 13;
-  std::vector<Vec3> fext;
-  for (int i = 0; i < n; ++i) {
-    ASSERT_TRUE(
-        body.addParticle({u(rng), u(rng), u(rng)}, 0.05 + 0.02 * (u(rng) + 1), i == 3 || i == 8).ok());
-    body.setVelocity(std::size_t(i), {0.3 * u(rng), 0.3 * u(rng), 0.3 * u(rng)});
-    fext.push_back({0.1 * u(rng), 0.1 * u(rng), 0.1 * u(rng)});
-    body.setExternalForce(std::size_t(i), fext.back());
-  }
-  std::uniform_int_distribution<int> pick(0, n - 1);
-  for (int e = 0; e < 40; ++e) {
-    const int i = pick(rng), j = pick(rng);
-    if (i == j) continue;
-    const SpringModel model = e % 3 == 0 ? SpringModel::Maxwell : SpringModel::KelvinVoigt;
-    const double rest =
-        (body.position(std::size_t(j)) - body.position(std::size_t(i))).norm() * (1 + 0.2 * u(rng));
-    ASSERT_TRUE(body.addElement(std::uint32_t(i), std::uint32_t(j),
-                                {true, 20 + 10 * u(rng), 0.5 + 0.4 * u(rng), model}, rest)
-                    .ok());
-    if (e == 7) {  // the same pair twice
-      ASSERT_TRUE(body.addElement(std::uint32_t(j), std::uint32_t(i), {true, 15, 0.2, model}, rest).ok());
-    }
-  }
-  body.setGravity({0, 0, -9.81});
-  ASSERT_TRUE(body.setDrag(0.7).ok());
-  body.setSolverOptions({.cgTolerance = 1e-12, .cgMaxIterations = 500});
-  // A few steps first, so the Maxwell dampers carry state.
-  for (int s = 0; s < 3; ++s) step(body, Path::Implicit, 5e-3);
-
-  const double h = 2e-2;
-  const Eigen::Index dofs = 3 * n;
+// The system A Δv = b of one implicit step of h from the body's state, as
+// the header describes it, assembled densely and restricted to the free
+// particles' coordinates (freeDofs: their indices in the 3n vector). With
+// `asStepped`, each element block a I + b n nᵀ has a, b and n rounded to
+// single precision, as the step keeps them: then A is the step's own matrix.
+struct DenseSystem {
+  Eigen::MatrixXd A;
+  Eigen::VectorXd b;
+  std::vector<Eigen::Index> freeDofs;
+};
+DenseSystem denseBackwardEuler(const MassSpringBody& body, double h, const std::vector<Vec3>& fext,
+                               bool asStepped = false) {
+  const Eigen::Index n = Eigen::Index(body.particleCount()), dofs = 3 * n;
   Eigen::MatrixXd A = Eigen::MatrixXd::Zero(dofs, dofs);
   Eigen::VectorXd b = Eigen::VectorXd::Zero(dofs);
-  for (int i = 0; i < n; ++i) {
+  for (Eigen::Index i = 0; i < n; ++i) {
     const double m = body.mass(std::size_t(i));
     A.block<3, 3>(3 * i, 3 * i) += (1 + h * body.drag()) * m * Eigen::Matrix3d::Identity();
     b.segment<3>(3 * i) +=
@@ -464,24 +453,82 @@ TEST(MassSpring, ImplicitStepSolvesTheBackwardEulerSystem) {
       cAxial = 0;
     }
     const double geo = spring > 0 ? spring / len : 0.0;
-    const Eigen::Matrix3d B = (h * cAxial + h * h * (kAxial - geo)) * nrm * nrm.transpose() +
-                              h * h * geo * Eigen::Matrix3d::Identity();
+    double iso = h * h * geo, axial = h * cAxial + h * h * (kAxial - geo);
+    Vec3 dir = nrm;
+    if (asStepped) {
+      iso = double(float(iso)), axial = double(float(axial));
+      dir = nrm.cast<float>().cast<double>();
+    }
+    const Eigen::Matrix3d B = axial * dir * dir.transpose() + iso * Eigen::Matrix3d::Identity();
     const Vec3 onI = (h * tension + h * h * (kAxial - geo) * rate) * nrm + h * h * geo * w;
     const Eigen::Index I = 3 * Eigen::Index(el.i), J = 3 * Eigen::Index(el.j);
     A.block<3, 3>(I, I) += B, A.block<3, 3>(J, J) += B, A.block<3, 3>(I, J) -= B, A.block<3, 3>(J, I) -= B;
     b.segment<3>(I) += onI, b.segment<3>(J) -= onI;
   }
-  std::vector<Eigen::Index> freeDofs;
-  for (int i = 0; i < n; ++i)
+  DenseSystem sys;
+  for (Eigen::Index i = 0; i < n; ++i)
     if (!body.pinned(std::size_t(i)))
-      for (int c = 0; c < 3; ++c) freeDofs.push_back(3 * i + c);
-  const Eigen::Index f = Eigen::Index(freeDofs.size());
-  Eigen::MatrixXd Af(f, f);
-  Eigen::VectorXd bf(f);
+      for (Eigen::Index c = 0; c < 3; ++c) sys.freeDofs.push_back(3 * i + c);
+  const Eigen::Index f = Eigen::Index(sys.freeDofs.size());
+  sys.A.resize(f, f);
+  sys.b.resize(f);
   for (Eigen::Index r = 0; r < f; ++r) {
-    bf[r] = b[freeDofs[std::size_t(r)]];
-    for (Eigen::Index c = 0; c < f; ++c) Af(r, c) = A(freeDofs[std::size_t(r)], freeDofs[std::size_t(c)]);
+    sys.b[r] = b[sys.freeDofs[std::size_t(r)]];
+    for (Eigen::Index c = 0; c < f; ++c) sys.A(r, c) = A(sys.freeDofs[std::size_t(r)], sys.freeDofs[std::size_t(c)]);
   }
+  return sys;
+}
+
+// An irregular body: uneven element counts per particle, a duplicated
+// element, Maxwell and Kelvin–Voigt elements, some compressed, pinned
+// particles, drag and external forces (fext, which it fills).
+MassSpringBody irregularBody(std::vector<Vec3>& fext) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  MassSpringBody body;
+  const int n = 13;
+  fext.clear();
+  for (int i = 0; i < n; ++i) {
+    EXPECT_TRUE(
+        body.addParticle({u(rng), u(rng), u(rng)}, 0.05 + 0.02 * (u(rng) + 1), i == 3 || i == 8).ok());
+    body.setVelocity(std::size_t(i), {0.3 * u(rng), 0.3 * u(rng), 0.3 * u(rng)});
+    fext.push_back({0.1 * u(rng), 0.1 * u(rng), 0.1 * u(rng)});
+    body.setExternalForce(std::size_t(i), fext.back());
+  }
+  std::uniform_int_distribution<int> pick(0, n - 1);
+  for (int e = 0; e < 40; ++e) {
+    const int i = pick(rng), j = pick(rng);
+    if (i == j) continue;
+    const SpringModel model = e % 3 == 0 ? SpringModel::Maxwell : SpringModel::KelvinVoigt;
+    const double rest =
+        (body.position(std::size_t(j)) - body.position(std::size_t(i))).norm() * (1 + 0.2 * u(rng));
+    EXPECT_TRUE(body.addElement(std::uint32_t(i), std::uint32_t(j),
+                                {true, 20 + 10 * u(rng), 0.5 + 0.4 * u(rng), model}, rest)
+                    .ok());
+    if (e == 7) {  // the same pair twice
+      EXPECT_TRUE(body.addElement(std::uint32_t(j), std::uint32_t(i), {true, 15, 0.2, model}, rest).ok());
+    }
+  }
+  body.setGravity({0, 0, -9.81});
+  EXPECT_TRUE(body.setDrag(0.7).ok());
+  return body;
+}
+
+// The implicit step against the system assembled densely from the model in
+// the header and solved directly, on the irregular body.
+TEST(MassSpring, ImplicitStepSolvesTheBackwardEulerSystem) {
+  std::vector<Vec3> fext;
+  MassSpringBody body = irregularBody(fext);
+  body.setSolverOptions({.cgTolerance = 1e-12, .cgMaxIterations = 500});
+  // A few steps first, so the Maxwell dampers carry state.
+  for (int s = 0; s < 3; ++s) step(body, Path::Implicit, 5e-3);
+
+  const double h = 2e-2;
+  const DenseSystem sys = denseBackwardEuler(body, h, fext);
+  const Eigen::MatrixXd& Af = sys.A;
+  const Eigen::VectorXd& bf = sys.b;
+  const std::vector<Eigen::Index>& freeDofs = sys.freeDofs;
+  const Eigen::Index f = Eigen::Index(freeDofs.size());
   const Eigen::VectorXd dvFree = Af.ldlt().solve(bf);
   Eigen::VectorXd expected = body.velocities();
   for (Eigen::Index r = 0; r < f; ++r) expected[freeDofs[std::size_t(r)]] += dvFree[r];
@@ -493,6 +540,112 @@ TEST(MassSpring, ImplicitStepSolvesTheBackwardEulerSystem) {
   // of the velocity change.
   EXPECT_LT((body.velocities() - expected).cwiseAbs().maxCoeff(),
             1e-6 * dvFree.cwiseAbs().maxCoeff() + 1e-12);
+}
+
+// CG stops on its recursively updated residual and skips the sweep that
+// confirms the true residual when its rounding-error bound shows it needless;
+// either way the true residual ‖b − A Δv‖ of the step it takes must be
+// within the tolerance. Checked against the dense system on the irregular
+// body and on a sheet, from loose to tight tolerances, soft and stiff.
+TEST(MassSpring, ImplicitStepMeetsItsToleranceOnTheTrueResidual) {
+  const auto check = [](MassSpringBody& body, const std::vector<Vec3>& fext, double h, double tol) {
+    SCOPED_TRACE(::testing::Message() << "h " << h << " tolerance " << tol);
+    body.setSolverOptions({.cgTolerance = tol, .cgMaxIterations = 2000});
+    for (int s = 0; s < 2; ++s) step(body, Path::Implicit, h);  // a warm start, damper states
+    const DenseSystem sys = denseBackwardEuler(body, h, fext, /*asStepped=*/true);
+    const dm::VecX before = body.velocities();
+    auto report = body.stepImplicit(h);
+    ASSERT_TRUE(report.ok()) << report.error().message();
+    ASSERT_TRUE(report->converged);
+    Eigen::VectorXd dv(Eigen::Index(sys.freeDofs.size()));
+    for (std::size_t r = 0; r < sys.freeDofs.size(); ++r)
+      dv[Eigen::Index(r)] = body.velocities()[sys.freeDofs[r]] - before[sys.freeDofs[r]];
+    // The dense product's own rounding, far below the tolerances checked.
+    const double aNorm = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(sys.A).eigenvalues().cwiseAbs().maxCoeff();
+    const double rounding = 64 * 0x1p-53 * aNorm * dv.norm();
+    ASSERT_LT(rounding, 0.01 * tol * sys.b.norm());
+    EXPECT_LE((sys.b - sys.A * dv).norm(), tol * sys.b.norm() + rounding);
+    EXPECT_LE(report->relativeResidual, tol);
+  };
+  for (double tol : {1e-3, 1e-6}) {
+    std::vector<Vec3> fext;
+    MassSpringBody body = irregularBody(fext);
+    check(body, fext, 2e-2, tol);
+  }
+  for (double k : {50.0, 5e4}) {  // soft: the bound confirms; stiff: ill-conditioned
+    for (double tol : {1e-4, 1e-7}) {
+      auto sheet = MassSpringBody::makeSheet({.nx = 6,
+                                              .ny = 5,
+                                              .mass = 0.3,
+                                              .structural = {true, k, 0.01 * k, SpringModel::KelvinVoigt},
+                                              .shear = {true, 0.5 * k, 0.01 * k, SpringModel::Maxwell},
+                                              .bend = {true, 0.1 * k, 0.01 * k, SpringModel::KelvinVoigt}});
+      ASSERT_TRUE(sheet.ok()) << sheet.error().message();
+      sheet->setPinned(0, true);
+      sheet->setGravity({0, 0, -9.81});
+      const std::vector<Vec3> fext(sheet->particleCount(), Vec3::Zero());
+      check(*sheet, fext, 1e-2, tol);
+    }
+  }
+}
+
+// The implicit step is compiled once per SIMD instruction set and picked at
+// run time (dm::simdLevel()); every version must give the same bits. Each
+// level's run happens in a child process (DM_SIMD caps the level), which
+// writes the state after a few steps for the parent to compare. A level the
+// CPU does not have runs as the widest it has.
+TEST(MassSpringSimd, ChildStepsAndWritesItsState) {
+  const char* out = std::getenv("DM_MASS_SPRING_CHILD_OUT");
+  if (!out) GTEST_SKIP() << "runs only as the child of MassSpringSimd.EveryLevelGivesTheSameBits";
+  std::vector<Vec3> fext;
+  MassSpringBody body = irregularBody(fext);
+  body.setSolverOptions({.cgTolerance = 1e-8});
+  auto sheet = MassSpringBody::makeSheet({.nx = 17, .ny = 13, .mass = 0.2});
+  if (!sheet) std::_Exit(3);
+  sheet->setPinned(0, true);
+  sheet->setGravity({0, 0, -9.81});
+  for (int s = 0; s < 4; ++s)
+    if (!body.stepImplicit(1e-2) || !sheet->stepImplicit(2e-2)) std::_Exit(4);
+  std::ofstream file(out, std::ios::binary);
+  for (const MassSpringBody* b : {&body, &*sheet})
+    for (const dm::VecX* v : {&b->positions(), &b->velocities()})
+      file.write(reinterpret_cast<const char*>(v->data()), std::streamsize(v->size() * sizeof(double)));
+  std::ofstream(std::string(out) + ".level") << dm::toString(dm::simdLevel());
+  std::_Exit(file.flush() ? 0 : 5);
+}
+
+TEST(MassSpringSimd, EveryLevelGivesTheSameBits) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("dm_mass_spring_simd_" + std::to_string(getpid()));
+  std::filesystem::create_directories(dir);
+  const std::string self = std::filesystem::read_symlink("/proc/self/exe").string();
+  std::vector<std::string> states;
+  for (const char* level : {"sse2", "avx2", "avx512"}) {
+    const std::string file = (dir / level).string();
+    std::string outVar = "DM_MASS_SPRING_CHILD_OUT=" + file, simdVar = std::string("DM_SIMD=") + level;
+    std::string filter = "--gtest_filter=MassSpringSimd.ChildStepsAndWritesItsState";
+    std::vector<char*> env;
+    for (char** e = environ; *e; ++e)
+      if (std::strncmp(*e, "DM_SIMD=", 8) != 0) env.push_back(*e);
+    env.push_back(outVar.data());
+    env.push_back(simdVar.data());
+    env.push_back(nullptr);
+    char* argv[] = {const_cast<char*>(self.c_str()), filter.data(), nullptr};
+    pid_t pid = -1;
+    ASSERT_EQ(posix_spawn(&pid, self.c_str(), nullptr, nullptr, argv, env.data()), 0);
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << level << ": the child failed";
+    std::ifstream in(file, std::ios::binary), ran(file + ".level");
+    states.emplace_back(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    ASSERT_GT(states.back().size(), 1000u);
+    std::string ranLevel;
+    ran >> ranLevel;
+    std::cout << "[ level    ] DM_SIMD=" << level << " ran " << ranLevel << "\n";
+  }
+  std::filesystem::remove_all(dir);
+  EXPECT_TRUE(states[0] == states[1]) << "sse2 and avx2 differ";
+  EXPECT_TRUE(states[0] == states[2]) << "sse2 and avx512 differ";
 }
 
 // The implicit step keeps per-element data in its workspace, some of it

@@ -166,7 +166,11 @@ struct MassSpringSolverOptions {
 /// What one implicit step did.
 struct ImplicitStepReport {
   int cgIterations = 0;           ///< CG iterations of the Newton step
-  double relativeResidual = 0.0;  ///< ‖b − A Δv‖ / ‖b‖ at exit
+  /// ‖r‖ / ‖b‖ at exit, r the residual CG updates by recurrence. When it
+  /// converged, the true residual b − A Δv is within the tolerance too:
+  /// confirmed by one more sweep, or by a bound on the rounding errors when
+  /// that leaves no doubt (MassSpringBody::stepImplicit).
+  double relativeResidual = 0.0;
   bool converged = true;          ///< false when CG stopped at cgMaxIterations
 };
 
@@ -350,8 +354,16 @@ class MassSpringBody {
   void forEachRange(std::size_t count, F&& fn) const;
   template <class Lead, class Trail>
   void sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const;
+  // What the implicit solve's rounding-error bound needs of the system A Δv =
+  // b of a step: anorm ≥ ‖A‖₂ (and the norm of its entries' magnitudes,
+  // which bound a sweep's rounding), lambda ≤ its smallest eigenvalue (0
+  // when no bound is known), x0 = ‖Δv‖ of the warm start.
+  struct SystemBounds {
+    double anorm = 0.0, lambda = 0.0, x0 = 0.0;
+  };
   // CG from the residual r = cgR_ of the warm start dv_ (rr0 = rᵀr, rz = rᵀz, z = cgZ_).
-  CgStop solveImplicit(double bnorm, double rr0, double rz, ImplicitStepReport& report);
+  CgStop solveImplicit(double bnorm, double rr0, double rz, const SystemBounds& bounds,
+                       ImplicitStepReport& report);
   CgStop stepImplicitCore(double h, ImplicitStepReport& report);  // stepImplicit after its checks
   void updateMaxwellDecay(double h);
 
@@ -388,6 +400,8 @@ class MassSpringBody {
   std::vector<double> slotRest_, slotK_, slotC_, slotEd_;
   double slotH_ = -1.0;
   std::size_t maxwellCount_ = 0;
+  double massMin_ = 0.0, massMax_ = 0.0;  // over all particles
+  std::uint32_t degreeMax_ = 0;           // most elements at one particle
   // 3 per element: force on i (explicit); 6 per slot pair, x x' y y' z z':
   // the right-hand-side terms on the owners of its two slots (implicit).
   std::vector<double> ef_;
