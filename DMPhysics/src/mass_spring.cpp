@@ -13,6 +13,7 @@
 #include <cstdio>
 #include <cstring>
 #include <string>
+#include <type_traits>
 #include <utility>
 
 #if defined(__SSE2__)
@@ -34,7 +35,6 @@ Vec3 load3(const std::vector<double>& a, std::size_t i) { return Vec3(a[3 * i], 
 void store3(std::vector<double>& a, std::size_t i, const Vec3& v) {
   a[3 * i] = v.x(), a[3 * i + 1] = v.y(), a[3 * i + 2] = v.z();
 }
-void store3(VecX& a, std::size_t i, const Vec3& v) { a.segment<3>(3 * Eigen::Index(i)) = v; }
 
 // Chunk size of the parallel loops: large enough that a chunk costs tens of
 // microseconds, so task overhead stays small.
@@ -427,30 +427,41 @@ void MassSpringBody::prepare() {
     incElem_[fill[ei_[e]]++] = std::uint32_t(e);
     incElem_[fill[ej_[e]]++] = std::uint32_t(e);
   }
-  // Implicit path: slots sorted (stably) by owner = lower end, so that a
-  // sweep in owner order finishes particle i once owner i is done; runs
-  // padded to even length for the two-lane sweep.
-  ownStart_.assign(n + 1, 0);
-  for (std::size_t e = 0; e < m; ++e) ++ownStart_[std::min(ei_[e], ej_[e]) + 1];
-  for (std::size_t i = 0; i < n; ++i) ownStart_[i + 1] += ownStart_[i] + (ownStart_[i + 1] & 1u);
-  const std::size_t slots = ownStart_[n];
+  // Implicit path: each element in a slot of its owner, its lower end, so
+  // that a sweep in owner order finishes particle i once owner i is done.
+  // Owners go in groups of two, particles 2g and 2g + 1, whose slots share
+  // slot pairs lane by lane (lane 0: the first owner's k-th slot, lane 1 the
+  // second's, in element order); the shorter run is padded with empty slots,
+  // which point at their owner (an odd count's last group has only empty
+  // ones in lane 1, pointing at the first owner).
+  const std::size_t groups = (n + 1) / 2;
+  std::vector<std::uint32_t> owned(2 * groups, 0);  // slots per owner
+  for (std::size_t e = 0; e < m; ++e) ++owned[std::min(ei_[e], ej_[e])];
+  ownStart_.assign(groups + 1, 0);
+  for (std::size_t g = 0; g < groups; ++g)
+    ownStart_[g + 1] = ownStart_[g] + std::max(owned[2 * g], owned[2 * g + 1]);
+  const std::size_t slots = 2 * std::size_t(ownStart_[groups]);
   linkElem_.assign(slots, kNoElement);
   linkOther_.resize(slots);
-  for (std::size_t i = 0; i < n; ++i)
-    std::fill(linkOther_.begin() + ownStart_[i], linkOther_.begin() + ownStart_[i + 1], std::uint32_t(i));
-  fill.assign(ownStart_.begin(), ownStart_.end() - 1);
+  for (std::size_t g = 0; g < groups; ++g)
+    for (std::size_t pr = ownStart_[g]; pr < ownStart_[g + 1]; ++pr) {
+      linkOther_[2 * pr] = std::uint32_t(2 * g);
+      linkOther_[2 * pr + 1] = std::uint32_t(std::min(2 * g + 1, n - 1));
+    }
+  fill.assign(n, 0);  // slots placed per owner
   for (std::size_t e = 0; e < m; ++e) {
-    const std::uint32_t s = fill[std::min(ei_[e], ej_[e])]++;
+    const std::uint32_t i = std::min(ei_[e], ej_[e]);
+    const std::size_t s = 2 * (ownStart_[i / 2] + fill[i]++) + (i & 1u);
     linkElem_[s] = std::uint32_t(e);
     linkOther_[s] = std::max(ei_[e], ej_[e]);
   }
-  leadUntil_.resize(n);
+  leadUntil_.resize(groups);
   std::uint32_t reach = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    reach = std::max(reach, std::uint32_t(i + 1));
-    for (std::uint32_t s = ownStart_[i]; s < ownStart_[i + 1]; ++s)
+  for (std::size_t g = 0; g < groups; ++g) {
+    reach = std::max(reach, std::uint32_t(std::min(2 * g + 2, n)));
+    for (std::size_t s = 2 * ownStart_[g]; s < 2 * ownStart_[g + 1]; ++s)
       reach = std::max(reach, linkOther_[s] + 1);
-    leadUntil_[i] = reach;
+    leadUntil_[g] = reach;
   }
   blocks_.assign(slots / 2, SlotPair{});
   for (std::size_t s = 0; s < slots; ++s) blocks_[s / 2].j3[s % 2] = 3 * linkOther_[s];
@@ -469,7 +480,8 @@ void MassSpringBody::prepare() {
   decay_.assign(m, 1.0);
   decayH_ = -1.0;
   dsum_.assign(6 * n, 0.0);
-  dinv_.assign(12 * ((n + 1) / 2), 0.0);
+  dinv_.assign(12 * groups, 0.0);
+  freeMask_.assign(2 * groups, 0.0);
   for (VecX* vec : {&rhs_, &dv_, &cgR_, &cgZ_, &cgP_, &cgQ_}) *vec = VecX::Zero(Eigen::Index(3 * n));
   prepared_ = true;
 }
@@ -663,9 +675,9 @@ inline void leadRow(double* y, double y0, double y1, double y2) noexcept {
 }
 
 // Applies the blocks B of one slot pair (one per lane) to v_j − v_i, with
-// v_i in v0, v1, v2 (both lanes) and v_j read from v at the pair's offsets:
-// adds g = B (v_j − v_i), minus the force on the owner, to y_j and subtracts
-// it from the owner's accumulators a0, a1, a2. Adding g to y_j is a
+// the lanes' owners' v_i in v0, v1, v2 and v_j read from v at the pair's
+// offsets: adds g = B (v_j − v_i), minus the force on the owner, to y_j and
+// subtracts it from the owners' accumulators a0, a1, a2. Adding g to y_j is a
 // load-add-store (the add takes y_j from memory: one instruction fewer
 // than subtracting the force). v_j − v_i = −(v_i − v_j) and IEEE rounding is
 // symmetric, so g is exactly the negated force: the same bits as applying
@@ -691,28 +703,32 @@ inline void applyPair(const Pair& B, const double* v, Lane2 v0, Lane2 v1, Lane2 
 // One sweep over the slots in owner order, accumulating y = (M + h C + h² K) v
 // restricted to the free particles, with v taken as 0 on pinned particles
 // (the callers keep it so). Each slot's block is applied once: it adds
-// B (v_i − v_j) to the owner i, held in registers, and subtracts it from the
-// other end j, in y; two slots at a time, one per lane. Before owner i,
-// lead(k) runs for every particle k not yet led up to leadUntil_[i]: it must
-// set v_k and y_k = (1 + h·drag) m_k v_k, which is the first write to y_k.
-// After owner i, no slot touches particle i again: trail(i, y_i) receives its
-// finished row (y_i is not stored; pinned particles get a meaningless row
-// that trail must ignore).
+// B (v_i − v_j) to the owner i and subtracts it from the other end j, in y.
+// The owners go two at a time, a lane each (group g: particles 2g, 2g + 1),
+// their own sums held in registers. Before group g, lead(k) runs for every
+// particle k not yet led up to leadUntil_[g]: it must set v_k and
+// y_k = (1 + h·drag) m_k v_k, which is the first write to y_k. After group
+// g, no slot touches its particles again: trail(i, second, y0, y1, y2, v0,
+// v1, v2) receives their finished rows (the stored row plus the owner's
+// sum; not stored) and their v, lane 0 particle i = 2g, lane 1 particle
+// i + 1 if `second` (else a meaningless lane). Pinned particles get a
+// meaningless row that trail must ignore.
 template <class Lead, class Trail>
 void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&& trail) const {
   static_assert(offsetof(SlotPair, n2) + 4 * sizeof(float) <= sizeof(SlotPair), "widen() reads 16 bytes");
-  const std::size_t n = particleCount();
+  const std::size_t n = particleCount(), groups = (n + 1) / 2;
   const std::uint32_t *own = ownStart_.data(), *leadUntil = leadUntil_.data();
-  const SlotPair* blk = blocks_.data();
+  const SlotPair* pair = blocks_.data();  // the groups' runs follow each other
   std::size_t front = 0;
-  for (std::size_t i = 0; i < n; ++i) {
-    for (const std::size_t until = leadUntil[i]; front < until; ++front) lead(front);
-    const Lane2 v0 = {v[3 * i], v[3 * i]}, v1 = {v[3 * i + 1], v[3 * i + 1]},
-                v2 = {v[3 * i + 2], v[3 * i + 2]};
-    Lane2 a0 = {y[3 * i], 0.0}, a1 = {y[3 * i + 1], 0.0}, a2 = {y[3 * i + 2], 0.0};
-    for (const SlotPair *pair = blk + own[i] / 2, *end = blk + own[i + 1] / 2; pair != end; ++pair)
+  for (std::size_t g = 0; g < groups; ++g) {
+    for (const std::size_t until = leadUntil[g]; front < until; ++front) lead(front);
+    const std::size_t i = 2 * g, k = std::min(i + 1, n - 1);  // k: lane 1's particle (i if none)
+    const Lane2 v0 = {v[3 * i], v[3 * k]}, v1 = {v[3 * i + 1], v[3 * k + 1]}, v2 = {v[3 * i + 2], v[3 * k + 2]};
+    Lane2 a0 = splat(0.0), a1 = splat(0.0), a2 = splat(0.0);
+    for (const SlotPair* end = blocks_.data() + own[g + 1]; pair != end; ++pair)
       applyPair(*pair, v, v0, v1, v2, y, a0, a1, a2);
-    trail(i, a0[0] + a0[1], a1[0] + a1[1], a2[0] + a2[1]);
+    trail(i, i + 1 < n, Lane2{y[3 * i], y[3 * k]} + a0, Lane2{y[3 * i + 1], y[3 * k + 1]} + a1,
+          Lane2{y[3 * i + 2], y[3 * k + 2]} + a2, v0, v1, v2);
   }
 }
 
@@ -733,7 +749,7 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
   double *r = cgR_.data(), *z = cgZ_.data(), *p = cgP_.data(), *q = cgQ_.data();
   const double* mass = mass_.data();
   const std::uint8_t* pinned = pinned_.data();
-  const double* dinv = dinv_.data();
+  const double *dinv = dinv_.data(), *freeMask = freeMask_.data();
   // z_i = D_i⁻¹ r_i; returns r_i·z_i.
   const auto precondition = [&](std::size_t i) {
     const double* d = dinv + 12 * (i / 2) + (i & 1);  // entry c at d[2 c]
@@ -753,12 +769,16 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
           const double m = ms * mass[k];
           leadRow(q + 3 * k, m * x[3 * k], m * x[3 * k + 1], m * x[3 * k + 2]);
         },
-        [&](std::size_t i, double y0, double y1, double y2) {
-          if (pinned[i]) y0 = y1 = y2 = 0.0;  // b_i = 0 and D_i⁻¹ = 0 there too
-          const double r0 = b[3 * i] - y0, r1 = b[3 * i + 1] - y1, r2 = b[3 * i + 2] - y2;
-          r[3 * i] = r0, r[3 * i + 1] = r1, r[3 * i + 2] = r2;
-          rr += r0 * r0 + r1 * r1 + r2 * r2;
-          rzSum += precondition(i);
+        [&](std::size_t i, bool second, Lane2 y0, Lane2 y1, Lane2 y2, Lane2, Lane2, Lane2) {
+          const auto row = [&](std::size_t k, double q0, double q1, double q2) {
+            if (pinned[k]) q0 = q1 = q2 = 0.0;  // b_k = 0 and D_k⁻¹ = 0 there too
+            const double r0 = b[3 * k] - q0, r1 = b[3 * k + 1] - q1, r2 = b[3 * k + 2] - q2;
+            r[3 * k] = r0, r[3 * k + 1] = r1, r[3 * k + 2] = r2;
+            rr += r0 * r0 + r1 * r1 + r2 * r2;
+            rzSum += precondition(k);
+          };
+          row(i, y0[0], y1[0], y2[0]);
+          if (second) row(i + 1, y0[1], y1[1], y2[1]);
         });
     rzOut = rzSum;
     return rr;
@@ -786,14 +806,21 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
   bool restart = true;  // p = z, else p = z + beta p
   double beta = 0.0;
   for (int it = 1; it <= options_.cgMaxIterations; ++it) {
-    double pAp = 0.0;
-    const auto trail = [&](std::size_t i, double y0, double y1, double y2) {
-      if (pinned[i]) {
-        q[3 * i] = q[3 * i + 1] = q[3 * i + 2] = 0.0;
-        return;
+    // q = A p, zero on pinned particles (their free mask), and pᵀAp, a lane
+    // per particle of the group.
+    Lane2 pAp2 = splat(0.0);
+    const auto trail = [&](std::size_t i, bool second, Lane2 y0, Lane2 y1, Lane2 y2, Lane2 p0, Lane2 p1,
+                           Lane2 p2) {
+      const Lane2 f = load2(freeMask + i);
+      y0 = y0 * f, y1 = y1 * f, y2 = y2 * f;
+      pAp2 += p0 * y0 + p1 * y1 + p2 * y2;
+      double* qi = q + 3 * i;
+      store2(qi, lows(y0, y1));
+      qi[2] = y2[0];
+      if (second) {
+        store2(qi + 3, highs(y0, y1));
+        qi[5] = y2[1];
       }
-      q[3 * i] = y0, q[3 * i + 1] = y1, q[3 * i + 2] = y2;
-      pAp += p[3 * i] * y0 + p[3 * i + 1] * y1 + p[3 * i + 2] * y2;
     };
     const auto massRow = [&](std::size_t k) {
       const double m = ms * mass[k];
@@ -818,6 +845,7 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
             leadRow(q + 3 * k, m * p0, m * p1, m * p2);
           },
           trail);
+    const double pAp = pAp2[0] + pAp2[1];
     if (!std::isfinite(pAp)) return CgStop::NotFinite;
     if (pAp <= 0.0) return CgStop::NotPositive;
     const double alpha = rz / pAp;
@@ -908,8 +936,9 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
   // Per slot, two at a time: the block B = a·I + b·n nᵀ of h C + h² K, and
   // the right-hand-side term h f₀ − h² K (v_i − v_j) on the owner i (n points
   // from the owner to the other end; padding slots have zero stiffness and
-  // length and give zero blocks and terms).
-  forEachRange(particleCount(), [this, h, h2](std::size_t begin, std::size_t end) {
+  // length and give zero blocks and terms). A group's two owners a lane each.
+  const std::size_t groups = (particleCount() + 1) / 2;
+  forEachRange(groups, [this, h, h2](std::size_t begin, std::size_t end) {
     // The arrays in locals: the stores through B and ef below could alias the
     // members as far as the compiler knows, which would reload every
     // member's data pointer after each store.
@@ -919,10 +948,12 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
     SlotPair* blocks = blocks_.data();
     double* ef = ef_.data();
     const Lane2 hh = splat(h), hh2 = splat(h2), one = splat(1.0);
-    for (std::size_t i = begin; i < end; ++i) {
-      const Lane2 xi0 = splat(X[3 * i]), xi1 = splat(X[3 * i + 1]), xi2 = splat(X[3 * i + 2]);
-      const Lane2 vi0 = splat(V[3 * i]), vi1 = splat(V[3 * i + 1]), vi2 = splat(V[3 * i + 2]);
-      for (std::size_t pr = own[i] / 2, last = own[i + 1] / 2; pr < last; ++pr) {
+    const std::size_t n = particleCount();
+    for (std::size_t g = begin; g < end; ++g) {
+      const std::size_t i = 2 * g, k = std::min(i + 1, n - 1);  // the owners of lanes 0 and 1
+      const Lane2 xi0 = {X[3 * i], X[3 * k]}, xi1 = {X[3 * i + 1], X[3 * k + 1]}, xi2 = {X[3 * i + 2], X[3 * k + 2]};
+      const Lane2 vi0 = {V[3 * i], V[3 * k]}, vi1 = {V[3 * i + 1], V[3 * k + 1]}, vi2 = {V[3 * i + 2], V[3 * k + 2]};
+      for (std::size_t pr = own[g], last = own[g + 1]; pr < last; ++pr) {
         SlotPair& B = blocks[pr];
         const std::size_t jA = B.j3[0], jB = B.j3[1];
         const Lane2 d0 = Lane2{X[jA], X[jB]} - xi0, d1 = Lane2{X[jA + 1], X[jB + 1]} - xi1,
@@ -950,16 +981,16 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
     }
   });
 
-  // One sweep in owner order (rhs_, dsum_ and cgQ_ hold the running sums of
-  // the particles ahead of it) assembles the right-hand side b and the
-  // diagonal blocks D_i = (1 + h·drag) m_i I + Σ B, inverts D_i as soon as
-  // owner i is done, and forms the residual r = b − A Δv of the warm start
-  // and z = D⁻¹ r for the solver.
+  // One sweep in owner order, a group of two owners at a time (rhs_, dsum_
+  // and cgQ_ hold the running sums of the particles ahead of it), assembles
+  // the right-hand side b and the diagonal blocks D_i = (1 + h·drag) m_i I +
+  // Σ B, inverts D_i as soon as owner i is done, and forms the residual
+  // r = b − A Δv of the warm start and z = D⁻¹ r for the solver.
   const Vec3 g = gravity_;
   const std::size_t n = particleCount();
   const double ms = massScale_;
   double *dsum = dsum_.data(), *dinv = dinv_.data(), *rhs = rhs_.data(), *x = dv_.data(), *q = cgQ_.data();
-  double *r = cgR_.data(), *z = cgZ_.data();
+  double *r = cgR_.data(), *z = cgZ_.data(), *freeMask = freeMask_.data();
   const double* ef = ef_.data();
   // Members in locals, as in the block formation above.
   const double *mass = mass_.data(), *V = v_.data(), *fext = fext_.data();
@@ -975,8 +1006,8 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
   // bound on each row sum of |B| (Σ_c |n_r n_c| ≤ √3).
   Lane2 blockMin = splat(HUGE_VAL), blockRowSum = splat(0.0);
   const Lane2 unitSq = splat(1.0 + 1e-6), sqrt3 = splat(1.7320508075688772);
-  for (std::size_t i = 0; i < n; ++i) {
-    for (const std::size_t until = leadUntil[i]; front < until; ++front) {
+  for (std::size_t gr = 0; gr < groups; ++gr) {
+    for (const std::size_t until = leadUntil[gr]; front < until; ++front) {
       const std::size_t k = front;
       for (int c = 0; c < 3; ++c) rhs[3 * k + c] = h * (mass[k] * (g[c] - drag * V[3 * k + c]) + fext[3 * k + c]);
       double* d = dsum + 6 * k;
@@ -984,16 +1015,17 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
       d[0] = d[3] = d[5] = m;
       d[1] = d[2] = d[4] = 0.0;
       if (pinned[k]) x[3 * k] = x[3 * k + 1] = x[3 * k + 2] = 0.0;
+      freeMask[k] = pinned[k] ? 0.0 : 1.0;
       leadRow(q + 3 * k, m * x[3 * k], m * x[3 * k + 1], m * x[3 * k + 2]);
     }
-    double* di = dsum + 6 * i;
-    Lane2 b0 = {rhs[3 * i], 0.0}, b1 = {rhs[3 * i + 1], 0.0}, b2 = {rhs[3 * i + 2], 0.0};
-    Lane2 D0 = {di[0], 0.0}, D1 = {di[1], 0.0}, D2 = {di[2], 0.0}, D3 = {di[3], 0.0}, D4 = {di[4], 0.0},
-          D5 = {di[5], 0.0};
-    Lane2 a0 = {q[3 * i], 0.0}, a1 = {q[3 * i + 1], 0.0}, a2 = {q[3 * i + 2], 0.0};
-    const Lane2 x0 = splat(x[3 * i]), x1 = splat(x[3 * i + 1]), x2 = splat(x[3 * i + 2]);
-    xx += x[3 * i] * x[3 * i] + x[3 * i + 1] * x[3 * i + 1] + x[3 * i + 2] * x[3 * i + 2];
-    for (std::size_t pr = own[i] / 2, last = own[i + 1] / 2; pr < last; ++pr) {
+    // The group's owners a lane each; their sums start at zero and are added
+    // to the stored rows (which other owners, the first one included, scatter
+    // into) once the group is done.
+    const std::size_t i0 = 2 * gr, i1 = std::min(i0 + 1, n - 1);
+    Lane2 b0 = splat(0.0), b1 = b0, b2 = b0, D0 = b0, D1 = b0, D2 = b0, D3 = b0, D4 = b0, D5 = b0, a0 = b0,
+          a1 = b0, a2 = b0;
+    const Lane2 x0 = {x[3 * i0], x[3 * i1]}, x1 = {x[3 * i0 + 1], x[3 * i1 + 1]}, x2 = {x[3 * i0 + 2], x[3 * i1 + 2]};
+    for (std::size_t pr = own[gr], last = own[gr + 1]; pr < last; ++pr) {
       const SlotPair& B = blocks[pr];
       const std::size_t jA = B.j3[0], jB = B.j3[1];
       const Lane2 t0 = load2(ef + 6 * pr), t1 = load2(ef + 6 * pr + 2), t2 = load2(ef + 6 * pr + 4);
@@ -1014,36 +1046,44 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
       store2(dA + 4, load2(dA + 4) + lows(e4, e5)), store2(dB + 4, load2(dB + 4) + highs(e4, e5));
       applyPair(B, x, x0, x1, x2, q, a0, a1, a2);
     }
-    Vec3 bi(b0[0] + b0[1], b1[0] + b1[1], b2[0] + b2[1]);
-    di[0] = D0[0] + D0[1], di[1] = D1[0] + D1[1], di[2] = D2[0] + D2[1];
-    di[3] = D3[0] + D3[1], di[4] = D4[0] + D4[1], di[5] = D5[0] + D5[1];
-    double y0 = a0[0] + a0[1], y1 = a1[0] + a1[1], y2 = a2[0] + a2[1];
-    double inv[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // D_i⁻¹; 0 for a pinned particle
-    if (pinned[i]) {
-      bi.setZero();
-      y0 = y1 = y2 = 0.0;
-    } else {
-      // Inverse of the symmetric block by cofactors.
-      const double c00 = di[3] * di[5] - di[4] * di[4], c01 = di[2] * di[4] - di[1] * di[5],
-                   c02 = di[1] * di[4] - di[2] * di[3];
-      const double det = 1.0 / (di[0] * c00 + di[1] * c01 + di[2] * c02);
-      const double c11 = di[0] * di[5] - di[2] * di[2], c12 = di[1] * di[2] - di[0] * di[4],
-                   c22 = di[0] * di[3] - di[1] * di[1];
-      inv[0] = c00 * det, inv[1] = c01 * det, inv[2] = c02 * det;
-      inv[3] = c11 * det, inv[4] = c12 * det, inv[5] = c22 * det;
-    }
-    double* dout = dinv + 12 * (i / 2) + (i & 1);
-    for (int c = 0; c < 6; ++c) dout[2 * c] = inv[c];
-    store3(rhs_, i, bi);
-    bb += bi.squaredNorm();
-    const double r0 = bi.x() - y0, r1 = bi.y() - y1, r2 = bi.z() - y2;
-    r[3 * i] = r0, r[3 * i + 1] = r1, r[3 * i + 2] = r2;
-    rr += r0 * r0 + r1 * r1 + r2 * r2;
-    const double z0 = inv[0] * r0 + inv[1] * r1 + inv[2] * r2;
-    const double z1 = inv[1] * r0 + inv[3] * r1 + inv[4] * r2;
-    const double z2 = inv[2] * r0 + inv[4] * r1 + inv[5] * r2;
-    z[3 * i] = z0, z[3 * i + 1] = z1, z[3 * i + 2] = z2;
-    rz += r0 * z0 + r1 * z1 + r2 * z2;
+    // Particle i, lane L of the group: b_i, D_i (inverted), the warm start's
+    // A Δv, r and z.
+    const auto finish = [&](std::size_t i, auto lane) {
+      constexpr int L = decltype(lane)::value;
+      double* di = dsum + 6 * i;
+      Vec3 bi(rhs[3 * i] + b0[L], rhs[3 * i + 1] + b1[L], rhs[3 * i + 2] + b2[L]);
+      di[0] += D0[L], di[1] += D1[L], di[2] += D2[L], di[3] += D3[L], di[4] += D4[L], di[5] += D5[L];
+      double y0 = q[3 * i] + a0[L], y1 = q[3 * i + 1] + a1[L], y2 = q[3 * i + 2] + a2[L];
+      xx += x[3 * i] * x[3 * i] + x[3 * i + 1] * x[3 * i + 1] + x[3 * i + 2] * x[3 * i + 2];
+      double inv[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};  // D_i⁻¹; 0 for a pinned particle
+      if (pinned[i]) {
+        bi.setZero();
+        y0 = y1 = y2 = 0.0;
+      } else {
+        // Inverse of the symmetric block by cofactors.
+        const double c00 = di[3] * di[5] - di[4] * di[4], c01 = di[2] * di[4] - di[1] * di[5],
+                     c02 = di[1] * di[4] - di[2] * di[3];
+        const double det = 1.0 / (di[0] * c00 + di[1] * c01 + di[2] * c02);
+        const double c11 = di[0] * di[5] - di[2] * di[2], c12 = di[1] * di[2] - di[0] * di[4],
+                     c22 = di[0] * di[3] - di[1] * di[1];
+        inv[0] = c00 * det, inv[1] = c01 * det, inv[2] = c02 * det;
+        inv[3] = c11 * det, inv[4] = c12 * det, inv[5] = c22 * det;
+      }
+      double* dout = dinv + 12 * (i / 2) + (i & 1);
+      for (int c = 0; c < 6; ++c) dout[2 * c] = inv[c];
+      rhs[3 * i] = bi.x(), rhs[3 * i + 1] = bi.y(), rhs[3 * i + 2] = bi.z();
+      bb += bi.squaredNorm();
+      const double r0 = bi.x() - y0, r1 = bi.y() - y1, r2 = bi.z() - y2;
+      r[3 * i] = r0, r[3 * i + 1] = r1, r[3 * i + 2] = r2;
+      rr += r0 * r0 + r1 * r1 + r2 * r2;
+      const double z0 = inv[0] * r0 + inv[1] * r1 + inv[2] * r2;
+      const double z1 = inv[1] * r0 + inv[3] * r1 + inv[4] * r2;
+      const double z2 = inv[2] * r0 + inv[4] * r1 + inv[5] * r2;
+      z[3 * i] = z0, z[3 * i + 1] = z1, z[3 * i + 2] = z2;
+      rz += r0 * z0 + r1 * z1 + r2 * z2;
+    };
+    finish(i0, std::integral_constant<int, 0>{});
+    if (i0 + 1 < n) finish(i0 + 1, std::integral_constant<int, 1>{});
   }
 
   const double bnorm = std::sqrt(bb);

@@ -50,8 +50,8 @@
 // elements sorted by their lower end. One CG iteration is then one sweep in
 // that order that forms the search direction just ahead of itself and
 // applies every block once (adding to one end, subtracting from the other;
-// two blocks at a time, one per SIMD lane), and one pass over the particles;
-// both run serially.
+// two owners at a time, a SIMD lane each, so that each owner's sums stay in
+// its lane), and one pass over the particles; both run serially.
 //
 // References: X. Provot, "Deformation constraints in a mass-spring model to
 // describe rigid cloth behavior", Graphics Interface 1995. D. Baraff and
@@ -337,9 +337,10 @@ class MassSpringBody {
   Result<ImplicitStepReport> stepImplicit(double h);
 
  private:
-  // The blocks of h C + h² K of two consecutive slots (lanes 0 and 1) in the
-  // implicit step, B = a·I + b·n nᵀ (n: unit direction; B acts on v_i − v_j
-  // for the force on the owner i), so that a sweep applies two at once.
+  // The blocks of h C + h² K of two slots (lanes 0 and 1: a slot of each
+  // owner of a group) in the implicit step, B = a·I + b·n nᵀ (n: unit
+  // direction; B acts on v_i − v_j for the force on the owner i), so that a
+  // sweep applies two at once.
   struct SlotPair {
     float a[2], b[2], n0[2], n1[2], n2[2];
     std::uint32_t j3[2];  // 3·(higher end): offset of its x coordinate in a 3n vector
@@ -385,12 +386,12 @@ class MassSpringBody {
   // Workspace (derived; rebuilt by prepare()).
   bool prepared_ = false;
   std::vector<std::uint32_t> incStart_, incElem_;  // CSR: elements incident to each particle
-  // Implicit path: the elements in "slots" sorted by their lower end, the
-  // owner, each owner's run padded to an even count with empty slots.
-  // ownStart_: CSR of the slots over owners; linkElem_: the element in each
-  // slot (kNoElement: padding), linkOther_: its higher end (padding: the
-  // owner); leadUntil_[i]: one past the highest particle reached by the slots
-  // of owners 0 … i.
+  // Implicit path: the elements in "slots" of their lower end, the owner;
+  // owners 2g and 2g + 1 form group g and share its slot pairs, one lane
+  // each (prepare()). ownStart_: CSR of the slot pairs over the groups;
+  // linkElem_: the element in each slot (kNoElement: padding), linkOther_:
+  // its higher end (padding: the owner); leadUntil_[g]: one past the highest
+  // particle reached by groups 0 … g, their owners included.
   static constexpr std::uint32_t kNoElement = 0xffffffffu;
   std::vector<std::uint32_t> ownStart_, linkElem_, linkOther_, leadUntil_;
   std::vector<SlotPair> blocks_;  // per two slots (implicit)
@@ -412,6 +413,9 @@ class MassSpringBody {
   // Inverse diagonal blocks, interleaved by particle pairs: entry c of
   // particle i at 12 (i/2) + 2 c + i%2 (implicit).
   std::vector<double> dinv_;
+  // Per particle, padded to an even count: 1 for a free particle, 0 for a
+  // pinned one and the padding (implicit; set by each step's assembly).
+  std::vector<double> freeMask_;
   VecX rhs_, dv_;               // 3n: right-hand side and solution Δv of the implicit step
   VecX cgR_, cgZ_, cgP_, cgQ_;  // 3n: CG residual, preconditioned residual, direction, A·direction
 };
