@@ -723,7 +723,8 @@ void MassSpringBody::sweepLinks(const double* v, double* y, Lead&& lead, Trail&&
   for (std::size_t g = 0; g < groups; ++g) {
     for (const std::size_t until = leadUntil[g]; front < until; ++front) lead(front);
     const std::size_t i = 2 * g, k = std::min(i + 1, n - 1);  // k: lane 1's particle (i if none)
-    const Lane2 v0 = {v[3 * i], v[3 * k]}, v1 = {v[3 * i + 1], v[3 * k + 1]}, v2 = {v[3 * i + 2], v[3 * k + 2]};
+    const Lane2 v0 = {v[3 * i], v[3 * k]}, v1 = {v[3 * i + 1], v[3 * k + 1]},
+                v2 = {v[3 * i + 2], v[3 * k + 2]};
     Lane2 a0 = splat(0.0), a1 = splat(0.0), a2 = splat(0.0);
     for (const SlotPair* end = blocks_.data() + own[g + 1]; pair != end; ++pair)
       applyPair(*pair, v, v0, v1, v2, y, a0, a1, a2);
@@ -801,7 +802,7 @@ MassSpringBody::CgStop MassSpringBody::solveImplicit(double bnorm, double rr0, d
   // below it too and the confirming sweep is skipped; otherwise it runs.
   constexpr double u = 0x1p-53;
   const double kSweep = 2.0 * (double(degreeMax_) + 8.0), anorm = bounds.anorm;
-  double xBound = bounds.x0;                   // ≥ ‖x_j‖ of every iterate so far
+  double xBound = bounds.x0;                     // ≥ ‖x_j‖ of every iterate so far
   double gap = kSweep * anorm * xBound + rnorm;  // the warm start's residual
   bool restart = true;  // p = z, else p = z + beta p
   double beta = 0.0;
@@ -951,8 +952,10 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
     const std::size_t n = particleCount();
     for (std::size_t g = begin; g < end; ++g) {
       const std::size_t i = 2 * g, k = std::min(i + 1, n - 1);  // the owners of lanes 0 and 1
-      const Lane2 xi0 = {X[3 * i], X[3 * k]}, xi1 = {X[3 * i + 1], X[3 * k + 1]}, xi2 = {X[3 * i + 2], X[3 * k + 2]};
-      const Lane2 vi0 = {V[3 * i], V[3 * k]}, vi1 = {V[3 * i + 1], V[3 * k + 1]}, vi2 = {V[3 * i + 2], V[3 * k + 2]};
+      const Lane2 xi0 = {X[3 * i], X[3 * k]}, xi1 = {X[3 * i + 1], X[3 * k + 1]},
+                  xi2 = {X[3 * i + 2], X[3 * k + 2]};
+      const Lane2 vi0 = {V[3 * i], V[3 * k]}, vi1 = {V[3 * i + 1], V[3 * k + 1]},
+                  vi2 = {V[3 * i + 2], V[3 * k + 2]};
       for (std::size_t pr = own[g], last = own[g + 1]; pr < last; ++pr) {
         SlotPair& B = blocks[pr];
         const std::size_t jA = B.j3[0], jB = B.j3[1];
@@ -1024,7 +1027,8 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
     const std::size_t i0 = 2 * gr, i1 = std::min(i0 + 1, n - 1);
     Lane2 b0 = splat(0.0), b1 = b0, b2 = b0, D0 = b0, D1 = b0, D2 = b0, D3 = b0, D4 = b0, D5 = b0, a0 = b0,
           a1 = b0, a2 = b0;
-    const Lane2 x0 = {x[3 * i0], x[3 * i1]}, x1 = {x[3 * i0 + 1], x[3 * i1 + 1]}, x2 = {x[3 * i0 + 2], x[3 * i1 + 2]};
+    const Lane2 x0 = {x[3 * i0], x[3 * i1]}, x1 = {x[3 * i0 + 1], x[3 * i1 + 1]},
+                x2 = {x[3 * i0 + 2], x[3 * i1 + 2]};
     for (std::size_t pr = own[gr], last = own[gr + 1]; pr < last; ++pr) {
       const SlotPair& B = blocks[pr];
       const std::size_t jA = B.j3[0], jB = B.j3[1];

@@ -474,7 +474,8 @@ DenseSystem denseBackwardEuler(const MassSpringBody& body, double h, const std::
   sys.b.resize(f);
   for (Eigen::Index r = 0; r < f; ++r) {
     sys.b[r] = b[sys.freeDofs[std::size_t(r)]];
-    for (Eigen::Index c = 0; c < f; ++c) sys.A(r, c) = A(sys.freeDofs[std::size_t(r)], sys.freeDofs[std::size_t(c)]);
+    for (Eigen::Index c = 0; c < f; ++c)
+      sys.A(r, c) = A(sys.freeDofs[std::size_t(r)], sys.freeDofs[std::size_t(c)]);
   }
   return sys;
 }
@@ -561,7 +562,8 @@ TEST(MassSpring, ImplicitStepMeetsItsToleranceOnTheTrueResidual) {
     for (std::size_t r = 0; r < sys.freeDofs.size(); ++r)
       dv[Eigen::Index(r)] = body.velocities()[sys.freeDofs[r]] - before[sys.freeDofs[r]];
     // The dense product's own rounding, far below the tolerances checked.
-    const double aNorm = Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(sys.A).eigenvalues().cwiseAbs().maxCoeff();
+    const double aNorm =
+        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(sys.A).eigenvalues().cwiseAbs().maxCoeff();
     const double rounding = 64 * 0x1p-53 * aNorm * dv.norm();
     ASSERT_LT(rounding, 0.01 * tol * sys.b.norm());
     EXPECT_LE((sys.b - sys.A * dv).norm(), tol * sys.b.norm() + rounding);
