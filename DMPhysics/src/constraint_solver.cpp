@@ -1165,17 +1165,27 @@ void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<
     entries_.push_back(e);
   }
   // The entries stay in input order; the runs (far fewer) are sorted by
-  // pair, a pair's in input order, and index them.
-  std::sort(runs_.begin(), runs_.end(), [](const Run& x, const Run& y) {
+  // pair, a pair's in input order, and index them. The narrow phase usually
+  // lists the pairs in order already.
+  const auto runLess = [](const Run& x, const Run& y) {
     return pairLess(x.a, x.b, y.a, y.b) || (x.a == y.a && x.b == y.b && x.begin < y.begin);
-  });
+  };
+  if (!std::is_sorted(runs_.begin(), runs_.end(), runLess)) std::sort(runs_.begin(), runs_.end(), runLess);
 }
 
-std::pair<const ContactCache::Run*, const ContactCache::Run*> ContactCache::runsOf(int a, int b) const noexcept {
-  const Run* first = std::lower_bound(runs_.data(), runs_.data() + runs_.size(), std::pair{a, b},
-                                      [](const Run& x, const std::pair<int, int>& k) {
-                                        return pairLess(x.a, x.b, k.first, k.second);
-                                      });
+std::pair<const ContactCache::Run*, const ContactCache::Run*> ContactCache::runsOf(int a, int b,
+                                                                                 const Run* hint) const noexcept {
+  const Run *begin = runs_.data(), *end = runs_.data() + runs_.size();
+  const Run* first = nullptr;
+  // Where the contacts come pair by pair in the runs' order, the pair's runs
+  // start right at the hint (the end of the last pair's): no search.
+  if (hint && hint >= begin && hint < end && hint->a == a && hint->b == b &&
+      (hint == begin || pairLess(hint[-1].a, hint[-1].b, a, b)))
+    first = hint;
+  else
+    first = std::lower_bound(begin, end, std::pair{a, b}, [](const Run& x, const std::pair<int, int>& k) {
+      return pairLess(x.a, x.b, k.first, k.second);
+    });
   const Run* last = first;
   while (last != runs_.data() + runs_.size() && last->a == a && last->b == b) ++last;
   return {first, last};
@@ -1222,7 +1232,7 @@ int ContactCache::warmStart(std::span<ContactConstraint> contacts, std::span<con
       haveRun = true;
       lastA = c.bodyA;
       lastB = c.bodyB;
-      std::tie(first, last) = runsOf(c.bodyA, c.bodyB);
+      std::tie(first, last) = runsOf(c.bodyA, c.bodyB, last);
       pa = poseOf(bodies, c.bodyA);
       fromA = pa.q.toRotationMatrix();
     }

@@ -385,8 +385,9 @@ class ContactCache {
     int a = 0, b = 0;
     std::uint32_t begin = 0, end = 0;
   };
-  // The runs of one pair, [first, last) of runs_.
-  std::pair<const Run*, const Run*> runsOf(int a, int b) const noexcept;
+  // The runs of pair (a, b), [first, last); `hint`: where they may start
+  // (checked, then searched for if not).
+  std::pair<const Run*, const Run*> runsOf(int a, int b, const Run* hint = nullptr) const noexcept;
   std::vector<Entry> entries_;  // in input order
   std::vector<Run> runs_;       // entries_' pair runs, sorted by pair (a, b), a pair's by begin
   std::vector<std::uint8_t> used_;
