@@ -1165,8 +1165,8 @@ void ContactCache::store(std::span<const ContactConstraint> contacts, std::span<
     entries_.push_back(e);
   }
   // The entries stay in input order; the runs (far fewer) are sorted by
-  // pair, a pair's in input order, and index them. The narrow phase usually
-  // lists the pairs in order already.
+  // pair, a pair's in input order, and index them (sorted only when out of
+  // order: the check is linear).
   const auto runLess = [](const Run& x, const Run& y) {
     return pairLess(x.a, x.b, y.a, y.b) || (x.a == y.a && x.b == y.b && x.begin < y.begin);
   };

@@ -37,7 +37,8 @@ Quat normalisedQuat(const VecX& y, Eigen::Index offset) {
 
 /// Name of the first non-finite field of body `i` in `s`, or nullptr.
 const char* nonFiniteField(const WorldSnapshot& s, std::size_t i) {
-  // x·0 is 0 for a finite x and NaN otherwise: one test for the common case.
+  // x·0 is 0 for a finite x and NaN otherwise: one test for the common case
+  // (a sum that overflows only falls through to the tests below).
   const double probe = s.position[i].sum() * 0.0 + s.orientation[i].coeffs().sum() * 0.0 +
                        s.linearVelocity[i].sum() * 0.0 + s.angularVelocity[i].sum() * 0.0;
   if (probe == 0.0) return nullptr;
