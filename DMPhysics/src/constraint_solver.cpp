@@ -946,9 +946,9 @@ double sweepNarrow(const std::vector<ConstraintSolver::Group>& groups, std::vect
 // 128-bit ones, half the instructions (AVX2, not AVX: the lane masks are
 // 256-bit integer operations); and for x86-64-v4 (AVX-512 VL), where 32
 // registers hold the lanes without spilling. GCC only (function targets
-// with vector types); chosen once at load time with __builtin_cpu_supports
-// (not an ifunc: ThreadSanitizer builds crash in an ifunc resolver, which
-// runs before the TSan runtime is up).
+// with vector types); chosen once at load time by dm::simdLevel() (the
+// CPU's widest, capped by DM_SIMD; not an ifunc: ThreadSanitizer builds
+// crash in an ifunc resolver, which runs before the TSan runtime is up).
 #if defined(DM_SOLVER_VECTOR_LANES) && defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
 #define DM_SOLVER_AVX 1
 template <int kMode>
@@ -969,21 +969,11 @@ template <int kMode>
 }
 #endif
 
-// The widest version this CPU runs: 2 AVX-512 (x86-64-v4), 1 AVX2, 0 SSE2.
-int hostVersion() noexcept {
-#if defined(DM_SOLVER_AVX)
-  if (simdLevel() == SimdLevel::Avx512) return 2;
-  if (simdLevel() == SimdLevel::Avx2) return 1;
-#endif
-  return 0;
-}
-const int gVersion = hostVersion();
-
 template <int kMode>
 SweepFn pickSweep() noexcept {
 #if defined(DM_SOLVER_AVX)
-  if (gVersion == 2) return &sweepAvx512<kMode>;
-  if (gVersion == 1) return &sweepAvx<kMode>;
+  if (simdLevel() == SimdLevel::Avx512) return &sweepAvx512<kMode>;
+  if (simdLevel() == SimdLevel::Avx2) return &sweepAvx<kMode>;
 #endif
   return &sweepNarrow<kMode>;
 }
@@ -991,8 +981,8 @@ SweepFn pickSweep() noexcept {
 using BuildFn = void (*)(const RowBuild&) noexcept;
 BuildFn pickBuild() noexcept {
 #if defined(DM_SOLVER_AVX)
-  if (gVersion == 2) return &buildRowsAvx512;
-  if (gVersion == 1) return &buildRowsAvx;
+  if (simdLevel() == SimdLevel::Avx512) return &buildRowsAvx512;
+  if (simdLevel() == SimdLevel::Avx2) return &buildRowsAvx;
 #endif
   return &buildRowsNarrow;
 }
