@@ -605,14 +605,16 @@ int fail(const std::string& message) {
   return 1;
 }
 
+// The bundled default scene: next to the installed binary or in the source
+// tree this was built from (DM_SOURCE_SCENES_DIR, relative to the built
+// binary's folder).
 fs::path defaultScene() {
   std::error_code ec;
   const auto exe = fs::canonical("/proc/self/exe", ec);
-  if (!ec) {
-    const auto installed = exe.parent_path().parent_path() / "share" / "dmplatform" / "scenes" / "head_probe.json";
-    if (fs::exists(installed, ec)) return installed;
-  }
-  return fs::path(DM_SOURCE_SCENES_DIR) / "head_probe.json";
+  if (ec) return fs::path(DM_SOURCE_SCENES_DIR) / "head_probe.json";
+  const auto installed = exe.parent_path().parent_path() / "share" / "dmplatform" / "scenes" / "head_probe.json";
+  if (fs::exists(installed, ec)) return installed;
+  return (exe.parent_path() / DM_SOURCE_SCENES_DIR / "head_probe.json").lexically_normal();
 }
 
 int run(const Options& o) {

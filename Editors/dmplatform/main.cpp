@@ -31,16 +31,15 @@ std::atomic<bool> gStop{false};
 extern "C" void onSignal(int) { gStop.store(true); }
 
 // The bundled default scene: next to the installed binary
-// (../share/dmplatform/scenes) or in the source tree this was built from.
+// (../share/dmplatform/scenes) or in the source tree this was built from
+// (DM_SOURCE_SCENES_DIR, relative to the built binary's folder).
 std::filesystem::path defaultScene() {
   std::error_code ec;
   const auto exe = std::filesystem::canonical("/proc/self/exe", ec);
-  if (!ec) {
-    const auto installed =
-        exe.parent_path().parent_path() / "share" / "dmplatform" / "scenes" / "head_probe.json";
-    if (std::filesystem::exists(installed, ec)) return installed;
-  }
-  return std::filesystem::path(DM_SOURCE_SCENES_DIR) / "head_probe.json";
+  if (ec) return std::filesystem::path(DM_SOURCE_SCENES_DIR) / "head_probe.json";
+  const auto installed = exe.parent_path().parent_path() / "share" / "dmplatform" / "scenes" / "head_probe.json";
+  if (std::filesystem::exists(installed, ec)) return installed;
+  return (exe.parent_path() / DM_SOURCE_SCENES_DIR / "head_probe.json").lexically_normal();
 }
 
 }  // namespace

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <memory>
 #include <random>
+#include "../common/build_paths.hpp"
 
 namespace {
 
@@ -36,7 +37,7 @@ struct Query {
 class ColliderPlugin : public ::testing::Test {
  protected:
   void SetUp() override {
-    auto loaded = linker_.load(std::string(DM_COLLIDER_PLUGIN_DIR) + "/libdm_test_plane_mesh_collider.so");
+    auto loaded = linker_.load(dm::test::besideExecutable(DM_COLLIDER_PLUGIN_DIR) + "/libdm_test_plane_mesh_collider.so");
     ASSERT_TRUE(loaded.ok()) << loaded.error().message();
     auto added = dm::registerPluginColliders(registry_, table_);
     ASSERT_TRUE(added.ok()) << added.error().message();

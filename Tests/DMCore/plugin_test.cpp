@@ -16,12 +16,13 @@
 #include <vector>
 
 #include "plugins/test_adder.h"
+#include "../common/build_paths.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 
-fs::path pluginDir(const char* sub) { return fs::path(DM_TEST_PLUGIN_DIR) / sub; }
+fs::path pluginDir(const char* sub) { return fs::path(dm::test::besideExecutable(DM_TEST_PLUGIN_DIR)) / sub; }
 fs::path pluginFile(const char* sub, const char* target) {
   return pluginDir(sub) / (std::string("lib") + target + ".so");
 }

@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <string>
+#include "../common/build_paths.hpp"
 
 namespace dm::test {
 
@@ -26,7 +27,7 @@ struct PluginDriver {
   PluginLinker linker{registry};
   bool loaded = false;
   PluginDriver(const std::string& file, const std::string& expectedName) {
-    auto r = linker.load(std::string(DM_DRIVER_PLUGIN_DIR) + "/libdm_driver_" + file + ".so");
+    auto r = linker.load(dm::test::besideExecutable(DM_DRIVER_PLUGIN_DIR) + "/libdm_driver_" + file + ".so");
     EXPECT_TRUE(r.ok()) << (r.ok() ? "" : r.error().message());
     if (!r.ok()) return;
     EXPECT_EQ(r->name, expectedName);

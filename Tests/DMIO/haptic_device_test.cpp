@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "../common/temp_dir.hpp"
+#include "../common/build_paths.hpp"
 
 namespace {
 
@@ -37,7 +38,7 @@ struct Builtin {
 TEST(SimHaptic, PluginAndBuiltInGiveIdenticalSamples) {
   dm::FactoryRegistry plugReg;
   dm::PluginLinker plugLinker(plugReg);
-  auto loaded = plugLinker.load(std::string(DM_DRIVER_PLUGIN_DIR) + "/libdm_driver_sim_haptic.so");
+  auto loaded = plugLinker.load(dm::test::besideExecutable(DM_DRIVER_PLUGIN_DIR) + "/libdm_driver_sim_haptic.so");
   ASSERT_TRUE(loaded.ok()) << loaded.error().message();
   EXPECT_EQ(loaded->name, "sim-haptic");
   Builtin b;
@@ -175,12 +176,12 @@ TEST(SimHaptic, BadParametersNameTheKey) {
 TEST(SimHaptic, WrongAbiAndCrashingInitDriversAreRefusedCleanly) {
   dm::FactoryRegistry registry;
   dm::PluginLinker linker(registry, {.useEnvironment = false, .probe = true});
-  const dm::ScanReport wrong = linker.scanDirectory(std::string(DM_TEST_DRIVER_DIR) + "/wrong_abi_driver");
+  const dm::ScanReport wrong = linker.scanDirectory(dm::test::besideExecutable(DM_TEST_DRIVER_DIR) + "/wrong_abi_driver");
   ASSERT_EQ(wrong.refused.size(), 1u);
   EXPECT_EQ(wrong.refused[0].error.code, dm::ErrorCode::Version);
   EXPECT_NE(wrong.refused[0].error.message().find("libdm_test_wrong_abi_driver.so"), std::string::npos)
       << wrong.refused[0].error.message();
-  const dm::ScanReport crash = linker.scanDirectory(std::string(DM_TEST_DRIVER_DIR) + "/crash_init_driver");
+  const dm::ScanReport crash = linker.scanDirectory(dm::test::besideExecutable(DM_TEST_DRIVER_DIR) + "/crash_init_driver");
   ASSERT_EQ(crash.refused.size(), 1u);
   EXPECT_NE(crash.refused[0].error.message().find("libdm_test_crash_init_driver.so"), std::string::npos)
       << crash.refused[0].error.message();

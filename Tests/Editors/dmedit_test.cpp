@@ -22,13 +22,14 @@
 
 #include "dmtool_run.hpp"
 #include "document.hpp"
+#include "../common/build_paths.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 using dmtool_test::TempDir;
 
-const fs::path kScene = fs::path(DM_SOURCE_SCENES_DIR) / "head_probe.json";
+const fs::path kScene = fs::path(dm::test::besideExecutable(DM_SOURCE_SCENES_DIR)) / "head_probe.json";
 
 TEST(DmeditDocument, EditsAreValidatedUndoneAndSaved) {
   auto doc = dmedit::SceneDocument::open(kScene);
@@ -193,7 +194,7 @@ TEST(Dmedit, DrawsThePanelsAndTheSceneUnderXvfb) {
   const fs::path shot = dir.path / "dmedit.png";
   setenv("DISPLAY", x.display().c_str(), 1);
   const auto run = dmtool_test::runProgram(
-      DMEDIT_PATH, {kScene.string(), "--size", "1000x640", "--screenshot", shot.string(), "--frames", "4"}, 300);
+      dm::test::besideExecutable(DMEDIT_PATH), {kScene.string(), "--size", "1000x640", "--screenshot", shot.string(), "--frames", "4"}, 300);
   unsetenv("DISPLAY");
   ASSERT_EQ(run.exitCode, 0) << dmtool_test::describe(run);
   auto image = dm::readPng(shot);
@@ -217,10 +218,10 @@ TEST(Dmedit, DrawsThePanelsAndTheSceneUnderXvfb) {
 
 TEST(Dmedit, RefusesABadSceneAndABadSize) {
   TempDir dir;
-  const auto missing = dmtool_test::runProgram(DMEDIT_PATH, {(dir.path / "none.json").string()}, 60);
+  const auto missing = dmtool_test::runProgram(dm::test::besideExecutable(DMEDIT_PATH), {(dir.path / "none.json").string()}, 60);
   EXPECT_EQ(missing.exitCode, 1) << dmtool_test::describe(missing);
   EXPECT_NE(missing.err.find("none.json"), std::string::npos) << missing.err;
-  const auto size = dmtool_test::runProgram(DMEDIT_PATH, {kScene.string(), "--size", "10x10"}, 60);
+  const auto size = dmtool_test::runProgram(dm::test::besideExecutable(DMEDIT_PATH), {kScene.string(), "--size", "10x10"}, 60);
   EXPECT_EQ(size.exitCode, 1) << dmtool_test::describe(size);
   EXPECT_NE(size.err.find("--size"), std::string::npos) << size.err;
 }

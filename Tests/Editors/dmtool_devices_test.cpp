@@ -7,6 +7,7 @@
 #include <string>
 
 #include "dmtool_run.hpp"
+#include "../common/build_paths.hpp"
 
 namespace {
 
@@ -50,7 +51,7 @@ TEST(DmtoolDevices, OpensOneDriverAndFailsForAMissingOne) {
 }
 
 TEST(DmtoolDevices, RefusesCrashingAndWrongAbiPluginsAndCarriesOn) {
-  const std::string dir = DM_TEST_DRIVER_DIR;
+  const std::string dir = dm::test::besideExecutable(DM_TEST_DRIVER_DIR);
   const auto r = runTool({"devices", "--json", "--plugin-dir", dir + "/crash_init_driver", "--plugin-dir",
                           dir + "/wrong_abi_driver"});
   ASSERT_EQ(r.exitCode, 0) << describe(r);

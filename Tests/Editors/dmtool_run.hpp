@@ -23,6 +23,7 @@
 #include <fstream>
 #include <string>
 #include <vector>
+#include "../common/build_paths.hpp"
 
 extern char** environ;
 
@@ -127,7 +128,7 @@ inline ToolRun runProgram(const std::string& program, const std::vector<std::str
 #ifdef DMTOOL_PATH
 inline ToolRun runTool(const std::vector<std::string>& args, double timeoutSeconds = 60.0,
                        bool stderrTerminal = false) {
-  return runProgram(DMTOOL_PATH, args, timeoutSeconds, stderrTerminal);
+  return runProgram(dm::test::besideExecutable(DMTOOL_PATH), args, timeoutSeconds, stderrTerminal);
 }
 #endif
 
