@@ -6,7 +6,6 @@
 // two halves of a voxel block cut by an oblique plane are brought back
 // together by a device path within one voxel of alignment; the tick is
 // allocation-free, deterministic and NaN-guarded; create() names bad fields.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/core/volume.hpp>
 #include <dm/haptics/bone_placement.hpp>
 

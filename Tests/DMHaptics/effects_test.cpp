@@ -3,7 +3,6 @@
 // the vibration frequency by counting zero crossings, the virtual fixtures
 // (sphere, rotated box, corridor: zero inside, spring + damper outside,
 // never pulling outward), and the fixed-capacity effect stack.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/haptics/effects.hpp>
 #include <dm/math/primitives.hpp>
 

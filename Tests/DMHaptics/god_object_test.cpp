@@ -2,7 +2,6 @@
 // true penetration on planes, spheres, box edges and corners and cylinders;
 // no pop-through of a one-triangle plate; the friction cone; moving and
 // overlapping objects; allocation-free, deterministic ticks.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/collide/bvh.hpp>
 #include <dm/collide/mesh_query.hpp>
 #include <dm/haptics/god_object.hpp>

@@ -5,7 +5,6 @@
 // renderer NaN, overruns and device loss, the passivity observer against the
 // zero-order-hold work sum, the passivity controller on a sampled wall, and
 // configuration errors.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/haptics/haptic_loop.hpp>
 #include <dm/io/drivers.hpp>
 

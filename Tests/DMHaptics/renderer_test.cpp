@@ -1,8 +1,4 @@
 // HapticMaterial validation: every bad field is refused by name.
-//
-// This file also defines the allocation-counting operators for the whole
-// DMHaptics_tests executable; the real-time tests of the other files include
-// alloc_counter.hpp with DM_ALLOC_COUNTER_DECLARE_ONLY.
 #include "../common/alloc_counter.hpp"
 
 #include <dm/haptics/renderer.hpp>

@@ -3,7 +3,6 @@
 // sampled (zero-order-hold) half-space wall does on the user along a path
 // that enters and leaves it — against the closed-form sum — with and without
 // the Hannaford–Ryu passivity controller.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/haptics/safety.hpp>
 
 #include <gtest/gtest.h>

@@ -8,7 +8,6 @@
 // sphere trees given node by node (a chain of equal spheres is a ball; a
 // binary chain of spheres along x is a rod), so the union of spheres the
 // method collides is known analytically.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/collide/sphere_tree.hpp>
 #include <dm/haptics/sphere_tree_6dof.hpp>
 #include <dm/math/primitives.hpp>

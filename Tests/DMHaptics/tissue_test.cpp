@@ -3,7 +3,6 @@
 // moves under it; at equilibrium the hand and the tissue feel equal and
 // opposite forces, the tissue takes the static shape of that load, and the
 // force is the haptic spring in series with the tissue's point stiffness.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/collide/bvh.hpp>
 #include <dm/haptics/god_object.hpp>
 #include <dm/haptics/tissue.hpp>

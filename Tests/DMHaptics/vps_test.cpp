@@ -7,7 +7,6 @@
 // pre-contact braking keeps a fast tool from tunnelling through a thin
 // plate; the coupled tool's kinetic energy only decays; the tick is
 // allocation-free, NaN-guarded and deterministic.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/core/volume.hpp>
 #include <dm/haptics/vps.hpp>
 #include <dm/math/primitives.hpp>

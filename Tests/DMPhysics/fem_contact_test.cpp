@@ -2,7 +2,6 @@
 // against physics: a rigid plate compressing a ν = 0 block carries exactly
 // E·A·δ/L; a block resting on a table presses on it with its weight; a
 // spherical tool meets Hertz's force; bad obstacles are refused.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/collide/bvh.hpp>
 #include <dm/math/primitives.hpp>
 #include <dm/physics/fem.hpp>

@@ -11,7 +11,6 @@
 #include <memory>
 #include <numbers>
 
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include "../common/alloc_counter.hpp"
 
 namespace {

@@ -4,7 +4,6 @@
 // (explicit force exchange at that step diverges, which the test shows);
 // a free ball hitting a free tissue block conserves the total linear
 // momentum; bad couplings are refused by index.
-#define DM_ALLOC_COUNTER_DECLARE_ONLY
 #include <dm/collide/bvh.hpp>
 #include <dm/math/primitives.hpp>
 #include <dm/physics/soft_rigid.hpp>

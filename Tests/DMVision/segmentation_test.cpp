@@ -3,10 +3,6 @@
 // bridge running from the sphere to the border (a path along which plain
 // region growing leaks). Radii are checked against the distance to the
 // sphere surface, the force against the symmetry of the sphere.
-//
-// This file defines the allocation-counting operators for the
-// DMVision_tests executable; other DMVision test files that need the
-// counter include alloc_counter.hpp with DM_ALLOC_COUNTER_DECLARE_ONLY.
 #include <dm/core/units.hpp>
 #include <dm/vision/segmentation.hpp>
 

@@ -3,10 +3,9 @@
 // malloc/free wrappers that count the calls made on threads whose
 // dm::test::tCountAllocations flag is set.
 //
-// Include it in exactly ONE source file of a test executable: replacement
-// operators are not inline and must be defined once per program. Other files
-// of the same executable that only read the counter define
-// DM_ALLOC_COUNTER_DECLARE_ONLY before including it.
+// The replacement operators are defined once per program, in
+// alloc_counter.cpp: dm_add_test (cmake/DMHelpers.cmake) compiles it, on its
+// own, into every test executable with a source that includes this header.
 //
 // @code
 //   dm::test::tCountAllocations = true;
@@ -50,50 +49,3 @@ inline void allocateOnce() {
 }
 
 }  // namespace dm::test
-
-#ifndef DM_ALLOC_COUNTER_DECLARE_ONLY
-// Every form below pairs malloc with free, but once GCC 12 inlines these
-// replacements (at -O1 under the sanitizers) it sees a free() of memory from
-// "operator new" and warns (-Wmismatched-new-delete) about its own view.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-void* operator new(std::size_t n) { return dm::test::countedAlloc(n, alignof(std::max_align_t)); }
-void* operator new[](std::size_t n) { return dm::test::countedAlloc(n, alignof(std::max_align_t)); }
-void* operator new(std::size_t n, std::align_val_t a) {
-  return dm::test::countedAlloc(n, static_cast<std::size_t>(a));
-}
-void* operator new[](std::size_t n, std::align_val_t a) {
-  return dm::test::countedAlloc(n, static_cast<std::size_t>(a));
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
-void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::align_val_t) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
-// The nothrow forms too: under ASan an unreplaced nothrow new would come
-// from ASan's allocator and be freed by the delete above (a mismatch).
-void* operator new(std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return dm::test::countedAlloc(n, alignof(std::max_align_t));
-  } catch (...) {
-    return nullptr;
-  }
-}
-void* operator new[](std::size_t n, const std::nothrow_t&) noexcept {
-  try {
-    return dm::test::countedAlloc(n, alignof(std::max_align_t));
-  } catch (...) {
-    return nullptr;
-  }
-}
-void operator delete(void* p, const std::nothrow_t&) noexcept { std::free(p); }
-void operator delete[](void* p, const std::nothrow_t&) noexcept { std::free(p); }
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
-#endif  // DM_ALLOC_COUNTER_DECLARE_ONLY
