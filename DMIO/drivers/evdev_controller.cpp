@@ -67,7 +67,7 @@ struct Evdev {
   bool dropping = false;  // after SYN_DROPPED, until the next SYN_REPORT
 };
 
-Evdev* self(DmDevice* d) { return reinterpret_cast<Evdev*>(d); }
+Evdev* asEvdev(DmDevice* d) { return reinterpret_cast<Evdev*>(d); }
 
 int axisIndex(const Evdev& d, unsigned code) {
   for (unsigned i = 0; i < d.axisCount; ++i)
@@ -218,13 +218,13 @@ DmDevice* evOpen(const DmDeviceParam* params, size_t count, char* error, size_t 
 }
 
 void evClose(DmDevice* dev) {
-  Evdev* d = self(dev);
+  Evdev* d = asEvdev(dev);
   if (d->fd >= 0) ::close(d->fd);
   delete d;
 }
 
 int evInfo(DmDevice* dev, DmControllerInfo* info) {
-  Evdev* d = self(dev);
+  Evdev* d = asEvdev(dev);
   *info = DmControllerInfo{};
   dm::driver::copyField(info->identity.driver, "evdev-controller");
   std::snprintf(info->identity.vendor, sizeof info->identity.vendor, "%04x:%04x", d->vendorId, d->productId);
@@ -275,7 +275,7 @@ double normalise(const input_absinfo& a, int raw) {
 }
 
 int evRead(DmDevice* dev, int64_t now, DmControllerState* s) {
-  Evdev* d = self(dev);
+  Evdev* d = asEvdev(dev);
   if (d->fd < 0) return DM_DEVICE_ERROR_LOST;
   input_event events[64];
   for (;;) {
@@ -303,7 +303,7 @@ int evRead(DmDevice* dev, int64_t now, DmControllerState* s) {
 }
 
 int evReconnect(DmDevice* dev, int64_t) {
-  Evdev* d = self(dev);
+  Evdev* d = asEvdev(dev);
   if (d->fd >= 0) return DM_DEVICE_OK;
   return openDevice(*d, nullptr, 0) ? DM_DEVICE_OK : DM_DEVICE_ERROR_LOST;
 }
@@ -315,12 +315,12 @@ int evInit(const DmHostApi* host) {
                                 DM_CONTROLLER_KIND_ABI_VERSION, &kEvdev);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "evdev-controller", "1.0", evInit, nullptr};
+const DmPluginInfo kEvdevControllerInfo = {DM_PLUGIN_ABI_VERSION, "evdev-controller", "1.0", evInit, nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kEvdevControllerInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_evdev_controller(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_evdev_controller(void) { return &kEvdevControllerInfo; }
 #endif

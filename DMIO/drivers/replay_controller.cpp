@@ -24,7 +24,7 @@ namespace {
 
 using dm::driver::ParamReader;
 
-struct Frame {
+struct ControllerFrame {
   std::int64_t t;
   double axes[DM_CONTROLLER_AXES];
   std::uint64_t buttons[2];
@@ -32,15 +32,15 @@ struct Frame {
 
 // One instance; DmDevice* is this type behind the C boundary.
 struct ReplayController {
-  dm::driver::ReplayStream<Frame> stream;
+  dm::driver::ReplayStream<ControllerFrame> stream;
 };
 
-ReplayController* self(DmDevice* d) { return reinterpret_cast<ReplayController*>(d); }
+ReplayController* asReplayController(DmDevice* d) { return reinterpret_cast<ReplayController*>(d); }
 
-std::string decodeFrame(const dm::record::RecordView& v, std::vector<Frame>& frames) {
+std::string decodeControllerFrame(const dm::record::RecordView& v, std::vector<ControllerFrame>& frames) {
   std::string why = dm::record::checkControllerState(v.payload);
   if (!why.empty()) return why;
-  Frame f{};
+  ControllerFrame f{};
   f.t = v.timeNs;
   dm::record::decodeControllerState(v.payload, f.axes, f.buttons);
   frames.push_back(f);
@@ -52,12 +52,12 @@ DmDevice* controllerOpen(const DmDeviceParam* params, size_t count, char* error,
       params, count, error, errorSize, {"file", "rate", "loop", "strict"},
       [](ReplayController& r, const dm::driver::ReplayOptions& o, ParamReader& p) {
         r.stream.load(o, dm::record::kControllerState, dm::record::kControllerStateBytes, "controller-state",
-                      p, decodeFrame);
+                      p, decodeControllerFrame);
       });
 }
 
 int controllerInfo(DmDevice* dev, DmControllerInfo* info) {
-  ReplayController* r = self(dev);
+  ReplayController* r = asReplayController(dev);
   *info = DmControllerInfo{};
   dm::driver::replayIdentity(info->identity, "replay-controller", "controller stream", r->stream.source);
   info->capabilities = DM_CONTROLLER_CAP_AXES | DM_CONTROLLER_CAP_BUTTONS;
@@ -68,9 +68,9 @@ int controllerInfo(DmDevice* dev, DmControllerInfo* info) {
 }
 
 int controllerRead(DmDevice* dev, int64_t now, DmControllerState* s) {
-  ReplayController* r = self(dev);
+  ReplayController* r = asReplayController(dev);
   std::int64_t time = 0;
-  const Frame* f = r->stream.playing(now, time);
+  const ControllerFrame* f = r->stream.playing(now, time);
   if (!f) return DM_DEVICE_ERROR_LOST;  // end of stream
   *s = DmControllerState{};
   s->time_ns = time;
@@ -88,12 +88,13 @@ int controllerInit(const DmHostApi* host) {
                                 DM_CONTROLLER_KIND_ABI_VERSION, &kReplayController);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "replay-controller", "1.0", controllerInit, nullptr};
+const DmPluginInfo kReplayControllerInfo = {DM_PLUGIN_ABI_VERSION, "replay-controller", "1.0", controllerInit,
+                                            nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kReplayControllerInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_replay_controller(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_replay_controller(void) { return &kReplayControllerInfo; }
 #endif

@@ -28,7 +28,7 @@ namespace {
 
 using dm::driver::ParamReader;
 
-struct Frame {
+struct DaqFrame {
   std::int64_t t;
   std::uint64_t index;
   std::uint64_t overrun;  // frames the recording lost just before this one
@@ -37,7 +37,7 @@ struct Frame {
 
 // One instance; DmDevice* is this type behind the C boundary.
 struct ReplayDaq {
-  dm::driver::ReplayStream<Frame> stream;
+  dm::driver::ReplayStream<DaqFrame> stream;
   std::uint32_t channels = 0;
   double rangeMin = 0.0, rangeMax = 0.0;
   std::size_t next = 0;    // next frame to hand over
@@ -45,9 +45,9 @@ struct ReplayDaq {
   std::uint64_t indexPeriod = 1;
 };
 
-ReplayDaq* self(DmDevice* d) { return reinterpret_cast<ReplayDaq*>(d); }
+ReplayDaq* asReplayDaq(DmDevice* d) { return reinterpret_cast<ReplayDaq*>(d); }
 
-std::string decodeBlock(const dm::record::RecordView& v, std::vector<Frame>& frames,
+std::string decodeBlock(const dm::record::RecordView& v, std::vector<DaqFrame>& frames,
                         std::uint32_t& channels) {
   dm::record::DaqBlockView b;
   std::string why = dm::record::parseDaqBlock(v.payload, v.size, b);
@@ -56,7 +56,7 @@ std::string decodeBlock(const dm::record::RecordView& v, std::vector<Frame>& fra
     return "block of " + std::to_string(b.channels) + " channels after blocks of " + std::to_string(channels);
   channels = b.channels;
   for (std::uint32_t f = 0; f < b.frames; ++f) {
-    Frame fr{};
+    DaqFrame fr{};
     fr.t = b.time(f);
     fr.index = b.index(f);
     fr.overrun = f == 0 ? b.overrun : 0;
@@ -66,18 +66,19 @@ std::string decodeBlock(const dm::record::RecordView& v, std::vector<Frame>& fra
   return why;
 }
 
-DmDevice* daqOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
+DmDevice* replayDaqOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
   return dm::driver::openReplay<ReplayDaq>(
       params, count, error, errorSize, {"file", "rate", "loop", "strict"},
       [](ReplayDaq& r, const dm::driver::ReplayOptions& o, ParamReader& p) {
-        const bool loaded = r.stream.load(o, dm::record::kDaqBlock, 0, "DAQ-block", p,
-                                          [&](const dm::record::RecordView& v, std::vector<Frame>& frames) {
-                                            return decodeBlock(v, frames, r.channels);
-                                          });
+        const bool loaded =
+            r.stream.load(o, dm::record::kDaqBlock, 0, "DAQ-block", p,
+                          [&](const dm::record::RecordView& v, std::vector<DaqFrame>& frames) {
+                            return decodeBlock(v, frames, r.channels);
+                          });
         if (!loaded) return;
         const auto& fr = r.stream.frames;
         r.rangeMin = r.rangeMax = fr.front().values[0];
-        for (const Frame& f : fr)
+        for (const DaqFrame& f : fr)
           for (std::uint32_t c = 0; c < r.channels; ++c) {
             r.rangeMin = std::min(r.rangeMin, f.values[c]);
             r.rangeMax = std::max(r.rangeMax, f.values[c]);
@@ -94,8 +95,8 @@ DmDevice* daqOpen(const DmDeviceParam* params, size_t count, char* error, size_t
       });
 }
 
-int daqInfo(DmDevice* dev, DmDaqInfo* info) {
-  ReplayDaq* r = self(dev);
+int replayDaqInfo(DmDevice* dev, DmDaqInfo* info) {
+  ReplayDaq* r = asReplayDaq(dev);
   const auto& fr = r->stream.frames;
   *info = DmDaqInfo{};
   dm::driver::replayIdentity(info->identity, "replay-daq", "DAQ stream", r->stream.source);
@@ -108,9 +109,9 @@ int daqInfo(DmDevice* dev, DmDaqInfo* info) {
   return DM_DEVICE_OK;
 }
 
-int daqRead(DmDevice* dev, int64_t now, double* samples, int64_t* times, size_t maxFrames,
-            DmDaqBlock* block) {
-  ReplayDaq* r = self(dev);
+int replayDaqRead(DmDevice* dev, int64_t now, double* samples, int64_t* times, size_t maxFrames,
+                  DmDaqBlock* block) {
+  ReplayDaq* r = asReplayDaq(dev);
   const auto& fr = r->stream.frames;
   dm::driver::ReplayClock& clock = r->stream.clock;
   clock.start(now);
@@ -122,7 +123,7 @@ int daqRead(DmDevice* dev, int64_t now, double* samples, int64_t* times, size_t 
       r->next = 0;
       ++r->cycle;
     }
-    const Frame& f = fr[r->next];
+    const DaqFrame& f = fr[r->next];
     const std::int64_t t = clock.hostTime(f.t, r->cycle);
     if (t > now) break;
     const std::uint64_t index = f.index + static_cast<std::uint64_t>(r->cycle) * r->indexPeriod;
@@ -141,18 +142,19 @@ int daqRead(DmDevice* dev, int64_t now, double* samples, int64_t* times, size_t 
   return DM_DEVICE_OK;
 }
 
-const DmDaqVTable kReplayDaq = {daqOpen, dm::driver::closeReplay<ReplayDaq>, daqInfo, daqRead, nullptr};
+const DmDaqVTable kReplayDaq = {replayDaqOpen, dm::driver::closeReplay<ReplayDaq>, replayDaqInfo,
+                                replayDaqRead, nullptr};
 
-int daqInit(const DmHostApi* host) {
+int replayDaqInit(const DmHostApi* host) {
   return host->register_factory(host->ctx, DM_DAQ_KIND, "replay-daq", DM_DAQ_KIND_ABI_VERSION, &kReplayDaq);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "replay-daq", "1.0", daqInit, nullptr};
+const DmPluginInfo kReplayDaqInfo = {DM_PLUGIN_ABI_VERSION, "replay-daq", "1.0", replayDaqInit, nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kReplayDaqInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_replay_daq(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_replay_daq(void) { return &kReplayDaqInfo; }
 #endif

@@ -22,21 +22,21 @@ namespace {
 
 using dm::driver::ParamReader;
 
-struct Frame {
+struct HapticFrame {
   std::int64_t t;
   double v[13];
   std::uint32_t buttons;
 };
 
 struct ReplayHaptic {
-  dm::driver::ReplayStream<Frame> stream;
+  dm::driver::ReplayStream<HapticFrame> stream;
   double maxForce = 8.0, servoRate = 1000.0, workspace = 0.15;
 };
 
-ReplayHaptic* self(DmDevice* d) { return reinterpret_cast<ReplayHaptic*>(d); }
+ReplayHaptic* asReplayHaptic(DmDevice* d) { return reinterpret_cast<ReplayHaptic*>(d); }
 
-std::string decodeFrame(const dm::record::RecordView& v, std::vector<Frame>& frames) {
-  Frame fr{};
+std::string decodeHapticFrame(const dm::record::RecordView& v, std::vector<HapticFrame>& frames) {
+  HapticFrame fr{};
   fr.t = v.timeNs;
   dm::record::decodeDoubles(v.payload, fr.v, 13);
   fr.buttons = dm::record::getU32(v.payload + 8 * 13);
@@ -54,12 +54,12 @@ DmDevice* replayOpen(const DmDeviceParam* params, size_t count, char* error, siz
         r.workspace = p.number("workspace", 0.15, 1e-6, 100.0);
         if (p.ok())
           r.stream.load(o, dm::record::kHapticState, dm::record::kHapticStateBytes, "haptic-state", p,
-                        decodeFrame);
+                        decodeHapticFrame);
       });
 }
 
 int replayInfo(DmDevice* dev, DmHapticInfo* info) {
-  ReplayHaptic* r = self(dev);
+  ReplayHaptic* r = asReplayHaptic(dev);
   *info = DmHapticInfo{};
   dm::driver::replayIdentity(info->identity, "replay-haptic", "haptic stream", r->stream.source);
   info->capabilities =
@@ -77,10 +77,10 @@ int replayInfo(DmDevice* dev, DmHapticInfo* info) {
 }
 
 int replayRead(DmDevice* dev, int64_t now, DmHapticState* s) {
-  ReplayHaptic* r = self(dev);
+  ReplayHaptic* r = asReplayHaptic(dev);
   // Past the end the last record holds (hold, unlike the other replays:
   // a haptic loop keeps rendering the final pose).
-  const Frame& f = dm::driver::latestAtOrBefore(r->stream.frames, r->stream.clock.at(now).recordedNs);
+  const HapticFrame& f = dm::driver::latestAtOrBefore(r->stream.frames, r->stream.clock.at(now).recordedNs);
   *s = DmHapticState{};
   s->time_ns = now;
   for (int i = 0; i < 3; ++i) {
@@ -103,12 +103,12 @@ int replayInit(const DmHostApi* host) {
                                 DM_HAPTIC_DEVICE_KIND_ABI_VERSION, &kReplayHaptic);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "replay-haptic", "1.0", replayInit, nullptr};
+const DmPluginInfo kReplayHapticInfo = {DM_PLUGIN_ABI_VERSION, "replay-haptic", "1.0", replayInit, nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kReplayHapticInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_replay_haptic(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_replay_haptic(void) { return &kReplayHapticInfo; }
 #endif

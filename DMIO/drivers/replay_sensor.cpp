@@ -26,7 +26,7 @@ namespace {
 
 using dm::driver::ParamReader;
 
-struct Frame {
+struct SensorFrame {
   std::int64_t t;
   std::uint32_t type;
   double values[7];
@@ -34,16 +34,16 @@ struct Frame {
 
 // One instance; DmDevice* is this type behind the C boundary.
 struct ReplaySensor {
-  dm::driver::ReplayStream<Frame> stream;
+  dm::driver::ReplayStream<SensorFrame> stream;
   char unit[16] = {};
 };
 
-ReplaySensor* self(DmDevice* d) { return reinterpret_cast<ReplaySensor*>(d); }
+ReplaySensor* asReplaySensor(DmDevice* d) { return reinterpret_cast<ReplaySensor*>(d); }
 
-std::string decodeFrame(const dm::record::RecordView& v, std::vector<Frame>& frames) {
+std::string decodeSensorFrame(const dm::record::RecordView& v, std::vector<SensorFrame>& frames) {
   std::string why = dm::record::checkSensorReading(v.payload);
   if (!why.empty()) return why;
-  Frame f{};
+  SensorFrame f{};
   f.t = v.timeNs;
   dm::record::decodeSensorReading(v.payload, f.type, f.values);
   if (!frames.empty() && f.type != frames.front().type)
@@ -64,12 +64,12 @@ DmDevice* sensorOpen(const DmDeviceParam* params, size_t count, char* error, siz
         }
         if (p.ok())
           r.stream.load(o, dm::record::kSensorReading, dm::record::kSensorReadingBytes, "sensor-reading", p,
-                        decodeFrame);
+                        decodeSensorFrame);
       });
 }
 
 int sensorInfo(DmDevice* dev, DmSensorInfo* info) {
-  ReplaySensor* r = self(dev);
+  ReplaySensor* r = asReplaySensor(dev);
   *info = DmSensorInfo{};
   dm::driver::replayIdentity(info->identity, "replay-sensor", "sensor stream", r->stream.source);
   info->reading_type = r->stream.frames.front().type;
@@ -79,9 +79,9 @@ int sensorInfo(DmDevice* dev, DmSensorInfo* info) {
 }
 
 int sensorRead(DmDevice* dev, int64_t now, DmSensorReading* reading) {
-  ReplaySensor* r = self(dev);
+  ReplaySensor* r = asReplaySensor(dev);
   std::int64_t time = 0;
-  const Frame* f = r->stream.playing(now, time);
+  const SensorFrame* f = r->stream.playing(now, time);
   if (!f) return DM_DEVICE_ERROR_LOST;  // end of stream
   *reading = DmSensorReading{};
   reading->time_ns = time;
@@ -98,12 +98,12 @@ int sensorInit(const DmHostApi* host) {
                                 &kReplaySensor);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "replay-sensor", "1.0", sensorInit, nullptr};
+const DmPluginInfo kReplaySensorInfo = {DM_PLUGIN_ABI_VERSION, "replay-sensor", "1.0", sensorInit, nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kReplaySensorInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_replay_sensor(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_replay_sensor(void) { return &kReplaySensorInfo; }
 #endif

@@ -57,7 +57,7 @@ struct SerialPosix {
   DmSerialConfig config{115200, 8, DM_SERIAL_PARITY_NONE, 1, DM_SERIAL_FLOW_NONE};
 };
 
-SerialPosix* self(DmDevice* d) { return reinterpret_cast<SerialPosix*>(d); }
+SerialPosix* asSerialPosix(DmDevice* d) { return reinterpret_cast<SerialPosix*>(d); }
 
 std::int64_t monotonicMs() {
   timespec ts{};
@@ -173,13 +173,13 @@ DmDevice* serOpen(const DmDeviceParam* params, size_t count, char* error, size_t
 }
 
 void serClose(DmDevice* dev) {
-  SerialPosix* d = self(dev);
+  SerialPosix* d = asSerialPosix(dev);
   if (d->fd >= 0) ::close(d->fd);
   delete d;
 }
 
 int serInfo(DmDevice* dev, DmSerialInfo* info) {
-  SerialPosix* d = self(dev);
+  SerialPosix* d = asSerialPosix(dev);
   *info = DmSerialInfo{};
   dm::driver::copyField(info->identity.driver, "serial-posix");
   dm::driver::copyField(info->identity.vendor, "POSIX");
@@ -192,7 +192,7 @@ int serInfo(DmDevice* dev, DmSerialInfo* info) {
 }
 
 int serConfigure(DmDevice* dev, const DmSerialConfig* config, char* error, size_t errorSize) {
-  SerialPosix* d = self(dev);
+  SerialPosix* d = asSerialPosix(dev);
   if (d->fd < 0) return DM_DEVICE_ERROR_LOST;
   const int rc = applyConfig(d->fd, *config, error, errorSize);
   if (rc == DM_DEVICE_OK) d->config = *config;
@@ -216,7 +216,7 @@ int waitFor(int fd, short events, std::int64_t deadlineMs) {
 }
 
 int serRead(DmDevice* dev, void* data, size_t size, int timeoutMs, size_t* transferred) {
-  SerialPosix* d = self(dev);
+  SerialPosix* d = asSerialPosix(dev);
   *transferred = 0;
   if (d->fd < 0) return DM_DEVICE_ERROR_LOST;
   const std::int64_t deadline = monotonicMs() + timeoutMs;
@@ -237,7 +237,7 @@ int serRead(DmDevice* dev, void* data, size_t size, int timeoutMs, size_t* trans
 }
 
 int serWrite(DmDevice* dev, const void* data, size_t size, int timeoutMs, size_t* transferred) {
-  SerialPosix* d = self(dev);
+  SerialPosix* d = asSerialPosix(dev);
   *transferred = 0;
   if (d->fd < 0) return DM_DEVICE_ERROR_LOST;
   const std::int64_t deadline = monotonicMs() + timeoutMs;
@@ -259,7 +259,7 @@ int serWrite(DmDevice* dev, const void* data, size_t size, int timeoutMs, size_t
 }
 
 int serReconnect(DmDevice* dev) {
-  SerialPosix* d = self(dev);
+  SerialPosix* d = asSerialPosix(dev);
   if (d->fd >= 0) ::close(d->fd);
   d->fd = openLine(d->path, d->config, nullptr, 0);
   return d->fd >= 0 ? DM_DEVICE_OK : DM_DEVICE_ERROR_LOST;
@@ -273,12 +273,12 @@ int serInit(const DmHostApi* host) {
                                 &kSerialPosix);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "serial-posix", "1.0", serInit, nullptr};
+const DmPluginInfo kSerialPosixInfo = {DM_PLUGIN_ABI_VERSION, "serial-posix", "1.0", serInit, nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kSerialPosixInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_serial_posix(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_serial_posix(void) { return &kSerialPosixInfo; }
 #endif

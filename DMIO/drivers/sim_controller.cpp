@@ -47,7 +47,7 @@ struct SimController {
   dm::driver::LossWindow loss;
 };
 
-SimController* self(DmDevice* d) { return reinterpret_cast<SimController*>(d); }
+SimController* asSimController(DmDevice* d) { return reinterpret_cast<SimController*>(d); }
 
 DmDevice* ctlOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
   ParamReader r(params, count, error, errorSize);
@@ -78,10 +78,10 @@ DmDevice* ctlOpen(const DmDeviceParam* params, size_t count, char* error, size_t
   return reinterpret_cast<DmDevice*>(d);
 }
 
-void ctlClose(DmDevice* d) { delete self(d); }
+void ctlClose(DmDevice* d) { delete asSimController(d); }
 
 int ctlInfo(DmDevice* dev, DmControllerInfo* info) {
-  SimController* d = self(dev);
+  SimController* d = asSimController(dev);
   *info = DmControllerInfo{};
   dm::driver::simIdentity(info->identity, "sim-controller", "simulated 6-axis controller", d->seed);
   info->capabilities = DM_CONTROLLER_CAP_AXES | DM_CONTROLLER_CAP_BUTTONS | DM_CONTROLLER_CAP_RECONNECT;
@@ -92,7 +92,7 @@ int ctlInfo(DmDevice* dev, DmControllerInfo* info) {
 }
 
 int ctlRead(DmDevice* dev, int64_t now, DmControllerState* s) {
-  SimController* d = self(dev);
+  SimController* d = asSimController(dev);
   if (d->loss.lostAt(now)) return DM_DEVICE_ERROR_LOST;
   const double t = 1e-9 * static_cast<double>(now);
   *s = DmControllerState{};
@@ -109,7 +109,7 @@ int ctlRead(DmDevice* dev, int64_t now, DmControllerState* s) {
   return DM_DEVICE_OK;
 }
 
-int ctlReconnect(DmDevice* dev, int64_t now) { return self(dev)->loss.reconnect(now); }
+int ctlReconnect(DmDevice* dev, int64_t now) { return asSimController(dev)->loss.reconnect(now); }
 
 const DmControllerVTable kSimController = {ctlOpen, ctlClose, ctlInfo, ctlRead, ctlReconnect};
 
@@ -118,12 +118,12 @@ int ctlInit(const DmHostApi* host) {
                                 DM_CONTROLLER_KIND_ABI_VERSION, &kSimController);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "sim-controller", "1.0", ctlInit, nullptr};
+const DmPluginInfo kSimControllerInfo = {DM_PLUGIN_ABI_VERSION, "sim-controller", "1.0", ctlInit, nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kSimControllerInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_sim_controller(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_sim_controller(void) { return &kSimControllerInfo; }
 #endif

@@ -64,7 +64,7 @@ struct SimDaq {
   }
 };
 
-SimDaq* self(DmDevice* d) { return reinterpret_cast<SimDaq*>(d); }
+SimDaq* asSimDaq(DmDevice* d) { return reinterpret_cast<SimDaq*>(d); }
 
 DmDevice* daqOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
   ParamReader r(params, count, error, errorSize);
@@ -99,10 +99,10 @@ DmDevice* daqOpen(const DmDeviceParam* params, size_t count, char* error, size_t
   return reinterpret_cast<DmDevice*>(d);
 }
 
-void daqClose(DmDevice* d) { delete self(d); }
+void daqClose(DmDevice* d) { delete asSimDaq(d); }
 
 int daqInfo(DmDevice* dev, DmDaqInfo* info) {
-  SimDaq* d = self(dev);
+  SimDaq* d = asSimDaq(dev);
   *info = DmDaqInfo{};
   dm::driver::simIdentity(info->identity, "sim-daq", "simulated signal generator", d->seed);
   info->capabilities = DM_DAQ_CAP_ANALOG_IN | DM_DAQ_CAP_RECONNECT;
@@ -116,7 +116,7 @@ int daqInfo(DmDevice* dev, DmDaqInfo* info) {
 
 int daqRead(DmDevice* dev, int64_t now, double* samples, int64_t* times, size_t maxFrames,
             DmDaqBlock* block) {
-  SimDaq* d = self(dev);
+  SimDaq* d = asSimDaq(dev);
   *block = DmDaqBlock{};
   if (d->loss.lostAt(now)) return DM_DEVICE_ERROR_LOST;
   if (!d->started) {
@@ -149,7 +149,7 @@ int daqRead(DmDevice* dev, int64_t now, double* samples, int64_t* times, size_t 
 }
 
 int daqReconnect(DmDevice* dev, int64_t now) {
-  SimDaq* d = self(dev);
+  SimDaq* d = asSimDaq(dev);
   const bool wasLost = d->loss.lost;
   const int rc = d->loss.reconnect(now);
   if (rc == DM_DEVICE_OK && wasLost && d->started) {
@@ -169,12 +169,12 @@ int daqInit(const DmHostApi* host) {
   return host->register_factory(host->ctx, DM_DAQ_KIND, "sim-daq", DM_DAQ_KIND_ABI_VERSION, &kSimDaq);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "sim-daq", "1.0", daqInit, nullptr};
+const DmPluginInfo kSimDaqInfo = {DM_PLUGIN_ABI_VERSION, "sim-daq", "1.0", daqInit, nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kSimDaqInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_sim_daq(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_sim_daq(void) { return &kSimDaqInfo; }
 #endif

@@ -192,7 +192,7 @@ struct SimHaptic {
   }
 };
 
-SimHaptic* self(DmDevice* d) { return reinterpret_cast<SimHaptic*>(d); }
+SimHaptic* asSimHaptic(DmDevice* d) { return reinterpret_cast<SimHaptic*>(d); }
 
 bool loadCsv(SimHaptic& d, const char* file, ParamReader& r) {
   std::FILE* f = std::fopen(file, "r");
@@ -276,10 +276,10 @@ DmDevice* simOpen(const DmDeviceParam* params, size_t count, char* error, size_t
   return reinterpret_cast<DmDevice*>(d);
 }
 
-void simClose(DmDevice* d) { delete self(d); }
+void simClose(DmDevice* d) { delete asSimHaptic(d); }
 
 int simInfo(DmDevice* dev, DmHapticInfo* info) {
-  SimHaptic* d = self(dev);
+  SimHaptic* d = asSimHaptic(dev);
   *info = DmHapticInfo{};
   dm::driver::simIdentity(info->identity, "sim-haptic",
                           d->hand ? "simulated 3-DOF stylus in a virtual hand" : "simulated 3-DOF stylus",
@@ -299,7 +299,7 @@ int simInfo(DmDevice* dev, DmHapticInfo* info) {
 }
 
 int simRead(DmDevice* dev, int64_t now, DmHapticState* s) {
-  SimHaptic* d = self(dev);
+  SimHaptic* d = asSimHaptic(dev);
   if (d->lostAt(now)) return DM_DEVICE_ERROR_LOST;
   const Sample smp = d->delayed(now);
   *s = DmHapticState{};
@@ -316,7 +316,7 @@ int simRead(DmDevice* dev, int64_t now, DmHapticState* s) {
 }
 
 int simWrite(DmDevice* dev, int64_t now, const double force[3], const double torque[3]) {
-  SimHaptic* d = self(dev);
+  SimHaptic* d = asSimHaptic(dev);
   (void)torque;  // no torque output (3-DOF)
   if (d->lostAt(now)) {
     d->force = {0, 0, 0};  // motors off while the link is down
@@ -328,7 +328,7 @@ int simWrite(DmDevice* dev, int64_t now, const double force[3], const double tor
 }
 
 int simReconnect(DmDevice* dev, int64_t now) {
-  SimHaptic* d = self(dev);
+  SimHaptic* d = asSimHaptic(dev);
   const double t = 1e-9 * static_cast<double>(now);
   if (!d->lost) return DM_DEVICE_OK;
   if (d->reconnectAt < 0.0 || t < d->reconnectAt) return DM_DEVICE_ERROR_LOST;
@@ -345,12 +345,12 @@ int simInit(const DmHostApi* host) {
                                 DM_HAPTIC_DEVICE_KIND_ABI_VERSION, &kSimHaptic);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "sim-haptic", "1.0", simInit, nullptr};
+const DmPluginInfo kSimHapticInfo = {DM_PLUGIN_ABI_VERSION, "sim-haptic", "1.0", simInit, nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kSimHapticInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_sim_haptic(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_sim_haptic(void) { return &kSimHapticInfo; }
 #endif

@@ -82,7 +82,7 @@ struct SimSensor {
   }
 };
 
-SimSensor* self(DmDevice* d) { return reinterpret_cast<SimSensor*>(d); }
+SimSensor* asSimSensor(DmDevice* d) { return reinterpret_cast<SimSensor*>(d); }
 
 DmDevice* senOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
   ParamReader r(params, count, error, errorSize);
@@ -125,10 +125,10 @@ DmDevice* senOpen(const DmDeviceParam* params, size_t count, char* error, size_t
   return reinterpret_cast<DmDevice*>(d);
 }
 
-void senClose(DmDevice* d) { delete self(d); }
+void senClose(DmDevice* d) { delete asSimSensor(d); }
 
 int senInfo(DmDevice* dev, DmSensorInfo* info) {
-  SimSensor* d = self(dev);
+  SimSensor* d = asSimSensor(dev);
   static const char* const kModels[] = {"simulated scalar sensor", "simulated 3-axis force sensor",
                                         "simulated orientation sensor", "simulated 6-DOF tracker"};
   static const std::uint32_t kTypes[] = {DM_SENSOR_SCALAR, DM_SENSOR_VEC3, DM_SENSOR_QUATERNION,
@@ -146,7 +146,7 @@ int senInfo(DmDevice* dev, DmSensorInfo* info) {
 }
 
 int senRead(DmDevice* dev, int64_t now, DmSensorReading* out) {
-  SimSensor* d = self(dev);
+  SimSensor* d = asSimSensor(dev);
   if (d->loss.lostAt(now)) return DM_DEVICE_ERROR_LOST;
   const double t = 1e-9 * static_cast<double>(now);
   *out = DmSensorReading{};
@@ -173,7 +173,7 @@ int senRead(DmDevice* dev, int64_t now, DmSensorReading* out) {
   return DM_DEVICE_OK;
 }
 
-int senReconnect(DmDevice* dev, int64_t now) { return self(dev)->loss.reconnect(now); }
+int senReconnect(DmDevice* dev, int64_t now) { return asSimSensor(dev)->loss.reconnect(now); }
 
 const DmSensorVTable kSimSensor = {senOpen, senClose, senInfo, senRead, senReconnect};
 
@@ -182,12 +182,12 @@ int senInit(const DmHostApi* host) {
                                 &kSimSensor);
 }
 
-const DmPluginInfo kInfo = {DM_PLUGIN_ABI_VERSION, "sim-sensor", "1.0", senInit, nullptr};
+const DmPluginInfo kSimSensorInfo = {DM_PLUGIN_ABI_VERSION, "sim-sensor", "1.0", senInit, nullptr};
 
 }  // namespace
 
 #if defined(DM_DRIVER_PLUGIN)
-DM_PLUGIN_ENTRY { return &kInfo; }
+DM_PLUGIN_ENTRY { return &kSimSensorInfo; }
 #else
-extern "C" const DmPluginInfo* dm_builtin_entry_sim_sensor(void) { return &kInfo; }
+extern "C" const DmPluginInfo* dm_builtin_entry_sim_sensor(void) { return &kSimSensorInfo; }
 #endif

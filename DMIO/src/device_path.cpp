@@ -14,7 +14,7 @@ namespace {
 
 constexpr std::array<std::string_view, 8> kColumns = {"t", "x", "y", "z", "qw", "qx", "qy", "qz"};
 
-std::string_view trim(std::string_view s) noexcept {
+std::string_view trimBlanks(std::string_view s) noexcept {
   while (!s.empty() && (s.front() == ' ' || s.front() == '\t')) s.remove_prefix(1);
   while (!s.empty() && (s.back() == ' ' || s.back() == '\t' || s.back() == '\r')) s.remove_suffix(1);
   return s;
@@ -39,7 +39,7 @@ int splitFields(std::string_view line, std::array<std::string_view, 9>& fields,
     const std::size_t comma = line.find(',', start);
     const std::size_t end = comma == std::string_view::npos ? line.size() : comma;
     columns[n] = start + 1;
-    fields[n++] = trim(line.substr(start, end - start));
+    fields[n++] = trimBlanks(line.substr(start, end - start));
     if (comma == std::string_view::npos) break;
     start = comma + 1;
   }
@@ -77,7 +77,7 @@ Result<DevicePath> parseDevicePathCsv(std::string_view text, std::string_view so
   while (pos < text.size()) {
     const std::size_t nl = text.find('\n', pos);
     const std::size_t end = nl == std::string_view::npos ? text.size() : nl;
-    const std::string_view line = trim(text.substr(pos, end - pos));
+    const std::string_view line = trimBlanks(text.substr(pos, end - pos));
     pos = end + 1;
     ++lineNo;
     if (line.empty() || line.front() == '#') continue;

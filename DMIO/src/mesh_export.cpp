@@ -22,7 +22,7 @@ namespace {
 
 using Bytes = std::vector<std::byte>;
 
-enum class Format { Stl, Ply, Obj };
+enum class MeshFormat { Stl, Ply, Obj };
 
 class Writer {
  public:
@@ -222,35 +222,36 @@ Bytes obj(const Mesh& m) {
   return w.take();
 }
 
-Result<Format> formatOf(std::string_view extension, const std::string& where) {
+Result<MeshFormat> meshFormatOf(std::string_view extension, const std::string& where) {
   std::string e(extension);
   for (char& c : e) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   if (!e.empty() && e.front() == '.') e.erase(0, 1);
-  if (e == "stl") return Format::Stl;
-  if (e == "ply") return Format::Ply;
-  if (e == "obj") return Format::Obj;
+  if (e == "stl") return MeshFormat::Stl;
+  if (e == "ply") return MeshFormat::Ply;
+  if (e == "obj") return MeshFormat::Obj;
   return fail(ErrorCode::Unsupported, "cannot write meshes with extension '" + std::string(extension) + "'",
               where, "use .stl, .ply or .obj");
 }
 
-Result<Bytes> encode(const Mesh& mesh, Format format, const MeshExportOptions& options) {
+Result<Bytes> encode(const Mesh& mesh, MeshFormat format, const MeshExportOptions& options) {
   if (auto s = mesh.validate(); !s) return s.error();
   const std::string where = mesh.name.empty() ? std::string("mesh") : "mesh '" + mesh.name + "'";
   if (mesh.triangles.empty())
     return fail(ErrorCode::InvalidArgument, "has no triangles; nothing to write", where,
                 "readers of the SDK reject meshes without triangles");
-  if (format == Format::Stl && mesh.triangles.size() > std::numeric_limits<std::uint32_t>::max())
+  if (format == MeshFormat::Stl && mesh.triangles.size() > std::numeric_limits<std::uint32_t>::max())
     return fail(ErrorCode::Unsupported, "has more triangles than binary STL can count (2^32 - 1)", where,
                 "write PLY or OBJ");
-  if (format == Format::Ply && mesh.positions.size() > std::size_t{std::numeric_limits<std::int32_t>::max()})
+  if (format == MeshFormat::Ply &&
+      mesh.positions.size() > std::size_t{std::numeric_limits<std::int32_t>::max()})
     return fail(ErrorCode::Unsupported, "has more vertices than PLY int indices can address (2^31 - 1)",
                 where, "split the mesh");
   switch (format) {
-    case Format::Stl:
+    case MeshFormat::Stl:
       return options.binary ? stlBinary(mesh) : stlAscii(mesh);
-    case Format::Ply:
+    case MeshFormat::Ply:
       return ply(mesh, options.binary);
-    case Format::Obj:
+    case MeshFormat::Obj:
       return obj(mesh);
   }
   return fail(ErrorCode::Internal, "unhandled mesh format", where);
@@ -260,14 +261,14 @@ Result<Bytes> encode(const Mesh& mesh, Format format, const MeshExportOptions& o
 
 Result<std::vector<std::byte>> encodeMesh(const Mesh& mesh, std::string_view extension,
                                           const MeshExportOptions& options) {
-  auto format = formatOf(extension, "encodeMesh");
+  auto format = meshFormatOf(extension, "encodeMesh");
   if (!format) return format.error();
   return encode(mesh, *format, options);
 }
 
 Status writeMesh(const Mesh& mesh, const std::filesystem::path& file, const MeshExportOptions& options) {
   const std::string where = file.string();
-  auto format = formatOf(file.extension().string(), where);
+  auto format = meshFormatOf(file.extension().string(), where);
   if (!format) return format.error();
   auto bytes = encode(mesh, *format, options);
   if (!bytes) return bytes.error().within(where);

@@ -36,6 +36,7 @@
 #include <unordered_map>
 #include <utility>
 
+#include "format_util.hpp"
 #include "isolate.hpp"
 
 namespace dm {
@@ -43,6 +44,7 @@ namespace dm {
 using detail::ByteReader;
 using detail::FdWriter;
 using detail::IsolateOptions;
+using detail::lower;
 using detail::runIsolated;
 
 namespace {
@@ -58,12 +60,6 @@ constexpr unsigned kPostProcess =
 // Deeper scene graphs than this are refused (Assimp rejects cycles, but a
 // crafted file can still nest deeply).
 constexpr std::size_t kMaxNodeDepth = 1024;
-
-std::string lower(std::string_view s) {
-  std::string out(s);
-  for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return out;
-}
 
 std::string squote(std::string_view s) { return "'" + std::string(s) + "'"; }
 

@@ -13,6 +13,7 @@
 #include <optional>
 #include <string>
 
+#include "format_util.hpp"
 #include "gzip.hpp"
 #include "raw_slice.hpp"
 
@@ -20,37 +21,13 @@ namespace dm {
 
 namespace {
 
-// A header is text; anything longer than this without ElementDataFile is not one.
-constexpr std::size_t kMaxHeaderBytes = std::size_t{1} << 20;
-
-std::string lower(std::string_view s) {
-  std::string out(s);
-  for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return out;
-}
-
-std::string_view trim(std::string_view s) {
-  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front()))) s.remove_prefix(1);
-  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.remove_suffix(1);
-  return s;
-}
-
-// Shows at most 60 characters of untrusted text, non-printables escaped.
-std::string shown(std::string_view s) {
-  std::string out;
-  for (std::size_t i = 0; i < s.size() && i < 60; ++i) {
-    const auto c = static_cast<unsigned char>(s[i]);
-    if (c >= 32 && c < 127) {
-      out += static_cast<char>(c);
-    } else {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\x%02x", c);
-      out += buf;
-    }
-  }
-  if (s.size() > 60) out += "...";
-  return out;
-}
+using detail::checkWritable;
+using detail::fmt17;
+using detail::isSingular;
+using detail::kMaxHeaderBytes;
+using detail::lower;
+using detail::shown;
+using detail::trim;
 
 struct Field {
   std::string value;
@@ -173,11 +150,6 @@ const char* elementTypeName(VoxelType t) {
       return "MET_DOUBLE";
   }
   return "MET_OTHER";
-}
-
-bool isSingular(const Mat3& m) {
-  const double scale = m.col(0).norm() * m.col(1).norm() * m.col(2).norm();
-  return !(scale > 0) || !(std::abs(m.determinant()) > 1e-10 * scale);
 }
 
 Result<Parsed> HeaderParser::parse() {
@@ -475,12 +447,6 @@ Result<Volume> readMetaImage(const std::filesystem::path& file, const MetaImageR
 
 namespace {
 
-std::string fmt17(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", v == 0 ? 0.0 : v);  // no "-0"
-  return buf;
-}
-
 std::vector<std::byte> littleEndianVoxels(const Volume& v) {
   std::vector<std::byte> out(v.bytes(), v.bytes() + v.byteSize());
   if constexpr (std::endian::native == std::endian::big) {
@@ -512,18 +478,6 @@ std::string headerText(const Volume& v, bool compressed, std::size_t compressedS
   h += std::string("ElementType = ") + elementTypeName(v.type()) + "\n";
   h += "ElementDataFile = " + dataFile + "\n";
   return h;
-}
-
-// Millimetre geometry written with %.17g must read back as a usable affine.
-Status checkWritable(const Volume& v, const std::string& where) {
-  if (v.empty())
-    return fail(ErrorCode::InvalidArgument, "the volume is empty", where, "create it with Volume::create");
-  const Mat3 lin = v.indexToWorld().linear() * 1e3;
-  const Vec3 spacing = lin.colwise().norm().transpose();
-  if (!lin.allFinite() || !(v.indexToWorld().translation() * 1e3).allFinite() || !spacing.allFinite() ||
-      !(spacing.array() > 0).all())
-    return fail(ErrorCode::InvalidArgument, "the index-to-world affine overflows in millimetres", where);
-  return ok();
 }
 
 Result<std::vector<std::byte>> payload(const Volume& v, bool compress) {

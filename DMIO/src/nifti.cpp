@@ -11,11 +11,16 @@
 #include <limits>
 #include <vector>
 
+#include "format_util.hpp"
 #include "gzip.hpp"
 
 namespace dm {
 
 namespace {
+
+using detail::endsWith;
+using detail::isSingular;
+using detail::lower;
 
 constexpr std::size_t kSizeN1 = 348;
 constexpr std::size_t kSizeN2 = 540;
@@ -132,14 +137,7 @@ Error parseError(std::string_view source, std::string what, std::string hint = {
   return fail(ErrorCode::Parse, std::move(what), std::string(source), std::move(hint));
 }
 
-// A 3x3 block is unusable when its determinant is tiny relative to the
-// product of its column lengths (scale-free test for collinear columns).
-bool isSingular(const Mat3& m) {
-  const double scale = m.col(0).norm() * m.col(1).norm() * m.col(2).norm();
-  return !(scale > 0) || !(std::abs(m.determinant()) > 1e-10 * scale);
-}
-
-struct HeaderReader {
+struct NiftiHeaderReader {
   std::span<const std::byte> bytes;
   const Layout& lay;
   bool swap;
@@ -198,7 +196,7 @@ Result<NiftiHeader> parseNiftiHeader(std::span<const std::byte> bytes, std::stri
                           std::to_string(lay->size),
                       "the file is cut short");
 
-  const HeaderReader r{bytes, *lay, fileBig != (std::endian::native == std::endian::big)};
+  const NiftiHeaderReader r{bytes, *lay, fileBig != (std::endian::native == std::endian::big)};
 
   // magic
   const std::byte* mp = bytes.data() + lay->magic;
@@ -508,15 +506,6 @@ Result<Volume> parseNiftiPair(std::span<const std::byte> header, std::span<const
 }
 
 namespace {
-
-std::string lower(std::string s) {
-  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
-
-bool endsWith(const std::string& s, std::string_view suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
 
 // For a .hdr/.img name, the partner's candidates (same case style first).
 std::vector<std::filesystem::path> partnerCandidates(const std::filesystem::path& file, bool isHeader) {

@@ -13,6 +13,7 @@
 #include <optional>
 #include <string>
 
+#include "format_util.hpp"
 #include "gzip.hpp"
 #include "raw_slice.hpp"
 
@@ -20,20 +21,15 @@ namespace dm {
 
 namespace {
 
-constexpr std::size_t kMaxHeaderBytes = std::size_t{1} << 20;
+using detail::checkWritable;
+using detail::fmt17;
+using detail::isSingular;
+using detail::kMaxHeaderBytes;
+using detail::lower;
+using detail::shown;
+using detail::trim;
+
 constexpr int kMaxDimension = 16;
-
-std::string lower(std::string_view s) {
-  std::string out(s);
-  for (char& c : out) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return out;
-}
-
-std::string_view trim(std::string_view s) {
-  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.front()))) s.remove_prefix(1);
-  while (!s.empty() && std::isspace(static_cast<unsigned char>(s.back()))) s.remove_suffix(1);
-  return s;
-}
 
 // Lower case with runs of blanks collapsed to one space ("unsigned   char").
 std::string normalized(std::string_view s) {
@@ -48,22 +44,6 @@ std::string normalized(std::string_view s) {
     blank = false;
     out += static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   }
-  return out;
-}
-
-std::string shown(std::string_view s) {
-  std::string out;
-  for (std::size_t i = 0; i < s.size() && i < 60; ++i) {
-    const auto c = static_cast<unsigned char>(s[i]);
-    if (c >= 32 && c < 127) {
-      out += static_cast<char>(c);
-    } else {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\x%02x", c);
-      out += buf;
-    }
-  }
-  if (s.size() > 60) out += "...";
   return out;
 }
 
@@ -95,7 +75,7 @@ bool parseNumber(std::string_view t, double& v) {
   return ec == std::errc() && next == e;
 }
 
-struct Field {
+struct NrrdField {
   std::string value;
   int line = 0;
   std::string name;
@@ -191,7 +171,7 @@ const SpaceName kSpaces[] = {
     {"3d-right-handed-time", "", 4, {1, 1, 1}},
 };
 
-struct Parsed {
+struct ParsedNrrd {
   Vec3i dims = Vec3i::Ones();
   std::int64_t volumes = 1;
   RawElement element = RawElement::U8;
@@ -208,35 +188,31 @@ struct Parsed {
   std::size_t volumeBytes = 0;
 };
 
-bool isSingular(const Mat3& m) {
-  const double scale = m.col(0).norm() * m.col(1).norm() * m.col(2).norm();
-  return !(scale > 0) || !(std::abs(m.determinant()) > 1e-10 * scale);
-}
-
-class HeaderParser {
+class NrrdHeaderParser {
  public:
-  HeaderParser(std::span<const std::byte> bytes, std::string_view source) : bytes_(bytes), source_(source) {}
-  Result<Parsed> parse();
+  NrrdHeaderParser(std::span<const std::byte> bytes, std::string_view source)
+      : bytes_(bytes), source_(source) {}
+  Result<ParsedNrrd> parse();
 
  private:
-  Error error(const Field& f, const std::string& what, std::string hint = {},
+  Error error(const NrrdField& f, const std::string& what, std::string hint = {},
               ErrorCode code = ErrorCode::Parse) const {
     return fail(code, "field \"" + f.name + "\" (line " + std::to_string(f.line) + ") " + what, source_,
                 std::move(hint));
   }
-  const Field* find(const char* name) const {
+  const NrrdField* find(const char* name) const {
     auto it = fields_.find(name);
     return it == fields_.end() ? nullptr : &it->second;
   }
-  Result<std::int64_t> integer(const Field& f, std::int64_t lo, std::int64_t hi) const;
-  Result<Vec3> vector(const Field& f, std::string_view token, int components) const;
+  Result<std::int64_t> integer(const NrrdField& f, std::int64_t lo, std::int64_t hi) const;
+  Result<Vec3> vector(const NrrdField& f, std::string_view token, int components) const;
 
   std::span<const std::byte> bytes_;
   std::string source_;
-  std::map<std::string, Field> fields_;
+  std::map<std::string, NrrdField> fields_;
 };
 
-Result<std::int64_t> HeaderParser::integer(const Field& f, std::int64_t lo, std::int64_t hi) const {
+Result<std::int64_t> NrrdHeaderParser::integer(const NrrdField& f, std::int64_t lo, std::int64_t hi) const {
   double v = 0;
   if (!parseNumber(trim(f.value), v) || v != std::floor(v) || v < static_cast<double>(lo) ||
       v > static_cast<double>(hi))
@@ -246,7 +222,7 @@ Result<std::int64_t> HeaderParser::integer(const Field& f, std::int64_t lo, std:
 }
 
 // "(x,y,z)" with `components` finite entries (only the first three are kept).
-Result<Vec3> HeaderParser::vector(const Field& f, std::string_view token, int components) const {
+Result<Vec3> NrrdHeaderParser::vector(const NrrdField& f, std::string_view token, int components) const {
   if (token.size() < 2 || token.front() != '(' || token.back() != ')')
     return error(f, "has \"" + shown(token) + "\"; expected a vector like (1,0,0)");
   std::string_view inner = token.substr(1, token.size() - 2);
@@ -273,8 +249,8 @@ Result<Vec3> HeaderParser::vector(const Field& f, std::string_view token, int co
   return out;
 }
 
-Result<Parsed> HeaderParser::parse() {
-  Parsed out;
+Result<ParsedNrrd> NrrdHeaderParser::parse() {
+  ParsedNrrd out;
   const char* text = reinterpret_cast<const char*>(bytes_.data());
   const std::size_t scanEnd = std::min(bytes_.size(), kMaxHeaderBytes);
   std::size_t pos = 0;
@@ -311,7 +287,7 @@ Result<Parsed> HeaderParser::parse() {
                   source_, "the header is damaged, or a blank line is missing before the data");
     const std::string name(trim(raw.substr(0, colon)));
     const std::string key = normalized(name);
-    Field f{std::string(trim(raw.substr(colon + 2))), line, name};
+    NrrdField f{std::string(trim(raw.substr(colon + 2))), line, name};
     if (auto it = fields_.find(key); it != fields_.end())
       return fail(ErrorCode::Parse,
                   "field \"" + name + "\" appears twice (lines " + std::to_string(it->second.line) + " and " +
@@ -323,7 +299,7 @@ Result<Parsed> HeaderParser::parse() {
     return fail(ErrorCode::Parse, "the file is empty; expected the magic NRRD0001..NRRD0005", source_);
   out.dataOffset = pos;
 
-  const Field* dataF = find("data file");
+  const NrrdField* dataF = find("data file");
   if (dataF) {
     out.dataFile = dataF->value;
     out.dataLine = dataF->line;
@@ -340,7 +316,7 @@ Result<Parsed> HeaderParser::parse() {
   }
 
   // type
-  const Field* typeF = find("type");
+  const NrrdField* typeF = find("type");
   if (!typeF) return fail(ErrorCode::Parse, "the \"type\" field is missing", source_);
   {
     const std::string t = normalized(typeF->value);
@@ -358,12 +334,12 @@ Result<Parsed> HeaderParser::parse() {
   const std::size_t eb = rawElementBytes(out.element);
 
   // dimension, sizes
-  const Field* dimF = find("dimension");
+  const NrrdField* dimF = find("dimension");
   if (!dimF) return fail(ErrorCode::Parse, "the \"dimension\" field is missing", source_);
   auto dimV = integer(*dimF, 1, kMaxDimension);
   if (!dimV) return std::move(dimV).error();
   const int dim = static_cast<int>(*dimV);
-  const Field* sizesF = find("sizes");
+  const NrrdField* sizesF = find("sizes");
   if (!sizesF) return fail(ErrorCode::Parse, "the \"sizes\" field is missing", source_);
   std::vector<std::int64_t> sizes;
   for (std::string_view t : tokens(sizesF->value)) {
@@ -378,7 +354,7 @@ Result<Parsed> HeaderParser::parse() {
     return error(*sizesF, "needs " + std::to_string(dim) + " sizes (dimension " + std::to_string(dim) + ")");
 
   // encoding, endian, skips
-  const Field* encF = find("encoding");
+  const NrrdField* encF = find("encoding");
   if (!encF) return fail(ErrorCode::Parse, "the \"encoding\" field is missing", source_);
   {
     const std::string e = normalized(encF->value);
@@ -396,7 +372,7 @@ Result<Parsed> HeaderParser::parse() {
     else
       return error(*encF, "is \"" + shown(encF->value) + "\"; expected raw, gzip, ascii or hex");
   }
-  if (const Field* f = find("endian")) {
+  if (const NrrdField* f = find("endian")) {
     const std::string e = normalized(f->value);
     if (e == "little")
       out.endian = std::endian::little;
@@ -410,14 +386,14 @@ Result<Parsed> HeaderParser::parse() {
                     "-byte values",
                 source_);
   }
-  if (const Field* f = find("byte skip")) {
+  if (const NrrdField* f = find("byte skip")) {
     auto v = integer(*f, -1, std::int64_t{1} << 50);
     if (!v) return std::move(v).error();
     out.byteSkip = *v;
     if (out.byteSkip == -1 && out.encoding != Encoding::Raw)
       return error(*f, "is -1, which is only allowed with raw encoding");
   }
-  if (const Field* f = find("line skip")) {
+  if (const NrrdField* f = find("line skip")) {
     auto v = integer(*f, 0, std::int64_t{1} << 50);
     if (!v) return std::move(v).error();
     out.lineSkip = *v;
@@ -426,7 +402,7 @@ Result<Parsed> HeaderParser::parse() {
   // space
   const SpaceName* space = nullptr;
   int spaceDim = 0;
-  const Field* spaceF = find("space");
+  const NrrdField* spaceF = find("space");
   if (spaceF) {
     const std::string s = normalized(spaceF->value);
     for (const SpaceName& sn : kSpaces)
@@ -439,7 +415,7 @@ Result<Parsed> HeaderParser::parse() {
     }
     spaceDim = space->dimension;
   }
-  if (const Field* f = find("space dimension")) {
+  if (const NrrdField* f = find("space dimension")) {
     if (spaceF) return error(*f, "cannot be given together with \"space\"");
     auto v = integer(*f, 1, kMaxDimension);
     if (!v) return std::move(v).error();
@@ -449,7 +425,7 @@ Result<Parsed> HeaderParser::parse() {
 
   // Which axes are spatial, and their directions (file space units).
   std::vector<std::optional<Vec3>> dirs(static_cast<std::size_t>(dim));
-  const Field* dirF = find("space directions");
+  const NrrdField* dirF = find("space directions");
   if (dirF) {
     if (spaceDim == 0) return error(*dirF, "needs a \"space\" or \"space dimension\" field");
     const std::vector<std::string_view> t = tokens(dirF->value);
@@ -464,14 +440,14 @@ Result<Parsed> HeaderParser::parse() {
     }
   } else {
     std::vector<std::string> kinds;
-    if (const Field* f = find("kinds")) {
+    if (const NrrdField* f = find("kinds")) {
       for (std::string_view t : tokens(f->value)) kinds.push_back(lower(t));
       if (static_cast<int>(kinds.size()) != dim)
         return error(*f,
                      "has " + std::to_string(kinds.size()) + " entries; dimension is " + std::to_string(dim));
     }
     std::vector<double> spacings(static_cast<std::size_t>(dim), 1.0);
-    if (const Field* f = find("spacings")) {
+    if (const NrrdField* f = find("spacings")) {
       const std::vector<std::string_view> t = tokens(f->value);
       if (static_cast<int>(t.size()) != dim)
         return error(*f, "has " + std::to_string(t.size()) + " entries; dimension is " + std::to_string(dim));
@@ -531,7 +507,7 @@ Result<Parsed> HeaderParser::parse() {
   out.volumes = static_cast<std::int64_t>(volumes);
 
   Vec3 origin = Vec3::Zero();
-  if (const Field* f = find("space origin")) {
+  if (const NrrdField* f = find("space origin")) {
     if (spaceDim == 0) return error(*f, "needs a \"space\" or \"space dimension\" field");
     const std::vector<std::string_view> t = tokens(f->value);
     if (t.size() != 1) return error(*f, "must be one vector like (0,0,0)");
@@ -541,7 +517,7 @@ Result<Parsed> HeaderParser::parse() {
   }
   // Space units per world component; NRRD's default for anatomical spaces is mm.
   Vec3 unit = Vec3::Constant(1e-3);
-  if (const Field* f = find("space units")) {
+  if (const NrrdField* f = find("space units")) {
     const std::vector<std::string_view> t = tokens(f->value);
     if (static_cast<int>(t.size()) != std::max(spaceDim, 1))
       return error(*f,
@@ -605,8 +581,8 @@ int hexValue(char c) {
   return -1;
 }
 
-Result<Volume> loadData(const Parsed& p, std::span<const std::byte> stream, const std::string& source,
-                        const NrrdReadOptions& options) {
+Result<Volume> loadNrrdData(const ParsedNrrd& p, std::span<const std::byte> stream, const std::string& source,
+                            const NrrdReadOptions& options) {
   if (options.volumeIndex < 0 || options.volumeIndex >= p.volumes)
     return fail(ErrorCode::InvalidArgument,
                 "volumeIndex " + std::to_string(options.volumeIndex) + " is out of range: the file holds " +
@@ -774,24 +750,24 @@ Result<Volume> loadData(const Parsed& p, std::span<const std::byte> stream, cons
 Result<Volume> parseNrrd(std::span<const std::byte> bytes, std::string_view sourceName,
                          const NrrdReadOptions& options) {
   const std::string source(sourceName);
-  auto p = HeaderParser(bytes, source).parse();
+  auto p = NrrdHeaderParser(bytes, source).parse();
   if (!p) return std::move(p).error();
   if (!p->dataFile.empty())
     return fail(ErrorCode::InvalidArgument,
                 "the header names a detached data file \"" + shown(p->dataFile) + "\" (line " +
                     std::to_string(p->dataLine) + "); parseNrrd reads only attached data",
                 source, "use readNrrd with the header's path");
-  return loadData(*p, bytes.subspan(p->dataOffset), source, options);
+  return loadNrrdData(*p, bytes.subspan(p->dataOffset), source, options);
 }
 
 Result<Volume> readNrrd(const std::filesystem::path& file, const NrrdReadOptions& options) {
   const std::string source = file.string();
   auto bytes = readFile(file, std::numeric_limits<std::size_t>::max());
   if (!bytes) return std::move(bytes).error();
-  auto p = HeaderParser(*bytes, source).parse();
+  auto p = NrrdHeaderParser(*bytes, source).parse();
   if (!p) return std::move(p).error();
   if (p->dataFile.empty())
-    return loadData(*p, std::span<const std::byte>(*bytes).subspan(p->dataOffset), source, options);
+    return loadNrrdData(*p, std::span<const std::byte>(*bytes).subspan(p->dataOffset), source, options);
   std::filesystem::path dataPath(p->dataFile);
   if (dataPath.is_relative()) dataPath = file.parent_path() / dataPath;
   auto data = readFile(dataPath, std::numeric_limits<std::size_t>::max());
@@ -800,20 +776,14 @@ Result<Volume> readNrrd(const std::filesystem::path& file, const NrrdReadOptions
     e.what = "data file (line " + std::to_string(p->dataLine) + ") of " + source + ": " + e.what;
     return e;
   }
-  return loadData(*p, *data, dataPath.string(), options);
+  return loadNrrdData(*p, *data, dataPath.string(), options);
 }
 
 namespace {
 
-std::string fmt17(double v) {
-  char buf[40];
-  std::snprintf(buf, sizeof buf, "%.17g", v == 0 ? 0.0 : v);
-  return buf;
-}
-
 std::string vec(const Vec3& v) { return "(" + fmt17(v.x()) + "," + fmt17(v.y()) + "," + fmt17(v.z()) + ")"; }
 
-std::string headerText(const Volume& v, bool gzip, const std::string& dataFile) {
+std::string nrrdHeaderText(const Volume& v, bool gzip, const std::string& dataFile) {
   const Mat3 lin = v.indexToWorld().linear() * 1e3;  // RAS mm
   const Vec3 origin = v.indexToWorld().translation() * 1e3;
   std::string h =
@@ -833,19 +803,7 @@ std::string headerText(const Volume& v, bool gzip, const std::string& dataFile) 
   return h;
 }
 
-// Millimetre geometry written with %.17g must read back as a usable affine.
-Status checkWritable(const Volume& v, const std::string& where) {
-  if (v.empty())
-    return fail(ErrorCode::InvalidArgument, "the volume is empty", where, "create it with Volume::create");
-  const Mat3 lin = v.indexToWorld().linear() * 1e3;
-  const Vec3 spacing = lin.colwise().norm().transpose();
-  if (!lin.allFinite() || !(v.indexToWorld().translation() * 1e3).allFinite() || !spacing.allFinite() ||
-      !(spacing.array() > 0).all())
-    return fail(ErrorCode::InvalidArgument, "the index-to-world affine overflows in millimetres", where);
-  return ok();
-}
-
-Result<std::vector<std::byte>> payload(const Volume& v, bool gzip) {
+Result<std::vector<std::byte>> nrrdPayload(const Volume& v, bool gzip) {
   std::vector<std::byte> raw(v.bytes(), v.bytes() + v.byteSize());
   if constexpr (std::endian::native == std::endian::big) {
     const std::size_t w = voxelBytes(v.type());
@@ -860,9 +818,9 @@ Result<std::vector<std::byte>> payload(const Volume& v, bool gzip) {
 
 Result<std::vector<std::byte>> encodeNrrd(const Volume& v, const NrrdWriteOptions& options) {
   if (auto s = checkWritable(v, "writeNrrd"); !s) return std::move(s).error();
-  auto data = payload(v, options.gzip);
+  auto data = nrrdPayload(v, options.gzip);
   if (!data) return std::move(data).error();
-  const std::string h = headerText(v, options.gzip, {});
+  const std::string h = nrrdHeaderText(v, options.gzip, {});
   std::vector<std::byte> out(h.size() + data->size());
   std::memcpy(out.data(), h.data(), h.size());
   std::memcpy(out.data() + h.size(), data->data(), data->size());
@@ -879,11 +837,11 @@ Status writeNrrd(const Volume& v, const std::filesystem::path& file, const NrrdW
   if (ext != ".nhdr")
     return fail(ErrorCode::InvalidArgument, "an NRRD file name must end in .nrrd or .nhdr", file.string());
   if (auto s = checkWritable(v, file.string()); !s) return s;
-  auto data = payload(v, options.gzip);
+  auto data = nrrdPayload(v, options.gzip);
   if (!data) return std::move(data).error().within(file.string());
   const std::string dataName = file.stem().string() + (options.gzip ? ".raw.gz" : ".raw");
   if (auto s = writeFileAtomic(file.parent_path() / dataName, data->data(), data->size()); !s) return s;
-  const std::string h = headerText(v, options.gzip, dataName);
+  const std::string h = nrrdHeaderText(v, options.gzip, dataName);
   return writeFileAtomic(file, h.data(), h.size());
 }
 

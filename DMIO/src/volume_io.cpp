@@ -13,18 +13,18 @@
 #include <string>
 #include <type_traits>
 
+#include "format_util.hpp"
+
 namespace dm {
 
 namespace {
+
+using detail::endsWith;
 
 std::string lowerName(const std::filesystem::path& p) {
   std::string s = p.filename().string();
   for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return s;
-}
-
-bool endsWith(const std::string& s, std::string_view suffix) {
-  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
 enum class Format { Nifti, MetaImage, Nrrd, Dicom, Vdb, Unknown };

@@ -20,7 +20,7 @@ namespace {
 
 constexpr char kSessionLabel[] = "DMNM session v1";
 
-std::int64_t nowNs() {
+std::int64_t steadyNowNs() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(
              std::chrono::steady_clock::now().time_since_epoch())
       .count();
@@ -85,14 +85,14 @@ struct Session {
       return fail(ErrorCode::Network,
                   "the command channel is not ready (not connected or handshake not done)", "command channel",
                   "wait for waitReady() or the peer's connection");
-    const MessageHeader h{.type = type, .sequence = nextSequence++, .timestampNs = nowNs()};
+    const MessageHeader h{.type = type, .sequence = nextSequence++, .timestampNs = steadyNowNs()};
     if (authenticated) return out->sign(h, payload, wire, limits);
     return appendMessage(h, payload, wire, limits);
   }
 };
 
 // Atomic counters behind CommandStats, one per refusal reason.
-struct Counters {
+struct CommandCounters {
   std::atomic<std::uint64_t> accepted{0}, handshakes{0};
   std::array<std::atomic<std::uint64_t>, 5> refused{};
 
@@ -187,7 +187,7 @@ struct CommandServer::Impl {
   // Published once listen() has the server; a connection accepted before
   // that (the network thread may already run) waits for it in greet().
   std::atomic<TcpServer*> tcp{nullptr};
-  Counters counters;
+  CommandCounters counters;
   mutable std::mutex mutex;  // guards connections
   std::map<ConnectionId, std::shared_ptr<Connection>> connections;
 
@@ -247,7 +247,7 @@ struct CommandServer::Impl {
       return;
     }
     std::vector<std::byte> hello;
-    if (!appendMessage({.type = kCommandHelloType, .timestampNs = nowNs()}, bytesOf(nonce), hello) ||
+    if (!appendMessage({.type = kCommandHelloType, .timestampNs = steadyNowNs()}, bytesOf(nonce), hello) ||
         !server->send(id, hello)) {
       log::warn("CommandServer: could not greet connection %llu; closing",
                 static_cast<unsigned long long>(id));
@@ -386,7 +386,7 @@ struct CommandClient::Impl {
   std::unique_ptr<TcpClient> owned;
   std::atomic<TcpClient*> tcp{nullptr};  // published once connect() has the client
   SocketAddress peer;
-  Counters counters;
+  CommandCounters counters;
   // network thread
   MessageStreamDecoder decoder;
   Session session;
@@ -448,7 +448,7 @@ struct CommandClient::Impl {
     std::vector<std::byte> wire;
     Status signedReply = [&] {
       std::lock_guard lock(session.mutex);
-      return session.out->sign({.type = kCommandHelloReplyType, .sequence = 0, .timestampNs = nowNs()},
+      return session.out->sign({.type = kCommandHelloReplyType, .sequence = 0, .timestampNs = steadyNowNs()},
                                bytesOf(*clientNonce), wire, limits);
     }();
     if (!signedReply) {

@@ -15,10 +15,10 @@ namespace dm {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
+using SteadyClock = std::chrono::steady_clock;
 
 struct Delivery {
-  Clock::time_point due;
+  SteadyClock::time_point due;
   std::uint64_t sequence = 0;  // ties keep submission order
   std::shared_ptr<const std::vector<std::byte>> bytes;
   bool operator>(const Delivery& o) const { return due != o.due ? due > o.due : sequence > o.sequence; }
@@ -51,11 +51,11 @@ struct LinkEmulator::Impl : std::enable_shared_from_this<LinkEmulator::Impl> {
 
   /// Network thread: (re)arms the timer for the earliest delivery.
   void arm() {
-    Clock::time_point due;
+    SteadyClock::time_point due;
     {
       std::lock_guard lock(mutex);
       if (closed || heap.empty()) {
-        armedDue = Clock::time_point::max();
+        armedDue = SteadyClock::time_point::max();
         return;
       }
       due = heap.top().due;
@@ -73,7 +73,7 @@ struct LinkEmulator::Impl : std::enable_shared_from_this<LinkEmulator::Impl> {
     {
       std::lock_guard lock(mutex);
       if (closed) return;
-      const Clock::time_point now = Clock::now();
+      const SteadyClock::time_point now = SteadyClock::now();
       while (!heap.empty() && heap.top().due <= now) {
         ready.push_back(heap.top());
         heap.pop();
@@ -101,7 +101,7 @@ struct LinkEmulator::Impl : std::enable_shared_from_this<LinkEmulator::Impl> {
 
   mutable std::mutex mutex;  // guards rng, heap, armedDue, counters below that are not atomic
   std::priority_queue<Delivery, std::vector<Delivery>, std::greater<>> heap;
-  Clock::time_point armedDue = Clock::time_point::max();
+  SteadyClock::time_point armedDue = SteadyClock::time_point::max();
   std::uint64_t nextSequence = 0;
   std::atomic<std::uint64_t> pending{0};  // scheduled and not yet delivered or discarded
   std::atomic<bool> closed{false};
@@ -169,7 +169,7 @@ Status LinkEmulator::submit(std::span<const std::byte> packet) {
     if (isLost) {
       m.lost.fetch_add(1, std::memory_order_relaxed);
     } else {
-      const Clock::time_point now = Clock::now();
+      const SteadyClock::time_point now = SteadyClock::now();
       const auto extra = isLate ? m.options.reorderDelay : std::chrono::microseconds(0);
       if (isLate) m.reordered.fetch_add(1, std::memory_order_relaxed);
       m.heap.push({now + first + extra, m.nextSequence++, bytes});

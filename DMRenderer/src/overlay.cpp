@@ -69,7 +69,7 @@ struct Batch {
   GLuint texture = 0;  // sprite texture of this run; 0 = none yet
 };
 
-struct TextureSlot {
+struct OverlayTextureSlot {
   GLuint name = 0;
   std::uint32_t generation = 0;
   bool live = false, owned = false, bottomUp = false;
@@ -154,12 +154,12 @@ struct Overlay::Impl {
   std::vector<Batch> batches;
   std::vector<Vec2f> plotPoints;  // plot(): one series in pixels
   std::vector<Vec2f> runPoints;   // polyline(): one finite run without repeated points
-  std::vector<TextureSlot> textures;
+  std::vector<OverlayTextureSlot> textures;
   const RenderTarget* target = nullptr;
   OverlayStats stats;
 
   ~Impl() {
-    for (TextureSlot& t : textures)
+    for (OverlayTextureSlot& t : textures)
       if (t.live && t.owned) glDeleteTextures(1, &t.name);
     if (atlasTex != 0) glDeleteTextures(1, &atlasTex);
     if (vbo != 0) glDeleteBuffers(1, &vbo);
@@ -265,14 +265,14 @@ struct Overlay::Impl {
     return gl::check("Overlay: glyph atlas upload");
   }
 
-  const TextureSlot* slot(SpriteId id) const {
+  const OverlayTextureSlot* slot(SpriteId id) const {
     if (!id.valid() || id.index >= textures.size()) return nullptr;
-    const TextureSlot& t = textures[id.index];
+    const OverlayTextureSlot& t = textures[id.index];
     return t.live && t.generation == id.generation ? &t : nullptr;
   }
 
   // Uploads `image` into slot `s` (new storage when `fresh`).
-  Status upload(TextureSlot& s, const Image& image, bool fresh) {
+  Status upload(OverlayTextureSlot& s, const Image& image, bool fresh) {
     if (image.empty() || image.type() != PixelType::U8 || image.channels() < 1 || image.channels() > 4)
       return fail(
           ErrorCode::Unsupported,
@@ -318,7 +318,7 @@ struct Overlay::Impl {
     return gl::check("Overlay: sprite texture upload");
   }
 
-  SpriteId addSlot(TextureSlot s) {
+  SpriteId addSlot(OverlayTextureSlot s) {
     for (std::size_t i = 0; i < textures.size(); ++i)
       if (!textures[i].live) {
         s.generation = textures[i].generation + 1;
@@ -560,7 +560,7 @@ void Overlay::polyline(std::span<const Vec2f> points, const Vec4f& color, float 
 }
 
 Result<SpriteId> Overlay::createTexture(const Image& image, const TextureOptions& options) {
-  TextureSlot s;
+  OverlayTextureSlot s;
   s.options = options;
   s.owned = true;
   if (auto st = impl_->upload(s, image, true); !st) {
@@ -572,11 +572,11 @@ Result<SpriteId> Overlay::createTexture(const Image& image, const TextureOptions
 }
 
 Status Overlay::updateTexture(SpriteId id, const Image& image) {
-  const TextureSlot* found = impl_->slot(id);
+  const OverlayTextureSlot* found = impl_->slot(id);
   if (found == nullptr || !found->owned)
     return fail(ErrorCode::NotFound, "no texture made by createTexture() with this handle",
                 "Overlay::updateTexture", "the texture was destroyed or wrapped; create a new one");
-  TextureSlot& s = impl_->textures[id.index];
+  OverlayTextureSlot& s = impl_->textures[id.index];
   GLint w = 0, h = 0;
   glGetTextureLevelParameteriv(s.name, 0, GL_TEXTURE_WIDTH, &w);
   glGetTextureLevelParameteriv(s.name, 0, GL_TEXTURE_HEIGHT, &h);
@@ -585,7 +585,7 @@ Status Overlay::updateTexture(SpriteId id, const Image& image) {
 
 SpriteId Overlay::wrapTexture(std::uint32_t glTexture) {
   if (glTexture == 0) return {};
-  TextureSlot s;
+  OverlayTextureSlot s;
   s.name = glTexture;
   s.live = true;
   s.bottomUp = true;
@@ -594,7 +594,7 @@ SpriteId Overlay::wrapTexture(std::uint32_t glTexture) {
 
 void Overlay::destroyTexture(SpriteId id) {
   if (impl_->slot(id) == nullptr) return;
-  TextureSlot& s = impl_->textures[id.index];
+  OverlayTextureSlot& s = impl_->textures[id.index];
   if (s.owned) glDeleteTextures(1, &s.name);
   s.name = 0;
   s.live = false;
@@ -602,7 +602,7 @@ void Overlay::destroyTexture(SpriteId id) {
 
 void Overlay::sprite(SpriteId id, const OverlayRect& dst, const Vec4f& tint) {
   Impl& d = *impl_;
-  const TextureSlot* s = d.slot(id);
+  const OverlayTextureSlot* s = d.slot(id);
   if (s == nullptr || !(dst.width > 0 && dst.height > 0)) return;
   d.useTexture(s->name);
   // Images are uploaded top row first; GL textures owned elsewhere (render targets) keep row 0 at the bottom.

@@ -47,12 +47,12 @@ struct TeleopCliOptions {
 std::atomic<bool> gStop{false};
 extern "C" void onSignal(int) { gStop.store(true); }
 
-nlohmann::json toJson(const dm::LatencyStats& s) {
+nlohmann::json statsJson(const dm::LatencyStats& s) {
   return {{"count", s.count}, {"p50_us", 1e6 * s.p50}, {"p99_us", 1e6 * s.p99},
           {"p999_us", 1e6 * s.p999}, {"max_us", 1e6 * s.max}};
 }
 
-nlohmann::json toJson(const dm::TeleopStats& s) {
+nlohmann::json statsJson(const dm::TeleopStats& s) {
   return {{"sent", s.sent},
           {"send_failed", s.sendFailed},
           {"received", s.received},
@@ -62,8 +62,8 @@ nlohmann::json toJson(const dm::TeleopStats& s) {
           {"late", s.late},
           {"lost", s.lost},
           {"loss_ratio", s.lossRatio},
-          {"round_trip", toJson(s.roundTrip)},
-          {"one_way", toJson(s.oneWay)},
+          {"round_trip", statsJson(s.roundTrip)},
+          {"one_way", statsJson(s.oneWay)},
           {"jitter_us", 1e6 * s.jitter},
           {"clock_offset_us", 1e6 * s.clockOffset},
           {"link_up", s.linkUp}};
@@ -141,7 +141,7 @@ int runTeleopDevice(const TeleopCliOptions& o) {
                         {"loop_ticks", loop.stats().ticks},
                         {"output_force_N", dmtool::toJson((*device)->lastOutput().force)},
                         {"output_force_mean_N", dmtool::toJson(bridge.meanForce())},
-                        {"stream", toJson(s)}};
+                        {"stream", statsJson(s)}};
     if (const dm::WaveMasterPort* w = bridge.wavePort()) {
       const dm::WaveReceiverStats ws = w->receiver().stats();
       j["wave"] = {{"impedance", o.waveImpedance},
