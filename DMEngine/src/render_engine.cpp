@@ -154,7 +154,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     hud(0.0, false, Vec3::Zero());
     overlay_.begin(target_);
     const float values[2] = {0.0f, 1.0f};
-    const PlotSeries series{.values = values};
+    const OverlaySeries series{.values = values};
     (void)overlay_.plot(OverlayRect{0, 0, 64, 32}, {&series, 1}, PlotOptions{});
     if (auto s = overlay_.end(); !s) return s;
     if (auto img = target_.readColor(); !img) return img.error();
@@ -234,7 +234,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
       feed_.recentForce(recent_, seconds);
       if (recent_.size() >= 2) {
         const OverlayRect frame{w * 0.58f, h * 0.70f, w * 0.40f, h * 0.27f};
-        PlotSeries series{.values = recent_, .color = Vec4f(1.0f, 0.55f, 0.2f, 1), .width = 1.5f};
+        OverlaySeries series{.values = recent_, .color = Vec4f(1.0f, 0.55f, 0.2f, 1), .width = 1.5f};
         PlotOptions opt;
         opt.xMin = static_cast<float>(-seconds);
         opt.xMax = 0;

@@ -610,7 +610,7 @@ void Overlay::sprite(SpriteId id, const OverlayRect& dst, const Vec4f& tint) {
   d.texturedRect(dst.x, dst.y, dst.x + dst.width, dst.y + dst.height, 0, v0, 1, v1, tint, kSprite);
 }
 
-PlotLayout Overlay::plot(const OverlayRect& frame, std::span<const PlotSeries> series,
+PlotLayout Overlay::plot(const OverlayRect& frame, std::span<const OverlaySeries> series,
                          const PlotOptions& opt) {
   Impl& d = *impl_;
   PlotLayout layout;
@@ -618,7 +618,7 @@ PlotLayout Overlay::plot(const OverlayRect& frame, std::span<const PlotSeries> s
   if (opt.autoRange) {
     lo = INFINITY;
     hi = -INFINITY;
-    for (const PlotSeries& s : series)
+    for (const OverlaySeries& s : series)
       for (float v : s.values)
         if (std::isfinite(v)) {
           lo = std::min(lo, v);
@@ -711,7 +711,7 @@ PlotLayout Overlay::plot(const OverlayRect& frame, std::span<const PlotSeries> s
     text(area.x + 0.5f * area.width, frame.y + frame.height - pad, opt.xLabel, opt.textSize, opt.textColor,
          TextAnchor::Bottom);
 
-  for (const PlotSeries& s : series) {
+  for (const OverlaySeries& s : series) {
     const std::size_t n = s.values.size();
     if (n < 2) continue;
     d.plotPoints.resize(n);

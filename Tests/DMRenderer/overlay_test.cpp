@@ -248,7 +248,7 @@ TEST(Overlay, PlotPutsASineWhereTheMathSays) {
   std::vector<float> sine(361);
   for (std::size_t i = 0; i < sine.size(); ++i)
     sine[i] = static_cast<float>(std::sin(2 * std::numbers::pi * static_cast<double>(i) / 360.0));
-  const dm::PlotSeries series[] = {{sine, dm::Vec4f(0, 1, 0, 1), 1.5f}};
+  const dm::OverlaySeries series[] = {{sine, dm::Vec4f(0, 1, 0, 1), 1.5f}};
   for (bool autoRange : {true, false}) {
     f.target.clear(dm::Vec4f(0, 0, 0, 1));
     f.overlay.begin(f.target);
@@ -403,7 +403,7 @@ TEST(Overlay, SteadyFramesDoNotAllocate) {
   ASSERT_TRUE(img);
   auto tex = f.overlay.createTexture(*img);
   ASSERT_TRUE(tex);
-  const dm::PlotSeries series[] = {{force, dm::Vec4f(1, 0.8f, 0.2f, 1), 1.5f}};
+  const dm::OverlaySeries series[] = {{force, dm::Vec4f(1, 0.8f, 0.2f, 1), 1.5f}};
   std::uint64_t allocations = 0;
   for (int frame = 0; frame < 4; ++frame) {
     if (frame == 3) dm::test::tCountAllocations = true;
@@ -456,7 +456,7 @@ TEST(Overlay, HudGolden) {
     }
   auto tex = f.overlay.createTexture(*img);
   ASSERT_TRUE(tex);
-  const dm::PlotSeries series[] = {{force, dm::Vec4f(1, 0.7f, 0.1f, 1), 1.5f},
+  const dm::OverlaySeries series[] = {{force, dm::Vec4f(1, 0.7f, 0.1f, 1), 1.5f},
                                    {limit, dm::Vec4f(1, 0.1f, 0.1f, 0.8f), 1.0f}};
   f.overlay.begin(f.target);
   f.overlay.fillRect({4, 4, 176, 44}, dm::Vec4f(0, 0, 0, 0.5f));

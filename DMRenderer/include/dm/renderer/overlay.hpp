@@ -110,7 +110,7 @@ struct TextureOptions {
 /// One line of a plot: `values` are evenly spaced in x over the plot's
 /// width (first at the left edge, last at the right); non-finite values
 /// break the line.
-struct PlotSeries {
+struct OverlaySeries {
   std::span<const float> values;
   Vec4f color = Vec4f(1, 1, 1, 1);
   float width = 1.5f;  ///< line width, pixels
@@ -218,7 +218,7 @@ class Overlay {
   /// A line plot of `series` inside `frame` (background, grid, axes, tick
   /// labels, title), each series one polyline. Returns where the data went.
   /// O(total samples); no allocation after warm-up.
-  PlotLayout plot(const OverlayRect& frame, std::span<const PlotSeries> series,
+  PlotLayout plot(const OverlayRect& frame, std::span<const OverlaySeries> series,
                   const PlotOptions& options = {});
 
  private:
