@@ -43,15 +43,12 @@ namespace dm::detail {
 
 namespace {
 
-constexpr std::uint32_t kNoSlot = ~std::uint32_t(0);
 constexpr int kCoordBits = 19;
 constexpr double kCoordHalf = double(1 << (kCoordBits - 1));
 constexpr int kMaxLevels = 64;
 constexpr std::size_t kMaxCells = 512;  // per box on the hashed grid
 
-using Box = FlatBox;
-
-struct Entry {
+struct CellEntry {
   std::uint64_t key;
   std::uint32_t index;
 };
@@ -70,7 +67,7 @@ inline std::uint64_t cellCoord(double x, double inv) noexcept {
 
 /// overlap() with no branches: in the cell loops the outcome is a coin toss
 /// to the predictor.
-inline bool overlapNoBranch(const Box& a, const Box& b) noexcept {
+inline bool overlapNoBranch(const FlatBox& a, const FlatBox& b) noexcept {
   return (a.lo[0] <= b.hi[0]) & (b.lo[0] <= a.hi[0]) & (a.lo[1] <= b.hi[1]) & (b.lo[1] <= a.hi[1]) &
          (a.lo[2] <= b.hi[2]) & (b.lo[2] <= a.hi[2]);
 }
@@ -141,7 +138,7 @@ class GridBroadPhase final : public BroadPhase {
   void query(const Aabb& box, std::vector<ProxyId>& out) const override {
     // O(n) scan: the cell table is rebuilt per step and may lag update().
     out.clear();
-    const Box q = toFlatBox(box);
+    const FlatBox q = toFlatBox(box);
     for (std::size_t i = 0; i < ids_.size(); ++i)
       if (usable_[i] && overlap(boxes_[i], q)) out.push_back(ids_[i]);
     std::sort(out.begin(), out.end());
@@ -153,7 +150,7 @@ class GridBroadPhase final : public BroadPhase {
     usable_[i] = isUsableBox(box) ? 1 : 0;
   }
 
-  static double largestEdge(const Box& b) noexcept {
+  static double largestEdge(const FlatBox& b) noexcept {
     return std::max({b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]});
   }
 
@@ -168,7 +165,7 @@ class GridBroadPhase final : public BroadPhase {
     } else {
       double sum = 0, smallest = INFINITY;
       std::size_t n = 0;
-      Box bounds{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+      FlatBox bounds{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
       for (std::size_t i = 0; i < ids_.size(); ++i) {
         if (!usable_[i]) continue;
         const double e = largestEdge(boxes_[i]);
@@ -200,7 +197,7 @@ class GridBroadPhase final : public BroadPhase {
     for (int l = 0; l < kMaxLevels; ++l) inv_[l] = std::ldexp(1.0 / cell_, -l);
   }
 
-  int levelOf(const Box& b) const noexcept {
+  int levelOf(const FlatBox& b) const noexcept {
     if (!hierarchical_) return 0;
     const double r = largestEdge(b) * inv_[0];
     if (!(r > 1.0)) return 0;
@@ -220,7 +217,7 @@ class GridBroadPhase final : public BroadPhase {
     levelsUsed_ = 0;
     for (std::uint32_t i = 0; i < ids_.size(); ++i) {
       if (!usable_[i]) continue;
-      const Box& b = boxes_[i];
+      const FlatBox& b = boxes_[i];
       const int l = levelOf(b);
       const double inv = inv_[l];
       const std::uint64_t x0 = cellCoord(b.lo[0], inv), x1 = cellCoord(b.hi[0], inv);
@@ -241,11 +238,11 @@ class GridBroadPhase final : public BroadPhase {
     const std::size_t buckets = std::bit_ceil(std::max<std::size_t>(16, entries_.size()));
     shift_ = 64u - static_cast<unsigned>(std::countr_zero(buckets));
     bucketStart_.assign(buckets + 1, 0);
-    for (const Entry& e : entries_) ++bucketStart_[bucketOf(e.key) + 1];
+    for (const CellEntry& e : entries_) ++bucketStart_[bucketOf(e.key) + 1];
     for (std::size_t b = 0; b < buckets; ++b) bucketStart_[b + 1] += bucketStart_[b];
     sorted_.resize(entries_.size());
     cursor_.assign(bucketStart_.begin(), bucketStart_.end() - 1);
-    for (const Entry& e : entries_) sorted_[cursor_[bucketOf(e.key)]++] = e;
+    for (const CellEntry& e : entries_) sorted_[cursor_[bucketOf(e.key)]++] = e;
   }
 
   std::size_t bucketOf(std::uint64_t key) const noexcept {
@@ -253,7 +250,7 @@ class GridBroadPhase final : public BroadPhase {
   }
 
   // Key of the cell at `level` holding the max-of-mins corner of a ∩ b.
-  std::uint64_t cornerKey(int level, const Box& a, const Box& b) const noexcept {
+  std::uint64_t cornerKey(int level, const FlatBox& a, const FlatBox& b) const noexcept {
     const double inv = inv_[level];
     return cellKey(level, cellCoord(std::max(a.lo[0], b.lo[0]), inv),
                    cellCoord(std::max(a.lo[1], b.lo[1]), inv), cellCoord(std::max(a.lo[2], b.lo[2]), inv));
@@ -266,12 +263,12 @@ class GridBroadPhase final : public BroadPhase {
     for (std::size_t bk = 0; bk < buckets; ++bk) {
       const std::uint32_t begin = bucketStart_[bk], end = bucketStart_[bk + 1];
       for (std::uint32_t p = begin; p + 1 < end; ++p) {
-        const Entry ep = sorted_[p];
-        const Box& a = boxes_[ep.index];
+        const CellEntry ep = sorted_[p];
+        const FlatBox& a = boxes_[ep.index];
         for (std::uint32_t q = p + 1; q < end; ++q) {
-          const Entry eq = sorted_[q];
+          const CellEntry eq = sorted_[q];
           if (eq.key != ep.key) continue;
-          const Box& b = boxes_[eq.index];
+          const FlatBox& b = boxes_[eq.index];
           if (overlapNoBranch(a, b) && cornerKey(keyLevel(ep.key), a, b) == ep.key) emit(ep.index, eq.index);
         }
       }
@@ -281,7 +278,7 @@ class GridBroadPhase final : public BroadPhase {
   void pairsAcrossLevels() {
     for (std::uint32_t i = 0; i < ids_.size(); ++i) {
       if (!usable_[i] || boxLevel_[i] < 0) continue;
-      const Box& a = boxes_[i];
+      const FlatBox& a = boxes_[i];
       const int la = boxLevel_[i];
       if (la + 1 >= kMaxLevels) continue;  // the top level has no coarser one
       for (std::uint64_t coarser = levelsUsed_ >> (la + 1); coarser;) {
@@ -298,7 +295,7 @@ class GridBroadPhase final : public BroadPhase {
               const std::size_t bk = bucketOf(key);
               for (std::uint32_t q = bucketStart_[bk]; q < bucketStart_[bk + 1]; ++q) {
                 if (sorted_[q].key != key) continue;
-                const Box& b = boxes_[sorted_[q].index];
+                const FlatBox& b = boxes_[sorted_[q].index];
                 if (overlapNoBranch(a, b) && cornerKey(l, a, b) == key) emit(i, sorted_[q].index);
               }
             }
@@ -309,7 +306,7 @@ class GridBroadPhase final : public BroadPhase {
   void pairsOfOversize() {
     for (std::size_t p = 0; p < oversize_.size(); ++p) {
       const std::uint32_t i = oversize_[p];
-      const Box& a = boxes_[i];
+      const FlatBox& a = boxes_[i];
       for (std::uint32_t j = 0; j < ids_.size(); ++j)
         if (usable_[j] && boxLevel_[j] >= 0 && overlap(a, boxes_[j])) emit(i, j);
       for (std::size_t q = p + 1; q < oversize_.size(); ++q)
@@ -323,10 +320,10 @@ class GridBroadPhase final : public BroadPhase {
   std::array<double, kMaxLevels> inv_{};
   std::vector<std::uint32_t> slotOf_;  // by id
   std::vector<ProxyId> ids_;           // dense
-  std::vector<Box> boxes_;             // dense
+  std::vector<FlatBox> boxes_;         // dense
   std::vector<unsigned char> usable_;  // dense
   std::vector<std::int8_t> boxLevel_;  // dense; −1 = oversize
-  std::vector<Entry> entries_, sorted_;
+  std::vector<CellEntry> entries_, sorted_;
   std::vector<std::uint32_t> bucketStart_, cursor_, oversize_;
   std::vector<std::uint64_t> keys_, scratch_;
   std::uint64_t levelsUsed_ = 0;

@@ -41,6 +41,10 @@ inline bool overlap(const FlatBox& a, const FlatBox& b) noexcept {
          a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
 }
 
+/// Dense slot of a proxy id that is not in the broad phase (the grids'
+/// and sweep and prune's id → slot maps).
+inline constexpr std::uint32_t kNoSlot = ~std::uint32_t(0);
+
 /// Key of the unordered pair {a, b}: the smaller id in the high 32 bits, so
 /// that ascending keys are ascending ProxyPairs.
 inline std::uint64_t pairKey(std::uint32_t a, std::uint32_t b) noexcept {

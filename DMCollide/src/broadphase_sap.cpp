@@ -50,7 +50,6 @@ namespace dm::detail {
 
 namespace {
 
-constexpr std::uint32_t kNoSlot = ~std::uint32_t(0);
 // Column indices are clamped to ±kCellClamp (boxes out at ±1e308 land in
 // the outermost columns; clamping keeps the index monotone).
 constexpr double kCellClamp = 1 << 28;
@@ -70,7 +69,7 @@ struct SlotData {
 };
 static_assert(sizeof(SlotData) == 64);
 
-struct Entry {
+struct SweepEntry {
   double lo, hi;    // sweep axis
   double lo1, hi1;  // first bucket axis
   double lo2, hi2;  // second bucket axis
@@ -80,7 +79,7 @@ struct Entry {
 
 struct Column {
   std::int32_t c1, c2;
-  std::vector<Entry> entries;
+  std::vector<SweepEntry> entries;
 };
 
 class SweepAndPruneBroadPhase final : public BroadPhase {
@@ -263,7 +262,7 @@ class SweepAndPruneBroadPhase final : public BroadPhase {
 
   // Step 2 for one column: refresh, drop, sort, sweep.
   void sweepColumn(Column& col) {
-    std::vector<Entry>& e = col.entries;
+    std::vector<SweepEntry>& e = col.entries;
     std::size_t m = 0;
     for (std::size_t i = 0; i < e.size(); ++i) {
       const std::uint32_t s = e[i].slot;
@@ -275,11 +274,11 @@ class SweepAndPruneBroadPhase final : public BroadPhase {
     }
     e.resize(m);
     if (fresh_) {
-      std::sort(e.begin(), e.end(), [](const Entry& a, const Entry& b) { return a.lo < b.lo; });
+      std::sort(e.begin(), e.end(), [](const SweepEntry& a, const SweepEntry& b) { return a.lo < b.lo; });
     } else {
       for (std::size_t i = 1; i < m; ++i) {
         if (!(e[i].lo < e[i - 1].lo)) continue;
-        const Entry x = e[i];
+        const SweepEntry x = e[i];
         std::size_t j = i;
         do {
           e[j] = e[j - 1];
@@ -289,9 +288,9 @@ class SweepAndPruneBroadPhase final : public BroadPhase {
       }
     }
     for (std::size_t i = 0; i < m; ++i) {
-      const Entry& a = e[i];
+      const SweepEntry& a = e[i];
       for (std::size_t j = i + 1; j < m && e[j].lo <= a.hi; ++j) {
-        const Entry& b = e[j];
+        const SweepEntry& b = e[j];
         const bool hit = (a.lo1 <= b.hi1) & (b.lo1 <= a.hi1) & (a.lo2 <= b.hi2) & (b.lo2 <= a.hi2) &
                          (std::max(a.c1, b.c1) == col.c1) & (std::max(a.c2, b.c2) == col.c2);
         if (hit) keys_.push_back(pairKey(idOf_[a.slot], idOf_[b.slot]));

@@ -61,8 +61,6 @@ constexpr std::int32_t kParked = -2;
 /// Fat boxes reach this many last displacements ahead of a moving box.
 constexpr double kPredict = 8.0;
 
-using Box = FlatBox;
-
 /// A box as six floats; the tree's boxes.
 struct FBox {
   float lo[3], hi[3];
@@ -80,7 +78,7 @@ inline double area(const FBox& b) noexcept {
   return x * y + y * z + z * x;
 }
 
-inline bool contains(const FBox& outer, const Box& inner) noexcept {
+inline bool contains(const FBox& outer, const FlatBox& inner) noexcept {
   return outer.lo[0] <= inner.lo[0] && outer.lo[1] <= inner.lo[1] && outer.lo[2] <= inner.lo[2] &&
          inner.hi[0] <= outer.hi[0] && inner.hi[1] <= outer.hi[1] && inner.hi[2] <= outer.hi[2];
 }
@@ -90,7 +88,7 @@ inline bool overlapF(const FBox& a, const FBox& b) noexcept {
          a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
 }
 
-inline bool overlapFD(const FBox& a, const Box& b) noexcept {
+inline bool overlapFD(const FBox& a, const FlatBox& b) noexcept {
   return a.lo[0] <= b.hi[0] && b.lo[0] <= a.hi[0] && a.lo[1] <= b.hi[1] && b.lo[1] <= a.hi[1] &&
          a.lo[2] <= b.hi[2] && b.lo[2] <= a.hi[2];
 }
@@ -134,7 +132,7 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
       dirty_.resize(n, 0);
     }
     ++count_;
-    const Box b = toFlatBox(box);
+    const FlatBox b = toFlatBox(box);
     real_[id] = b;
     leafOf_[id] = isUsableBox(box) ? createLeaf(id, b) : kParked;
     markDirty(id);
@@ -143,7 +141,7 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
   void update(ProxyId id, const Aabb& box) override {
     if (id >= leafOf_.size() || leafOf_[id] == kAbsent) return;
     const std::int32_t leaf = leafOf_[id];
-    const Box b = toFlatBox(box);
+    const FlatBox b = toFlatBox(box);
     if (!isUsableBox(box)) {
       real_[id] = b;
       if (leaf != kParked) {
@@ -160,7 +158,7 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
       markDirty(id);
       return;
     }
-    const Box old = real_[id];
+    const FlatBox old = real_[id];
     real_[id] = b;
     if (contains(fat_[id], b)) return;
     removeLeaf(leaf);
@@ -237,7 +235,7 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
   void query(const Aabb& box, std::vector<ProxyId>& out) const override {
     out.clear();
     if (root_ == kNull) return;
-    const Box q = toFlatBox(box);
+    const FlatBox q = toFlatBox(box);
     std::vector<std::int32_t> stack = {root_};
     while (!stack.empty()) {
       const std::int32_t i = stack.back();
@@ -335,7 +333,7 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
 
   // Stores the fat box of `b` in leaf and fat_[id]; `old` (the previous
   // exact box, or null) gives the displacement to predict along.
-  void setFat(std::int32_t leaf, ProxyId id, const Box& b, const Box* old) {
+  void setFat(std::int32_t leaf, ProxyId id, const FlatBox& b, const FlatBox* old) {
     const double edge = std::max({b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]});
     double m = margin_ * edge;
     if (!(m >= 0)) m = 0;  // 0 · ∞ for an edge that overflows
@@ -381,7 +379,7 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
     moved_.push_back(id);
   }
 
-  std::int32_t createLeaf(ProxyId id, const Box& b) {
+  std::int32_t createLeaf(ProxyId id, const FlatBox& b) {
     const std::int32_t leaf = allocNode();
     nodes_[leaf].child2 = static_cast<std::int32_t>(id);
     setFat(leaf, id, b, nullptr);
@@ -520,7 +518,7 @@ class DynamicAabbTreeBroadPhase final : public BroadPhase {
   std::vector<Node> nodes_;
   std::vector<std::int32_t> parent_, height_;  // by node
   std::vector<std::int32_t> leafOf_;           // by id: leaf node, kAbsent or kParked
-  std::vector<Box> real_;                      // by id: exact box
+  std::vector<FlatBox> real_;                  // by id: exact box
   std::vector<FBox> fat_;                      // by id: the leaf's fat box
   std::vector<unsigned char> dirty_;           // by id: listed in moved_
   std::vector<ProxyId> moved_;                 // ids (re)inserted, parked or removed

@@ -29,11 +29,13 @@
 #define DM_GJK_AVX2 1
 #endif
 
+#include "collide_internal.hpp"
+
 namespace dm {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
+using detail::kInf;
 
 // A point of the Minkowski difference A − B with the two support points it
 // came from (all in A's frame).
@@ -1156,3 +1158,5 @@ GjkResult gjkDistance(const ConvexShape& a, const Isometry3& poseA, const Convex
 }
 
 }  // namespace dm
+
+#undef DM_GJK_AVX2

@@ -4,27 +4,28 @@
 #include <dm/core/assert.hpp>
 #include <dm/math/geometry.hpp>
 
-#include "lanes.hpp"
-
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <utility>
 
+#include "collide_internal.hpp"
+#include "lanes.hpp"
+
 namespace dm {
 
 namespace {
 
-constexpr int kStack = 128;      // single-tree DFS: <= depth + 1 entries
+using detail::kStack;
 constexpr int kPairStack = 256;  // tree-tree DFS: <= depthA + depthB + 1 entries
 static_assert(kStack > MeshBvh::kMaxDepth + 1 && kPairStack > 2 * MeshBvh::kMaxDepth + 1);
 // Relative widening of box tests against the rounding of the box transform.
 constexpr double kSlack = 1e-14;
 
-struct Box {
+struct NodeBox {
   Vec3 c, e;  // centre, half extents (exact from the float node box)
 };
-inline Box boxOf(const BvhNode& n) noexcept {
+inline NodeBox boxOf(const BvhNode& n) noexcept {
   const Vec3 lo(n.lo[0], n.lo[1], n.lo[2]), hi(n.hi[0], n.hi[1], n.hi[2]);
   return {0.5 * (lo + hi), 0.5 * (hi - lo)};
 }
@@ -46,7 +47,7 @@ struct Relative {
 };
 
 // Separating-axis test on A's three and B's three box axes.
-bool boxesOverlap(const Box& a, const Box& b, const Relative& m) noexcept {
+bool boxesOverlap(const NodeBox& a, const NodeBox& b, const Relative& m) noexcept {
   const Vec3 bc = m.r * b.c + m.t, be = m.absR * b.e;
   const Vec3 limA = a.e + be;
   const Vec3 slackA = kSlack * (a.c.cwiseAbs() + m.t.cwiseAbs() + m.absR * b.c.cwiseAbs() + limA);
@@ -226,14 +227,14 @@ void traverseOverlap(const MeshBvh& a, const MeshBvh& b, const Relative& m, Leaf
     }
     const bool descendA = !na.isLeaf() && (nb.isLeaf() || size(na) >= size(nb));
     if (descendA) {
-      const Box bb = boxOf(nb);
+      const NodeBox bb = boxOf(nb);
       for (std::uint32_t c = na.first + 2; c-- > na.first;)
         if (boxesOverlap(boxOf(a.node(c)), bb, m)) {
           DM_ASSERT(sp < kPairStack, "traversal stack bound");
           stack[sp++] = {c, ib};
         }
     } else {
-      const Box ab = boxOf(na);
+      const NodeBox ab = boxOf(na);
       for (std::uint32_t c = nb.first + 2; c-- > nb.first;)
         if (boxesOverlap(ab, boxOf(b.node(c)), m)) {
           DM_ASSERT(sp < kPairStack, "traversal stack bound");

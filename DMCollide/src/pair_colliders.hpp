@@ -3,6 +3,9 @@
 #pragma once
 
 #include <dm/collide/query.hpp>
+#include <dm/collide/voxel_model.hpp>
+
+#include <cmath>
 
 namespace dm::detail {
 
@@ -56,6 +59,19 @@ SignedContact pointPair(const Vec3& cA, double rA, const Vec3& cB, double rB,
 /// Keeps at most `maxContacts` of the contacts from index `first` on: the
 /// deepest, then repeatedly the one farthest from those kept.
 void reduceContacts(CollisionResult& out, std::size_t first, int maxContacts) noexcept;
+
+/// The VoxelModel of a shape of type VoxelModel.
+inline const VoxelModel& modelOf(const Shape& s) noexcept { return static_cast<const VoxelModel&>(s); }
+
+/// Unit normal from shape A to the model B at a point whose model gradient
+/// (local frame of B) is g: the model separates by moving along −∇d.
+/// `fallback` (world, unit) serves where the gradient vanishes (deep inside a
+/// band-clamped field).
+inline Vec3 normalFromGradient(const Isometry3& poseB, const Vec3& g, const Vec3& fallback) noexcept {
+  const double n = g.norm();
+  if (!(n > 1e-12) || !std::isfinite(n)) return fallback;
+  return poseB.linear() * (-g / n);
+}
 
 /// Registers sphere–sphere, sphere–box, sphere–capsule, capsule–capsule,
 /// triangle–sphere (pair_primitives.cpp) and box–box (pair_box_box.cpp).

@@ -20,13 +20,13 @@
 #include <cmath>
 #include <limits>
 
+#include "collide_internal.hpp"
 #include "pair_colliders.hpp"
 
 namespace dm::detail {
 namespace {
 
 using NodeId = SphereHierarchy::NodeId;
-constexpr double kInf = std::numeric_limits<double>::infinity();
 // Each step pops one entry and pushes ≤ 8; descents are ≤ 11 + 11 levels deep.
 constexpr int kStackSize = 256;
 

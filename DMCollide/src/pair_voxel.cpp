@@ -17,25 +17,16 @@
 #include <cmath>
 #include <limits>
 
+#include "collide_internal.hpp"
 #include "pair_colliders.hpp"
 
 namespace dm {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
-
-const VoxelModel& modelOf(const Shape& s) noexcept { return static_cast<const VoxelModel&>(s); }
-
-// Unit normal from shape A to the model B at a point whose model gradient
-// (local frame of B) is g: the model separates by moving along −∇d.
-// `fallback` (world, unit) serves where the gradient vanishes (deep inside a
-// band-clamped field).
-Vec3 normalFromGradient(const Isometry3& poseB, const Vec3& g, const Vec3& fallback) noexcept {
-  const double n = g.norm();
-  if (!(n > 1e-12) || !std::isfinite(n)) return fallback;
-  return poseB.linear() * (-g / n);
-}
+using detail::kInf;
+using detail::modelOf;
+using detail::normalFromGradient;
 
 // Depth-first walk over the shell's sphere hierarchy that visits, in the
 // model's frame, every point whose distance may be ≤ `cutoff`: a node whose

@@ -45,17 +45,18 @@
 #include <limits>
 #include <numbers>
 
+#include "collide_internal.hpp"
 #include "pair_colliders.hpp"
 
 namespace dm {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
+using detail::kInf;
+using detail::modelOf;
+using detail::normalFromGradient;
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
 constexpr int kStackSize = 160;
-
-const VoxelModel& modelOf(const Shape& s) noexcept { return static_cast<const VoxelModel&>(s); }
 
 // Smallest x² over x ∈ [x0, x1].
 double minSquare(double x0, double x1) noexcept {
@@ -420,14 +421,6 @@ struct VoxelConvexPair {
     return n > 0 && std::isfinite(n) ? Vec3(g / n) : Vec3::UnitZ();
   }
 };
-
-// Unit normal from the shape A to the model B where the model's gradient
-// (B's frame) is g; `fallback` (world, unit) where the gradient vanishes.
-Vec3 normalFromGradient(const Isometry3& poseB, const Vec3& g, const Vec3& fallback) noexcept {
-  const double n = g.norm();
-  if (!(n > 1e-12) || !std::isfinite(n)) return fallback;
-  return poseB.linear() * (-g / n);
-}
 
 // World direction from A's origin to world point x (unit; +z if they coincide).
 Vec3 outwardGuess(const Isometry3& pa, const Vec3& x) noexcept {

@@ -6,13 +6,14 @@
 #include <cmath>
 #include <string>
 
+#include "collide_internal.hpp"
 #include "pair_colliders.hpp"
 
 namespace dm {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
+using detail::kInf;
 
 GjkCache* gjkCacheOf(PairCache* cache) { return cache ? &cache->gjk : nullptr; }
 

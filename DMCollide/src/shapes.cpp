@@ -13,6 +13,8 @@
 #include <numbers>
 #include <string>
 
+#include "collide_internal.hpp"
+
 namespace dm {
 
 namespace {
@@ -35,7 +37,7 @@ TypeRegistry& typeRegistry() {
   return registry;
 }
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
+using detail::kInf;
 
 Aabb centredBox(const Vec3& centre, const Vec3& half) { return Aabb(centre - half, centre + half); }
 

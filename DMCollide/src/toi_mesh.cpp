@@ -13,13 +13,14 @@
 #include <limits>
 #include <utility>
 
+#include "collide_internal.hpp"
+
 namespace dm {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr int kStack = 128;  // depth-first: <= depth + 1 entries
-static_assert(kStack > MeshBvh::kMaxDepth + 1);
+using detail::kInf;
+using detail::kStack;
 
 // Parameter at which the segment o + t·d enters the node box inflated by
 // `inflate`, clipped to [0, tMax]; +∞ when it misses. Unlike raycastMesh's

@@ -14,11 +14,13 @@
 #include <string>
 #include <utility>
 
+#include "collide_internal.hpp"
+
 namespace dm {
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
+using detail::kInf;
 constexpr float kInfF = std::numeric_limits<float>::infinity();
 
 std::string indexString(int i, int j, int k) {

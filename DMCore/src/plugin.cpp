@@ -335,18 +335,6 @@ Status probePlugin(const std::filesystem::path& path, std::chrono::milliseconds 
   return ok();
 }
 
-// The dlopen'ed library; dlclose when the last owner (plugin record or a
-// Factory copy's keepAlive) lets go.
-struct Library {
-  void* handle = nullptr;
-  explicit Library(void* h) : handle(h) {}
-  Library(const Library&) = delete;
-  Library& operator=(const Library&) = delete;
-  ~Library() {
-    if (handle) dlclose(handle);
-  }
-};
-
 std::string dlErrorString() {
   const char* e = dlerror();
   return e ? e : "unknown dlopen error";
@@ -367,6 +355,24 @@ std::filesystem::path canonicalOr(const std::filesystem::path& p) {
 }
 
 }  // namespace
+
+namespace detail {
+
+// The dlopen'ed library; dlclose when the last owner (plugin record or a
+// Factory copy's keepAlive) lets go. In a named namespace: PluginLinker::Loaded
+// holds one, and a member type from an anonymous namespace draws
+// -Wsubobject-linkage once this file is part of a unity batch.
+struct PluginLibrary {
+  void* handle = nullptr;
+  explicit PluginLibrary(void* h) : handle(h) {}
+  PluginLibrary(const PluginLibrary&) = delete;
+  PluginLibrary& operator=(const PluginLibrary&) = delete;
+  ~PluginLibrary() {
+    if (handle) dlclose(handle);
+  }
+};
+
+}  // namespace detail
 
 // ---- FactoryRegistry ---------------------------------------------------------
 
@@ -490,7 +496,7 @@ const char* toString(PluginStatus status) noexcept {
 
 struct PluginLinker::Loaded {
   PluginRecord record;
-  std::shared_ptr<Library> library;  // null for built-ins
+  std::shared_ptr<detail::PluginLibrary> library;  // null for built-ins
   const DmPluginInfo* info = nullptr;
   std::unique_ptr<DmHostContext> ctx;
   DmHostApi api{};
@@ -598,7 +604,7 @@ Result<PluginRecord> PluginLinker::loadFileLocked(const std::filesystem::path& f
                    "is it a plugin built for this platform and architecture?"));
   }
   auto plugin = std::make_shared<Loaded>();
-  plugin->library = std::make_shared<Library>(handle);
+  plugin->library = std::make_shared<detail::PluginLibrary>(handle);
   plugin->record.path = file;
 
   dlerror();

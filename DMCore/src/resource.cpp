@@ -424,3 +424,5 @@ ResourceStats ResourceManager::stats() const {
 }
 
 }  // namespace dm
+
+#undef DM_RESOURCE_TSAN

@@ -23,13 +23,15 @@
 #include <utility>
 #include <vector>
 
+#include "math_internal.hpp"
+
 namespace dm {
 namespace {
 
-constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+using detail::kNone;
 constexpr const char* kWhere = "convexHull";
 
-std::string formatDouble(double v) {
+std::string formatCoarse(double v) {
   char buf[32];
   std::snprintf(buf, sizeof buf, "%.3g", v);
   return buf;
@@ -593,7 +595,7 @@ Simplex findSimplex(const std::vector<Vec3>& q, double tolerance, double thickne
 Result<Mesh> convexHull(std::span<const Vec3> points, const ConvexHullOptions& options) {
   const double relTol = options.relativeTolerance;
   if (!std::isfinite(relTol) || relTol < 0 || relTol >= 0.1)
-    return fail(ErrorCode::InvalidArgument, "relativeTolerance is " + formatDouble(relTol), kWhere,
+    return fail(ErrorCode::InvalidArgument, "relativeTolerance is " + formatCoarse(relTol), kWhere,
                 "pass 0 for the default or a finite value in [0, 0.1)");
   const std::size_t n = points.size();
   if (n == 0)
@@ -629,7 +631,7 @@ Result<Mesh> convexHull(std::span<const Vec3> points, const ConvexHullOptions& o
     return fail(
         ErrorCode::InvalidArgument,
         "the hull is degenerate: all " + std::to_string(n) + " points " + what + " within " +
-            formatDouble(flat) + " m (" + std::to_string(dimension) + "-dimensional)",
+            formatCoarse(flat) + " m (" + std::to_string(dimension) + "-dimensional)",
         kWhere,
         "a convex hull needs points that span 3 dimensions (at least 4 not in one plane); give a flat or "
         "thin object some thickness");

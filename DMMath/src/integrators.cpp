@@ -9,6 +9,8 @@
 #include <string>
 #include <utility>
 
+#include "math_internal.hpp"
+
 namespace dm {
 
 // ---------------------------------------------------------------------------
@@ -125,20 +127,10 @@ void velocityVerletStep(const SecondOrderRhs& a, double t, double h, VecX& x, Ve
 
 namespace {
 
-std::string fmt(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
+using detail::firstNonFinite;
+using detail::fmt;
 
 std::string at(std::string_view method, double t) { return std::string(method) + " at t = " + fmt(t); }
-
-/// Index of the first NaN/Inf component, or -1.
-Eigen::Index firstNonFinite(const VecX& v) {
-  for (Eigen::Index i = 0; i < v.size(); ++i)
-    if (!std::isfinite(v[i])) return i;
-  return -1;
-}
 
 /// Number of fixed steps of size h covering `span`: the ratio, or its
 /// ceiling when it is not within round-off of an integer.

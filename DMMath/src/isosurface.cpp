@@ -53,7 +53,7 @@ constexpr std::uint64_t lowBits(int n) {
 /// work. Returns false, after skipping the remaining tasks, if a task ran out
 /// of memory (std::bad_alloc must not escape a std::thread).
 template <class F>
-bool parallelFor(int tasks, int threads, F&& body) {
+bool parallelTasks(int tasks, int threads, F&& body) {
   std::atomic<bool> outOfMemory{false};
   std::atomic<int> next{0};
   const auto run = [&](int worker) {
@@ -273,7 +273,7 @@ class Extractor {
                      static_cast<std::size_t>(g_.words),
                  0);
     const int chunks = std::min(g_.nz, 8 * threads);
-    parallelFor(chunks, threads, [&](int c, int) {
+    parallelTasks(chunks, threads, [&](int c, int) {
       for (int z = g_.nz * c / chunks; z < g_.nz * (c + 1) / chunks; ++z) classifySlice(z);
     });  // allocates nothing
     report(0.1);
@@ -281,7 +281,7 @@ class Extractor {
     // 2. Count the vertices of each node slice and number them.
     std::vector<std::size_t> first(static_cast<std::size_t>(g_.Nz) + 1, 0);
     const int countChunks = std::min(g_.Nz, 8 * threads);
-    parallelFor(countChunks, threads, [&](int c, int) {
+    parallelTasks(countChunks, threads, [&](int c, int) {
       for (int k = g_.Nz * c / countChunks; k < g_.Nz * (c + 1) / countChunks; ++k)
         first[static_cast<std::size_t>(k) + 1] = countSlice(k);
     });  // allocates nothing
@@ -309,7 +309,7 @@ class Extractor {
     std::vector<std::vector<Triangle>> slabTriangles(static_cast<std::size_t>(slabs));
     std::vector<Scratch> scratch(static_cast<std::size_t>(threads));
     std::atomic<int> slabsDone{0};
-    const bool allocated = parallelFor(slabs, threads, [&](int s, int worker) {
+    const bool allocated = parallelTasks(slabs, threads, [&](int s, int worker) {
       auto& sc = scratch[static_cast<std::size_t>(worker)];
       sc.allocate(static_cast<std::size_t>(g_.Nx) * static_cast<std::size_t>(g_.Ny));
       extractSlab(g_.Nz * s / slabs, g_.Nz * (s + 1) / slabs, sc, slabTriangles[static_cast<std::size_t>(s)]);

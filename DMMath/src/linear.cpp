@@ -12,19 +12,13 @@
 #include <limits>
 #include <string>
 
+#include "math_internal.hpp"
+
 namespace dm {
 namespace {
 
-Error invalid(std::string what, const char* where, std::string hint = {}) {
-  return fail(ErrorCode::InvalidArgument, std::move(what), where, std::move(hint));
-}
-
-// Index of the first non-finite entry of a vector, or -1.
-Eigen::Index firstNonFinite(const VecX& v) {
-  for (Eigen::Index i = 0; i < v.size(); ++i)
-    if (!std::isfinite(v[i])) return i;
-  return -1;
-}
+using detail::firstNonFinite;
+using detail::invalid;
 
 Status checkFiniteVector(const VecX& v, const char* name, const char* where) {
   if (const Eigen::Index i = firstNonFinite(v); i >= 0)

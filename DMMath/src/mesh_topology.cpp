@@ -43,7 +43,7 @@ bool isDegenerate(const Triangle& t, std::size_t n) {
 }
 
 /// One side of an undirected edge {lo, hi} as seen by a triangle.
-struct HalfEdge {
+struct EdgeSide {
   std::uint32_t hi;
   std::uint32_t triangle;
   std::uint8_t cornerLo, cornerHi;  // corner index (0..2) of lo and hi in the triangle
@@ -74,7 +74,7 @@ MeshTopology analyzeTopology(const Mesh& mesh) {
     }
   }
   for (std::size_t v = 0; v < n; ++v) edgeStart[v + 1] += edgeStart[v];
-  std::vector<HalfEdge> half(edgeStart[n]);
+  std::vector<EdgeSide> half(edgeStart[n]);
   {
     std::vector<std::size_t> fill(edgeStart.begin(), edgeStart.end() - 1);
     for (std::size_t t = 0; t < f; ++t) {
@@ -84,7 +84,7 @@ MeshTopology analyzeTopology(const Mesh& mesh) {
         const std::uint8_t d = static_cast<std::uint8_t>((c + 1) % 3);
         const std::uint32_t a = tri[c], b = tri[d];
         const bool forward = a < b;
-        half[fill[std::min(a, b)]++] = HalfEdge{std::max(a, b), static_cast<std::uint32_t>(t),
+        half[fill[std::min(a, b)]++] = EdgeSide{std::max(a, b), static_cast<std::uint32_t>(t),
                                                 forward ? c : d, forward ? d : c, forward};
       }
     }
@@ -96,7 +96,7 @@ MeshTopology analyzeTopology(const Mesh& mesh) {
   for (std::size_t lo = 0; lo < n; ++lo) {
     auto* begin = half.data() + edgeStart[lo];
     auto* end = half.data() + edgeStart[lo + 1];
-    std::sort(begin, end, [](const HalfEdge& a, const HalfEdge& b) {
+    std::sort(begin, end, [](const EdgeSide& a, const EdgeSide& b) {
       return a.hi != b.hi ? a.hi < b.hi : a.triangle < b.triangle;
     });
     for (auto* g = begin; g != end;) {

@@ -9,12 +9,12 @@
 #include <limits>
 #include <string>
 
+#include "math_internal.hpp"
+
 namespace dm {
 namespace {
 
-Error invalid(std::string what, const char* where, std::string hint = {}) {
-  return fail(ErrorCode::InvalidArgument, std::move(what), where, std::move(hint));
-}
+using detail::invalid;
 
 Status checkFinite(std::span<const Vec3> pts, const char* name, const char* where) {
   for (std::size_t i = 0; i < pts.size(); ++i)

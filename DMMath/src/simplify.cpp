@@ -16,10 +16,12 @@
 #include <utility>
 #include <vector>
 
+#include "math_internal.hpp"
+
 namespace dm {
 namespace {
 
-constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+using detail::kNone;
 
 // ---------------------------------------------------------------------------
 // Bounding-volume hierarchy over triangles for closest-point queries.

@@ -8,29 +8,29 @@
 namespace dm {
 namespace {
 
-constexpr const char* kWhere = "CubicSpline::create";
+constexpr const char* kSplineWhere = "CubicSpline::create";
 
 Status checkKnots(std::span<const double> x, std::span<const double> y) {
   if (x.size() != y.size())
     return fail(ErrorCode::InvalidArgument, formatString("%zu knots x but %zu values y", x.size(), y.size()),
-                kWhere, "pass one value per knot");
+                kSplineWhere, "pass one value per knot");
   if (x.size() < 2)
     return fail(ErrorCode::InvalidArgument,
-                formatString("a spline needs at least 2 points, got %zu", x.size()), kWhere,
+                formatString("a spline needs at least 2 points, got %zu", x.size()), kSplineWhere,
                 "add control points (two points give a straight line)");
   for (std::size_t i = 0; i < x.size(); ++i) {
     if (!std::isfinite(x[i]))
-      return fail(ErrorCode::InvalidArgument, formatString("x[%zu] is %g (NaN or Inf)", i, x[i]), kWhere,
-                  "knots must be finite numbers");
+      return fail(ErrorCode::InvalidArgument, formatString("x[%zu] is %g (NaN or Inf)", i, x[i]),
+                  kSplineWhere, "knots must be finite numbers");
     if (!std::isfinite(y[i]))
-      return fail(ErrorCode::InvalidArgument, formatString("y[%zu] is %g (NaN or Inf)", i, y[i]), kWhere,
-                  "values must be finite numbers");
+      return fail(ErrorCode::InvalidArgument, formatString("y[%zu] is %g (NaN or Inf)", i, y[i]),
+                  kSplineWhere, "values must be finite numbers");
     if (i > 0 && !(x[i] > x[i - 1]))
       return fail(
           ErrorCode::InvalidArgument,
           formatString("x[%zu] = %.17g is not greater than x[%zu] = %.17g: knots must be strictly increasing",
                        i, x[i], i - 1, x[i - 1]),
-          kWhere, "sort the control points by x and merge duplicates");
+          kSplineWhere, "sort the control points by x and merge duplicates");
   }
   return ok();
 }
@@ -112,7 +112,7 @@ Result<CubicSpline> CubicSpline::create(std::span<const double> x, std::span<con
     return fail(ErrorCode::InvalidArgument,
                 formatString("clamped end slopes must be finite, got %g and %g", options.startSlope,
                              options.endSlope),
-                kWhere);
+                kSplineWhere);
   CubicSpline s;
   s.x_.assign(x.begin(), x.end());
   s.y_.assign(y.begin(), y.end());

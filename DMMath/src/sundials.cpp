@@ -22,16 +22,15 @@
 #include <string>
 #include <utility>
 
+#include "math_internal.hpp"
+
 namespace dm {
 namespace {
 
-enum class Method { CvodeBdf, CvodeAdams, ArkodeErk, ArkodeDirk, ArkodeArk };
+using detail::firstNonFinite;
+using detail::fmt;
 
-std::string fmt(double v) {
-  char buf[32];
-  std::snprintf(buf, sizeof buf, "%.9g", v);
-  return buf;
-}
+enum class Method { CvodeBdf, CvodeAdams, ArkodeErk, ArkodeDirk, ArkodeArk };
 
 /// What the callbacks see (SUNDIALS user data), and what they report back.
 struct Callbacks {
@@ -65,12 +64,6 @@ struct Callbacks {
 Callbacks& cbOf(void* p) { return *static_cast<Callbacks*>(p); }
 
 Eigen::Map<VecX> view(N_Vector v, Eigen::Index n) { return {N_VGetArrayPointer(v), n}; }
-
-Eigen::Index firstNonFinite(const VecX& v) {
-  for (Eigen::Index i = 0; i < v.size(); ++i)
-    if (!std::isfinite(v[i])) return i;
-  return -1;
-}
 
 /// Calls a user function, turning an exception into a recorded failure.
 template <class Fn>

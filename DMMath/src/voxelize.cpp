@@ -132,9 +132,9 @@ std::pair<long long, long long> centreRange(double a, double b, double origin, d
 
 /// Bounding volume hierarchy over triangles (median splits, up to 4
 /// triangles per leaf) for exact nearest-triangle queries within a radius.
-class TriangleBvh {
+class NearestTriangleBvh {
  public:
-  TriangleBvh(const Mesh& mesh, const std::vector<std::uint32_t>& tris) : mesh_(mesh), order_(tris) {
+  NearestTriangleBvh(const Mesh& mesh, const std::vector<std::uint32_t>& tris) : mesh_(mesh), order_(tris) {
     if (order_.empty()) return;
     centroids_.resize(mesh.triangles.size());
     for (std::uint32_t t : order_) {
@@ -229,7 +229,7 @@ class TriangleBvh {
 /// every voxel within `band`, infinity beyond, by BVH queries of radius band.
 void bvhDistances(const Mesh& mesh, const std::vector<std::uint32_t>& tris, const Grid& g, double band,
                   float* dist, Progress& progress, double p0, double p1) {
-  const TriangleBvh bvh(mesh, tris);
+  const NearestTriangleBvh bvh(mesh, tris);
   const double band2 = band * band;
   runBatched(g.nz(), progress, p0, p1, [&](std::size_t kb, std::size_t ke) {
     for (std::size_t k = kb; k < ke; ++k)

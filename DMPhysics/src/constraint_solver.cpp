@@ -1285,3 +1285,6 @@ void integratePositions(std::span<SolverBody> bodies, double dt) noexcept {
 }
 
 }  // namespace dm
+
+#undef DM_SOLVER_AVX
+#undef DM_SOLVER_VECTOR_LANES
