@@ -56,7 +56,7 @@ using detail::kInf;
 using detail::modelOf;
 using detail::normalFromGradient;
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
-constexpr int kStackSize = 160;
+constexpr int kCellStackSize = 160;
 
 // Smallest x² over x ∈ [x0, x1].
 double minSquare(double x0, double x1) noexcept {
@@ -336,7 +336,7 @@ struct VoxelConvexPair {
     // Whole-shape prune by the bounding sphere.
     const BoundingSphere bs = shape.boundingSphere();
     if (!(model.distance(toModel * bs.center) - k * bs.radius <= cutoff)) return true;
-    Cell stack[kStackSize];
+    Cell stack[kCellStackSize];
     const int patches = surface.patchCount();
     for (int patch = 0; patch < patches; ++patch) {
       const int dim = surface.dim(patch);
@@ -353,7 +353,7 @@ struct VoxelConvexPair {
         const Vec3 p = toModel * surface.eval(patch, sm, tm);
         const double d = model.distance(p);
         if (!(d - k * 0.5 * (es + et) <= cutoff)) continue;
-        if ((es <= spacing && et <= spacing) || top + 2 > kStackSize) {
+        if ((es <= spacing && et <= spacing) || top + 2 > kCellStackSize) {
           Vec3 g = Vec3::Zero();
           const double dl = kGradient ? model.distance(p, g) : d;
           if (!visit(p, dl, g)) return false;
@@ -380,7 +380,7 @@ struct VoxelConvexPair {
     struct Box3 {
       Vec3 center, half;
     };
-    Box3 stack[kStackSize];
+    Box3 stack[kCellStackSize];
     int top = 0;
     const Aabb box = surface.localAabb();
     stack[top++] = {box.center(), 0.5 * box.sizes()};
@@ -397,7 +397,7 @@ struct VoxelConvexPair {
       }
       int axis = 0;
       const double longest = c.half.maxCoeff(&axis);
-      if (longest < 0.5 * spacing || top + 2 > kStackSize) continue;
+      if (longest < 0.5 * spacing || top + 2 > kCellStackSize) continue;
       Box3 lo = c, hi = c;
       lo.half[axis] = hi.half[axis] = 0.5 * longest;
       lo.center[axis] -= 0.5 * longest;

@@ -897,20 +897,20 @@ Result<std::shared_ptr<const SphereTree>> buildSphereTreeFitted(const Volume& vo
 // -------------------------------------------------- ImplicitSphereTree ---
 
 namespace {
-constexpr int kCoordBits = 18;
-constexpr std::uint64_t kCoordMask = (std::uint64_t{1} << kCoordBits) - 1;
+constexpr int kMortonBits = 18;
+constexpr std::uint64_t kCoordMask = (std::uint64_t{1} << kMortonBits) - 1;
 }  // namespace
 
 SphereHierarchy::NodeId ImplicitSphereTree::nodeId(int level, int i, int j, int k) noexcept {
-  return static_cast<NodeId>(level) << (3 * kCoordBits) |
-         (static_cast<NodeId>(k) & kCoordMask) << (2 * kCoordBits) |
-         (static_cast<NodeId>(j) & kCoordMask) << kCoordBits | (static_cast<NodeId>(i) & kCoordMask);
+  return static_cast<NodeId>(level) << (3 * kMortonBits) |
+         (static_cast<NodeId>(k) & kCoordMask) << (2 * kMortonBits) |
+         (static_cast<NodeId>(j) & kCoordMask) << kMortonBits | (static_cast<NodeId>(i) & kCoordMask);
 }
 
 void ImplicitSphereTree::unpack(NodeId id, int& level, int& i, int& j, int& k) noexcept {
-  level = static_cast<int>(id >> (3 * kCoordBits));
-  k = static_cast<int>((id >> (2 * kCoordBits)) & kCoordMask);
-  j = static_cast<int>((id >> kCoordBits) & kCoordMask);
+  level = static_cast<int>(id >> (3 * kMortonBits));
+  k = static_cast<int>((id >> (2 * kMortonBits)) & kCoordMask);
+  j = static_cast<int>((id >> kMortonBits) & kCoordMask);
   i = static_cast<int>(id & kCoordMask);
 }
 
