@@ -1,11 +1,21 @@
 #!/usr/bin/env bash
 # Builds every libFuzzer target with clang and runs each for a bounded time.
 #   scripts/fuzz.sh [SECONDS_PER_TARGET]   (default 30)
+#   scripts/fuzz.sh --budget SECONDS       every target runs, and the
+#       fuzzing takes about SECONDS of wall time in all: each target gets
+#       SECONDS x cores / targets (at least 5 s). CI uses this, so the stage
+#       keeps its time as targets are added.
 # Seeds: Tests/fuzz/corpus/<target>/ plus real files named in seeds_for().
 # A crash leaves the input in build-fuzz/artifacts/ and fails the script.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-seconds="${1:-30}"
+budget=""
+seconds=30
+if [ "${1:-}" = "--budget" ]; then
+  budget="${2:?fuzz.sh: --budget needs a number of seconds}"
+elif [ -n "${1:-}" ]; then
+  seconds="$1"
+fi
 bash scripts/setup.sh
 builddir=build-fuzz
 CC=clang CXX=clang++ cmake -S . -B "$builddir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDM_FUZZ=ON \
@@ -14,6 +24,11 @@ CC=clang CXX=clang++ cmake -S . -B "$builddir" -G Ninja -DCMAKE_BUILD_TYPE=RelWi
 mapfile -t targets < <(cmake --build "$builddir" --target help | sed -n 's/^\([a-z0-9_]*_fuzz\):.*/\1/p')
 if [ ${#targets[@]} -eq 0 ]; then echo "fuzz: no targets"; exit 0; fi
 cmake --build "$builddir" -j "$(nproc)" --target "${targets[@]}"
+if [ -n "$budget" ]; then
+  seconds=$((budget * $(nproc) / ${#targets[@]}))
+  [ "$seconds" -ge 5 ] || seconds=5
+  echo "fuzz: ${#targets[@]} targets, ${seconds}s each, $(nproc) at a time (budget ${budget}s)"
+fi
 
 seeds_for() {
   case "$1" in
