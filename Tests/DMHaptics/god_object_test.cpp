@@ -19,26 +19,19 @@
 #include <vector>
 
 #include "../common/alloc_counter.hpp"
+#include "haptics_test_support.hpp"
 
 namespace dm {
 namespace {
 
-constexpr double kStiffness = 1000.0;  // N/m
+using dm::test::at;
+using dm::test::input;
+using dm::test::kStiffness;
 
 std::shared_ptr<const MeshBvh> bvhOf(const Mesh& mesh) {
   Result<MeshBvh> b = MeshBvh::build(mesh);
   EXPECT_TRUE(b.ok());
   return std::make_shared<const MeshBvh>(std::move(*b));
-}
-
-Isometry3 at(const Vec3& p) {
-  Isometry3 t = Isometry3::Identity();
-  t.translation() = p;
-  return t;
-}
-
-HapticInput input(const Vec3& p, const Vec3& v = Vec3::Zero()) {
-  return {.timeNs = 0, .dt = 1e-3, .devicePose = at(p), .linearVelocity = v};
 }
 
 std::unique_ptr<GodObjectRenderer> makeRenderer(std::vector<GodObjectObject> objects,

@@ -23,11 +23,13 @@
 #include <memory>
 #include <vector>
 
+#include "haptics_test_support.hpp"
+
 namespace dm {
 namespace {
 
 constexpr double kHalf = 0.05;  // box half extent, m: top face at z = 0.05
-constexpr double kDt = 1e-3;    // 1 kHz
+using dm::test::kDt;
 
 // Three turns of a 6 mm circle in the xz plane centred 1 mm above the top
 // face (so 5 mm deep at the bottom), 1000 ticks a turn, ending where it began.

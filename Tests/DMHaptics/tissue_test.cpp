@@ -17,19 +17,14 @@
 #include <vector>
 
 #include "../common/alloc_counter.hpp"
+#include "haptics_test_support.hpp"
 
 namespace dm {
 namespace {
 
-constexpr double kStiffness = 1000.0;  // N/m
-
-Isometry3 at(const Vec3& p) {
-  Isometry3 t = Isometry3::Identity();
-  t.translation() = p;
-  return t;
-}
-
-HapticInput input(const Vec3& p) { return {.timeNs = 0, .dt = 1e-3, .devicePose = at(p)}; }
+using dm::test::at;
+using dm::test::input;
+using dm::test::kStiffness;
 
 std::unique_ptr<GodObjectRenderer> rendererOn(const Mesh& mesh, std::shared_ptr<const MeshBvh>& tree,
                                               const GodObjectOptions& options = {}) {

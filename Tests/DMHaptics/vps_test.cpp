@@ -24,11 +24,13 @@
 #include <vector>
 
 #include "../common/alloc_counter.hpp"
+#include "haptics_test_support.hpp"
 
 namespace dm {
 namespace {
 
-constexpr double kDt = 1e-3;
+using dm::test::at;
+using dm::test::kDt;
 
 // Point shell of an icosphere's vertices (radius r, 642 points at level 3)
 // centred at `centre` in the tool frame, normals radial.
@@ -69,13 +71,6 @@ std::shared_ptr<const VoxelModel> sphereSdfModel(const Vec3& c, double radius, c
   auto model = VoxelModel::fromSdf(*v);
   EXPECT_TRUE(model.ok());
   return *model;
-}
-
-Isometry3 at(const Vec3& t, const Mat3& r = Mat3::Identity()) {
-  Isometry3 p = Isometry3::Identity();
-  p.linear() = r;
-  p.translation() = t;
-  return p;
 }
 
 // Holds the device still at `device` for `ticks` ticks; the last response.

@@ -25,7 +25,7 @@
 
 namespace {
 
-constexpr std::int64_t kMs = 1'000'000;
+using dm::test::kMs;
 
 std::unique_ptr<dm::Controller> openOrFail(const dm::FactoryRegistry& reg, const char* driver,
                                            const dm::DeviceParams& params,
@@ -35,7 +35,7 @@ std::unique_ptr<dm::Controller> openOrFail(const dm::FactoryRegistry& reg, const
   return c.ok() ? std::move(*c) : nullptr;
 }
 
-double frac(double x) { return x - std::floor(x); }
+using dm::test::frac;
 
 TEST(SimController, PluginAndBuiltInGiveIdenticalStates) {
   dm::test::PluginDriver plugin("sim_controller", "sim-controller");

@@ -15,10 +15,10 @@
 
 namespace {
 
-constexpr std::int64_t kMs = 1'000'000;
+using dm::test::kMs;
 using Frames = std::vector<dm::DaqFrame>;
 
-std::unique_ptr<dm::Daq> openOrFail(const dm::FactoryRegistry& reg, const dm::DeviceParams& params) {
+std::unique_ptr<dm::Daq> openDaqOrFail(const dm::FactoryRegistry& reg, const dm::DeviceParams& params) {
   auto d = dm::Daq::open(reg, "sim-daq", params);
   EXPECT_TRUE(d.ok()) << (d.ok() ? "" : d.error().message());
   return d.ok() ? std::move(*d) : nullptr;
@@ -35,7 +35,7 @@ Frames drain(dm::Daq& d, std::uint64_t* overrun = nullptr) {
   }
 }
 
-double frac(double x) { return x - std::floor(x); }
+using dm::test::frac;
 
 TEST(SimDaq, PluginAndBuiltInGiveIdenticalFrames) {
   dm::test::PluginDriver plugin("sim_daq", "sim-daq");
@@ -66,14 +66,14 @@ TEST(SimDaq, PluginAndBuiltInGiveIdenticalFrames) {
 
 TEST(SimDaq, SamplesFollowTheSignalFormulas) {
   dm::test::BuiltinDrivers b;
-  auto d = openOrFail(b.registry, {{"channels", "5"},
-                                   {"rate", "1000"},
-                                   {"ch0", "sine,2,5,0.5"},
-                                   {"ch1", "square,1,10"},
-                                   {"ch2", "ramp,3,2,-1"},
-                                   {"ch3", "constant,0,1,1.5"},
-                                   {"ch4", "sine,20,1"},  // clipped to ±range
-                                   {"range", "12"}});
+  auto d = openDaqOrFail(b.registry, {{"channels", "5"},
+                                      {"rate", "1000"},
+                                      {"ch0", "sine,2,5,0.5"},
+                                      {"ch1", "square,1,10"},
+                                      {"ch2", "ramp,3,2,-1"},
+                                      {"ch3", "constant,0,1,1.5"},
+                                      {"ch4", "sine,20,1"},  // clipped to ±range
+                                      {"range", "12"}});
   ASSERT_TRUE(d);
   for (std::int64_t k = 0; k <= 100; ++k) d->acquire(k * 10 * kMs);
   const Frames f = drain(*d);
@@ -96,7 +96,7 @@ TEST(SimDaq, SamplesFollowTheSignalFormulas) {
 
 TEST(SimDaq, TimestampsAreOneOverTheRateApart) {
   dm::test::BuiltinDrivers b;
-  auto d = openOrFail(b.registry, {{"channels", "1"}, {"rate", "3000"}});  // period 333 333.3 ns
+  auto d = openDaqOrFail(b.registry, {{"channels", "1"}, {"rate", "3000"}});  // period 333 333.3 ns
   ASSERT_TRUE(d);
   const std::int64_t start = 500 * kMs + 123;  // acquisition starts at the first acquire()
   for (std::int64_t k = 0; k <= 50; ++k) d->acquire(start + k * 2 * kMs);
@@ -120,7 +120,7 @@ TEST(SimDaq, TimestampsAreOneOverTheRateApart) {
 
 TEST(SimDaq, DeviceFifoOverflowIsReportedWithItsCount) {
   dm::test::BuiltinDrivers b;
-  auto d = openOrFail(b.registry, {{"channels", "2"}, {"rate", "1000"}, {"fifo", "100"}});
+  auto d = openDaqOrFail(b.registry, {{"channels", "2"}, {"rate", "1000"}, {"fifo", "100"}});
   ASSERT_TRUE(d);
   d->acquire(0);           // frame 0
   d->acquire(1000 * kMs);  // frames 1..1000 are due, the FIFO kept the last 100
@@ -139,7 +139,7 @@ TEST(SimDaq, DeviceFifoOverflowIsReportedWithItsCount) {
 
 TEST(SimDaq, ConsumerFallingBehindGetsRingOverrunCounts) {
   dm::test::BuiltinDrivers b;
-  auto d = openOrFail(b.registry, {{"channels", "1"}, {"rate", "10000"}, {"fifo", "1000000"}});
+  auto d = openDaqOrFail(b.registry, {{"channels", "1"}, {"rate", "10000"}, {"fifo", "1000000"}});
   ASSERT_TRUE(d);
   for (std::int64_t k = 0; k <= 200; ++k) d->acquire(k * 10 * kMs);  // 2 s: frames 0..20000, nothing read
   const std::uint64_t produced = 20001;
@@ -165,12 +165,12 @@ TEST(SimDaq, ConsumerFallingBehindGetsRingOverrunCounts) {
 TEST(SimDaq, NoiseIsGaussianWithTheRequestedSpreadAndRepeats) {
   dm::test::BuiltinDrivers b;
   auto run = [&](const char* seed) {
-    auto d = openOrFail(b.registry, {{"channels", "1"},
-                                     {"ch0", "constant,0,1,0.25"},
-                                     {"noise", "0.01"},
-                                     {"seed", seed},
-                                     {"rate", "10000"},
-                                     {"fifo", "100000"}});
+    auto d = openDaqOrFail(b.registry, {{"channels", "1"},
+                                        {"ch0", "constant,0,1,0.25"},
+                                        {"noise", "0.01"},
+                                        {"seed", seed},
+                                        {"rate", "10000"},
+                                        {"fifo", "100000"}});
     Frames all;
     for (std::int64_t k = 0; k <= 20; ++k) {
       d->acquire(k * 100 * kMs);
@@ -196,8 +196,8 @@ TEST(SimDaq, NoiseIsGaussianWithTheRequestedSpreadAndRepeats) {
 
 TEST(SimDaq, LossIsAnEventAndTheMissedFramesAreCounted) {
   dm::test::BuiltinDrivers b;
-  auto d = openOrFail(b.registry,
-                      {{"channels", "1"}, {"rate", "1000"}, {"drop_at", "0.1"}, {"reconnect_at", "0.25"}});
+  auto d = openDaqOrFail(b.registry,
+                         {{"channels", "1"}, {"rate", "1000"}, {"drop_at", "0.1"}, {"reconnect_at", "0.25"}});
   ASSERT_TRUE(d);
   Frames all;
   std::uint64_t overrun = 0;

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "../common/temp_dir.hpp"
+#include "file_test_support.hpp"
 
 namespace {
 
@@ -52,20 +53,8 @@ std::string capture(const std::string& cmd) {
   return out;
 }
 
-void writeText(const fs::path& p, const std::string& s) {
-  std::ofstream f(p, std::ios::binary);
-  f << s;
-}
-
-fs::path mricron(const std::string& name) {
-  auto p = dm::FileSystem::global().resolve("mricron:" + name);
-  if (!p) {
-    ADD_FAILURE() << "test data missing: install the Debian package mricron-data (scripts/setup.sh does): "
-                  << p.error();
-    return {};
-  }
-  return *p;
-}
+using dm::test::mricron;
+using dm::test::writeText;
 
 // DICOM LPS millimetres to the SDK's RAS metres.
 dm::Vec3 lpsToRasM(const dm::Vec3& v) { return {-v.x() * 1e-3, -v.y() * 1e-3, v.z() * 1e-3}; }
@@ -491,3 +480,5 @@ TEST(Dicom, HostileDeclaredLengthsFailWithTheirOffset) {
 }
 
 }  // namespace
+
+#undef REQUIRE_TOOL

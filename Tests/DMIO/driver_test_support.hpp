@@ -8,10 +8,19 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <cstdint>
 #include <string>
+
 #include "../common/build_paths.hpp"
 
 namespace dm::test {
+
+/// One millisecond in the nanoseconds of device timestamps.
+inline constexpr std::int64_t kMs = 1'000'000;
+
+/// The fractional part of x, in [0, 1): the phase of a periodic signal.
+inline double frac(double x) { return x - std::floor(x); }
 
 /// A registry filled by registerBuiltinDrivers().
 struct BuiltinDrivers {

@@ -14,16 +14,18 @@
 #include <numbers>
 #include <vector>
 
-#include "../common/temp_dir.hpp"
 #include "../common/build_paths.hpp"
+#include "../common/temp_dir.hpp"
+#include "driver_test_support.hpp"
 
 namespace {
 
 using dm::Vec3;
-constexpr std::int64_t kMs = 1'000'000;
+using dm::test::kMs;
 
-std::unique_ptr<dm::HapticDevice> openOrFail(const dm::FactoryRegistry& reg, const dm::DeviceParams& params,
-                                             const dm::HapticSafety& safety = {}) {
+std::unique_ptr<dm::HapticDevice> openHapticOrFail(const dm::FactoryRegistry& reg,
+                                                   const dm::DeviceParams& params,
+                                                   const dm::HapticSafety& safety = {}) {
   auto d = dm::HapticDevice::open(reg, "sim-haptic", params, safety);
   EXPECT_TRUE(d.ok()) << (d.ok() ? "" : d.error().message());
   return d.ok() ? std::move(*d) : nullptr;
@@ -43,8 +45,8 @@ TEST(SimHaptic, PluginAndBuiltInGiveIdenticalSamples) {
   EXPECT_EQ(loaded->name, "sim-haptic");
   Builtin b;
   const dm::DeviceParams params = {{"path", "spiral"}, {"noise", "0.0001"}, {"seed", "42"}};
-  auto p = openOrFail(plugReg, params);
-  auto s = openOrFail(b.registry, params);
+  auto p = openHapticOrFail(plugReg, params);
+  auto s = openHapticOrFail(b.registry, params);
   ASSERT_TRUE(p && s);
   EXPECT_EQ(p->info().driver, "sim-haptic");
   EXPECT_EQ(p->info().serial, "sim-42");
@@ -57,8 +59,8 @@ TEST(SimHaptic, PluginAndBuiltInGiveIdenticalSamples) {
 
 TEST(SimHaptic, CircleFollowsItsFormula) {
   Builtin b;
-  auto d = openOrFail(b.registry,
-                      {{"path", "circle"}, {"radius", "0.04"}, {"period", "0.5"}, {"center", "0.1,0,0.2"}});
+  auto d = openHapticOrFail(
+      b.registry, {{"path", "circle"}, {"radius", "0.04"}, {"period", "0.5"}, {"center", "0.1,0,0.2"}});
   ASSERT_TRUE(d);
   const Vec3 c(0.1, 0, 0.2);
   const double w = 2 * std::numbers::pi / 0.5;
@@ -75,7 +77,8 @@ TEST(SimHaptic, CircleFollowsItsFormula) {
 
 TEST(SimHaptic, LineSweepsBetweenItsEnds) {
   Builtin b;
-  auto d = openOrFail(b.registry, {{"path", "line"}, {"from", "0,0,0"}, {"to", "0.1,0,0"}, {"period", "1"}});
+  auto d =
+      openHapticOrFail(b.registry, {{"path", "line"}, {"from", "0,0,0"}, {"to", "0.1,0,0"}, {"period", "1"}});
   ASSERT_TRUE(d);
   d->servo(250 * kMs);  // a quarter period: halfway out
   EXPECT_NEAR(d->state().position.x(), 0.05, 1e-12);
@@ -87,7 +90,7 @@ TEST(SimHaptic, LineSweepsBetweenItsEnds) {
 
 TEST(SimHaptic, NoiseQuantizationAndLatency) {
   Builtin b;
-  auto noisy = openOrFail(b.registry, {{"path", "point"}, {"noise", "0.001"}, {"seed", "3"}});
+  auto noisy = openHapticOrFail(b.registry, {{"path", "point"}, {"noise", "0.001"}, {"seed", "3"}});
   ASSERT_TRUE(noisy);
   double sum = 0, sum2 = 0;
   const int n = 20000;
@@ -101,7 +104,7 @@ TEST(SimHaptic, NoiseQuantizationAndLatency) {
   EXPECT_NEAR(sd, 0.001, 0.00005);  // 20000 samples: the estimate's sd is 0.5 %
   EXPECT_NEAR(mean, 0.0, 0.00005);
 
-  auto q = openOrFail(b.registry, {{"path", "circle"}, {"quantization", "0.0005"}});
+  auto q = openHapticOrFail(b.registry, {{"path", "circle"}, {"quantization", "0.0005"}});
   ASSERT_TRUE(q);
   for (int k = 0; k < 100; ++k) {
     q->servo(k * 7 * kMs);
@@ -111,8 +114,8 @@ TEST(SimHaptic, NoiseQuantizationAndLatency) {
     }
   }
 
-  auto late = openOrFail(b.registry, {{"path", "circle"}, {"latency", "0.02"}});
-  auto now = openOrFail(b.registry, {{"path", "circle"}});
+  auto late = openHapticOrFail(b.registry, {{"path", "circle"}, {"latency", "0.02"}});
+  auto now = openHapticOrFail(b.registry, {{"path", "circle"}});
   ASSERT_TRUE(late && now);
   std::vector<Vec3> truth;
   for (std::int64_t k = 0; k < 200; ++k) {
@@ -132,7 +135,7 @@ TEST(SimHaptic, CsvPathInterpolatesAndLoops) {
     f << "t,x,y,z\n0,0,0,0\n1,0.1,0,0\n2,0.1,0.1,0\n";
   }
   Builtin b;
-  auto d = openOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "path.csv").string()}});
+  auto d = openHapticOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "path.csv").string()}});
   ASSERT_TRUE(d);
   d->servo(500 * kMs);
   EXPECT_NEAR((d->state().position - Vec3(0.05, 0, 0)).norm(), 0.0, 1e-12);
@@ -195,7 +198,7 @@ TEST(SimHaptic, WrongAbiAndCrashingInitDriversAreRefusedCleanly) {
 // one toward x0 (k_v). Equilibrium x* = k_v·x0 / (k_h + k_v).
 TEST(SimHaptic, VirtualHandSettlesAtTheSpringEquilibrium) {
   Builtin b;
-  auto d = openOrFail(b.registry, {{"path", "point"}, {"hand", "1"}, {"hand_stiffness", "300"}});
+  auto d = openHapticOrFail(b.registry, {{"path", "point"}, {"hand", "1"}, {"hand_stiffness", "300"}});
   ASSERT_TRUE(d);
   const Vec3 x0(0.02, -0.01, 0.005);
   const double kv = 200.0;
@@ -209,7 +212,7 @@ TEST(SimHaptic, VirtualHandSettlesAtTheSpringEquilibrium) {
 
 TEST(SimHaptic, LossWindowGivesEventsAndNoOutput) {
   Builtin b;
-  auto d = openOrFail(b.registry, {{"path", "point"}, {"drop_at", "0.1"}, {"reconnect_at", "0.25"}});
+  auto d = openHapticOrFail(b.registry, {{"path", "point"}, {"drop_at", "0.1"}, {"reconnect_at", "0.25"}});
   ASSERT_TRUE(d);
   std::vector<dm::DeviceEvent> events;
   for (std::int64_t k = 0; k < 400; ++k) {

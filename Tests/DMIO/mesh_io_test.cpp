@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "../common/temp_dir.hpp"
+#include "file_test_support.hpp"
 
 namespace {
 
@@ -39,11 +40,7 @@ const fs::path kModels = "/usr/share/assimp/models";
   } while (0)
 
 using dm::test::TempDir;
-
-void writeText(const fs::path& p, const std::string& s) {
-  std::ofstream f(p, std::ios::binary);
-  f << s;
-}
+using dm::test::writeText;
 
 std::vector<std::byte> bytesOf(const std::string& s) {
   std::vector<std::byte> b(s.size());
@@ -828,3 +825,5 @@ TEST(MeshIoWalk, EveryAssimpTestModelLoadsOrFailsCleanly) {
 }
 
 }  // namespace
+
+#undef DM_REQUIRE_TESTMODELS

@@ -18,39 +18,18 @@
 
 #include "../../DMIO/src/gzip.hpp"
 #include "../common/temp_dir.hpp"
+#include "file_test_support.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 using Bytes = std::vector<std::byte>;
 
-Bytes text(const std::string& s) {
-  Bytes b(s.size());
-  if (!s.empty()) std::memcpy(b.data(), s.data(), s.size());
-  return b;
-}
-
-template <class T>
-Bytes raw(const std::vector<T>& v, bool bigEndian = false) {
-  Bytes b(v.size() * sizeof(T));
-  if (!b.empty()) std::memcpy(b.data(), v.data(), b.size());
-  if (bigEndian != (std::endian::native == std::endian::big))
-    for (std::size_t i = 0; i < b.size(); i += sizeof(T))
-      std::reverse(b.begin() + i, b.begin() + i + sizeof(T));
-  return b;
-}
-
-Bytes operator+(Bytes a, const Bytes& b) {
-  a.insert(a.end(), b.begin(), b.end());
-  return a;
-}
-
+using dm::test::operator+;
+using dm::test::raw;
 using dm::test::TempDir;
-
-void writeBytes(const fs::path& p, const Bytes& b) {
-  auto s = dm::writeFileAtomic(p, b.data(), b.size());
-  ASSERT_TRUE(s) << s.error();
-}
+using dm::test::text;
+using dm::test::writeBytes;
 
 TEST(MetaImage, LpsGeometryBecomesRasMetres) {
   // Axis 0 points along LPS +y (posterior), axis 1 along LPS -x (right), axis 2 along +z.
@@ -229,7 +208,7 @@ void expectError(const std::string& header, const Bytes& data, const std::string
 }
 
 const std::string kTail = "ElementType = MET_UCHAR\nElementDataFile = LOCAL\n";
-const Bytes kEight(8, std::byte{1});
+using dm::test::kEight;
 
 TEST(MetaImageBadInput, MissingOrMalformedKeys) {
   expectError("DimSize = 2 2 2\n" + kTail, kEight, "NDims");

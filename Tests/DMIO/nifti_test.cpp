@@ -20,6 +20,7 @@
 
 #include "../../DMIO/src/gzip.hpp"  // the library's own zlib helper, to inspect .gz bytes
 #include "../common/temp_dir.hpp"
+#include "file_test_support.hpp"
 
 namespace {
 
@@ -129,23 +130,9 @@ float floatAt(const Bytes& b, std::size_t off) {
   return f;
 }
 
+using dm::test::mricron;
 using dm::test::TempDir;
-
-void writeBytes(const fs::path& p, const Bytes& b) {
-  auto s = dm::writeFileAtomic(p, b.data(), b.size());
-  ASSERT_TRUE(s) << s.error();
-}
-
-// Resolves a file of the mricron-data package, failing with the package name.
-fs::path mricron(const std::string& name) {
-  auto p = dm::FileSystem::global().resolve("mricron:" + name);
-  if (!p) {
-    ADD_FAILURE() << "test data missing: install the Debian package mricron-data (scripts/setup.sh does): "
-                  << p.error();
-    return {};
-  }
-  return *p;
-}
+using dm::test::writeBytes;
 
 // ---------------------------------------------------------------- real data
 

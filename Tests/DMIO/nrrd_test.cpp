@@ -18,39 +18,18 @@
 
 #include "../../DMIO/src/gzip.hpp"
 #include "../common/temp_dir.hpp"
+#include "file_test_support.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 using Bytes = std::vector<std::byte>;
 
-Bytes text(const std::string& s) {
-  Bytes b(s.size());
-  if (!s.empty()) std::memcpy(b.data(), s.data(), s.size());
-  return b;
-}
-
-template <class T>
-Bytes raw(const std::vector<T>& v, bool bigEndian = false) {
-  Bytes b(v.size() * sizeof(T));
-  if (!b.empty()) std::memcpy(b.data(), v.data(), b.size());
-  if (bigEndian != (std::endian::native == std::endian::big))
-    for (std::size_t i = 0; i < b.size(); i += sizeof(T))
-      std::reverse(b.begin() + i, b.begin() + i + sizeof(T));
-  return b;
-}
-
-Bytes operator+(Bytes a, const Bytes& b) {
-  a.insert(a.end(), b.begin(), b.end());
-  return a;
-}
-
+using dm::test::operator+;
+using dm::test::raw;
 using dm::test::TempDir;
-
-void writeBytes(const fs::path& p, const Bytes& b) {
-  auto s = dm::writeFileAtomic(p, b.data(), b.size());
-  ASSERT_TRUE(s) << s.error();
-}
+using dm::test::text;
+using dm::test::writeBytes;
 
 std::string header(const std::string& space, const std::string& rest) {
   return "NRRD0004\n# comment\ntype: short\ndimension: 3\nspace: " + space +
@@ -162,7 +141,7 @@ TEST(Nrrd, TimeAxisSelectsVolumeAndSkips) {
   EXPECT_EQ(out.error().code, dm::ErrorCode::InvalidArgument);
 }
 
-dm::Affine3 obliqueAffine() {
+dm::Affine3 obliqueNrrdAffine() {
   dm::Affine3 a = dm::Affine3::Identity();
   a.linear() = dm::AngleAxis(2.2, dm::Vec3(-0.3, 0.4, 1).normalized()).toRotationMatrix() *
                dm::Vec3(0.4e-3, -1.7e-3, 2.9e-3).asDiagonal();
@@ -174,7 +153,7 @@ TEST(Nrrd, RoundTripEveryTypeAttachedAndDetached) {
   TempDir dir("roundtrip");
   for (auto type : {dm::VoxelType::U8, dm::VoxelType::I8, dm::VoxelType::U16, dm::VoxelType::I16,
                     dm::VoxelType::U32, dm::VoxelType::I32, dm::VoxelType::F32, dm::VoxelType::F64}) {
-    auto v = dm::Volume::create({3, 5, 4}, type, obliqueAffine());
+    auto v = dm::Volume::create({3, 5, 4}, type, obliqueNrrdAffine());
     ASSERT_TRUE(v);
     for (std::size_t n = 0; n < v->voxelCount(); ++n)
       v->setValueAt(n, 1e12 * std::sin(0.7 * static_cast<double>(n)));
@@ -198,8 +177,8 @@ TEST(Nrrd, RoundTripEveryTypeAttachedAndDetached) {
 
 // ---------------------------------------------------------------- bad input
 
-void expectError(const std::string& h, const Bytes& data, const std::string& needle,
-                 dm::ErrorCode code = dm::ErrorCode::Parse) {
+void expectNrrdError(const std::string& h, const Bytes& data, const std::string& needle,
+                     dm::ErrorCode code = dm::ErrorCode::Parse) {
   auto v = dm::parseNrrd(text(h) + data);
   ASSERT_FALSE(v) << "expected an error naming " << needle;
   EXPECT_EQ(v.error().code, code) << v.error();
@@ -207,67 +186,71 @@ void expectError(const std::string& h, const Bytes& data, const std::string& nee
   EXPECT_NE(v.error().message().find(needle), std::string::npos) << v.error();
 }
 
-const Bytes kEight(8, std::byte{1});
+using dm::test::kEight;
 std::string minimal(const std::string& extra) {
   return "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n" + extra + "\n";
 }
 
 TEST(NrrdBadInput, HeaderErrors) {
-  expectError("NRRD0009\n\n", kEight, "magic");
-  expectError("P6\n2 2\n255\n", kEight, "magic");
-  expectError("", {}, "magic");
-  expectError("NRRD0004\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", kEight, "\"type\"");
-  expectError("NRRD0004\ntype: quaternion\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", kEight,
-              "quaternion");
-  expectError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2\nencoding: raw\n\n", kEight, "sizes");
-  expectError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 0 2\nencoding: raw\n\n", kEight, "sizes");
-  expectError("NRRD0004\ntype: uint8\ndimension: 99\nsizes: 2 2 2\nencoding: raw\n\n", kEight, "dimension");
-  expectError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: lz4\n\n", kEight, "lz4");
-  expectError(minimal("type: uint8\n"), kEight, "twice");
-  expectError(minimal("garbage line\n"), kEight, "line 6");
-  expectError("NRRD0004\ntype: uint16\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", Bytes(16), "endian");
-  expectError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n", {}, "blank line");
+  expectNrrdError("NRRD0009\n\n", kEight, "magic");
+  expectNrrdError("P6\n2 2\n255\n", kEight, "magic");
+  expectNrrdError("", {}, "magic");
+  expectNrrdError("NRRD0004\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", kEight, "\"type\"");
+  expectNrrdError("NRRD0004\ntype: quaternion\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", kEight,
+                  "quaternion");
+  expectNrrdError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2\nencoding: raw\n\n", kEight, "sizes");
+  expectNrrdError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 0 2\nencoding: raw\n\n", kEight, "sizes");
+  expectNrrdError("NRRD0004\ntype: uint8\ndimension: 99\nsizes: 2 2 2\nencoding: raw\n\n", kEight,
+                  "dimension");
+  expectNrrdError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: lz4\n\n", kEight, "lz4");
+  expectNrrdError(minimal("type: uint8\n"), kEight, "twice");
+  expectNrrdError(minimal("garbage line\n"), kEight, "line 6");
+  expectNrrdError("NRRD0004\ntype: uint16\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", Bytes(16),
+                  "endian");
+  expectNrrdError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n", {}, "blank line");
 }
 
 TEST(NrrdBadInput, UnsupportedFeatures) {
-  expectError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: bzip2\n\n", kEight, "bzip2",
-              dm::ErrorCode::Unsupported);
-  expectError("NRRD0004\ntype: block\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", kEight, "block",
-              dm::ErrorCode::Unsupported);
-  expectError(minimal("space: 3D-left-handed\nspace directions: (1,0,0) (0,1,0) (0,0,1)\n"), kEight,
-              "left-handed", dm::ErrorCode::Unsupported);
+  expectNrrdError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: bzip2\n\n", kEight, "bzip2",
+                  dm::ErrorCode::Unsupported);
+  expectNrrdError("NRRD0004\ntype: block\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", kEight, "block",
+                  dm::ErrorCode::Unsupported);
+  expectNrrdError(minimal("space: 3D-left-handed\nspace directions: (1,0,0) (0,1,0) (0,0,1)\n"), kEight,
+                  "left-handed", dm::ErrorCode::Unsupported);
   // RGB: a 3-component axis first.
-  expectError(
+  expectNrrdError(
       "NRRD0004\ntype: uint8\ndimension: 4\nsizes: 3 2 2 2\nspace: RAS\n"
       "space directions: none (1,0,0) (0,1,0) (0,0,1)\nencoding: raw\n\n",
       Bytes(24), "multi-component", dm::ErrorCode::Unsupported);
-  expectError(minimal("data file: LIST\n"), kEight, "several", dm::ErrorCode::Unsupported);
-  expectError(minimal("data file: slice%03d.raw 0 9 1\n"), kEight, "several", dm::ErrorCode::Unsupported);
-  expectError(minimal("data file: other.raw\n"), {}, "readNrrd", dm::ErrorCode::InvalidArgument);
+  expectNrrdError(minimal("data file: LIST\n"), kEight, "several", dm::ErrorCode::Unsupported);
+  expectNrrdError(minimal("data file: slice%03d.raw 0 9 1\n"), kEight, "several", dm::ErrorCode::Unsupported);
+  expectNrrdError(minimal("data file: other.raw\n"), {}, "readNrrd", dm::ErrorCode::InvalidArgument);
 }
 
 TEST(NrrdBadInput, GeometryErrors) {
-  expectError(minimal("space: RAS\nspace directions: (1,0,0) (2,0,0) (0,0,1)\n"), kEight, "singular");
-  expectError(minimal("space: RAS\nspace directions: (1,0,0) (0,nan,0) (0,0,1)\n"), kEight,
-              "space directions");
-  expectError(minimal("space: RAS\nspace directions: (1,0,0) (0,1) (0,0,1)\n"), kEight, "components");
-  expectError(minimal("space: RAS\nspace directions: (1,0,0) (0,1,0)\n"), kEight, "entries");
-  expectError(minimal("space directions: (1,0,0) (0,1,0) (0,0,1)\n"), kEight, "space dimension");
-  expectError(minimal("space: RAS\nspace origin: (0,inf,0)\n"), kEight, "space origin");
-  expectError(minimal("space: RAS\nspace units: \"mm\" \"furlong\" \"mm\"\n"), kEight, "furlong");
-  expectError(minimal("space: moon\n"), kEight, "moon");
+  expectNrrdError(minimal("space: RAS\nspace directions: (1,0,0) (2,0,0) (0,0,1)\n"), kEight, "singular");
+  expectNrrdError(minimal("space: RAS\nspace directions: (1,0,0) (0,nan,0) (0,0,1)\n"), kEight,
+                  "space directions");
+  expectNrrdError(minimal("space: RAS\nspace directions: (1,0,0) (0,1) (0,0,1)\n"), kEight, "components");
+  expectNrrdError(minimal("space: RAS\nspace directions: (1,0,0) (0,1,0)\n"), kEight, "entries");
+  expectNrrdError(minimal("space directions: (1,0,0) (0,1,0) (0,0,1)\n"), kEight, "space dimension");
+  expectNrrdError(minimal("space: RAS\nspace origin: (0,inf,0)\n"), kEight, "space origin");
+  expectNrrdError(minimal("space: RAS\nspace units: \"mm\" \"furlong\" \"mm\"\n"), kEight, "furlong");
+  expectNrrdError(minimal("space: moon\n"), kEight, "moon");
 }
 
 TEST(NrrdBadInput, DataErrors) {
-  expectError(minimal(""), Bytes(7), "need 8");
-  expectError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 30000 30000 30000\nencoding: raw\n\n", kEight,
-              "holds 8 bytes");
-  expectError(minimal("").replace(minimal("").find("raw"), 3, "gzip"), kEight, "compressed");
-  expectError(minimal("").replace(minimal("").find("raw"), 3, "ascii"), text("1 2 3 x 5 6 7 8"), "\"x\"");
-  expectError(minimal("").replace(minimal("").find("raw"), 3, "ascii"), text("1 2 3 4 5 6 7"), "cannot hold");
-  expectError(minimal("").replace(minimal("").find("raw"), 3, "hex"), text("01020304050607  "), "need 8");
-  expectError(minimal("").replace(minimal("").find("raw"), 3, "hex"), text("01020304g5060708"), "non-hex");
-  expectError(minimal("line skip: 5\n"), text("a\nb\n"), "line skip");
+  expectNrrdError(minimal(""), Bytes(7), "need 8");
+  expectNrrdError("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 30000 30000 30000\nencoding: raw\n\n", kEight,
+                  "holds 8 bytes");
+  expectNrrdError(minimal("").replace(minimal("").find("raw"), 3, "gzip"), kEight, "compressed");
+  expectNrrdError(minimal("").replace(minimal("").find("raw"), 3, "ascii"), text("1 2 3 x 5 6 7 8"), "\"x\"");
+  expectNrrdError(minimal("").replace(minimal("").find("raw"), 3, "ascii"), text("1 2 3 4 5 6 7"),
+                  "cannot hold");
+  expectNrrdError(minimal("").replace(minimal("").find("raw"), 3, "hex"), text("01020304050607  "), "need 8");
+  expectNrrdError(minimal("").replace(minimal("").find("raw"), 3, "hex"), text("01020304g5060708"),
+                  "non-hex");
+  expectNrrdError(minimal("line skip: 5\n"), text("a\nb\n"), "line skip");
   // A gzip bomb: 8 voxels declared, 16 MiB of zeros; inflation stops at 8 bytes.
   auto bomb = dm::detail::deflate(Bytes(std::size_t{16} << 20), dm::detail::CompressFormat::Gzip);
   ASSERT_TRUE(bomb);
@@ -294,7 +277,7 @@ TEST(NrrdBadInput, DetachedFileErrorsNameTheFiles) {
 }
 
 TEST(NrrdBadInput, RandomCorruptionNeverCrashes) {
-  auto vol = dm::Volume::create({3, 2, 2}, dm::VoxelType::F32, obliqueAffine());
+  auto vol = dm::Volume::create({3, 2, 2}, dm::VoxelType::F32, obliqueNrrdAffine());
   ASSERT_TRUE(vol);
   for (bool gzip : {false, true}) {
     auto enc = dm::encodeNrrd(*vol, {.gzip = gzip});

@@ -20,6 +20,7 @@
 #include <thread>
 
 #include "../common/temp_dir.hpp"
+#include "driver_test_support.hpp"
 
 extern char** environ;
 
@@ -27,7 +28,7 @@ namespace {
 
 using dm::Vec3;
 namespace fs = std::filesystem;
-constexpr std::int64_t kMs = 1'000'000;
+using dm::test::kMs;
 
 struct Drivers {
   dm::FactoryRegistry registry;

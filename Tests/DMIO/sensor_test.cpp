@@ -15,16 +15,16 @@
 
 namespace {
 
-constexpr std::int64_t kMs = 1'000'000;
 using dm::Vec3;
+using dm::test::kMs;
 
-std::unique_ptr<dm::Sensor> openOrFail(const dm::FactoryRegistry& reg, const dm::DeviceParams& params) {
+std::unique_ptr<dm::Sensor> openSensorOrFail(const dm::FactoryRegistry& reg, const dm::DeviceParams& params) {
   auto s = dm::Sensor::open(reg, "sim-sensor", params);
   EXPECT_TRUE(s.ok()) << (s.ok() ? "" : s.error().message());
   return s.ok() ? std::move(*s) : nullptr;
 }
 
-double frac(double x) { return x - std::floor(x); }
+using dm::test::frac;
 
 TEST(SimSensor, PluginAndBuiltInGiveIdenticalReadings) {
   dm::test::PluginDriver plugin("sim_sensor", "sim-sensor");
@@ -48,8 +48,8 @@ TEST(SimSensor, PluginAndBuiltInGiveIdenticalReadings) {
 
 TEST(SimSensor, ForceFollowsItsFormula) {
   dm::test::BuiltinDrivers b;
-  auto s = openOrFail(b.registry,
-                      {{"type", "force"}, {"x", "sine,2,1,0.5"}, {"y", "square,1,2"}, {"z", "ramp,4,0.5"}});
+  auto s = openSensorOrFail(
+      b.registry, {{"type", "force"}, {"x", "sine,2,1,0.5"}, {"y", "square,1,2"}, {"z", "ramp,4,0.5"}});
   ASSERT_TRUE(s);
   EXPECT_EQ(s->info().type, dm::SensorReadingType::Vector);
   EXPECT_EQ(s->info().unit, "N");
@@ -68,7 +68,7 @@ TEST(SimSensor, ForceFollowsItsFormula) {
 
 TEST(SimSensor, OrientationRotatesAboutItsAxisAtItsRate) {
   dm::test::BuiltinDrivers b;
-  auto s = openOrFail(b.registry, {{"type", "orientation"}, {"axis", "1,1,0"}, {"angular_rate", "2"}});
+  auto s = openSensorOrFail(b.registry, {{"type", "orientation"}, {"axis", "1,1,0"}, {"angular_rate", "2"}});
   ASSERT_TRUE(s);
   EXPECT_EQ(s->info().type, dm::SensorReadingType::Quaternion);
   const Vec3 axis = Vec3(1, 1, 0).normalized();
@@ -87,12 +87,12 @@ TEST(SimSensor, OrientationRotatesAboutItsAxisAtItsRate) {
 
 TEST(SimSensor, TrackerGivesAWholePose) {
   dm::test::BuiltinDrivers b;
-  auto s = openOrFail(b.registry, {{"type", "tracker"},
-                                   {"x", "constant,0,1,0.1"},
-                                   {"y", "sine,0.05,0.5"},
-                                   {"z", "constant,0,1,-0.2"},
-                                   {"axis", "0,0,1"},
-                                   {"angular_rate", "1"}});
+  auto s = openSensorOrFail(b.registry, {{"type", "tracker"},
+                                         {"x", "constant,0,1,0.1"},
+                                         {"y", "sine,0.05,0.5"},
+                                         {"z", "constant,0,1,-0.2"},
+                                         {"axis", "0,0,1"},
+                                         {"angular_rate", "1"}});
   ASSERT_TRUE(s);
   s->poll(1500 * kMs);
   const dm::SensorReading& r = s->latest();
@@ -105,11 +105,11 @@ TEST(SimSensor, TrackerGivesAWholePose) {
 
 TEST(SimSensor, NoiseHasTheRequestedSpread) {
   dm::test::BuiltinDrivers b;
-  auto scalar = openOrFail(
+  auto scalar = openSensorOrFail(
       b.registry,
       {{"type", "scalar"}, {"value", "constant,0,1,3"}, {"noise", "0.5"}, {"unit", "K"}, {"seed", "4"}});
   auto rot =
-      openOrFail(b.registry, {{"type", "orientation"}, {"angular_rate", "0"}, {"angle_noise", "0.01"}});
+      openSensorOrFail(b.registry, {{"type", "orientation"}, {"angular_rate", "0"}, {"angle_noise", "0.01"}});
   ASSERT_TRUE(scalar && rot);
   EXPECT_EQ(scalar->info().unit, "K");
   double sum = 0, sum2 = 0, angle2 = 0;
@@ -131,7 +131,7 @@ TEST(SimSensor, NoiseHasTheRequestedSpread) {
 
 TEST(SimSensor, ReadingRingKeepsOrderAndCountsDrops) {
   dm::test::BuiltinDrivers b;
-  auto s = openOrFail(b.registry, {{"type", "scalar"}});
+  auto s = openSensorOrFail(b.registry, {{"type", "scalar"}});
   ASSERT_TRUE(s);
   for (std::int64_t k = 0; k < 2000; ++k) s->poll(k * kMs);
   EXPECT_EQ(s->latest().timeNs, 1999 * kMs);
@@ -147,7 +147,7 @@ TEST(SimSensor, ReadingRingKeepsOrderAndCountsDrops) {
 
 TEST(SimSensor, LossAndReconnectionAreEvents) {
   dm::test::BuiltinDrivers b;
-  auto s = openOrFail(b.registry, {{"drop_at", "0.05"}, {"reconnect_at", "0.1"}});
+  auto s = openSensorOrFail(b.registry, {{"drop_at", "0.05"}, {"reconnect_at", "0.1"}});
   ASSERT_TRUE(s);
   std::vector<dm::DeviceEvent> events;
   for (std::int64_t k = 0; k < 200; ++k) {

@@ -24,7 +24,7 @@
 namespace {
 
 namespace fs = std::filesystem;
-constexpr std::int64_t kMs = 1'000'000;
+using dm::test::kMs;
 constexpr std::uint16_t kControllerType = static_cast<std::uint16_t>(dm::RecordType::ControllerState);
 constexpr std::uint16_t kDaqType = static_cast<std::uint16_t>(dm::RecordType::DaqBlock);
 constexpr std::uint16_t kSensorType = static_cast<std::uint16_t>(dm::RecordType::SensorReading);

@@ -35,7 +35,7 @@ std::vector<std::byte> bytes(const std::string& s) {
 std::string text(std::span<const std::byte> b) { return {reinterpret_cast<const char*>(b.data()), b.size()}; }
 
 /// What a command handler saw, thread-safe.
-struct Inbox {
+struct CommandInbox {
   std::mutex mutex;
   std::vector<std::pair<std::uint16_t, std::string>> items;
   std::vector<dm::ConnectionId> from;
@@ -115,7 +115,7 @@ struct Net {
 
 TEST(CommandChannel, AuthenticatedCommandsArriveInOrderAndRepliesComeBack) {
   Net n;
-  Inbox commands, replies;
+  CommandInbox commands, replies;
   std::unique_ptr<dm::CommandServer>* serverRef = nullptr;
   auto server = dm::CommandServer::listen(n.net, {.keyHex = kKey}, [&](const dm::Command& c) {
     commands.handler()(c);
@@ -147,7 +147,7 @@ TEST(CommandChannel, AuthenticatedCommandsArriveInOrderAndRepliesComeBack) {
 
 TEST(CommandChannel, UnsignedCommandsAreRefused) {
   Net n;
-  Inbox commands;
+  CommandInbox commands;
   auto server = dm::CommandServer::listen(n.net, {.keyHex = kKey}, commands.handler());
   ASSERT_TRUE(server) << server.error();
   RawPeer peer(n.net, (*server)->port());
@@ -174,7 +174,7 @@ TEST(CommandChannel, UnsignedCommandsAreRefused) {
 
 TEST(CommandChannel, WrongKeyFailsTheHandshake) {
   Net n;
-  Inbox commands;
+  CommandInbox commands;
   auto server = dm::CommandServer::listen(n.net, {.keyHex = kKey}, commands.handler());
   ASSERT_TRUE(server) << server.error();
   auto client = dm::CommandClient::connect(
@@ -191,7 +191,7 @@ TEST(CommandChannel, WrongKeyFailsTheHandshake) {
 
 TEST(CommandChannel, ReplaysAreRefusedOnTheSameAndOnANewConnection) {
   Net n;
-  Inbox commands;
+  CommandInbox commands;
   auto server = dm::CommandServer::listen(n.net, {.keyHex = kKey}, commands.handler());
   ASSERT_TRUE(server) << server.error();
   std::vector<std::byte> recorded;
@@ -225,7 +225,7 @@ TEST(CommandChannel, ReplaysAreRefusedOnTheSameAndOnANewConnection) {
 
 TEST(CommandChannel, PeersOutsideTheAllowListAreRefused) {
   Net n;
-  Inbox commands;
+  CommandInbox commands;
   auto server = dm::CommandServer::listen(n.net, {.keyHex = kKey, .tcp = {.allow = {"10.0.0.0/8"}}},
                                           commands.handler());
   ASSERT_TRUE(server) << server.error();
@@ -251,7 +251,7 @@ TEST(CommandChannel, KeysAreRequiredUnlessTurnedOffAndThenPlainCommandsPass) {
   ASSERT_FALSE(badDigit);
   EXPECT_NE(badDigit.error().message().find("offset 40"), std::string::npos) << badDigit.error().message();
 
-  Inbox commands;
+  CommandInbox commands;
   auto open = dm::CommandServer::listen(n.net, {.requireAuth = false}, commands.handler());
   ASSERT_TRUE(open) << open.error();
   auto client = dm::CommandClient::connect(

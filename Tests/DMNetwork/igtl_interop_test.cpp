@@ -367,3 +367,5 @@ TEST(IgtlInterop, Queries) {
 }
 
 }  // namespace
+
+#undef EXPECT_SAME_BYTES

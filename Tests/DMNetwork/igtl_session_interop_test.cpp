@@ -235,7 +235,7 @@ typename M::Pointer unpackRef(const Received& r) {
 // ------------------------------------------------------- our handlers ----
 
 /// What our handlers received, by type.
-struct Inbox {
+struct InteropInbox {
   std::mutex mutex;
   std::map<std::string, int> count;
   std::vector<std::pair<std::string, dm::Affine3>> transforms;
@@ -300,7 +300,7 @@ struct Inbox {
 };
 
 /// Checks that our decoded values equal what the reference builders packed.
-void expectReferenceValues(Inbox& in) {
+void expectReferenceValues(InteropInbox& in) {
   std::lock_guard lock(in.mutex);
   ASSERT_EQ(in.transforms.size(), 1u);
   EXPECT_EQ(in.transforms[0].first, "Tool");
@@ -357,7 +357,7 @@ void expectReferenceValues(Inbox& in) {
 TEST(IgtlSessionInterop, ReferenceClientMessagesReachOurTypedHandlers) {
   dm::IoThread net;
   ASSERT_TRUE(net.start().ok());
-  Inbox in;
+  InteropInbox in;
   auto server = dm::IgtlServer::listen(net, {}, in.handlers());
   ASSERT_TRUE(server.ok());
   auto ref = igtl::ClientSocket::New();
@@ -376,7 +376,7 @@ TEST(IgtlSessionInterop, ReferenceClientMessagesReachOurTypedHandlers) {
 TEST(IgtlSessionInterop, ReferenceClientQueriesAreAnsweredByOurServer) {
   dm::IoThread net;
   ASSERT_TRUE(net.start().ok());
-  Inbox in;
+  InteropInbox in;
   auto server = dm::IgtlServer::listen(net, {}, in.handlers());
   ASSERT_TRUE(server.ok());
   auto ref = igtl::ClientSocket::New();
@@ -635,7 +635,7 @@ TEST(IgtlSessionInterop, OurClientAndTheReferenceServerUnderstandEachOther) {
 
   dm::IoThread net;
   ASSERT_TRUE(net.start().ok());
-  Inbox in;
+  InteropInbox in;
   auto client = dm::IgtlClient::connect(
       net, {.tcp = {.peer = {"127.0.0.1", static_cast<std::uint16_t>(port)}}}, in.handlers());
   ASSERT_TRUE(client.ok());

@@ -11,6 +11,8 @@
 #include <cstring>
 #include <random>
 
+#include "network_test_support.hpp"
+
 namespace {
 
 namespace igtl = dm::igtl;
@@ -40,11 +42,7 @@ Bytes frame(std::uint16_t version, const std::string& type, const std::string& d
   return m;
 }
 
-Bytes ascii(const char* s) {
-  Bytes b(std::strlen(s));
-  std::memcpy(b.data(), s, b.size());
-  return b;
-}
+using dm::test::ascii;
 
 TEST(IgtlCrc64, MatchesTheEcma182CheckValue) {
   EXPECT_EQ(dm::crc64Ecma(ascii("123456789")), 0x6C40DF5F0B497347ull);

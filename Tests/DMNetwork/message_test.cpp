@@ -9,15 +9,13 @@
 #include <cstring>
 #include <random>
 
+#include "network_test_support.hpp"
+
 namespace {
 
 using Bytes = std::vector<std::byte>;
 
-Bytes ascii(const char* s) {
-  Bytes b(std::strlen(s));
-  std::memcpy(b.data(), s, b.size());
-  return b;
-}
+using dm::test::ascii;
 
 Bytes randomBytes(std::mt19937& rng, std::size_t n) {
   std::uniform_int_distribution<int> any(0, 255);

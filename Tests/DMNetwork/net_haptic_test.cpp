@@ -22,13 +22,13 @@
 
 #include "../common/alloc_counter.hpp"
 #include "../common/eventually.hpp"
+#include "network_test_support.hpp"
 
 namespace {
 
 using namespace std::chrono_literals;
 using dm::test::eventually;
-
-std::int64_t monotonicNs() { return dm::RealClock().now(); }  // CLOCK_MONOTONIC, as the stream
+using dm::test::monotonicNs;
 
 class NetHaptic : public ::testing::Test {
  protected:

@@ -28,7 +28,7 @@ using namespace std::chrono_literals;
 
 using dm::test::eventually;
 
-std::vector<std::byte> randomBytes(std::mt19937& rng, std::size_t n) {
+std::vector<std::byte> randomPayload(std::mt19937& rng, std::size_t n) {
   std::vector<std::byte> v(n);
   for (auto& b : v) b = static_cast<std::byte>(rng() & 0xFF);
   return v;
@@ -160,7 +160,7 @@ TEST(TcpEcho, RandomPayloadsOfManySizesArriveByteExactAndInOrder) {
   for (std::size_t size :
        {1u, 2u, 3u, 7u, 58u, 100u, 777u, 778u, 1000u, 1460u, 4096u, 65535u, 65536u, 300001u}) {
     for (int rep = 0; rep < 3; ++rep) {
-      const auto payload = randomBytes(rng, size);
+      const auto payload = randomPayload(rng, size);
       ASSERT_TRUE((*client)->send(payload).ok());
       sent.insert(sent.end(), payload.begin(), payload.end());
       ++messages;
@@ -203,7 +203,7 @@ TEST(TcpServer, ServesManyClientsEachGetsItsOwnBytesBack) {
                                     {.onBytes = [&, i](std::span<const std::byte> b) { sinks[i].add(b); }});
     ASSERT_TRUE(c.ok()) << c.error();
     clients.push_back(std::move(*c));
-    payloads.push_back(randomBytes(rng, 1000 + 137 * i));
+    payloads.push_back(randomPayload(rng, 1000 + 137 * i));
   }
   for (int i = 0; i < kClients; ++i) {
     ASSERT_TRUE(clients[i]->waitConnected(5s).ok());

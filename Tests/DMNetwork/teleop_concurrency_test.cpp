@@ -16,13 +16,13 @@
 #include <thread>
 
 #include "../common/eventually.hpp"
+#include "network_test_support.hpp"
 
 namespace {
 
 using namespace std::chrono_literals;
 using dm::test::eventually;
-
-std::int64_t monotonicNs() { return dm::RealClock().now(); }  // CLOCK_MONOTONIC, as the stream
+using dm::test::monotonicNs;
 
 /// Calls `step(now)` every millisecond until `stop`.
 template <class F>

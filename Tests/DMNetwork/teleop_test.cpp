@@ -24,13 +24,13 @@
 #include <vector>
 
 #include "../common/eventually.hpp"
+#include "network_test_support.hpp"
 
 namespace {
 
 using namespace std::chrono_literals;
 using dm::test::eventually;
-
-std::int64_t monotonicNs() { return dm::RealClock().now(); }  // CLOCK_MONOTONIC, as the stream
+using dm::test::monotonicNs;
 
 dm::HapticState sampleState(double k) {
   dm::HapticState s;
@@ -60,9 +60,9 @@ dm::HapticInfo sampleInfo() {
 }
 
 /// A plain UDP socket on 127.0.0.1 that plays one end by hand.
-class RawPeer {
+class RawUdpPeer {
  public:
-  RawPeer() {
+  RawUdpPeer() {
     fd_ = ::socket(AF_INET, SOCK_DGRAM, 0);
     sockaddr_in a{};
     a.sin_family = AF_INET;
@@ -72,7 +72,7 @@ class RawPeer {
     ::getsockname(fd_, reinterpret_cast<sockaddr*>(&a), &n);
     port_ = ntohs(a.sin_port);
   }
-  ~RawPeer() { ::close(fd_); }
+  ~RawUdpPeer() { ::close(fd_); }
   std::uint16_t port() const { return port_; }
   void sendTo(std::uint16_t port, std::span<const std::byte> bytes) const {
     sockaddr_in a{};
@@ -226,7 +226,7 @@ TEST(TeleopCodec, MalformedPayloadsAreRefusedNamingTheByte) {
 // ---- host end ------------------------------------------------------------------
 
 TEST_F(TeleopEnds, HostClassifiesLossReorderingAndDuplicatesAndKeepsTheNewestState) {
-  RawPeer device;
+  RawUdpPeer device;
   auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}, .clocksSynchronized = true});
   ASSERT_TRUE(host) << host.error().message();
   // 0 1 2 5 (gap of 2) 4 (late) 4 (duplicate) 3 (late): the newest is 5.
@@ -252,7 +252,7 @@ TEST_F(TeleopEnds, HostClassifiesLossReorderingAndDuplicatesAndKeepsTheNewestSta
 }
 
 TEST_F(TeleopEnds, HostDropsMalformedAndForeignDatagramsWithoutLosingTheLink) {
-  RawPeer device, stranger;
+  RawUdpPeer device, stranger;
   auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}});
   ASSERT_TRUE(host);
   device.sendTo((*host)->port(), stateDatagram(0, monotonicNs(), sampleState(1)));
@@ -268,7 +268,7 @@ TEST_F(TeleopEnds, HostDropsMalformedAndForeignDatagramsWithoutLosingTheLink) {
 }
 
 TEST_F(TeleopEnds, RoundTripSubtractsTheHoldTimeTheDeviceReports) {
-  RawPeer device;
+  RawUdpPeer device;
   auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}});
   ASSERT_TRUE(host);
   // Round 1: the device holds the force 30 ms and says so: round trip ≈ wire time only.
@@ -294,7 +294,7 @@ TEST_F(TeleopEnds, RoundTripSubtractsTheHoldTimeTheDeviceReports) {
 }
 
 TEST_F(TeleopEnds, ClockOffsetOfThePeerIsEstimatedAndOneWayLatencyCorrected) {
-  RawPeer device;
+  RawUdpPeer device;
   auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}});
   ASSERT_TRUE(host);
   const std::int64_t offset = 2'000'000'000;  // the device's clock reads 2 s ahead
@@ -319,7 +319,7 @@ TEST_F(TeleopEnds, ClockOffsetOfThePeerIsEstimatedAndOneWayLatencyCorrected) {
 }
 
 TEST_F(TeleopEnds, JitterFollowsRfc3550ForAKnownTransitDifference) {
-  RawPeer device;
+  RawUdpPeer device;
   auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()}, .clocksSynchronized = true});
   ASSERT_TRUE(host);
   // Send timestamps 1 ms apart, sent back to back: each D ≈ −1 ms, so after
@@ -335,7 +335,7 @@ TEST_F(TeleopEnds, JitterFollowsRfc3550ForAKnownTransitDifference) {
 }
 
 TEST_F(TeleopEnds, AnEmulatedLinkDelaysAndLosesWhatArrives) {
-  RawPeer device;
+  RawUdpPeer device;
   auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", device.port()},
                                     .clocksSynchronized = true,
                                     .emulate = dm::LinkEmulatorOptions{.delay = std::chrono::milliseconds(30),
@@ -384,7 +384,7 @@ TEST_F(TeleopEnds, WaveSamplesCrossBothWaysInArrivalOrder) {
 }
 
 TEST_F(TeleopEnds, WaitForDeviceTimesOutNamingThePeer) {
-  RawPeer silent;
+  RawUdpPeer silent;
   auto host = dm::TeleopHost::open({.peer = {"127.0.0.1", silent.port()}});
   ASSERT_TRUE(host);
   auto info = (*host)->waitForDevice(120ms);
@@ -410,7 +410,7 @@ TEST_F(TeleopEnds, DeviceAnswersHelloLearnsItsHostAndRefusesASecondHostWhileTheF
   EXPECT_FALSE((*device)->sendState(sampleState(1)));  // no host yet
   EXPECT_FALSE((*device)->linkUp());
 
-  RawPeer first, second;
+  RawUdpPeer first, second;
   std::array<std::byte, 64> hello{};
   const std::size_t n = dm::writeTeleopHello({}, hello);
   first.sendTo((*device)->port(), std::span(hello.data(), n));
@@ -447,7 +447,7 @@ TEST_F(TeleopEnds, DeviceAnswersHelloLearnsItsHostAndRefusesASecondHostWhileTheF
 TEST_F(TeleopEnds, DeviceAllowListRefusesOtherHosts) {
   auto device = dm::TeleopDevice::open({.allow = {"127.0.0.2"}}, sampleInfo());
   ASSERT_TRUE(device);
-  RawPeer host;  // 127.0.0.1: not allowed
+  RawUdpPeer host;  // 127.0.0.1: not allowed
   std::array<std::byte, 64> hello{};
   host.sendTo((*device)->port(), std::span(hello.data(), dm::writeTeleopHello({}, hello)));
   ASSERT_TRUE(eventually([&] { return (*device)->stats().foreign == 1; }));

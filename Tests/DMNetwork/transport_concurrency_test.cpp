@@ -21,7 +21,7 @@ namespace {
 using namespace std::chrono_literals;
 
 template <class F>
-bool eventually(F&& done) {
+bool eventuallyWithin10s(F&& done) {
   return dm::test::eventually(done, 10000ms);
 }
 
@@ -99,7 +99,7 @@ TEST(TransportConcurrency, ThreadsSendingOnOneConnectionInterleaveWholeFrames) {
     });
   for (auto& t : senders) t.join();
   EXPECT_EQ(failed.load(), 0u);
-  ASSERT_TRUE(eventually([&] { return checker.frames.load() == kThreads * kFrames; }))
+  ASSERT_TRUE(eventuallyWithin10s([&] { return checker.frames.load() == kThreads * kFrames; }))
       << checker.frames.load() << " frames";
   EXPECT_EQ(checker.corrupt.load(), 0u);
   const dm::ConnectionStats s = (*client)->stats();
@@ -174,7 +174,7 @@ TEST(TransportConcurrency, ServerSendsWhileClientsComeAndGo) {
       }  // each client is closed by its destructor, racing the broadcaster
     });
   for (auto& t : churn) t.join();
-  ASSERT_TRUE(eventually([&] { return disconnects.load() == connects.load(); }));
+  ASSERT_TRUE(eventuallyWithin10s([&] { return disconnects.load() == connects.load(); }));
   stop = true;
   broadcaster.join();
   EXPECT_EQ(unexpected.load(), 0u);

@@ -25,7 +25,7 @@ using namespace std::chrono_literals;
 using dm::test::eventually;
 
 /// Datagrams received, with their senders.
-struct Inbox {
+struct DatagramInbox {
   std::mutex mutex;
   std::vector<std::vector<std::byte>> datagrams;
   std::vector<dm::SocketAddress> senders;
@@ -45,7 +45,7 @@ struct Inbox {
 TEST(UdpEndpoint, RoundTripOfRandomDatagramsUpToTheMaximum) {
   dm::IoThread net;
   ASSERT_TRUE(net.start().ok());
-  Inbox atA;
+  DatagramInbox atA;
   auto a = dm::UdpEndpoint::open(net, {.maxDatagramBytes = 9000}, atA.callback());
   ASSERT_TRUE(a.ok()) << a.error();
   // B echoes every datagram to its sender.
@@ -83,7 +83,7 @@ TEST(UdpEndpoint, RoundTripOfRandomDatagramsUpToTheMaximum) {
 TEST(UdpEndpoint, OversizeIsRefusedWhenSendingAndDroppedWhenReceiving) {
   dm::IoThread net;
   ASSERT_TRUE(net.start().ok());
-  Inbox small;
+  DatagramInbox small;
   auto receiver = dm::UdpEndpoint::open(net, {.maxDatagramBytes = 100}, small.callback());
   ASSERT_TRUE(receiver.ok());
   auto sender = dm::UdpEndpoint::open(net, {.maxDatagramBytes = 1472}, {});
@@ -105,7 +105,7 @@ TEST(UdpEndpoint, OversizeIsRefusedWhenSendingAndDroppedWhenReceiving) {
 TEST(UdpEndpoint, ConnectFixesThePeerAndFiltersOthers) {
   dm::IoThread net;
   ASSERT_TRUE(net.start().ok());
-  Inbox atA, atB;
+  DatagramInbox atA, atB;
   auto a = dm::UdpEndpoint::open(net, {}, atA.callback());
   auto b = dm::UdpEndpoint::open(net, {}, atB.callback());
   auto stranger = dm::UdpEndpoint::open(net, {}, {});

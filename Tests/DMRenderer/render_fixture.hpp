@@ -3,6 +3,7 @@
 #pragma once
 
 #include <dm/renderer/context.hpp>
+#include <dm/renderer/scene_renderer.hpp>
 #include <dm/renderer/shader.hpp>
 
 #ifndef GL_GLEXT_PROTOTYPES
@@ -16,8 +17,14 @@
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
+#include <numbers>
 
 namespace dm::test {
+
+inline constexpr double kPi = std::numbers::pi;
+
+/// Black background and no ambient light: only the scene's lights count.
+inline const RenderSettings kDark{.background = Vec4f(0, 0, 0, 1), .ambient = Vec3f(0, 0, 0)};
 
 /// The process-wide context, created on first use; null (the reason printed)
 /// when this machine has no EGL OpenGL 4.5. It lives until the process ends

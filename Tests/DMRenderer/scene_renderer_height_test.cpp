@@ -24,7 +24,7 @@
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
+using dm::test::kPi;
 constexpr int kSize = 256;          // target pixels per side
 constexpr double kOrtho = 1.0;      // orthographic view height, m: 256 px per m
 constexpr double kTheta = kPi / 4;  // view angle from the quad's normal
@@ -36,17 +36,17 @@ constexpr int kTex = 64;            // texture texels per side
 // coarser filtering weights. The shift measured is 18 px.
 constexpr double kTolerancePx = 0.5;
 
-struct Scene {
+struct HeightScene {
   dm::SceneRenderer renderer;
   dm::RenderTarget target;
 };
 
-Scene makeScene() {
+HeightScene makeScene() {
   auto r = dm::SceneRenderer::create();
   EXPECT_TRUE(r) << r.error();
   auto t = dm::RenderTarget::create({.width = kSize, .height = kSize, .samples = 1});
   EXPECT_TRUE(t) << t.error();
-  return Scene{std::move(*r), std::move(*t)};
+  return HeightScene{std::move(*r), std::move(*t)};
 }
 
 // A 1 m square in z = 0 facing +z; u along +x, v along -y, uv (0, 0) at the top-left corner.
@@ -125,7 +125,7 @@ void saveForInspection(const dm::Image& img, const std::string& name) {
   if (dm::writePng(img, path)) std::fprintf(stderr, "wrote %s\n", path.string().c_str());
 }
 
-const dm::RenderSettings kDark{.background = dm::Vec4f(0, 0, 0, 1), .ambient = dm::Vec3f(0, 0, 0)};
+using dm::test::kDark;
 
 // A lit material whose rendered colour keeps the texture's red/blue order:
 // light straight onto the quad, no specular (Blinn–Phong), rough dielectric (PBR).
@@ -146,7 +146,7 @@ const char* modelName(dm::ShadingModel m) {
 
 TEST(SceneRendererHeight, PitShiftsTextureEdgesTowardTheViewerByDepthTimesTanTheta) {
   DM_REQUIRE_GL();
-  Scene s = makeScene();
+  HeightScene s = makeScene();
   auto quad = s.renderer.addMesh(makeQuad());
   ASSERT_TRUE(quad) << quad.error();
   const dm::Light sun = dm::Light::directional({0, 0, -1});
@@ -227,7 +227,7 @@ TEST(SceneRendererHeight, PitShiftsTextureEdgesTowardTheViewerByDepthTimesTanThe
 
 TEST(SceneRendererHeight, ReliefAtTheSurfaceRendersLikeNoHeightTexture) {
   DM_REQUIRE_GL();
-  Scene s = makeScene();
+  HeightScene s = makeScene();
   auto quad = s.renderer.addMesh(makeQuad());
   ASSERT_TRUE(quad) << quad.error();
   auto color = s.renderer.addTexture(stripes(false));  // sRGB, mipmapped: the default path
@@ -275,7 +275,7 @@ TEST(SceneRendererHeight, ReliefAtTheSurfaceRendersLikeNoHeightTexture) {
 
 TEST(SceneRendererHeight, HeightScaleIsValidated) {
   DM_REQUIRE_GL();
-  Scene s = makeScene();
+  HeightScene s = makeScene();
   for (const float bad :
        {-0.001f, std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
     auto mat = s.renderer.addMaterial({.heightScale = bad});

@@ -17,7 +17,7 @@
 
 namespace {
 
-constexpr double kPi = std::numbers::pi;
+using dm::test::kPi;
 
 using dm::test::srgbToLinear;
 
@@ -96,7 +96,7 @@ double centroidX(const dm::Image& img, int channel, int x0, int x1) {
   return n > 0 ? sum / n : -1;
 }
 
-const dm::RenderSettings kDark{.background = dm::Vec4f(0, 0, 0, 1), .ambient = dm::Vec3f(0, 0, 0)};
+using dm::test::kDark;
 
 }  // namespace
 

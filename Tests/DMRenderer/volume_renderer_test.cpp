@@ -23,7 +23,7 @@ namespace {
 using dm::Vec3;
 
 // sRGB encoding of a linear value (0..255, unrounded) and its inverse.
-double srgb8(double linear) { return dm::test::srgbEncode255(linear); }
+double srgb8Unrounded(double linear) { return dm::test::srgbEncode255(linear); }
 double linear(int encoded) { return dm::test::srgbToLinear(encoded); }
 
 dm::VolumeRenderer& renderer() {
@@ -138,7 +138,8 @@ TEST(VolumeRenderer, MipOfSphereCoversPiRSquaredThroughSkewAnisotropicAffine) {
     // MIP value >= 0.5 exactly inside the sphere's silhouette disc.
     const double pxPerM = 128 / height;
     const double expected = std::numbers::pi * std::pow(s.radius * pxPerM, 2);
-    const auto covered = static_cast<double>(countAtLeast(*img, 0, static_cast<int>(std::ceil(srgb8(0.5)))));
+    const auto covered =
+        static_cast<double>(countAtLeast(*img, 0, static_cast<int>(std::ceil(srgb8Unrounded(0.5)))));
     EXPECT_NEAR(covered, expected, 0.02 * expected) << "view from " << dir.transpose();
   }
   EXPECT_TRUE(renderer().removeVolume(*id));
@@ -356,7 +357,7 @@ TEST(VolumeRenderer, SliceViewsShowTheVoxelValuesWithTheVolumesAspect) {
         if ((ijk.array() < 0.2).any() || (ijk.array() > dims.cast<double>().array() - 1.2).any()) continue;
         const double value = 2 * ijk.x() + 3 * ijk.y() + 5 * ijk.z();
         const int got = img->at<std::uint8_t>(70 * v + x, y, 0);
-        worst = std::max(worst, static_cast<int>(std::abs(got - srgb8(value / vmax))));
+        worst = std::max(worst, static_cast<int>(std::abs(got - srgb8Unrounded(value / vmax))));
         ++checked;
       }
     EXPECT_GT(checked, 300) << "view " << v;
@@ -422,7 +423,8 @@ TEST(VolumeRenderer, SlicePlaneIn3DShowsTheValueWhereEachRayMeetsThePlane) {
       }
       if ((ijk.array() < 0.3).any() || (ijk.array() > dims.cast<double>().array() - 1.3).any()) continue;
       const double v = 1.5 * ijk.x() + 2 * ijk.y() + 2.5 * ijk.z();
-      worst = std::max(worst, static_cast<int>(std::abs(img->at<std::uint8_t>(x, y, 0) - srgb8(v / vmax))));
+      worst = std::max(worst,
+                       static_cast<int>(std::abs(img->at<std::uint8_t>(x, y, 0) - srgb8Unrounded(v / vmax))));
       ++inside;
     }
   EXPECT_GT(inside, 200);
@@ -666,7 +668,7 @@ TEST_F(VolumeColin, MipGolden) {
   for (int y = 0; y < 192; ++y)
     for (int x = 0; x < 160; ++x) brightest = std::max<int>(brightest, img->at<std::uint8_t>(x, y, 0));
   const auto [lo, hi] = vol_->range();
-  EXPECT_GE(brightest, static_cast<int>(srgb8(0.9)));
+  EXPECT_GE(brightest, static_cast<int>(srgb8Unrounded(0.9)));
   EXPECT_EQ(img->at<std::uint8_t>(1, 1, 0), 0);
   EXPECT_EQ(lo, 0.0);
   EXPECT_GT(hi, 200.0);

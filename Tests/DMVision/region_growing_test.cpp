@@ -14,13 +14,15 @@
 #include <numbers>
 #include <random>
 
+#include "vision_test_support.hpp"
+
 namespace {
 
 using dm::Vec3;
 using dm::Vec3i;
 using dm::Volume;
 
-Volume makeVolume(const Vec3i& dims, dm::VoxelType type, double h = 1e-3) {
+Volume makeIsoVolume(const Vec3i& dims, dm::VoxelType type, double h = 1e-3) {
   dm::Affine3 a = dm::Affine3::Identity();
   a.linear() *= h;
   auto v = Volume::create(dims, type, a);
@@ -28,14 +30,10 @@ Volume makeVolume(const Vec3i& dims, dm::VoxelType type, double h = 1e-3) {
   return std::move(*v);
 }
 
-std::size_t countOn(const Volume& v) {
-  std::size_t c = 0;
-  for (std::size_t n = 0; n < v.voxelCount(); ++n) c += v.valueAt(n) != 0;
-  return c;
-}
+using dm::test::countOn;
 
 TEST(RegionGrowing, FillsExactlyTheConnectedBoxInsideTheInterval) {
-  Volume v = makeVolume({20, 16, 12}, dm::VoxelType::U8, 2e-3);
+  Volume v = makeIsoVolume({20, 16, 12}, dm::VoxelType::U8, 2e-3);
   auto fill = [&](Vec3i lo, Vec3i hi, double value) {
     for (int k = lo.z(); k <= hi.z(); ++k)
       for (int j = lo.y(); j <= hi.y(); ++j)
@@ -68,7 +66,7 @@ TEST(RegionGrowing, FillsExactlyTheConnectedBoxInsideTheInterval) {
 }
 
 TEST(RegionGrowing, ConnectivityDecidesWhetherADiagonalChainIsOneRegion) {
-  Volume v = makeVolume({8, 8, 8}, dm::VoxelType::U8);
+  Volume v = makeIsoVolume({8, 8, 8}, dm::VoxelType::U8);
   for (int t = 0; t < 6; ++t) v.setValue(t + 1, t + 1, t + 1, 1);  // corner-to-corner chain
   const std::array seed{Vec3i(1, 1, 1)};
   auto six = dm::growRegion(v, seed, {.lower = 1, .connectivity = dm::Connectivity::Six});
@@ -79,7 +77,7 @@ TEST(RegionGrowing, ConnectivityDecidesWhetherADiagonalChainIsOneRegion) {
 }
 
 TEST(RegionGrowing, BoundingBallKeepsTheVoxelsWhoseCentresLieInside) {
-  Volume v = makeVolume({21, 21, 21}, dm::VoxelType::U8);
+  Volume v = makeIsoVolume({21, 21, 21}, dm::VoxelType::U8);
   for (std::size_t n = 0; n < v.voxelCount(); ++n) v.setValueAt(n, 1);
   const Vec3 centre(10.3e-3, 9.8e-3, 10.1e-3);
   const double radius = 6.5e-3;
@@ -100,7 +98,7 @@ TEST(RegionGrowing, BoundingBallKeepsTheVoxelsWhoseCentresLieInside) {
 }
 
 TEST(RegionGrowing, GradientBoundStopsBeforeAStep) {
-  Volume v = makeVolume({20, 6, 6}, dm::VoxelType::F32);
+  Volume v = makeIsoVolume({20, 6, 6}, dm::VoxelType::F32);
   for (int k = 0; k < 6; ++k)
     for (int j = 0; j < 6; ++j)
       for (int i = 0; i < 20; ++i) v.setValue(i, j, k, i < 12 ? 0.0 : 100.0);
@@ -119,7 +117,7 @@ TEST(RegionGrowing, AdaptiveCriterionFollowsANoisySphere) {
   const int n = 40;
   const double R = 12.0;
   const Vec3 c(19.7, 20.1, 20.3);
-  Volume v = makeVolume({n, n, n}, dm::VoxelType::F32);
+  Volume v = makeIsoVolume({n, n, n}, dm::VoxelType::F32);
   std::mt19937 rng(5);
   std::normal_distribution<double> noise(0.0, 4.0);
   std::size_t inside = 0;
@@ -144,7 +142,7 @@ TEST(RegionGrowing, AdaptiveCriterionFollowsANoisySphere) {
 }
 
 TEST(RegionGrowing, MaxVoxelsTruncatesAndGrowerAccumulatesIntoAMask) {
-  Volume v = makeVolume({10, 10, 10}, dm::VoxelType::U8);
+  Volume v = makeIsoVolume({10, 10, 10}, dm::VoxelType::U8);
   for (std::size_t n = 0; n < v.voxelCount(); ++n) v.setValueAt(n, 1);
   auto r = dm::growRegion(v, std::array{Vec3i(5, 5, 5)}, {.maxVoxels = 100});
   ASSERT_TRUE(r) << r.error();
@@ -166,7 +164,7 @@ TEST(RegionGrowing, MaxVoxelsTruncatesAndGrowerAccumulatesIntoAMask) {
 }
 
 TEST(RegionGrowing, RejectsBadInput) {
-  Volume v = makeVolume({4, 4, 4}, dm::VoxelType::U8);
+  Volume v = makeIsoVolume({4, 4, 4}, dm::VoxelType::U8);
   auto outside = dm::growRegion(v, std::array{Vec3i(4, 0, 0)});
   ASSERT_FALSE(outside);
   EXPECT_NE(outside.error().what.find("seed 0"), std::string::npos) << outside.error();
@@ -175,7 +173,7 @@ TEST(RegionGrowing, RejectsBadInput) {
   EXPECT_FALSE(dm::growRegion(v, std::array{Vec3i(0, 0, 0)}, {.bound = dm::GrowBall{Vec3::Zero(), -1}}));
   EXPECT_FALSE(dm::growRegion(Volume{}, std::array{Vec3i(0, 0, 0)}));
   dm::RegionGrower grower;
-  Volume wrong = makeVolume({4, 4, 5}, dm::VoxelType::U8);
+  Volume wrong = makeIsoVolume({4, 4, 5}, dm::VoxelType::U8);
   EXPECT_FALSE(grower.grow(v, std::array{Vec3i(0, 0, 0)}, {}, wrong));
   EXPECT_FALSE(dm::nearestVoxel(v, Vec3(1.0, 0, 0)));
   EXPECT_FALSE(dm::nearestVoxel(v, Vec3(std::nan(""), 0, 0)));

@@ -291,3 +291,5 @@ TEST(Stereo, ErrorsNameTheFileAndTheCount) {
 }
 
 }  // namespace
+
+#undef DM_REQUIRE_OPENCV_DOC

@@ -15,6 +15,8 @@
 #include <random>
 #include <vector>
 
+#include "vision_test_support.hpp"
+
 namespace {
 
 using dm::Vec3;
@@ -67,11 +69,7 @@ bool sameMask(const Volume& a, const Volume& b) {
   return true;
 }
 
-std::size_t countOn(const Volume& v) {
-  std::size_t c = 0;
-  for (std::size_t n = 0; n < v.voxelCount(); ++n) c += v.valueAt(n) != 0;
-  return c;
-}
+using dm::test::countOn;
 
 TEST(VolumeFilters, GaussianOfAConstantIsTheConstant) {
   Volume v = makeVolume({20, 18, 16}, VoxelType::I16, scaled(Vec3(1, 2, 0.5) * dm::units::mm));
