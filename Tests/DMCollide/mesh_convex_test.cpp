@@ -36,6 +36,8 @@
 #include <string>
 #include <vector>
 
+#include "collide_test_support.hpp"
+
 namespace {
 
 using dm::Isometry3;
@@ -53,10 +55,7 @@ Isometry3 randomRotation(std::mt19937_64& rng) {
   return pose;
 }
 
-Vec3 randomDirection(std::mt19937_64& rng) {
-  std::normal_distribution<double> g(0.0, 1.0);
-  return Vec3(g(rng), g(rng), g(rng)).normalized();
-}
+using dm::test::randomUnit;
 
 struct MeshCase {
   std::string name;
@@ -100,7 +99,7 @@ struct ConvexCase {
 std::vector<ConvexCase> convexCases() {
   std::mt19937_64 rng(3);
   std::vector<Vec3> cloud(20);
-  for (Vec3& p : cloud) p = 0.1 * randomDirection(rng);
+  for (Vec3& p : cloud) p = 0.1 * randomUnit(rng);
   auto hull = dm::ConvexHull::create(cloud);
   EXPECT_TRUE(hull.ok());
   auto verts =
@@ -225,11 +224,11 @@ TEST(MeshConvex, MatchesBruteForceAndFclOnRandomPoses) {
       int separated = 0, overlapping = 0;
       for (int k = 0; k < 48; ++k, ++poses) {
         Isometry3 pa = randomRotation(rng);
-        pa.translation() = 0.1 * randomDirection(rng);
+        pa.translation() = 0.1 * randomUnit(rng);
         Isometry3 pb = randomRotation(rng);
         const auto placement = static_cast<Placement>(k % 5);
         if (placement == Placement::Random || (placement == Placement::Hole && m.name != "torus")) {
-          pb.translation() = pa.translation() + 1.2 * reach * std::cbrt(unit(rng)) * randomDirection(rng);
+          pb.translation() = pa.translation() + 1.2 * reach * std::cbrt(unit(rng)) * randomUnit(rng);
         } else if (placement == Placement::Hole) {
           // Centre within 2 cm of the torus axis, in its mid-plane: the hole
           // (radius 0.23 m) holds every shape (radius ≤ 0.13 m) untouched.
@@ -239,7 +238,7 @@ TEST(MeshConvex, MatchesBruteForceAndFclOnRandomPoses) {
           // From a separated start, along the closest-point direction.
           // GJK on curved shapes converges linearly (~1e-9 relative at 0.3 m),
           // so the step is repeated from the new closest points while apart.
-          pb.translation() = pa.translation() + 1.5 * reach * randomDirection(rng);
+          pb.translation() = pa.translation() + 1.5 * reach * randomUnit(rng);
           double target = 0;
           if (placement == Placement::NearMiss) target = std::pow(10.0, -6 + 3 * unit(rng));
           if (placement == Placement::Deep) target = -(0.005 + 0.03 * unit(rng));

@@ -37,7 +37,7 @@ dm::Mesh soup(std::size_t n, std::uint64_t seed) {
   return m;
 }
 
-Isometry3 randomPose(std::mt19937_64& rng, double spread) {
+Isometry3 randomMeshPose(std::mt19937_64& rng, double spread) {
   std::uniform_real_distribution<double> u(-1, 1);
   Isometry3 p = Isometry3::Identity();
   p.linear() = dm::Quat(Eigen::Vector4d(u(rng), u(rng), u(rng), u(rng)).normalized()).toRotationMatrix();
@@ -121,7 +121,7 @@ void checkPair(const dm::Mesh& ma, const dm::Mesh& mb, std::uint64_t seed, int b
   std::mt19937_64 rng(seed);
   int hits = 0;
   for (int i = 0; i < booleanPoses; ++i) {
-    const Isometry3 pa = randomPose(rng, 0.5), pb = randomPose(rng, spread);
+    const Isometry3 pa = randomMeshPose(rng, 0.5), pb = randomMeshPose(rng, spread);
     brute.setPoses(pa, pb);
     const bool ref = brute.intersect();
     hits += ref;
@@ -130,8 +130,8 @@ void checkPair(const dm::Mesh& ma, const dm::Mesh& mb, std::uint64_t seed, int b
   EXPECT_GT(hits, booleanPoses / 10);
   EXPECT_LT(hits, booleanPoses * 9 / 10);
   for (int i = 0; i < distancePoses; ++i) {
-    const Isometry3 pa = randomPose(rng, 0.5);
-    Isometry3 pb = randomPose(rng, 2.0);
+    const Isometry3 pa = randomMeshPose(rng, 0.5);
+    Isometry3 pb = randomMeshPose(rng, 2.0);
     brute.setPoses(pa, pb);
     const dm::TriangleDistance ref = brute.distance();
     if (ref.distance == 0) continue;
@@ -178,7 +178,7 @@ TEST(MeshQuery, ScaledMeshesMatchBruteForce) {
     Brute brute{a, b, {}};
     std::mt19937_64 rng(17);
     for (int i = 0; i < 400; ++i) {
-      const Isometry3 pa = randomPose(rng, 0.5 * s), pb = randomPose(rng, s);
+      const Isometry3 pa = randomMeshPose(rng, 0.5 * s), pb = randomMeshPose(rng, s);
       brute.setPoses(pa, pb);
       ASSERT_EQ(dm::meshMeshIntersect(ba, pa, bb, pb), brute.intersect());
       if (i % 10 == 0) {
@@ -207,7 +207,7 @@ TEST(MeshQuery, MatchesFclBooleanAndDistance) {
   std::mt19937_64 rng(23);
   int compared = 0, collided = 0;
   for (int i = 0; i < 400; ++i) {
-    const Isometry3 pa = randomPose(rng, 0.5), pb = randomPose(rng, 1.5);
+    const Isometry3 pa = randomMeshPose(rng, 0.5), pb = randomMeshPose(rng, 1.5);
     fcl::CollisionObjectd oa(fa, pa), ob(fb, pb);
     fcl::CollisionRequestd creq;
     fcl::CollisionResultd cres;
@@ -239,7 +239,7 @@ TEST(MeshQuery, ContactsAreTheIntersectingPairs) {
   std::vector<dm::MeshContact> contacts;
   int withContacts = 0;
   for (int i = 0; i < 150; ++i) {
-    const Isometry3 pa = randomPose(rng, 0.3), pb = randomPose(rng, 0.6);
+    const Isometry3 pa = randomMeshPose(rng, 0.3), pb = randomMeshPose(rng, 0.6);
     brute.setPoses(pa, pb);
     const auto ref = brute.pairs();
     const std::size_t n = dm::meshMeshContacts(a, pa, b, pb, contacts);
@@ -283,7 +283,7 @@ TEST(MeshQuery, SignedPointDistanceMatchesBruteForceAndWinding) {
     std::mt19937_64 rng(41);
     std::uniform_real_distribution<double> u(-1, 1);
     for (int i = 0; i < 1500; ++i) {
-      const Isometry3 pose = randomPose(rng, 0.2);
+      const Isometry3 pose = randomMeshPose(rng, 0.2);
       const Vec3 q = 0.9 * Vec3(u(rng), u(rng), u(rng));
       const dm::MeshPointQuery r = dm::closestPointOnMesh(bvh, pose, q);
       const Vec3 local = pose.inverse(Eigen::Isometry) * q;
@@ -314,7 +314,7 @@ TEST(MeshQuery, RaycastMatchesBruteForce) {
   std::uniform_real_distribution<double> u(-1, 1);
   int hits = 0;
   for (int i = 0; i < 3000; ++i) {
-    const Isometry3 pose = randomPose(rng, 0.2);
+    const Isometry3 pose = randomMeshPose(rng, 0.2);
     const Vec3 o = 1.5 * Vec3(u(rng), u(rng), u(rng)), dir = Vec3(u(rng), u(rng), u(rng));
     const Isometry3 inv = pose.inverse(Eigen::Isometry);
     const Vec3 lo = inv * o, ld = inv.linear() * dir;
@@ -345,7 +345,7 @@ TEST(MeshQuery, SphereAndCapsuleMatchBruteForce) {
   std::uniform_real_distribution<double> u(-1, 1), r01(0, 0.3);
   int overlapping = 0;
   for (int i = 0; i < 1500; ++i) {
-    const Isometry3 pose = randomPose(rng, 0.2);
+    const Isometry3 pose = randomMeshPose(rng, 0.2);
     const Vec3 p0 = Vec3(u(rng), u(rng), u(rng)), p1 = p0 + 0.4 * Vec3(u(rng), u(rng), u(rng));
     const double radius = r01(rng);
     const Isometry3 inv = pose.inverse(Eigen::Isometry);

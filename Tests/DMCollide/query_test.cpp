@@ -15,6 +15,8 @@
 #include <string>
 #include <vector>
 
+#include "collide_test_support.hpp"
+
 namespace {
 
 using dm::Isometry3;
@@ -29,11 +31,7 @@ Isometry3 pose(std::mt19937_64& rng, double maxOffset) {
   return p;
 }
 
-Isometry3 at(double x, double y, double z) {
-  Isometry3 p = Isometry3::Identity();
-  p.translation() = Vec3(x, y, z);
-  return p;
-}
+using dm::test::at;
 
 struct Fcl {
   std::shared_ptr<fcl::CollisionGeometryd> g;

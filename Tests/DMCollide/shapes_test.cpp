@@ -15,15 +15,14 @@
 #include <utility>
 #include <vector>
 
+#include "collide_test_support.hpp"
+
 namespace {
 
 using dm::Isometry3;
 using dm::Vec3;
 
-Vec3 randomUnit(std::mt19937_64& rng) {
-  std::normal_distribution<double> g(0.0, 1.0);
-  return Vec3(g(rng), g(rng), g(rng)).normalized();
-}
+using dm::test::randomUnit;
 
 Isometry3 randomPose(std::mt19937_64& rng) {
   std::normal_distribution<double> g(0.0, 1.0);
@@ -33,7 +32,7 @@ Isometry3 randomPose(std::mt19937_64& rng) {
   return p;
 }
 
-std::vector<Vec3> spherePoints(std::mt19937_64& rng, int n, double r) {
+std::vector<Vec3> randomSpherePoints(std::mt19937_64& rng, int n, double r) {
   std::vector<Vec3> p(n);
   for (auto& v : p) v = r * randomUnit(rng);
   return p;
@@ -44,7 +43,7 @@ std::vector<Vec3> spherePoints(std::mt19937_64& rng, int n, double r) {
 TEST(Shapes, HullSupportMatchesBruteForce) {
   std::mt19937_64 rng(1);
   for (int n : {4, 12, 40, 1000}) {
-    auto hull = dm::ConvexHull::create(spherePoints(rng, n, 0.5));
+    auto hull = dm::ConvexHull::create(randomSpherePoints(rng, n, 0.5));
     ASSERT_TRUE(hull.ok());
     const auto& verts = (*hull)->vertices();
     std::uint32_t hint = 0;
@@ -62,7 +61,7 @@ TEST(Shapes, HullSupportMatchesBruteForce) {
 // degree ≥ 3, and V − E + F = 2.
 TEST(Shapes, HullAdjacencyIsTheEdgeGraph) {
   std::mt19937_64 rng(2);
-  auto hull = dm::ConvexHull::create(spherePoints(rng, 300, 1.0));
+  auto hull = dm::ConvexHull::create(randomSpherePoints(rng, 300, 1.0));
   ASSERT_TRUE(hull.ok());
   const auto& h = **hull;
   std::set<std::pair<std::uint32_t, std::uint32_t>> edges;
@@ -112,7 +111,7 @@ TEST(Shapes, PrimitiveSupportIsExtreme) {
 // The closed-form world AABBs equal the support-based (tight) ones.
 TEST(Shapes, WorldAabbIsTight) {
   std::mt19937_64 rng(4);
-  auto hull = dm::ConvexHull::create(spherePoints(rng, 50, 0.4));
+  auto hull = dm::ConvexHull::create(randomSpherePoints(rng, 50, 0.4));
   ASSERT_TRUE(hull.ok());
   const std::vector<std::shared_ptr<const dm::ConvexShape>> shapes = {
       std::make_shared<dm::Sphere>(0.3),

@@ -21,6 +21,8 @@
 #include <random>
 #include <vector>
 
+#include "collide_test_support.hpp"
+
 namespace {
 
 using dm::BoundingSphere;
@@ -102,7 +104,7 @@ std::vector<BoundingSphere> leavesOf(const SphereHierarchy& t) {
   return out;
 }
 
-Isometry3 randomPose(std::mt19937_64& rng, double spread) {
+Isometry3 randomTreePose(std::mt19937_64& rng, double spread) {
   std::uniform_real_distribution<double> u(-1, 1);
   Isometry3 p = Isometry3::Identity();
   p.linear() = Eigen::Quaterniond(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
@@ -110,11 +112,7 @@ Isometry3 randomPose(std::mt19937_64& rng, double spread) {
   return p;
 }
 
-Isometry3 at(const Vec3& c) {
-  Isometry3 p = Isometry3::Identity();
-  p.translation() = c;
-  return p;
-}
+using dm::test::at;
 
 const dm::Mesh& torus() {
   static const dm::Mesh m = dm::makeTorus(0.1, 0.03, 32, 12);
@@ -365,7 +363,7 @@ TEST(SphereTreeCollide, SphereQueriesAreConservativeAgainstTheMesh) {
   std::uniform_real_distribution<double> u(-1, 1);
   int hits = 0, misses = 0;
   for (int it = 0; it < 400; ++it) {
-    const Isometry3 pt = randomPose(rng, 0.05);
+    const Isometry3 pt = randomTreePose(rng, 0.05);
     const double r = 0.005 + 0.02 * (u(rng) + 1);
     const Vec3 c = pt * (0.18 * Vec3(u(rng), u(rng), 0.4 * u(rng)));
     const dm::Sphere ball(r);
@@ -416,7 +414,7 @@ TEST(SphereTreeCollide, TreeTreeAgreesWithLeafPairs) {
   std::mt19937_64 rng(9);
   int hits = 0;
   for (int it = 0; it < 200; ++it) {
-    const Isometry3 pa = randomPose(rng, 0.05), pb = randomPose(rng, 0.15);
+    const Isometry3 pa = randomTreePose(rng, 0.05), pb = randomTreePose(rng, 0.15);
     double brute = kInf;
     for (const auto& x : la)
       for (const auto& y : lb)
@@ -445,7 +443,7 @@ TEST(SphereTreeCollide, PlaneBoxAndRaycastAgreeWithLeafSpheres) {
   std::uniform_real_distribution<double> u(-1, 1);
   const dm::Box box(Vec3(0.02, 0.03, 0.01));
   for (int it = 0; it < 200; ++it) {
-    const Isometry3 pt = randomPose(rng, 0.02);
+    const Isometry3 pt = randomTreePose(rng, 0.02);
     // Plane z ≤ h: the deepest leaf is the lowest sphere bottom.
     const double h = 0.06 * u(rng);
     const dm::Plane plane(Vec3::UnitZ(), h);
@@ -454,7 +452,7 @@ TEST(SphereTreeCollide, PlaneBoxAndRaycastAgreeWithLeafSpheres) {
     EXPECT_NEAR(dm::distance(*tree, pt, plane, Isometry3::Identity()).distance, lowest, 1e-12);
     EXPECT_EQ(dm::intersect(plane, Isometry3::Identity(), *tree, pt), lowest <= 0);
     // Box through the sphere–box collider.
-    const Isometry3 pb = randomPose(rng, 0.08);
+    const Isometry3 pb = randomTreePose(rng, 0.08);
     bool any = false;
     for (const auto& s : ls) any = any || dm::intersect(dm::Sphere(s.radius), at(pt * s.center), box, pb);
     EXPECT_EQ(dm::intersect(*tree, pt, box, pb), any) << it;

@@ -22,6 +22,8 @@
 #include <random>
 #include <vector>
 
+#include "collide_test_support.hpp"
+
 namespace {
 
 using dm::Isometry3;
@@ -30,11 +32,7 @@ using dm::Vec3;
 
 constexpr double kPi = std::numbers::pi;
 
-Isometry3 at(double x, double y, double z) {
-  Isometry3 p = Isometry3::Identity();
-  p.translation() = Vec3(x, y, z);
-  return p;
-}
+using dm::test::at;
 
 Isometry3 rotated(const Isometry3& p, double angle, const Vec3& axis) {
   Isometry3 r = p;
@@ -42,7 +40,7 @@ Isometry3 rotated(const Isometry3& p, double angle, const Vec3& axis) {
   return r;
 }
 
-Isometry3 randomPose(std::mt19937_64& rng, double spread) {
+Isometry3 randomToiPose(std::mt19937_64& rng, double spread) {
   std::normal_distribution<double> g(0.0, 1.0);
   std::uniform_real_distribution<double> u(-spread, spread);
   Isometry3 p = Isometry3::Identity();
@@ -271,8 +269,8 @@ TEST(ToiConservativeAdvancement, AgreesWithBisectionOnRandomConvexMotions) {
     const dm::Shape& a = *shapes[trial % 4];
     const dm::Shape& b = *shapes[(trial / 4) % 4];
     // A crosses B's neighbourhood while both turn: usually a real impact.
-    const Isometry3 b0 = randomPose(rng, 0.05), b1 = rotated(b0, 0.5, Vec3(u(rng), u(rng), 1));
-    Isometry3 a0 = randomPose(rng, 0.1), a1 = randomPose(rng, 0.1);
+    const Isometry3 b0 = randomToiPose(rng, 0.05), b1 = rotated(b0, 0.5, Vec3(u(rng), u(rng), 1));
+    Isometry3 a0 = randomToiPose(rng, 0.1), a1 = randomToiPose(rng, 0.1);
     const Vec3 through = 1.2 * Vec3(u(rng), u(rng), u(rng)).normalized();
     a0.translation() += through;
     a1.translation() -= through;
@@ -329,8 +327,8 @@ TEST(ToiConservativeAdvancement, MeshMeshAgreesWithBisection) {
   int hits = 0;
   for (int trial = 0; trial < 30; ++trial) {
     const dm::TriangleMesh& a = trial % 2 ? *ball : *block;
-    const Isometry3 b0 = randomPose(rng, 0.05), b1 = rotated(b0, 0.4 * u(rng), Vec3(u(rng), u(rng), 1));
-    Isometry3 a0 = randomPose(rng, 0.05), a1 = randomPose(rng, 0.05);
+    const Isometry3 b0 = randomToiPose(rng, 0.05), b1 = rotated(b0, 0.4 * u(rng), Vec3(u(rng), u(rng), 1));
+    Isometry3 a0 = randomToiPose(rng, 0.05), a1 = randomToiPose(rng, 0.05);
     const Vec3 through = 1.0 * Vec3(u(rng), u(rng), u(rng)).normalized();
     a0.translation() += through;
     a1.translation() -= through;
@@ -531,7 +529,7 @@ TEST_F(ToiSweepSphere, MatchesConservativeAdvancementAndBruteForce) {
   std::uniform_real_distribution<double> u(-1, 1);
   int hits = 0;
   for (int trial = 0; trial < 60; ++trial) {
-    const Isometry3 pose = randomPose(rng, 0.1);
+    const Isometry3 pose = randomToiPose(rng, 0.1);
     const Vec3 from = 0.8 * Vec3(u(rng), u(rng), u(rng)).normalized();
     const Vec3 to = 0.5 * Vec3(u(rng), u(rng), u(rng));
     const dm::SweepHit h = dm::sweepSphere(*ball, pose, probe.radius(), from, to);

@@ -18,6 +18,8 @@
 #include <string>
 #include <vector>
 
+#include "collide_test_support.hpp"
+
 namespace {
 
 using dm::Isometry3;
@@ -44,18 +46,11 @@ Vec3 randomInBall(std::mt19937_64& rng, double radius) {
   }
 }
 
-Vec3 randomUnit(std::mt19937_64& rng) {
-  std::normal_distribution<double> g(0.0, 1.0);
-  return Vec3(g(rng), g(rng), g(rng)).normalized();
-}
+using dm::test::randomUnit;
 
-Isometry3 at(const Vec3& t) {
-  Isometry3 p = Isometry3::Identity();
-  p.translation() = t;
-  return p;
-}
+using dm::test::at;
 
-Isometry3 randomPose(std::mt19937_64& rng, double offset) {
+Isometry3 randomModelPose(std::mt19937_64& rng, double offset) {
   std::normal_distribution<double> g(0.0, 1.0);
   Isometry3 p = Isometry3::Identity();
   p.linear() = dm::Quat(Eigen::Vector4d(g(rng), g(rng), g(rng), g(rng)).normalized()).toRotationMatrix();
@@ -248,7 +243,7 @@ TEST(VoxelModel, PointShellAgainstSphereMatchesAnalyticPenetration) {
   for (int trial = 0; trial < 20; ++trial) {
     const Vec3 u = randomUnit(rng);
     const double delta = trial % 2 ? 1.5e-3 : 0.5e-3;  // analytic penetration
-    Isometry3 poseShell = randomPose(rng, 0.0);
+    Isometry3 poseShell = randomModelPose(rng, 0.0);
     poseShell.translation() = (bigR + smallR - delta) * u;
     const Isometry3 poseModel = Isometry3::Identity();
     EXPECT_TRUE(dm::intersect(**shell, poseShell, *model, poseModel));
@@ -337,7 +332,7 @@ TEST(VoxelModel, RoundShapesAgainstSphereModel) {
 TEST(VoxelModel, RaycastMatchesAnalyticRaySphereHit) {
   auto model = analyticSphere();
   std::mt19937_64 rng(7);
-  const Isometry3 pose = randomPose(rng, 0.05);
+  const Isometry3 pose = randomModelPose(rng, 0.05);
   int hits = 0;
   for (int s = 0; s < 200; ++s) {
     const Vec3 o = (0.012 + 0.01 * (s % 3)) * randomUnit(rng);

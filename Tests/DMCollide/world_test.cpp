@@ -21,6 +21,8 @@
 #include <utility>
 #include <vector>
 
+#include "collide_test_support.hpp"
+
 namespace {
 
 using dm::BroadPhaseKind;
@@ -38,13 +40,9 @@ constexpr std::array<BroadPhaseKind, 5> kKinds = {
     BroadPhaseKind::BruteForce, BroadPhaseKind::SweepAndPrune, BroadPhaseKind::HashedGrid,
     BroadPhaseKind::HierarchicalGrid, BroadPhaseKind::DynamicAabbTree};
 
-Isometry3 at(double x, double y, double z) {
-  Isometry3 p = Isometry3::Identity();
-  p.translation() = Vec3(x, y, z);
-  return p;
-}
+using dm::test::at;
 
-Isometry3 randomPose(std::mt19937_64& rng, double extent) {
+Isometry3 randomWorldPose(std::mt19937_64& rng, double extent) {
   std::normal_distribution<double> g(0.0, 1.0);
   std::uniform_real_distribution<double> u(0.0, extent);
   Isometry3 p = Isometry3::Identity();
@@ -516,7 +514,7 @@ Scene randomScene(std::uint64_t seed, std::size_t n) {
         s.shapes.push_back(std::make_shared<dm::Capsule>(size(rng), size(rng)));
         break;
     }
-    s.poses.push_back(i < 12 && i % 2 == 0 ? at(0.5, 0.5, 0.5) : randomPose(rng, 1.0));
+    s.poses.push_back(i < 12 && i % 2 == 0 ? at(0.5, 0.5, 0.5) : randomWorldPose(rng, 1.0));
     s.velocity.push_back(i < 12 ? Vec3::Zero() : Vec3(v(rng), v(rng), v(rng)));
   }
   return s;

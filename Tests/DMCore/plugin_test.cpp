@@ -15,8 +15,9 @@
 #include <string>
 #include <vector>
 
-#include "plugins/test_adder.h"
 #include "../common/build_paths.hpp"
+#include "core_test_support.hpp"
+#include "plugins/test_adder.h"
 
 namespace {
 
@@ -35,10 +36,7 @@ bool isMapped(const fs::path& lib) {
   return true;
 }
 
-bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
-
-#define EXPECT_HAS(haystack, needle) \
-  EXPECT_TRUE(contains((haystack), (needle))) << "expected \"" << (needle) << "\" in: " << (haystack)
+using dm::test::contains;
 
 // Captures log messages (plugins log through the host API).
 class LogCapture {

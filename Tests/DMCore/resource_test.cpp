@@ -18,6 +18,8 @@
 #include <thread>
 #include <vector>
 
+#include "core_test_support.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -32,10 +34,7 @@ struct LineCount {
   std::size_t lines = 0;
 };
 
-bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
-
-#define EXPECT_HAS(haystack, needle) \
-  EXPECT_TRUE(contains((haystack), (needle))) << "expected \"" << (needle) << "\" in: " << (haystack)
+using dm::test::contains;
 
 dm::Result<std::string> readFile(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);

@@ -14,11 +14,13 @@
 #include <set>
 #include <vector>
 
+#include "math_test_support.hpp"
+
 namespace {
 
 using dm::Vec3;
 
-constexpr double kPi = std::numbers::pi;
+using dm::test::kPi;
 
 std::array<double, 3> key(const Vec3& p) { return {p.x(), p.y(), p.z()}; }
 

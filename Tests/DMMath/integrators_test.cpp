@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "math_test_support.hpp"
+
 namespace {
 
 using dm::IntegrationStats;
@@ -17,11 +19,7 @@ using dm::IntegratorOptions;
 using dm::OdeSystem;
 using dm::VecX;
 
-std::unique_ptr<dm::Integrator> make(std::string_view name) {
-  auto r = dm::makeIntegrator(name);
-  EXPECT_TRUE(r) << (r ? "" : r.error().message());
-  return r ? std::move(r).value() : nullptr;
-}
+using dm::test::make;
 
 /// Least-squares slope of log(err) against log(h).
 double fittedOrder(const std::vector<double>& hs, const std::vector<double>& errs) {

@@ -10,12 +10,14 @@
 #include <utility>
 #include <vector>
 
+#include "math_test_support.hpp"
+
 namespace {
 
 using dm::Mat3;
 using dm::Vec3;
 
-constexpr double kPi = std::numbers::pi;
+using dm::test::kPi;
 
 /// Box [lo, lo + size] (per-axis sizes), 8 vertices, 12 triangles CCW from outside.
 dm::Mesh box(const Vec3& lo, const Vec3& size) {
@@ -91,13 +93,7 @@ void flip(dm::Mesh& m) {
   for (auto& t : m.triangles) std::swap(t[1], t[2]);
 }
 
-dm::Mesh merged(const dm::Mesh& a, const dm::Mesh& b) {
-  dm::Mesh m = a;
-  const auto offset = static_cast<std::uint32_t>(a.positions.size());
-  m.positions.insert(m.positions.end(), b.positions.begin(), b.positions.end());
-  for (auto t : b.triangles) m.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
-  return m;
-}
+using dm::test::merged;
 
 /// Relative Frobenius distance of two matrices.
 double relDiff(const Mat3& a, const Mat3& b) { return (a - b).norm() / b.norm(); }

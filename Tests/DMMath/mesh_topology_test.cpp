@@ -8,6 +8,8 @@
 #include <random>
 #include <vector>
 
+#include "math_test_support.hpp"
+
 namespace {
 
 using dm::Vec3;
@@ -27,13 +29,7 @@ dm::Mesh box(const Vec3& lo, double size) {
   return m;
 }
 
-dm::Mesh merged(const dm::Mesh& a, const dm::Mesh& b) {
-  dm::Mesh m = a;
-  const auto offset = static_cast<std::uint32_t>(a.positions.size());
-  m.positions.insert(m.positions.end(), b.positions.begin(), b.positions.end());
-  for (auto t : b.triangles) m.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
-  return m;
-}
+using dm::test::merged;
 
 TEST(MeshTopology, BoxIsAClosedOrientedSphere) {
   const auto t = dm::analyzeTopology(box(Vec3(1, 2, 3), 2.0));

@@ -10,10 +10,12 @@
 #include <limits>
 #include <numbers>
 
+#include "math_test_support.hpp"
+
 namespace dm {
 namespace {
 
-constexpr double kPi = std::numbers::pi;
+using dm::test::kPi;
 
 /// The cylinder duplicates its rim vertices; welding exact duplicates must
 /// give a closed, oriented genus-0 manifold.

@@ -12,6 +12,8 @@
 #include <string>
 #include <vector>
 
+#include "math_test_support.hpp"
+
 namespace {
 
 using dm::IntegrationStats;
@@ -21,11 +23,7 @@ using dm::MatX;
 using dm::OdeSystem;
 using dm::VecX;
 
-std::unique_ptr<dm::Integrator> make(std::string_view name) {
-  auto r = dm::makeIntegrator(name);
-  EXPECT_TRUE(r) << (r ? "" : r.error().message());
-  return r ? std::move(r).value() : nullptr;
-}
+using dm::test::make;
 
 void print(const char* label, const IntegrationStats& s, double err) {
   std::printf(

@@ -19,6 +19,8 @@
 #include <utility>
 #include <vector>
 
+#include "math_test_support.hpp"
+
 namespace {
 
 using dm::Vec3;
@@ -81,12 +83,7 @@ void forEachVoxel(const dm::Volume& v, F&& f) {
       for (int i = 0; i < d.x(); ++i) f(v.indexToWorld() * Vec3(i, j, k), v.value(i, j, k));
 }
 
-dm::Mesh merged(dm::Mesh a, const dm::Mesh& b) {
-  const auto offset = static_cast<std::uint32_t>(a.positions.size());
-  a.positions.insert(a.positions.end(), b.positions.begin(), b.positions.end());
-  for (const auto& t : b.triangles) a.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
-  return a;
-}
+using dm::test::merged;
 
 TEST(Voxelize, GridIsTheWorldLatticeAroundTheBoundsWithPadding) {
   const dm::Mesh box = boxMesh(Vec3(0.0123, -0.004, 0.031), Vec3(0.010, 0.007, 0.005));

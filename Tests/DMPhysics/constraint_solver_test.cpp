@@ -12,10 +12,12 @@
 #include <numbers>
 #include <vector>
 
+#include "physics_test_support.hpp"
+
 namespace dm {
 namespace {
 
-constexpr double kG = 9.81;
+using dm::test::kG;
 const Vec3 kGravity(0.0, 0.0, -kG);
 
 Isometry3 poseOf(const SolverBody& b) {

@@ -14,15 +14,12 @@
 #include <vector>
 
 #include "../common/alloc_counter.hpp"
+#include "physics_test_support.hpp"
 
 namespace dm {
 namespace {
 
-MeshBvh treeOf(const Mesh& mesh) {
-  auto t = MeshBvh::build(mesh);
-  EXPECT_TRUE(t.ok());
-  return std::move(*t);
-}
+using dm::test::treeOf;
 
 Isometry3 at(const Vec3& p) {
   Isometry3 t = Isometry3::Identity();

@@ -14,10 +14,12 @@
 #include <cstdio>
 #include <vector>
 
+#include "physics_test_support.hpp"
+
 namespace dm {
 namespace {
 
-constexpr double kG = 9.81;
+using dm::test::kG;
 
 double triangleArea(const TetMesh& m, const Triangle& t) {
   return 0.5 * (m.nodes[t[1]] - m.nodes[t[0]]).cross(m.nodes[t[2]] - m.nodes[t[0]]).norm();

@@ -13,10 +13,12 @@
 #include <cmath>
 #include <vector>
 
+#include "physics_test_support.hpp"
+
 namespace dm {
 namespace {
 
-constexpr double kG = 9.81;
+using dm::test::kG;
 
 // ---------------------------------------------------------------------------
 // Tetrahedral meshes from voxels

@@ -13,6 +13,8 @@
 #include <memory>
 #include <numbers>
 
+#include "physics_test_support.hpp"
+
 namespace {
 
 using dm::BodyId;
@@ -20,7 +22,7 @@ using dm::PhysicsWorld;
 using dm::Vec3;
 using dm::WorldState;
 
-constexpr double kG = 9.81;
+using dm::test::kG;
 constexpr double kDt = 1e-3;
 
 /// A rigid body of `shape` with the solid's inertia, or a static one.

@@ -12,6 +12,7 @@
 #include <numbers>
 
 #include "../common/alloc_counter.hpp"
+#include "physics_test_support.hpp"
 
 namespace {
 
@@ -22,7 +23,7 @@ using dm::PhysicsWorld;
 using dm::Vec3;
 using dm::WorldState;
 
-constexpr double kG = 9.81;
+using dm::test::kG;
 
 BodyId addGround(PhysicsWorld& w, const Vec3& normal = Vec3::UnitZ(), double friction = 0.5,
                  double restitution = 0.0) {

@@ -14,17 +14,14 @@
 #include <cstdio>
 
 #include "../common/alloc_counter.hpp"
+#include "physics_test_support.hpp"
 
 namespace dm {
 namespace {
 
-constexpr double kG = 9.81;
+using dm::test::kG;
 
-MeshBvh treeOf(const Mesh& mesh) {
-  auto t = MeshBvh::build(mesh);
-  EXPECT_TRUE(t.ok());
-  return std::move(*t);
-}
+using dm::test::treeOf;
 
 // A 4 × 4 × 2 cm tissue slab, E = 10 kPa, base clamped unless `free`.
 FemBody slab(bool free, double alpha = 5.0) {
