@@ -18,9 +18,7 @@ elif [ -n "${1:-}" ]; then
 fi
 bash scripts/setup.sh
 builddir=build-fuzz
-# File by file (DM_UNITY_BUILD=OFF), as the sanitizer trees of test.sh: the
-# sanitizers' instrumentation costs more in big unity batches.
-CC=clang CXX=clang++ cmake -S . -B "$builddir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDM_FUZZ=ON -DDM_UNITY_BUILD=OFF \
+CC=clang CXX=clang++ cmake -S . -B "$builddir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DDM_FUZZ=ON \
   "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" \
   -DDM_BUILD_TESTS=OFF -DDM_BUILD_BENCH=OFF -DDM_BUILD_EXAMPLES=OFF >/dev/null
 mapfile -t targets < <(cmake --build "$builddir" --target help | sed -n 's/^\([a-z0-9_]*_fuzz\):.*/\1/p')

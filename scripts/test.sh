@@ -29,11 +29,6 @@ if [ -n "$sanitize" ]; then
   # faster than full debug info. -O1, as the sanitizers' own docs advise:
   # with UBSan's checks GCC 12 takes up to twice as long at -O2 (measured on
   # DMMath's isosurface.cpp: 125 s at -O2, 63 s at -O1), for no extra finding.
-  # File by file, not in unity batches: GCC 12's sanitizer instrumentation
-  # grows faster than the size of a translation unit, and the ASan+UBSan
-  # batches took 2.4-2.6 times the CPU of the plain ones (DMMath 146 -> 359 s,
-  # DMIO 176 -> 414 s, docs/build-time.md), more than file by file had cost.
-  args+=(-DDM_UNITY_BUILD=OFF)
   args+=(-DDM_SANITIZE="$sanitize" -DDM_BUILD_BENCH=OFF -DDM_BUILD_EXAMPLES=OFF
          "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" "-DCMAKE_C_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG")
 fi
