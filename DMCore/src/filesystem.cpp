@@ -15,6 +15,24 @@ namespace dm {
 
 namespace fs = std::filesystem;
 
+namespace {
+
+// "a:b::c" -> {a, b, c}; null -> {}.
+std::vector<fs::path> splitPathList(const char* list) {
+  std::vector<fs::path> out;
+  if (list == nullptr) return out;
+  const std::string s(list);
+  std::size_t start = 0;
+  while (start <= s.size()) {
+    const std::size_t end = std::min(s.find(':', start), s.size());
+    if (end > start) out.emplace_back(s.substr(start, end - start));
+    start = end + 1;
+  }
+  return out;
+}
+
+}  // namespace
+
 FileSystem::FileSystem() {
   mounts_ = {
       {"mricron", "/usr/share/mricron/templates", "mricron-data"},
@@ -22,15 +40,8 @@ FileSystem::FileSystem() {
       {"opencv", "/usr/share/doc/opencv-doc/examples/data", "opencv-doc"},
       {"haar", "/usr/share/opencv4/haarcascades", "opencv-data"},
   };
-  if (const char* env = std::getenv("DM_DATA_PATH")) {
-    std::string s(env);
-    std::size_t start = 0;
-    while (start <= s.size()) {
-      const std::size_t end = std::min(s.find(':', start), s.size());
-      if (end > start) searchPaths_.emplace_back(s.substr(start, end - start));
-      start = end + 1;
-    }
-  }
+  searchPaths_ = splitPathList(std::getenv("DM_DATA_PATH"));
+  allowedRoots_ = splitPathList(std::getenv("DM_ALLOW_PATH"));
 }
 
 FileSystem& FileSystem::global() {
@@ -59,6 +70,16 @@ void FileSystem::unmount(const std::string& name) {
 void FileSystem::addSearchPath(const fs::path& dir) {
   std::lock_guard lock(mutex_);
   searchPaths_.push_back(dir);
+}
+
+void FileSystem::allowRoot(const fs::path& dir) {
+  std::lock_guard lock(mutex_);
+  allowedRoots_.push_back(dir);
+}
+
+void FileSystem::disallowRoot(const fs::path& dir) {
+  std::lock_guard lock(mutex_);
+  std::erase(allowedRoots_, dir);
 }
 
 std::vector<fs::path> FileSystem::searchPaths() const {

@@ -30,6 +30,22 @@ std::string formatString(const char* format, ...) noexcept {
   }
 }
 
+std::string shownText(std::string_view text, std::size_t maxChars) {
+  std::string out;
+  for (std::size_t i = 0; i < text.size() && i < maxChars; ++i) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    if (c >= 32 && c < 127) {
+      out += static_cast<char>(c);
+    } else {
+      char buf[8];
+      std::snprintf(buf, sizeof buf, "\\x%02x", c);
+      out += buf;
+    }
+  }
+  if (text.size() > maxChars) out += "...";
+  return out;
+}
+
 const char* toString(ErrorCode code) noexcept {
   switch (code) {
     case ErrorCode::InvalidArgument:
@@ -54,6 +70,8 @@ const char* toString(ErrorCode code) noexcept {
       return "busy";
     case ErrorCode::Internal:
       return "internal error";
+    case ErrorCode::Denied:
+      return "denied";
   }
   return "unknown error";
 }

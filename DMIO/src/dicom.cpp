@@ -147,18 +147,9 @@ class Walker {
     h.vr[0] = static_cast<char>(b_[pos + 4]);
     h.vr[1] = static_cast<char>(b_[pos + 5]);
     if (!isKnownVr(h.vr)) {
-      std::string shown;
-      for (int i = 0; i < 2; ++i) {
-        const auto c = static_cast<unsigned char>(h.vr[i]);
-        if (c >= 32 && c < 127) {
-          shown += static_cast<char>(c);
-        } else {
-          char x[8];
-          std::snprintf(x, sizeof x, "\\x%02x", c);
-          shown += x;
-        }
-      }
-      return error("unknown VR '" + shown + "' of element " + tagText(h.group, h.element), pos);
+      return error("unknown VR '" + shownText(std::string_view(h.vr, 2)) + "' of element " +
+                       tagText(h.group, h.element),
+                   pos);
     }
     if (hasLongLength(h.vr)) {
       if (limit - pos < 12)
@@ -857,10 +848,19 @@ Result<Volume> readDicomSeries(const std::filesystem::path& dirOrFile, const Dic
       wanted = h->seriesUid;
     }
 
+    // The folder is the caller's choice; a symlink in it is someone else's,
+    // so it must not lead out of the folder or the allowed roots.
     std::vector<std::filesystem::path> files;
     for (std::filesystem::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
       std::error_code fec;
-      if (it->is_regular_file(fec)) files.push_back(it->path());
+      if (!it->is_regular_file(fec)) continue;
+      if (it->is_symlink(fec)) {
+        const std::string name = it->path().filename().string();
+        auto real = FileSystem::global().confine(dir, name, "file \"" + shownText(name) + "\" of the series folder " +
+                                                                 dir.string());
+        if (!real) return std::move(real).error();
+      }
+      files.push_back(it->path());
     }
     if (ec) return ioError("cannot list the directory", dir, ec);
     std::sort(files.begin(), files.end());

@@ -40,21 +40,7 @@ inline bool endsWith(const std::string& s, std::string_view suffix) {
 }
 
 /// Shows at most 60 characters of untrusted text, non-printables escaped.
-inline std::string shown(std::string_view s) {
-  std::string out;
-  for (std::size_t i = 0; i < s.size() && i < 60; ++i) {
-    const auto c = static_cast<unsigned char>(s[i]);
-    if (c >= 32 && c < 127) {
-      out += static_cast<char>(c);
-    } else {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\x%02x", c);
-      out += buf;
-    }
-  }
-  if (s.size() > 60) out += "...";
-  return out;
-}
+inline std::string shown(std::string_view s) { return shownText(s); }
 
 /// `v` with 17 significant digits (reads back exactly); no "-0".
 inline std::string fmt17(double v) {

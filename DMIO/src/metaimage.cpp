@@ -435,14 +435,16 @@ Result<Volume> readMetaImage(const std::filesystem::path& file, const MetaImageR
   if (auto s = checkDataFileName(*p, source); !s) return std::move(s).error();
   if (isLocal(p->dataFile))
     return loadData(*p, std::span<const std::byte>(*bytes).subspan(p->dataOffset), source, options);
-  const std::filesystem::path dataPath = file.parent_path() / p->dataFile;
-  auto data = readFile(dataPath, std::numeric_limits<std::size_t>::max());
+  const std::string field = "ElementDataFile (line " + std::to_string(p->dataLine) + ") of " + source;
+  auto dataPath = FileSystem::global().confine(file.parent_path(), p->dataFile, field);
+  if (!dataPath) return std::move(dataPath).error();
+  auto data = readFile(*dataPath, std::numeric_limits<std::size_t>::max());
   if (!data) {
     Error e = std::move(data).error();
-    e.what = "ElementDataFile (line " + std::to_string(p->dataLine) + ") of " + source + ": " + e.what;
+    e.what = field + ": " + e.what;
     return e;
   }
-  return loadData(*p, *data, dataPath.string(), options);
+  return loadData(*p, *data, dataPath->string(), options);
 }
 
 namespace {

@@ -119,18 +119,7 @@ std::string num(double v) {
 }
 
 std::string printable(const std::byte* p, std::size_t n) {
-  std::string s;
-  for (std::size_t i = 0; i < n; ++i) {
-    const auto c = static_cast<unsigned char>(p[i]);
-    if (c >= 32 && c < 127) {
-      s += static_cast<char>(c);
-    } else {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\x%02x", c);
-      s += buf;
-    }
-  }
-  return s;
+  return shownText(std::string_view(reinterpret_cast<const char*>(p), n), n);
 }
 
 Error parseError(std::string_view source, std::string what, std::string hint = {}) {

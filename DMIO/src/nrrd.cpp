@@ -768,15 +768,16 @@ Result<Volume> readNrrd(const std::filesystem::path& file, const NrrdReadOptions
   if (!p) return std::move(p).error();
   if (p->dataFile.empty())
     return loadNrrdData(*p, std::span<const std::byte>(*bytes).subspan(p->dataOffset), source, options);
-  std::filesystem::path dataPath(p->dataFile);
-  if (dataPath.is_relative()) dataPath = file.parent_path() / dataPath;
-  auto data = readFile(dataPath, std::numeric_limits<std::size_t>::max());
+  const std::string field = "data file (line " + std::to_string(p->dataLine) + ") of " + source;
+  auto dataPath = FileSystem::global().confine(file.parent_path(), p->dataFile, field);
+  if (!dataPath) return std::move(dataPath).error();
+  auto data = readFile(*dataPath, std::numeric_limits<std::size_t>::max());
   if (!data) {
     Error e = std::move(data).error();
-    e.what = "data file (line " + std::to_string(p->dataLine) + ") of " + source + ": " + e.what;
+    e.what = field + ": " + e.what;
     return e;
   }
-  return loadNrrdData(*p, *data, dataPath.string(), options);
+  return loadNrrdData(*p, *data, dataPath->string(), options);
 }
 
 namespace {

@@ -368,17 +368,27 @@ class SceneParser {
   using Type = SceneResource::Type;
   using NameIndex = std::map<std::string, std::size_t>;
 
+  // A source leads only into the scene's folder, the mounts, DM_DATA_PATH
+  // and the allowed roots (FileSystem::confine): the scene may come from
+  // anyone, so it must not make us read any file of the machine.
   fs::path resolveSource(ConfigReader& r, const std::string& source) {
+    std::string named = source;
     const std::size_t colon = source.find(':');
     if (colon != std::string::npos && colon >= 2 && source.find('/') > colon) {
       auto p = FileSystem::global().resolve(source);
-      if (p) return *p;
-      // FileSystem has no query for its mounts: its error names an unknown one.
-      if (p.error().what.rfind("unknown mount", 0) == 0) r.addError(p.error().what, "source", p.error().hint);
+      if (!p) {
+        // FileSystem has no query for its mounts: its error names an unknown one.
+        if (p.error().what.rfind("unknown mount", 0) == 0) r.addError(p.error().what, "source", p.error().hint);
+        return {};
+      }
+      named = p->string();
+    }
+    auto real = FileSystem::global().confine(baseDir_, named, "source");
+    if (!real) {
+      r.addError(real.error().what, "source", real.error().hint);
       return {};
     }
-    const fs::path p(source);
-    return (p.is_absolute() ? p : baseDir_ / p).lexically_normal();
+    return *real;
   }
 
   void readSource(ConfigReader& r, SceneResource& res) {

@@ -141,9 +141,19 @@ dm::Status SceneDocument::save(const std::filesystem::path& file) {
   std::error_code ec;
   const std::filesystem::path dir = std::filesystem::absolute(target, ec).parent_path();
   dm::SceneDesc out = scene_;
-  if (!ec && std::filesystem::absolute(out.baseDir, ec) != dir)
+  if (!ec && std::filesystem::absolute(out.baseDir, ec) != dir) {
+    // Saved elsewhere, the scene names its files by absolute paths into its
+    // old folder. That folder is outside the new one, so this process allows
+    // it as a root (FileSystem::confine); another process that opens the
+    // moved scene needs DM_ALLOW_PATH, which the refusal then names.
+    bool relative = false;
     for (dm::SceneResource& r : out.resources)
-      if (relativeFileSource(r.source)) r.source = std::filesystem::absolute(out.baseDir / r.source).string();
+      if (relativeFileSource(r.source)) {
+        r.source = std::filesystem::absolute(out.baseDir / r.source).string();
+        relative = true;
+      }
+    if (relative) dm::FileSystem::global().allowRoot(std::filesystem::absolute(out.baseDir));
+  }
   const std::string json = dm::toJson(out).dump(2) + "\n";
   if (auto s = dm::writeFileAtomic(target, json.data(), json.size()); !s) return s.error();
   out.baseDir = dir;

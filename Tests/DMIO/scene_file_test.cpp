@@ -539,7 +539,7 @@ Json fullScene() {
       "floor": {"type": "shape", "shape": "plane", "half_extents": [1.0, 2.0], "subdivisions": 0},
       "ball": {"type": "shape", "shape": "sphere", "radius": 0.005, "subdivisions": 5},
       "liver": {"type": "mesh", "source": "meshes/liver.stl", "unit": "mm", "scale": 1.5},
-      "ct": {"type": "volume", "source": "/abs/ct.nii.gz"},
+      "ct": {"type": "volume", "source": "/data/scenes/ct/ct.nii.gz"},
       "iso": {"type": "isosurface", "volume": "ct", "level": 300.5, "largest_component": true, "smooth": 4,
               "downsample": 3},
       "albedo": {"type": "image", "source": "textures/albedo.png"},
@@ -618,7 +618,7 @@ TEST(SceneFile, ToJsonWritesEveryKeyAndReadsBackEqual) {
 
   // Spot checks that values reached the right fields.
   EXPECT_EQ(a->resource("liver")->path, fs::path("/data/scenes/meshes/liver.stl"));
-  EXPECT_EQ(a->resource("ct")->path, fs::path("/abs/ct.nii.gz"));
+  EXPECT_EQ(a->resource("ct")->path, fs::path("/data/scenes/ct/ct.nii.gz"));
   EXPECT_EQ(a->resource("floor")->halfExtents, dm::Vec3(1.0, 2.0, 0.0));
   EXPECT_EQ(a->camera("fly")->path.size(), 2u);
   EXPECT_TRUE(a->camera("fly")->stereo);
@@ -657,15 +657,40 @@ TEST(SceneFile, BundledSceneRoundTrips) {
 TEST(SceneFile, SourcesResolveAgainstTheSceneDirectory) {
   Json j = baseScene();
   j["resources"]["a"] = {{"type", "mesh"}, {"source", "meshes/tool.stl"}};
-  j["resources"]["b"] = {{"type", "mesh"}, {"source", "../shared/./b.obj"}, {"unit", "mm"}};
-  j["resources"]["c"] = {{"type", "volume"}, {"source", "/abs/c.nrrd"}};
+  j["resources"]["b"] = {{"type", "mesh"}, {"source", "./meshes/../b.obj"}, {"unit", "mm"}};
+  j["resources"]["c"] = {{"type", "volume"}, {"source", "/data/scenes/volumes/c.nrrd"}};
   auto s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
   ASSERT_TRUE(s) << s.error();
   EXPECT_EQ(s->resource("a")->source, "meshes/tool.stl");
   EXPECT_EQ(s->resource("a")->path, fs::path("/data/scenes/meshes/tool.stl"));
-  EXPECT_EQ(s->resource("b")->path, fs::path("/data/shared/b.obj"));
+  EXPECT_EQ(s->resource("b")->path, fs::path("/data/scenes/b.obj"));
   EXPECT_EQ(s->resource("b")->unit, "mm");
+  EXPECT_EQ(s->resource("c")->path, fs::path("/data/scenes/volumes/c.nrrd"));
+
+  // Outside the scene's folder (and the mounts, DM_DATA_PATH and the allowed
+  // roots) a source is refused (FileSystem::confine); an allowed root lets it in.
+  j["resources"]["b"]["source"] = "../shared/./b.obj";
+  j["resources"]["c"]["source"] = "/abs/c.nrrd";
+  {
+    const auto refused = problemsOf(j);
+    ASSERT_EQ(refused.size(), 2u) << dm::formatSceneErrors(refused);
+    for (const char* key : {"/resources/b/source", "/resources/c/source"}) {
+      const dm::Error* e = at(refused, key);
+      ASSERT_TRUE(e) << key;
+      EXPECT_NE(e->what.find("outside the allowed folders"), std::string::npos) << e->what;
+      EXPECT_NE(e->hint.find("DM_ALLOW_PATH"), std::string::npos) << e->hint;
+    }
+  }
+  dm::FileSystem::global().allowRoot("/data/shared");
+  dm::FileSystem::global().allowRoot("/abs");
+  s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  dm::FileSystem::global().disallowRoot("/data/shared");
+  dm::FileSystem::global().disallowRoot("/abs");
+  ASSERT_TRUE(s) << s.error();
+  EXPECT_EQ(s->resource("b")->path, fs::path("/data/shared/b.obj"));
   EXPECT_EQ(s->resource("c")->path, fs::path("/abs/c.nrrd"));
+  j["resources"]["b"]["source"] = "./meshes/../b.obj";
+  j["resources"]["c"]["source"] = "/data/scenes/volumes/c.nrrd";
 
   // An unknown mount is an error now; an unknown unit too.
   j["resources"]["a"]["source"] = "nosuch:tool.stl";

@@ -3,6 +3,7 @@
 // sources kept loadable when the scene moves) and, where Xvfb and the GUI
 // were built, the editor itself: started on a virtual X display with the
 // bundled scene, it must draw its panels and the head into the screenshot.
+#include <dm/core/filesystem.hpp>
 #include <dm/io/image_io.hpp>
 #include <dm/io/scene_file.hpp>
 
@@ -120,6 +121,13 @@ TEST(DmeditDocument, RelativeSourcesStayLoadableWhenTheSceneMoves) {
   auto moved = dm::readScene(b.path / "moved.json");
   ASSERT_TRUE(moved) << moved.error();
   EXPECT_EQ(fs::path(moved->resource("box")->source), fs::path(obj));
+  // The old folder is now outside the scene's: the editor allowed it for this
+  // process; without that (another process), the source is refused and the
+  // error says how to allow it (issue 37, FileSystem::confine).
+  dm::FileSystem::global().disallowRoot(fs::absolute(a.path));
+  auto refused = dm::readScene(b.path / "moved.json");
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message().find("DM_ALLOW_PATH"), std::string::npos) << refused.error();
   // Saved in place, the relative source stays relative.
   auto again = dmedit::SceneDocument::open(a.path / "scene.json");
   ASSERT_TRUE(again);

@@ -404,6 +404,33 @@ TEST(Dmtool, MissingFileFailsWithItsNameOnStderrAndNothingOnStdout) {
   }
 }
 
+TEST(Dmtool, InfoRefusesAHeaderWhoseDataFileLeavesItsFolder) {
+  // issue 37: a MetaImage header naming ../outside/secret.raw made `dmtool
+  // info` print that file's bytes as voxel statistics. Now the reference is
+  // refused (exit 1, the field and DM_ALLOW_PATH on stderr) unless allowed.
+  TempDir tmp;
+  fs::create_directories(tmp.path / "case");
+  fs::create_directories(tmp.path / "outside");
+  std::ofstream(tmp.path / "outside" / "secret.raw", std::ios::binary) << "ABCDEFGH";
+  std::ofstream(tmp.path / "case" / "evil.mhd")
+      << "NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = ../outside/secret.raw\n";
+  const std::string header = (tmp.path / "case" / "evil.mhd").string();
+  ToolRun r = runTool({"info", "--json", header});
+  EXPECT_EQ(r.exitCode, 1) << describe(r);
+  EXPECT_TRUE(r.out.empty()) << r.out;
+  EXPECT_NE(r.err.find("ElementDataFile (line 4)"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("DM_ALLOW_PATH"), std::string::npos) << r.err;
+  // Allowed explicitly, the same header reads the eight voxels 'A'..'H'.
+  ASSERT_EQ(::setenv("DM_ALLOW_PATH", (tmp.path / "outside").c_str(), 1), 0);
+  r = runTool({"info", "--json", header});
+  ::unsetenv("DM_ALLOW_PATH");
+  ASSERT_EQ(r.exitCode, 0) << describe(r);
+  const auto j = nlohmann::json::parse(r.out);
+  EXPECT_EQ(j["dims"], nlohmann::json::array({2, 2, 2}));
+  EXPECT_EQ(j["range"][0].get<double>(), 'A') << r.out;
+  EXPECT_EQ(j["range"][1].get<double>(), 'H') << r.out;
+}
+
 TEST(Dmtool, OperationErrorsExitOne) {
   TempDir tmp;
   // A mesh cannot become a volume file by conversion.

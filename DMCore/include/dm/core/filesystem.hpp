@@ -11,6 +11,18 @@
 // paths. A failed lookup lists every place it tried and, for a default mount,
 // the package to install.
 //
+// Confinement: a file named *inside* another file (a MetaImage header's
+// ElementDataFile, an NRRD header's data file, a scene's resource source, a
+// file of a DICOM series folder) comes from whoever wrote that file, so
+// confine() lets it lead only into an allowed root, after every symlink is
+// resolved: the referring file's own folder, the mounts, the search paths
+// (DM_DATA_PATH) and the roots allowed explicitly, by DM_ALLOW_PATH
+// (colon-separated) or allowRoot(). Anything else, "..", an absolute path, a
+// symlink that leaves the roots, a NUL byte or a reference longer than
+// kMaxReferenceBytes, is refused with ErrorCode::Denied before a byte of it
+// is read; the error names the field and how to allow the folder. Paths a
+// program passes in itself are not confined: they are the user's choice.
+//
 // FileStreamReader reads a large file on a background thread in chunks, so
 // the caller polls without blocking (tryNext) or waits with a timeout.
 //
@@ -53,6 +65,24 @@ class FileSystem {
   /// Resolves `name` to an existing file or directory (see header comment).
   Result<std::filesystem::path> resolve(std::string_view name) const;
 
+  /// Longest file reference confine() accepts, in bytes (PATH_MAX - 1).
+  static constexpr std::size_t kMaxReferenceBytes = 4095;
+  /// Allows files under `dir` (and its subfolders) as references from any
+  /// file; DM_ALLOW_PATH does the same from the environment. Thread-safe.
+  void allowRoot(const std::filesystem::path& dir);
+  /// Takes back allowRoot(dir) (every entry equal to `dir`). Thread-safe.
+  void disallowRoot(const std::filesystem::path& dir);
+  /// The folders references may lead into from a file in `folder`: that
+  /// folder, the mounts, the search paths and the allowed roots, each with
+  /// its symlinks resolved as far as it exists.
+  std::vector<std::filesystem::path> allowedRoots(const std::filesystem::path& folder) const;
+  /// Resolves `reference`, written in `field` of a file in `folder` (relative
+  /// references are taken from that folder), to a path without symlinks that
+  /// lies in one of allowedRoots(folder); Denied otherwise (see the header
+  /// comment). The file need not exist: reading it reports that.
+  Result<std::filesystem::path> confine(const std::filesystem::path& folder, std::string_view reference,
+                                        std::string_view field) const;
+
  private:
   struct Mount {
     std::string name;
@@ -62,6 +92,7 @@ class FileSystem {
   mutable std::mutex mutex_;
   std::vector<Mount> mounts_;
   std::vector<std::filesystem::path> searchPaths_;
+  std::vector<std::filesystem::path> allowedRoots_;  ///< DM_ALLOW_PATH and allowRoot()
 };
 
 /// Reads a whole file; fails if it is missing, unreadable or larger than

@@ -15,10 +15,12 @@
 
 #include <dm/core/assert.hpp>
 
+#include <cstddef>
 #include <cstdint>
 #include <iosfwd>
 #include <span>
 #include <string>
+#include <string_view>
 #include <type_traits>
 #include <utility>
 #include <variant>
@@ -38,6 +40,7 @@ enum class ErrorCode : std::uint8_t {
   Timeout,          ///< an operation did not finish in time
   Busy,             ///< a resource is in use or a queue is full
   Internal,         ///< a bug in the SDK; please report
+  Denied,           ///< not allowed, e.g. a file outside the allowed folders
 };
 
 /// Short name of an error code ("parse error", "not found", ...).
@@ -68,6 +71,11 @@ Error combineErrors(std::span<const Error> errors);
 ///   return dm::fail(ErrorCode::InvalidArgument, dm::formatString("stiffness is %g N/m", k), where);
 /// @endcode
 std::string formatString(const char* format, ...) noexcept __attribute__((format(printf, 1, 2)));
+
+/// Untrusted text (a file's field, a name from the network) as an error
+/// message may show it: at most `maxChars` characters, then "...", with
+/// bytes outside printable ASCII written as \xNN.
+std::string shownText(std::string_view text, std::size_t maxChars = 60);
 
 /// Builds an Error; the usual way to fail: `return dm::fail(ErrorCode::Parse, ...)`.
 inline Error fail(ErrorCode code, std::string what, std::string where = {}, std::string hint = {}) {

@@ -5,7 +5,8 @@
 // of its directory with the same SeriesInstanceUID). When the files hold
 // several series, DicomReadOptions::seriesUid picks one; left empty, the read
 // fails unless there is exactly one, and the error's hint lists every UID with
-// its slice count. Slices are sorted by the projection of ImagePositionPatient
+// its slice count. A symlink in the folder must lead into an allowed root
+// (FileSystem::confine), else the read fails with ErrorCode::Denied. Slices are sorted by the projection of ImagePositionPatient
 // (0020,0032) onto the slice normal n = row × column cosine of
 // ImageOrientationPatient (0020,0037), so k grows along +n whatever the file
 // names or InstanceNumbers say. The slice step is the mean difference of the

@@ -73,7 +73,10 @@ Result<Volume> parseMetaImage(std::span<const std::byte> bytes, std::string_view
                               const MetaImageReadOptions& options = {});
 
 /// Reads a .mha or .mhd file; a separate data file is looked up relative to
-/// the header's folder. Errors name the header or data file. O(file size).
+/// the header's folder and must lie in an allowed root (FileSystem::confine:
+/// the header's folder, the mounts, DM_DATA_PATH, DM_ALLOW_PATH), else
+/// ErrorCode::Denied before it is opened. Errors name the header or data
+/// file. O(file size).
 /// @code
 ///   auto v = dm::readMetaImage("ct.mhd");
 ///   if (v) std::printf("spacing %g m\n", v->spacing().x());

@@ -74,7 +74,9 @@ Result<Volume> parseNrrd(std::span<const std::byte> bytes, std::string_view sour
                          const NrrdReadOptions& options = {});
 
 /// Reads a .nrrd or .nhdr file; a detached data file is looked up relative
-/// to the header's folder. Errors name the file. O(file size).
+/// to the header's folder and must lie in an allowed root
+/// (FileSystem::confine), else ErrorCode::Denied before it is opened.
+/// Errors name the file. O(file size).
 /// @code
 ///   auto v = dm::readNrrd("brain.nhdr");
 ///   if (v) std::printf("%d slices\n", v->dims().z());
