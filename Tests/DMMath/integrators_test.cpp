@@ -18,6 +18,7 @@ using dm::IntegrationStats;
 using dm::IntegratorOptions;
 using dm::OdeSystem;
 using dm::VecX;
+using dm::test::vecOf;
 
 using dm::test::make;
 
@@ -56,13 +57,13 @@ OdeSystem keplerSystem() {
   });
 }
 VecX keplerInitial() {
-  return (VecX(4) << 1.0 - kEcc, 0.0, 0.0, std::sqrt((1.0 + kEcc) / (1.0 - kEcc))).finished();
+  return vecOf({1.0 - kEcc, 0.0, 0.0, std::sqrt((1.0 + kEcc) / (1.0 - kEcc))});
 }
 /// The exact state after half a period (t = π): apocentre, moving in -y.
 /// (Errors are measured here, not after a full period, because there the
 /// O(h) error of symplectic Euler cancels: it is conjugate to Verlet.)
 VecX keplerHalfPeriod() {
-  return (VecX(4) << -(1.0 + kEcc), 0.0, 0.0, -std::sqrt((1.0 - kEcc) / (1.0 + kEcc))).finished();
+  return vecOf({-(1.0 + kEcc), 0.0, 0.0, -std::sqrt((1.0 - kEcc) / (1.0 + kEcc))});
 }
 
 /// Final-time error of `name` with fixed steps T/n for each n.
@@ -164,8 +165,8 @@ TEST(IntegratorOrder, VelocityVerletStaysSecondOrderWithDamping) {
   const double x = std::exp(-c * T / 2) * (std::cos(w * T) + c / (2 * w) * std::sin(w * T));
   const double v = -std::exp(-c * T / 2) * (1.0 / w) * std::sin(w * T);
   std::vector<double> hs;
-  const auto errs = fixedStepErrors("verlet", sys, (VecX(2) << 1.0, 0.0).finished(), T,
-                                    (VecX(2) << x, v).finished(), {100, 200, 400, 800}, hs);
+  const auto errs = fixedStepErrors("verlet", sys, vecOf({1.0, 0.0}), T,
+                                    vecOf({x, v}), {100, 200, 400, 800}, hs);
   const double p = fittedOrder(hs, errs);
   std::printf("[order] verlet (damped): %.3f\n", p);
   EXPECT_NEAR(p, 2.0, 0.2);
@@ -254,7 +255,7 @@ TEST(IntegratorAdaptive, MatchesExponentialDecayAndOscillatorToTolerance) {
                                  5.0, y, o));
     EXPECT_NEAR(y[0], std::exp(-5.0), 1e-9 * std::exp(-5.0) * 20 + 1e-12) << name;
     // Harmonic oscillator x'' = -x over 10 periods: x = cos t, v = -sin t.
-    VecX z = (VecX(2) << 1.0, 0.0).finished();
+    VecX z = vecOf({1.0, 0.0});
     const double T = 20.0 * std::numbers::pi;
     ASSERT_TRUE(integ->integrate(
         OdeSystem::secondOrder([](double, const VecX& x, const VecX&, VecX& a) { a = -x; }), 0.0, T, z, o));
@@ -291,10 +292,10 @@ TEST(IntegratorAdaptive, SplitSystemIsSummedForUnsplitMethods) {
 TEST(IntegratorAdaptive, PerComponentAbsoluteToleranceIsHonoured) {
   // A component that starts and stays at 0 with atol 0 for it would need
   // zero error; with a per-component atol the run succeeds and is accurate.
-  VecX y = (VecX(2) << 1.0, 0.0).finished();
+  VecX y = vecOf({1.0, 0.0});
   IntegratorOptions o;
   o.rtol = 1e-8;
-  o.atolPerComponent = (VecX(2) << 1e-10, 1e-12).finished();
+  o.atolPerComponent = vecOf({1e-10, 1e-12});
   ASSERT_TRUE(make("dopri5")->integrate(
       OdeSystem::firstOrder([](double, const VecX& u, VecX& d) { d << -u[0], u[0] - u[1]; }), 0.0, 2.0, y,
       o));
@@ -347,7 +348,7 @@ TEST(IntegratorEnergy, SymplecticMethodsKeepEnergyBoundedExplicitEulerGrows) {
   EXPECT_LT(vv.maxLate, 1.01 * vv.maxEarly);
 
   // Explicit Euler multiplies the energy by exactly (1 + h^2) per step.
-  VecX y = (VecX(2) << 1.0, 0.0).finished();
+  VecX y = vecOf({1.0, 0.0});
   dm::EulerWorkspace ws;
   const dm::OdeRhs f = [](double, const VecX& u, VecX& d) { d << u[1], -u[0]; };
   double prev = e0;

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <initializer_list>
 #include <memory>
 #include <numbers>
 #include <string_view>
@@ -21,6 +22,16 @@ inline std::unique_ptr<dm::Integrator> make(std::string_view name) {
   auto r = dm::makeIntegrator(name);
   EXPECT_TRUE(r) << (r ? "" : r.error().message());
   return r ? std::move(r).value() : nullptr;
+}
+
+/// A dynamic vector of `values`. Eigen's comma initializer,
+/// `(VecX(n) << a, b).finished()`, makes GCC 12 report -Wmaybe-uninitialized
+/// inside Eigen at -O1 (the tests' optimisation level, dm_add_test).
+inline dm::VecX vecOf(std::initializer_list<double> values) {
+  dm::VecX v(static_cast<Eigen::Index>(values.size()));
+  Eigen::Index i = 0;
+  for (const double x : values) v[i++] = x;
+  return v;
 }
 
 /// The union of two meshes: `b`'s vertices appended to `a`'s, its triangles renumbered.

@@ -22,6 +22,7 @@ using dm::LinearSolverKind;
 using dm::MatX;
 using dm::OdeSystem;
 using dm::VecX;
+using dm::test::vecOf;
 
 using dm::test::make;
 
@@ -201,7 +202,7 @@ OdeSystem robertson() {
 }
 
 TEST(Sundials, RobertsonKineticsAgainstReference) {
-  const VecX ref = (VecX(3) << 7.158e-1, 9.185e-6, 2.842e-1).finished();
+  const VecX ref = vecOf({7.158e-1, 9.185e-6, 2.842e-1});
   struct Case {
     const char* label;
     const char* name;
@@ -215,10 +216,10 @@ TEST(Sundials, RobertsonKineticsAgainstReference) {
       {"robertson arkode-dirk dense", "arkode-dirk", LinearSolverKind::Dense, true},
   };
   for (const Case& c : cases) {
-    VecX y = (VecX(3) << 1.0, 0.0, 0.0).finished();
+    VecX y = vecOf({1.0, 0.0, 0.0});
     IntegratorOptions o;
     o.rtol = 1e-6;
-    o.atolPerComponent = (VecX(3) << 1e-10, 1e-14, 1e-8).finished();
+    o.atolPerComponent = vecOf({1e-10, 1e-14, 1e-8});
     o.linearSolver = c.ls;
     OdeSystem sys = robertson();
     if (!c.jac) sys.jacobian = {};
@@ -233,15 +234,15 @@ TEST(Sundials, RobertsonKineticsAgainstReference) {
 
   // An explicit method with the budget of the dense BDF run goes unstable
   // (the fast eigenvalue is about -1e4 near t = 40, and ~ -2e3 early on).
-  VecX y = (VecX(3) << 1.0, 0.0, 0.0).finished();
+  VecX y = vecOf({1.0, 0.0, 0.0});
   IntegrationStats bdf;
   IntegratorOptions o;
   o.rtol = 1e-6;
-  o.atolPerComponent = (VecX(3) << 1e-10, 1e-14, 1e-8).finished();
+  o.atolPerComponent = vecOf({1e-10, 1e-14, 1e-8});
   ASSERT_TRUE(make("cvode-bdf")->integrate(robertson(), 0.0, 40.0, y, o, &bdf));
   IntegratorOptions f;
   f.h = 40.0 / static_cast<double>(std::max<std::int64_t>(1, bdf.rhsEvaluations / 4));
-  VecX z = (VecX(3) << 1.0, 0.0, 0.0).finished();
+  VecX z = vecOf({1.0, 0.0, 0.0});
   const auto st = make("rk4")->integrate(robertson(), 0.0, 40.0, z, f);
   std::printf("[sundials] robertson rk4 at BDF's budget (h = %.3g): %s\n", f.h,
               st ? "finished" : st.error().message().c_str());
@@ -256,14 +257,14 @@ TEST(Sundials, NonStiffMethodsMatchTheOscillator) {
   const OdeSystem sys = OdeSystem::secondOrder([](double, const VecX& x, const VecX&, VecX& a) { a = -x; });
   const double T = 10.0 * std::numbers::pi;
   for (const char* name : {"cvode-adams", "arkode-erk", "cvode-bdf", "arkode-dirk"}) {
-    VecX y = (VecX(2) << 1.0, 0.0).finished();
+    VecX y = vecOf({1.0, 0.0});
     IntegratorOptions o;
     o.rtol = 1e-9;
     o.atol = 1e-11;
     IntegrationStats s;
     const auto st = make(name)->integrate(sys, 0.0, T, y, o, &s);
     ASSERT_TRUE(st) << name << ": " << st.error().message();
-    const double err = (y - (VecX(2) << 1.0, 0.0).finished()).norm();
+    const double err = (y - vecOf({1.0, 0.0})).norm();
     print(name, s, err);
     EXPECT_LT(err, 1e-6) << name;
   }
