@@ -291,8 +291,10 @@ class SweepAndPruneBroadPhase final : public BroadPhase {
       const SweepEntry& a = e[i];
       for (std::size_t j = i + 1; j < m && e[j].lo <= a.hi; ++j) {
         const SweepEntry& b = e[j];
-        const bool hit = (a.lo1 <= b.hi1) & (b.lo1 <= a.hi1) & (a.lo2 <= b.hi2) & (b.lo2 <= a.hi2) &
-                         (std::max(a.c1, b.c1) == col.c1) & (std::max(a.c2, b.c2) == col.c2);
+        // Bitwise '&' on 0/1 integers: one branch for the six tests.
+        const unsigned hit = unsigned{a.lo1 <= b.hi1} & unsigned{b.lo1 <= a.hi1} & unsigned{a.lo2 <= b.hi2} &
+                             unsigned{b.lo2 <= a.hi2} & unsigned{std::max(a.c1, b.c1) == col.c1} &
+                             unsigned{std::max(a.c2, b.c2) == col.c2};
         if (hit) keys_.push_back(pairKey(idOf_[a.slot], idOf_[b.slot]));
       }
     }

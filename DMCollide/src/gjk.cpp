@@ -24,7 +24,7 @@
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__)
+#if defined(__GNUC__) && defined(__x86_64__)  // GCC and clang
 #include <immintrin.h>
 #define DM_GJK_AVX2 1
 #endif

@@ -149,8 +149,8 @@ std::uint64_t packBits64(const T* v, const InsideTest<T>& inside) {
     constexpr int kBits = 8 * static_cast<int>(sizeof(T));
     using S = std::make_signed_t<T>;
     using U = std::make_unsigned_t<T>;
-    const U bias = std::is_signed_v<T> ? U{0} : static_cast<U>(U{1} << (kBits - 1));
-    const auto flip = [bias](T x) { return static_cast<S>(static_cast<U>(static_cast<U>(x) ^ bias)); };
+    constexpr U bias = std::is_signed_v<T> ? U{0} : static_cast<U>(U{1} << (kBits - 1));
+    const auto flip = [](T x) { return static_cast<S>(static_cast<U>(static_cast<U>(x) ^ bias)); };
     const S t = flip(static_cast<T>(inside.threshold));
     const auto load = [v](int q) { return _mm_loadu_si128(reinterpret_cast<const __m128i*>(v) + q); };
     if constexpr (kBits == 8) {

@@ -73,12 +73,12 @@ Mesh keepLargestComponent(const Mesh& mesh, std::size_t* removedComponents) {
   // Flood fill over triangles that share a vertex; pieces are numbered in the
   // order of their first triangle, so the strict '>' below breaks ties to the
   // earliest piece.
-  constexpr std::size_t kNone = std::numeric_limits<std::size_t>::max();
-  std::vector<std::size_t> piece(f, kNone);
+  constexpr std::size_t kNoPiece = std::numeric_limits<std::size_t>::max();
+  std::vector<std::size_t> piece(f, kNoPiece);
   std::vector<std::uint32_t> stack;
-  std::size_t pieces = 0, best = kNone, bestSize = 0;
+  std::size_t pieces = 0, best = kNoPiece, bestSize = 0;
   for (std::size_t seed = 0; seed < f; ++seed) {
-    if (piece[seed] != kNone || !inRange(mesh.triangles[seed], n)) continue;
+    if (piece[seed] != kNoPiece || !inRange(mesh.triangles[seed], n)) continue;
     const std::size_t id = pieces++;
     std::size_t size = 0;
     piece[seed] = id;
@@ -90,7 +90,7 @@ Mesh keepLargestComponent(const Mesh& mesh, std::size_t* removedComponents) {
       for (std::uint32_t v : mesh.triangles[t])
         for (std::size_t k = incident.offsets[v]; k < incident.offsets[v + 1]; ++k) {
           const std::uint32_t u = incident.items[k];
-          if (piece[u] != kNone) continue;
+          if (piece[u] != kNoPiece) continue;
           piece[u] = id;
           stack.push_back(u);
         }
@@ -104,7 +104,7 @@ Mesh keepLargestComponent(const Mesh& mesh, std::size_t* removedComponents) {
 
   Mesh out;
   out.name = mesh.name;
-  if (best == kNone) return out;
+  if (best == kNoPiece) return out;
   constexpr std::uint32_t kUnused = std::numeric_limits<std::uint32_t>::max();
   std::vector<std::uint32_t> remap(n, kUnused);
   for (std::size_t t = 0; t < f; ++t)

@@ -230,7 +230,7 @@ Result<WeldReport> weldVertices(Mesh& mesh, double tolerance) {
   std::vector<std::uint32_t> kept;        // kept vertex → original index
   std::vector<std::uint32_t> target(n);   // original → new index
   const double tol2 = tolerance * tolerance;
-  constexpr std::uint32_t kNone = ~std::uint32_t{0};
+  constexpr std::uint32_t kNoVertex = ~std::uint32_t{0};
   for (std::size_t v = 0; v < n; ++v) {
     const Vec3& p = mesh.positions[v];
     CellKey key{};
@@ -239,17 +239,17 @@ Result<WeldReport> weldVertices(Mesh& mesh, double tolerance) {
                   "weld tolerance " + std::to_string(tolerance) +
                       " is too small for coordinates near vertex " + std::to_string(v),
                   "weldVertices", "use a tolerance above 1e-15 of the coordinates' magnitude, or 0");
-    std::uint32_t best = kNone;
+    std::uint32_t best = kNoVertex;
     const int reach = tolerance > 0 ? 1 : 0;
     for (int dz = -reach; dz <= reach; ++dz)
       for (int dy = -reach; dy <= reach; ++dy)
         for (int dx = -reach; dx <= reach; ++dx) {
           const auto it = head.find(CellKey{key.x + dx, key.y + dy, key.z + dz});
           if (it == head.end()) continue;
-          for (std::uint32_t k = it->second; k != kNone; k = nextInCell[k])
+          for (std::uint32_t k = it->second; k != kNoVertex; k = nextInCell[k])
             if (k < best && (mesh.positions[kept[k]] - p).squaredNorm() <= tol2) best = k;
         }
-    if (best != kNone) {
+    if (best != kNoVertex) {
       target[v] = best;
       continue;
     }
@@ -259,7 +259,7 @@ Result<WeldReport> weldVertices(Mesh& mesh, double tolerance) {
     // Cells keep their vertices in descending order of keeping; the scan
     // above visits all of them, so the order does not matter.
     const auto [it, inserted] = head.try_emplace(key, newIndex);
-    nextInCell.push_back(inserted ? kNone : it->second);
+    nextInCell.push_back(inserted ? kNoVertex : it->second);
     if (!inserted) it->second = newIndex;
   }
 

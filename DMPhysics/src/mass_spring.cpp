@@ -1144,9 +1144,8 @@ MassSpringBody::CgStop MassSpringBody::stepImplicitCore(double h, ImplicitStepRe
 // member, only because the modules are built with -fno-semantic-interposition
 // (cmake/DMHelpers.cmake); without it stepAvx2 is a jump to the SSE2 code.
 // Chosen once with __builtin_cpu_supports (not an ifunc, as in
-// constraint_solver.cpp); GCC on x86-64 only, and not under ThreadSanitizer.
-#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && !defined(__AVX2__) && \
-    !defined(__SANITIZE_THREAD__)
+// constraint_solver.cpp); GCC and clang on x86-64, not under ThreadSanitizer.
+#if defined(__GNUC__) && defined(__x86_64__) && !defined(__AVX2__) && !defined(__SANITIZE_THREAD__)
 #define DM_MASS_SPRING_AVX2 1
 #endif
 

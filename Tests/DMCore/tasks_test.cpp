@@ -102,7 +102,7 @@ TEST(TaskPool, RespectsMaxConcurrencyOfOne) {
 
 TEST(TaskPool, ParallelForInsidePoolEqualsSerial) {
   dm::TaskPool pool({.max_concurrency = 2});
-  const std::size_t n = 20'000;
+  constexpr std::size_t n = 20'000;
   std::vector<double> out(n);
   pool.parallelFor(0, n, 64, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) out[i] = f(i);
@@ -111,7 +111,7 @@ TEST(TaskPool, ParallelForInsidePoolEqualsSerial) {
   // Nested: tasks that themselves run parallel loops.
   std::vector<std::future<double>> sums;
   for (int t = 0; t < 4; ++t)
-    sums.push_back(pool.submit([n] {
+    sums.push_back(pool.submit([] {
       std::vector<double> part(n);
       dm::parallelFor(0, n, 256, [&](std::size_t b, std::size_t e) {
         for (std::size_t i = b; i < e; ++i) part[i] = f(i);

@@ -308,11 +308,11 @@ TEST(LinearPcg, ReusedWorkspaceAndPatternGiveConsistentSolves) {
 }
 
 TEST(LinearPcg, MatrixFreeOperatorMatchesAssembledMatrix) {
-  const int m = 25;
+  constexpr int m = 25;
   const SparseMat A = laplacian(m, 2);
   const VecX b = VecX::LinSpaced(m * m, 0.0, 1.0);
   // The 5-point Laplacian applied as a stencil, never assembled.
-  const dm::LinearOperator stencil = [m](const VecX& u, VecX& y) {
+  const dm::LinearOperator stencil = [](const VecX& u, VecX& y) {
     for (int j = 0; j < m; ++j)
       for (int i = 0; i < m; ++i) {
         const int c = i + m * j;

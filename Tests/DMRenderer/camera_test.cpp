@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <tuple>
 
 namespace {
 
@@ -69,7 +70,10 @@ TEST(Camera, StereoPairHasZeroParallaxAtConvergenceAndCrossedParallaxNearer) {
   dm::Camera cam = dm::Camera::lookAt({0, 0, 1}, {0, 0, 0});
   cam.fovYDeg = 40;
   const double e = 0.065, c = 1.0;
-  auto [left, right] = cam.stereoPair(e, c);
+  // Named references, not a structured binding: clang 14 cannot capture one.
+  const auto stereo = cam.stereoPair(e, c);
+  const auto& left = std::get<0>(stereo);
+  const auto& right = std::get<1>(stereo);
   EXPECT_NEAR((right.position - left.position).norm(), e, 1e-12);
   const int w = 320, h = 240;
   auto disparity = [&](const dm::Vec3& p) {
