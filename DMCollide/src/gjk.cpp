@@ -844,20 +844,13 @@ EpaOut runEpa(MinkowskiPair& m, Simplex s, const GjkOptions& opt) noexcept {
   // not clamped to the triangle: when a flat face of the shapes is split into
   // coplanar triangles the nearest one may not hold the projection, and the
   // affine extension still maps it onto the same face of A and of B.
-  Vec3 l;
-  {
-    const Vec3 e0 = b.w - a.w, e1 = c.w - a.w, q = fd * f.n - a.w;
-    const double d00 = e0.dot(e0), d01 = e0.dot(e1), d11 = e1.dot(e1);
-    const double d20 = q.dot(e0), d21 = q.dot(e1);
-    const double den = d00 * d11 - d01 * d01;
-    if (den > 1e-24 * d00 * d11) {
-      l[1] = (d11 * d20 - d01 * d21) / den;
-      l[2] = (d00 * d21 - d01 * d20) / den;
-      l[0] = 1.0 - l[1] - l[2];
-    } else {
-      l = closestPointOnTriangle(Vec3::Zero(), a.w, b.w, c.w).barycentric;
-    }
-  }
+  // planeBarycentric() keeps a sliver's thin direction (a box edge against a
+  // cylinder rim: two 0.8 m edges 1e-6 m apart), which the Gram solve from
+  // vertex a lost: the witness points then missed by 9e-5 m.
+  const Vec3 e0 = b.w - a.w, e1 = c.w - a.w;
+  const Vec3 l = e0.cross(e1).squaredNorm() > 1e-24 * e0.squaredNorm() * e1.squaredNorm()
+                     ? planeBarycentric(fd * f.n, a.w, b.w, c.w)
+                     : closestPointOnTriangle(Vec3::Zero(), a.w, b.w, c.w).barycentric;
   out.n = f.n;
   out.depth = std::max(0.0, fd);
   out.pa = l[0] * a.a + l[1] * b.a + l[2] * c.a;

@@ -620,8 +620,14 @@ SegmentClosest closestPointsSegmentSegment(const Vec3& p0, const Vec3& p1, const
       s = std::clamp(-c / a, 0.0, 1.0);
     } else {
       const double b = d1.dot(d2);
-      const double denom = a * e - b * b;
-      s = denom > 0.0 ? std::clamp((b * f - c * e) / denom, 0.0, 1.0) : 0.0;
+      // Ericson's a e - b^2 and b f - c e, written as the Lagrange identities
+      // |d1 x d2|^2 and (d1 x d2).(d2 x r): for nearly parallel segments the
+      // products cancel to rounding noise (a 1e-9 rad skew leaves 1e-18 of
+      // a e), which picked an arbitrary s and missed the closest pair by
+      // 1e-9 relative; the cross products keep their relative accuracy.
+      const Vec3 n = d1.cross(d2);
+      const double denom = n.squaredNorm();
+      s = denom > 0.0 ? std::clamp(n.dot(d2.cross(r)) / denom, 0.0, 1.0) : 0.0;
       t = (b * s + f) / e;
       if (t < 0.0) {
         t = 0.0;

@@ -67,9 +67,27 @@ TriangleClosest closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3&
     const double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
     return make(p, b + w * (c - b), Vec3(0, 1 - w, w), TriangleFeature::EdgeBC);
   }
-  const double denom = 1.0 / (va + vb + vc);
-  const double v = vb * denom, w = vc * denom;
-  return make(p, a + ab * v + ac * w, Vec3(1 - v - w, v, w), TriangleFeature::Face);
+  // Face region. Ericson's vb / (va + vb + vc) loses the digits of a
+  // sliver's thin direction; planeBarycentric() keeps them.
+  const Vec3 l = planeBarycentric(p, a, b, c);
+  return make(p, l[0] * a + l[1] * b + l[2] * c, l, TriangleFeature::Face);
+}
+
+Vec3 planeBarycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) noexcept {
+  const Vec3* v[3] = {&a, &b, &c};
+  const double opposite[3] = {(c - b).squaredNorm(), (a - c).squaredNorm(), (b - a).squaredNorm()};
+  const int o =
+      opposite[0] >= opposite[1] && opposite[0] >= opposite[2] ? 0 : (opposite[1] >= opposite[2] ? 1 : 2);
+  const int i1 = (o + 1) % 3, i2 = (o + 2) % 3;
+  const Vec3 e0 = *v[i1] - *v[o], e1 = *v[i2] - *v[o], q = p - *v[o];
+  const double d00 = e0.dot(e0), d01 = e0.dot(e1), d11 = e1.dot(e1);
+  const double d20 = q.dot(e0), d21 = q.dot(e1);
+  const double den = d00 * d11 - d01 * d01;
+  Vec3 l;
+  l[i1] = (d11 * d20 - d01 * d21) / den;
+  l[i2] = (d00 * d21 - d01 * d20) / den;
+  l[o] = 1.0 - l[i1] - l[i2];
+  return l;
 }
 
 }  // namespace dm

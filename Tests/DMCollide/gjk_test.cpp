@@ -92,7 +92,7 @@ std::vector<Both> testShapes() {
   return {
       {"sphere", std::make_shared<dm::Sphere>(0.3), std::make_shared<fcl::Sphered>(0.3), true},
       {"box", std::make_shared<dm::Box>(Vec3(0.4, 0.25, 0.15)), std::make_shared<fcl::Boxd>(0.8, 0.5, 0.3),
-       false},
+       false, std::make_shared<dm::Mesh>(boxMesh(Vec3(0.4, 0.25, 0.15)))},
       {"capsule", std::make_shared<dm::Capsule>(0.2, 0.3), std::make_shared<fcl::Capsuled>(0.2, 0.6), true},
       {"cylinder", std::make_shared<dm::Cylinder>(0.25, 0.35), std::make_shared<fcl::Cylinderd>(0.25, 0.7),
        false},
@@ -363,6 +363,40 @@ TEST(Gjk, EpaDepthOfBoxesIsTheMinimumTranslation) {
 }
 
 // Axis-aligned boxes: depth and normal in closed form.
+// A pose clang's draw order produced (the random poses above differ by
+// compiler): 1e-4 m of overlap where a box edge meets a cylinder rim. EPA's
+// nearest face is then a sliver (two 0.8 m edges 1e-6 m apart), and the
+// witness points, solved from its first vertex, missed the face point by up
+// to 9e-5 m while the depth was right. At every tolerance they now realise
+// the depth to rounding.
+TEST(Gjk, EpaWitnessesOnASliverFace) {
+  const auto pose = [](std::initializer_list<double> m) {
+    Isometry3 p = Isometry3::Identity();
+    auto it = m.begin();
+    for (int r = 0; r < 3; ++r)
+      for (int c = 0; c < 4; ++c) p.matrix()(r, c) = *it++;
+    return p;
+  };
+  const Isometry3 pa =
+      pose({0.73624954932999964, 0.65449187494898498, -0.17197961139953433, 0.068014935765181986,
+            0.40134011316459373, -0.62693564430575788, -0.66774082656668243, -0.11673628435540893,
+            -0.54485109403983367, 0.42260156592786946, -0.72425492873635999, 0.0074133230954887891});
+  const Isometry3 pb =
+      pose({0.49343157780851488, 0.41003228562847582, 0.76707157603686982, 0.76283665076810292,
+            0.45197302436806586, 0.63261760090767294, -0.62890011628668341, -0.17664847449830132,
+            -0.74313233226995523, 0.65701483679145944, 0.12682996874125751, 0.34673527127414588});
+  const dm::Box box(Vec3(0.4, 0.25, 0.15));
+  const dm::Cylinder cylinder(0.25, 0.35);
+  for (const double tolerance : {1e-9, 1e-10, 1e-11, 1e-12}) {
+    dm::GjkOptions o;
+    o.epaTolerance = tolerance;
+    const dm::GjkResult r = dm::gjkDistance(box, pa, cylinder, pb, nullptr, o);
+    EXPECT_NEAR(r.distance, -1e-4, 1e-9) << tolerance;
+    EXPECT_NEAR((r.pointB - r.pointA).norm(), -r.distance, 1e-15) << tolerance;
+    EXPECT_NEAR((r.pointA - r.pointB).normalized().dot(r.normal), 1.0, 1e-9) << tolerance;
+  }
+}
+
 TEST(Gjk, EpaAxisAlignedBoxes) {
   const dm::Box a(Vec3(1.0, 1.0, 1.0)), b(Vec3(0.5, 0.5, 0.5));
   Isometry3 pb = Isometry3::Identity();

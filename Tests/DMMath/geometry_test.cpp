@@ -52,6 +52,36 @@ TEST(ClosestPointOnTriangle, MatchesBruteForceOnRandomInput) {
   }
 }
 
+// A sliver as EPA and GJK meet it (a box edge against a cylinder rim): two
+// 0.8 m edges 1e-6 m apart, turned and moved off the axes. The face point is
+// the orthogonal projection: a point of the plane maps to itself, and the
+// offset from any other point is orthogonal to both edge directions, each to
+// rounding (measured 2.5e-16 m). Solved from vertex a (Ericson's areas, as
+// before, or a Gram matrix of condition ~1e12) both missed by 1.7e-5 m.
+TEST(ClosestPointOnTriangle, SliverFaceIsTheProjection) {
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<double> u(-1, 1);
+  for (int k = 0; k < 50; ++k) {
+    const Mat3 r = Quat(u(rng), u(rng), u(rng), u(rng)).normalized().toRotationMatrix();
+    const Vec3 t = Vec3(u(rng), u(rng), u(rng));
+    const Vec3 a = t, b = r * Vec3(0.8, 0, 0) + t, c = r * Vec3(0.8, 1e-6, 0) + t;
+    const Vec3 inPlane = r * Vec3(0.4, 2.5e-7, 0) + t;  // barycentrics (0.5, 0.25, 0.25)
+    const TriangleClosest q = closestPointOnTriangle(inPlane, a, b, c);
+    EXPECT_EQ(q.feature, TriangleFeature::Face) << k;
+    EXPECT_LT((q.point - inPlane).norm(), 1e-14) << k;
+    const Vec3 l = planeBarycentric(inPlane, a, b, c);
+    EXPECT_LT((l[0] * a + l[1] * b + l[2] * c - inPlane).norm(), 1e-14) << k;
+    EXPECT_NEAR(l[0], 0.5, 1e-9) << k;  // the long direction is well conditioned
+
+    const Vec3 p = inPlane + r * Vec3(0, 0, 0.3);
+    const TriangleClosest o = closestPointOnTriangle(p, a, b, c);
+    EXPECT_EQ(o.feature, TriangleFeature::Face) << k;
+    EXPECT_LT(std::abs((p - o.point).dot((b - a).normalized())), 1e-14) << k;
+    EXPECT_LT(std::abs((p - o.point).dot((c - b).normalized())), 1e-14) << k;
+    EXPECT_NEAR(o.distanceSq, 0.09, 1e-14) << k;
+  }
+}
+
 TEST(ClosestPointOnTriangle, DegenerateTrianglesFallBackToEdges) {
   // Collinear: the triangle is the segment from (0,0,0) to (2,0,0).
   auto r = closestPointOnTriangle(Vec3(1, 1, 0), Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(2, 0, 0));
