@@ -19,6 +19,18 @@ function(dm_target_options target)
                                              -fno-sanitize-recover=all)
     target_link_options(${target} PRIVATE -fsanitize=${DM_SANITIZE})
   endif()
+  if((DM_SANITIZE MATCHES "undefined" OR DM_FUZZ) AND CMAKE_CXX_COMPILER_ID MATCHES "Clang")
+    # Findings in Debian packages' headers, each with its upstream fix
+    # (cmake/ubsan-ignore.txt). The path is relative to the build tree,
+    # where the compiler runs: an absolute one would differ between clones
+    # and miss ccache in every file. ccache does not hash the list's
+    # content, so its checksum goes on the command line as well.
+    set(list ${PROJECT_SOURCE_DIR}/cmake/ubsan-ignore.txt)
+    file(RELATIVE_PATH rel ${CMAKE_BINARY_DIR} ${list})
+    file(MD5 ${list} sum)
+    set_property(DIRECTORY ${PROJECT_SOURCE_DIR} APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS ${list})
+    target_compile_options(${target} PRIVATE -fsanitize-ignorelist=${rel} -DDM_UBSAN_IGNORELIST_MD5=${sum})
+  endif()
 endfunction()
 
 # dm_path_definition(TARGET NAME PATH): defines NAME as PATH relative to the
