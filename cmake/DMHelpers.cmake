@@ -25,10 +25,10 @@ function(dm_target_options target)
     # where the compiler runs: an absolute one would differ between clones
     # and miss ccache in every file. ccache does not hash the list's
     # content, so its checksum goes on the command line as well.
-    set(list ${PROJECT_SOURCE_DIR}/cmake/ubsan-ignore.txt)
-    file(RELATIVE_PATH rel ${CMAKE_BINARY_DIR} ${list})
-    file(MD5 ${list} sum)
-    set_property(DIRECTORY ${PROJECT_SOURCE_DIR} APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS ${list})
+    set(ignorelist ${PROJECT_SOURCE_DIR}/cmake/ubsan-ignore.txt)
+    file(RELATIVE_PATH rel ${CMAKE_BINARY_DIR} ${ignorelist})
+    file(MD5 ${ignorelist} sum)
+    set_property(DIRECTORY ${PROJECT_SOURCE_DIR} APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS ${ignorelist})
     target_compile_options(${target} PRIVATE -fsanitize-ignorelist=${rel} -DDM_UBSAN_IGNORELIST_MD5=${sum})
   endif()
 endfunction()
