@@ -17,7 +17,9 @@
 //   from, to     "x,y,z" m, line ends                           (-0.05,0,0) (0.05,0,0)
 //   pitch        m per turn along z, spiral                     (0.005)
 //   turns        turns before the spiral restarts               (4)
-//   file         CSV of "t,x,y,z" rows (s, m), csv path; loops
+//   file         CSV of "t,x,y,z" rows (s, m), csv path
+//   loop         0 | 1: line and csv paths loop (1), or run once from the
+//                first sample and hold their end (0)                     (1)
 //   hand         0 | 1: drive a virtual hand instead of the stylus (0)
 //   hand_mass    kg (0.2)   hand_stiffness N/m (300)   hand_damping N·s/m (8)
 //   noise        m, standard deviation per axis                 (0)
@@ -34,6 +36,7 @@
 #include <dm/core/plugin_abi.h>
 #include <dm/io/device_abi.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <new>
@@ -68,6 +71,8 @@ struct SimHaptic {
   V3 center{}, from{}, to{};
   double radius = 0.03, period = 2.0, pitch = 0.005, turns = 4.0;
   std::vector<std::array<double, 4>> csv;  // t, x, y, z; t strictly increasing
+  bool repeat = true;
+  std::int64_t originNs = -1;  // !repeat: the path's time starts at the first sample
 
   bool hand = false;
   double mass = 0.2, stiffness = 300.0, damping = 8.0;
@@ -93,7 +98,7 @@ struct SimHaptic {
       case kPoint:
         return center;
       case kLine: {
-        const double phase = t / period - std::floor(t / period);
+        const double phase = repeat ? t / period - std::floor(t / period) : std::clamp(t / period, 0.0, 0.5);
         return lerp(from, to, phase < 0.5 ? 2.0 * phase : 2.0 - 2.0 * phase);
       }
       case kCircle: {
@@ -110,6 +115,7 @@ struct SimHaptic {
         const double span = csv.back()[0] - csv.front()[0];
         double tt = span > 0 ? csv.front()[0] + std::fmod(t - csv.front()[0], span) : csv.front()[0];
         if (tt < csv.front()[0]) tt += span;
+        if (!repeat) tt = std::clamp(t, csv.front()[0], csv.back()[0]);
         std::size_t lo = 0, hi = csv.size() - 1;  // binary search: csv[lo].t ≤ tt < csv[hi].t
         if (tt >= csv[hi][0]) return {csv[hi][1], csv[hi][2], csv[hi][3]};
         while (hi - lo > 1) {
@@ -121,6 +127,14 @@ struct SimHaptic {
       }
     }
     return center;
+  }
+
+  // Seconds along the path at device time `ns`: the clock's own time for
+  // looping paths, time since the first sample for paths that run once.
+  double pathSeconds(std::int64_t ns) {
+    if (repeat) return 1e-9 * static_cast<double>(ns);
+    if (originNs < 0) originNs = ns;
+    return 1e-9 * static_cast<double>(ns - originNs);
   }
 
   // Central difference: exact to O(h²) for the smooth paths; at a line's
@@ -135,8 +149,8 @@ struct SimHaptic {
     if (!handStarted) {
       handStarted = true;
       handT = now;
-      handX = target(1e-9 * static_cast<double>(now));
-      handV = targetVelocity(1e-9 * static_cast<double>(now));
+      handX = target(pathSeconds(now));
+      handV = targetVelocity(pathSeconds(now));
       return;
     }
     if (now <= handT) return;
@@ -144,7 +158,7 @@ struct SimHaptic {
     const std::int64_t steps = (total + 99999) / 100000;
     const double dt = 1e-9 * static_cast<double>(total) / static_cast<double>(steps);
     for (std::int64_t i = 1; i <= steps; ++i) {
-      const double t = 1e-9 * static_cast<double>(handT) + dt * static_cast<double>(i);
+      const double t = pathSeconds(handT) + dt * static_cast<double>(i);
       const V3 pull = scale(sub(target(t), handX), stiffness);
       const V3 acc = scale(add(sub(pull, scale(handV, damping)), force), 1.0 / mass);
       handV = add(handV, scale(acc, dt));
@@ -158,7 +172,7 @@ struct SimHaptic {
       advanceHand(now);
       return {now, handX, handV};
     }
-    const double t = 1e-9 * static_cast<double>(now);
+    const double t = pathSeconds(now);
     return {now, target(t), targetVelocity(t)};
   }
 
@@ -230,10 +244,10 @@ bool loadCsv(SimHaptic& d, const char* file, ParamReader& r) {
 
 DmDevice* simOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
   ParamReader r(params, count, error, errorSize);
-  r.onlyKnown({"path",         "center",    "radius",       "period",      "from",      "to",
-               "pitch",        "turns",     "file",         "hand",        "hand_mass", "hand_stiffness",
-               "hand_damping", "noise",     "quantization", "latency",     "seed",      "max_force",
-               "servo_rate",   "workspace", "drop_at",      "reconnect_at"});
+  r.onlyKnown({"path",         "center",    "radius",       "period",       "from",      "to",
+               "pitch",        "turns",     "file",         "hand",         "hand_mass", "hand_stiffness",
+               "hand_damping", "noise",     "quantization", "latency",      "seed",      "max_force",
+               "servo_rate",   "workspace", "drop_at",      "reconnect_at", "loop"});
   SimHaptic* d = new (std::nothrow) SimHaptic();
   if (!d) {
     r.failf("out of memory");
@@ -248,6 +262,7 @@ DmDevice* simOpen(const DmDeviceParam* params, size_t count, char* error, size_t
   d->pitch = r.number("pitch", 0.005, -10.0, 10.0);
   d->turns = r.number("turns", 4.0, 1e-3, 1e6);
   d->hand = r.number("hand", 0.0, 0.0, 1.0) != 0.0;
+  d->repeat = r.number("loop", 1.0, 0.0, 1.0) != 0.0;
   d->mass = r.number("hand_mass", 0.2, 1e-4, 1e3);
   d->stiffness = r.number("hand_stiffness", 300.0, 0.0, 1e6);
   d->damping = r.number("hand_damping", 8.0, 0.0, 1e6);

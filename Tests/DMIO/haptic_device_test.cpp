@@ -88,6 +88,35 @@ TEST(SimHaptic, LineSweepsBetweenItsEnds) {
   EXPECT_NEAR(d->state().position.x(), 0.05, 1e-12);
 }
 
+TEST(SimHaptic, PathsWithoutLoopRunOnceFromTheFirstSampleAndHoldTheirEnd) {
+  // loop 0: the path's clock starts at the first sample (a real-time clock
+  // does not start at zero), goes out once and stays at the end.
+  Builtin b;
+  auto d = openHapticOrFail(
+      b.registry, {{"path", "line"}, {"from", "0,0,0"}, {"to", "0.1,0,0"}, {"period", "1"}, {"loop", "0"}});
+  ASSERT_TRUE(d);
+  const std::int64_t t0 = 123456 * kMs;
+  d->servo(t0);
+  EXPECT_NEAR(d->state().position.x(), 0.0, 1e-12);
+  d->servo(t0 + 250 * kMs);
+  EXPECT_NEAR(d->state().position.x(), 0.05, 1e-12);
+  for (std::int64_t ms : {500, 750, 1000, 5000}) {
+    d->servo(t0 + ms * kMs);
+    EXPECT_NEAR(d->state().position.x(), 0.1, 1e-12) << ms;
+  }
+  EXPECT_NEAR(d->state().linearVelocity.norm(), 0.0, 1e-9);
+
+  const dm::test::TempDir dir("sim_haptic_once");
+  std::ofstream(dir / "path.csv") << "t,x,y,z\n0,0,0,0\n1,0,0,0.02\n2,0.01,0,0.02\n";
+  auto c = openHapticOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "path.csv").string()}, {"loop", "0"}});
+  ASSERT_TRUE(c);
+  c->servo(t0);
+  c->servo(t0 + 1500 * kMs);
+  EXPECT_NEAR((c->state().position - Vec3(0.005, 0, 0.02)).norm(), 0.0, 1e-12);
+  c->servo(t0 + 9000 * kMs);
+  EXPECT_NEAR((c->state().position - Vec3(0.01, 0, 0.02)).norm(), 0.0, 1e-12);
+}
+
 TEST(SimHaptic, NoiseQuantizationAndLatency) {
   Builtin b;
   auto noisy = openHapticOrFail(b.registry, {{"path", "point"}, {"noise", "0.001"}, {"seed", "3"}});
