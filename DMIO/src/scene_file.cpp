@@ -316,8 +316,8 @@ class SceneParser {
     scene_.baseDir = baseDir_;
   }
 
-  // False when the document is not a version-1 scene at all (then nothing
-  // else is checked: its other keys would only add noise).
+  // False when the document is not a scene of a version this build reads
+  // (then nothing else is checked: its other keys would only add noise).
   bool header() {
     if (!root_.isObject()) {
       root_.addError(std::string("a scene is a JSON object, got ") + root_.node().type_name(), {},
@@ -333,12 +333,13 @@ class SceneParser {
     }
     if (root_.has("version") && root_.node()["version"].is_number_integer()) {
       const long long v = root_.integer("version");
-      if (v != kSceneFormatVersion) {
+      if (v != 1 && v != kSceneFormatVersion) {
         root_.addError("unsupported scene version " + std::to_string(v), "version",
-                       "this build reads version " + std::to_string(kSceneFormatVersion));
+                       "this build reads versions 1 and " + std::to_string(kSceneFormatVersion));
         badVersion_ = true;
         return false;
       }
+      version_ = static_cast<int>(v);
     } else {
       (void)root_.integer("version");
     }
@@ -358,6 +359,7 @@ class SceneParser {
     cameras();
     engines();
     outputs();
+    physicsBodies();
   }
 
   bool badVersion() const { return badVersion_; }
@@ -371,21 +373,22 @@ class SceneParser {
   // A source leads only into the scene's folder, the mounts, DM_DATA_PATH
   // and the allowed roots (FileSystem::confine): the scene may come from
   // anyone, so it must not make us read any file of the machine.
-  fs::path resolveSource(ConfigReader& r, const std::string& source) {
+  fs::path resolveSource(ConfigReader& r, const std::string& source, std::string_view key = "source") {
     std::string named = source;
     const std::size_t colon = source.find(':');
     if (colon != std::string::npos && colon >= 2 && source.find('/') > colon) {
       auto p = FileSystem::global().resolve(source);
       if (!p) {
         // FileSystem has no query for its mounts: its error names an unknown one.
-        if (p.error().what.rfind("unknown mount", 0) == 0) r.addError(p.error().what, "source", p.error().hint);
+        if (p.error().what.rfind("unknown mount", 0) == 0)
+          r.addError(p.error().what, key, p.error().hint);
         return {};
       }
       named = p->string();
     }
-    auto real = FileSystem::global().confine(baseDir_, named, "source");
+    auto real = FileSystem::global().confine(baseDir_, named, std::string(key));
     if (!real) {
-      r.addError(real.error().what, "source", real.error().hint);
+      r.addError(real.error().what, key, real.error().hint);
       return {};
     }
     return *real;
@@ -635,7 +638,7 @@ class SceneParser {
       ConfigReader r = sec.at(i);
       if (!expectObject(r)) continue;
       r.knownKeys({"name", "mesh", "render_mesh", "material", "pose", "scale", "visible", "haptic", "dynamic",
-                   "mass"});
+                   "mass", "density", "velocity", "angular_velocity", "collide", "contact"});
       SceneObject o;
       o.name = uniqueName(r, objectIndex_, scene_.objects.size());
       std::size_t before = r.errors().size();
@@ -656,10 +659,7 @@ class SceneParser {
       o.visible = r.boolean("visible", true);
       o.haptic = r.boolean("haptic", false);
       o.dynamic = r.boolean("dynamic", false);
-      if (r.has("mass"))
-        o.mass = readPositive(r, "mass", {});
-      else if (o.dynamic)
-        r.addError("a dynamic object needs a mass", "mass", "add \"mass\": <kg>");
+      rigidBody(r, o);
       if (r.has("material") && !o.material.empty() &&
           checkName(r, "material", o.material, materialIndex_, "material", "materials")) {
         if (o.haptic && !scene_.materials[materialIndex_.at(o.material)].haptic)
@@ -671,6 +671,85 @@ class SceneParser {
       }
       scene_.objects.push_back(std::move(o));
     }
+  }
+
+  // True when `key` is present and this document may use it: keys version 2
+  // added are errors in a version-1 file.
+  bool v2Key(ConfigReader& r, std::string_view key) {
+    if (!r.has(key)) return false;
+    if (version_ >= 2) return true;
+    r.addError("\"" + std::string(key) + "\" is a version-2 key", key, "set \"version\": 2");
+    return false;
+  }
+
+  // The rigid-body keys of an object: mass or density, initial velocities
+  // (dynamic objects only), and contact (any object that collides).
+  void rigidBody(ConfigReader& r, SceneObject& o) {
+    const bool density = v2Key(r, "density");
+    if (r.has("mass") && density) {
+      r.addError("both \"mass\" and \"density\" are given", "density", "give one of them");
+    } else if (r.has("mass")) {
+      o.mass = readPositive(r, "mass", {}, 1e6);
+    } else if (density) {
+      o.density = readPositive(r, "density", {}, 1e6);
+    } else if (o.dynamic) {
+      r.addError("a dynamic object needs a mass", "mass",
+                 "add \"mass\": <kg>" + std::string(version_ >= 2 ? " or \"density\": <kg/m³>" : ""));
+    }
+    if (!o.dynamic && (r.has("mass") || density))
+      r.addError("only a dynamic object has a mass", r.has("mass") ? "mass" : "density",
+                 "set \"dynamic\": true, or remove it");
+    for (const char* key : {"velocity", "angular_velocity"}) {
+      if (!v2Key(r, key)) continue;
+      (std::string_view(key) == "velocity" ? o.velocity : o.angularVelocity) = readVec3(r, key);
+      if (!o.dynamic) r.addError("only a dynamic object moves", key, "set \"dynamic\": true, or remove it");
+    }
+    if (v2Key(r, "collide")) o.collide = r.boolean("collide");
+    if (v2Key(r, "contact")) {
+      ConfigReader c = r.child("contact");
+      if (expectObject(c)) {
+        c.knownKeys({"friction", "restitution"});
+        o.friction = c.number("friction", {.min = 0.0, .max = 10.0}, o.friction);
+        o.restitution = c.number("restitution", {.min = 0.0, .max = 1.0}, o.restitution);
+      }
+    }
+  }
+
+  // Cross-checks between the objects and the engines, once both are read:
+  // dynamic objects need the physics engine and a shape that can move; the
+  // physics engine needs something to move; the tool's picture is no body.
+  void physicsBodies() {
+    ConfigReader objects = root_.child("objects");
+    const auto& h = scene_.engines.haptics;
+    bool anyDynamic = false;
+    for (std::size_t i = 0; i < scene_.objects.size() && objects.isArray() && i < objects.size(); ++i) {
+      const SceneObject o = scene_.objects[i];
+      ConfigReader r = objects.at(i);
+      const bool proxy = h && h->proxyObject == o.name;
+      if (proxy && o.dynamic)
+        r.addError("the haptic proxy object " + inQuotes(o.name) + " is moved by the tool, not by physics",
+                   "dynamic", "remove \"dynamic\", or show the tool with another object");
+      if (proxy && r.has("collide") && o.collide)
+        r.addError("the haptic proxy object " + inQuotes(o.name) +
+                       " is the tool's picture and collides with nothing",
+                   "collide", "remove \"collide\"");
+      if (proxy) scene_.objects[i].collide = false;  // what toJson writes back
+      if (!o.dynamic) continue;
+      anyDynamic = true;  // a dynamic proxy is reported above, not as "nothing to move" too
+      if (proxy) continue;
+      if (!scene_.engines.physics)
+        r.addError("dynamic object " + inQuotes(o.name) + " but no physics engine runs this scene", "dynamic",
+                   "add \"physics\": {} to \"engines\", or remove \"dynamic\"");
+      if (const SceneResource* m = scene_.resource(o.mesh)) {
+        if (m->type == Type::Shape && m->shape == SceneResource::Shape::Plane)
+          r.addError("a plane (a flat rectangle) has no volume and cannot be a dynamic body", "mesh",
+                     "use a thin box shape");
+      }
+    }
+    if (scene_.engines.physics && !anyDynamic)
+      root_.child("engines").child("physics").addError(
+          "the physics engine has no dynamic object to move", {},
+          "set \"dynamic\": true and a mass on an object, or remove the engine");
   }
 
   void transferFunction(ConfigReader tf, SceneVolume& v) {
@@ -827,6 +906,13 @@ class SceneParser {
                 std::string("driver parameters are strings, numbers, booleans or arrays of them, got ") +
                     v.type_name(),
                 it.key());
+          // A driver's "file" (a path to follow, a recording to replay) is
+          // a source like a resource's: relative to the scene, confined.
+          if (it.key() == "file" && v.is_string()) {
+            const std::size_t b = c.errors().size();
+            fs::path p = resolveSource(c, v.get<std::string>(), "file");
+            if (c.errors().size() == b) d.files["file"] = std::move(p);
+          }
         }
         d.config = c.node();
       }
@@ -837,7 +923,8 @@ class SceneParser {
           SceneDeviceServe serve;
           serve.listen = sv.string("listen", serve.listen);
           if (auto hp = parseHostPort(serve.listen, "listen", true); !hp)
-            sv.addError(hp.error().what, "listen", "e.g. \"127.0.0.1:0\" (port 0: any free port) or \"0.0.0.0:47000\"");
+            sv.addError(hp.error().what, "listen",
+                        "e.g. \"127.0.0.1:0\" (port 0: any free port) or \"0.0.0.0:47000\"");
           serve.timeout = sv.number("timeout", {.min = 1e-3, .max = 60.0}, serve.timeout);
           serve.waveImpedance = sv.number("wave_impedance", {.min = 0.0, .max = 1e6}, 0.0);
           d.serve = serve;
@@ -1003,10 +1090,11 @@ class SceneParser {
     sec.knownKeys({"haptics", "physics", "render", "monitor"});
     hapticsEngine(sec.child("haptics"));
     if (ConfigReader r = sec.child("physics"); expectObject(r)) {
-      r.knownKeys({"rate_hz", "gravity"});
+      r.knownKeys({"rate_hz", "gravity", "sleep"});
       ScenePhysicsEngine p;
       p.rateHz = r.number("rate_hz", {.min = 10.0, .max = 10000.0}, p.rateHz);
       p.gravity = readVec3(r, "gravity", p.gravity);
+      if (v2Key(r, "sleep")) p.sleep = r.boolean("sleep");
       scene_.engines.physics = p;
     }
     if (ConfigReader r = sec.child("render"); expectObject(r)) {
@@ -1064,6 +1152,7 @@ class SceneParser {
   // Name → index of the first element with it (duplicates are errors).
   NameIndex materialIndex_, objectIndex_, volumeIndex_, deviceIndex_, cameraIndex_;
   bool badVersion_ = false;
+  int version_ = kSceneFormatVersion;
 };
 
 template <class T>
@@ -1088,7 +1177,9 @@ std::string paramString(const Json& v) {
 bool SceneObject::operator==(const SceneObject& o) const {
   return name == o.name && mesh == o.mesh && renderMesh == o.renderMesh && material == o.material &&
          pose.p == o.pose.p && pose.q.coeffs() == o.pose.q.coeffs() && scale == o.scale &&
-         visible == o.visible && haptic == o.haptic && dynamic == o.dynamic && mass == o.mass;
+         visible == o.visible && haptic == o.haptic && dynamic == o.dynamic && mass == o.mass &&
+         density == o.density && velocity == o.velocity && angularVelocity == o.angularVelocity &&
+         collide == o.collide && friction == o.friction && restitution == o.restitution;
 }
 
 bool SceneHapticsEngine::operator==(const SceneHapticsEngine& o) const {
@@ -1168,8 +1259,10 @@ std::string formatSceneErrors(const std::vector<Error>& problems) {
 std::vector<std::pair<std::string, std::string>> deviceParams(const SceneDevice& device) {
   std::vector<std::pair<std::string, std::string>> out;
   if (!device.config.is_object()) return out;
-  for (auto it = device.config.begin(); it != device.config.end(); ++it)
-    out.emplace_back(it.key(), paramString(it.value()));
+  for (auto it = device.config.begin(); it != device.config.end(); ++it) {
+    const auto file = device.files.find(it.key());
+    out.emplace_back(it.key(), file != device.files.end() ? file->second.string() : paramString(it.value()));
+  }
   return out;
 }
 
@@ -1245,6 +1338,13 @@ Json toJson(const SceneDesc& scene) {
     if (!o.material.empty()) e["material"] = o.material;
     if (!o.renderMesh.empty()) e["render_mesh"] = o.renderMesh;
     if (o.mass > 0.0) e["mass"] = o.mass;
+    if (o.density > 0.0) e["density"] = o.density;
+    if (o.dynamic) {
+      e["velocity"] = toJson(o.velocity);
+      e["angular_velocity"] = toJson(o.angularVelocity);
+    }
+    e["collide"] = o.collide;
+    e["contact"] = {{"friction", o.friction}, {"restitution", o.restitution}};
     objects.push_back(std::move(e));
   }
   j["objects"] = std::move(objects);
@@ -1331,7 +1431,7 @@ Json toJson(const SceneDesc& scene) {
   if (scene.engines.haptics && !scene.engines.haptics->proxyObject.empty())
     engines["haptics"]["proxy_object"] = scene.engines.haptics->proxyObject;
   if (const auto& p = scene.engines.physics)
-    engines["physics"] = {{"rate_hz", p->rateHz}, {"gravity", toJson(p->gravity)}};
+    engines["physics"] = {{"rate_hz", p->rateHz}, {"gravity", toJson(p->gravity)}, {"sleep", p->sleep}};
   if (const auto& r = scene.engines.render) {
     engines["render"] = {
         {"rate_hz", r->rateHz}, {"width", r->width}, {"height", r->height}, {"samples", r->samples}};

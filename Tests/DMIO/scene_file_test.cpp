@@ -55,6 +55,7 @@ Json baseScene() {
     "devices": [{"name": "hand", "driver": "sim-haptic", "config": {"path": "circle"}}],
     "engines": {
       "haptics": {"device": "hand", "objects": ["head_skin"]},
+      "physics": {},
       "render": {"camera": "main"}
     }
   })");
@@ -426,22 +427,86 @@ TEST(SceneFile, TransferFunctionMustBeSorted) {
 
 TEST(SceneFile, UnsupportedVersionStopsEarly) {
   Json j = baseScene();
-  j["version"] = 2;
-  j["objects"][0]["mesh"] = "skni";  // not reported: a version-2 file may mean something else
+  j["version"] = 3;
+  j["objects"][0]["mesh"] = "skni";  // not reported: a version-3 file may mean something else
   dm::ErrorCode code{};
   const auto p = problemsOf(j, &code);
   ASSERT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);
   EXPECT_EQ(code, dm::ErrorCode::Version);
   EXPECT_EQ(p[0].code, dm::ErrorCode::Version);
   EXPECT_EQ(p[0].where, "scene.json: /version");
-  EXPECT_EQ(p[0].what, "unsupported scene version 2");
-  EXPECT_EQ(p[0].hint, "this build reads version 1");
+  EXPECT_EQ(p[0].what, "unsupported scene version 3");
+  EXPECT_EQ(p[0].hint, "this build reads versions 1 and 2");
 
   j = baseScene();
   j["format"] = "dmplatform-config";
   const auto q = problemsOf(j);
   ASSERT_EQ(q.size(), 1u);
   EXPECT_EQ(q[0].where, "scene.json: /format");
+}
+
+TEST(SceneFile, RigidBodyKeysAreCheckedAndNeedVersionTwo) {
+  // Version 2 adds density, initial velocities, collide and contact; a
+  // version-1 file that uses them is told so rather than read differently.
+  Json j = baseScene();
+  j["objects"][1]["velocity"] = {0, 0, 1};
+  j["objects"][1]["contact"] = {{"friction", 0.2}};
+  j["engines"]["physics"]["sleep"] = true;
+  auto p = problemsOf(j);
+  ASSERT_EQ(p.size(), 3u) << dm::formatSceneErrors(p);
+  for (const char* where : {"/objects/1/velocity", "/objects/1/contact", "/engines/physics/sleep"}) {
+    const dm::Error* e = at(p, where);
+    ASSERT_TRUE(e) << where;
+    EXPECT_EQ(e->hint, "set \"version\": 2");
+  }
+
+  j["version"] = 2;
+  auto s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const dm::SceneObject& ball = s->objects[1];
+  EXPECT_EQ(ball.velocity, dm::Vec3(0, 0, 1));
+  EXPECT_EQ(ball.friction, 0.2);
+  EXPECT_EQ(ball.restitution, 0.0);
+  EXPECT_TRUE(ball.collide);
+  EXPECT_TRUE(s->engines.physics->sleep);
+
+  // One of mass and density; only dynamic objects have them or move.
+  j["objects"][1]["density"] = 1000;
+  j["objects"][0]["angular_velocity"] = {1, 0, 0};
+  j["objects"][0]["mass"] = 2;
+  j["objects"][1]["contact"]["restitution"] = 1.5;
+  j["objects"][1]["contact"]["frction"] = 0.1;
+  p = problemsOf(j);
+  ASSERT_EQ(p.size(), 5u) << dm::formatSceneErrors(p);
+  for (const char* where : {"/objects/1/density", "/objects/0/angular_velocity", "/objects/0/mass",
+                            "/objects/1/contact/restitution", "/objects/1/contact/frction"})
+    EXPECT_TRUE(at(p, where)) << where;
+
+  // A dynamic object needs the physics engine, and the engine something to move.
+  j = baseScene();
+  j["engines"].erase("physics");
+  p = problemsOf(j);
+  ASSERT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);
+  ASSERT_TRUE(at(p, "/objects/1/dynamic"));
+  EXPECT_NE(p[0].what.find("no physics engine"), std::string::npos);
+  j = baseScene();
+  j["objects"][1]["dynamic"] = false;
+  j["objects"][1].erase("mass");
+  p = problemsOf(j);
+  ASSERT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);
+  EXPECT_TRUE(at(p, "/engines/physics"));
+
+  // The tool's picture is no body; a plane has no volume to move.
+  j = baseScene();
+  j["engines"]["haptics"]["proxy_object"] = "ball";
+  p = problemsOf(j);
+  ASSERT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);
+  EXPECT_TRUE(at(p, "/objects/1/dynamic"));
+  j = baseScene();
+  j["resources"]["ball"] = {{"type", "shape"}, {"shape", "plane"}, {"half_extents", {0.1, 0.1}}};
+  p = problemsOf(j);
+  ASSERT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);
+  EXPECT_TRUE(at(p, "/objects/1/mesh"));
 }
 
 TEST(SceneFile, NotJsonNamesLineAndColumn) {
@@ -531,7 +596,7 @@ TEST(SceneFile, KeysAndLimitsDependOnTheKind) {
 // value: parsing and writing it back must give the same document.
 Json fullScene() {
   return Json::parse(R"({
-    "format": "dmplatform-scene", "version": 1, "name": "full",
+    "format": "dmplatform-scene", "version": 2, "name": "full",
     "resources": {
       "box": {"type": "shape", "shape": "box", "half_extents": [0.1, 0.2, 0.3], "subdivisions": 1},
       "cap": {"type": "shape", "shape": "capsule", "radius": 0.01, "height": 0.05, "subdivisions": 2},
@@ -556,11 +621,18 @@ Json fullScene() {
     },
     "objects": [
       {"name": "liver", "mesh": "liver", "material": "tissue", "scale": 2.0, "visible": false, "haptic": true,
-       "dynamic": false, "pose": {"position": [0.01, 0.02, 0.03], "rotation": [0.0, 0.6, 0.8, 0.0]}},
+       "dynamic": false, "pose": {"position": [0.01, 0.02, 0.03], "rotation": [0.0, 0.6, 0.8, 0.0]},
+       "collide": false, "contact": {"friction": 0.7, "restitution": 0.1}},
       {"name": "ball", "mesh": "ball", "material": "metal", "scale": 1.0, "visible": true, "haptic": false,
-       "dynamic": true, "mass": 0.25, "pose": {"position": [0.0, 0.0, 0.5], "rotation": [1.0, 0.0, 0.0, 0.0]}},
+       "dynamic": true, "mass": 0.25, "pose": {"position": [0.0, 0.0, 0.5], "rotation": [1.0, 0.0, 0.0, 0.0]},
+       "velocity": [0.1, 0.0, -0.2], "angular_velocity": [0.0, 0.0, 2.0], "collide": true,
+       "contact": {"friction": 0.4, "restitution": 0.6}},
       {"name": "iso", "mesh": "iso", "render_mesh": "box", "scale": 1.0, "visible": true, "haptic": false,
-       "dynamic": false, "pose": {"position": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]}}
+       "dynamic": false, "pose": {"position": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]},
+       "collide": true, "contact": {"friction": 0.5, "restitution": 0.0}},
+      {"name": "tip", "mesh": "ball", "scale": 1.0, "visible": true, "haptic": false, "dynamic": false,
+       "pose": {"position": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]}, "collide": false,
+       "contact": {"friction": 0.5, "restitution": 0.0}}
     ],
     "volumes": [
       {"name": "ct_slice", "volume": "ct", "mode": "slice", "visible": false,
@@ -595,9 +667,9 @@ Json fullScene() {
     ],
     "engines": {
       "haptics": {"rate_hz": 2000.0, "renderer": "sphere-tree", "device": "stylus", "objects": ["liver"],
-                  "tool_radius": 0.003, "max_force": 5.0, "force_shading": false, "proxy_object": "ball",
+                  "tool_radius": 0.003, "max_force": 5.0, "force_shading": false, "proxy_object": "tip",
                   "device_pose": {"position": [0.1, 0.0, 0.0], "rotation": [0.0, 0.0, 0.0, 1.0]}},
-      "physics": {"rate_hz": 500.0, "gravity": [0.0, -9.81, 0.0]},
+      "physics": {"rate_hz": 500.0, "gravity": [0.0, -9.81, 0.0], "sleep": true},
       "render": {"rate_hz": 60.0, "camera": "follow", "width": 1920, "height": 1080, "samples": 4},
       "monitor": {"rate_hz": 10.0}
     },
@@ -626,7 +698,7 @@ TEST(SceneFile, ToJsonWritesEveryKeyAndReadsBackEqual) {
   EXPECT_EQ(a->engines.physics->gravity, dm::Vec3(0.0, -9.81, 0.0));
   EXPECT_EQ(dm::deviceParams(*a->device("stylus")),
             (std::vector<std::pair<std::string, std::string>>{
-                {"file", "press.csv"}, {"loop", "1"}, {"offset", "0.0,0.0,0.01"}}));
+                {"file", "/data/scenes/press.csv"}, {"loop", "1"}, {"offset", "0.0,0.0,0.01"}}));
   ASSERT_TRUE(a->device("spare")->serve);
   EXPECT_EQ(a->device("spare")->serve->listen, "0.0.0.0:47000");
   EXPECT_EQ(a->device("spare")->serve->waveImpedance, 20.0);
@@ -638,11 +710,13 @@ TEST(SceneFile, ToJsonWritesEveryKeyAndReadsBackEqual) {
 }
 
 TEST(SceneFile, BundledSceneRoundTrips) {
-  auto a = dm::readScene(sourceDir() / "examples/scenes/head_probe.json");
-  ASSERT_TRUE(a) << a.error();
-  auto b = dm::parseScene(dm::toJson(*a).dump(2), "written.json", a->baseDir);
-  ASSERT_TRUE(b) << b.error();
-  EXPECT_TRUE(*a == *b);
+  for (const char* name : {"head_probe.json", "head_probe_teleop.json", "box_push.json"}) {
+    auto a = dm::readScene(sourceDir() / "examples/scenes" / name);
+    ASSERT_TRUE(a) << a.error();
+    auto b = dm::parseScene(dm::toJson(*a).dump(2), "written.json", a->baseDir);
+    ASSERT_TRUE(b) << b.error();
+    EXPECT_TRUE(*a == *b) << name;
+  }
   // Euler angles and non-unit directions are written in their normalised form and stay put.
   Json j = baseScene();
   j["objects"][0]["pose"] = {{"euler_deg", {10, 20, 30}}};
@@ -652,6 +726,30 @@ TEST(SceneFile, BundledSceneRoundTrips) {
   auto d = dm::parseScene(dm::toJson(*c).dump(), "scene.json", "/data/scenes");
   ASSERT_TRUE(d) << d.error();
   EXPECT_TRUE(*c == *d);
+}
+
+TEST(SceneFile, DeviceFilesResolveLikeSourcesAndStayConfined) {
+  // A driver's "file" (a path to follow, a recording to replay) is relative
+  // to the scene and confined like a resource's source; the driver gets the
+  // resolved path, the scene keeps what was written.
+  Json j = baseScene();
+  j["devices"][0]["config"] = {{"path", "csv"}, {"file", "paths/push.csv"}, {"loop", 0}};
+  auto s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const dm::SceneDevice& hand = *s->device("hand");
+  EXPECT_EQ(hand.config["file"], "paths/push.csv");
+  const auto params = dm::deviceParams(hand);
+  const auto file = std::find_if(params.begin(), params.end(), [](const auto& p) { return p.first == "file"; });
+  ASSERT_NE(file, params.end());
+  EXPECT_EQ(file->second, "/data/scenes/paths/push.csv");
+  EXPECT_EQ(dm::parseScene(dm::toJson(*s).dump(), "scene.json", "/data/scenes").value(), *s);
+
+  j["devices"][0]["config"]["file"] = "../../etc/passwd";
+  const auto p = problemsOf(j);
+  ASSERT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);
+  const dm::Error* e = at(p, "/devices/0/config/file");
+  ASSERT_TRUE(e);
+  EXPECT_NE(e->hint.find("DM_ALLOW_PATH"), std::string::npos) << e->hint;
 }
 
 TEST(SceneFile, SourcesResolveAgainstTheSceneDirectory) {

@@ -1,4 +1,5 @@
-// dm/io/scene_file.hpp — the scene file (JSON, "dmplatform-scene" version 1)
+// dm/io/scene_file.hpp — the scene file (JSON, "dmplatform-scene" version 2;
+// version 1 files read unchanged)
 // shared by `dmtool render`, the master engine and `dmplatform run`.
 //
 // parseScene() validates a scene document and turns it into SceneDesc, a
@@ -34,6 +35,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -42,8 +44,11 @@
 
 namespace dm {
 
-/// The only scene format version this build reads and writes.
-inline constexpr int kSceneFormatVersion = 1;
+/// The scene format version this build writes. It reads this one and
+/// version 1, a subset: a version-1 file reads unchanged, and keys that
+/// version 2 added are errors in it (so an old reader's file never means
+/// something else to a new one).
+inline constexpr int kSceneFormatVersion = 2;
 
 /// A named resource: something to load or generate once and share.
 struct SceneResource {
@@ -116,8 +121,16 @@ struct SceneObject {
   double scale = 1.0;    ///< uniform, > 0
   bool visible = true;
   bool haptic = false;   ///< touchable by haptic renderers
-  bool dynamic = false;  ///< simulated by the physics engine
-  double mass = 0.0;     ///< kg; > 0 when dynamic, 0 when not given
+  bool dynamic = false;  ///< a rigid body moved by the physics engine
+  double mass = 0.0;     ///< kg; dynamic objects give this or `density`; 0 when not given
+  double density = 0.0;  ///< kg/m³ (v2): mass from the shape's volume; 0 when not given
+  Vec3 velocity = Vec3::Zero();         ///< m/s, world, initial (v2; dynamic objects)
+  Vec3 angularVelocity = Vec3::Zero();  ///< rad/s, world, initial (v2; dynamic objects)
+  /// Takes part in rigid contact when the physics engine runs (v2). The
+  /// haptics engine's proxy_object never does: it is the tool's picture.
+  bool collide = true;
+  double friction = 0.5;     ///< rigid contact: Coulomb μ, 0..10 (v2 "contact")
+  double restitution = 0.0;  ///< rigid contact: coefficient of restitution, 0..1 (v2 "contact")
 
   bool operator==(const SceneObject& o) const;
 };
@@ -212,6 +225,10 @@ struct SceneDevice {
   std::string name;
   std::string driver;            ///< registered driver name, e.g. "sim-haptic"
   Json config = Json::object();  ///< driver parameters: strings, numbers, booleans or arrays of them
+  /// Config keys that name files ("file": a path to follow, a recording),
+  /// resolved like resource sources (relative to the scene, confined to the
+  /// allowed folders); deviceParams() passes these resolved paths.
+  std::map<std::string, std::filesystem::path, std::less<>> files;
   /// Served to the tele-operation stream (haptic devices). A config string
   /// "@NAME" of another device stands for the address a served device NAME
   /// listens on, filled in when the scene runs.
@@ -241,6 +258,7 @@ struct SceneHapticsEngine {
 struct ScenePhysicsEngine {
   double rateHz = 1000.0;            ///< 10..10000
   Vec3 gravity{0.0, 0.0, -9.80665};  ///< m/s², world
+  bool sleep = false;                ///< v2: bodies at rest fall asleep (dm::ContactSettings::sleep)
 
   bool operator==(const ScenePhysicsEngine&) const = default;
 };
@@ -335,7 +353,7 @@ Result<SceneDesc> readScene(const std::filesystem::path& file, std::vector<Error
 /// One line per problem ("where: what (hint)\n"), for a console.
 std::string formatSceneErrors(const std::vector<Error>& problems);
 
-/// The scene as a version-1 document with every key written out (defaults
+/// The scene as a version-2 document with every key written out (defaults
 /// included); parseScene() of it gives back an equal SceneDesc (baseDir
 /// aside, which is not stored).
 /// @code
@@ -345,7 +363,8 @@ Json toJson(const SceneDesc& scene);
 
 /// A device's config as driver parameters (dm::DeviceParams): strings as
 /// they are, numbers in shortest round-trip form, booleans as "1"/"0",
-/// arrays joined with commas ([0, 0, -0.004] → "0,0,-0.004").
+/// arrays joined with commas ([0, 0, -0.004] → "0,0,-0.004"); file keys
+/// (SceneDevice::files) as their resolved paths.
 std::vector<std::pair<std::string, std::string>> deviceParams(const SceneDevice& device);
 
 }  // namespace dm
