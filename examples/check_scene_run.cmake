@@ -3,6 +3,7 @@
 #   cmake -DDMPLATFORM=... -DSCENE=... -DOUT=... -DDURATION=... -DFRAMES=N
 #         -DMIN_CONTACT_TICKS=N (FRAMES: at least that many frames)
 #         -DMIN_FORCE=F -DMAX_FORCE=F -P check_scene_run.cmake
+#         -DMOVED_BODY=name -DMIN_DISPLACEMENT=m (scenes with physics)
 # Tele-operation scenes (a device with "serve") run in real time:
 #         -DMODE=realtime -DMIN_ROUND_TRIP_MS=T: the served device's link
 #         measured a round trip of at least T ms (p50), received a force
@@ -108,5 +109,27 @@ if(DEFINED MIN_ROUND_TRIP_MS)
     endif()
   endif()
   message(STATUS "tele-operation: round trip p50 ${rtt} ms, ${received} forces received")
+endif()
+# Physics: -DMOVED_BODY=name -DMIN_DISPLACEMENT=m: that dynamic body's
+# centre of mass ended at least that far from where it started.
+if(DEFINED MOVED_BODY)
+  string(JSON count LENGTH "${summary}" physics bodies)
+  set(moved "")
+  if(count GREATER 0)
+    math(EXPR last "${count} - 1")
+    foreach(i RANGE ${last})
+      string(JSON name GET "${summary}" physics bodies ${i} name)
+      if(name STREQUAL MOVED_BODY)
+        string(JSON moved GET "${summary}" physics bodies ${i} displacement_m)
+      endif()
+    endforeach()
+  endif()
+  if(moved STREQUAL "")
+    message(FATAL_ERROR "no dynamic body ${MOVED_BODY} in the physics summary")
+  endif()
+  if(moved LESS MIN_DISPLACEMENT)
+    message(FATAL_ERROR "body ${MOVED_BODY} moved ${moved} m, expected at least ${MIN_DISPLACEMENT} m")
+  endif()
+  message(STATUS "physics: ${MOVED_BODY} moved ${moved} m")
 endif()
 message(STATUS "ok: ${contact}/${ticks} ticks in contact, max force ${maxForce} N")

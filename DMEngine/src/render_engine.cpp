@@ -174,6 +174,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   RenderEngineStats stats_;
   std::vector<double> renderMs_;
   std::vector<float> recent_;
+  std::vector<Isometry3> poses_;  // of feed_.movingObjects
   Error error_;
   TickTime time_;
 
@@ -189,6 +190,12 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     const double t = time_.seconds(info);  // scene time, also in real time
     Isometry3 proxy = Isometry3::Identity();
     Vec3 force = Vec3::Zero();
+    if (feed_.objectPoses && feed_.objectPoses(poses_))
+      for (std::size_t i = 0; i < poses_.size() && i < feed_.movingObjects.size(); ++i)
+        if (auto s = view_.setObjectPose(feed_.movingObjects[i], poses_[i]); !s) {
+          error_ = s.error();
+          return false;
+        }
     const bool haptics = feed_.haptics && feed_.haptics(proxy, force);
     if (haptics && !proxyObject_.empty()) {
       if (auto s = view_.setObjectPose(proxyObject_, proxy); !s) {

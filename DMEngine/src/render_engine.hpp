@@ -26,6 +26,11 @@ struct RenderFeed {
   std::function<bool(Isometry3& proxy, Vec3& force)> haptics;
   /// |F| over the last seconds at the haptic rate, oldest first (copied).
   std::function<void(std::vector<float>& out, double& seconds)> recentForce;
+  /// Objects the physics engine moves, and their newest poses (object →
+  /// world) in that order; objectPoses returns false when no step finished
+  /// since the last call (the objects stay where they were drawn).
+  std::vector<std::string> movingObjects;
+  std::function<bool(std::vector<Isometry3>& poses)> objectPoses;
 };
 
 /// Counters of a render engine (control thread, after stop).

@@ -11,6 +11,7 @@
 #include <dm/haptics/god_object.hpp>
 #include <dm/haptics/haptic_loop.hpp>
 #include <dm/haptics/probe.hpp>
+#include <dm/haptics/tool_impulse.hpp>
 #include <dm/io/drivers.hpp>
 #include <dm/io/haptic_device.hpp>
 #include <dm/io/image_io.hpp>
@@ -22,6 +23,7 @@
 #include <dm/network/drivers.hpp>
 #include <dm/network/teleop.hpp>
 #endif
+#include "physics_engine.hpp"
 #ifdef DM_ENGINE_HAVE_RENDERER
 #include "render_engine.hpp"
 #endif
@@ -46,7 +48,9 @@ constexpr int kRenderCatchUp = 2;
 
 // The haptic engine: device servo, god-object, safety — one HapticLoop tick
 // per engine tick; every tick's sample goes to the monitor through an SPSC
-// ring (the haptic thread never allocates, locks or logs).
+// ring (the haptic thread never allocates, locks or logs). With a physics
+// engine, the loop applies the poses physics published (its local model)
+// and the tool's reaction goes back as impulses on the touched object.
 class HapticsEngine final : public Engine {
  public:
   std::string_view name() const noexcept override { return "haptics"; }
@@ -58,12 +62,20 @@ class HapticsEngine final : public Engine {
     p.devicePose = s.input.devicePose;
     p.response = s.response;
     p.response.force = loop->config().deviceToWorld.linear() * s.deviceForce;  // what was sent, world frame
+    if (tools != nullptr) {
+      // Newton's third law: what pushes the hand pushes the object back,
+      // where the proxy touches it, for as long as the command holds.
+      const GodObjectContact& c = renderer->contact();
+      if (c.active) tools->add(c.object, -p.response.force, c.point, info.dt());
+      tools->publish();
+    }
     if (!ring.tryPush(p)) dropped.fetch_add(1, std::memory_order_relaxed);
     return true;
   }
   std::unique_ptr<HapticDevice> device;
   std::unique_ptr<GodObjectRenderer> renderer;
   std::unique_ptr<HapticLoop> loop;
+  ToolImpulseChannel* tools = nullptr;  // owned by the physics engine
   SpscRing<ProbeSample, 16384> ring;
   std::atomic<std::uint64_t> dropped{0};
   TickTime time;
@@ -148,8 +160,8 @@ struct ServedDevice {
   nlohmann::json summary() const {
     const TeleopStats st = link->stats();
     const auto latency = [](const LatencyStats& l) {
-      return nlohmann::json{{"count", l.count}, {"p50_ms", 1e3 * l.p50}, {"p99_ms", 1e3 * l.p99},
-                            {"max_ms", 1e3 * l.max}};
+      return nlohmann::json{
+          {"count", l.count}, {"p50_ms", 1e3 * l.p50}, {"p99_ms", 1e3 * l.p99}, {"max_ms", 1e3 * l.max}};
     };
     nlohmann::json j = {{"device", name},
                         {"address", address},
@@ -185,13 +197,14 @@ Result<std::unique_ptr<ServedDevice>> serveDevice(FactoryRegistry& registry, con
   // CLOCK_MONOTONIC: one-way latencies need no offset estimate.
   const bool loopback = listen->address.starts_with("127.") || listen->address == "::1";
   auto link = TeleopDevice::open(
-      {.local = *listen, .timeoutSeconds = d.serve->timeout, .clocksSynchronized = loopback}, sd->device->info());
+      {.local = *listen, .timeoutSeconds = d.serve->timeout, .clocksSynchronized = loopback},
+      sd->device->info());
   if (!link) return link.error().within(where);
   sd->link = std::move(*link);
   const std::string host = listen->address.empty() || listen->address == "0.0.0.0" ? "127.0.0.1"
-                           : listen->address == "::"                              ? "[::1]"
-                           : listen->address.find(':') != std::string::npos       ? "[" + listen->address + "]"
-                                                                                  : listen->address;
+                           : listen->address == "::"                               ? "[::1]"
+                           : listen->address.find(':') != std::string::npos ? "[" + listen->address + "]"
+                                                                            : listen->address;
   sd->address = host + ":" + std::to_string(sd->link->port());
   sd->bridge = std::make_unique<TeleopDeviceBridge>(
       *sd->device, *sd->link,
@@ -215,6 +228,7 @@ struct SceneRuntime::Impl {
   SceneResources resources;
   MasterEngine master;
   std::shared_ptr<HapticsEngine> haptics;
+  std::shared_ptr<PhysicsEngine> physics;
   std::shared_ptr<MonitorEngine> monitor;
   RecentForce recent;
   FactoryRegistry registry;
@@ -226,9 +240,13 @@ struct SceneRuntime::Impl {
 #ifdef DM_ENGINE_HAVE_NETWORK
   std::vector<std::unique_ptr<ServedDevice>> served;  // destroyed before the registry and linker
 #endif
+  bool prepared = false;
+  RunMode preparedMode = RunMode::Lockstep;
+  std::filesystem::path preparedOut;
   bool ran = false;
 
   Status buildHaptics(bool lockstep);
+  Status buildEngines(bool lockstep, const SceneRunOptions& options, const std::filesystem::path& out);
 };
 
 Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
@@ -298,6 +316,7 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   auto e = std::make_shared<HapticsEngine>();
   e->device = std::move(*device);
   e->renderer = std::move(*renderer);
+  e->tools = physics ? physics->toolImpulses() : nullptr;
   HapticLoopConfig config;
   config.loop = {.rate_hz = h.rateHz, .name = "haptics"};
   config.deviceToWorld = h.devicePose.isometry();
@@ -305,7 +324,9 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   // In lockstep an overrun says how loaded this machine is, not what the
   // simulation did: count it but keep the output (bit-identical reruns).
   config.overrunFades = !lockstep;
-  auto loop = HapticLoop::create({.device = *e->device, .renderer = *e->renderer}, config);
+  auto loop = HapticLoop::create(
+      {.device = *e->device, .renderer = *e->renderer, .model = physics ? physics->hapticModel() : nullptr},
+      config);
   if (!loop) return loop.error().within(where);
   e->loop = std::move(*loop);
   haptics = e;
@@ -332,6 +353,74 @@ SceneRuntime::SceneRuntime() : impl_(std::make_unique<Impl>()) {}
 SceneRuntime::~SceneRuntime() {
   if (impl_ && impl_->master.state() != SimState::Stopped && impl_->master.state() != SimState::Created)
     (void)impl_->master.stop("runtime destroyed");
+}
+
+Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& options,
+                                        const std::filesystem::path& out) {
+  // Engines: physics is built first (the haptic loop takes its local model
+  // and tool channel), haptics added first (at equal lockstep times it
+  // ticks before physics, which then sees that tick's impulse), then
+  // physics, the monitor, the renderer, and user engines.
+  if (scene.engines.physics) {
+    const std::vector<std::string> touched =
+        scene.engines.haptics ? scene.engines.haptics->objects : std::vector<std::string>();
+    auto p = PhysicsEngine::build(scene, resources, touched);
+    if (!p) return p.error();
+    physics = *p;
+  }
+  if (scene.engines.haptics) {
+    if (auto s = buildHaptics(lockstep); !s) return s.error();
+    if (auto s = master.addEngine(haptics, {.rateHz = scene.engines.haptics->rateHz, .priority = 80}); !s)
+      return s.error();
+  }
+  if (physics)
+    if (auto s = master.addEngine(
+            physics, {.rateHz = scene.engines.physics->rateHz, .priority = 60, .catchUp = kRenderCatchUp});
+        !s)
+      return s.error();
+  const double hapticRate = scene.engines.haptics ? scene.engines.haptics->rateHz : 1000.0;
+  recent.values.assign(static_cast<std::size_t>(std::max(2.0, hapticRate * recent.seconds)), 0.0f);
+  monitor = std::make_shared<MonitorEngine>(haptics.get(), &recent);
+  monitor->trace.reserve(haptics ? static_cast<std::size_t>(options.duration * hapticRate * 1.05) + 64 : 0);
+  const double monitorRate = scene.engines.monitor ? scene.engines.monitor->rateHz : 30.0;
+  if (auto s = master.addEngine(monitor, {.rateHz = monitorRate}); !s) return s.error();
+  if (scene.engines.render) {
+#ifdef DM_ENGINE_HAVE_RENDERER
+    RenderFeed feed;
+    if (physics) {
+      feed.movingObjects = physics->movingObjects();
+      feed.objectPoses = [p = physics.get()](std::vector<Isometry3>& poses) { return p->latestPoses(poses); };
+    }
+    if (haptics) {
+      HapticsEngine* h = haptics.get();
+      feed.haptics = [h](Isometry3& proxy, Vec3& force) {
+        const HapticLoopSample& s = h->loop->latest();
+        proxy = s.response.proxyPose;
+        force = h->loop->config().deviceToWorld.linear() * s.deviceForce;
+        return true;
+      };
+      feed.recentForce = [r = &recent](std::vector<float>& v, double& secs) { r->copy(v, secs); };
+    }
+    auto made = makeRenderEngine(scene, resources, std::move(feed),
+                                 scene.outputs.frames ? out / "frames" : std::filesystem::path(),
+                                 scene.outputs.frameEvery, lockstep);
+    if (!made) return made.error();
+    render = *made;
+    if (auto s = master.addEngine(render->engine(),
+                                  {.rateHz = scene.engines.render->rateHz, .catchUp = kRenderCatchUp});
+        !s)
+      return s.error();
+#else
+    (void)out;
+    return fail(ErrorCode::Unsupported, "this build has no DMRenderer (EGL was not found at configure time)",
+                "engines/render",
+                "install libegl-dev libegl1-mesa-dev libgl1-mesa-dri and rebuild, or remove it");
+#endif
+  }
+  for (auto& [engine, schedule] : userEngines)
+    if (auto s = master.addEngine(engine, schedule); !s) return s.error();
+
+  return ok();
 }
 
 Result<std::unique_ptr<SceneRuntime>> SceneRuntime::load(const std::filesystem::path& sceneFile) {
@@ -366,66 +455,55 @@ Status SceneRuntime::addEngine(std::shared_ptr<Engine> engine, const EngineSched
 MasterEngine& SceneRuntime::master() { return impl_->master; }
 const SceneDesc& SceneRuntime::scene() const { return impl_->scene; }
 
-Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
+Status SceneRuntime::prepare(const SceneRunOptions& options) {
   Impl& im = *impl_;
-  if (im.ran) return fail(ErrorCode::InvalidArgument, "a SceneRuntime runs once", "SceneRuntime::run");
-  im.ran = true;
+  if (im.prepared)
+    return fail(ErrorCode::InvalidArgument, "a SceneRuntime is prepared once", "SceneRuntime::prepare");
   if (!(options.duration > 0) || !std::isfinite(options.duration))
     return fail(ErrorCode::InvalidArgument, formatString("duration %g s", options.duration), "--duration",
                 "give a positive number of seconds");
-  const bool lockstep = options.mode == RunMode::Lockstep;
   const SceneDesc& scene = im.scene;
   const std::filesystem::path out =
       options.outDir.empty() ? std::filesystem::path(scene.outputs.directory) : options.outDir;
+  // A scene that cannot be built leaves no output folder behind: it is
+  // made only when it did not exist, and removed again on failure.
   std::error_code ec;
+  const bool outExisted = std::filesystem::exists(out, ec);
   std::filesystem::create_directories(out, ec);
   if (ec) return fail(ErrorCode::Io, "cannot create the output folder: " + ec.message(), out.string());
-
-  // Engines: haptics first (the render feed reads it), then the monitor,
-  // the renderer, and user engines.
-  if (scene.engines.haptics) {
-    if (auto s = im.buildHaptics(lockstep); !s) return s.error();
-    if (auto s = im.master.addEngine(im.haptics, {.rateHz = scene.engines.haptics->rateHz, .priority = 80});
-        !s)
-      return s.error();
+  Status built = im.buildEngines(options.mode == RunMode::Lockstep, options, out);
+  if (built) built = im.master.load(scene.name);
+  if (!built) {
+    if (!outExisted) std::filesystem::remove_all(out, ec);
+    return built.error();
   }
-  const double hapticRate = scene.engines.haptics ? scene.engines.haptics->rateHz : 1000.0;
-  im.recent.values.assign(static_cast<std::size_t>(std::max(2.0, hapticRate * im.recent.seconds)), 0.0f);
-  im.monitor = std::make_shared<MonitorEngine>(im.haptics.get(), &im.recent);
-  im.monitor->trace.reserve(im.haptics ? static_cast<std::size_t>(options.duration * hapticRate * 1.05) + 64
-                                       : 0);
-  const double monitorRate = scene.engines.monitor ? scene.engines.monitor->rateHz : 30.0;
-  if (auto s = im.master.addEngine(im.monitor, {.rateHz = monitorRate}); !s) return s.error();
-  if (scene.engines.render) {
-#ifdef DM_ENGINE_HAVE_RENDERER
-    RenderFeed feed;
-    if (im.haptics) {
-      HapticsEngine* h = im.haptics.get();
-      feed.haptics = [h](Isometry3& proxy, Vec3& force) {
-        const HapticLoopSample& s = h->loop->latest();
-        proxy = s.response.proxyPose;
-        force = h->loop->config().deviceToWorld.linear() * s.deviceForce;
-        return true;
-      };
-      feed.recentForce = [r = &im.recent](std::vector<float>& v, double& secs) { r->copy(v, secs); };
+  im.prepared = true;
+  im.preparedMode = options.mode;
+  im.preparedOut = out;
+  return ok();
+}
+
+Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
+  Impl& im = *impl_;
+  if (im.ran) return fail(ErrorCode::InvalidArgument, "a SceneRuntime runs once", "SceneRuntime::run");
+  if (!im.prepared) {
+    if (auto s = prepare(options); !s) {
+      im.ran = true;
+      return s.error();
     }
-    auto render = makeRenderEngine(scene, im.resources, std::move(feed),
-                                   scene.outputs.frames ? out / "frames" : std::filesystem::path(),
-                                   scene.outputs.frameEvery, lockstep);
-    if (!render) return render.error();
-    im.render = *render;
-    if (auto s = im.master.addEngine(im.render->engine(), {.rateHz = scene.engines.render->rateHz, .catchUp = kRenderCatchUp}); !s)
-      return s.error();
-#else
-    return fail(ErrorCode::Unsupported, "this build has no DMRenderer (EGL was not found at configure time)",
-                "engines/render",
-                "install libegl-dev libegl1-mesa-dev libgl1-mesa-dri and rebuild, or remove it");
-#endif
   }
-  for (auto& [engine, schedule] : im.userEngines)
-    if (auto s = im.master.addEngine(engine, schedule); !s) return s.error();
+  im.ran = true;
+  const bool lockstep = options.mode == RunMode::Lockstep;
+  const SceneDesc& scene = im.scene;
+  const std::filesystem::path out = im.preparedOut;
+  if (options.mode != im.preparedMode ||
+      (!options.outDir.empty() && std::filesystem::path(options.outDir) != out))
+    return fail(ErrorCode::InvalidArgument, "run() was given another mode or output folder than prepare()",
+                "SceneRuntime::run", "pass the same options to both");
+  if (!(options.duration > 0) || !std::isfinite(options.duration))
+    return fail(ErrorCode::InvalidArgument, formatString("duration %g s", options.duration), "--duration",
+                "give a positive number of seconds");
 
-  if (auto s = im.master.load(scene.name); !s) return s.error();
   if (im.haptics) im.haptics->renderer->reset(im.haptics->loop->config().deviceToWorld);
   if (auto s = im.master.start(options.mode); !s) return s.error();
 
@@ -518,10 +596,18 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
                           {"device", scene.engines.haptics->device},
                           {"ticks", trace.size()},
                           {"contact_ticks", contactTicks},
+                          {"final_force_N", trace.empty() ? Json::array({0.0, 0.0, 0.0})
+                                                          : Json::array({trace.back().response.force.x(),
+                                                                         trace.back().response.force.y(),
+                                                                         trace.back().response.force.z()})},
                           {"max_force_N", maxForce},
                           {"max_depth_m", maxDepth},
                           {"safety_fault_ticks", hs.faultTicks},
                           {"trace_dropped", im.haptics->dropped.load()}};
+  }
+  if (im.physics) {
+    summary["physics"] = im.physics->summary();
+    summary["physics"]["rate_hz"] = scene.engines.physics->rateHz;
   }
 #ifdef DM_ENGINE_HAVE_RENDERER
   if (im.render) {

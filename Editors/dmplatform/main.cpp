@@ -37,7 +37,8 @@ std::filesystem::path defaultScene() {
   std::error_code ec;
   const auto exe = std::filesystem::canonical("/proc/self/exe", ec);
   if (ec) return std::filesystem::path(DM_SOURCE_SCENES_DIR) / "head_probe.json";
-  const auto installed = exe.parent_path().parent_path() / "share" / "dmplatform" / "scenes" / "head_probe.json";
+  const auto installed =
+      exe.parent_path().parent_path() / "share" / "dmplatform" / "scenes" / "head_probe.json";
   if (std::filesystem::exists(installed, ec)) return installed;
   return (exe.parent_path() / DM_SOURCE_SCENES_DIR / "head_probe.json").lexically_normal();
 }
@@ -68,10 +69,12 @@ int main(int argc, char** argv) {
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
 
+  // Exit codes: 2 for a scene that cannot be run (invalid, a resource or a
+  // model that cannot be built), 1 for a run that failed, 130 interrupted.
   auto runtime = dm::SceneRuntime::load(scene);
   if (!runtime) {
     std::cerr << "dmplatform: " << runtime.error().message() << '\n';
-    return 1;
+    return 2;
   }
   const auto& desc = (*runtime)->scene();
   const std::filesystem::path outDir =
@@ -86,6 +89,11 @@ int main(int argc, char** argv) {
   options.outDir = outDir;
   options.stop = &gStop;
   options.progress = [&](double f, const std::string&) { bar.update(f); };
+  if (auto s = (*runtime)->prepare(options); !s) {
+    bar.finish();
+    std::cerr << "dmplatform: " << s.error().message() << '\n';
+    return 2;
+  }
   auto result = (*runtime)->run(options);
   bar.finish();
   if (!result) {
@@ -106,6 +114,12 @@ int main(int argc, char** argv) {
                 s["haptics"]["contact_ticks"].get<unsigned long long>(),
                 s["haptics"]["ticks"].get<unsigned long long>(), s["haptics"]["max_force_N"].get<double>(),
                 s["haptics"]["max_depth_m"].get<double>() * 1e3);
+  if (s.contains("physics"))
+    for (const auto& b : s["physics"]["bodies"])
+      std::printf("physics: %s moved %.1f mm, now at (%.1f, %.1f, %.1f) mm\n",
+                  b["name"].get<std::string>().c_str(), b["displacement_m"].get<double>() * 1e3,
+                  b["position_m"][0].get<double>() * 1e3, b["position_m"][1].get<double>() * 1e3,
+                  b["position_m"][2].get<double>() * 1e3);
   if (s.contains("render"))
     std::printf("render: %llu frames (%llu written) on %s, frame p50 %.1f ms\n",
                 s["render"]["frames"].get<unsigned long long>(),

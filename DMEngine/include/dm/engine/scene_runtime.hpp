@@ -8,16 +8,24 @@
 //     the god-object renderer over the touchable objects with their scene
 //     materials, force shading and the force limit, and dm::HapticLoop
 //     (device servo, safety, fade) at the scene's rate;
+//   - physics: every "dynamic" object a rigid body of one dm::PhysicsWorld,
+//     the other objects static colliders; the god-object feels the moving
+//     bodies where physics has them (HapticLocalModel) and pushes them back
+//     with the tool's impulses (dm::ToolImpulseChannel), so the hand and the
+//     body exchange equal and opposite momentum;
 //   - render: a headless EGL context on the render engine's own thread,
 //     dm::SceneView drawing the render camera with the tool object following
 //     the haptic proxy, a HUD (time, force, force plot) from dm::Overlay,
 //     frames read back and written as PNG by a writer thread;
 //   - monitor: drains the haptic samples into the force trace.
-// run() starts them in lockstep on a virtual clock (bit-reproducible) or on
+// prepare() builds and loads them (a model that cannot be built fails there,
+// before anything runs); run() starts them in lockstep on a virtual clock (bit-reproducible) or on
 // real-time threads, for a duration or until `stop` is raised (Ctrl-C), then
 // stops them and writes the outputs the scene asks for: frames/frame_NNNNN.png,
 // forces.csv, forces.png and summary.json (achieved rate and tick-time
-// percentiles per engine, deadline misses, contacts, maximum force, frames).
+// percentiles per engine, deadline misses, contacts, maximum and final force,
+// frames; each dynamic body's final state, displacement, contact and tool
+// forces of the last step, and the tool impulse it received).
 // User code adds engines of its own (addEngine) before run().
 //
 // @code
@@ -89,9 +97,18 @@ class SceneRuntime {
   MasterEngine& master();
   const SceneDesc& scene() const;
 
+  /// Builds the engines for a run with `options` (mode, output folder) and
+  /// loads them, so that a scene whose models cannot be built fails here,
+  /// before anything runs; a failure leaves no output folder it made. run()
+  /// calls it when it was not called, with the same options.
+  /// @code
+  ///   if (auto s = rt->prepare(options); !s) return 2;  // a bad scene
+  ///   auto r = rt->run(options);                          // a failed run
+  /// @endcode
+  Status prepare(const SceneRunOptions& options);
   /// Runs once (see the file comment). Fails when an engine fails (outputs
   /// written so far are kept and named in the error) or an output cannot be
-  /// written.
+  /// written, or with other mode or output folder than prepare() was given.
   Result<SceneRunResult> run(const SceneRunOptions& options);
 
  private:

@@ -1,0 +1,334 @@
+// physics_engine.cpp — the scene's rigid bodies on one dm::PhysicsWorld,
+// coupled to the haptic tool by impulses and poses (physics_engine.hpp).
+#include "physics_engine.hpp"
+
+#include <dm/collide/shapes.hpp>
+#include <dm/haptics/haptic_loop.hpp>
+#include <dm/haptics/tool_impulse.hpp>
+#include <dm/io/scene_file.hpp>
+#include <dm/io/scene_resources.hpp>
+#include <dm/math/mass_properties.hpp>
+#include <dm/physics/world.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+
+namespace dm {
+
+namespace {
+
+// A body's collision shape and mass distribution, in the body frame: the
+// object frame moved to the centre of mass (axes unchanged), so
+// object → world = body → world · objectInBody.
+struct BodyGeometry {
+  ShapePtr shape;
+  Isometry3 shapeOffset = Isometry3::Identity();  // shape frame in the body frame
+  Isometry3 objectInBody = Isometry3::Identity();
+  double volume = 0.0;               // m³
+  Mat3 inertiaPerKg = Mat3::Zero();  // kg·m² per kg of mass, about the centre of mass
+};
+
+Mat3 diag(double x, double y, double z) { return Vec3(x, y, z).asDiagonal(); }
+
+// Analytic shapes: the scene's shape resources at the object's scale,
+// centred at their origin with their axis along +z.
+Result<BodyGeometry> primitiveGeometry(const SceneResource& r, double scale, bool dynamic,
+                                       const std::string& where) {
+  using S = SceneResource::Shape;
+  constexpr double pi = std::numbers::pi;
+  BodyGeometry g;
+  const double rad = r.radius * scale;
+  switch (r.shape) {
+    case S::Sphere:
+      g.shape = std::make_shared<Sphere>(rad);
+      g.volume = 4.0 / 3.0 * pi * rad * rad * rad;
+      g.inertiaPerKg = Mat3::Identity() * (0.4 * rad * rad);
+      break;
+    case S::Box: {
+      const Vec3 h = r.halfExtents * scale;
+      g.shape = std::make_shared<Box>(h);
+      g.volume = 8.0 * h.prod();
+      g.inertiaPerKg =
+          diag(h.y() * h.y() + h.z() * h.z(), h.x() * h.x() + h.z() * h.z(), h.x() * h.x() + h.y() * h.y()) /
+          3.0;
+      break;
+    }
+    case S::Cylinder: {
+      const double len = r.height * scale;
+      g.shape = std::make_shared<Cylinder>(rad, 0.5 * len);
+      g.volume = pi * rad * rad * len;
+      const double side = (3.0 * rad * rad + len * len) / 12.0;
+      g.inertiaPerKg = diag(side, side, 0.5 * rad * rad);
+      break;
+    }
+    case S::Capsule: {
+      // A cylinder of length `len` between two hemispherical caps; per kg:
+      // the cylinder's share c and the caps' share s of the volume.
+      const double len = r.height * scale;
+      g.shape = std::make_shared<Capsule>(rad, 0.5 * len);
+      const double vc = pi * rad * rad * len, vs = 4.0 / 3.0 * pi * rad * rad * rad;
+      g.volume = vc + vs;
+      const double c = vc / g.volume, s = vs / g.volume;
+      const double axial = c * 0.5 * rad * rad + s * 0.4 * rad * rad;
+      const double side = c * (len * len / 12.0 + rad * rad / 4.0) +
+                          s * (0.4 * rad * rad + len * len / 4.0 + 3.0 * len * rad / 8.0);
+      g.inertiaPerKg = diag(side, side, axial);
+      break;
+    }
+    case S::Plane: {
+      // A finite rectangle in z = 0, solid below: a slab as deep as its
+      // shorter side, so nothing that lands on it can tunnel through.
+      if (dynamic)
+        return fail(ErrorCode::InvalidArgument, "a plane cannot be a dynamic body", where, "use a thin box");
+      const Vec3 h(r.halfExtents.x() * scale, r.halfExtents.y() * scale,
+                   0.5 * std::min(r.halfExtents.x(), r.halfExtents.y()) * scale);
+      g.shape = std::make_shared<Box>(h);
+      g.shapeOffset = Isometry3(Eigen::Translation3d(0, 0, -h.z()));
+      break;
+    }
+  }
+  return g;
+}
+
+// Meshes (files, isosurfaces): a static object collides as its triangles;
+// a dynamic one as their convex hull, with the mass distribution of the
+// closed mesh itself.
+Result<BodyGeometry> meshGeometry(const Mesh& source, double scale, bool dynamic, const std::string& where) {
+  auto mesh = std::make_shared<Mesh>(source);
+  if (scale != 1.0)
+    for (Vec3& p : mesh->positions) p *= scale;
+  BodyGeometry g;
+  if (!dynamic) {
+    auto tm = TriangleMesh::create(std::move(mesh));
+    if (!tm) return tm.error().within(where);
+    g.shape = *tm;
+    return g;
+  }
+  auto mp = computeMassProperties(*mesh, 1.0);
+  if (!mp)
+    return fail(ErrorCode::InvalidArgument, "its mesh has no mass properties: " + mp.error().message(), where,
+                "a dynamic mesh object must be closed and consistently oriented");
+  auto hull = ConvexHull::create(mesh->positions);
+  if (!hull) return hull.error().within(where);
+  g.shape = *hull;
+  g.volume = mp->volume;
+  g.inertiaPerKg = mp->inertia / mp->mass;  // density 1: mass = volume
+  g.shapeOffset = Isometry3(Eigen::Translation3d(-mp->centroid));
+  g.objectInBody = g.shapeOffset;
+  return g;
+}
+
+Json vecJson(const Vec3& v) { return Json::array({v.x(), v.y(), v.z()}); }
+
+}  // namespace
+
+struct PhysicsEngine::Impl {
+  struct Body {
+    std::string object;
+    BodyId id;
+    bool dynamic = false;
+    Isometry3 objectInBody = Isometry3::Identity();
+    Vec3 start = Vec3::Zero();  // centre of mass at t = 0
+  };
+  PhysicsWorld world;
+  WorldState state;
+  bool sleep = false;
+  std::vector<Body> bodies;             // by body index
+  std::vector<std::uint32_t> moving;    // dynamic bodies, scene order
+  std::vector<int> touchedBody;         // per touched object: body index, or -1 (never moves)
+  std::vector<Isometry3> touchedPoses;  // published to the haptic loop
+  std::unique_ptr<ToolImpulseChannel> tools;
+  std::unique_ptr<HapticLocalModel> model;
+  std::vector<ToolImpulse> impulses;        // per touched object, this tick
+  std::vector<Vec3> toolForce, toolTorque;  // per body, applied over this step
+  std::unique_ptr<TripleBuffer<std::vector<Isometry3>>> renderPoses;
+  std::uint64_t steps = 0;
+  double lastDt = 0.0;
+
+  Isometry3 objectPose(std::uint32_t b) const {
+    Isometry3 body = Isometry3::Identity();
+    body.translate(state.position(bodies[b].id));
+    body.rotate(state.orientation(bodies[b].id));
+    return body * bodies[b].objectInBody;
+  }
+};
+
+PhysicsEngine::PhysicsEngine(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {
+  for (std::uint32_t b : impl_->moving) movingNames_.push_back(impl_->bodies[b].object);
+}
+PhysicsEngine::~PhysicsEngine() = default;
+
+HapticLocalModel* PhysicsEngine::hapticModel() noexcept { return impl_->model.get(); }
+ToolImpulseChannel* PhysicsEngine::toolImpulses() noexcept { return impl_->tools.get(); }
+
+Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& scene,
+                                                            const SceneResources& resources,
+                                                            std::span<const std::string> touched) {
+  const ScenePhysicsEngine& cfg = *scene.engines.physics;
+  auto m = std::make_unique<Impl>();
+  if (auto s = m->world.setGravity(cfg.gravity); !s) return s.error().within("engines/physics/gravity");
+  ContactSettings contact = m->world.contactSettings();
+  contact.sleep = cfg.sleep;
+  if (auto s = m->world.setContactSettings(contact); !s) return s.error().within("engines/physics");
+  m->sleep = cfg.sleep;
+  const std::string proxy = scene.engines.haptics ? scene.engines.haptics->proxyObject : std::string();
+
+  for (const SceneObject& o : scene.objects) {
+    if (o.name == proxy || (!o.dynamic && !o.collide)) continue;
+    const std::string where = "objects/" + o.name;
+    const SceneResource* res = scene.resource(o.mesh);
+    auto mesh = resources.mesh(o.mesh);
+    if (res == nullptr || !mesh)
+      return fail(ErrorCode::NotFound, "mesh \"" + o.mesh + "\" was not loaded", where);
+    auto g = res->type == SceneResource::Type::Shape ? primitiveGeometry(*res, o.scale, o.dynamic, where)
+                                                     : meshGeometry(*mesh, o.scale, o.dynamic, where);
+    if (!g) return g.error();
+    BodyDesc d;
+    d.name = o.name;
+    d.shape = g->shape;
+    d.shapeOffset = g->shapeOffset;
+    const Isometry3 body0 = o.pose.isometry() * g->objectInBody.inverse();
+    d.position = body0.translation();
+    d.orientation = Quat(body0.rotation());
+    if (o.dynamic) {
+      d.kind = BodyKind::Rigid;
+      d.mass = o.mass > 0.0 ? o.mass : o.density * g->volume;
+      d.inertia = g->inertiaPerKg * d.mass;
+      d.linearVelocity = o.velocity;
+      d.angularVelocity = o.angularVelocity;
+    } else {
+      d.kind = BodyKind::Static;
+    }
+    auto id = m->world.addBody(d);
+    if (!id) return id.error().within(where);
+    if (auto s = m->world.setMaterial(
+            *id, {.friction = o.friction, .restitution = o.restitution, .collides = o.collide});
+        !s)
+      return s.error().within(where + "/contact");
+    if (o.dynamic) m->moving.push_back(id->index);
+    m->bodies.push_back({o.name, *id, o.dynamic, g->objectInBody, d.position});
+  }
+
+  // The haptic side: touched objects that move get their poses from here
+  // and give their tool impulses back.
+  bool anyTouchedMoves = false;
+  for (const std::string& name : touched) {
+    int body = -1;
+    for (std::size_t b = 0; b < m->bodies.size(); ++b)
+      if (m->bodies[b].object == name && m->bodies[b].dynamic) body = static_cast<int>(b);
+    m->touchedBody.push_back(body);
+    const SceneObject* o = scene.object(name);
+    m->touchedPoses.push_back(o != nullptr ? o->pose.isometry() : Isometry3::Identity());
+    anyTouchedMoves = anyTouchedMoves || body >= 0;
+  }
+  if (anyTouchedMoves) {
+    m->tools = std::make_unique<ToolImpulseChannel>(touched.size());
+    m->model = std::make_unique<HapticLocalModel>(touched.size());
+    m->impulses.resize(touched.size());
+  }
+  m->toolForce.assign(m->bodies.size(), Vec3::Zero());
+  m->toolTorque.assign(m->bodies.size(), Vec3::Zero());
+  Impl* raw = m.get();
+  if (anyTouchedMoves) {
+    if (auto s = m->world.addUserForce("haptic tool",
+                                       [raw](const BodyStateView&, ForceOutput& out) {
+                                         for (std::size_t b = 0; b < raw->toolForce.size(); ++b) {
+                                           out.force[b] += raw->toolForce[b];
+                                           out.torque[b] += raw->toolTorque[b];
+                                         }
+                                       });
+        !s)
+      return s.error();
+  }
+  m->renderPoses = std::make_unique<TripleBuffer<std::vector<Isometry3>>>(
+      std::vector<Isometry3>(m->moving.size(), Isometry3::Identity()));
+  m->state = m->world.makeState();
+  return std::shared_ptr<PhysicsEngine>(new PhysicsEngine(std::move(m)));
+}
+
+bool PhysicsEngine::tick(const TickInfo& info) noexcept {
+  Impl& m = *impl_;
+  const double dt = info.dt();
+  if (m.tools) {
+    // The impulse each touched body received since the last step, as a
+    // constant force and torque (about its centre of mass) over this step.
+    m.tools->take(m.impulses);
+    std::fill(m.toolForce.begin(), m.toolForce.end(), Vec3::Zero());
+    std::fill(m.toolTorque.begin(), m.toolTorque.end(), Vec3::Zero());
+    for (std::size_t k = 0; k < m.touchedBody.size(); ++k) {
+      const int b = m.touchedBody[k];
+      if (b < 0) continue;
+      const ToolImpulse& j = m.impulses[k];
+      const BodyId id = m.bodies[static_cast<std::size_t>(b)].id;
+      m.toolForce[static_cast<std::size_t>(b)] += j.linear / dt;
+      m.toolTorque[static_cast<std::size_t>(b)] += (j.angular - m.state.position(id).cross(j.linear)) / dt;
+      if (m.sleep && m.state.asleep(id) && j.linear.squaredNorm() > 0.0)
+        (void)m.world.setBodyState(m.state, id, m.state.position(id), m.state.orientation(id),
+                                   m.state.linearVelocity(id), m.state.angularVelocity(id));
+    }
+  }
+  if (auto s = m.world.step(m.state, dt); !s) {
+    error_ = s.error().within("physics step " + std::to_string(m.steps));
+    return false;
+  }
+  ++m.steps;
+  m.lastDt = dt;
+  if (m.model) {
+    for (std::size_t k = 0; k < m.touchedBody.size(); ++k)
+      if (m.touchedBody[k] >= 0)
+        m.touchedPoses[k] = m.objectPose(static_cast<std::uint32_t>(m.touchedBody[k]));
+    m.model->publish(m.touchedPoses, info.scheduled_ns);
+  }
+  std::vector<Isometry3>& poses = m.renderPoses->writeBuffer();  // sized at build: no allocation
+  for (std::size_t i = 0; i < m.moving.size(); ++i) poses[i] = m.objectPose(m.moving[i]);
+  m.renderPoses->publish();
+  return true;
+}
+
+bool PhysicsEngine::latestPoses(std::vector<Isometry3>& out) {
+  if (!impl_->renderPoses->update()) return false;
+  out = impl_->renderPoses->readBuffer();
+  return true;
+}
+
+nlohmann::json PhysicsEngine::summary() const {
+  const Impl& m = *impl_;
+  // Contact forces of the last step on each body: the solver's accumulated
+  // impulses over the step length (the normal pushes body B along +n).
+  std::vector<Vec3> contactForce(m.bodies.size(), Vec3::Zero());
+  if (m.lastDt > 0.0)
+    for (const ContactConstraint& c : m.state.contacts()) {
+      const Vec3 onB = (c.normalImpulse * c.point.normal + c.frictionImpulse) / m.lastDt;
+      if (c.bodyB >= 0 && static_cast<std::size_t>(c.bodyB) < contactForce.size())
+        contactForce[c.bodyB] += onB;
+      if (c.bodyA >= 0 && static_cast<std::size_t>(c.bodyA) < contactForce.size())
+        contactForce[c.bodyA] -= onB;
+    }
+  Json bodies = Json::array();
+  for (std::size_t b = 0; b < m.bodies.size(); ++b) {
+    const Impl::Body& body = m.bodies[b];
+    if (!body.dynamic) continue;
+    const Quat& q = m.state.orientation(body.id);
+    Json j = {{"name", body.object},
+              {"mass_kg", m.world.bodies()[body.id.index].mass},
+              {"position_m", vecJson(m.state.position(body.id))},
+              {"displacement_m", (m.state.position(body.id) - body.start).norm()},
+              {"orientation_wxyz", Json::array({q.w(), q.x(), q.y(), q.z()})},
+              {"velocity_m_s", vecJson(m.state.linearVelocity(body.id))},
+              {"angular_velocity_rad_s", vecJson(m.state.angularVelocity(body.id))},
+              {"asleep", m.state.asleep(body.id)},
+              {"contact_force_N", vecJson(contactForce[b])},
+              {"tool_force_N", vecJson(m.toolForce[b])}};
+    for (std::size_t k = 0; k < m.touchedBody.size(); ++k)
+      if (m.touchedBody[k] == static_cast<int>(b) && m.tools)
+        j["tool_impulse_Ns"] = vecJson(m.tools->taken(k).linear);
+    bodies.push_back(std::move(j));
+  }
+  return {{"steps", m.steps},
+          {"bodies", std::move(bodies)},
+          {"static_bodies", m.bodies.size() - m.moving.size()},
+          {"contacts", m.state.contacts().size()}};
+}
+
+}  // namespace dm

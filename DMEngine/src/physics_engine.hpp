@@ -1,0 +1,77 @@
+// physics_engine.hpp (private) — the physics engine of a scene run: the
+// scene's objects as rigid bodies of one dm::PhysicsWorld (dynamic objects
+// move, the others are static colliders), stepped at the engine's rate, with
+// the haptic tool's impulses applied and the new poses handed on.
+//
+// Data flow per physics tick (docs/architecture.md, "Scene runtime"):
+//   haptics → ToolImpulseChannel → the impulse the tool gave each touched
+//   body since the last tick, applied as a force and torque over the step;
+//   step; body poses → HapticLocalModel (the god-object's objects move) and
+//   → a TripleBuffer the render engine reads (the drawn objects move).
+// Each channel has one writer and one reader thread, so the engine runs on
+// real-time threads and in lockstep alike; tick() allocates nothing.
+#pragma once
+
+#include <dm/core/result.hpp>
+#include <dm/core/rt_loop.hpp>
+#include <dm/core/triple_buffer.hpp>
+#include <dm/core/types.hpp>
+#include <dm/engine/engine.hpp>
+
+#include <nlohmann/json.hpp>
+
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace dm {
+
+struct SceneDesc;
+struct SceneResources;
+class HapticLocalModel;
+class ToolImpulseChannel;
+
+/// The physics engine; build() it before the haptics engine, which takes
+/// its hapticModel() and toolImpulses().
+class PhysicsEngine final : public Engine {
+ public:
+  /// Bodies from `scene` (which has engines.physics): every object with
+  /// "dynamic" a rigid body, every other object that collides a static one,
+  /// the haptics proxy object none. `touched` are the haptics engine's
+  /// objects in its order (empty without haptics). Fails naming the object
+  /// (a mesh that is not closed, a bad mass) before anything runs.
+  static Result<std::shared_ptr<PhysicsEngine>> build(const SceneDesc& scene, const SceneResources& resources,
+                                                      std::span<const std::string> touched);
+  ~PhysicsEngine() override;
+
+  std::string_view name() const noexcept override { return "physics"; }
+  bool tick(const TickInfo& info) noexcept override;
+  Error error() const override { return error_; }
+
+  /// Poses of the touched objects for the haptic loop; nullptr when none of
+  /// them moves.
+  HapticLocalModel* hapticModel() noexcept;
+  /// Where the haptics engine puts the tool's impulses, one slot per touched
+  /// object; nullptr when none of them moves.
+  ToolImpulseChannel* toolImpulses() noexcept;
+
+  /// The objects physics moves (dynamic ones), in scene order.
+  const std::vector<std::string>& movingObjects() const noexcept { return movingNames_; }
+  /// Render thread (one reader): the newest poses of movingObjects()
+  /// (object frame → world) when a step finished since the last call.
+  bool latestPoses(std::vector<Isometry3>& out);
+
+  /// Control thread, after the run: each body's final state, the forces on
+  /// it in the last step (contacts, tool) and the step counters.
+  nlohmann::json summary() const;
+
+ private:
+  struct Impl;
+  explicit PhysicsEngine(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+  std::vector<std::string> movingNames_;
+  Error error_;
+};
+
+}  // namespace dm
