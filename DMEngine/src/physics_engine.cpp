@@ -94,10 +94,15 @@ Result<BodyGeometry> primitiveGeometry(const SceneResource& r, double scale, boo
 // Meshes (files, isosurfaces): a static object collides as its triangles;
 // a dynamic one as their convex hull, with the mass distribution of the
 // closed mesh itself.
-Result<BodyGeometry> meshGeometry(const Mesh& source, double scale, bool dynamic, const std::string& where) {
-  auto mesh = std::make_shared<Mesh>(source);
-  if (scale != 1.0)
-    for (Vec3& p : mesh->positions) p *= scale;
+// The resource's mesh is shared, not copied, at scale 1 (a skin isosurface
+// holds a million triangles).
+Result<BodyGeometry> meshGeometry(std::shared_ptr<const Mesh> mesh, double scale, bool dynamic,
+                                  const std::string& where) {
+  if (scale != 1.0) {
+    auto scaled = std::make_shared<Mesh>(*mesh);
+    for (Vec3& p : scaled->positions) p *= scale;
+    mesh = std::move(scaled);
+  }
   BodyGeometry g;
   if (!dynamic) {
     auto tm = TriangleMesh::create(std::move(mesh));
@@ -182,7 +187,7 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
     if (res == nullptr || !mesh)
       return fail(ErrorCode::NotFound, "mesh \"" + o.mesh + "\" was not loaded", where);
     auto g = res->type == SceneResource::Type::Shape ? primitiveGeometry(*res, o.scale, o.dynamic, where)
-                                                     : meshGeometry(*mesh, o.scale, o.dynamic, where);
+                                                     : meshGeometry(mesh, o.scale, o.dynamic, where);
     if (!g) return g.error();
     BodyDesc d;
     d.name = o.name;

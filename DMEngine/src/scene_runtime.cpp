@@ -45,6 +45,15 @@ using SteadyClock = std::chrono::steady_clock;
 // behind) instead of dropping a period: the render rate holds its average
 // through one slow frame. Haptics never catch up.
 constexpr int kRenderCatchUp = 2;
+// Physics makes up a late step the same way: the impulses it applies are
+// totals over time, and a skipped step would hold the bodies still.
+constexpr int kPhysicsCatchUp = 2;
+
+Status checkDuration(const SceneRunOptions& options) {
+  if (options.duration > 0 && std::isfinite(options.duration)) return ok();
+  return fail(ErrorCode::InvalidArgument, formatString("duration %g s", options.duration), "--duration",
+              "give a positive number of seconds");
+}
 
 // The haptic engine: device servo, god-object, safety — one HapticLoop tick
 // per engine tick; every tick's sample goes to the monitor through an SPSC
@@ -66,8 +75,10 @@ class HapticsEngine final : public Engine {
       // Newton's third law: what pushes the hand pushes the object back,
       // where the proxy touches it, for as long as the command holds.
       const GodObjectContact& c = renderer->contact();
-      if (c.active) tools->add(c.object, -p.response.force, c.point, info.dt());
-      tools->publish();
+      if (c.active) {
+        tools->add(c.object, -p.response.force, c.point, info.dt());
+        tools->publish();
+      }
     }
     if (!ring.tryPush(p)) dropped.fetch_add(1, std::memory_order_relaxed);
     return true;
@@ -375,7 +386,7 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
   }
   if (physics)
     if (auto s = master.addEngine(
-            physics, {.rateHz = scene.engines.physics->rateHz, .priority = 60, .catchUp = kRenderCatchUp});
+            physics, {.rateHz = scene.engines.physics->rateHz, .priority = 60, .catchUp = kPhysicsCatchUp});
         !s)
       return s.error();
   const double hapticRate = scene.engines.haptics ? scene.engines.haptics->rateHz : 1000.0;
@@ -459,9 +470,7 @@ Status SceneRuntime::prepare(const SceneRunOptions& options) {
   Impl& im = *impl_;
   if (im.prepared)
     return fail(ErrorCode::InvalidArgument, "a SceneRuntime is prepared once", "SceneRuntime::prepare");
-  if (!(options.duration > 0) || !std::isfinite(options.duration))
-    return fail(ErrorCode::InvalidArgument, formatString("duration %g s", options.duration), "--duration",
-                "give a positive number of seconds");
+  if (auto s = checkDuration(options); !s) return s.error();
   const SceneDesc& scene = im.scene;
   const std::filesystem::path out =
       options.outDir.empty() ? std::filesystem::path(scene.outputs.directory) : options.outDir;
@@ -500,9 +509,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
       (!options.outDir.empty() && std::filesystem::path(options.outDir) != out))
     return fail(ErrorCode::InvalidArgument, "run() was given another mode or output folder than prepare()",
                 "SceneRuntime::run", "pass the same options to both");
-  if (!(options.duration > 0) || !std::isfinite(options.duration))
-    return fail(ErrorCode::InvalidArgument, formatString("duration %g s", options.duration), "--duration",
-                "give a positive number of seconds");
+  if (auto s = checkDuration(options); !s) return s.error();
 
   if (im.haptics) im.haptics->renderer->reset(im.haptics->loop->config().deviceToWorld);
   if (auto s = im.master.start(options.mode); !s) return s.error();
