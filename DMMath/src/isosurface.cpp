@@ -44,6 +44,18 @@ using detail::kCellEdges;
 using detail::kKindStep;
 using detail::kSliceKinds;
 
+/// Vertices stay this fraction of an edge away from its end nodes. A voxel
+/// equal to iso (integer data at an integer iso, which is what people type)
+/// would otherwise put the vertex of every edge from it to an inside
+/// neighbour on that one node: distinct indices at one position, zero-area
+/// triangles, and a mesh that falls apart into non-manifold edges as soon as
+/// anything merges vertices by position (an STL file, a mesh tool). Points
+/// strictly inside distinct edges are distinct, and three points on the
+/// boundary of a cube (or of a tetrahedron) are never collinear unless they
+/// lie on one edge, so every triangle keeps a positive area. The surface
+/// moves by at most 1/256 of a voxel, far below marching cubes' own error.
+constexpr double kEdgeMargin = 1.0 / 256.0;
+
 constexpr std::uint64_t lowBits(int n) {
   return n >= 64 ? ~std::uint64_t{0} : n <= 0 ? 0 : (std::uint64_t{1} << n) - 1;
 }
@@ -523,7 +535,7 @@ class Extractor {
       pb = pa + (sx * sx_ + sy * sy_ + sz * sz_);
       const double va = static_cast<double>(*pa), vb = static_cast<double>(*pb);
       const double r = (iso_ - va) / (vb - va);
-      if (r >= 0 && r <= 1) t = r;  // false for NaN/Inf voxel values
+      if (r >= 0 && r <= 1) t = std::clamp(r, kEdgeMargin, 1.0 - kEdgeMargin);  // false for NaN/Inf values
     }
     const double p[3] = {ax + t * sx, ay + t * sy, az + t * sz};
     double w[3];

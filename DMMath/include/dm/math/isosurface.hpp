@@ -11,7 +11,8 @@
 //  - Positions are world coordinates in metres: the volume's index-to-world
 //    affine applied to the interpolated point on the grid edge.
 //  - Each crossed grid edge gives exactly one vertex, shared by all the cells
-//    around it, so there are no duplicate vertices. Where the isosurface is
+//    around it, strictly inside the edge, so there are no duplicate vertices,
+//    by index or by position, and no zero-area triangles. Where the isosurface is
 //    closed inside the grid the mesh is a closed, consistently oriented
 //    2-manifold (ambiguous faces are resolved the same way from both cells;
 //    see DMMath/src/mc_tables.cpp). Where the inside reaches the grid border
@@ -60,10 +61,11 @@ struct IsosurfaceOptions {
 /// the world by the inverse transpose of the affine and negated. Where the
 /// gradient vanishes or is not finite the normal falls back to the edge
 /// direction from the inside voxel to the outside one. Voxel values that are
-/// NaN count as outside. A voxel exactly at iso is outside and the edges from
-/// it to inside voxels get their vertex on it: such vertices coincide (zero-area
-/// triangles) but keep distinct indices, so the connectivity stays manifold;
-/// with integer voxels an iso of n + 0.5 avoids them.
+/// NaN count as outside. A vertex stays 1/256 of its edge away from both end
+/// voxels, so no two vertices share a position and no triangle has zero area,
+/// even where voxels equal iso (integer data at an integer iso): the mesh stays
+/// a manifold when something merges vertices by position (an STL file, a mesh
+/// tool), and the surface moves by at most 1/256 of a voxel.
 ///
 /// Runs on `options.threads` threads over z-slabs: O(voxels) to classify, then
 /// O(active cells + triangles). Memory: one bit per voxel plus a few index
