@@ -380,8 +380,7 @@ class SceneParser {
       auto p = FileSystem::global().resolve(source);
       if (!p) {
         // FileSystem has no query for its mounts: its error names an unknown one.
-        if (p.error().what.rfind("unknown mount", 0) == 0)
-          r.addError(p.error().what, key, p.error().hint);
+        if (p.error().what.rfind("unknown mount", 0) == 0) r.addError(p.error().what, key, p.error().hint);
         return {};
       }
       named = p->string();
@@ -469,11 +468,18 @@ class SceneParser {
           readSource(r, res);
           break;
         case Type::Isosurface:
-          r.knownKeys({"type", "volume", "level", "largest_component", "smooth", "downsample"});
+          r.knownKeys({"type", "volume", "level", "largest_component", "smooth", "smooth_max_displacement",
+                       "downsample"});
           res.volume = r.string("volume");
           res.level = r.number("level");
           res.largestComponent = r.boolean("largest_component", false);
           res.smooth = static_cast<int>(r.integer("smooth", {.min = 0, .max = 100}, 0));
+          if (v2Key(r, "smooth_max_displacement")) {
+            res.smoothMaxDisplacement = readPositive(r, "smooth_max_displacement", {}, 0.1);
+            if (!r.has("smooth") || res.smooth == 0)
+              r.addError("\"smooth_max_displacement\" bounds smoothing, but \"smooth\" is 0",
+                         "smooth_max_displacement", "set \"smooth\": <iterations>, or remove the bound");
+          }
           res.downsample = static_cast<int>(r.integer("downsample", {.min = 1, .max = 8}, 1));
           isosurfaces.emplace_back(scene_.resources.size(), r);
           break;
@@ -1289,6 +1295,8 @@ Json toJson(const SceneDesc& scene) {
         o["level"] = r.level;
         o["largest_component"] = r.largestComponent;
         o["smooth"] = r.smooth;
+        if (r.smoothMaxDisplacement < std::numeric_limits<double>::infinity())
+          o["smooth_max_displacement"] = r.smoothMaxDisplacement;
         o["downsample"] = r.downsample;
         break;
       case Type::Shape:

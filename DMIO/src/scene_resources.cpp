@@ -66,7 +66,8 @@ Result<Mesh> makeIsosurface(const SceneResource& r, const Volume& full) {
                 "pick a level between the volume's minimum and maximum (dmtool info shows them)");
   if (r.largestComponent) *mesh = keepLargestComponent(*mesh);
   if (r.smooth > 0)
-    if (auto s = smoothMesh(*mesh, r.smooth); !s) return s.error().within(where(r) + "/smooth");
+    if (auto s = smoothMesh(*mesh, {.iterations = r.smooth, .maxDisplacement = r.smoothMaxDisplacement}); !s)
+      return s.error().within(where(r) + "/smooth");
   mesh->name = r.name;
   return mesh;
 }

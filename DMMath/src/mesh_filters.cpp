@@ -130,6 +130,12 @@ Mesh keepLargestComponent(const Mesh& mesh, std::size_t* removedComponents) {
 }
 
 Status smoothMesh(Mesh& mesh, int iterations, double lambda, double mu) {
+  return smoothMesh(mesh, {.iterations = iterations, .lambda = lambda, .mu = mu});
+}
+
+Status smoothMesh(Mesh& mesh, const SmoothOptions& options) {
+  const int iterations = options.iterations;
+  const double lambda = options.lambda, mu = options.mu, limit = options.maxDisplacement;
   const std::string where = mesh.name.empty() ? "smoothMesh" : "smoothMesh: mesh '" + mesh.name + "'";
   if (iterations < 0 || iterations > 1000)
     return fail(ErrorCode::InvalidArgument, formatString("iterations is %d", iterations), where,
@@ -140,6 +146,9 @@ Status smoothMesh(Mesh& mesh, int iterations, double lambda, double mu) {
   if (!std::isfinite(mu) || mu >= -lambda)
     return fail(ErrorCode::InvalidArgument, formatString("mu is %g with lambda %g", mu, lambda), where,
                 "mu must be below -lambda (Taubin's inflation step), e.g. lambda 0.5, mu -0.53");
+  if (!(limit > 0))
+    return fail(ErrorCode::InvalidArgument, formatString("maxDisplacement is %g", limit), where,
+                "use a distance > 0 in metres (e.g. half a voxel), or infinity for no bound");
   if (auto s = mesh.validate(); !s) return s.error().within("smoothMesh");
 
   const std::size_t n = mesh.positions.size();
@@ -184,9 +193,17 @@ Status smoothMesh(Mesh& mesh, int iterations, double lambda, double mu) {
   ring.items.resize(write);
 
   std::vector<Vec3> scratch(n);
+  const bool bounded = limit < std::numeric_limits<double>::infinity();
+  const std::vector<Vec3> start = bounded ? mesh.positions : std::vector<Vec3>{};
   for (int it = 0; it < iterations; ++it) {
     umbrellaStep(ring, fixed, mesh.positions, scratch, lambda);
     umbrellaStep(ring, fixed, scratch, mesh.positions, mu);
+    if (!bounded) continue;
+    for (std::size_t v = 0; v < n; ++v) {
+      const Vec3 d = mesh.positions[v] - start[v];
+      const double len = d.norm();
+      if (len > limit) mesh.positions[v] = start[v] + d * (limit / len);
+    }
   }
   mesh.computeNormals();
   return ok();

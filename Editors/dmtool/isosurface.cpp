@@ -1,12 +1,19 @@
 // dmtool isosurface VOLUME --iso V -o MESH [--method mc|mt] [--close-borders]
-// [--json]: extracts the isosurface and reports its size and topology.
+// [--largest-component] [--smooth N [--smooth-max-displacement M]] [--json]:
+// extracts the isosurface, optionally keeps its largest piece and smooths the
+// voxel staircase away (Taubin, each vertex within M metres of where it
+// was), and reports its size, topology and how far smoothing moved it.
 #include <dm/io/mesh_io.hpp>
 #include <dm/io/volume_io.hpp>
 #include <dm/math/isosurface.hpp>
+#include <dm/math/mesh_filters.hpp>
 
+#include <algorithm>
 #include <iostream>
+#include <limits>
 #include <map>
 #include <memory>
+#include <vector>
 
 #include "common.hpp"
 #include "progress_bar.hpp"
@@ -20,8 +27,27 @@ struct IsoOptions {
   double iso = 0.0;
   std::string method = "mc";
   bool closeBorders = false;
+  bool largestComponent = false;
+  int smooth = 0;
+  double smoothMaxDisplacement = std::numeric_limits<double>::infinity();
   bool json = false;
 };
+
+/// How far smoothing moved the vertices (m).
+struct SmoothReport {
+  double meanDisplacement = 0, maxDisplacement = 0;
+};
+
+SmoothReport displacement(const std::vector<dm::Vec3>& before, const std::vector<dm::Vec3>& after) {
+  SmoothReport r;
+  for (std::size_t v = 0; v < before.size(); ++v) {
+    const double d = (after[v] - before[v]).norm();
+    r.meanDisplacement += d;
+    r.maxDisplacement = std::max(r.maxDisplacement, d);
+  }
+  if (!before.empty()) r.meanDisplacement /= static_cast<double>(before.size());
+  return r;
+}
 
 int runIsosurface(const IsoOptions& o) {
   const std::filesystem::path in = resolveInput(o.volume);
@@ -43,6 +69,16 @@ int runIsosurface(const IsoOptions& o) {
         in.string(),
         "choose --iso inside the value range [" + std::to_string(lo) + ", " + std::to_string(hi) + "]"));
   }
+  std::size_t dropped = 0;
+  if (o.largestComponent) *mesh = dm::keepLargestComponent(*mesh, &dropped);
+  SmoothReport moved;
+  if (o.smooth > 0) {
+    const std::vector<dm::Vec3> before = mesh->positions;
+    if (auto s = dm::smoothMesh(*mesh, {.iterations = o.smooth, .maxDisplacement = o.smoothMaxDisplacement});
+        !s)
+      return printError(s.error());
+    moved = displacement(before, mesh->positions);
+  }
   if (auto s = dm::writeMesh(*mesh, o.output); !s) return printError(s.error());
   MeshSummary s = summarize(*mesh);
   s.name = std::filesystem::path(o.output).filename().string();
@@ -51,9 +87,20 @@ int runIsosurface(const IsoOptions& o) {
     j["file"] = o.output;
     j["iso"] = o.iso;
     j["method"] = o.method;
+    if (o.largestComponent) j["components_dropped"] = dropped;
+    if (o.smooth > 0)
+      j["smooth"] = {{"iterations", o.smooth},
+                     {"mean_displacement_m", moved.meanDisplacement},
+                     {"max_displacement_m", moved.maxDisplacement}};
     printJson(j);
   } else {
-    std::cout << o.output << ": isosurface " << o.iso << " of " << in.string() << '\n' << toText(s);
+    std::cout << o.output << ": isosurface " << o.iso << " of " << in.string() << '\n';
+    if (o.largestComponent) std::cout << "  largest component kept, " << dropped << " smaller ones dropped\n";
+    if (o.smooth > 0)
+      std::cout << "  smoothed (" << o.smooth << " Taubin iterations): vertices moved "
+                << 1e3 * moved.meanDisplacement << " mm on average, " << 1e3 * moved.maxDisplacement
+                << " mm at most\n";
+    std::cout << toText(s);
   }
   return kExitOk;
 }
@@ -72,8 +119,22 @@ Command addIsosurfaceCommand(CLI::App& parent) {
   app->add_option("--method", o->method, "mc: marching cubes, mt: marching tetrahedra")
       ->check(CLI::IsMember({"mc", "mt"}));
   app->add_flag("--close-borders", o->closeBorders, "close the surface where it leaves the grid");
+  app->add_flag("--largest-component", o->largestComponent, "keep only the largest connected piece");
+  app->add_option("--smooth", o->smooth, "Taubin smoothing iterations (removes the voxel staircase), 0..100")
+      ->check(CLI::Range(0, 100));
+  app->add_option("--smooth-max-displacement", o->smoothMaxDisplacement,
+                  "while smoothing, move no vertex further than this (metres, e.g. half a voxel)")
+      ->check(CLI::PositiveNumber & finiteNumber());
   app->add_flag("--json", o->json, "print one JSON object on stdout");
-  return {app, [o] { return runIsosurface(*o); }};
+  return {app, [o, app] {
+            if (app->count("--smooth-max-displacement") > 0 && o->smooth == 0) {
+              printError(dm::fail(dm::ErrorCode::InvalidArgument,
+                                  "--smooth-max-displacement bounds smoothing, but --smooth is 0",
+                                  "dmtool isosurface", "add --smooth N (e.g. 10)"));
+              return kExitUsage;
+            }
+            return runIsosurface(*o);
+          }};
 }
 
 }  // namespace dmtool

@@ -109,6 +109,10 @@ TEST(SceneFile, BundledHeadProbeSceneHasTheValuesOfTheMainJob) {
   EXPECT_EQ(skin->volume, "head");
   EXPECT_EQ(skin->level, 40.0);
   EXPECT_TRUE(skin->largestComponent);
+  // The voxel staircase smoothed away within half a voxel: it excited the
+  // simulated hand's 15.5 Hz resonance (docs/haptics-accuracy.md).
+  EXPECT_EQ(skin->smooth, 20);
+  EXPECT_EQ(skin->smoothMaxDisplacement, 0.0005);
   const dm::SceneResource* tool = s->resource("tool");
   ASSERT_NE(tool, nullptr);
   EXPECT_EQ(tool->shape, dm::SceneResource::Shape::Sphere);
@@ -509,6 +513,39 @@ TEST(SceneFile, RigidBodyKeysAreCheckedAndNeedVersionTwo) {
   EXPECT_TRUE(at(p, "/objects/1/mesh"));
 }
 
+TEST(SceneFile, SmoothingBoundIsAVersionTwoKeyThatNeedsSmoothing) {
+  Json j = baseScene();
+  j["resources"]["skin"]["smooth_max_displacement"] = 0.0005;
+  auto p = problemsOf(j);
+  ASSERT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);  // a v2 key in v1, read no further
+  const dm::Error* e = at(p, "/resources/skin/smooth_max_displacement");
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->hint, "set \"version\": 2");
+
+  j["version"] = 2;
+  p = problemsOf(j);
+  ASSERT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);
+  e = at(p, "/resources/skin/smooth_max_displacement");
+  ASSERT_TRUE(e);
+  EXPECT_NE(e->what.find("\"smooth\" is 0"), std::string::npos) << e->what;
+
+  j["resources"]["skin"]["smooth"] = 10;
+  auto s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  EXPECT_EQ(s->resource("skin")->smoothMaxDisplacement, 0.0005);
+  EXPECT_EQ(s->resource("skin")->smooth, 10);
+  EXPECT_EQ(dm::toJson(*s)["resources"]["skin"]["smooth_max_displacement"], 0.0005);
+  // Unbounded unless given, and then not written.
+  EXPECT_FALSE(dm::toJson(*s)["resources"]["head"].contains("smooth_max_displacement"));
+
+  for (const Json& bad : {Json(0.0), Json(-1e-3), Json(0.5), Json("half a voxel")}) {
+    j["resources"]["skin"]["smooth_max_displacement"] = bad;
+    p = problemsOf(j);
+    ASSERT_EQ(p.size(), 1u) << bad << dm::formatSceneErrors(p);
+    EXPECT_TRUE(at(p, "/resources/skin/smooth_max_displacement")) << bad;
+  }
+}
+
 TEST(SceneFile, NotJsonNamesLineAndColumn) {
   std::vector<dm::Error> problems;
   auto s = dm::parseScene("{\n  \"format\": \"dmplatform-scene\",\n  \"version\" 1\n}", "scene.json", "/",
@@ -606,7 +643,7 @@ Json fullScene() {
       "liver": {"type": "mesh", "source": "meshes/liver.stl", "unit": "mm", "scale": 1.5},
       "ct": {"type": "volume", "source": "/data/scenes/ct/ct.nii.gz"},
       "iso": {"type": "isosurface", "volume": "ct", "level": 300.5, "largest_component": true, "smooth": 4,
-              "downsample": 3},
+              "smooth_max_displacement": 0.0005, "downsample": 3},
       "albedo": {"type": "image", "source": "textures/albedo.png"},
       "normals": {"type": "image", "source": "textures/normals.png"},
       "relief": {"type": "image", "source": "textures/relief.png"}
@@ -739,7 +776,8 @@ TEST(SceneFile, DeviceFilesResolveLikeSourcesAndStayConfined) {
   const dm::SceneDevice& hand = *s->device("hand");
   EXPECT_EQ(hand.config["file"], "paths/push.csv");
   const auto params = dm::deviceParams(hand);
-  const auto file = std::find_if(params.begin(), params.end(), [](const auto& p) { return p.first == "file"; });
+  const auto file =
+      std::find_if(params.begin(), params.end(), [](const auto& p) { return p.first == "file"; });
   ASSERT_NE(file, params.end());
   EXPECT_EQ(file->second, "/data/scenes/paths/push.csv");
   EXPECT_EQ(dm::parseScene(dm::toJson(*s).dump(), "scene.json", "/data/scenes").value(), *s);

@@ -1,12 +1,15 @@
 // keepLargestComponent and Taubin smoothing against known pieces and shapes.
+#include <dm/math/isosurface.hpp>
 #include <dm/math/mesh_filters.hpp>
 #include <dm/math/mesh_topology.hpp>
 #include <dm/math/primitives.hpp>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <random>
 
 namespace dm {
@@ -161,6 +164,59 @@ TEST(MeshFilters, TaubinKeepsTheRadiusOverManyIterations) {
   EXPECT_LT(change, 0.01);
 }
 
+/// The marching-cubes surface of a voxelised ball (voxels 1 inside radius R,
+/// 0 outside, 1 mm voxels, iso 0.5): a sphere carrying the voxel staircase,
+/// centred at the origin.
+Mesh staircaseBall(double R) {
+  const int n = static_cast<int>(2 * R) + 6;
+  Affine3 a = Affine3::Identity();
+  a.linear() = 1e-3 * Mat3::Identity();
+  a.translation() = Vec3::Constant(-1e-3 * (n - 1) / 2.0);
+  auto v = Volume::create({n, n, n}, VoxelType::U8, a);
+  EXPECT_TRUE(v);
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) v->setValue(i, j, k, (a * Vec3(i, j, k)).norm() < R * 1e-3 ? 1 : 0);
+  auto m = extractIsosurface(*v, {.iso = 0.5, .computeNormals = false});
+  EXPECT_TRUE(m);
+  return m ? std::move(*m) : Mesh{};
+}
+
+TEST(MeshFilters, BoundedTaubinRemovesTheStaircaseWithinItsDisplacementBound) {
+  // A 12-voxel ball's staircase is a radial error of a few tenths of a voxel.
+  // Smoothing (20 iterations) with a bound of a quarter voxel: no vertex
+  // moves further (the
+  // vertices of the raw surface lie on the isosurface, so neither does the
+  // smoothed surface), yet the staircase's spread of radii shrinks, and the
+  // ball keeps its size. Unbounded, the same smoothing moves some vertices
+  // further: the bound is what holds them.
+  const double R = 12e-3, bound = 0.25e-3;
+  const Mesh raw = staircaseBall(12);
+  ASSERT_GT(raw.vertexCount(), 1000u);
+  const RadialStats before = radialStats(raw);
+  Mesh bounded = raw, unbounded = raw;
+  ASSERT_TRUE(smoothMesh(bounded, {.iterations = 20, .maxDisplacement = bound}));
+  ASSERT_TRUE(smoothMesh(unbounded, {.iterations = 20}));
+  const auto largestMove = [&](const Mesh& m) {
+    double d = 0;
+    for (std::size_t v = 0; v < m.vertexCount(); ++v)
+      d = std::max(d, (m.positions[v] - raw.positions[v]).norm());
+    return d;
+  };
+  EXPECT_LE(largestMove(bounded), bound * (1 + 1e-12));
+  EXPECT_GT(largestMove(unbounded), 1.2 * bound) << largestMove(unbounded);
+  const RadialStats after = radialStats(bounded);
+  std::printf(
+      "staircase ball R = 12 voxels: radial rms about the mean %.3f -> %.3f voxel (bounded), mean %.3f -> "
+      "%.3f\n",
+      1e3 * before.rms, 1e3 * after.rms, 1e3 * before.mean, 1e3 * after.mean);
+  EXPECT_LT(after.rms, 0.7 * before.rms);  // 0.207 -> 0.130 voxel when written
+  EXPECT_NEAR(after.mean, before.mean, 0.05e-3);
+  EXPECT_NEAR(before.mean, R, 0.25e-3);
+  const MeshTopology t = analyzeTopology(bounded);
+  EXPECT_TRUE(t.isClosed && t.isManifold && t.isOrientedConsistently);
+}
+
 TEST(MeshFilters, BoundaryVerticesOfAPlaneStayExactlyPut) {
   Mesh m = makePlane(0.5, 0.5, 12);
   std::mt19937 rng(3);
@@ -222,6 +278,9 @@ TEST(MeshFilters, SmoothingRejectsBadParametersAndLeavesTheMesh) {
   expectRejected(smoothMesh(m, 5, 0.5, 0.0));   // plain Laplacian is not Taubin
   expectRejected(smoothMesh(m, 5, 0.5, -0.5));  // mu must be strictly below -lambda
   expectRejected(smoothMesh(m, 5, 0.5, -INFINITY));
+  expectRejected(smoothMesh(m, {.iterations = 5, .maxDisplacement = 0.0}));
+  expectRejected(smoothMesh(m, {.iterations = 5, .maxDisplacement = -1e-3}));
+  expectRejected(smoothMesh(m, {.iterations = 5, .maxDisplacement = std::nan("")}));
   Mesh broken = original;
   broken.triangles.push_back({0, 1, 9999});
   const Status s = smoothMesh(broken, 5);

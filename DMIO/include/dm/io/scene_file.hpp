@@ -35,6 +35,7 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <limits>
 #include <map>
 #include <optional>
 #include <string>
@@ -69,7 +70,10 @@ struct SceneResource {
   double level = 0.0;             ///< Isosurface: iso value, in the volume's value units
   bool largestComponent = false;  ///< Isosurface: keep only the largest connected component
   int smooth = 0;                 ///< Isosurface: smoothing iterations, 0..100
-  int downsample = 1;             ///< Isosurface: voxels averaged per axis before extraction, 1..8
+  /// Isosurface: farthest a vertex may move while smoothing, m (v2,
+  /// "smooth_max_displacement"); infinity: unbounded.
+  double smoothMaxDisplacement = std::numeric_limits<double>::infinity();
+  int downsample = 1;  ///< Isosurface: voxels averaged per axis before extraction, 1..8
 
   Shape shape = Shape::Sphere;      ///< Shape: which one, centred at its origin, axis +z
   double radius = 0.0;              ///< Sphere, capsule, cylinder: m, > 0
@@ -114,16 +118,16 @@ struct SceneMaterial {
 /// A mesh placed in the world.
 struct SceneObject {
   std::string name;
-  std::string mesh;      ///< a Mesh, Isosurface or Shape resource (touched, simulated, drawn)
+  std::string mesh;        ///< a Mesh, Isosurface or Shape resource (touched, simulated, drawn)
   std::string renderMesh;  ///< drawn instead of `mesh` when set (e.g. a coarser skin), or empty
-  std::string material;  ///< a material name, or empty for the renderer's default
-  Pose pose;             ///< object → world; the quaternion is unit within 1e-9
-  double scale = 1.0;    ///< uniform, > 0
+  std::string material;    ///< a material name, or empty for the renderer's default
+  Pose pose;               ///< object → world; the quaternion is unit within 1e-9
+  double scale = 1.0;      ///< uniform, > 0
   bool visible = true;
-  bool haptic = false;   ///< touchable by haptic renderers
-  bool dynamic = false;  ///< a rigid body moved by the physics engine
-  double mass = 0.0;     ///< kg; dynamic objects give this or `density`; 0 when not given
-  double density = 0.0;  ///< kg/m³ (v2): mass from the shape's volume; 0 when not given
+  bool haptic = false;                  ///< touchable by haptic renderers
+  bool dynamic = false;                 ///< a rigid body moved by the physics engine
+  double mass = 0.0;                    ///< kg; dynamic objects give this or `density`; 0 when not given
+  double density = 0.0;                 ///< kg/m³ (v2): mass from the shape's volume; 0 when not given
   Vec3 velocity = Vec3::Zero();         ///< m/s, world, initial (v2; dynamic objects)
   Vec3 angularVelocity = Vec3::Zero();  ///< rad/s, world, initial (v2; dynamic objects)
   /// Takes part in rigid contact when the physics engine runs (v2). The

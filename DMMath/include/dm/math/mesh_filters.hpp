@@ -17,6 +17,7 @@
 #include <dm/core/result.hpp>
 
 #include <cstddef>
+#include <limits>
 
 namespace dm {
 
@@ -38,11 +39,26 @@ namespace dm {
 /// @endcode
 Mesh keepLargestComponent(const Mesh& mesh, std::size_t* removedComponents = nullptr);
 
+/// Options of smoothMesh().
+struct SmoothOptions {
+  int iterations = 10;  ///< λ|μ pairs, 0..1000; 5 to 50 is typical
+  double lambda = 0.5;  ///< shrinking step, finite and > 0
+  double mu = -0.53;    ///< inflating step, finite and < −λ
+  /// Largest distance (m) a vertex may end up from where it started: each
+  /// iteration ends by pulling any vertex further away back onto the sphere
+  /// of this radius around its start. Since the vertices of an isosurface lie
+  /// on it, this bounds the smoothed surface's vertices' distance to the
+  /// original surface (half a voxel keeps the anatomy and removes the
+  /// staircase of a 1 mm scan). Infinity: unbounded; otherwise finite, > 0.
+  double maxDisplacement = std::numeric_limits<double>::infinity();
+};
+
 /// Taubin λ|μ smoothing (Taubin, "A signal processing approach to fair
 /// surface design", SIGGRAPH 1995): each of `iterations` runs one shrinking
 /// step p ← p + λ·L(p) and one inflating step p ← p + μ·L(p), where L(p) is
 /// the mean of the vertex's one-ring neighbours (the vertices it shares a
-/// triangle edge with, uniform "umbrella" weights) minus p. Vertices on a
+/// triangle edge with, uniform "umbrella" weights) minus p, then applies
+/// `maxDisplacement`. Vertices on a
 /// boundary edge (one triangle) or a non-manifold edge (more than two), and
 /// vertices no triangle uses, stay exactly where they are; degenerate
 /// triangles (a repeated index) are ignored. Normals are recomputed
@@ -50,15 +66,19 @@ Mesh keepLargestComponent(const Mesh& mesh, std::size_t* removedComponents = nul
 /// uvs and colours are untouched. λ = 0.5, μ = −0.53 (pass-band
 /// k = 1/λ + 1/μ ≈ 0.11) removes high-frequency noise while keeping the volume
 /// nearly constant. O(iterations·(V + F)) time; memory: the one-ring table
-/// and two position buffers, allocated once.
+/// and three position buffers, allocated once.
 /// Fails with InvalidArgument (mesh unchanged) when iterations is outside
-/// [0, 1000], λ is not a finite value > 0, μ is not finite or μ ≥ −λ, or the
-/// mesh is invalid (Mesh::validate()).
+/// [0, 1000], λ is not a finite value > 0, μ is not finite or μ ≥ −λ,
+/// maxDisplacement is not > 0 (NaN included), or the mesh is invalid
+/// (Mesh::validate()).
 /// @code
 ///   dm::Mesh skin = loadScan("face.stl");
-///   if (auto s = dm::smoothMesh(skin, 10); !s) return s.error();
+///   if (auto s = dm::smoothMesh(skin, {.iterations = 10, .maxDisplacement = 0.5e-3}); !s) return s.error();
 ///   renderer.addMesh(skin);  // normals already recomputed
 /// @endcode
+Status smoothMesh(Mesh& mesh, const SmoothOptions& options);
+
+/// smoothMesh() with `iterations`, λ and μ, unbounded displacement.
 Status smoothMesh(Mesh& mesh, int iterations, double lambda = 0.5, double mu = -0.53);
 
 }  // namespace dm
