@@ -1,7 +1,8 @@
 // sim-haptic — a simulated 3-DOF haptic device (kind "haptic-device").
 //
 // Without hardware it produces what a stylus would: a scripted trajectory
-// (point, line, circle, spiral, or piecewise linear from a CSV file), or a
+// (point, line, circle, spiral, or piecewise linear from a CSV file, which
+// may also give the handle's orientation, interpolated by slerp), or a
 // virtual hand — a mass–spring–damper pulled toward that trajectory and
 // pushed by the forces the device renders — so closed-loop force rendering
 // can be tested. Sensor effects: Gaussian position noise (seeded, so lockstep
@@ -17,7 +18,10 @@
 //   from, to     "x,y,z" m, line ends                           (-0.05,0,0) (0.05,0,0)
 //   pitch        m per turn along z, spiral                     (0.005)
 //   turns        turns before the spiral restarts               (4)
-//   file         CSV of "t,x,y,z" rows (s, m), csv path
+//   file         CSV of "t,x,y,z" or "t,x,y,z,qw,qx,qy,qz" rows (s, m, unit
+//                quaternion, normalised; every row the same, values within
+//                ±1e9), csv path; an optional header line first, '#' lines
+//                skipped
 //   loop         0 | 1: line and csv paths loop (1), or run once from the
 //                first sample and hold their end (0)                     (1)
 //   hand         0 | 1: drive a virtual hand instead of the stylus (0)
@@ -37,10 +41,12 @@
 #include <dm/io/device_abi.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <new>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "driver_params.hpp"
@@ -58,11 +64,42 @@ V3 sub(V3 a, V3 b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 V3 scale(V3 a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
 V3 lerp(V3 a, V3 b, double u) { return add(a, scale(sub(b, a), u)); }
 
+using Q4 = std::array<double, 4>;  // w, x, y, z
+constexpr Q4 kIdentity = {1, 0, 0, 0};
+double dot4(const Q4& a, const Q4& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]; }
+// Spherical linear interpolation from a to b (both unit, same hemisphere).
+Q4 slerp(const Q4& a, const Q4& b, double u) {
+  const double c = std::min(1.0, dot4(a, b));
+  double wa = 1.0 - u, wb = u;
+  if (c < 0.9995) {  // otherwise linear, then normalised: the same to 1e-7
+    const double th = std::acos(c), sn = std::sin(th);
+    wa = std::sin((1.0 - u) * th) / sn;
+    wb = std::sin(u * th) / sn;
+  }
+  Q4 q{};
+  for (int i = 0; i < 4; ++i) q[i] = wa * a[i] + wb * b[i];
+  const double n = std::sqrt(dot4(q, q));
+  for (double& c4 : q) c4 /= n;
+  return q;
+}
+// Angular velocity (rad/s, world) that turns a into b in dt: 2·vec(b·a⁻¹)/dt
+// (first order; the samples are microseconds apart).
+V3 angularVelocity(const Q4& a, const Q4& b, double dt) {
+  // b · conj(a)
+  const double w = b[0] * a[0] + b[1] * a[1] + b[2] * a[2] + b[3] * a[3];
+  const V3 v = {-b[0] * a[1] + b[1] * a[0] - b[2] * a[3] + b[3] * a[2],
+                -b[0] * a[2] + b[1] * a[3] + b[2] * a[0] - b[3] * a[1],
+                -b[0] * a[3] - b[1] * a[2] + b[2] * a[1] + b[3] * a[0]};
+  return scale(v, (w < 0 ? -2.0 : 2.0) / dt);
+}
+
 enum Path { kPoint, kLine, kCircle, kSpiral, kCsv };
 
 struct Sample {
   std::int64_t t = 0;
   V3 x{}, v{};
+  Q4 q = kIdentity;
+  V3 w{};
 };
 
 // One device instance; DmDevice* is this type behind the C boundary.
@@ -70,7 +107,8 @@ struct SimHaptic {
   Path path = kCircle;
   V3 center{}, from{}, to{};
   double radius = 0.03, period = 2.0, pitch = 0.005, turns = 4.0;
-  std::vector<std::array<double, 4>> csv;  // t, x, y, z; t strictly increasing
+  std::vector<std::array<double, 8>> csv;  // t, x, y, z, qw, qx, qy, qz; t strictly increasing
+  bool csvOrientation = false;             // the file has the quaternion columns
   bool repeat = true;
   std::int64_t originNs = -1;  // !repeat: the path's time starts at the first sample
 
@@ -112,21 +150,38 @@ struct SimHaptic {
                             pitch * (u - turns * std::floor(u / turns))});
       }
       case kCsv: {
-        const double span = csv.back()[0] - csv.front()[0];
-        double tt = span > 0 ? csv.front()[0] + std::fmod(t - csv.front()[0], span) : csv.front()[0];
-        if (tt < csv.front()[0]) tt += span;
-        if (!repeat) tt = std::clamp(t, csv.front()[0], csv.back()[0]);
-        std::size_t lo = 0, hi = csv.size() - 1;  // binary search: csv[lo].t ≤ tt < csv[hi].t
-        if (tt >= csv[hi][0]) return {csv[hi][1], csv[hi][2], csv[hi][3]};
-        while (hi - lo > 1) {
-          const std::size_t mid = (lo + hi) / 2;
-          (csv[mid][0] <= tt ? lo : hi) = mid;
-        }
-        const double u = (tt - csv[lo][0]) / (csv[hi][0] - csv[lo][0]);
-        return lerp({csv[lo][1], csv[lo][2], csv[lo][3]}, {csv[hi][1], csv[hi][2], csv[hi][3]}, u);
+        const auto [lo, u] = csvSegment(t);
+        const auto& a = csv[lo];
+        const auto& b = csv[std::min(lo + 1, csv.size() - 1)];
+        return lerp({a[1], a[2], a[3]}, {b[1], b[2], b[3]}, u);
       }
     }
     return center;
+  }
+
+  // The CSV row `lo` and the fraction u in [0, 1) toward row lo + 1 at path
+  // time t (looped over the file's span, or held at its ends).
+  std::pair<std::size_t, double> csvSegment(double t) const {
+    const double span = csv.back()[0] - csv.front()[0];
+    double tt = span > 0 ? csv.front()[0] + std::fmod(t - csv.front()[0], span) : csv.front()[0];
+    if (tt < csv.front()[0]) tt += span;
+    if (!repeat) tt = std::clamp(t, csv.front()[0], csv.back()[0]);
+    std::size_t lo = 0, hi = csv.size() - 1;  // binary search: csv[lo].t ≤ tt < csv[hi].t
+    if (tt >= csv[hi][0]) return {hi, 0.0};
+    while (hi - lo > 1) {
+      const std::size_t mid = (lo + hi) / 2;
+      (csv[mid][0] <= tt ? lo : hi) = mid;
+    }
+    return {lo, (tt - csv[lo][0]) / (csv[hi][0] - csv[lo][0])};
+  }
+
+  // The handle's orientation: slerp between the CSV rows; identity otherwise.
+  Q4 targetOrientation(double t) const {
+    if (path != kCsv || !csvOrientation) return kIdentity;
+    const auto [lo, u] = csvSegment(t);
+    const auto& a = csv[lo];
+    const auto& b = csv[std::min(lo + 1, csv.size() - 1)];
+    return slerp({a[4], a[5], a[6], a[7]}, {b[4], b[5], b[6], b[7]}, u);
   }
 
   // Seconds along the path at device time `ns`: the clock's own time for
@@ -167,13 +222,24 @@ struct SimHaptic {
     handT = now;
   }
 
+  // The hand holds the handle's orientation rigidly (it is a translational
+  // model), so orientation and angular velocity always come from the path.
   Sample trueSample(std::int64_t now) {
+    const double t = pathSeconds(now);
+    Sample s{now, {}, {}, targetOrientation(t), {}};
+    if (csvOrientation) {
+      const double h = 1e-6;
+      s.w = angularVelocity(targetOrientation(t - h), targetOrientation(t + h), 2 * h);
+    }
     if (hand) {
       advanceHand(now);
-      return {now, handX, handV};
+      s.x = handX;
+      s.v = handV;
+    } else {
+      s.x = target(t);
+      s.v = targetVelocity(t);
     }
-    const double t = pathSeconds(now);
-    return {now, target(t), targetVelocity(t)};
+    return s;
   }
 
   // The true sample at now − latency, linearly interpolated in the ring.
@@ -192,11 +258,13 @@ struct SimHaptic {
         const double u = newer.t > older.t
                              ? static_cast<double>(want - older.t) / static_cast<double>(newer.t - older.t)
                              : 0.0;
-        return {want, lerp(older.x, newer.x, u), lerp(older.v, newer.v, u)};
+        return {want, lerp(older.x, newer.x, u), lerp(older.v, newer.v, u), slerp(older.q, newer.q, u),
+                lerp(older.w, newer.w, u)};
       }
       newer = older;
     }
-    return {want, newer.x, newer.v};  // not enough history yet: the oldest sample
+    newer.t = want;
+    return newer;  // not enough history yet: the oldest sample
   }
 
   bool lostAt(std::int64_t now) {
@@ -208,24 +276,54 @@ struct SimHaptic {
 
 SimHaptic* asSimHaptic(DmDevice* d) { return reinterpret_cast<SimHaptic*>(d); }
 
+// Reads the CSV path: rows of 4 (t,x,y,z) or 8 (plus qw,qx,qy,qz) finite
+// numbers, all rows alike, times strictly increasing, quaternions of non-zero
+// length (normalised, and flipped into the previous row's hemisphere so that
+// slerp takes the short way). The first line may be a header.
 bool loadCsv(SimHaptic& d, const char* file, ParamReader& r) {
   std::FILE* f = std::fopen(file, "r");
   if (!f) {
     r.failf("parameter 'file': cannot open '%s'", file);
     return false;
   }
-  char line[512];
-  int lineNo = 0;
+  char line[1024];
+  int lineNo = 0, width = 0;
   while (std::fgets(line, sizeof line, f)) {
     ++lineNo;
     if (line[0] == '#' || line[0] == '\n' || line[0] == '\r') continue;
-    std::array<double, 4> row{};
-    if (std::sscanf(line, "%lf,%lf,%lf,%lf", &row[0], &row[1], &row[2], &row[3]) != 4 ||
-        !std::isfinite(row[0]) || !std::isfinite(row[1]) || !std::isfinite(row[2]) ||
-        !std::isfinite(row[3])) {
-      if (lineNo == 1) continue;  // a header line
-      r.failf("%s:%d: expected \"t,x,y,z\" (four numbers)", file, lineNo);
+    std::array<double, 8> row{};
+    int end = 0;
+    const int n = std::sscanf(line, "%lf,%lf,%lf,%lf%n,%lf,%lf,%lf,%lf%n", &row[0], &row[1], &row[2], &row[3],
+                              &end, &row[4], &row[5], &row[6], &row[7], &end);
+    bool finite = true;  // and within ±1e9 (s, m): differences of values stay finite
+    for (int i = 0; i < n; ++i) finite = finite && std::abs(row[static_cast<std::size_t>(i)]) <= 1e9;
+    const char* rest = line + end;
+    while (*rest == ' ' || *rest == '\t' || *rest == '\r' || *rest == '\n') ++rest;
+    if ((n != 4 && n != 8) || !finite || *rest != '\0') {
+      if (lineNo == 1 && n <= 0) continue;  // a header line
+      r.failf("%s:%d: expected \"t,x,y,z\" or \"t,x,y,z,qw,qx,qy,qz\" (4 or 8 numbers, each within ±1e9)",
+              file, lineNo);
       break;
+    }
+    if (width == 0) width = n;
+    if (n != width) {
+      r.failf("%s:%d: %d numbers, but the rows before have %d", file, lineNo, n, width);
+      break;
+    }
+    if (n == 8) {
+      Q4 q = {row[4], row[5], row[6], row[7]};
+      const double len = std::sqrt(dot4(q, q));
+      if (!(len > 0.0)) {
+        r.failf("%s:%d: quaternion qw,qx,qy,qz has zero length", file, lineNo);
+        break;
+      }
+      const double sign = !d.csv.empty() && dot4(q, {d.csv.back()[4], d.csv.back()[5], d.csv.back()[6],
+                                                     d.csv.back()[7]}) < 0.0
+                              ? -1.0
+                              : 1.0;
+      for (std::size_t i = 0; i < 4; ++i) row[4 + i] = sign * q[i] / len;
+    } else {
+      row[4] = 1.0;
     }
     if (!d.csv.empty() && !(row[0] > d.csv.back()[0])) {
       r.failf("%s:%d: time %g does not increase", file, lineNo, row[0]);
@@ -239,6 +337,7 @@ bool loadCsv(SimHaptic& d, const char* file, ParamReader& r) {
   }
   std::fclose(f);
   if (r.ok() && d.csv.empty()) r.failf("%s: no \"t,x,y,z\" rows", file);
+  d.csvOrientation = width == 8;
   return r.ok();
 }
 
@@ -300,6 +399,7 @@ int simInfo(DmDevice* dev, DmHapticInfo* info) {
                           d->hand ? "simulated 3-DOF stylus in a virtual hand" : "simulated 3-DOF stylus",
                           d->seed);
   info->capabilities = DM_HAPTIC_CAP_POSITION | DM_HAPTIC_CAP_VELOCITY | DM_HAPTIC_CAP_FORCE;
+  if (d->csvOrientation) info->capabilities |= DM_HAPTIC_CAP_ORIENTATION;
   info->button_count = 0;
   for (int i = 0; i < 3; ++i) {
     info->workspace_min[i] = d->center[i] - d->workspace;
@@ -326,7 +426,8 @@ int simRead(DmDevice* dev, int64_t now, DmHapticState* s) {
     s->position[i] = x;
     s->linear_velocity[i] = smp.v[i];
   }
-  s->orientation[0] = 1.0;
+  for (std::size_t i = 0; i < 4; ++i) s->orientation[i] = smp.q[i];
+  for (std::size_t i = 0; i < 3; ++i) s->angular_velocity[i] = smp.w[i];
   return DM_DEVICE_OK;
 }
 

@@ -9,9 +9,12 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <numbers>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "../common/build_paths.hpp"
@@ -40,7 +43,8 @@ struct Builtin {
 TEST(SimHaptic, PluginAndBuiltInGiveIdenticalSamples) {
   dm::FactoryRegistry plugReg;
   dm::PluginLinker plugLinker(plugReg);
-  auto loaded = plugLinker.load(dm::test::besideExecutable(DM_DRIVER_PLUGIN_DIR) + "/libdm_driver_sim_haptic.so");
+  auto loaded =
+      plugLinker.load(dm::test::besideExecutable(DM_DRIVER_PLUGIN_DIR) + "/libdm_driver_sim_haptic.so");
   ASSERT_TRUE(loaded.ok()) << loaded.error().message();
   EXPECT_EQ(loaded->name, "sim-haptic");
   Builtin b;
@@ -108,7 +112,8 @@ TEST(SimHaptic, PathsWithoutLoopRunOnceFromTheFirstSampleAndHoldTheirEnd) {
 
   const dm::test::TempDir dir("sim_haptic_once");
   std::ofstream(dir / "path.csv") << "t,x,y,z\n0,0,0,0\n1,0,0,0.02\n2,0.01,0,0.02\n";
-  auto c = openHapticOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "path.csv").string()}, {"loop", "0"}});
+  auto c =
+      openHapticOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "path.csv").string()}, {"loop", "0"}});
   ASSERT_TRUE(c);
   c->servo(t0);
   c->servo(t0 + 1500 * kMs);
@@ -183,6 +188,69 @@ TEST(SimHaptic, CsvPathInterpolatesAndLoops) {
   EXPECT_NE(bad.error().message().find("bad.csv:2"), std::string::npos) << bad.error().message();
 }
 
+TEST(SimHaptic, CsvPathWithOrientationSlerpsTheHandle) {
+  // A handle turning 90° about z in 1 s while moving 0.1 m along x, then
+  // 90° about x (given as the negated quaternion: the same rotation; the
+  // reader keeps the short way). At every time the pose is the slerp of the
+  // neighbouring rows, and the angular velocity is that of the turn.
+  dm::test::TempDir dir("sim_haptic_csv_q");
+  const double h = std::sqrt(0.5);
+  {
+    std::ofstream f(dir / "turn.csv");
+    f << "t,x,y,z,qw,qx,qy,qz\n# comment\n0,0,0,0,2,0,0,0\n1,0.1,0,0," << h << ",0,0," << h << "\n2,0.1,0,0,"
+      << -0.5 << ",-0.5,-0.5,-0.5\n";
+  }
+  Builtin b;
+  auto d =
+      openHapticOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "turn.csv").string()}, {"loop", "0"}});
+  ASSERT_TRUE(d);
+  EXPECT_TRUE(d->info().capabilities & DM_HAPTIC_CAP_ORIENTATION);
+  const dm::Quat start = dm::Quat::Identity(), quarterZ(h, 0, 0, h), end(0.5, 0.5, 0.5, 0.5);
+  for (int ms : {0, 250, 500, 999, 1000, 1300, 2000, 2500}) {
+    ASSERT_EQ(d->servo(ms * kMs), dm::DeviceStatus::Ok);
+    const double t = ms / 1000.0;
+    const dm::Quat expected = t < 1 ? start.slerp(t, quarterZ) : quarterZ.slerp(std::min(t - 1, 1.0), end);
+    EXPECT_LT(d->state().orientation.angularDistance(expected), 1e-6) << ms;
+    EXPECT_NEAR(d->state().orientation.norm(), 1.0, 1e-12) << ms;
+  }
+  // The first segment turns at π/2 rad/s about z, the second at the angle
+  // between quarterZ and end per second, about their relative axis.
+  // (loop 0: the path's clock starts at the first servo.)
+  d = openHapticOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "turn.csv").string()}, {"loop", "0"}});
+  ASSERT_EQ(d->servo(0), dm::DeviceStatus::Ok);
+  ASSERT_EQ(d->servo(500 * kMs), dm::DeviceStatus::Ok);
+  EXPECT_LT((d->state().angularVelocity - Vec3(0, 0, std::numbers::pi / 2)).norm(), 1e-6);
+  ASSERT_EQ(d->servo(1500 * kMs), dm::DeviceStatus::Ok);
+  const Eigen::AngleAxisd rel(end * quarterZ.inverse());
+  EXPECT_LT((d->state().angularVelocity - rel.angle() * rel.axis()).norm(), 1e-6);
+  EXPECT_LT((d->state().position - Vec3(0.1, 0, 0)).norm(), 1e-12);
+
+  // A position-only file keeps the identity and does not claim orientation.
+  {
+    std::ofstream f(dir / "plain.csv");
+    f << "0,0,0,0\n1,0.1,0,0\n";
+  }
+  auto plain = openHapticOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "plain.csv").string()}});
+  ASSERT_TRUE(plain);
+  EXPECT_FALSE(plain->info().capabilities & DM_HAPTIC_CAP_ORIENTATION);
+  ASSERT_EQ(plain->servo(500 * kMs), dm::DeviceStatus::Ok);
+  EXPECT_EQ(plain->state().orientation.coeffs(), dm::Quat::Identity().coeffs());
+
+  // Mixed widths, a zero quaternion, trailing junk, 5 numbers: refused with the line.
+  const std::vector<std::pair<std::string, std::string>> bad = {
+      {"0,0,0,0,1,0,0,0\n1,0,0,0\n", "bad.csv:2"},   {"0,0,0,0,1,0,0,0\n1,0,0,0,0,0,0,0\n", "bad.csv:2"},
+      {"0,0,0,0\n1,0,0,0x\n", "bad.csv:2"},          {"0,0,0,0,1\n", "bad.csv:1"},
+      {"t,x,y,z\n0,0,0,0,nan,0,0,0\n", "bad.csv:2"},
+  };
+  for (const auto& [text, where] : bad) {
+    std::ofstream(dir / "bad.csv") << text;
+    auto r = dm::HapticDevice::open(b.registry, "sim-haptic",
+                                    {{"path", "csv"}, {"file", (dir / "bad.csv").string()}});
+    ASSERT_FALSE(r.ok()) << text;
+    EXPECT_NE(r.error().message().find(where), std::string::npos) << text << ": " << r.error().message();
+  }
+}
+
 TEST(SimHaptic, BadParametersNameTheKey) {
   Builtin b;
   const std::vector<std::pair<dm::DeviceParams, std::string>> cases = {
@@ -208,12 +276,14 @@ TEST(SimHaptic, BadParametersNameTheKey) {
 TEST(SimHaptic, WrongAbiAndCrashingInitDriversAreRefusedCleanly) {
   dm::FactoryRegistry registry;
   dm::PluginLinker linker(registry, {.useEnvironment = false, .probe = true});
-  const dm::ScanReport wrong = linker.scanDirectory(dm::test::besideExecutable(DM_TEST_DRIVER_DIR) + "/wrong_abi_driver");
+  const dm::ScanReport wrong =
+      linker.scanDirectory(dm::test::besideExecutable(DM_TEST_DRIVER_DIR) + "/wrong_abi_driver");
   ASSERT_EQ(wrong.refused.size(), 1u);
   EXPECT_EQ(wrong.refused[0].error.code, dm::ErrorCode::Version);
   EXPECT_NE(wrong.refused[0].error.message().find("libdm_test_wrong_abi_driver.so"), std::string::npos)
       << wrong.refused[0].error.message();
-  const dm::ScanReport crash = linker.scanDirectory(dm::test::besideExecutable(DM_TEST_DRIVER_DIR) + "/crash_init_driver");
+  const dm::ScanReport crash =
+      linker.scanDirectory(dm::test::besideExecutable(DM_TEST_DRIVER_DIR) + "/crash_init_driver");
   ASSERT_EQ(crash.refused.size(), 1u);
   EXPECT_NE(crash.refused[0].error.message().find("libdm_test_crash_init_driver.so"), std::string::npos)
       << crash.refused[0].error.message();

@@ -107,7 +107,7 @@ TEST_P(MricronIsosurface, IntegerIsoGivesAWatertightSurface) {
 INSTANTIATE_TEST_SUITE_P(
     EveryTemplate, MricronIsosurface,
     ::testing::Values(TemplateCase{"ch2.nii.gz", {40, 80, 120}}, TemplateCase{"ch2bet.nii.gz", {40, 80, 120}},
-                      TemplateCase{"ch2better.nii.gz", {40, 100}},
+                      TemplateCase{"ch2better.nii.gz", {40}},  // 35 M voxels: one level
                       TemplateCase{"inia19-t1-brain.nii.gz", {20, 60, 100}},
                       TemplateCase{"aal.nii.gz", {0, 50}}, TemplateCase{"brodmann.nii.gz", {0, 20}},
                       TemplateCase{"AICHAmc.nii.gz", {0, 100}},
