@@ -430,6 +430,55 @@ TEST(GodObject, TorusForceMatchesAnalyticPenetrationEverywhere) {
   }
 }
 
+// The same torus from a voxel model: its signed distance (positive inside)
+// sampled at h and extracted by marching cubes, as a segmented organ would
+// be. The error against the true torus falls with the voxel size (printed);
+// at 0.5 mm voxels within 2 % and 2°.
+TEST(GodObject, TorusFromAVoxelModelConvergesWithVoxelSize) {
+  const double R = 0.04, r0 = 0.015, depth = 0.002;
+  double previous = 1.0;
+  for (const double h : {2e-3, 1e-3, 0.5e-3}) {
+    const double extent = R + r0 + 3 * h, thick = r0 + 3 * h;
+    const Vec3i dims(static_cast<int>(2 * extent / h) + 1, static_cast<int>(2 * extent / h) + 1,
+                     static_cast<int>(2 * thick / h) + 1);
+    Affine3 a = Affine3::Identity();
+    a.linear() = h * Mat3::Identity();
+    a.translation() = Vec3(-extent, -extent, -thick);
+    auto v = Volume::create(dims, VoxelType::F32, a);
+    ASSERT_TRUE(v);
+    for (int k = 0; k < dims.z(); ++k)
+      for (int j = 0; j < dims.y(); ++j)
+        for (int i = 0; i < dims.x(); ++i) {
+          const Vec3 p = a * Vec3(i, j, k);
+          v->setValue(i, j, k, r0 - std::hypot(std::hypot(p.x(), p.y()) - R, p.z()));
+        }
+    auto mesh = extractIsosurface(*v, {.iso = 0.0});
+    ASSERT_TRUE(mesh);
+    auto r = makeRenderer({object(*mesh)}, {.forceShading = true});
+    ASSERT_TRUE(r);
+    double worstMagnitude = 0, worstAngle = 0;
+    for (int i = 0; i < 12; ++i)
+      for (int j = 0; j < 12; ++j) {
+        const double u = 2 * std::numbers::pi * (i + 0.37) / 12, w = 2 * std::numbers::pi * (j + 0.29) / 12;
+        const Vec3 n(std::cos(w) * std::cos(u), std::cos(w) * std::sin(u), std::sin(w));  // outward
+        const Vec3 p = Vec3(R * std::cos(u), R * std::sin(u), 0) + r0 * n;                // on the torus
+        const HapticResponse out = press(*r, p + 0.004 * n, p - depth * n);
+        ASSERT_GE(out.contacts, 1) << h << ' ' << i << ' ' << j;
+        worstMagnitude =
+            std::max(worstMagnitude, std::abs(out.force.norm() - kStiffness * depth) / (kStiffness * depth));
+        worstAngle = std::max(worstAngle, angle(out.force, n));
+      }
+    std::printf("[ torus voxels ] h = %.1f mm (%7zu tris): |F| error %.3f %%, direction error %.3f deg\n",
+                1e3 * h, mesh->triangleCount(), 100 * worstMagnitude, worstAngle * 180 / std::numbers::pi);
+    EXPECT_LT(worstMagnitude, previous) << "not converging at h = " << h;
+    previous = worstMagnitude;
+    if (h < 1e-3) {
+      EXPECT_LT(worstMagnitude, 0.02);
+      EXPECT_LT(worstAngle, 2 * std::numbers::pi / 180);
+    }
+  }
+}
+
 // A plate one triangle thick, crossed at 5 cm per tick: the proxy stays on
 // the side it came from, for a point proxy and a ball tip.
 TEST(GodObject, NoPopThroughThinPlate) {

@@ -97,9 +97,9 @@ TEST(Isosurface, SphereIsClosedOrientedAndConvergesToTheTrueSurface) {
       // Vertices are roots of the linear interpolant of a concave f along an
       // edge of length L: f >= 0 there, and f <= L²·max|f''|/8 with
       // |f''| <= 1/(R − L) on the edge (the distance to c is >= R − L) —
-      // except that a root within L/256 of an edge end is moved to L/256
-      // from it (the edge margin, so no two vertices share a position),
-      // which changes f (|∇f| = 1) by at most L/256.
+      // except that a root on a voxel is moved L/256 into its edge and one
+      // within L/65536 of a voxel to L/65536 from it (so no two vertices
+      // share a position), which changes f (|∇f| = 1) by at most L/256.
       const double L = m == IsoMethod::MarchingCubes ? h : std::sqrt(3.0) * h;
       const double margin = L / 256;
       const double bound = L * L / (8 * (s.R - L));
@@ -327,9 +327,10 @@ TEST(Isosurface, IntegerDataAtIntegerIsoIsWatertightByPosition) {
 
 TEST(Isosurface, VerticesKeepOffTheVoxelsByTheEdgeMargin) {
   // Two voxels, 40 (outside at iso 40) and 41: the crossing is on the outside
-  // voxel itself; the vertex is placed 1/256 of the edge into it. Between 0
-  // and 100 at iso 99.9 the crossing is 0.1 % from the inside voxel: also
-  // moved to the margin. Elsewhere the linear interpolation is exact.
+  // voxel itself; the vertex is placed 1/256 of the edge into it (from either
+  // end). A root merely close to a voxel stays where it is down to 1/65536 of
+  // the edge, and is held there below that. Elsewhere the linear
+  // interpolation is exact.
   auto v = dm::Volume::create({2, 1, 1}, dm::VoxelType::F32);
   ASSERT_TRUE(v);
   const auto vertexX = [&](double a, double b, double iso) {
@@ -343,9 +344,11 @@ TEST(Isosurface, VerticesKeepOffTheVoxelsByTheEdgeMargin) {
   };
   EXPECT_DOUBLE_EQ(vertexX(40, 41, 40), 1.0 / 256.0);
   EXPECT_DOUBLE_EQ(vertexX(41, 40, 40), 1.0 - 1.0 / 256.0);
-  EXPECT_DOUBLE_EQ(vertexX(0, 100, 99.9), 1.0 - 1.0 / 256.0);
+  EXPECT_DOUBLE_EQ(vertexX(0, 100, 99.9), 0.999);
   EXPECT_DOUBLE_EQ(vertexX(0, 100, 25), 0.25);
-  EXPECT_DOUBLE_EQ(vertexX(0, 100, 0.2), 1.0 / 256.0);
+  EXPECT_DOUBLE_EQ(vertexX(0, 100, 0.2), 0.002);
+  EXPECT_DOUBLE_EQ(vertexX(0, 1, 1e-7), 1.0 / 65536.0);
+  EXPECT_DOUBLE_EQ(vertexX(1, 0, 1e-7), 1.0 - 1.0 / 65536.0);
 }
 
 TEST(Isosurface, EveryPairOfNeighbouringCellCasesIsWatertight) {
@@ -426,7 +429,7 @@ TEST(Isosurface, ObliqueAffinePlacesTheSurfaceInTheWorld) {
       if (m == IsoMethod::MarchingCubes && step.sum() > 1) continue;
       L = std::max(L, (linear * step).norm());
     }
-    for (const Vec3& p : mesh.positions) {  // as in the axis-aligned case, with the edge margin L/256
+    for (const Vec3& p : mesh.positions) {  // as in the axis-aligned case, with the margin L/256
       EXPECT_GE(s.f(p), -L / 256 - 1e-15) << name(m);
       EXPECT_LE(s.f(p), L * L / (8 * (s.R - L)) + L / 256) << name(m);
     }

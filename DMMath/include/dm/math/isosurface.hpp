@@ -11,8 +11,9 @@
 //  - Positions are world coordinates in metres: the volume's index-to-world
 //    affine applied to the interpolated point on the grid edge.
 //  - Each crossed grid edge gives exactly one vertex, shared by all the cells
-//    around it, strictly inside the edge, so there are no duplicate vertices,
-//    by index or by position, and no zero-area triangles. Where the isosurface is
+//    around it, strictly inside the edge (see extractIsosurface), so there
+//    are no duplicate vertices, by index or by position, and no zero-area
+//    triangles. Where the isosurface is
 //    closed inside the grid the mesh is a closed, consistently oriented
 //    2-manifold (ambiguous faces are resolved the same way from both cells;
 //    see DMMath/src/mc_tables.cpp). Where the inside reaches the grid border
@@ -61,11 +62,14 @@ struct IsosurfaceOptions {
 /// the world by the inverse transpose of the affine and negated. Where the
 /// gradient vanishes or is not finite the normal falls back to the edge
 /// direction from the inside voxel to the outside one. Voxel values that are
-/// NaN count as outside. A vertex stays 1/256 of its edge away from both end
-/// voxels, so no two vertices share a position and no triangle has zero area,
-/// even where voxels equal iso (integer data at an integer iso): the mesh stays
-/// a manifold when something merges vertices by position (an STL file, a mesh
-/// tool), and the surface moves by at most 1/256 of a voxel.
+/// NaN count as outside. A voxel exactly at iso is outside, and the vertices
+/// of the edges from it to inside voxels (whose linear root is the voxel
+/// itself) go 1/256 of their edge into it; every other vertex stays at least
+/// 1/65536 of its edge off both ends. So no two vertices share a position and
+/// no triangle has zero area, even where voxels equal iso (integer data at an
+/// integer iso): the mesh stays a manifold when something merges vertices by
+/// position (an STL file, a mesh tool), and the surface moves by at most
+/// 1/256 of a voxel, only around voxels at iso.
 ///
 /// Runs on `options.threads` threads over z-slabs: O(voxels) to classify, then
 /// O(active cells + triangles). Memory: one bit per voxel plus a few index
