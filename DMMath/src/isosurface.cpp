@@ -542,7 +542,9 @@ class Extractor {
       const double va = static_cast<double>(*pa), vb = static_cast<double>(*pb);
       const double r = (iso_ - va) / (vb - va);
       if (r >= 0 && r <= 1)  // false for NaN/Inf values
-        t = r == 0 ? kOnVoxelMargin : r == 1 ? 1.0 - kOnVoxelMargin : std::clamp(r, kEdgeFloor, 1.0 - kEdgeFloor);
+        t = r == 0   ? kOnVoxelMargin
+            : r == 1 ? 1.0 - kOnVoxelMargin
+                     : std::clamp(r, kEdgeFloor, 1.0 - kEdgeFloor);
     }
     const double p[3] = {ax + t * sx, ay + t * sy, az + t * sz};
     double w[3];
