@@ -385,6 +385,32 @@ TEST(GodObject, CylinderForceMatchesAnalyticPenetration) {
   EXPECT_NEAR(cap.force.z(), kStiffness * depth, 0.02 * kStiffness * depth);
 }
 
+// The worst errors of pressing a torus (about z: R to the tube's centre
+// line, tube radius r0) `depth` along the true normal at 144 points spread
+// over it: force magnitude against k·depth (relative), direction against the
+// true normal (rad), and how deep the proxy ends inside the true torus (m).
+struct TorusErrors {
+  double magnitude = 0, angle = 0, inside = 0;
+};
+TorusErrors pressTorus(GodObjectRenderer& r, double R, double r0, double depth) {
+  TorusErrors e;
+  for (int i = 0; i < 12; ++i)
+    for (int j = 0; j < 12; ++j) {
+      // Off the mesh's vertices and symmetry lines.
+      const double u = 2 * std::numbers::pi * (i + 0.37) / 12, v = 2 * std::numbers::pi * (j + 0.29) / 12;
+      const Vec3 n(std::cos(v) * std::cos(u), std::cos(v) * std::sin(u), std::sin(v));  // outward
+      const Vec3 p = Vec3(R * std::cos(u), R * std::sin(u), 0) + r0 * n;                // on the torus
+      const HapticResponse out = press(r, p + 0.004 * n, p - depth * n);
+      EXPECT_GE(out.contacts, 1) << i << ' ' << j;
+      e.magnitude =
+          std::max(e.magnitude, std::abs(out.force.norm() - kStiffness * depth) / (kStiffness * depth));
+      e.angle = std::max(e.angle, angle(out.force, n));
+      const Vec3 q = r.proxy();
+      e.inside = std::max(e.inside, r0 - std::hypot(std::hypot(q.x(), q.y()) - R, q.z()));
+    }
+  return e;
+}
+
 // A torus has every kind of curvature: convex outside (both principal
 // curvatures positive), saddle-shaped inside (negative Gaussian curvature,
 // where facets meet at concave edges along the tube) and in between. Pressed
@@ -397,23 +423,8 @@ TEST(GodObject, TorusForceMatchesAnalyticPenetrationEverywhere) {
     const int nv = nu / 2;
     auto r = makeRenderer({object(makeTorus(R, r0, nu, nv))}, {.forceShading = true});
     ASSERT_TRUE(r);
-    double worstMagnitude = 0, worstAngle = 0, worstInside = 0;
-    for (int i = 0; i < 12; ++i)
-      for (int j = 0; j < 12; ++j) {
-        // Off the mesh's vertices and symmetry lines.
-        const double u = 2 * std::numbers::pi * (i + 0.37) / 12, v = 2 * std::numbers::pi * (j + 0.29) / 12;
-        const Vec3 n(std::cos(v) * std::cos(u), std::cos(v) * std::sin(u), std::sin(v));  // outward
-        const Vec3 p = Vec3(R * std::cos(u), R * std::sin(u), 0) + r0 * n;                // on the torus
-        const HapticResponse out = press(*r, p + 0.004 * n, p - depth * n);
-        ASSERT_GE(out.contacts, 1) << nu << ' ' << i << ' ' << j;
-        worstMagnitude =
-            std::max(worstMagnitude, std::abs(out.force.norm() - kStiffness * depth) / (kStiffness * depth));
-        worstAngle = std::max(worstAngle, angle(out.force, n));
-        // The proxy is outside the true torus, up to the chord sag of the facets.
-        const Vec3 q = r->proxy();
-        const double sdf = std::hypot(std::hypot(q.x(), q.y()) - R, q.z()) - r0;
-        worstInside = std::max(worstInside, -sdf);
-      }
+    const TorusErrors e = pressTorus(*r, R, r0, depth);
+    const double worstMagnitude = e.magnitude, worstAngle = e.angle, worstInside = e.inside;
     std::printf(
         "[ torus ] %3dx%3d (%6d tris): |F| error %.3f %%, direction error %.3f deg, proxy inside %.1f um\n",
         nu, nv, 2 * nu * nv, 100 * worstMagnitude, worstAngle * 180 / std::numbers::pi, 1e6 * worstInside);
@@ -456,18 +467,8 @@ TEST(GodObject, TorusFromAVoxelModelConvergesWithVoxelSize) {
     ASSERT_TRUE(mesh);
     auto r = makeRenderer({object(*mesh)}, {.forceShading = true});
     ASSERT_TRUE(r);
-    double worstMagnitude = 0, worstAngle = 0;
-    for (int i = 0; i < 12; ++i)
-      for (int j = 0; j < 12; ++j) {
-        const double u = 2 * std::numbers::pi * (i + 0.37) / 12, w = 2 * std::numbers::pi * (j + 0.29) / 12;
-        const Vec3 n(std::cos(w) * std::cos(u), std::cos(w) * std::sin(u), std::sin(w));  // outward
-        const Vec3 p = Vec3(R * std::cos(u), R * std::sin(u), 0) + r0 * n;                // on the torus
-        const HapticResponse out = press(*r, p + 0.004 * n, p - depth * n);
-        ASSERT_GE(out.contacts, 1) << h << ' ' << i << ' ' << j;
-        worstMagnitude =
-            std::max(worstMagnitude, std::abs(out.force.norm() - kStiffness * depth) / (kStiffness * depth));
-        worstAngle = std::max(worstAngle, angle(out.force, n));
-      }
+    const TorusErrors e = pressTorus(*r, R, r0, depth);
+    const double worstMagnitude = e.magnitude, worstAngle = e.angle;
     std::printf("[ torus voxels ] h = %.1f mm (%7zu tris): |F| error %.3f %%, direction error %.3f deg\n",
                 1e3 * h, mesh->triangleCount(), 100 * worstMagnitude, worstAngle * 180 / std::numbers::pi);
     EXPECT_LT(worstMagnitude, previous) << "not converging at h = " << h;

@@ -56,10 +56,10 @@ std::shared_ptr<const VoxelModel> boxModel(const Vec3& half, const Vec3& centre,
   return *model;
 }
 
-// Dense model of the analytic sphere SDF |p − c| − R sampled on the grid
-// lo + h·(i, j, k) covering [lo, hi].
-std::shared_ptr<const VoxelModel> sphereSdfModel(const Vec3& c, double radius, const Vec3& lo, const Vec3& hi,
-                                                 double h) {
+// Dense model of a signed distance `sdf` (negative inside) sampled on the
+// grid lo + h·(i, j, k) covering [lo, hi].
+std::shared_ptr<const VoxelModel> sdfModel(const std::function<double(const Vec3&)>& sdf, const Vec3& lo,
+                                           const Vec3& hi, double h) {
   const Vec3i dims = ((hi - lo) / h).array().ceil().cast<int>() + 1;
   Affine3 a = Affine3::Identity();
   a.linear() = h * Mat3::Identity();
@@ -68,10 +68,16 @@ std::shared_ptr<const VoxelModel> sphereSdfModel(const Vec3& c, double radius, c
   EXPECT_TRUE(v.ok());
   for (int k = 0; k < dims.z(); ++k)
     for (int j = 0; j < dims.y(); ++j)
-      for (int i = 0; i < dims.x(); ++i) v->setValue(i, j, k, ((lo + h * Vec3(i, j, k)) - c).norm() - radius);
+      for (int i = 0; i < dims.x(); ++i) v->setValue(i, j, k, sdf(lo + h * Vec3(i, j, k)));
   auto model = VoxelModel::fromSdf(*v);
   EXPECT_TRUE(model.ok());
   return *model;
+}
+
+// The analytic sphere SDF |p − c| − R on such a grid.
+std::shared_ptr<const VoxelModel> sphereSdfModel(const Vec3& c, double radius, const Vec3& lo, const Vec3& hi,
+                                                 double h) {
+  return sdfModel([&](const Vec3& p) { return (p - c).norm() - radius; }, lo, hi, h);
 }
 
 // Holds the device still at `device` for `ticks` ticks; the last response.
@@ -205,24 +211,6 @@ double torusField(double R, double r0, const Vec3& p, Vec3& n) {
   return q.norm() - r0;
 }
 
-// Dense model of the torus SDF sampled on the grid lo + h·(i, j, k) over [lo, hi].
-std::shared_ptr<const VoxelModel> torusSdfModel(double R, double r0, const Vec3& lo, const Vec3& hi,
-                                                double h) {
-  const Vec3i dims = ((hi - lo) / h).array().ceil().cast<int>() + 1;
-  Affine3 a = Affine3::Identity();
-  a.linear() = h * Mat3::Identity();
-  a.translation() = lo;
-  auto v = Volume::create(dims, VoxelType::F32, a);
-  EXPECT_TRUE(v.ok());
-  Vec3 n;
-  for (int k = 0; k < dims.z(); ++k)
-    for (int j = 0; j < dims.y(); ++j)
-      for (int i = 0; i < dims.x(); ++i) v->setValue(i, j, k, torusField(R, r0, lo + h * Vec3(i, j, k), n));
-  auto model = VoxelModel::fromSdf(*v);
-  EXPECT_TRUE(model.ok());
-  return *model;
-}
-
 // On a torus — the convex outside, the top, and the saddle-shaped inside
 // (negative Gaussian curvature) — the settled force matches the force model
 // evaluated on the exact geometry within 2 %, along the true normal within
@@ -244,8 +232,9 @@ TEST(Vps, SphereTipOnTorusMatchesExactForceOnConvexAndSaddleRegions) {
     const Vec3 onSurface = Vec3(R * std::cos(u), R * std::sin(u), 0) + r0 * n;
     const Isometry3 device = at(onSurface + (r - 1.5e-3) * n);
     for (const double h : {0.5e-3, 0.25e-3}) {
-      auto model =
-          torusSdfModel(R, r0, onSurface - Vec3::Constant(8e-3), onSurface + Vec3::Constant(8e-3), h);
+      Vec3 unused;
+      auto model = sdfModel([&](const Vec3& p) { return torusField(R, r0, p, unused); },
+                            onSurface - Vec3::Constant(8e-3), onSurface + Vec3::Constant(8e-3), h);
       auto vps = VpsRenderer::create(tool, {{model, Isometry3::Identity(), mat}}, opt);
       ASSERT_TRUE(vps.ok());
       (*vps)->reset(at(onSurface + (r + 2e-3) * n));
