@@ -85,8 +85,7 @@ Q4 slerp(const Q4& a, const Q4& b, double u) {
 // Angular velocity (rad/s, world) that turns a into b in dt: 2·vec(b·a⁻¹)/dt
 // (first order; the samples are microseconds apart).
 V3 angularVelocity(const Q4& a, const Q4& b, double dt) {
-  // b · conj(a)
-  const double w = b[0] * a[0] + b[1] * a[1] + b[2] * a[2] + b[3] * a[3];
+  const double w = dot4(a, b);  // the scalar part of b · conj(a)
   const V3 v = {-b[0] * a[1] + b[1] * a[0] - b[2] * a[3] + b[3] * a[2],
                 -b[0] * a[2] + b[1] * a[3] + b[2] * a[0] - b[3] * a[1],
                 -b[0] * a[3] - b[1] * a[2] + b[2] * a[1] + b[3] * a[0]};

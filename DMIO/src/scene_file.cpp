@@ -476,7 +476,7 @@ class SceneParser {
           res.smooth = static_cast<int>(r.integer("smooth", {.min = 0, .max = 100}, 0));
           if (v2Key(r, "smooth_max_displacement")) {
             res.smoothMaxDisplacement = readPositive(r, "smooth_max_displacement", {}, 0.1);
-            if (!r.has("smooth") || res.smooth == 0)
+            if (res.smooth == 0)
               r.addError("\"smooth_max_displacement\" bounds smoothing, but \"smooth\" is 0",
                          "smooth_max_displacement", "set \"smooth\": <iterations>, or remove the bound");
           }

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "../common/alloc_counter.hpp"
+#include "../common/staircase_ball.hpp"
 #include "haptics_test_support.hpp"
 
 namespace dm {
@@ -247,24 +248,6 @@ TEST(GodObject, ForceShadingSmoothsDirectionOverFacets) {
   EXPECT_LT(maxError[1], 0.01);
 }
 
-/// The marching-cubes skin of a voxelised ball of radius R (voxels of `h`,
-/// 1 inside, 0 outside, iso 0.5), centred at the origin: a sphere carrying
-/// the voxel staircase, as a skin from a 1 mm scan does.
-Mesh staircaseBall(double R, double h) {
-  const int n = static_cast<int>(2 * R / h) + 6;
-  Affine3 a = Affine3::Identity();
-  a.linear() = h * Mat3::Identity();
-  a.translation() = Vec3::Constant(-h * (n - 1) / 2.0);
-  auto v = Volume::create({n, n, n}, VoxelType::U8, a);
-  EXPECT_TRUE(v);
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) v->setValue(i, j, k, (a * Vec3(i, j, k)).norm() < R ? 1 : 0);
-  auto m = extractIsosurface(*v, {.iso = 0.5});
-  EXPECT_TRUE(m);
-  return m ? std::move(*m) : Mesh{};
-}
-
 // Sliding over a skin extracted from a 1 mm voxel ball: the staircase is felt
 // as a force that departs from the true sphere's k·depth·n at every step.
 // Taubin smoothing, 20 iterations within half a voxel (the head-probe
@@ -274,7 +257,7 @@ Mesh staircaseBall(double R, double h) {
 // within 5 % of k·depth (the raw staircase: 8.5 % short).
 TEST(GodObject, StaircaseSkinIsFeltUntilSmoothedWithinHalfAVoxel) {
   const double R = 0.03, h = 1e-3, depth = 0.001;
-  const Mesh raw = staircaseBall(R, h);
+  const Mesh raw = test::staircaseBall(R, h);
   Mesh smooth = raw;
   ASSERT_TRUE(smoothMesh(smooth, {.iterations = 20, .maxDisplacement = 0.5 * h}));
   double rms[2] = {0, 0}, meanForce[2] = {0, 0};

@@ -97,11 +97,12 @@ TEST(Isosurface, SphereIsClosedOrientedAndConvergesToTheTrueSurface) {
       // Vertices are roots of the linear interpolant of a concave f along an
       // edge of length L: f >= 0 there, and f <= L²·max|f''|/8 with
       // |f''| <= 1/(R − L) on the edge (the distance to c is >= R − L) —
-      // except that a root on a voxel is moved L/256 into its edge and one
-      // within L/65536 of a voxel to L/65536 from it (so no two vertices
-      // share a position), which changes f (|∇f| = 1) by at most L/256.
+      // except that a root within L/65536 of a voxel is held L/65536 from it
+      // (so no two vertices share a position), which changes f (|∇f| = 1)
+      // by at most L/65536. (A root exactly on a voxel would go L/256 in; no
+      // node of this grid lies on the sphere.)
       const double L = m == IsoMethod::MarchingCubes ? h : std::sqrt(3.0) * h;
-      const double margin = L / 256;
+      const double margin = L / 65536;
       const double bound = L * L / (8 * (s.R - L));
       double worst = 0;
       for (const Vec3& p : mesh.positions) {
@@ -429,9 +430,9 @@ TEST(Isosurface, ObliqueAffinePlacesTheSurfaceInTheWorld) {
       if (m == IsoMethod::MarchingCubes && step.sum() > 1) continue;
       L = std::max(L, (linear * step).norm());
     }
-    for (const Vec3& p : mesh.positions) {  // as in the axis-aligned case, with the margin L/256
-      EXPECT_GE(s.f(p), -L / 256 - 1e-15) << name(m);
-      EXPECT_LE(s.f(p), L * L / (8 * (s.R - L)) + L / 256) << name(m);
+    for (const Vec3& p : mesh.positions) {  // as in the axis-aligned case, with the floor L/65536
+      EXPECT_GE(s.f(p), -L / 65536 - 1e-15) << name(m);
+      EXPECT_LE(s.f(p), L * L / (8 * (s.R - L)) + L / 65536) << name(m);
     }
     const auto t = dm::analyzeTopology(mesh);
     ASSERT_TRUE(t.centroid);

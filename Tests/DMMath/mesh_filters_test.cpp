@@ -1,5 +1,4 @@
 // keepLargestComponent and Taubin smoothing against known pieces and shapes.
-#include <dm/math/isosurface.hpp>
 #include <dm/math/mesh_filters.hpp>
 #include <dm/math/mesh_topology.hpp>
 #include <dm/math/primitives.hpp>
@@ -11,6 +10,8 @@
 #include <cstdint>
 #include <cstdio>
 #include <random>
+
+#include "../common/staircase_ball.hpp"
 
 namespace dm {
 namespace {
@@ -164,24 +165,6 @@ TEST(MeshFilters, TaubinKeepsTheRadiusOverManyIterations) {
   EXPECT_LT(change, 0.01);
 }
 
-/// The marching-cubes surface of a voxelised ball (voxels 1 inside radius R,
-/// 0 outside, 1 mm voxels, iso 0.5): a sphere carrying the voxel staircase,
-/// centred at the origin.
-Mesh staircaseBall(double R) {
-  const int n = static_cast<int>(2 * R) + 6;
-  Affine3 a = Affine3::Identity();
-  a.linear() = 1e-3 * Mat3::Identity();
-  a.translation() = Vec3::Constant(-1e-3 * (n - 1) / 2.0);
-  auto v = Volume::create({n, n, n}, VoxelType::U8, a);
-  EXPECT_TRUE(v);
-  for (int k = 0; k < n; ++k)
-    for (int j = 0; j < n; ++j)
-      for (int i = 0; i < n; ++i) v->setValue(i, j, k, (a * Vec3(i, j, k)).norm() < R * 1e-3 ? 1 : 0);
-  auto m = extractIsosurface(*v, {.iso = 0.5, .computeNormals = false});
-  EXPECT_TRUE(m);
-  return m ? std::move(*m) : Mesh{};
-}
-
 TEST(MeshFilters, BoundedTaubinRemovesTheStaircaseWithinItsDisplacementBound) {
   // A 12-voxel ball's staircase is a radial error of a few tenths of a voxel.
   // Smoothing (20 iterations) with a bound of a quarter voxel: no vertex
@@ -191,7 +174,7 @@ TEST(MeshFilters, BoundedTaubinRemovesTheStaircaseWithinItsDisplacementBound) {
   // ball keeps its size. Unbounded, the same smoothing moves some vertices
   // further: the bound is what holds them.
   const double R = 12e-3, bound = 0.25e-3;
-  const Mesh raw = staircaseBall(12);
+  const Mesh raw = test::staircaseBall(12e-3, 1e-3);  // 1 mm voxels
   ASSERT_GT(raw.vertexCount(), 1000u);
   const RadialStats before = radialStats(raw);
   Mesh bounded = raw, unbounded = raw;
