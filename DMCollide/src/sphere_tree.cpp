@@ -24,6 +24,8 @@
 #include <string>
 #include <unordered_map>
 
+#include "surface_patch_fit.hpp"
+
 namespace dm {
 
 const char* toString(SphereTreeMethod method) noexcept {
@@ -148,22 +150,50 @@ BoundingSphere minimalSphere(std::vector<Vec3>& points) {
 // ---------------------------------------------------------------- pieces ---
 
 // Pieces in CSR form: piece i has points [start[i], start[i+1]) and lies in
-// cell `cell[i]` of a 2^gridLevel grid.
+// cell `cell[i]` of a 2^gridLevel grid. Its surface (the triangles clipped
+// to the cell; none for solid corners and voxels) has the points
+// [start[i], surfaceEnd[i]), the area vector Σ area·n, the area and the
+// area moment Σ area·centroid, from which the nodes' SurfacePatches are fitted.
 struct Pieces {
   int gridLevel = 0;
   std::vector<Vec3> points;
   std::vector<std::uint32_t> start{0};
+  std::vector<std::uint32_t> surfaceEnd;
   std::vector<Vec3i> cell;
   std::vector<Vec3> centroid;
   std::vector<double> radius;  // ball about the centroid holding the piece's points
+  std::vector<Vec3> areaVector, areaMoment;
+  std::vector<double> area;
+  bool anySurface = false;
   std::size_t size() const { return cell.size(); }
 };
 
-// One cell's share of a piece before merging by cell.
+// One cell's share of a piece before merging by cell: a clipped triangle
+// (surface) or solid corners and voxel cubes (no area).
 struct Record {
   std::uint64_t key;
   std::uint32_t first, count;
+  Vec3 areaVector = Vec3::Zero();
+  double area = 0.0;
+  Vec3 areaMoment = Vec3::Zero();
+  bool surface = false;
 };
+
+// A surface record of the convex polygon raw[first, first + n): its area
+// vector, area and area moment by a fan from the first vertex.
+Record surfaceRecord(std::uint64_t key, const std::vector<Vec3>& raw, std::uint32_t first, std::uint32_t n) {
+  Record r{key, first, n};
+  r.surface = true;
+  const Vec3& q0 = raw[first];
+  for (std::uint32_t i = 1; i + 1 < n; ++i) {
+    const Vec3 a = 0.5 * (raw[first + i] - q0).cross(raw[first + i + 1] - q0);
+    const double an = a.norm();
+    r.areaVector += a;
+    r.area += an;
+    r.areaMoment += an * (q0 + raw[first + i] + raw[first + i + 1]) / 3.0;
+  }
+  return r;
+}
 
 std::uint64_t linearKey(const Vec3i& c, int r) {
   return static_cast<std::uint64_t>(c.x()) +
@@ -195,20 +225,37 @@ Error tooMany(const char* where, std::size_t limit) {
 Result<Pieces> mergeRecords(std::vector<Record>& records, const std::vector<Vec3>& raw, int gridLevel,
                             const char* where, std::size_t maxPieces) {
   const int r = 1 << gridLevel;
-  std::sort(records.begin(), records.end(), [](const Record& a, const Record& b) { return a.key < b.key; });
+  // By cell, a cell's surface records first (their points lead the piece's).
+  std::sort(records.begin(), records.end(), [](const Record& a, const Record& b) {
+    return a.key != b.key ? a.key < b.key : (a.surface && !b.surface);
+  });
   Pieces out;
   out.gridLevel = gridLevel;
   out.points.reserve(raw.size());
   for (std::size_t i = 0; i < records.size();) {
     const std::uint64_t key = records[i].key;
-    Vec3 sum = Vec3::Zero();
+    Vec3 sum = Vec3::Zero(), areaVector = Vec3::Zero(), areaMoment = Vec3::Zero();
+    double area = 0.0;
     const std::size_t first = out.points.size();
-    for (; i < records.size() && records[i].key == key; ++i)
-      for (std::uint32_t k = 0; k < records[i].count; ++k) out.points.push_back(raw[records[i].first + k]);
+    std::size_t surfaceEnd = first;
+    for (; i < records.size() && records[i].key == key; ++i) {
+      const Record& rec = records[i];
+      for (std::uint32_t k = 0; k < rec.count; ++k) out.points.push_back(raw[rec.first + k]);
+      if (!rec.surface) continue;
+      surfaceEnd = out.points.size();
+      areaVector += rec.areaVector;
+      area += rec.area;
+      areaMoment += rec.areaMoment;
+    }
     for (std::size_t k = first; k < out.points.size(); ++k) sum += out.points[k];
     out.start.push_back(static_cast<std::uint32_t>(out.points.size()));
+    out.surfaceEnd.push_back(static_cast<std::uint32_t>(surfaceEnd - first));  // a count until reordered
     out.cell.push_back(keyCell(key, r));
     out.centroid.push_back(sum / static_cast<double>(out.points.size() - first));
+    out.areaVector.push_back(areaVector);
+    out.area.push_back(area);
+    out.areaMoment.push_back(areaMoment);
+    out.anySurface = out.anySurface || area > 0.0;
     if (out.cell.size() > maxPieces) return tooMany(where, maxPieces);
   }
   // Morton order makes every octree cell a contiguous range of pieces.
@@ -220,13 +267,18 @@ Result<Pieces> mergeRecords(std::vector<Record>& records, const std::vector<Vec3
             [&](std::uint32_t a, std::uint32_t b) { return codes[a] < codes[b]; });
   Pieces sorted;
   sorted.gridLevel = gridLevel;
+  sorted.anySurface = out.anySurface;
   sorted.points.reserve(out.points.size());
   for (std::uint32_t i : order) {
+    sorted.surfaceEnd.push_back(static_cast<std::uint32_t>(sorted.points.size()) + out.surfaceEnd[i]);
     sorted.points.insert(sorted.points.end(), out.points.begin() + out.start[i],
                          out.points.begin() + out.start[i + 1]);
     sorted.start.push_back(static_cast<std::uint32_t>(sorted.points.size()));
     sorted.cell.push_back(out.cell[i]);
     sorted.centroid.push_back(out.centroid[i]);
+    sorted.areaVector.push_back(out.areaVector[i]);
+    sorted.area.push_back(out.area[i]);
+    sorted.areaMoment.push_back(out.areaMoment[i]);
   }
   sorted.radius.resize(sorted.size());
   for (std::size_t i = 0; i < sorted.size(); ++i) {
@@ -316,9 +368,9 @@ Result<Pieces> meshPieces(const Mesh& mesh, int gridLevel, const SphereTreeOptio
             n = n > 0 ? clipPolygon(bufB, n, bufA, a, hi[a], false) : 0;
           }
           if (n == 0) continue;
-          records.push_back(
-              {linearKey(c, g.r), static_cast<std::uint32_t>(raw.size()), static_cast<std::uint32_t>(n)});
+          const auto first = static_cast<std::uint32_t>(raw.size());
           raw.insert(raw.end(), bufA, bufA + n);
+          records.push_back(surfaceRecord(linearKey(c, g.r), raw, first, static_cast<std::uint32_t>(n)));
           if (records.size() > opt.maxPieces) return tooMany(where, opt.maxPieces);
         }
   }
@@ -462,6 +514,7 @@ Result<Pieces> volumePieces(const Volume& vol, int gridLevel, const SphereTreeOp
 struct Build {
   std::vector<SphereTreeNode> nodes;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> range;
+  std::vector<SurfacePatch> patches;  // one per node when the pieces hold surface
 };
 
 void gatherPoints(const Pieces& p, const std::uint32_t* order, std::uint32_t b, std::uint32_t e,
@@ -477,13 +530,33 @@ BoundingSphere sphereOfRange(const Pieces& p, const std::uint32_t* order, std::u
   return minimalSphere(scratch);
 }
 
-// Computes the spheres of nodes [first, last) from their piece ranges.
+// The SurfacePatch of the surface of the pieces order[b, e).
+SurfacePatch patchOfRange(const Pieces& p, const std::uint32_t* order, std::uint32_t b, std::uint32_t e,
+                          std::vector<Vec3>& pts) {
+  pts.clear();
+  Vec3 areaVector = Vec3::Zero(), areaMoment = Vec3::Zero();
+  double area = 0.0;
+  for (std::uint32_t i = b; i < e; ++i) {
+    const std::uint32_t k = order[i];
+    pts.insert(pts.end(), p.points.begin() + p.start[k], p.points.begin() + p.surfaceEnd[k]);
+    areaVector += p.areaVector[k];
+    area += p.area[k];
+    areaMoment += p.areaMoment[k];
+  }
+  return detail::fitSurfacePatch(areaVector, area, areaMoment, pts);
+}
+
+// Computes the spheres (and, when the pieces hold surface, the patches) of
+// nodes [first, last) from their piece ranges.
 void computeSpheres(Build& t, const Pieces& p, const std::vector<std::uint32_t>& order, std::size_t first,
                     std::size_t last) {
+  if (p.anySurface) t.patches.resize(t.nodes.size());
   parallelFor(first, last, 4, [&](std::size_t b, std::size_t e) {
     std::vector<Vec3> scratch;
     for (std::size_t n = b; n < e; ++n) {
-      const BoundingSphere s = sphereOfRange(p, order.data(), t.range[n].first, t.range[n].second, scratch);
+      const auto [rb, re] = t.range[n];
+      if (p.anySurface) t.patches[n] = patchOfRange(p, order.data(), rb, re, scratch);
+      const BoundingSphere s = sphereOfRange(p, order.data(), rb, re, scratch);
       t.nodes[n].center = s.center;
       t.nodes[n].radius = s.radius;
     }
@@ -739,7 +812,7 @@ Status checkLevels(const SphereTreeOptions& opt, const char* where) {
 Result<std::shared_ptr<const SphereTree>> finish(Build&& t, double referenceVolume, SphereTreeMethod method) {
   if (!(referenceVolume > 0)) referenceVolume = ballVolume(t.nodes[0].radius);
   if (!(referenceVolume > 0)) referenceVolume = std::numeric_limits<double>::min();
-  return SphereTree::fromNodes(std::move(t.nodes), referenceVolume, method);
+  return SphereTree::fromNodes(std::move(t.nodes), std::move(t.patches), referenceVolume, method);
 }
 
 Result<std::shared_ptr<const SphereTree>> buildFromMesh(const Mesh& mesh, const SphereTreeOptions& opt,
@@ -783,7 +856,41 @@ Result<std::shared_ptr<const SphereTree>> buildFromVolume(const Volume& vol, con
 Result<std::shared_ptr<const SphereTree>> SphereTree::fromNodes(std::vector<SphereTreeNode> nodes,
                                                                 double referenceVolume,
                                                                 SphereTreeMethod method) {
+  return fromNodes(std::move(nodes), {}, referenceVolume, method);
+}
+
+namespace {
+// Why patch `p` is not a valid SurfacePatch ("" when it is).
+std::string patchProblem(const SurfacePatch& p) {
+  const auto unit = [](const Vec3& v) { return std::abs(v.norm() - 1.0) < 1e-6; };
+  if (!p.origin.allFinite() || !p.normal.allFinite() || !p.tangentU.allFinite() || !p.tangentV.allFinite() ||
+      !std::all_of(p.coeff.begin(), p.coeff.end(), [](double c) { return std::isfinite(c); }) ||
+      !std::isfinite(p.halfWidth) || !std::isfinite(p.deviation) || !std::isfinite(p.coherence))
+    return "a field is not finite";
+  if (p.normal.isZero()) return "";  // a node without surface
+  if (!unit(p.normal) || !unit(p.tangentU) || !unit(p.tangentV))
+    return "normal or tangent is not a unit vector";
+  if (std::abs(p.normal.dot(p.tangentU)) > 1e-6 || (p.normal.cross(p.tangentU) - p.tangentV).norm() > 1e-6)
+    return "(tangentU, tangentV, normal) is not a right-handed orthonormal frame";
+  if (p.halfWidth < 0 || p.deviation < 0) return "halfWidth or deviation is negative";
+  if (p.coherence < 0 || p.coherence > 1) return "coherence is outside [0, 1]";
+  return "";
+}
+}  // namespace
+
+Result<std::shared_ptr<const SphereTree>> SphereTree::fromNodes(std::vector<SphereTreeNode> nodes,
+                                                                std::vector<SurfacePatch> patches,
+                                                                double referenceVolume,
+                                                                SphereTreeMethod method) {
   const char* where = "dm::SphereTree::fromNodes";
+  if (!patches.empty() && patches.size() != nodes.size())
+    return fail(ErrorCode::InvalidArgument,
+                formatString("%zu patches for %zu nodes", patches.size(), nodes.size()), where,
+                "pass one SurfacePatch per node, or none");
+  for (std::size_t i = 0; i < patches.size(); ++i)
+    if (std::string why = patchProblem(patches[i]); !why.empty())
+      return fail(ErrorCode::InvalidArgument, "patch " + std::to_string(i) + ": " + why, where,
+                  "give every node a valid SurfacePatch (zero normal: no surface)");
   auto bad = [&](std::size_t i, const std::string& what) {
     return fail(ErrorCode::InvalidArgument, "node " + std::to_string(i) + ": " + what, where,
                 "store the nodes breadth-first with contiguous children (see SphereTreeNode)");
@@ -832,6 +939,7 @@ Result<std::shared_ptr<const SphereTree>> SphereTree::fromNodes(std::vector<Sphe
       tree->levelStart_.push_back(static_cast<std::uint32_t>(i));
   tree->levelStart_.push_back(static_cast<std::uint32_t>(nodes.size()));
   tree->nodes_ = std::move(nodes);
+  tree->patches_ = std::move(patches);
   return std::shared_ptr<const SphereTree>(std::move(tree));
 }
 

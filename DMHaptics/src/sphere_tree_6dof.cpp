@@ -21,6 +21,7 @@
 #include <array>
 #include <cmath>
 #include <limits>
+#include <span>
 #include <utility>
 
 namespace dm {
@@ -30,6 +31,16 @@ namespace {
 using NodeId = SphereHierarchy::NodeId;
 constexpr int kStackSize = 512;           // each pop pushes ≤ 8; descents are ≤ 11 + 11 levels deep
 constexpr double kTouchTolerance = 1e-9;  // m: pairs closer than this count as touching in the sweep
+// Surface patches (see the file comment): a node's patch is used when its
+// normals agree within about 25° ...
+constexpr double kMinCoherence = 0.9;
+// ... a tool point counts against an environment patch when it lies over the
+// patch's disc (with this slack) ...
+constexpr double kLateralSlack = 1.05;
+// ... and no deeper below it than this share of the patch's half-width
+// (deeper points are beside or under the patch, e.g. past a box's edge:
+// they collide through the spheres, conservatively).
+constexpr double kMaxPatchDepth = 0.25;
 
 // Rotation vector (axis · angle, rad) of a unit quaternion.
 Vec3 logRotation(const Quat& qIn) noexcept {
@@ -82,7 +93,8 @@ struct SphereTree6DofRenderer::State {
   // used level: the sphere; above: a bound of the used level's spheres below).
   std::vector<Vec3> toolCenter;
   std::vector<double> toolBound;
-  double toolReach = 0.0;  // max |centre| of the used level's spheres
+  std::vector<const SurfacePatch*> toolPatch;  // the used level's usable patches (else null)
+  double toolReach = 0.0;                      // max |centre| of the used level's spheres
   double toolMaxRadius = 0.0;
   double envMaxLeafRadius = 0.0;
   double mass = 1.0, inertia = 1.0;
@@ -105,6 +117,17 @@ struct SphereTree6DofRenderer::State {
     std::uint32_t object = 0;
     Vec3 envCenter = Vec3::Zero();  // world
     double envRadius = 0.0;
+    const SurfacePatch* envPatch = nullptr;  // object local frame; null: collide with the sphere
+  };
+  // One pair's contact at a tool pose: unit normal from the environment to
+  // the tool (world), the tool point (tool frame: a patch's support point or
+  // a sphere's centre) and its radius (0 for a patch point), the distance.
+  struct Contact {
+    Vec3 n = Vec3::UnitZ();
+    Vec3 point = Vec3::Zero();
+    double radius = 0.0;
+    double dist = 0.0;
+    bool envPatch = false;
   };
   std::vector<Pair> pairs;  // capacity maxConstraints
   std::size_t pairCount = 0;
@@ -112,9 +135,12 @@ struct SphereTree6DofRenderer::State {
   // Smallest gap of a candidate dropped by the truncation: no tool sphere may
   // move farther than this in the tick, or it could hit a pair not solved for.
   double minDropped = std::numeric_limits<double>::infinity();
-  // Constraint rows of one linearisation.
+  // Constraint rows of one linearisation, and each row's contact (what the
+  // sweep moves along the chord; rowActive 0: no constraint this time).
   std::vector<Vec3> rowN, rowRxN;
   std::vector<double> rowD, rowLambda, rowInvA;
+  std::vector<Contact> rowContact;
+  std::vector<std::uint8_t> rowActive;
 
   Vec3 pg = Vec3::Zero();  // graphic tool
   Quat qg = Quat::Identity();
@@ -122,11 +148,21 @@ struct SphereTree6DofRenderer::State {
   Quat lastHandleQ = Quat::Identity();
 
   // ---------------------------------------------------------------------
-  void addCandidate(double gap, std::uint32_t toolNode, std::uint32_t object, const Vec3& envCenterWorld,
-                    double envRadius) noexcept {
+  // A node's patch when it is usable: valid, coherent, and within
+  // surfaceTolerance × radius of its surface.
+  const SurfacePatch* usablePatch(std::span<const SurfacePatch> patches, NodeId node,
+                                  double radius) const noexcept {
+    if (node >= patches.size()) return nullptr;
+    const SurfacePatch& sp = patches[node];
+    if (!sp.valid() || sp.coherence < kMinCoherence || sp.deviation > opt.surfaceTolerance * radius)
+      return nullptr;
+    return &sp;
+  }
+
+  void addCandidate(const Pair& p) noexcept {
+    const double gap = p.gap;
     ++candidates;
     const auto less = [](const Pair& a, const Pair& b) { return a.gap < b.gap; };
-    const Pair p{gap, toolNode, object, envCenterWorld, envRadius};
     if (pairCount < pairs.size()) {
       pairs[pairCount++] = p;
       std::push_heap(pairs.begin(), pairs.begin() + static_cast<std::ptrdiff_t>(pairCount), less);
@@ -148,6 +184,7 @@ struct SphereTree6DofRenderer::State {
     const Mat3 rObj = o.pose.linear();
     const Mat3 rot = rObj.transpose() * q.toRotationMatrix();
     const Vec3 tr = rObj.transpose() * (p - o.pose.translation());
+    const Mat3 rWorld = q.toRotationMatrix();
     struct Entry {
       std::uint32_t t;
       NodeId e;
@@ -166,7 +203,18 @@ struct SphereTree6DofRenderer::State {
       NodeId kids[8];
       const int nk = env.children(en.e, kids);
       if (toolLeaf && nk == 0) {
-        addCandidate(gap, en.t, k, o.pose * be.center, be.radius);
+        const std::span<const SurfacePatch> patches =
+            o.stored ? o.stored->patches() : std::span<const SurfacePatch>{};
+        Pair pr{gap, en.t, k, o.pose * be.center, be.radius, usablePatch(patches, en.e, be.radius)};
+        if (pr.envPatch || toolPatch[en.t]) {
+          // Through a patch the pair is as near as its contact, which the
+          // spheres only bound: keep it when that is within the margin
+          // (its tool point may move up to the margin over the patch).
+          Contact c;
+          if (!contact(pr, p, rWorld, c, margin) || c.dist > margin) continue;
+          pr.gap = c.dist;
+        }
+        addCandidate(pr);
         continue;
       }
       const bool splitTool = nk == 0 || (!toolLeaf && rt >= be.radius);
@@ -195,22 +243,98 @@ struct SphereTree6DofRenderer::State {
                    [](const Pair& a, const Pair& b) { return a.gap < b.gap; });
   }
 
-  // Centre (world) and lever of a tool sphere at pose (p, R).
-  Vec3 lever(std::uint32_t node, const Mat3& r) const noexcept { return r * toolCenter[node]; }
+  // Contact of tool point `c.point` (radius c.radius) with the environment
+  // sphere of `pr` at the tool pose (p, R).
+  static void sphereContact(const Pair& pr, const Vec3& p, const Mat3& r, Contact& c) noexcept {
+    const Vec3 lv = r * c.point;
+    const Vec3 diff = p + lv - pr.envCenter;
+    const double dist = diff.norm();
+    // Coincident centres: push along the lever (away from the tool origin), else up.
+    c.n = dist > 1e-12 ? Vec3(diff / dist) : (lv.norm() > 1e-12 ? Vec3(lv.normalized()) : Vec3::UnitZ());
+    c.dist = dist - c.radius - pr.envRadius;
+    c.envPatch = false;
+  }
+
+  // The contact of pair `pr` at the tool pose (p, R); false when the pair
+  // constrains nothing there (a tool patch facing away from the
+  // environment's surface, or a tool point beside an environment patch).
+  // Environment patch: the tool's support point along the patch normal (two
+  // passes: the normal at the first point, then at the second) or the tool
+  // sphere, against the patch; deeper than kMaxPatchDepth, the spheres.
+  // Environment sphere: the tool's support point towards its centre, or the
+  // tool sphere. `lateralExtra` (m) widens the lateral gate (collection).
+  bool contact(const Pair& pr, const Vec3& p, const Mat3& r, Contact& c,
+               double lateralExtra = 0.0) const noexcept {
+    const SurfacePatch* tp = toolPatch[pr.toolNode];
+    c.point = toolCenter[pr.toolNode];
+    c.radius = toolBound[pr.toolNode];
+    if (pr.envPatch) {
+      const SurfacePatch& ep = *pr.envPatch;
+      const Isometry3& pose = objects[pr.object].pose;
+      const Mat3 ro = pose.linear();
+      Vec3 nEnv = ro * ep.normal;
+      SurfacePatch::Query q;
+      for (int pass = 0; pass < (tp ? 2 : 1); ++pass) {
+        if (tp) {
+          const Vec3 d = -(r.transpose() * nEnv);
+          if (d.dot(tp->normal) <= 0.0) return false;
+          c.point = tp->support(d);
+          c.radius = 0.0;
+        }
+        q = ep.query(ro.transpose() * (p + r * c.point - pose.translation()));
+        nEnv = ro * q.normal;
+      }
+      if (q.lateral > kLateralSlack * ep.halfWidth + c.radius + lateralExtra) return false;
+      if (q.distance - c.radius >= -kMaxPatchDepth * ep.halfWidth) {
+        c.n = nEnv;
+        c.dist = q.distance - c.radius;
+        c.envPatch = true;
+        return true;
+      }
+      c.point = toolCenter[pr.toolNode];
+      c.radius = toolBound[pr.toolNode];
+      sphereContact(pr, p, r, c);
+      return true;
+    }
+    if (tp) {
+      const Vec3 toEnv = r.transpose() * (pr.envCenter - p) - tp->origin;
+      if (toEnv.squaredNorm() > 0.0 && toEnv.dot(tp->normal) > 0.0) {
+        c.point = tp->support(toEnv.normalized());
+        c.radius = 0.0;
+      }
+    }
+    sphereContact(pr, p, r, c);
+    return true;
+  }
+
+  // Distance of row i's contact (the same tool point and feature) at the tool pose (p, R).
+  double rowDistance(std::size_t i, const Vec3& p, const Mat3& r) const noexcept {
+    const Pair& pr = pairs[i];
+    const Contact& c = rowContact[i];
+    if (c.envPatch) {
+      const Isometry3& pose = objects[pr.object].pose;
+      return pr.envPatch->query(pose.linear().transpose() * (p + r * c.point - pose.translation())).distance -
+             c.radius;
+    }
+    return (p + r * c.point - pr.envCenter).norm() - c.radius - pr.envRadius;
+  }
 
   // Linearises every pair at (p, R) into the constraint rows.
   void linearize(const Vec3& p, const Mat3& r) noexcept {
     for (std::size_t i = 0; i < pairCount; ++i) {
-      const Pair& pr = pairs[i];
-      const Vec3 lv = lever(pr.toolNode, r);
-      const Vec3 diff = p + lv - pr.envCenter;
-      const double dist = diff.norm();
-      // Coincident centres: push along the lever (away from the tool origin), else up.
-      Vec3 n = dist > 1e-12 ? Vec3(diff / dist) : (lv.norm() > 1e-12 ? Vec3(lv.normalized()) : Vec3::UnitZ());
-      rowN[i] = n;
-      rowRxN[i] = lv.cross(n);
-      rowD[i] = dist - toolBound[pr.toolNode] - pr.envRadius;
+      Contact& c = rowContact[i];
       rowLambda[i] = 0.0;
+      rowActive[i] = contact(pairs[i], p, r, c) ? 1 : 0;
+      if (!rowActive[i]) {  // a row that never binds
+        rowN[i] = Vec3::Zero();
+        rowRxN[i] = Vec3::Zero();
+        rowD[i] = std::numeric_limits<double>::max();
+        rowInvA[i] = mass;
+        continue;
+      }
+      rowN[i] = c.n;
+      rowRxN[i] = (r * c.point).cross(c.n);
+      rowD[i] = c.dist;
       rowInvA[i] = 1.0 / (1.0 / mass + rowRxN[i].squaredNorm() / inertia);
     }
   }
@@ -247,10 +371,21 @@ struct SphereTree6DofRenderer::State {
   double sweep(const Vec3& p0, const Mat3& r0, const Vec3& p1, const Mat3& r1) const noexcept {
     double tFirst = 2.0;
     for (std::size_t i = 0; i < pairCount; ++i) {
+      if (!rowActive[i]) continue;
       const Pair& pr = pairs[i];
-      const Vec3 c0 = p0 + lever(pr.toolNode, r0);
-      const Vec3 c1 = p1 + lever(pr.toolNode, r1);
-      const double rr = toolBound[pr.toolNode] + pr.envRadius - kTouchTolerance;
+      const Contact& ct = rowContact[i];
+      if (ct.envPatch) {
+        // The point's distance from the patch along the chord, linearly
+        // (exact for a plane, and the motion is within the margin).
+        const double d0 = ct.dist - kTouchTolerance;
+        if (d0 <= 0.0) continue;
+        const double d1 = rowDistance(i, p1, r1) - kTouchTolerance;
+        if (d1 < 0.0) tFirst = std::min(tFirst, d0 / (d0 - d1));
+        continue;
+      }
+      const Vec3 c0 = p0 + r0 * ct.point;
+      const Vec3 c1 = p1 + r1 * ct.point;
+      const double rr = ct.radius + pr.envRadius - kTouchTolerance;
       const Vec3 m = c0 - pr.envCenter;
       const double cq = m.squaredNorm() - rr * rr;
       if (cq <= 0.0) continue;
@@ -314,6 +449,10 @@ Result<std::unique_ptr<SphereTree6DofRenderer>> SphereTree6DofRenderer::create(
                "options.marginEpsilon", "");
   if (!finite(o.maxStep) || o.maxStep <= 0)
     return bad(formatString("maxStep is %g m; it must be finite and > 0", o.maxStep), "options.maxStep", "");
+  if (!finite(o.surfaceTolerance) || o.surfaceTolerance < 0)
+    return bad(formatString("surfaceTolerance is %g; it must be finite and >= 0 (0 = spheres only)",
+                            o.surfaceTolerance),
+               "options.surfaceTolerance", "");
 
   auto s = std::make_unique<State>();
   s->opt = o;
@@ -324,11 +463,13 @@ Result<std::unique_ptr<SphereTree6DofRenderer>> SphereTree6DofRenderer::create(
   s->levelEnd = s->levelBegin + static_cast<std::uint32_t>(lv.size());
   s->toolCenter.resize(s->levelEnd);
   s->toolBound.resize(s->levelEnd);
+  s->toolPatch.assign(s->levelEnd, nullptr);
   for (std::uint32_t i = s->levelEnd; i-- > 0;) {
     const SphereTreeNode& n = nodes[i];
     s->toolCenter[i] = n.center;
     if (i >= s->levelBegin) {
       s->toolBound[i] = n.radius;
+      s->toolPatch[i] = s->usablePatch(tool->patches(), i, n.radius);
       s->toolReach = std::max(s->toolReach, n.center.norm());
       s->toolMaxRadius = std::max(s->toolMaxRadius, n.radius);
       continue;
@@ -379,6 +520,8 @@ Result<std::unique_ptr<SphereTree6DofRenderer>> SphereTree6DofRenderer::create(
   s->rowD.resize(m);
   s->rowLambda.resize(m);
   s->rowInvA.resize(m);
+  s->rowContact.resize(m);
+  s->rowActive.resize(m);
   return std::unique_ptr<SphereTree6DofRenderer>(new SphereTree6DofRenderer(std::move(s)));
 }
 
@@ -469,9 +612,8 @@ HapticResponse SphereTree6DofRenderer::tick(const HapticInput& input) noexcept {
   int touching = 0;
   for (std::size_t i = 0; i < s.pairCount; ++i) {
     const State::Pair& pr = s.pairs[i];
-    const double gap =
-        (p + s.lever(pr.toolNode, rg) - pr.envCenter).norm() - s.toolBound[pr.toolNode] - pr.envRadius;
-    if (gap > s.opt.marginEpsilon) continue;
+    State::Contact c;
+    if (!s.contact(pr, p, rg, c) || c.dist > s.opt.marginEpsilon) continue;
     ++touching;
     damping = std::max(damping, s.objects[pr.object].material.damping);
   }

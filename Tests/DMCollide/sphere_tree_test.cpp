@@ -250,6 +250,80 @@ TEST(SphereTree, FromNodesChecksTheLayout) {
   EXPECT_FALSE(dm::SphereTree::fromNodes(nodes, 0.0).ok());
 }
 
+// Every node of a mesh tree stores the quadric patch of its surface. On a
+// sphere (a quadric) the leaves' patches carry the surface exactly: normals
+// radial, the curvature 1/R, every mesh vertex of the leaf on or just under
+// the patch (within its deviation), and the support point along a direction
+// is the sphere's own; a box's corner leaf mixes three faces (incoherent).
+TEST(SphereTree, MeshTreesStoreTheSurfaceAsQuadricPatches) {
+  const double r = 0.02;
+  const dm::Mesh mesh = dm::makeIcosphere(r, 6);
+  auto tree = dm::buildSphereTreeFitted(mesh, {.levels = 5});
+  ASSERT_TRUE(tree.ok()) << tree.error();
+  const auto patches = (*tree)->patches();
+  ASSERT_EQ(patches.size(), (*tree)->nodes().size());
+  double sag = 0;  // the deepest point of the mesh under the sphere: a triangle's centroid
+  for (const dm::Triangle& t : mesh.triangles)
+    sag = std::max(sag, r - (mesh.positions[t[0]] + mesh.positions[t[1]] + mesh.positions[t[2]]).norm() / 3);
+  EXPECT_LT(patches[0].coherence, 0.01) << "the root holds the whole closed sphere";
+  int leaves = 0;
+  for (std::size_t i = (*tree)->nodes().size() - (*tree)->level(4).size(); i < patches.size(); ++i) {
+    const dm::SurfacePatch& p = patches[i];
+    ASSERT_TRUE(p.valid()) << i;
+    ++leaves;
+    EXPECT_GT(p.coherence, 0.99);
+    // The band holds the chord sag (vertices on the sphere, cut points on
+    // the facets under it) and the fit's own error, spread both ways.
+    EXPECT_LT(p.deviation, 2 * sag) << "the mesh's chord sag is " << sag;
+    const Vec3 c = p.origin + p.coeff[0] * p.normal;  // the patch above its centroid
+    EXPECT_NEAR(c.norm(), r, sag + 1e-7);
+    EXPECT_LT(std::acos(std::min(1.0, p.query(c).normal.dot(c.normalized()))), 1e-3) << "radial normal";
+    // Curvature 1/R, curving away from the normal (a leaf spans a few
+    // 0.6 mm facets, whose flat samples bias the fit a little).
+    EXPECT_NEAR(p.coeff[3], -1 / r, 0.05 / r);
+    EXPECT_NEAR(p.coeff[5], -1 / r, 0.05 / r);
+    EXPECT_NEAR(p.coeff[4], 0.0, 0.05 / r);
+    // A point 1 mm off the sphere along its normal is 1 mm off the patch.
+    const Vec3 out = c.normalized() * (r + 0.001);
+    EXPECT_NEAR(p.query(out).distance, 0.001, 2 * sag);
+    // The support point towards the normal is the top of the cap.
+    EXPECT_NEAR((p.support(c.normalized()) - c).norm(), 0.0, 2e-5);
+  }
+  EXPECT_GT(leaves, 100);
+
+  auto box = dm::buildSphereTreeOctree(dm::makeBox(Vec3(0.01, 0.01, 0.01)), {.levels = 3});
+  ASSERT_TRUE(box.ok()) << box.error();
+  int incoherent = 0;
+  for (const dm::SurfacePatch& p : (*box)->patches()) incoherent += p.valid() && p.coherence < 0.9 ? 1 : 0;
+  EXPECT_GE(incoherent, 8) << "the corner cells hold three faces";
+}
+
+TEST(SphereTree, FromNodesChecksThePatches) {
+  std::vector<dm::SphereTreeNode> nodes(1);
+  nodes[0].radius = 1.0;
+  dm::SurfacePatch p;
+  p.normal = Vec3::UnitZ();
+  p.tangentU = Vec3::UnitX();
+  p.tangentV = Vec3::UnitY();
+  p.coherence = 1.0;
+  EXPECT_TRUE(dm::SphereTree::fromNodes(nodes, {p}, 1.0).ok());
+  EXPECT_TRUE(dm::SphereTree::fromNodes(nodes, {dm::SurfacePatch{}}, 1.0).ok()) << "no surface";
+  auto r = dm::SphereTree::fromNodes(nodes, {p, p}, 1.0);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().what.find("2 patches for 1 nodes"), std::string::npos) << r.error().what;
+  dm::SurfacePatch bad = p;
+  bad.tangentV = -bad.tangentV;
+  r = dm::SphereTree::fromNodes(nodes, {bad}, 1.0);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().what.find("patch 0"), std::string::npos) << r.error().what;
+  bad = p;
+  bad.coeff[3] = std::numeric_limits<double>::quiet_NaN();
+  EXPECT_FALSE(dm::SphereTree::fromNodes(nodes, {bad}, 1.0).ok());
+  bad = p;
+  bad.coherence = 1.5;
+  EXPECT_FALSE(dm::SphereTree::fromNodes(nodes, {bad}, 1.0).ok());
+}
+
 // --------------------------------------------------------- voxel models ---
 
 // A ball of voxels in a 19 × 13 × 9 grid with anisotropic, rotated spacing.

@@ -21,9 +21,12 @@
 #include <vector>
 
 #include "../common/alloc_counter.hpp"
+#include "haptics_test_support.hpp"
 
 namespace dm {
 namespace {
+
+using test::drive;
 
 constexpr double kPlaneR = 1000.0;
 
@@ -79,21 +82,6 @@ SphereTreeObject planeObject() {
   o.pose = poseAt(Vec3(0, 0, -kPlaneR));
   o.name = "plane";
   return o;
-}
-
-// Moves the handle in `steps` straight steps to `to`, then holds it `hold` ticks.
-HapticResponse drive(SphereTree6DofRenderer& r, const Isometry3& from, const Isometry3& to, int steps,
-                     int hold) {
-  HapticResponse out;
-  const Quat q0(from.linear()), q1(to.linear());
-  for (int i = 1; i <= steps + hold; ++i) {
-    const double t = std::min(1.0, static_cast<double>(i) / steps);
-    Isometry3 p = Isometry3::Identity();
-    p.linear() = q0.slerp(t, q1).toRotationMatrix();
-    p.translation() = (1 - t) * from.translation() + t * to.translation();
-    out = r.tick({.timeNs = i * 1000000LL, .dt = 1e-3, .devicePose = p});
-  }
-  return out;
 }
 
 TEST(SphereTree6Dof, BallRestsOnPlaneAndForceIsStiffnessTimesDepth) {

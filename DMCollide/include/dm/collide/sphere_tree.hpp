@@ -51,6 +51,7 @@
 #include <dm/core/types.hpp>
 #include <dm/core/volume.hpp>
 
+#include <array>
 #include <cstddef>
 #include <cstdint>
 #include <memory>
@@ -65,7 +66,9 @@ namespace dm {
 /// on the next level, and the children of consecutive nodes follow each
 /// other. Leaves carry no reference to the triangles or voxels they cover
 /// (the builders' pieces are cell fragments, not source primitives); the
-/// implicit tree's leaves are the voxels themselves.
+/// mesh builders store the surface of every node as a SurfacePatch beside
+/// the nodes (SphereTree::patches()); the implicit tree's leaves are the
+/// voxels themselves.
 struct SphereTreeNode {
   Vec3 center = Vec3::Zero();  ///< m, local frame
   /// m: sphere about `center` covering the geometry of the node (what the
@@ -77,6 +80,46 @@ struct SphereTreeNode {
   std::uint32_t firstChild = 0;  ///< index into SphereTree::nodes() (unused at leaves)
   std::uint8_t childCount = 0;   ///< 0 (leaf) .. 8
   std::uint8_t level = 0;        ///< 0 = root
+};
+
+/// The surface inside one node of a mesh sphere tree, as a small quadric
+/// patch in the tree's local frame. With (u, v, w) the coordinates of
+/// x − origin along (tangentU, tangentV, normal), the patch is the graph
+///     w = h(u, v) = c₀ + c₁u + c₂v + ½(c₃u² + 2c₄uv + c₅v²),  |(u, v)| ≤ halfWidth,
+/// least-squares fitted to the node's surface points (the vertices of the
+/// triangles clipped to its cells) and then raised by the largest residual,
+/// so that no surface point lies above it: outward (+normal) it is
+/// conservative, and it lies within `deviation` of every surface point. On a
+/// smooth surface it is exact to second order (a sphere, cylinder or torus
+/// patch is a quadric graph up to O(halfWidth³·κ²)); where the node holds an
+/// edge, a corner or both sides of a thin wall, `coherence` or `deviation`
+/// says so and a user falls back to the node's sphere.
+struct SurfacePatch {
+  Vec3 origin = Vec3::Zero();  ///< m: area centroid of the node's surface
+  Vec3 normal = Vec3::Zero();  ///< unit outward (area-weighted mean normal); zero: the node holds no surface
+  Vec3 tangentU = Vec3::Zero();   ///< unit, ⟂ normal
+  Vec3 tangentV = Vec3::Zero();   ///< normal × tangentU
+  std::array<double, 6> coeff{};  ///< c₀ (m), c₁, c₂ (1), c₃, c₄, c₅ (1/m) of h(u, v)
+  double halfWidth = 0.0;         ///< m: largest |(u, v)| of the node's surface points
+  double deviation = 0.0;         ///< m: largest distance (along normal) of a surface point below the patch
+  double coherence = 0.0;  ///< |Σ area·n| / Σ area ∈ [0, 1]: 1 flat, ≈ 0 both sides of a thin wall
+
+  /// True when the node holds surface (normal is a unit vector).
+  bool valid() const noexcept { return normal.squaredNorm() > 0.5; }
+  /// w = h(u, v), m.
+  double height(double u, double v) const noexcept;
+  /// Where a point x (local frame) is relative to the patch.
+  struct Query {
+    double distance = 0.0;  ///< m, first order: (w − h) / |∇(w − h)|; > 0 outside (exact for a plane)
+    Vec3 normal = Vec3::Zero();  ///< unit outward normal of the patch at (u, v)
+    double lateral = 0.0;        ///< m: |(u, v)|, to compare with halfWidth
+  };
+  Query query(const Vec3& x) const noexcept;
+  /// The point of the patch (|(u, v)| ≤ halfWidth) farthest along the unit
+  /// direction d (local frame): the quadric's stationary point where it is a
+  /// maximum inside the disc, else the best of the centre and the rim point
+  /// the objective's gradient points to. O(1).
+  Vec3 support(const Vec3& d) const noexcept;
 };
 
 /// How a stored tree was built.
@@ -166,8 +209,20 @@ class SphereTree final : public SphereHierarchy {
   static Result<std::shared_ptr<const SphereTree>> fromNodes(
       std::vector<SphereTreeNode> nodes, double referenceVolume,
       SphereTreeMethod method = SphereTreeMethod::Given);
+  /// The same, with one SurfacePatch per node (empty: none). Also fails
+  /// naming the first bad patch on a size that is not the node count, a
+  /// non-finite field, a normal or tangent that is not unit (or zero, for a
+  /// node without surface), a negative halfWidth or deviation, or a
+  /// coherence outside [0, 1].
+  static Result<std::shared_ptr<const SphereTree>> fromNodes(
+      std::vector<SphereTreeNode> nodes, std::vector<SurfacePatch> patches, double referenceVolume,
+      SphereTreeMethod method = SphereTreeMethod::Given);
 
   const std::vector<SphereTreeNode>& nodes() const noexcept { return nodes_; }
+  /// One surface patch per node for trees built from meshes (node i's patch
+  /// is patches()[i]; nodes without surface, e.g. inside a solid tree, have
+  /// an invalid one); empty for voxel-built trees and trees given without.
+  std::span<const SurfacePatch> patches() const noexcept { return patches_; }
   /// The nodes of level `l` (contiguous in nodes()); empty for a bad level.
   std::span<const SphereTreeNode> level(int l) const noexcept;
   SphereTreeMethod method() const noexcept { return method_; }
@@ -188,6 +243,7 @@ class SphereTree final : public SphereHierarchy {
  private:
   SphereTree() noexcept = default;
   std::vector<SphereTreeNode> nodes_;
+  std::vector<SurfacePatch> patches_;      // empty or one per node
   std::vector<std::uint32_t> levelStart_;  // size levels + 1
   SphereTreeMethod method_ = SphereTreeMethod::Given;
   double referenceVolume_ = 0.0;
@@ -197,9 +253,9 @@ class SphereTree final : public SphereHierarchy {
 /// Octree sphere tree of a mesh: level l has the non-empty cells of a
 /// 2^l × 2^l × 2^l subdivision of the mesh's bounding box, each with the
 /// minimal sphere of the surface (with options.solid and a closed mesh: the
-/// solid) inside the cell. Fails with InvalidArgument on an invalid or
-/// empty mesh, levels outside 1..10, `solid` with an open mesh (the message
-/// says so), or more than options.maxPieces pieces.
+/// solid) inside the cell, and the SurfacePatch of the surface in it. Fails with InvalidArgument on an
+/// invalid or empty mesh, levels outside 1..10, `solid` with an open mesh (the message says so), or more than
+/// options.maxPieces pieces.
 /// @code
 ///   auto tree = dm::buildSphereTreeOctree(dm::makeIcosphere(0.01, 3), {});
 ///   if (!tree) return tree.error();

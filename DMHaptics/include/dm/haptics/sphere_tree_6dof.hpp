@@ -5,7 +5,20 @@
 //
 // The tool and the environment objects are sphere trees. The tool is
 // represented by the spheres of one chosen level of its tree (3, 4, 5, ...:
-// the accuracy/speed trade-off), the environment by its leaf spheres. Each
+// the accuracy/speed trade-off), the environment by its leaf spheres.
+//
+// Spheres alone stand off a curved surface by up to a sphere's radius and
+// give normals between sphere centres, tens of degrees off the surface's. So
+// where a tree built from a mesh stores a SurfacePatch (a quadric fitted to
+// the node's surface, dm/collide/sphere_tree.hpp) that fits within
+// `surfaceTolerance`, the node collides through its patch instead: a tool
+// patch by its support point (the point of the patch farthest towards the
+// environment), an environment leaf by the patch's surface and normal at
+// the tool point. Candidate pairs are still found with the spheres (which
+// contain the patches); a tool point only counts against an environment
+// patch that it lies over, and at most a quarter of the patch's width below
+// it; otherwise, at edges, corners and thin walls, and for trees without
+// patches, the spheres collide as in the published method. Each
 // tick the graphic tool's configuration q_g (position and orientation, the
 // orientation as a rotation increment about the previous graphic pose) is
 // the minimiser of
@@ -13,7 +26,8 @@
 // under the linearised non-penetration constraints of the candidate sphere
 // pairs (tool sphere i, environment leaf j, normal n from j to i, lever r
 // from the tool origin to i's centre, signed gap d):
-//     n·(Δx + Δθ × r) ≥ −d.
+//     n·(Δx + Δθ × r) ≥ −d
+// (for a patch: n its normal at the tool point, r the lever to that point).
 // Candidates are the pairs within a margin of the previous graphic pose:
 // the step the tool may take this tick (how far the handle moved since the
 // last tick, as translation + rotation × tool reach, plus how far the
@@ -96,6 +110,14 @@ struct SphereTree6DofOptions {
   /// m, > 0: the farthest any tool sphere moves in one tick (the tool's
   /// speed limit; a handle farther away is followed over several ticks).
   double maxStep = 0.02;
+  /// ≥ 0, a share of a node's sphere radius: a tool node (on toolLevel) or
+  /// an environment leaf whose SurfacePatch lies within this share of its
+  /// radius of the node's surface (and whose normals agree within about
+  /// 25°) collides through the patch, exactly to second order on smooth
+  /// surfaces; other nodes (edges, corners, thin walls) and trees without
+  /// patches (given, voxel-built and implicit trees) collide through their
+  /// spheres. 0 = spheres only (the published method).
+  double surfaceTolerance = 0.1;
 };
 
 /// The 6-DOF constraint-based sphere-tree haptic renderer; see the file

@@ -1,0 +1,135 @@
+// Quadric surface patches of sphere-tree nodes: the least-squares fit of a
+// node's surface points and the two queries the haptic renderers use (where
+// a point is relative to the patch, and the patch's support point); see
+// dm/collide/sphere_tree.hpp (SurfacePatch).
+#include <Eigen/Cholesky>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "surface_patch_fit.hpp"
+
+namespace dm {
+
+double SurfacePatch::height(double u, double v) const noexcept {
+  const std::array<double, 6>& c = coeff;
+  return c[0] + c[1] * u + c[2] * v + 0.5 * (c[3] * u * u + 2.0 * c[4] * u * v + c[5] * v * v);
+}
+
+SurfacePatch::Query SurfacePatch::query(const Vec3& x) const noexcept {
+  const Vec3 d = x - origin;
+  const double u = d.dot(tangentU), v = d.dot(tangentV), w = d.dot(normal);
+  const std::array<double, 6>& c = coeff;
+  const double hu = c[1] + c[3] * u + c[4] * v, hv = c[2] + c[4] * u + c[5] * v;
+  // Gradient of w − h(u, v) in (tangentU, tangentV, normal).
+  const double g = std::sqrt(1.0 + hu * hu + hv * hv);
+  Query q;
+  q.distance = (w - height(u, v)) / g;
+  q.normal = (normal - hu * tangentU - hv * tangentV) / g;
+  q.lateral = std::hypot(u, v);
+  return q;
+}
+
+Vec3 SurfacePatch::support(const Vec3& dir) const noexcept {
+  const double du = dir.dot(tangentU), dv = dir.dot(tangentV), dn = dir.dot(normal);
+  const std::array<double, 6>& c = coeff;
+  // Objective f(u, v) = u·du + v·dv + h(u, v)·dn over the disc |(u, v)| ≤ halfWidth.
+  const auto f = [&](double u, double v) { return u * du + v * dv + height(u, v) * dn; };
+  const auto point = [&](double u, double v) {
+    return Vec3(origin + u * tangentU + v * tangentV + height(u, v) * normal);
+  };
+  double bu = 0.0, bv = 0.0, best = f(0.0, 0.0);
+  // Stationary point: ∇f = 0 ⇔ dn·H·(u, v) = −(du + dn·c₁, dv + dn·c₂), H = [c₃ c₄; c₄ c₅];
+  // a maximum when dn·H is negative definite.
+  const double a = dn * c[3], b = dn * c[4], e = dn * c[5];
+  const double det = a * e - b * b;
+  const double gu = du + dn * c[1], gv = dv + dn * c[2];
+  if (a < 0.0 && det > 0.0) {
+    const double u = (-gu * e + gv * b) / det, v = (-gv * a + gu * b) / det;
+    const double r = std::hypot(u, v);
+    const double s = r > halfWidth ? halfWidth / r : 1.0;  // the disc's point nearest the maximum
+    if (const double fs = f(s * u, s * v); fs > best) best = fs, bu = s * u, bv = s * v;
+  }
+  // The rim point the gradient at the centre points to (the maximum of a
+  // flat, saddle or concave patch lies on the rim).
+  if (const double gn = std::hypot(gu, gv); gn > 0.0) {
+    const double u = halfWidth * gu / gn, v = halfWidth * gv / gn;
+    if (const double fr = f(u, v); fr > best) best = fr, bu = u, bv = v;
+  }
+  return point(bu, bv);
+}
+
+namespace detail {
+
+SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& areaMoment,
+                             std::span<const Vec3> points) {
+  SurfacePatch p;
+  const double an = areaVector.norm();
+  if (!(area > 0.0) || !(an > 1e-12 * area) || points.size() < 3) return p;
+  p.normal = areaVector / an;
+  p.coherence = std::min(1.0, an / area);
+  p.origin = areaMoment / area;
+  // A tangent from the axis least aligned with the normal.
+  Vec3 axis = Vec3::Zero();
+  Eigen::Index least = 0;
+  p.normal.cwiseAbs().minCoeff(&least);
+  axis[least] = 1.0;
+  p.tangentU = (axis - axis.dot(p.normal) * p.normal).normalized();
+  p.tangentV = p.normal.cross(p.tangentU);
+
+  double width = 0.0;
+  for (const Vec3& x : points) {
+    const Vec3 d = x - p.origin;
+    width = std::max(width, std::hypot(d.dot(p.tangentU), d.dot(p.tangentV)));
+  }
+  p.halfWidth = width;
+  const double s = width > 0.0 ? width : 1.0;  // fit in coordinates scaled to the unit disc
+
+  // Least squares of w over the basis (1, ũ, ṽ, ½ũ², ũṽ, ½ṽ²), ũ = u/s; the
+  // plane (the first three) when the points cannot fix a quadric.
+  using Mat6 = Eigen::Matrix<double, 6, 6>;
+  using Vec6 = Eigen::Matrix<double, 6, 1>;
+  Mat6 ata = Mat6::Zero();
+  Vec6 atb = Vec6::Zero();
+  for (const Vec3& x : points) {
+    const Vec3 d = x - p.origin;
+    const double u = d.dot(p.tangentU) / s, v = d.dot(p.tangentV) / s;
+    const Vec6 row(1.0, u, v, 0.5 * u * u, u * v, 0.5 * v * v);
+    ata.selfadjointView<Eigen::Lower>().rankUpdate(row);
+    atb += row * d.dot(p.normal);
+  }
+  ata.triangularView<Eigen::StrictlyUpper>() = ata.transpose();
+  const auto solved = [](const auto& m, const auto& rhs, auto& out) {
+    const auto ldlt = m.ldlt();
+    if (ldlt.info() != Eigen::Success) return false;
+    const auto dg = ldlt.vectorD().cwiseAbs();
+    if (!(dg.minCoeff() > 1e-10 * dg.maxCoeff())) return false;
+    out = ldlt.solve(rhs);
+    return out.allFinite();
+  };
+  Vec6 a = Vec6::Zero();
+  Eigen::Vector3d a3 = Eigen::Vector3d::Zero();
+  if (points.size() >= 6 && solved(ata, atb, a)) {
+  } else if (solved(Eigen::Matrix3d(ata.topLeftCorner<3, 3>()), Eigen::Vector3d(atb.head<3>()), a3)) {
+    a.head<3>() = a3;
+  } else {
+    a[0] = atb[0] / ata(0, 0);  // collinear points: the mean height
+  }
+  p.coeff = {a[0], a[1] / s, a[2] / s, a[3] / (s * s), a[4] / (s * s), a[5] / (s * s)};
+
+  // Raise the patch above every surface point; the spread is the deviation.
+  double hi = -std::numeric_limits<double>::infinity(), lo = std::numeric_limits<double>::infinity();
+  for (const Vec3& x : points) {
+    const Vec3 d = x - p.origin;
+    const double r = d.dot(p.normal) - p.height(d.dot(p.tangentU), d.dot(p.tangentV));
+    hi = std::max(hi, r);
+    lo = std::min(lo, r);
+  }
+  p.coeff[0] += hi;
+  p.deviation = hi - lo;
+  return p;
+}
+
+}  // namespace detail
+}  // namespace dm
