@@ -267,7 +267,11 @@ TEST(SphereTreeAccuracy, BallPressedIntoACylinderAndATorus) {
       const Errors t = pressAll(*renderer(torusTree, toolLevel), torusShape(R, r0), torusPoints);
       print("cylinder", levels, toolLevel, 0.1, c);
       print("torus", levels + 1, toolLevel, 0.1, t);
-      if (levels < 6) continue;
+      // The sweep also shows where the meshes' own facets set the floor
+      // (docs/haptics-accuracy.md): a node smaller than a facet is that
+      // facet, whose normal is up to half a facet off the true one (torus
+      // 256 × 128: up to 1.6°; the tool's 20480 facets: 1.2° at level 5).
+      if (sweep()) continue;
       expectWithinBounds(c, cylSag, "cylinder");
       expectWithinBounds(t, torusSag, "torus");
     }
