@@ -514,6 +514,7 @@ Result<Pieces> volumePieces(const Volume& vol, int gridLevel, const SphereTreeOp
 struct Build {
   std::vector<SphereTreeNode> nodes;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> range;
+  std::vector<std::uint32_t> order;   // the pieces of the nodes' ranges
   std::vector<SurfacePatch> patches;  // one per node when the pieces hold surface
 };
 
@@ -530,35 +531,112 @@ BoundingSphere sphereOfRange(const Pieces& p, const std::uint32_t* order, std::u
   return minimalSphere(scratch);
 }
 
-// The SurfacePatch of the surface of the pieces order[b, e).
-SurfacePatch patchOfRange(const Pieces& p, const std::uint32_t* order, std::uint32_t b, std::uint32_t e,
-                          std::vector<Vec3>& pts) {
-  pts.clear();
-  Vec3 areaVector = Vec3::Zero(), areaMoment = Vec3::Zero();
-  double area = 0.0;
-  for (std::uint32_t i = b; i < e; ++i) {
-    const std::uint32_t k = order[i];
-    pts.insert(pts.end(), p.points.begin() + p.start[k], p.points.begin() + p.surfaceEnd[k]);
-    areaVector += p.areaVector[k];
-    area += p.area[k];
-    areaMoment += p.areaMoment[k];
-  }
-  return detail::fitSurfacePatch(areaVector, area, areaMoment, pts);
-}
-
-// Computes the spheres (and, when the pieces hold surface, the patches) of
-// nodes [first, last) from their piece ranges.
+// Computes the spheres of nodes [first, last) from their piece ranges.
 void computeSpheres(Build& t, const Pieces& p, const std::vector<std::uint32_t>& order, std::size_t first,
                     std::size_t last) {
-  if (p.anySurface) t.patches.resize(t.nodes.size());
   parallelFor(first, last, 4, [&](std::size_t b, std::size_t e) {
     std::vector<Vec3> scratch;
     for (std::size_t n = b; n < e; ++n) {
-      const auto [rb, re] = t.range[n];
-      if (p.anySurface) t.patches[n] = patchOfRange(p, order.data(), rb, re, scratch);
-      const BoundingSphere s = sphereOfRange(p, order.data(), rb, re, scratch);
+      const BoundingSphere s = sphereOfRange(p, order.data(), t.range[n].first, t.range[n].second, scratch);
       t.nodes[n].center = s.center;
       t.nodes[n].radius = s.radius;
+    }
+  });
+}
+
+// Mesh vertices whose normal is within this angle (cos) of a node's take
+// part in the node's fit: a smooth neighbourhood, not the far side of an
+// edge sharper than 30° or of a thin wall.
+constexpr double kFitCrease = 0.866;
+
+// A neighbourhood holding more vertices than this is already a few
+// triangles across inside the node: the node's own surface fits it.
+constexpr std::size_t kMaxFitPoints = 256;
+
+// The mesh's vertices with their area-weighted normals, binned on a grid of
+// cell `h` and sorted by cell, so that the vertices near a point are a few
+// binary searches away.
+struct VertexGrid {
+  double h = 1.0;
+  Vec3 lo = Vec3::Zero();
+  std::vector<std::uint64_t> keys;  // sorted
+  std::vector<std::uint32_t> ids;   // vertex of keys[i]
+  std::vector<Vec3> normal;         // per vertex, unit (zero where the faces cancel)
+  static std::uint64_t pack(const Vec3i& c) {
+    const auto u = [](int x) { return static_cast<std::uint64_t>(x) & 0x1fffffu; };
+    return u(c.x()) | u(c.y()) << 21 | u(c.z()) << 42;
+  }
+  Vec3i cellOf(const Vec3& x) const { return ((x - lo) / h).array().floor().cast<int>(); }
+};
+
+VertexGrid vertexGrid(const Mesh& mesh, double h) {
+  VertexGrid g;
+  g.h = h;
+  g.normal.assign(mesh.positions.size(), Vec3::Zero());
+  for (const Triangle& t : mesh.triangles) {
+    const Vec3 &a = mesh.positions[t[0]], &b = mesh.positions[t[1]], &c = mesh.positions[t[2]];
+    const Vec3 n = (b - a).cross(c - a);  // twice the area vector
+    for (int k = 0; k < 3; ++k) g.normal[t[k]] += n;
+  }
+  for (Vec3& n : g.normal) n = n.norm() > 0.0 ? Vec3(n.normalized()) : Vec3(Vec3::Zero());
+  g.lo = mesh.bounds().min() - Vec3::Constant(h);
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> entries;
+  entries.reserve(mesh.positions.size());
+  for (std::size_t k = 0; k < mesh.positions.size(); ++k)
+    entries.emplace_back(VertexGrid::pack(g.cellOf(mesh.positions[k])), static_cast<std::uint32_t>(k));
+  std::sort(entries.begin(), entries.end());
+  for (const auto& [key, id] : entries) g.keys.push_back(key), g.ids.push_back(id);
+  return g;
+}
+
+// The SurfacePatch of every node (pieces with surface only). A node's
+// frame, raise and deviation come from its own surface. A node smaller than
+// fitRadius (which spans a few of the mesh's triangles) has its quadric
+// fitted over its neighbourhood, the mesh vertices within 2·fitRadius of its
+// centroid whose normals are within the crease of its own, weighted by a
+// Gaussian of scale fitRadius (moving least squares: enough vertices to fix
+// a quadric across anisotropic triangles, the near ones count; they lie
+// on the shape the mesh samples; a facet's interior lies up to its sagitta
+// inside), so that it follows the smooth shape around it rather than one
+// flat facet, whose normal is up to half a facet off the shape's. A larger
+// node, or one whose neighbourhood is dense, is fitted over its own surface.
+// O(nodes · kMaxFitPoints).
+void computePatches(Build& t, const Pieces& p, const Mesh& mesh, double fitRadius) {
+  const VertexGrid grid = vertexGrid(mesh, 2.0 * fitRadius);
+  t.patches.assign(t.nodes.size(), SurfacePatch{});
+  parallelFor(std::size_t{0}, t.nodes.size(), 4, [&](std::size_t b, std::size_t e) {
+    std::vector<Vec3> own, fit;
+    for (std::size_t n = b; n < e; ++n) {
+      const auto [rb, re] = t.range[n];
+      own.clear();
+      fit.clear();
+      Vec3 areaVector = Vec3::Zero(), areaMoment = Vec3::Zero();
+      double area = 0.0;
+      for (std::uint32_t i = rb; i < re; ++i) {
+        const std::uint32_t k = t.order[i];
+        own.insert(own.end(), p.points.begin() + p.start[k], p.points.begin() + p.surfaceEnd[k]);
+        areaVector += p.areaVector[k];
+        area += p.area[k];
+        areaMoment += p.areaMoment[k];
+      }
+      if (area > 0.0 && areaVector.norm() > 1e-12 * area && t.nodes[n].radius < fitRadius) {
+        const Vec3 origin = areaMoment / area, normal = areaVector.normalized();
+        const Vec3i c = grid.cellOf(origin);
+        for (int dz = -1; dz <= 1 && fit.size() <= kMaxFitPoints; ++dz)
+          for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+              const auto [kb, ke] = std::equal_range(grid.keys.begin(), grid.keys.end(),
+                                                     VertexGrid::pack(c + Vec3i(dx, dy, dz)));
+              for (auto it = kb; it != ke; ++it) {
+                const std::uint32_t k = grid.ids[static_cast<std::size_t>(it - grid.keys.begin())];
+                if (grid.normal[k].dot(normal) >= kFitCrease &&
+                    (mesh.positions[k] - origin).norm() <= 2.0 * fitRadius)
+                  fit.push_back(mesh.positions[k]);
+              }
+            }
+        if (fit.size() > kMaxFitPoints) fit.clear();
+      }
+      t.patches[n] = detail::fitSurfacePatch(areaVector, area, areaMoment, own, fit, fitRadius);
     }
   });
 }
@@ -594,6 +672,7 @@ Build octreeBuild(const Pieces& p, int levels) {
     levelBegin = levelEnd;
   }
   computeSpheres(t, p, order, 0, t.nodes.size());
+  t.order = std::move(order);
   return t;
 }
 
@@ -799,6 +878,7 @@ Build fittedBuild(const Pieces& p, int levels, int iterations) {
     levelBegin = levelEnd;
   }
   computeSpheres(t, p, order, 0, t.nodes.size());
+  t.order = std::move(order);
   return t;
 }
 
@@ -832,6 +912,20 @@ Result<std::shared_ptr<const SphereTree>> buildFromMesh(const Mesh& mesh, const 
                 "pass a valid mesh");
   Build t =
       fitted ? fittedBuild(*pieces, opt.levels, opt.fittedIterations) : octreeBuild(*pieces, opt.levels);
+  // The patches' fits reach over about two triangles (see computePatches),
+  // measured across them: the median of the triangles' shortest edges (the
+  // normals of a sliver's fan change across it, not along it).
+  if (pieces->anySurface) {
+    std::vector<double> shortest;
+    shortest.reserve(mesh.triangles.size());
+    for (const Triangle& tri : mesh.triangles) {
+      const Vec3 &a = mesh.positions[tri[0]], &b = mesh.positions[tri[1]], &c = mesh.positions[tri[2]];
+      shortest.push_back(std::min({(b - a).norm(), (c - b).norm(), (a - c).norm()}));
+    }
+    std::nth_element(shortest.begin(), shortest.begin() + static_cast<std::ptrdiff_t>(shortest.size() / 2),
+                     shortest.end());
+    computePatches(t, *pieces, mesh, std::max(2.0 * shortest[shortest.size() / 2], 1e-12));
+  }
   return finish(std::move(t), volume, method);
 }
 

@@ -63,10 +63,11 @@ Vec3 SurfacePatch::support(const Vec3& dir) const noexcept {
 namespace detail {
 
 SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& areaMoment,
-                             std::span<const Vec3> points) {
+                             std::span<const Vec3> points, std::span<const Vec3> fit, double fitScale) {
   SurfacePatch p;
   const double an = areaVector.norm();
   if (!(area > 0.0) || !(an > 1e-12 * area) || points.size() < 3) return p;
+  if (fit.size() < 6) fit = points, fitScale = 0.0;
   p.normal = areaVector / an;
   p.coherence = std::min(1.0, an / area);
   p.origin = areaMoment / area;
@@ -84,7 +85,12 @@ SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& ar
     width = std::max(width, std::hypot(d.dot(p.tangentU), d.dot(p.tangentV)));
   }
   p.halfWidth = width;
-  const double s = width > 0.0 ? width : 1.0;  // fit in coordinates scaled to the unit disc
+  double fitWidth = 0.0;  // fit in coordinates scaled to the unit disc
+  for (const Vec3& x : fit) {
+    const Vec3 d = x - p.origin;
+    fitWidth = std::max(fitWidth, std::hypot(d.dot(p.tangentU), d.dot(p.tangentV)));
+  }
+  const double s = fitWidth > 0.0 ? fitWidth : 1.0;
 
   // Least squares of w over the basis (1, ũ, ṽ, ½ũ², ũṽ, ½ṽ²), ũ = u/s; the
   // plane (the first three) when the points cannot fix a quadric.
@@ -92,12 +98,13 @@ SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& ar
   using Vec6 = Eigen::Matrix<double, 6, 1>;
   Mat6 ata = Mat6::Zero();
   Vec6 atb = Vec6::Zero();
-  for (const Vec3& x : points) {
+  for (const Vec3& x : fit) {
     const Vec3 d = x - p.origin;
     const double u = d.dot(p.tangentU) / s, v = d.dot(p.tangentV) / s;
     const Vec6 row(1.0, u, v, 0.5 * u * u, u * v, 0.5 * v * v);
-    ata.selfadjointView<Eigen::Lower>().rankUpdate(row);
-    atb += row * d.dot(p.normal);
+    const double w = fitScale > 0.0 ? std::exp(-(u * u + v * v) * (s * s) / (fitScale * fitScale)) : 1.0;
+    ata.selfadjointView<Eigen::Lower>().rankUpdate(row, w);
+    atb += w * row * d.dot(p.normal);
   }
   ata.triangularView<Eigen::StrictlyUpper>() = ata.transpose();
   const auto solved = [](const auto& m, const auto& rhs, auto& out) {
@@ -110,7 +117,7 @@ SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& ar
   };
   Vec6 a = Vec6::Zero();
   Eigen::Vector3d a3 = Eigen::Vector3d::Zero();
-  if (points.size() >= 6 && solved(ata, atb, a)) {
+  if (fit.size() >= 6 && solved(ata, atb, a)) {
   } else if (solved(Eigen::Matrix3d(ata.topLeftCorner<3, 3>()), Eigen::Vector3d(atb.head<3>()), a3)) {
     a.head<3>() = a3;
   } else {

@@ -87,10 +87,7 @@ Errors pressAll(SphereTree6DofRenderer& r, const Analytic& shape, const std::vec
   return e;
 }
 
-// The tool: a fitted tree of a fine icosphere (20480 triangles, chord sag 0.2 µm;
-// its facets must be finer than the level-5 nodes, or a node is one flat
-// facet whose normal is up to half a facet (1.2° at 5120 triangles) off the
-// ball's).
+// The tool: a fitted tree of a fine icosphere (20480 triangles, chord sag 0.2 µm).
 std::shared_ptr<const SphereTree> toolTree() {
   static const auto t = buildSphereTreeFitted(makeIcosphere(kToolRadius, 5), {.levels = 6});
   EXPECT_TRUE(t.ok()) << t.error();
@@ -257,8 +254,8 @@ TEST(SphereTreeAccuracy, BallPressedIntoACylinderAndATorus) {
   const double torusSag = r0 * (1 - std::cos(std::numbers::pi / 128)) +
                           (R + r0) * (1 - std::cos(std::numbers::pi / 256)) + toolSag;
   // The torus is 11 cm across: its leaves are 2.3 times the cylinder's at
-  // the same level, and a quadric patch leaves a third-order error on a
-  // torus (whose curvature varies along the tube), so it needs a level more.
+  // the same level (a quadric patch leaves a third-order error where the
+  // curvature varies, as around a torus), so it gets a level more.
   for (const int levels : sweep() ? std::vector<int>{5, 6, 7} : std::vector<int>{6}) {
     const auto cylTree = fitted(cylinder, levels), torusTree = fitted(torus, levels + 1);
     ASSERT_TRUE(cylTree && torusTree && toolTree());
@@ -267,11 +264,6 @@ TEST(SphereTreeAccuracy, BallPressedIntoACylinderAndATorus) {
       const Errors t = pressAll(*renderer(torusTree, toolLevel), torusShape(R, r0), torusPoints);
       print("cylinder", levels, toolLevel, 0.1, c);
       print("torus", levels + 1, toolLevel, 0.1, t);
-      // The sweep also shows where the meshes' own facets set the floor
-      // (docs/haptics-accuracy.md): a node smaller than a facet is that
-      // facet, whose normal is up to half a facet off the true one (torus
-      // 256 × 128: up to 1.6°; the tool's 20480 facets: 1.2° at level 5).
-      if (sweep()) continue;
       expectWithinBounds(c, cylSag, "cylinder");
       expectWithinBounds(t, torusSag, "torus");
     }

@@ -86,9 +86,9 @@ struct SphereTreeNode {
 /// patch in the tree's local frame. With (u, v, w) the coordinates of
 /// x − origin along (tangentU, tangentV, normal), the patch is the graph
 ///     w = h(u, v) = c₀ + c₁u + c₂v + ½(c₃u² + 2c₄uv + c₅v²),  |(u, v)| ≤ halfWidth,
-/// least-squares fitted to the node's surface points (the vertices of the
-/// triangles clipped to its cells) and then raised by the largest residual,
-/// so that no surface point lies above it: outward (+normal) it is
+/// least-squares fitted to the node's surface points (the triangles clipped to its cells; a node under two
+/// triangles across: the mesh vertices near it with normals within 30°, the smooth shape, not one facet),
+/// then raised by the largest residual of its own points, so none lies above it: outward (+normal) it is
 /// conservative, and it lies within `deviation` of every surface point. On a
 /// smooth surface it is exact to second order (a sphere, cylinder or torus
 /// patch is a quadric graph up to O(halfWidth³·κ²)); where the node holds an
