@@ -107,6 +107,14 @@ struct SphereTree6DofRenderer::State {
     HapticMaterial material;
     double reach = 0.0;  // max distance of a leaf point from the local origin
     double moved = 0.0;  // motion bound since the last tick, m
+    // What collides: the stored tree's nodes and patches, or the deformed
+    // ones of a soft object (stable storage).
+    const SphereTreeNode* nodes = nullptr;
+    std::span<const SurfacePatch> patches;
+    std::shared_ptr<SphereTreeDeformation> deformation;
+    double releaseForce = std::numeric_limits<double>::infinity();
+    bool released = false;
+    Vec3 force = Vec3::Zero();  // on the object in the last tick, world
   };
   std::vector<Object> objects;
 
@@ -115,6 +123,7 @@ struct SphereTree6DofRenderer::State {
     double gap = 0.0;  // at collection; heap key
     std::uint32_t toolNode = 0;
     std::uint32_t object = 0;
+    NodeId envNode = 0;
     Vec3 envCenter = Vec3::Zero();  // world
     double envRadius = 0.0;
     const SurfacePatch* envPatch = nullptr;  // object local frame; null: collide with the sphere
@@ -203,9 +212,7 @@ struct SphereTree6DofRenderer::State {
       NodeId kids[8];
       const int nk = env.children(en.e, kids);
       if (toolLeaf && nk == 0) {
-        const std::span<const SurfacePatch> patches =
-            o.stored ? o.stored->patches() : std::span<const SurfacePatch>{};
-        Pair pr{gap, en.t, k, o.pose * be.center, be.radius, usablePatch(patches, en.e, be.radius)};
+        Pair pr{gap, en.t, k, en.e, o.pose * be.center, be.radius, usablePatch(o.patches, en.e, be.radius)};
         if (pr.envPatch || toolPatch[en.t]) {
           // Through a patch the pair is as near as its contact, which the
           // spheres only bound: keep it when that is within the margin
@@ -233,8 +240,9 @@ struct SphereTree6DofRenderer::State {
     candidates = 0;
     minDropped = std::numeric_limits<double>::infinity();
     for (std::uint32_t k = 0; k < objects.size(); ++k) {
-      if (objects[k].stored)
-        collect(StoredEnv{objects[k].stored->nodes().data()}, k, pg, qg, margin);
+      if (objects[k].released) continue;
+      if (objects[k].nodes)
+        collect(StoredEnv{objects[k].nodes}, k, pg, qg, margin);
       else
         collect(GenericEnv{objects[k].tree.get()}, k, pg, qg, margin);
     }
@@ -402,6 +410,30 @@ struct SphereTree6DofRenderer::State {
     return tFirst;
   }
 
+  // The force on the objects: the user's force `userForce` (on the tool,
+  // from the objects) shared over the touching rows (rowActive, rowContact
+  // at the final pose) by their multipliers: row i pushes its object with
+  // −c λ_i n_i, c = F·S / |S|² with S = Σ λ_i n_i (the projection of F on
+  // the constraints' resultant). Soft objects take it on the node touched;
+  // a bonded piece whose force exceeds its bond comes off.
+  void shareForce(const Vec3& userForce, const Vec3& lambdaN) noexcept {
+    for (Object& o : objects) o.force = Vec3::Zero();
+    const double ln2 = lambdaN.squaredNorm();
+    const double c = ln2 > 0.0 ? std::max(0.0, userForce.dot(lambdaN)) / ln2 : 0.0;
+    if (c == 0.0) return;
+    for (std::size_t i = 0; i < pairCount; ++i) {
+      if (!rowActive[i] || rowLambda[i] <= 0.0) continue;
+      const Pair& pr = pairs[i];
+      Object& o = objects[pr.object];
+      const Vec3 f = -(c * rowLambda[i]) * rowContact[i].n;
+      o.force += f;
+      if (o.deformation)
+        o.deformation->addForce(static_cast<std::uint32_t>(pr.envNode), o.pose.linear().transpose() * f);
+    }
+    for (Object& o : objects)
+      if (o.force.norm() > o.releaseForce) o.released = true;
+  }
+
   double motionBound(const Vec3& dx, const Vec3& dth) const noexcept {
     return dx.norm() + dth.norm() * toolReach;
   }
@@ -497,8 +529,21 @@ Result<std::unique_ptr<SphereTree6DofRenderer>> SphereTree6DofRenderer::create(
       return bad("the object's sphere tree is null", where + ".tree", "give every object a tree");
     if (!finitePose(src.pose)) return bad("the object's pose is not finite", where + ".pose", "");
     if (Status st = src.material.validate(where + ".material"); !st.ok()) return st.error();
+    if (!(src.releaseForce > 0))
+      return bad(
+          formatString("releaseForce is %g N; it must be > 0 (infinity: never released)", src.releaseForce),
+          where + ".releaseForce", "");
     State::Object ob;
     ob.stored = dynamic_cast<const SphereTree*>(src.tree.get());
+    if (src.deformation && &src.deformation->rest() != ob.stored)
+      return bad("the deformation was built on another sphere tree than the object's", where + ".deformation",
+                 "create it from the object's tree: SphereTreeDeformation::create(tree, ...)");
+    if (ob.stored) {
+      ob.nodes = src.deformation ? src.deformation->nodes().data() : ob.stored->nodes().data();
+      ob.patches = src.deformation ? src.deformation->patches() : ob.stored->patches();
+    }
+    ob.deformation = std::move(src.deformation);
+    ob.releaseForce = src.releaseForce;
     const BoundingSphere root = src.tree->bound(src.tree->root());
     ob.reach = root.center.norm() + root.radius;
     if (ob.stored) {
@@ -533,7 +578,10 @@ void SphereTree6DofRenderer::reset(const Isometry3& devicePose) noexcept {
   s_->lastHandleQ = s_->qg;
   s_->pairCount = 0;
   s_->candidates = 0;
-  for (State::Object& o : s_->objects) o.moved = 0.0;
+  for (State::Object& o : s_->objects) {
+    o.moved = 0.0;
+    o.force = Vec3::Zero();
+  }
 }
 
 HapticResponse SphereTree6DofRenderer::tick(const HapticInput& input) noexcept {
@@ -557,6 +605,7 @@ HapticResponse SphereTree6DofRenderer::tick(const HapticInput& input) noexcept {
   s.lastHandleQ = qh;
   double objectMotion = 0.0;
   for (State::Object& o : s.objects) {
+    if (o.deformation) o.moved += o.deformation->step(input.dt);  // under last tick's contact forces
     objectMotion = std::max(objectMotion, o.moved);
     o.moved = 0.0;
   }
@@ -610,15 +659,19 @@ HapticResponse SphereTree6DofRenderer::tick(const HapticInput& input) noexcept {
   const Mat3 rg = q.toRotationMatrix();
   double damping = 0.0;
   int touching = 0;
+  Vec3 lambdaN = Vec3::Zero();  // Σ λ n over the touching rows
   for (std::size_t i = 0; i < s.pairCount; ++i) {
     const State::Pair& pr = s.pairs[i];
-    State::Contact c;
-    if (!s.contact(pr, p, rg, c) || c.dist > s.opt.marginEpsilon) continue;
+    State::Contact& c = s.rowContact[i];
+    s.rowActive[i] = s.contact(pr, p, rg, c) && c.dist <= s.opt.marginEpsilon ? 1 : 0;
+    if (!s.rowActive[i]) continue;
     ++touching;
     damping = std::max(damping, s.objects[pr.object].material.damping);
+    lambdaN += s.rowLambda[i] * c.n;
   }
   out.force = s.kLin.cwiseProduct(p - ph);
   out.torque = s.kAng.cwiseProduct(logRotation(q * qh.conjugate()));
+  s.shareForce(out.force, lambdaN);
   if (touching > 0) {
     out.force -= damping * input.linearVelocity;
     out.penetration = (p - ph).norm();
@@ -650,5 +703,11 @@ std::size_t SphereTree6DofRenderer::toolSphereCount() const noexcept { return s_
 double SphereTree6DofRenderer::toolSphereMaxRadius() const noexcept { return s_->toolMaxRadius; }
 double SphereTree6DofRenderer::environmentLeafMaxRadius() const noexcept { return s_->envMaxLeafRadius; }
 std::size_t SphereTree6DofRenderer::lastCandidateCount() const noexcept { return s_->candidates; }
+Vec3 SphereTree6DofRenderer::objectForce(std::size_t index) const noexcept {
+  return index < s_->objects.size() ? s_->objects[index].force : Vec3::Zero();
+}
+bool SphereTree6DofRenderer::objectReleased(std::size_t index) const noexcept {
+  return index < s_->objects.size() && s_->objects[index].released;
+}
 
 }  // namespace dm

@@ -45,6 +45,17 @@
 // coefficients are validated but not rendered; their damping acts on the
 // device velocity while the tool touches the object.
 //
+// Patient changes. The force on each object is the user's force shared over
+// the touching constraints by their multipliers (Newton's third law). A soft
+// object (SphereTreeObject::deformation, dm/haptics/sphere_tree_deformation.hpp)
+// takes its share on the nodes touched and is stepped at the start of the
+// next tick; its deformed tree is what collides, and how far it moved
+// widens the margin like an object's motion. A bonded piece
+// (releaseForce) comes off in the tick its force exceeds the bond: from
+// the next tick on it does not collide, and the tool, no longer held,
+// follows the handle — the sudden drop of the feedback force the seed
+// reports for calculus removal.
+//
 // Real time: tick() and setObjectPose() never allocate, lock or throw; all
 // buffers are sized by create() from options.maxConstraints.
 //
@@ -59,9 +70,11 @@
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
 #include <dm/haptics/renderer.hpp>
+#include <dm/haptics/sphere_tree_deformation.hpp>
 
 #include <cstddef>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <string_view>
@@ -77,6 +90,14 @@ struct SphereTreeObject {
   Isometry3 pose = Isometry3::Identity();  ///< local → world
   HapticMaterial material;                 ///< damping is rendered; friction is not (see the file comment)
   std::string name;                        ///< for messages; may be empty
+  /// A soft object: the spring–sphere-tree model built on `tree` (which
+  /// must then be that stored tree). The renderer steps it at the start of
+  /// every tick and feeds it the contact forces; null = rigid.
+  std::shared_ptr<SphereTreeDeformation> deformation;
+  /// N, > 0: a bonded piece (calculus on a tooth) comes off when the tool
+  /// pushes it harder than this, and collides no more (objectReleased());
+  /// infinity = never.
+  double releaseForce = std::numeric_limits<double>::infinity();
 };
 
 /// Options of SphereTree6DofRenderer.
@@ -166,6 +187,12 @@ class SphereTree6DofRenderer final : public HapticRenderer {
   double environmentLeafMaxRadius() const noexcept;
   /// Candidate pairs of the last tick (before truncation to maxConstraints).
   std::size_t lastCandidateCount() const noexcept;
+  /// N, world: the force the tool put on object `index` in the last tick
+  /// (the user's force K (q_h − q_g) shared over the touching constraints
+  /// by their multipliers; zero out of range or out of contact).
+  Vec3 objectForce(std::size_t index) const noexcept;
+  /// Whether object `index` came off (its releaseForce was exceeded).
+  bool objectReleased(std::size_t index) const noexcept;
 
  private:
   struct State;  // sphere_tree_6dof.cpp

@@ -1,0 +1,309 @@
+// The spring–sphere-tree soft object; see
+// dm/haptics/sphere_tree_deformation.hpp for the model.
+#include <dm/haptics/sphere_tree_deformation.hpp>
+
+#include <Eigen/Cholesky>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+#include <string>
+#include <utility>
+
+namespace dm {
+
+namespace {
+
+constexpr double kTouching = 1.05;  // skeleton spheres this close (× r_i + r_j) are linked
+constexpr int kWeights = 4;         // skeleton nodes per interpolated point
+
+// The Shepard weights of `x` over its kWeights nearest skeleton centres.
+void shepard(const Vec3& x, std::span<const Vec3> centres, double eps2, std::array<std::uint32_t, 4>& idx,
+             std::array<double, 4>& w) {
+  std::array<double, 4> best;
+  best.fill(std::numeric_limits<double>::infinity());
+  idx.fill(0);
+  for (std::size_t j = 0; j < centres.size(); ++j) {
+    double d2 = (x - centres[j]).squaredNorm();
+    auto id = static_cast<std::uint32_t>(j);
+    for (int k = 0; k < kWeights; ++k)
+      if (d2 < best[static_cast<std::size_t>(k)]) {
+        std::swap(d2, best[static_cast<std::size_t>(k)]);
+        std::swap(id, idx[static_cast<std::size_t>(k)]);
+      }
+  }
+  double sum = 0.0;
+  for (int k = 0; k < kWeights; ++k) {
+    const auto kk = static_cast<std::size_t>(k);
+    w[kk] = std::isfinite(best[kk]) ? 1.0 / (best[kk] + eps2) : 0.0;
+    sum += w[kk];
+  }
+  for (double& v : w) v /= sum;
+}
+
+}  // namespace
+
+struct SphereTreeDeformation::State {
+  std::shared_ptr<const SphereTree> rest;
+  SphereTreeDeformationOptions opt;
+  // Skeleton.
+  std::vector<std::uint32_t> skel;  // tree node of skeleton node i
+  std::vector<Vec3> skelCentre;     // rest centres
+  std::vector<std::uint8_t> isFixed;
+  std::vector<int> freeIndex;                    // skeleton → row of the system (−1: fixed)
+  std::vector<std::uint32_t> freeSkel;           // row → skeleton
+  std::vector<double> mass;                      // per skeleton node
+  std::vector<std::uint32_t> linkStart, linkTo;  // CSR over skeleton nodes
+  Eigen::MatrixXd ainv;                          // (M + hC + h²K)⁻¹ over the free rows
+  double eps2 = 0.0;
+  // Dynamics (per skeleton node; fixed ones stay zero).
+  std::vector<Vec3> d, v, f;
+  std::vector<Vec3> rhs, prev;  // per free row
+  double acc = 0.0;
+  Vec3 support = Vec3::Zero();
+  // Every tree node: weights, displacement, deformed copy.
+  std::vector<std::array<std::uint32_t, 4>> wIdx;
+  std::vector<std::array<double, 4>> w;
+  std::vector<Vec3> disp;
+  std::vector<double> dev;
+  std::vector<SphereTreeNode> nodes;
+  std::vector<SurfacePatch> patches;
+
+  // k_a d_i + Σ_j k_l (d_i − d_j): the springs' force on skeleton node i, negated.
+  Vec3 springForce(std::size_t i) const noexcept {
+    Vec3 s = opt.anchorStiffness * d[i];
+    for (std::uint32_t e = linkStart[i]; e < linkStart[i + 1]; ++e)
+      s += opt.linkStiffness * (d[i] - d[linkTo[e]]);
+    return s;
+  }
+
+  void substep() noexcept {
+    const double h = opt.timeStep;
+    const std::size_t nf = freeSkel.size();
+    for (std::size_t r = 0; r < nf; ++r) {
+      const std::uint32_t i = freeSkel[r];
+      rhs[r] = mass[i] * v[i] + h * (f[i] - springForce(i));
+    }
+    for (std::size_t r = 0; r < nf; ++r) {
+      Vec3 vn = Vec3::Zero();
+      const double* row = ainv.data() + r * nf;  // symmetric: column r is row r
+      for (std::size_t c = 0; c < nf; ++c) vn += row[c] * rhs[c];
+      v[freeSkel[r]] = vn;
+    }
+    for (std::size_t r = 0; r < nf; ++r) d[freeSkel[r]] += h * v[freeSkel[r]];
+  }
+
+  void updateSupport() noexcept {
+    support = Vec3::Zero();
+    for (std::size_t i = 0; i < skel.size(); ++i) {
+      if (isFixed[i]) continue;
+      support -= opt.anchorStiffness * d[i];
+      for (std::uint32_t e = linkStart[i]; e < linkStart[i + 1]; ++e)
+        if (isFixed[linkTo[e]]) support -= opt.linkStiffness * d[i];
+    }
+  }
+
+  // Deformed nodes and patches from the skeleton's displacements.
+  void updateTree() noexcept {
+    const std::vector<SphereTreeNode>& rn = rest->nodes();
+    const std::span<const SurfacePatch> rp = rest->patches();
+    for (std::size_t n = 0; n < rn.size(); ++n) {
+      Vec3 x = Vec3::Zero();
+      for (int k = 0; k < kWeights; ++k)
+        x += w[n][static_cast<std::size_t>(k)] * d[wIdx[n][static_cast<std::size_t>(k)]];
+      disp[n] = x;
+    }
+    for (std::size_t n = rn.size(); n-- > 0;) {  // children come after parents
+      double g = 0.0;
+      for (std::uint32_t c = rn[n].firstChild; c < rn[n].firstChild + rn[n].childCount; ++c)
+        g = std::max(g, (disp[c] - disp[n]).norm() + dev[c]);
+      dev[n] = g;
+      nodes[n].center = rn[n].center + disp[n];
+      nodes[n].boundRadius = rn[n].boundRadius + g;
+      if (!rp.empty()) patches[n].origin = rp[n].origin + disp[n];
+    }
+  }
+};
+
+SphereTreeDeformation::SphereTreeDeformation(std::unique_ptr<State> s) noexcept : s_(std::move(s)) {}
+SphereTreeDeformation::~SphereTreeDeformation() = default;
+
+Result<std::shared_ptr<SphereTreeDeformation>> SphereTreeDeformation::create(
+    std::shared_ptr<const SphereTree> rest, const SphereTreeDeformationOptions& options) {
+  const auto bad = [](std::string what, std::string field, std::string hint = "") -> Error {
+    return fail(ErrorCode::InvalidArgument, std::move(what), std::move(field), std::move(hint));
+  };
+  const SphereTreeDeformationOptions& o = options;
+  if (!rest) return bad("the rest sphere tree is null", "tree", "build it with dm::buildSphereTreeFitted()");
+  if (o.skeletonLevel < 0 || o.skeletonLevel >= rest->levelCount())
+    return bad(formatString("skeletonLevel is %d but the tree has levels 0..%d", o.skeletonLevel,
+                            rest->levelCount() - 1),
+               "options.skeletonLevel");
+  const std::span<const SphereTreeNode> level = rest->level(o.skeletonLevel);
+  if (level.size() > static_cast<std::size_t>(kMaxSkeletonNodes))
+    return bad(formatString("skeleton level %d has %zu nodes; at most %d", o.skeletonLevel, level.size(),
+                            kMaxSkeletonNodes),
+               "options.skeletonLevel", "use a coarser level");
+  const auto check = [&](double x, bool positive, const char* name, const char* unit) -> Status {
+    if (std::isfinite(x) && (positive ? x > 0 : x >= 0)) return {};
+    return bad(
+        formatString("%s is %g %s; it must be finite and %s", name, x, unit, positive ? "> 0" : ">= 0"),
+        std::string("options.") + name);
+  };
+  if (Status s = check(o.mass, true, "mass", "kg"); !s) return s.error();
+  if (Status s = check(o.anchorStiffness, false, "anchorStiffness", "N/m"); !s) return s.error();
+  if (Status s = check(o.linkStiffness, false, "linkStiffness", "N/m"); !s) return s.error();
+  if (Status s = check(o.damping, false, "damping", "N*s/m"); !s) return s.error();
+  if (Status s = check(o.timeStep, true, "timeStep", "s"); !s) return s.error();
+  if (o.fixedRegion && !(o.fixedRegion->min().allFinite() && o.fixedRegion->max().allFinite()))
+    return bad("fixedRegion is not finite", "options.fixedRegion");
+
+  auto st = std::make_unique<State>();
+  State& s = *st;
+  s.opt = o;
+  const std::size_t n = level.size();
+  const auto first = static_cast<std::uint32_t>(level.data() - rest->nodes().data());
+  double radiusSum = 0.0, volumeSum = 0.0;
+  for (std::size_t i = 0; i < n; ++i) {
+    s.skel.push_back(first + static_cast<std::uint32_t>(i));
+    s.skelCentre.push_back(level[i].center);
+    s.isFixed.push_back(o.fixedRegion && o.fixedRegion->contains(level[i].center) ? 1 : 0);
+    radiusSum += level[i].radius;
+    volumeSum += std::pow(level[i].radius, 3);
+  }
+  for (std::size_t i = 0; i < n; ++i)
+    s.mass.push_back(volumeSum > 0 ? o.mass * std::pow(level[i].radius, 3) / volumeSum : o.mass / n);
+  s.linkStart.push_back(0);
+  for (std::size_t i = 0; i < n; ++i) {
+    for (std::size_t j = 0; j < n; ++j)
+      if (j != i &&
+          (level[i].center - level[j].center).norm() <= kTouching * (level[i].radius + level[j].radius))
+        s.linkTo.push_back(static_cast<std::uint32_t>(j));
+    s.linkStart.push_back(static_cast<std::uint32_t>(s.linkTo.size()));
+  }
+  s.freeIndex.assign(n, -1);
+  for (std::size_t i = 0; i < n; ++i)
+    if (!s.isFixed[i]) {
+      s.freeIndex[i] = static_cast<int>(s.freeSkel.size());
+      s.freeSkel.push_back(static_cast<std::uint32_t>(i));
+    }
+  if (s.freeSkel.empty())
+    return bad("every skeleton node lies in fixedRegion: nothing can move", "options.fixedRegion",
+               "fix only the region the object is attached by");
+  if (o.anchorStiffness == 0 && s.freeSkel.size() == n)
+    return bad("anchorStiffness is 0 and no node is fixed: the object would float away",
+               "options.anchorStiffness", "give an anchor stiffness or a fixedRegion");
+
+  // A = M + hC + h²K over the free nodes.
+  const double h = o.timeStep;
+  const auto nf = static_cast<Eigen::Index>(s.freeSkel.size());
+  Eigen::MatrixXd a = Eigen::MatrixXd::Zero(nf, nf);
+  for (Eigen::Index r = 0; r < nf; ++r) {
+    const std::uint32_t i = s.freeSkel[static_cast<std::size_t>(r)];
+    const double degree = s.linkStart[i + 1] - s.linkStart[i];
+    a(r, r) = s.mass[i] + h * o.damping + h * h * (o.anchorStiffness + o.linkStiffness * degree);
+    for (std::uint32_t e = s.linkStart[i]; e < s.linkStart[i + 1]; ++e)
+      if (const int c = s.freeIndex[s.linkTo[e]]; c >= 0) a(r, c) -= h * h * o.linkStiffness;
+  }
+  const Eigen::LLT<Eigen::MatrixXd> llt(a);
+  if (llt.info() != Eigen::Success)
+    return bad("the spring network's system is not positive definite", "options",
+               "check the stiffness and mass values");
+  s.ainv = llt.solve(Eigen::MatrixXd::Identity(nf, nf));
+  if (!s.ainv.allFinite()) return bad("the spring network's system is singular", "options", "");
+
+  s.eps2 = std::pow(radiusSum / static_cast<double>(n), 2);
+  const std::vector<SphereTreeNode>& rn = rest->nodes();
+  s.wIdx.resize(rn.size());
+  s.w.resize(rn.size());
+  for (std::size_t k = 0; k < rn.size(); ++k) shepard(rn[k].center, s.skelCentre, s.eps2, s.wIdx[k], s.w[k]);
+  s.d.assign(n, Vec3::Zero());
+  s.v.assign(n, Vec3::Zero());
+  s.f.assign(n, Vec3::Zero());
+  s.rhs.assign(s.freeSkel.size(), Vec3::Zero());
+  s.prev.assign(s.freeSkel.size(), Vec3::Zero());
+  s.disp.assign(rn.size(), Vec3::Zero());
+  s.dev.assign(rn.size(), 0.0);
+  s.nodes = rn;
+  s.patches.assign(rest->patches().begin(), rest->patches().end());
+  s.rest = std::move(rest);
+  return std::shared_ptr<SphereTreeDeformation>(new SphereTreeDeformation(std::move(st)));
+}
+
+void SphereTreeDeformation::addForce(std::uint32_t node, const Vec3& force) noexcept {
+  State& s = *s_;
+  if (node >= s.w.size() || !force.allFinite()) return;
+  for (int k = 0; k < kWeights; ++k) {
+    const std::uint32_t j = s.wIdx[node][static_cast<std::size_t>(k)];
+    if (!s.isFixed[j]) s.f[j] += s.w[node][static_cast<std::size_t>(k)] * force;
+  }
+}
+
+double SphereTreeDeformation::step(double dt) noexcept {
+  State& s = *s_;
+  if (!std::isfinite(dt) || dt <= 0) return 0.0;
+  s.acc += dt;
+  int steps = 0;
+  double moved = 0.0;  // the skeleton's largest move bounds every node's (convex weights)
+  while (s.acc >= s.opt.timeStep * (1 - 1e-9) && steps < kMaxSubsteps) {
+    for (std::size_t r = 0; r < s.freeSkel.size(); ++r) s.prev[r] = s.d[s.freeSkel[r]];
+    s.substep();
+    for (std::size_t r = 0; r < s.freeSkel.size(); ++r)
+      moved = std::max(moved, (s.d[s.freeSkel[r]] - s.prev[r]).norm());
+    s.acc -= s.opt.timeStep;
+    ++steps;
+  }
+  if (steps == kMaxSubsteps) s.acc = std::min(s.acc, s.opt.timeStep);
+  for (Vec3& x : s.f) x = Vec3::Zero();
+  if (steps > 0) {
+    s.updateTree();
+    s.updateSupport();
+  }
+  return moved;
+}
+
+void SphereTreeDeformation::reset() noexcept {
+  State& s = *s_;
+  for (std::size_t i = 0; i < s.d.size(); ++i) s.d[i] = s.v[i] = s.f[i] = Vec3::Zero();
+  s.acc = 0.0;
+  s.updateTree();
+  s.updateSupport();
+}
+
+const SphereTree& SphereTreeDeformation::rest() const noexcept { return *s_->rest; }
+std::span<const SphereTreeNode> SphereTreeDeformation::nodes() const noexcept { return s_->nodes; }
+std::span<const SurfacePatch> SphereTreeDeformation::patches() const noexcept { return s_->patches; }
+Vec3 SphereTreeDeformation::displacement(std::uint32_t node) const noexcept {
+  return node < s_->disp.size() ? s_->disp[node] : Vec3::Zero();
+}
+std::span<const std::uint32_t> SphereTreeDeformation::skeleton() const noexcept { return s_->skel; }
+bool SphereTreeDeformation::fixed(std::size_t i) const noexcept {
+  return i < s_->isFixed.size() && s_->isFixed[i] != 0;
+}
+Vec3 SphereTreeDeformation::supportForce() const noexcept { return s_->support; }
+
+SphereTreeDeformation::Binding SphereTreeDeformation::bind(std::span<const Vec3> restPoints) const {
+  Binding b;
+  b.index.resize(restPoints.size());
+  b.weight.resize(restPoints.size());
+  for (std::size_t i = 0; i < restPoints.size(); ++i)
+    shepard(restPoints[i], s_->skelCentre, s_->eps2, b.index[i], b.weight[i]);
+  return b;
+}
+
+bool SphereTreeDeformation::deform(const Binding& b, std::span<const Vec3> restPoints,
+                                   std::span<Vec3> out) const noexcept {
+  if (b.index.size() != restPoints.size() || b.weight.size() != restPoints.size() ||
+      out.size() != restPoints.size())
+    return false;
+  for (std::size_t i = 0; i < restPoints.size(); ++i) {
+    Vec3 x = restPoints[i];
+    for (int k = 0; k < kWeights; ++k)
+      x += b.weight[i][static_cast<std::size_t>(k)] * s_->d[b.index[i][static_cast<std::size_t>(k)]];
+    out[i] = x;
+  }
+  return true;
+}
+
+}  // namespace dm
