@@ -27,7 +27,7 @@ SurfacePatch::Query SurfacePatch::query(const Vec3& x) const noexcept {
   Query q;
   q.distance = (w - height(u, v)) / g;
   q.normal = (normal - hu * tangentU - hv * tangentV) / g;
-  q.lateral = std::hypot(u, v);
+  q.lateral = std::sqrt(u * u + v * v);  // not hypot: metres, no overflow, and 10x cheaper
   return q;
 }
 
@@ -47,13 +47,13 @@ Vec3 SurfacePatch::support(const Vec3& dir) const noexcept {
   const double gu = du + dn * c[1], gv = dv + dn * c[2];
   if (a < 0.0 && det > 0.0) {
     const double u = (-gu * e + gv * b) / det, v = (-gv * a + gu * b) / det;
-    const double r = std::hypot(u, v);
+    const double r = std::sqrt(u * u + v * v);
     const double s = r > halfWidth ? halfWidth / r : 1.0;  // the disc's point nearest the maximum
     if (const double fs = f(s * u, s * v); fs > best) best = fs, bu = s * u, bv = s * v;
   }
   // The rim point the gradient at the centre points to (the maximum of a
   // flat, saddle or concave patch lies on the rim).
-  if (const double gn = std::hypot(gu, gv); gn > 0.0) {
+  if (const double gn = std::sqrt(gu * gu + gv * gv); gn > 0.0) {
     const double u = halfWidth * gu / gn, v = halfWidth * gv / gn;
     if (const double fr = f(u, v); fr > best) best = fr, bu = u, bv = v;
   }

@@ -22,6 +22,7 @@
 #include <cmath>
 #include <limits>
 #include <span>
+#include <tuple>
 #include <utility>
 
 namespace dm {
@@ -73,6 +74,16 @@ struct StoredEnv {
   NodeId root() const noexcept { return 0; }
 };
 
+// A soft object's deformed tree (SphereTreeDeformation): the rest topology,
+// bounds evaluated on demand.
+struct DeformedEnv {
+  const SphereTreeNode* nodes;
+  const SphereTreeDeformation* def;
+  BoundingSphere bound(NodeId n) const noexcept { return def->bound(static_cast<std::uint32_t>(n)); }
+  int children(NodeId n, NodeId out[8]) const noexcept { return StoredEnv{nodes}.children(n, out); }
+  NodeId root() const noexcept { return 0; }
+};
+
 // Any hierarchy (implicit voxel trees): through the virtual interface.
 struct GenericEnv {
   const SphereHierarchy* tree;
@@ -107,8 +118,8 @@ struct SphereTree6DofRenderer::State {
     HapticMaterial material;
     double reach = 0.0;  // max distance of a leaf point from the local origin
     double moved = 0.0;  // motion bound since the last tick, m
-    // What collides: the stored tree's nodes and patches, or the deformed
-    // ones of a soft object (stable storage).
+    // The stored tree's nodes and patches (a soft object's at rest: its
+    // deformation displaces them).
     const SphereTreeNode* nodes = nullptr;
     std::span<const SurfacePatch> patches;
     std::shared_ptr<SphereTreeDeformation> deformation;
@@ -119,15 +130,6 @@ struct SphereTree6DofRenderer::State {
   std::vector<Object> objects;
 
   // ---- per-tick state (preallocated) ----
-  struct Pair {
-    double gap = 0.0;  // at collection; heap key
-    std::uint32_t toolNode = 0;
-    std::uint32_t object = 0;
-    NodeId envNode = 0;
-    Vec3 envCenter = Vec3::Zero();  // world
-    double envRadius = 0.0;
-    const SurfacePatch* envPatch = nullptr;  // object local frame; null: collide with the sphere
-  };
   // One pair's contact at a tool pose: unit normal from the environment to
   // the tool (world), the tool point (tool frame: a patch's support point or
   // a sphere's centre) and its radius (0 for a patch point), the distance.
@@ -137,8 +139,24 @@ struct SphereTree6DofRenderer::State {
     double radius = 0.0;
     double dist = 0.0;
     bool envPatch = false;
+    bool strict = true;       // within the strict lateral gate (collection widens it)
+    double centrality = 0.0;  // environment patch: the tool point's lateral offset / the patch's half-width
   };
-  std::vector<Pair> pairs;  // capacity maxConstraints
+  struct Pair {
+    double gap = 0.0;  // at collection; heap key
+    std::uint32_t toolNode = 0;
+    std::uint32_t object = 0;
+    NodeId envNode = 0;
+    Vec3 envCenter = Vec3::Zero();  // world
+    double envRadius = 0.0;
+    const SurfacePatch* envPatch = nullptr;  // object local frame; null: collide with the sphere
+    Vec3 envShift = Vec3::Zero();            // a soft object's patch: its displacement, object local frame
+    bool collected = false;                  // `atCollection` holds the contact at the collection pose
+    Contact atCollection;
+  };
+  std::vector<Pair> pairs;             // capacity maxConstraints
+  std::vector<std::uint32_t> scratch;  // capacity maxConstraints
+  std::vector<std::uint8_t> drop;      // per pair, all 0 between ticks
   std::size_t pairCount = 0;
   std::size_t candidates = 0;
   // Smallest gap of a candidate dropped by the truncation: no tool sphere may
@@ -213,13 +231,15 @@ struct SphereTree6DofRenderer::State {
       const int nk = env.children(en.e, kids);
       if (toolLeaf && nk == 0) {
         Pair pr{gap, en.t, k, en.e, o.pose * be.center, be.radius, usablePatch(o.patches, en.e, be.radius)};
+        if (o.deformation) pr.envShift = o.deformation->displacement(static_cast<std::uint32_t>(en.e));
         if (pr.envPatch || toolPatch[en.t]) {
           // Through a patch the pair is as near as its contact, which the
           // spheres only bound: keep it when that is within the margin
           // (its tool point may move up to the margin over the patch).
-          Contact c;
+          Contact& c = pr.atCollection;
           if (!contact(pr, p, rWorld, c, margin) || c.dist > margin) continue;
           pr.gap = c.dist;
+          pr.collected = true;
         }
         addCandidate(pr);
         continue;
@@ -241,14 +261,48 @@ struct SphereTree6DofRenderer::State {
     minDropped = std::numeric_limits<double>::infinity();
     for (std::uint32_t k = 0; k < objects.size(); ++k) {
       if (objects[k].released) continue;
-      if (objects[k].nodes)
+      if (objects[k].nodes && !objects[k].deformation)
         collect(StoredEnv{objects[k].nodes}, k, pg, qg, margin);
+      else if (objects[k].deformation)
+        collect(DeformedEnv{objects[k].nodes, objects[k].deformation.get()}, k, pg, qg, margin);
       else
         collect(GenericEnv{objects[k].tree.get()}, k, pg, qg, margin);
     }
     // Deepest first: Gauss–Seidel resolves the worst overlaps first.
     std::sort_heap(pairs.begin(), pairs.begin() + static_cast<std::ptrdiff_t>(pairCount),
                    [](const Pair& a, const Pair& b) { return a.gap < b.gap; });
+    dropOverlappingPatches();
+  }
+
+  // A tool point over several environment patches of one object (they
+  // overlap at their rims, by kLateralSlack) is constrained by the one it
+  // lies most centrally over: the patches fit the same surface, the others
+  // repeat its constraint (to their deviation) and only cost solver sweeps.
+  void dropOverlappingPatches() noexcept {
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < pairCount; ++i)
+      if (pairs[i].collected && pairs[i].atCollection.envPatch) scratch[n++] = static_cast<std::uint32_t>(i);
+    if (n < 2) return;
+    const auto key = [&](std::uint32_t i) {
+      const Pair& p = pairs[i];
+      return std::tuple(p.object, p.toolNode, p.atCollection.centrality, i);
+    };
+    std::sort(scratch.begin(), scratch.begin() + static_cast<std::ptrdiff_t>(n),
+              [&](std::uint32_t a, std::uint32_t b) { return key(a) < key(b); });
+    for (std::size_t k = 1; k < n; ++k) {
+      const Pair &a = pairs[scratch[k - 1]], &b = pairs[scratch[k]];
+      if (a.object == b.object && a.toolNode == b.toolNode) drop[scratch[k]] = 1;
+    }
+    std::size_t out = 0;
+    for (std::size_t i = 0; i < pairCount; ++i) {
+      if (drop[i]) {
+        drop[i] = 0;
+        continue;
+      }
+      if (out != i) pairs[out] = pairs[i];
+      ++out;
+    }
+    pairCount = out;
   }
 
   // Contact of tool point `c.point` (radius c.radius) with the environment
@@ -276,6 +330,7 @@ struct SphereTree6DofRenderer::State {
     const SurfacePatch* tp = toolPatch[pr.toolNode];
     c.point = toolCenter[pr.toolNode];
     c.radius = toolBound[pr.toolNode];
+    c.strict = true;
     if (pr.envPatch) {
       const SurfacePatch& ep = *pr.envPatch;
       const Isometry3& pose = objects[pr.object].pose;
@@ -289,10 +344,13 @@ struct SphereTree6DofRenderer::State {
           c.point = tp->support(d);
           c.radius = 0.0;
         }
-        q = ep.query(ro.transpose() * (p + r * c.point - pose.translation()));
+        q = ep.query(ro.transpose() * (p + r * c.point - pose.translation()) - pr.envShift);
         nEnv = ro * q.normal;
       }
-      if (q.lateral > kLateralSlack * ep.halfWidth + c.radius + lateralExtra) return false;
+      const double gate = kLateralSlack * ep.halfWidth + c.radius;
+      if (q.lateral > gate + lateralExtra) return false;
+      c.strict = q.lateral <= gate;
+      c.centrality = q.lateral / std::max(ep.halfWidth, 1e-300);
       if (q.distance - c.radius >= -kMaxPatchDepth * ep.halfWidth) {
         c.n = nEnv;
         c.dist = q.distance - c.radius;
@@ -321,18 +379,27 @@ struct SphereTree6DofRenderer::State {
     const Contact& c = rowContact[i];
     if (c.envPatch) {
       const Isometry3& pose = objects[pr.object].pose;
-      return pr.envPatch->query(pose.linear().transpose() * (p + r * c.point - pose.translation())).distance -
+      return pr.envPatch
+                 ->query(pose.linear().transpose() * (p + r * c.point - pose.translation()) - pr.envShift)
+                 .distance -
              c.radius;
     }
     return (p + r * c.point - pr.envCenter).norm() - c.radius - pr.envRadius;
   }
 
   // Linearises every pair at (p, R) into the constraint rows.
-  void linearize(const Vec3& p, const Mat3& r) noexcept {
+  // At the collection pose (`atCollection`) the patch pairs' contacts from
+  // the collection are reused.
+  void linearize(const Vec3& p, const Mat3& r, bool atCollection) noexcept {
     for (std::size_t i = 0; i < pairCount; ++i) {
       Contact& c = rowContact[i];
       rowLambda[i] = 0.0;
-      rowActive[i] = contact(pairs[i], p, r, c) ? 1 : 0;
+      if (atCollection && pairs[i].collected) {
+        c = pairs[i].atCollection;
+        rowActive[i] = c.strict ? 1 : 0;
+      } else {
+        rowActive[i] = contact(pairs[i], p, r, c) ? 1 : 0;
+      }
       if (!rowActive[i]) {  // a row that never binds
         rowN[i] = Vec3::Zero();
         rowRxN[i] = Vec3::Zero();
@@ -539,8 +606,8 @@ Result<std::unique_ptr<SphereTree6DofRenderer>> SphereTree6DofRenderer::create(
       return bad("the deformation was built on another sphere tree than the object's", where + ".deformation",
                  "create it from the object's tree: SphereTreeDeformation::create(tree, ...)");
     if (ob.stored) {
-      ob.nodes = src.deformation ? src.deformation->nodes().data() : ob.stored->nodes().data();
-      ob.patches = src.deformation ? src.deformation->patches() : ob.stored->patches();
+      ob.nodes = ob.stored->nodes().data();
+      ob.patches = ob.stored->patches();
     }
     ob.deformation = std::move(src.deformation);
     ob.releaseForce = src.releaseForce;
@@ -560,6 +627,8 @@ Result<std::unique_ptr<SphereTree6DofRenderer>> SphereTree6DofRenderer::create(
   }
   const auto m = static_cast<std::size_t>(o.maxConstraints);
   s->pairs.resize(m);
+  s->scratch.resize(m);
+  s->drop.assign(m, 0);
   s->rowN.resize(m);
   s->rowRxN.resize(m);
   s->rowD.resize(m);
@@ -623,7 +692,7 @@ HapticResponse SphereTree6DofRenderer::tick(const HapticInput& input) noexcept {
   double travelled = 0.0;
   for (int it = 0; it < s.opt.linearizations; ++it) {
     const Mat3 r0 = q.toRotationMatrix();
-    s.linearize(p, r0);
+    s.linearize(p, r0, it == 0);
     Vec3 dx = ph - p;
     Vec3 dth = logRotation(qh * q.conjugate());
     s.solve(dx, dth);

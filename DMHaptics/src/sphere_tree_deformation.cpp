@@ -65,10 +65,13 @@ struct SphereTreeDeformation::State {
   // Every tree node: weights, displacement, deformed copy.
   std::vector<std::array<std::uint32_t, 4>> wIdx;
   std::vector<std::array<double, 4>> w;
-  std::vector<Vec3> disp;
-  std::vector<double> dev;
-  std::vector<SphereTreeNode> nodes;
-  std::vector<SurfacePatch> patches;
+  // Per internal node: the skeleton nodes any leaf below it is weighted on
+  // (CSR), so |disp(leaf) − disp(node)| ≤ max over them of |d_j − disp(node)|.
+  std::vector<std::uint32_t> reachStart, reach;
+  // Deformed bounds, evaluated when first asked for in an epoch (a step).
+  std::uint32_t epoch = 1;
+  mutable std::vector<std::uint32_t> cacheEpoch;
+  mutable std::vector<BoundingSphere> cache;
 
   // k_a d_i + Σ_j k_l (d_i − d_j): the springs' force on skeleton node i, negated.
   Vec3 springForce(std::size_t i) const noexcept {
@@ -104,25 +107,26 @@ struct SphereTreeDeformation::State {
     }
   }
 
-  // Deformed nodes and patches from the skeleton's displacements.
-  void updateTree() noexcept {
-    const std::vector<SphereTreeNode>& rn = rest->nodes();
-    const std::span<const SurfacePatch> rp = rest->patches();
-    for (std::size_t n = 0; n < rn.size(); ++n) {
-      Vec3 x = Vec3::Zero();
-      for (int k = 0; k < kWeights; ++k)
-        x += w[n][static_cast<std::size_t>(k)] * d[wIdx[n][static_cast<std::size_t>(k)]];
-      disp[n] = x;
-    }
-    for (std::size_t n = rn.size(); n-- > 0;) {  // children come after parents
-      double g = 0.0;
-      for (std::uint32_t c = rn[n].firstChild; c < rn[n].firstChild + rn[n].childCount; ++c)
-        g = std::max(g, (disp[c] - disp[n]).norm() + dev[c]);
-      dev[n] = g;
-      nodes[n].center = rn[n].center + disp[n];
-      nodes[n].boundRadius = rn[n].boundRadius + g;
-      if (!rp.empty()) patches[n].origin = rp[n].origin + disp[n];
-    }
+  Vec3 disp(std::size_t n) const noexcept {
+    Vec3 x = Vec3::Zero();
+    for (int k = 0; k < kWeights; ++k)
+      x += w[n][static_cast<std::size_t>(k)] * d[wIdx[n][static_cast<std::size_t>(k)]];
+    return x;
+  }
+
+  // The deformed node's bound: its centre displaced, its radius grown by
+  // how far the leaves below can have moved relative to it (0 at a leaf,
+  // whose sphere moves rigidly).
+  BoundingSphere bound(std::size_t n) const noexcept {
+    if (cacheEpoch[n] == epoch) return cache[n];
+    const SphereTreeNode& r = rest->nodes()[n];
+    const Vec3 x = disp(n);
+    double g = 0.0;
+    for (std::uint32_t e = reachStart[n]; e < reachStart[n + 1]; ++e)
+      g = std::max(g, (d[reach[e]] - x).norm());
+    cacheEpoch[n] = epoch;
+    cache[n] = {r.center + x, r.boundRadius + g};
+    return cache[n];
   }
 };
 
@@ -223,10 +227,28 @@ Result<std::shared_ptr<SphereTreeDeformation>> SphereTreeDeformation::create(
   s.f.assign(n, Vec3::Zero());
   s.rhs.assign(s.freeSkel.size(), Vec3::Zero());
   s.prev.assign(s.freeSkel.size(), Vec3::Zero());
-  s.disp.assign(rn.size(), Vec3::Zero());
-  s.dev.assign(rn.size(), 0.0);
-  s.nodes = rn;
-  s.patches.assign(rest->patches().begin(), rest->patches().end());
+  // Reach sets, leaves up (children come after their parents).
+  std::vector<std::vector<std::uint32_t>> reach(rn.size());
+  for (std::size_t k = rn.size(); k-- > 0;) {
+    std::vector<std::uint32_t>& r = reach[k];
+    for (std::uint32_t c = rn[k].firstChild; c < rn[k].firstChild + rn[k].childCount; ++c) {
+      if (rn[c].childCount == 0) {
+        for (int j = 0; j < kWeights; ++j)
+          if (s.w[c][static_cast<std::size_t>(j)] > 0) r.push_back(s.wIdx[c][static_cast<std::size_t>(j)]);
+      } else {
+        r.insert(r.end(), reach[c].begin(), reach[c].end());
+      }
+    }
+    std::sort(r.begin(), r.end());
+    r.erase(std::unique(r.begin(), r.end()), r.end());
+  }
+  s.reachStart.push_back(0);
+  for (const auto& r : reach) {
+    s.reach.insert(s.reach.end(), r.begin(), r.end());
+    s.reachStart.push_back(static_cast<std::uint32_t>(s.reach.size()));
+  }
+  s.cacheEpoch.assign(rn.size(), 0);
+  s.cache.resize(rn.size());
   s.rest = std::move(rest);
   return std::shared_ptr<SphereTreeDeformation>(new SphereTreeDeformation(std::move(st)));
 }
@@ -257,7 +279,7 @@ double SphereTreeDeformation::step(double dt) noexcept {
   if (steps == kMaxSubsteps) s.acc = std::min(s.acc, s.opt.timeStep);
   for (Vec3& x : s.f) x = Vec3::Zero();
   if (steps > 0) {
-    s.updateTree();
+    ++s.epoch;
     s.updateSupport();
   }
   return moved;
@@ -267,15 +289,16 @@ void SphereTreeDeformation::reset() noexcept {
   State& s = *s_;
   for (std::size_t i = 0; i < s.d.size(); ++i) s.d[i] = s.v[i] = s.f[i] = Vec3::Zero();
   s.acc = 0.0;
-  s.updateTree();
+  ++s.epoch;
   s.updateSupport();
 }
 
 const SphereTree& SphereTreeDeformation::rest() const noexcept { return *s_->rest; }
-std::span<const SphereTreeNode> SphereTreeDeformation::nodes() const noexcept { return s_->nodes; }
-std::span<const SurfacePatch> SphereTreeDeformation::patches() const noexcept { return s_->patches; }
+BoundingSphere SphereTreeDeformation::bound(std::uint32_t node) const noexcept {
+  return node < s_->w.size() ? s_->bound(node) : BoundingSphere{};
+}
 Vec3 SphereTreeDeformation::displacement(std::uint32_t node) const noexcept {
-  return node < s_->disp.size() ? s_->disp[node] : Vec3::Zero();
+  return node < s_->w.size() ? s_->disp(node) : Vec3::Zero();
 }
 std::span<const std::uint32_t> SphereTreeDeformation::skeleton() const noexcept { return s_->skel; }
 bool SphereTreeDeformation::fixed(std::size_t i) const noexcept {

@@ -20,12 +20,15 @@
 // Every node of the tree (all levels) follows the skeleton by Shepard
 // weights (1 / (|x − c_j|² + ε²), ε the mean skeleton radius) over its four
 // nearest skeleton nodes: its sphere and SurfacePatch translate by the
-// weighted displacement, and a node's bound grows by how far the nodes
-// below it moved relative to it, so the deformed tree stays a valid
-// hierarchy. To first order: patches translate, their normals keep their
-// rest direction (a dent tilts the real surface by about |∇d|). Mesh
-// vertices follow the same weights (bind() / deform(): the graphics follow
-// the deformed tree).
+// weighted displacement (displacement()), and a node's bound grows by how
+// far the leaves below it can have moved relative to it (bound(): the
+// largest |d_j − its displacement| over the skeleton nodes those leaves are
+// weighted on), so the deformed tree stays a valid hierarchy. Bounds are
+// evaluated when asked for and kept until the next step: a tick costs the
+// nodes the collision visits, not the whole tree. To first order: patches
+// translate, their normals keep their rest direction (a dent tilts the
+// real surface by about |∇d|). Mesh vertices follow the same weights
+// (bind() / deform(): the graphics follow the deformed tree).
 //
 // Contact forces come from the renderer (addForce on an environment node,
 // object local frame; the node's weights share it over the skeleton) and
@@ -99,21 +102,22 @@ class SphereTreeDeformation {
   /// for the next step(). Out-of-range nodes and non-finite forces are ignored.
   void addForce(std::uint32_t node, const Vec3& force) noexcept;
   /// Advances by dt (s; non-finite or ≤ 0: nothing) under the forces added
-  /// since the last step (then cleared), in fixed steps of timeStep, and
-  /// updates the deformed nodes and patches. Returns how far any node moved
-  /// (m), a bound for the renderer's margin. O(kMaxSubsteps · n² + nodes).
+  /// since the last step (then cleared), in fixed steps of timeStep.
+  /// Returns how far any node moved (m), a bound for the renderer's margin.
+  /// O(kMaxSubsteps · n²).
   double step(double dt) noexcept;
   /// Back to rest, at rest; forces cleared.
   void reset() noexcept;
 
   /// The rest tree.
   const SphereTree& rest() const noexcept;
-  /// The deformed tree's nodes (the rest tree's layout; centres displaced,
-  /// bound radii grown) and patches (origins displaced; empty when the rest
-  /// tree has none). Stable storage: the spans stay valid for the object's life.
-  std::span<const SphereTreeNode> nodes() const noexcept;
-  std::span<const SurfacePatch> patches() const noexcept;
-  /// m, object local frame: node `node`'s displacement (zero out of range).
+  /// The deformed node `node`'s bound (object local frame): the rest
+  /// centre displaced, the rest bound radius grown (a leaf's: its radius).
+  /// Kept until the next step() (not thread-safe: the stepping thread
+  /// only). Out of range: a zero sphere. O(skeleton nodes below it), once a step.
+  BoundingSphere bound(std::uint32_t node) const noexcept;
+  /// m, object local frame: node `node`'s displacement, which also moves its
+  /// SurfacePatch (zero out of range). O(1).
   Vec3 displacement(std::uint32_t node) const noexcept;
   /// The skeleton: its node indices in the tree, and which are fixed.
   std::span<const std::uint32_t> skeleton() const noexcept;
