@@ -102,11 +102,34 @@ std::int64_t cpuNs() {
   return std::int64_t{ts.tv_sec} * 1000000000 + ts.tv_nsec;
 }
 
+// Puts the renderer's tool above the surface and warms it up along the
+// first 200 ticks of the path.
+void startOnPath(dm::SphereTree6DofRenderer& ren) {
+  Isometry3 start = handlePose(0);
+  start.translation() *= 1.3;
+  ren.reset(start);
+  for (int i = 0; i < 200; ++i) (void)ren.tick({.dt = 1e-3, .devicePose = handlePose(i)});
+}
+
 fcl::Transform3d toFcl(const Isometry3& p) {
   fcl::Transform3d f = fcl::Transform3d::Identity();
   f.linear() = p.linear();
   f.translation() = p.translation();
   return f;
+}
+
+// The peer's collision step: collide (up to 256 contacts) and distance
+// between the tool at `pose` and the environment at the origin; the contact count.
+std::size_t fclQuery(const std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>& tool, const Isometry3& pose,
+                     const std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>>& env) {
+  fcl::CollisionObjectd oa(tool, toFcl(pose)), ob(env, fcl::Transform3d::Identity());
+  fcl::CollisionRequestd creq(256, true);
+  fcl::CollisionResultd cres;
+  fcl::collide(&oa, &ob, creq, cres);
+  fcl::DistanceRequestd dreq(true);
+  fcl::DistanceResultd dres;
+  fcl::distance(&oa, &ob, dreq, dres);
+  return cres.numContacts();
 }
 
 }  // namespace
@@ -143,11 +166,7 @@ int main(int argc, char** argv) {
       return 1;
     }
     dm::SphereTree6DofRenderer& ren = **r;
-    // Start above the surface, then warm up along the path.
-    Isometry3 start = handlePose(0);
-    start.translation() *= 1.3;
-    ren.reset(start);
-    for (int i = 0; i < 200; ++i) (void)ren.tick({.dt = 1e-3, .devicePose = handlePose(i)});
+    startOnPath(ren);
     std::vector<Isometry3> graphic(static_cast<std::size_t>(ticks));
     dm::LatencyHistogram ours, peer;
     double candidates = 0, contacts = 0, depth = 0;
@@ -164,16 +183,9 @@ int main(int argc, char** argv) {
     long fclContacts = 0;
     for (int i = 0; i < ticks; ++i) {
       const std::int64_t a = cpuNs();
-      fcl::CollisionObjectd oa(fProbe, toFcl(graphic[static_cast<std::size_t>(i)])),
-          ob(fTooth, fcl::Transform3d::Identity());
-      fcl::CollisionRequestd creq(256, true);
-      fcl::CollisionResultd cres;
-      fcl::collide(&oa, &ob, creq, cres);
-      fcl::DistanceRequestd dreq(true);
-      fcl::DistanceResultd dres;
-      fcl::distance(&oa, &ob, dreq, dres);
+      const std::size_t n = fclQuery(fProbe, graphic[static_cast<std::size_t>(i)], fTooth);
       peer.record(cpuNs() - a);
-      fclContacts += static_cast<long>(cres.numContacts());
+      fclContacts += static_cast<long>(n);
     }
     const dm::LatencyHistogram::Summary s = ours.summary(), f = peer.summary();
     std::printf("%-6d %8zu %10.2f %10.2f %10.2f %10.2f %9.1f %9.1f %12.2f %12.2f %8.3f\n", level,
@@ -212,10 +224,7 @@ int main(int argc, char** argv) {
       return 1;
     }
     dm::SphereTree6DofRenderer& ren = **r;
-    Isometry3 start = handlePose(0);
-    start.translation() *= 1.3;
-    ren.reset(start);
-    for (int i = 0; i < 200; ++i) (void)ren.tick({.dt = 1e-3, .devicePose = handlePose(i)});
+    startOnPath(ren);
     const dm::SphereTreeDeformation::Binding binding = (*def)->bind(tooth.positions);
     std::vector<Vec3> deformed(tooth.positions.size());
     auto fSoft = fclIndexedModel(tooth);
@@ -235,13 +244,7 @@ int main(int argc, char** argv) {
       fSoft->beginReplaceModel();
       for (const Vec3& p : deformed) fSoft->replaceVertex(p);
       fSoft->endReplaceModel(true, true);  // refit, bottom-up
-      fcl::CollisionObjectd oa(fProbe, toFcl(g)), ob(fSoft, fcl::Transform3d::Identity());
-      fcl::CollisionRequestd creq(256, true);
-      fcl::CollisionResultd cres;
-      fcl::collide(&oa, &ob, creq, cres);
-      fcl::DistanceRequestd dreq(true);
-      fcl::DistanceResultd dres;
-      fcl::distance(&oa, &ob, dreq, dres);
+      (void)fclQuery(fProbe, g, fSoft);
       peer.record(cpuNs() - b);
     }
     const dm::LatencyHistogram::Summary s = ours.summary(), f = peer.summary();

@@ -150,8 +150,12 @@ struct SphereTree6DofRenderer::State {
     Vec3 envCenter = Vec3::Zero();  // world
     double envRadius = 0.0;
     const SurfacePatch* envPatch = nullptr;  // object local frame; null: collide with the sphere
-    Vec3 envShift = Vec3::Zero();            // a soft object's patch: its displacement, object local frame
-    bool collected = false;                  // `atCollection` holds the contact at the collection pose
+    // A soft object's patch is carried by x ↦ o + u + F (x − o) (o its rest
+    // origin): u its displacement, F⁻¹ kept (object local frame).
+    bool soft = false;
+    Vec3 envShift = Vec3::Zero();
+    Mat3 envInvF = Mat3::Identity();
+    bool collected = false;  // `atCollection` holds the contact at the collection pose
     Contact atCollection;
   };
   std::vector<Pair> pairs;             // capacity maxConstraints
@@ -231,7 +235,13 @@ struct SphereTree6DofRenderer::State {
       const int nk = env.children(en.e, kids);
       if (toolLeaf && nk == 0) {
         Pair pr{gap, en.t, k, en.e, o.pose * be.center, be.radius, usablePatch(o.patches, en.e, be.radius)};
-        if (o.deformation) pr.envShift = o.deformation->displacement(static_cast<std::uint32_t>(en.e));
+        if (o.deformation && pr.envPatch) {
+          const auto node = static_cast<std::uint32_t>(en.e);
+          const Mat3 f = o.deformation->deformationGradient(node);
+          pr.soft = true;
+          pr.envShift = o.deformation->displacement(node);
+          if (f.determinant() > 0.1) pr.envInvF = f.inverse();  // else (crushed): translated only
+        }
         if (pr.envPatch || toolPatch[en.t]) {
           // Through a patch the pair is as near as its contact, which the
           // spheres only bound: keep it when that is within the margin
@@ -317,6 +327,17 @@ struct SphereTree6DofRenderer::State {
     c.envPatch = false;
   }
 
+  // A soft object's patch: the object-frame point `x` mapped back to the
+  // patch's rest frame, and a rest normal carried to the deformed one.
+  static Vec3 restPoint(const Pair& pr, const Vec3& x) noexcept {
+    if (!pr.soft) return x;
+    const Vec3& o = pr.envPatch->origin;
+    return o + pr.envInvF * (x - o - pr.envShift);
+  }
+  static Vec3 restNormal(const Pair& pr, const Vec3& n) noexcept {
+    return pr.soft ? Vec3((pr.envInvF.transpose() * n).normalized()) : n;
+  }
+
   // The contact of pair `pr` at the tool pose (p, R); false when the pair
   // constrains nothing there (a tool patch facing away from the
   // environment's surface, or a tool point beside an environment patch).
@@ -344,8 +365,8 @@ struct SphereTree6DofRenderer::State {
           c.point = tp->support(d);
           c.radius = 0.0;
         }
-        q = ep.query(ro.transpose() * (p + r * c.point - pose.translation()) - pr.envShift);
-        nEnv = ro * q.normal;
+        q = ep.query(restPoint(pr, ro.transpose() * (p + r * c.point - pose.translation())));
+        nEnv = ro * restNormal(pr, q.normal);
       }
       const double gate = kLateralSlack * ep.halfWidth + c.radius;
       if (q.lateral > gate + lateralExtra) return false;
@@ -380,7 +401,7 @@ struct SphereTree6DofRenderer::State {
     if (c.envPatch) {
       const Isometry3& pose = objects[pr.object].pose;
       return pr.envPatch
-                 ->query(pose.linear().transpose() * (p + r * c.point - pose.translation()) - pr.envShift)
+                 ->query(restPoint(pr, pose.linear().transpose() * (p + r * c.point - pose.translation())))
                  .distance -
              c.radius;
     }

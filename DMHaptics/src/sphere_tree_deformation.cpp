@@ -3,6 +3,8 @@
 #include <dm/haptics/sphere_tree_deformation.hpp>
 
 #include <Eigen/Cholesky>
+#include <Eigen/LU>
+#include <Eigen/SVD>
 
 #include <algorithm>
 #include <cmath>
@@ -16,30 +18,72 @@ namespace dm {
 namespace {
 
 constexpr double kTouching = 1.05;  // skeleton spheres this close (× r_i + r_j) are linked
-constexpr int kWeights = 4;         // skeleton nodes per interpolated point
+constexpr int kWeights = SphereTreeDeformation::kWeights;  // skeleton nodes per interpolated point
+using Index = std::array<std::uint32_t, kWeights>;
+using Weights = std::array<double, kWeights>;
+using Gradients = std::array<Vec3, kWeights>;
+constexpr double kRidge = 0.02;  // the slope's regularisation, a share of the weights' sum
 
-// The Shepard weights of `x` over its kWeights nearest skeleton centres.
-void shepard(const Vec3& x, std::span<const Vec3> centres, double eps2, std::array<std::uint32_t, 4>& idx,
-             std::array<double, 4>& w) {
-  std::array<double, 4> best;
-  best.fill(std::numeric_limits<double>::infinity());
+// The interpolation at `x` over its kWeights nearest skeleton centres:
+// linear moving least squares (weights (1 − (r/h)²)², h 1.5 × the farthest
+// of them), so that an affine displacement field is reproduced exactly,
+// value and gradient (the fitted slope: a bent tongue's surface turns as
+// its skeleton does). u(x) = Σ w_k d_k, ∇u(x) = Σ d_k g_kᵀ. Where the
+// centres cannot fix a plane (fewer than four, or coplanar), Shepard
+// weights and a zero gradient.
+void interpolation(const Vec3& x, std::span<const Vec3> centres, Index& idx, Weights& w, Gradients& g) {
+  Weights d2;
+  d2.fill(std::numeric_limits<double>::infinity());
   idx.fill(0);
   for (std::size_t j = 0; j < centres.size(); ++j) {
-    double d2 = (x - centres[j]).squaredNorm();
+    double dj = (x - centres[j]).squaredNorm();
     auto id = static_cast<std::uint32_t>(j);
-    for (int k = 0; k < kWeights; ++k)
-      if (d2 < best[static_cast<std::size_t>(k)]) {
-        std::swap(d2, best[static_cast<std::size_t>(k)]);
-        std::swap(id, idx[static_cast<std::size_t>(k)]);
+    for (std::size_t k = 0; k < kWeights; ++k)
+      if (dj < d2[k]) {
+        std::swap(dj, d2[k]);
+        std::swap(id, idx[k]);
       }
   }
-  double sum = 0.0;
-  for (int k = 0; k < kWeights; ++k) {
-    const auto kk = static_cast<std::size_t>(k);
-    w[kk] = std::isfinite(best[kk]) ? 1.0 / (best[kk] + eps2) : 0.0;
-    sum += w[kk];
+  std::size_t n = 0;
+  while (n < kWeights && std::isfinite(d2[n])) ++n;
+  const double h = 1.5 * std::sqrt(d2[n - 1]) + 1e-300;
+  Eigen::Matrix4d m = Eigen::Matrix4d::Zero();
+  Weights kernel{};
+  for (std::size_t k = 0; k < n; ++k) {
+    const double q = 1.0 - d2[k] / (h * h);
+    kernel[k] = q * q;
+    Eigen::Vector4d p;
+    p << 1.0, (centres[idx[k]] - x) / h;
+    m += kernel[k] * p * p.transpose();
   }
-  for (double& v : w) v /= sum;
+  // Ridge on the slope: a surface tree's skeleton is a shell, nearly
+  // coplanar around a point, and its slope along the normal is not
+  // determined by it (unregularised, the weights grow without bound).
+  double kernelSum = 0.0;
+  for (std::size_t k = 0; k < n; ++k) kernelSum += kernel[k];
+  m.diagonal().tail<3>() += Eigen::Vector3d::Constant(kRidge * kernelSum);
+  w.fill(0.0);
+  g.fill(Vec3::Zero());
+  const Eigen::JacobiSVD<Eigen::Matrix4d> svd(m);
+  const auto sv = svd.singularValues();
+  if (n >= 4 && sv(3) > 1e-8 * sv(0)) {
+    const Eigen::Matrix4d a = m.inverse();
+    for (std::size_t k = 0; k < n; ++k) {
+      Eigen::Vector4d p;
+      p << 1.0, (centres[idx[k]] - x) / h;
+      const Eigen::Vector4d c = kernel[k] * (a * p);
+      w[k] = c(0);
+      g[k] = c.tail<3>() / h;
+    }
+    return;
+  }
+  if (d2[0] == 0.0) {  // on a centre: that node's displacement
+    w[0] = 1.0;
+    return;
+  }
+  double sum = 0.0;
+  for (std::size_t k = 0; k < n; ++k) sum += w[k] = 1.0 / d2[k];
+  for (std::size_t k = 0; k < n; ++k) w[k] /= sum;
 }
 
 }  // namespace
@@ -56,15 +100,20 @@ struct SphereTreeDeformation::State {
   std::vector<double> mass;                      // per skeleton node
   std::vector<std::uint32_t> linkStart, linkTo;  // CSR over skeleton nodes
   Eigen::MatrixXd ainv;                          // (M + hC + h²K)⁻¹ over the free rows
-  double eps2 = 0.0;
   // Dynamics (per skeleton node; fixed ones stay zero).
   std::vector<Vec3> d, v, f;
   std::vector<Vec3> rhs, prev;  // per free row
   double acc = 0.0;
   Vec3 support = Vec3::Zero();
   // Every tree node: weights, displacement, deformed copy.
-  std::vector<std::array<std::uint32_t, 4>> wIdx;
-  std::vector<std::array<double, 4>> w;
+  std::vector<Index> wIdx;
+  std::vector<Weights> w;
+  std::vector<Gradients> wGrad;  // the gradient weights at the node's rest centre
+  // Σ|w| (1 for convex weights; MLS weights may be negative): per internal
+  // node the largest of the leaves below (their motion relative to it is at
+  // most that times the skeleton's), and the largest of all.
+  std::vector<double> reachScale;
+  double maxScale = 1.0;
   // Per internal node: the skeleton nodes any leaf below it is weighted on
   // (CSR), so |disp(leaf) − disp(node)| ≤ max over them of |d_j − disp(node)|.
   std::vector<std::uint32_t> reachStart, reach;
@@ -109,8 +158,7 @@ struct SphereTreeDeformation::State {
 
   Vec3 disp(std::size_t n) const noexcept {
     Vec3 x = Vec3::Zero();
-    for (int k = 0; k < kWeights; ++k)
-      x += w[n][static_cast<std::size_t>(k)] * d[wIdx[n][static_cast<std::size_t>(k)]];
+    for (std::size_t k = 0; k < kWeights; ++k) x += w[n][k] * d[wIdx[n][k]];
     return x;
   }
 
@@ -125,7 +173,7 @@ struct SphereTreeDeformation::State {
     for (std::uint32_t e = reachStart[n]; e < reachStart[n + 1]; ++e)
       g = std::max(g, (d[reach[e]] - x).norm());
     cacheEpoch[n] = epoch;
-    cache[n] = {r.center + x, r.boundRadius + g};
+    cache[n] = {r.center + x, r.boundRadius + reachScale[n] * g};
     return cache[n];
   }
 };
@@ -217,26 +265,34 @@ Result<std::shared_ptr<SphereTreeDeformation>> SphereTreeDeformation::create(
   s.ainv = llt.solve(Eigen::MatrixXd::Identity(nf, nf));
   if (!s.ainv.allFinite()) return bad("the spring network's system is singular", "options", "");
 
-  s.eps2 = std::pow(radiusSum / static_cast<double>(n), 2);
   const std::vector<SphereTreeNode>& rn = rest->nodes();
   s.wIdx.resize(rn.size());
   s.w.resize(rn.size());
-  for (std::size_t k = 0; k < rn.size(); ++k) shepard(rn[k].center, s.skelCentre, s.eps2, s.wIdx[k], s.w[k]);
+  s.wGrad.resize(rn.size());
+  for (std::size_t k = 0; k < rn.size(); ++k)
+    interpolation(rn[k].center, s.skelCentre, s.wIdx[k], s.w[k], s.wGrad[k]);
   s.d.assign(n, Vec3::Zero());
   s.v.assign(n, Vec3::Zero());
   s.f.assign(n, Vec3::Zero());
   s.rhs.assign(s.freeSkel.size(), Vec3::Zero());
   s.prev.assign(s.freeSkel.size(), Vec3::Zero());
-  // Reach sets, leaves up (children come after their parents).
+  // Reach sets and scales, leaves up (children come after their parents).
   std::vector<std::vector<std::uint32_t>> reach(rn.size());
+  s.reachScale.assign(rn.size(), 1.0);
   for (std::size_t k = rn.size(); k-- > 0;) {
     std::vector<std::uint32_t>& r = reach[k];
+    double l1 = 0.0;
+    for (const double x : s.w[k]) l1 += std::abs(x);
+    s.maxScale = std::max(s.maxScale, l1);
     for (std::uint32_t c = rn[k].firstChild; c < rn[k].firstChild + rn[k].childCount; ++c) {
       if (rn[c].childCount == 0) {
-        for (int j = 0; j < kWeights; ++j)
-          if (s.w[c][static_cast<std::size_t>(j)] > 0) r.push_back(s.wIdx[c][static_cast<std::size_t>(j)]);
+        double lc = 0.0;
+        for (std::size_t j = 0; j < kWeights; ++j)
+          if (s.w[c][j] != 0) r.push_back(s.wIdx[c][j]), lc += std::abs(s.w[c][j]);
+        s.reachScale[k] = std::max(s.reachScale[k], lc);
       } else {
         r.insert(r.end(), reach[c].begin(), reach[c].end());
+        s.reachScale[k] = std::max(s.reachScale[k], s.reachScale[c]);
       }
     }
     std::sort(r.begin(), r.end());
@@ -256,9 +312,9 @@ Result<std::shared_ptr<SphereTreeDeformation>> SphereTreeDeformation::create(
 void SphereTreeDeformation::addForce(std::uint32_t node, const Vec3& force) noexcept {
   State& s = *s_;
   if (node >= s.w.size() || !force.allFinite()) return;
-  for (int k = 0; k < kWeights; ++k) {
-    const std::uint32_t j = s.wIdx[node][static_cast<std::size_t>(k)];
-    if (!s.isFixed[j]) s.f[j] += s.w[node][static_cast<std::size_t>(k)] * force;
+  for (std::size_t k = 0; k < kWeights; ++k) {
+    const std::uint32_t j = s.wIdx[node][k];
+    if (!s.isFixed[j]) s.f[j] += s.w[node][k] * force;
   }
 }
 
@@ -282,7 +338,7 @@ double SphereTreeDeformation::step(double dt) noexcept {
     ++s.epoch;
     s.updateSupport();
   }
-  return moved;
+  return s.maxScale * moved;
 }
 
 void SphereTreeDeformation::reset() noexcept {
@@ -300,6 +356,12 @@ BoundingSphere SphereTreeDeformation::bound(std::uint32_t node) const noexcept {
 Vec3 SphereTreeDeformation::displacement(std::uint32_t node) const noexcept {
   return node < s_->w.size() ? s_->disp(node) : Vec3::Zero();
 }
+Mat3 SphereTreeDeformation::deformationGradient(std::uint32_t node) const noexcept {
+  Mat3 f = Mat3::Identity();
+  if (node >= s_->w.size()) return f;
+  for (std::size_t k = 0; k < kWeights; ++k) f += s_->d[s_->wIdx[node][k]] * s_->wGrad[node][k].transpose();
+  return f;
+}
 std::span<const std::uint32_t> SphereTreeDeformation::skeleton() const noexcept { return s_->skel; }
 bool SphereTreeDeformation::fixed(std::size_t i) const noexcept {
   return i < s_->isFixed.size() && s_->isFixed[i] != 0;
@@ -310,8 +372,9 @@ SphereTreeDeformation::Binding SphereTreeDeformation::bind(std::span<const Vec3>
   Binding b;
   b.index.resize(restPoints.size());
   b.weight.resize(restPoints.size());
+  Gradients unused;
   for (std::size_t i = 0; i < restPoints.size(); ++i)
-    shepard(restPoints[i], s_->skelCentre, s_->eps2, b.index[i], b.weight[i]);
+    interpolation(restPoints[i], s_->skelCentre, b.index[i], b.weight[i], unused);
   return b;
 }
 
@@ -322,8 +385,7 @@ bool SphereTreeDeformation::deform(const Binding& b, std::span<const Vec3> restP
     return false;
   for (std::size_t i = 0; i < restPoints.size(); ++i) {
     Vec3 x = restPoints[i];
-    for (int k = 0; k < kWeights; ++k)
-      x += b.weight[i][static_cast<std::size_t>(k)] * s_->d[b.index[i][static_cast<std::size_t>(k)]];
+    for (std::size_t k = 0; k < kWeights; ++k) x += b.weight[i][k] * s_->d[b.index[i][k]];
     out[i] = x;
   }
   return true;

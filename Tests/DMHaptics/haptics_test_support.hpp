@@ -1,9 +1,15 @@
 // Helpers shared by the DMHaptics tests.
 #pragma once
 
+#include <dm/collide/sphere_tree.hpp>
 #include <dm/haptics/renderer.hpp>
 
+#include <gtest/gtest.h>
+
 #include <algorithm>
+#include <memory>
+#include <numbers>
+#include <vector>
 
 namespace dm::test {
 
@@ -37,6 +43,22 @@ inline HapticResponse drive(HapticRenderer& r, const Isometry3& from, const Isom
                                    q0.slerp(t, q1).toRotationMatrix())});
   }
   return out;
+}
+
+// A sphere tree whose every level is one sphere (centre c, radius r).
+inline std::shared_ptr<const SphereTree> ballTree(double r, int levels, const Vec3& c = Vec3::Zero()) {
+  std::vector<SphereTreeNode> nodes(static_cast<std::size_t>(levels));
+  for (int l = 0; l < levels; ++l) {
+    SphereTreeNode& n = nodes[static_cast<std::size_t>(l)];
+    n.center = c;
+    n.radius = r;
+    n.level = static_cast<std::uint8_t>(l);
+    n.firstChild = static_cast<std::uint32_t>(l + 1);
+    n.childCount = l + 1 < levels ? 1 : 0;
+  }
+  auto t = SphereTree::fromNodes(std::move(nodes), 4.0 / 3.0 * std::numbers::pi * r * r * r);
+  EXPECT_TRUE(t.ok());
+  return *t;
 }
 
 }  // namespace dm::test

@@ -26,6 +26,7 @@
 namespace dm {
 namespace {
 
+using test::ballTree;
 using test::drive;
 
 constexpr double kPlaneR = 1000.0;
@@ -35,22 +36,6 @@ Isometry3 poseAt(const Vec3& p, const Mat3& r = Mat3::Identity()) {
   x.linear() = r;
   x.translation() = p;
   return x;
-}
-
-// A sphere tree whose every level is one sphere (centre c, radius r).
-std::shared_ptr<const SphereTree> ballTree(double r, int levels, const Vec3& c = Vec3::Zero()) {
-  std::vector<SphereTreeNode> nodes(static_cast<std::size_t>(levels));
-  for (int l = 0; l < levels; ++l) {
-    SphereTreeNode& n = nodes[static_cast<std::size_t>(l)];
-    n.center = c;
-    n.radius = r;
-    n.level = static_cast<std::uint8_t>(l);
-    n.firstChild = static_cast<std::uint32_t>(l + 1);
-    n.childCount = l + 1 < levels ? 1 : 0;
-  }
-  auto t = SphereTree::fromNodes(std::move(nodes), 4.0 / 3.0 * std::numbers::pi * r * r * r);
-  EXPECT_TRUE(t.ok());
-  return *t;
 }
 
 // Rod along x, |x| ≤ h, thickness a: level l has 2^l spheres of radius

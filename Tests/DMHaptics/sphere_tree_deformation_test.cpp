@@ -12,8 +12,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <complex>
+#include <cstdio>
 #include <numbers>
 #include <vector>
 
@@ -24,22 +26,7 @@ namespace dm {
 namespace {
 
 using test::at;
-
-// A sphere tree whose every level is one sphere (centre c, radius r).
-std::shared_ptr<const SphereTree> singleSphereTree(double r, int levels, const Vec3& c = Vec3::Zero()) {
-  std::vector<SphereTreeNode> nodes(static_cast<std::size_t>(levels));
-  for (int l = 0; l < levels; ++l) {
-    SphereTreeNode& n = nodes[static_cast<std::size_t>(l)];
-    n.center = c;
-    n.radius = r;
-    n.level = static_cast<std::uint8_t>(l);
-    n.firstChild = static_cast<std::uint32_t>(l + 1);
-    n.childCount = l + 1 < levels ? 1 : 0;
-  }
-  auto t = SphereTree::fromNodes(std::move(nodes), 4.0 / 3.0 * std::numbers::pi * r * r * r);
-  EXPECT_TRUE(t.ok());
-  return *t;
-}
+using test::ballTree;
 
 std::shared_ptr<const SphereTree> fittedTree(const Mesh& m, int levels) {
   auto t = buildSphereTreeFitted(m, {.levels = levels});
@@ -61,7 +48,7 @@ TEST(SphereTreeDeformation, OneNodeOscillatesAtItsNaturalFrequencyAndSettlesAtFO
   // 1e-9); it shifts the phase by (ωh)²/3 and damps by (1 + ω²h²)^(−1/2) a
   // step: the peak within 1.5 steps of π/ω and 20 % of its height.
   const double m = 0.05, k = 200.0, F = 1.0, h = 1e-3;
-  const auto tree = singleSphereTree(0.01, 3);
+  const auto tree = ballTree(0.01, 3);
   auto def = SphereTreeDeformation::create(
       tree,
       {.skeletonLevel = 0, .mass = m, .anchorStiffness = k, .linkStiffness = 0, .damping = 0, .timeStep = h});
@@ -170,8 +157,8 @@ TEST(SphereTreeDeformation, NetworkIsReciprocalLocalAndInEquilibriumWithItsRoot)
       tipVertex = i;
   EXPECT_NEAR(moved[tipVertex].z() - mesh.positions[tipVertex].z(), tip, 0.3 * std::abs(tip));
   for (std::size_t i = 0; i < mesh.positions.size(); ++i)
-    if (mesh.positions[i].x() < -0.029) {
-      EXPECT_NEAR((moved[i] - mesh.positions[i]).norm(), 0.0, 0.02 * std::abs(tip));
+    if (mesh.positions[i].x() < -0.029) {  // the fitted (least-squares) field there: within 5 % of the tip's
+      EXPECT_NEAR((moved[i] - mesh.positions[i]).norm(), 0.0, 0.05 * std::abs(tip));
     }
 }
 
@@ -180,8 +167,8 @@ TEST(SphereTreeDeformation, BallOnASoftPlaneMeetsTwoSpringsInSeries) {
   // spring k_a; the tool spring is K. Hand D under the rest surface: the
   // surface gives way d = K D / (K + k_a), the force is K k_a D / (K + k_a).
   const double K = 1000.0, ka = 500.0, D = 0.003, R = 1000.0;
-  const auto plane = singleSphereTree(R, 2, Vec3(0, 0, -R));
-  const auto tool = singleSphereTree(0.005, 2);
+  const auto plane = ballTree(R, 2, Vec3(0, 0, -R));
+  const auto tool = ballTree(0.005, 2);
   auto soft = SphereTreeDeformation::create(
       plane, {.skeletonLevel = 0, .mass = 0.02, .anchorStiffness = ka, .damping = 4.0});
   ASSERT_TRUE(soft.ok()) << soft.error();
@@ -263,6 +250,80 @@ TEST(SphereTreeDeformation, MirrorPushesTheTongueAsideAndItSpringsBack) {
   EXPECT_LT(std::abs(dz(press)), 0.01 * sunk);
 }
 
+// The vertex of `positions` nearest `x`, and the area-weighted normal of
+// vertex v over `m`'s triangles with `positions`.
+std::uint32_t vertexNear(const std::vector<Vec3>& positions, const Vec3& x) {
+  std::uint32_t v = 0;
+  for (std::uint32_t i = 0; i < positions.size(); ++i)
+    if ((positions[i] - x).squaredNorm() < (positions[v] - x).squaredNorm()) v = i;
+  return v;
+}
+Vec3 vertexNormal(const Mesh& m, const std::vector<Vec3>& positions, std::uint32_t v) {
+  Vec3 n = Vec3::Zero();
+  for (const Triangle& t : m.triangles)
+    if (t[0] == v || t[1] == v || t[2] == v)
+      n += (positions[t[1]] - positions[t[0]]).cross(positions[t[2]] - positions[t[0]]);
+  return n.normalized();
+}
+
+TEST(SphereTreeDeformation, ForceFollowsTheBentSurfaceNotItsRestNormal) {
+  // The tongue bent by 6 N at its tip; a 1 mm probe touches its top at
+  // x = 12 mm with a light spring (its own 10 mN barely adds). The force on
+  // a frictionless ball is along the surface normal at the contact: it must
+  // match the bent mesh's normal there (the graphics), not the rest one.
+  const Mesh mesh = tongueMesh();
+  const auto tongue = fittedTree(mesh, 5);
+  const auto probe = fittedTree(makeIcosphere(0.001, 3), 4);
+  ASSERT_TRUE(tongue && probe);
+  auto soft =
+      SphereTreeDeformation::create(tongue, {.skeletonLevel = 2,
+                                             .mass = 0.06,
+                                             .anchorStiffness = 30,
+                                             .linkStiffness = 400,
+                                             .damping = 2,
+                                             .fixedRegion = Aabb(Vec3(-1, -1, -1), Vec3(-0.022, 1, 1))});
+  ASSERT_TRUE(soft.ok()) << soft.error();
+  const double k = 50.0;
+  auto r = SphereTree6DofRenderer::create(probe, {{.tree = tongue, .deformation = *soft}},
+                                          {.toolLevel = 3, .linearStiffness = Vec3::Constant(k)});
+  ASSERT_TRUE(r.ok()) << r.error();
+  std::uint32_t tip = 0;
+  for (std::uint32_t n = 0; n < tongue->nodes().size(); ++n)
+    if (tongue->nodes()[n].center.x() > tongue->nodes()[tip].center.x()) tip = n;
+  const double x = 0.012, top = 0.008 * std::sqrt(1.0 - (x / 0.030) * (x / 0.030));
+  Vec3 hand(x, 0, top + 0.004);
+  (*r)->reset(at(hand));
+  HapticResponse out;
+  bool touched = false;
+  for (int i = 0; i < 5000; ++i) {
+    (*soft)->addForce(tip, Vec3(0, 0, -6.0));
+    if (i >= 3000 && !touched) hand.z() -= 1e-5;  // settled: lower at 10 mm/s until it touches
+    out = (*r)->tick(test::input(hand));
+    if (i >= 3000 && !touched && out.contacts > 0) {
+      touched = true;
+      hand.z() -= 0.0002;  // then press 0.2 mm: 10 mN
+    }
+  }
+  ASSERT_TRUE(touched);
+  ASSERT_GT(out.contacts, 0);
+  const Vec3 f = out.force.normalized();
+  const Vec3 contactPoint = (*r)->graphicPose().translation() - 0.001 * f;
+  std::vector<Vec3> bent(mesh.positions.size());
+  ASSERT_TRUE((*soft)->deform((*soft)->bind(mesh.positions), mesh.positions, bent));
+  const std::uint32_t v = vertexNear(bent, contactPoint);
+  const Vec3 nBent = vertexNormal(mesh, bent, v), nRest = vertexNormal(mesh, mesh.positions, v);
+  const auto degrees = [&](const Vec3& n) {
+    return std::acos(std::clamp(f.dot(n), -1.0, 1.0)) * 180 / std::numbers::pi;
+  };
+  const double bentAngle = degrees(nBent), restAngle = degrees(nRest);
+  std::printf(
+      "[ tongue bent ] tip sank %.2f mm; force vs bent mesh normal %.2f deg, vs rest normal %.2f deg\n",
+      -1e3 * (*soft)->displacement(tip).z(), bentAngle, restAngle);
+  EXPECT_GT(-(*soft)->displacement(tip).z(), 0.002);
+  EXPECT_GT(restAngle, 3.0);  // the bend is real
+  EXPECT_LT(bentAngle, 1.5);
+}
+
 TEST(SphereTreeDeformation, ScalerReleasesEachCalculusAtItsBondWithASuddenDrop) {
   // A tooth (10 × 10 × 20 mm box, the face y = 0) with three calculus pieces
   // (1.2 mm balls bonded at 1.5 N) on its face; the scaler (a 1 mm ball)
@@ -316,7 +377,7 @@ TEST(SphereTreeDeformation, ScalerReleasesEachCalculusAtItsBondWithASuddenDrop) 
 }
 
 TEST(SphereTreeDeformation, BadInputIsNamed) {
-  const auto tree = singleSphereTree(0.01, 3), other = singleSphereTree(0.01, 3);
+  const auto tree = ballTree(0.01, 3), other = ballTree(0.01, 3);
   const auto fails = [](const auto& r, const char* where) {
     ASSERT_FALSE(r.ok());
     EXPECT_NE(r.error().message().find(where), std::string::npos) << r.error().message();

@@ -17,17 +17,20 @@
 // stable; the system matrix M + h C + h² K is inverted once at create()).
 // Static answer: K d = f, the springs in series and parallel.
 //
-// Every node of the tree (all levels) follows the skeleton by Shepard
-// weights (1 / (|x − c_j|² + ε²), ε the mean skeleton radius) over its four
-// nearest skeleton nodes: its sphere and SurfacePatch translate by the
-// weighted displacement (displacement()), and a node's bound grows by how
-// far the leaves below it can have moved relative to it (bound(): the
-// largest |d_j − its displacement| over the skeleton nodes those leaves are
-// weighted on), so the deformed tree stays a valid hierarchy. Bounds are
+// Every node of the tree (all levels) follows the skeleton by linear moving
+// least squares over its kWeights nearest skeleton nodes (an affine
+// displacement field is reproduced exactly, value and slope): its sphere
+// and SurfacePatch move by the interpolated displacement (displacement()),
+// and a node's bound grows by how far the leaves below it can have moved
+// relative to it (bound(): Σ|w| times the largest |d_j − its displacement|
+// over the skeleton nodes those leaves are weighted on), so the deformed
+// tree stays a valid hierarchy. Bounds are
 // evaluated when asked for and kept until the next step: a tick costs the
-// nodes the collision visits, not the whole tree. To first order: patches
-// translate, their normals keep their rest direction (a dent tilts the
-// real surface by about |∇d|). Mesh vertices follow the same weights
+// nodes the collision visits, not the whole tree. A node's patch follows
+// the interpolant to first order: it is carried by the local affine map
+// x ↦ origin + u + F (x − origin), F the deformation gradient
+// (deformationGradient()), so its normals turn with a dent (they would be
+// off by about |∇u| otherwise). Mesh vertices follow the same weights
 // (bind() / deform(): the graphics follow the deformed tree).
 //
 // Contact forces come from the renderer (addForce on an environment node,
@@ -84,6 +87,8 @@ class SphereTreeDeformation {
  public:
   /// Most skeleton nodes (the dense system inverse is n² doubles).
   static constexpr int kMaxSkeletonNodes = 512;
+  /// Skeleton nodes a point is interpolated over (its nearest).
+  static constexpr std::size_t kWeights = 8;
   /// Most fixed steps one step() takes (a longer dt drops the rest: the
   /// object lags rather than stalling the haptic thread).
   static constexpr int kMaxSubsteps = 16;
@@ -119,6 +124,10 @@ class SphereTreeDeformation {
   /// m, object local frame: node `node`'s displacement, which also moves its
   /// SurfacePatch (zero out of range). O(1).
   Vec3 displacement(std::uint32_t node) const noexcept;
+  /// The deformation gradient F = I + ∂u/∂x of the interpolant at
+  /// node `node`'s rest centre (identity out of range): its patch deforms
+  /// by x ↦ origin + u + F (x − origin), so its normals turn by F⁻ᵀ. O(1).
+  Mat3 deformationGradient(std::uint32_t node) const noexcept;
   /// The skeleton: its node indices in the tree, and which are fixed.
   std::span<const std::uint32_t> skeleton() const noexcept;
   bool fixed(std::size_t skeletonIndex) const noexcept;
@@ -129,11 +138,11 @@ class SphereTreeDeformation {
 
   /// Per-point skeleton weights for deform(): the graphics' binding.
   struct Binding {
-    std::vector<std::array<std::uint32_t, 4>> index;  // skeleton indices
-    std::vector<std::array<double, 4>> weight;        // sum 1
+    std::vector<std::array<std::uint32_t, kWeights>> index;  // skeleton indices
+    std::vector<std::array<double, kWeights>> weight;        // sum 1 (some may be negative)
   };
   /// Binds points (object local frame, at rest) to the skeleton by the
-  /// nodes' Shepard weights. O(points · skeleton).
+  /// nodes' interpolation weights. O(points · skeleton).
   Binding bind(std::span<const Vec3> restPoints) const;
   /// out[i] = restPoints[i] + the bound displacement. Sizes must match the
   /// binding (else false, out untouched). No allocation.
