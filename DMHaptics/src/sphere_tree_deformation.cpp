@@ -216,12 +216,11 @@ Result<std::shared_ptr<SphereTreeDeformation>> SphereTreeDeformation::create(
   s.opt = o;
   const std::size_t n = level.size();
   const auto first = static_cast<std::uint32_t>(level.data() - rest->nodes().data());
-  double radiusSum = 0.0, volumeSum = 0.0;
+  double volumeSum = 0.0;
   for (std::size_t i = 0; i < n; ++i) {
     s.skel.push_back(first + static_cast<std::uint32_t>(i));
     s.skelCentre.push_back(level[i].center);
     s.isFixed.push_back(o.fixedRegion && o.fixedRegion->contains(level[i].center) ? 1 : 0);
-    radiusSum += level[i].radius;
     volumeSum += std::pow(level[i].radius, 3);
   }
   for (std::size_t i = 0; i < n; ++i)

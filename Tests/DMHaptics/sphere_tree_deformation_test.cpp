@@ -41,6 +41,16 @@ Mesh tongueMesh() {
   return m;
 }
 
+// The tongue's root (x < −22 mm) is fixed.
+const Aabb kTongueRoot(Vec3(-1, -1, -1), Vec3(-0.022, 1, 1));
+// A soft tongue: 55 masses on level 2 of its tree.
+const SphereTreeDeformationOptions kTongue{.skeletonLevel = 2,
+                                           .mass = 0.06,
+                                           .anchorStiffness = 30,
+                                           .linkStiffness = 400,
+                                           .damping = 2,
+                                           .fixedRegion = kTongueRoot};
+
 TEST(SphereTreeDeformation, OneNodeOscillatesAtItsNaturalFrequencyAndSettlesAtFOverK) {
   // Skeleton level 0: one mass m on an anchor spring k. A constant force F
   // from rest: d(t) = F/k (1 − cos ωt), ω = √(k/m); the first peak, 2F/k, at
@@ -86,9 +96,11 @@ TEST(SphereTreeDeformation, OneNodeOscillatesAtItsNaturalFrequencyAndSettlesAtFO
 TEST(SphereTreeDeformation, NetworkIsReciprocalLocalAndInEquilibriumWithItsRoot) {
   const auto tree = fittedTree(tongueMesh(), 4);
   ASSERT_TRUE(tree);
-  const Aabb root(Vec3(-1, -1, -1), Vec3(-0.022, 1, 1));
-  const SphereTreeDeformationOptions opt{
-      .skeletonLevel = 2, .anchorStiffness = 20, .linkStiffness = 300, .damping = 3, .fixedRegion = root};
+  const SphereTreeDeformationOptions opt{.skeletonLevel = 2,
+                                         .anchorStiffness = 20,
+                                         .linkStiffness = 300,
+                                         .damping = 3,
+                                         .fixedRegion = kTongueRoot};
   // Leaves near the tip (A) and the middle (B).
   const std::span<const SphereTreeNode> leaves = tree->level(3);
   const auto nearest = [&](const Vec3& x) {
@@ -200,13 +212,7 @@ TEST(SphereTreeDeformation, MirrorPushesTheTongueAsideAndItSpringsBack) {
   const auto tongue = fittedTree(tongueMesh(), 5);
   const auto mirror = fittedTree(makeIcosphere(0.006, 3), 4);
   ASSERT_TRUE(tongue && mirror);
-  auto soft =
-      SphereTreeDeformation::create(tongue, {.skeletonLevel = 2,
-                                             .mass = 0.06,
-                                             .anchorStiffness = 30,
-                                             .linkStiffness = 400,
-                                             .damping = 2,
-                                             .fixedRegion = Aabb(Vec3(-1, -1, -1), Vec3(-0.022, 1, 1))});
+  auto soft = SphereTreeDeformation::create(tongue, kTongue);
   ASSERT_TRUE(soft.ok()) << soft.error();
   auto r = SphereTree6DofRenderer::create(mirror, {{.tree = tongue, .name = "tongue", .deformation = *soft}},
                                           {.toolLevel = 3});
@@ -275,13 +281,7 @@ TEST(SphereTreeDeformation, ForceFollowsTheBentSurfaceNotItsRestNormal) {
   const auto tongue = fittedTree(mesh, 5);
   const auto probe = fittedTree(makeIcosphere(0.001, 3), 4);
   ASSERT_TRUE(tongue && probe);
-  auto soft =
-      SphereTreeDeformation::create(tongue, {.skeletonLevel = 2,
-                                             .mass = 0.06,
-                                             .anchorStiffness = 30,
-                                             .linkStiffness = 400,
-                                             .damping = 2,
-                                             .fixedRegion = Aabb(Vec3(-1, -1, -1), Vec3(-0.022, 1, 1))});
+  auto soft = SphereTreeDeformation::create(tongue, kTongue);
   ASSERT_TRUE(soft.ok()) << soft.error();
   const double k = 50.0;
   auto r = SphereTree6DofRenderer::create(probe, {{.tree = tongue, .deformation = *soft}},
