@@ -1,0 +1,451 @@
+// MillableVolume: fractional-occupancy voxel bone edited by milling tools
+// (see dm/collide/millable_volume.hpp for the model).
+#include <dm/collide/millable_volume.hpp>
+#include <dm/core/assert.hpp>
+#include <dm/math/isosurface.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <new>
+#include <set>
+
+namespace dm {
+
+namespace {
+
+constexpr const char* kMillWhere = "MillableVolume";
+
+std::string millVoxelName(const Vec3i& dims, std::size_t linear) {
+  const auto nx = static_cast<std::size_t>(dims.x()), ny = static_cast<std::size_t>(dims.y());
+  char buf[96];
+  std::snprintf(buf, sizeof buf, "voxel (%zu, %zu, %zu)", linear % nx, (linear / nx) % ny,
+                linear / (nx * ny));
+  return buf;
+}
+
+// Cell fraction of a voxel whose centre is at signed distance s from the
+// tool's surface: the partial volume of a plane through a cell of width h.
+inline double millCoverage(double s, double invH) noexcept { return std::clamp(0.5 - s * invH, 0.0, 1.0); }
+
+// Signed distance to a box of half extents b, and its gradient.
+double millBoxDistance(const Vec3& p, const Vec3& b, Vec3& g) noexcept {
+  const Vec3 q = p.cwiseAbs() - b;
+  const Vec3 qPos = q.cwiseMax(0.0);
+  const double outside = qPos.norm();
+  if (outside > 0.0) {
+    g = (qPos / outside).cwiseProduct(p.cwiseSign());
+    return outside;
+  }
+  int axis = 0;
+  q.maxCoeff(&axis);
+  g = Vec3::Zero();
+  g[axis] = p[axis] < 0.0 ? -1.0 : 1.0;
+  return q[axis];
+}
+
+}  // namespace
+
+// --- MillingTool -----------------------------------------------------------
+
+double MillingTool::distance(const Vec3& p, Vec3& gradient) const noexcept {
+  switch (kind) {
+    case Kind::Sphere: {
+      const double r = p.norm();
+      gradient = r > 0.0 ? Vec3(p / r) : Vec3::UnitZ();
+      return r - radius;
+    }
+    case Kind::Cylinder: {
+      const double rho = std::hypot(p.x(), p.y());
+      const Vec3 radial = rho > 0.0 ? Vec3(p.x() / rho, p.y() / rho, 0.0) : Vec3::UnitX();
+      const Vec3 axial(0.0, 0.0, p.z() < 0.0 ? -1.0 : 1.0);
+      const double dr = rho - radius, dz = std::abs(p.z()) - halfLength;
+      if (dr > 0.0 && dz > 0.0) {
+        const double d = std::hypot(dr, dz);
+        gradient = (dr * radial + dz * axial) / d;
+        return d;
+      }
+      gradient = dr > dz ? radial : axial;
+      return std::max(dr, dz);
+    }
+    case Kind::Box:
+      return millBoxDistance(p, halfExtents, gradient);
+    case Kind::Voxels:
+      return shape ? shape->distance(p, gradient) : std::numeric_limits<double>::infinity();
+  }
+  return std::numeric_limits<double>::infinity();
+}
+
+double MillingTool::boundingRadius() const noexcept {
+  switch (kind) {
+    case Kind::Sphere:
+      return radius;
+    case Kind::Cylinder:
+      return std::hypot(radius, halfLength);
+    case Kind::Box:
+      return halfExtents.norm();
+    case Kind::Voxels: {
+      if (!shape) return 0.0;
+      const Aabb b = shape->localAabb();
+      return b.min().cwiseAbs().cwiseMax(b.max().cwiseAbs()).norm();
+    }
+  }
+  return 0.0;
+}
+
+double MillingTool::innerRadius() const noexcept {
+  switch (kind) {
+    case Kind::Sphere:
+      return radius;
+    case Kind::Cylinder:
+      return std::min(radius, halfLength);
+    case Kind::Box:
+      return halfExtents.minCoeff();
+    case Kind::Voxels:
+      return shape ? std::max(0.0, -shape->distance(Vec3::Zero())) : 0.0;
+  }
+  return 0.0;
+}
+
+Status MillingTool::validate(std::string_view where) const {
+  const std::string at(where);
+  auto positive = [&](double v, const char* field) -> Status {
+    if (std::isfinite(v) && v > 0.0) return ok();
+    return fail(ErrorCode::InvalidArgument, formatString("%s must be finite and > 0 (got %g)", field, v),
+                at + "/" + field);
+  };
+  switch (kind) {
+    case Kind::Sphere:
+      return positive(radius, "radius");
+    case Kind::Cylinder:
+      if (auto s = positive(radius, "radius"); !s) return s;
+      return positive(halfLength, "half_length");
+    case Kind::Box:
+      for (int a = 0; a < 3; ++a)
+        if (auto s = positive(halfExtents[a], "half_extents"); !s) return s;
+      return ok();
+    case Kind::Voxels:
+      if (!shape)
+        return fail(ErrorCode::InvalidArgument, "a voxel tool needs its shape (a VoxelModel)", at + "/shape");
+      if (innerRadius() <= 0.0)
+        return fail(ErrorCode::InvalidArgument, "the voxel tool's origin is outside its shape", at + "/shape",
+                    "put the tool frame's origin inside the cutting part");
+      return ok();
+  }
+  return fail(ErrorCode::InvalidArgument, "unknown tool kind", at + "/kind");
+}
+
+// --- construction ----------------------------------------------------------
+
+Result<MillableVolume> MillableVolume::fromFraction(const Volume& v, const char* what,
+                                                    double (*fraction)(double, double, double), double a,
+                                                    double b, MillingMaterial material) {
+  const std::string where = std::string(kMillWhere) + "::" + what;
+  if (v.empty()) return fail(ErrorCode::InvalidArgument, "volume is empty (no voxels)", where + ": volume");
+  MillableVolume m;
+  m.dims_ = v.dims();
+  m.indexToWorld_ = v.indexToWorld();
+  m.worldToIndex_ = v.worldToIndex();
+  const Vec3 spacing = v.spacing();
+  m.h_ = spacing.minCoeff();
+  m.cellVolume_ = std::abs(v.indexToWorld().linear().determinant());
+  if (!(m.h_ > 0.0) || !std::isfinite(m.cellVolume_) || !(m.cellVolume_ > 0.0))
+    return fail(ErrorCode::InvalidArgument, "the volume's spacing is not positive", where + ": affine");
+  const std::size_t n = v.voxelCount();
+  try {
+    m.occupancy_.resize(n);
+    m.material_.assign(n, 0);
+    m.blockDims_ = Vec3i((m.dims_.x() + kBlock - 1) / kBlock, (m.dims_.y() + kBlock - 1) / kBlock,
+                         (m.dims_.z() + kBlock - 1) / kBlock);
+    const auto blocks = static_cast<std::size_t>(m.blockDims_.prod());
+    m.blockChanged_.assign(blocks, 0);
+    m.changed_.assign(blocks, 0);
+  } catch (const std::bad_alloc&) {
+    return fail(ErrorCode::InvalidArgument, "out of memory for the millable volume", where + ": volume",
+                "3 bytes a voxel are needed; crop the volume to the bone");
+  }
+  for (std::size_t i = 0; i < n; ++i) {
+    const double value = v.valueAt(i);
+    if (!std::isfinite(value))
+      return fail(ErrorCode::InvalidArgument, "voxel value is not finite",
+                  where + ": " + millVoxelName(m.dims_, i));
+    const double o = fraction(value, a, b);
+    m.occupancy_[i] = static_cast<std::uint16_t>(std::lround(o * kFull));
+  }
+  if (auto s = m.setMaterials({std::move(material)}); !s) return s.error().within(where);
+  return m;
+}
+
+Result<MillableVolume> MillableVolume::fromSdf(const Volume& sdf, MillingMaterial material) {
+  if (sdf.empty())
+    return fail(ErrorCode::InvalidArgument, "volume is empty (no voxels)",
+                std::string(kMillWhere) + "::fromSdf: volume");
+  const double invH = 1.0 / sdf.spacing().minCoeff();
+  return fromFraction(
+      sdf, "fromSdf", [](double d, double inv, double) { return millCoverage(d, inv); }, invH, 0.0,
+      std::move(material));
+}
+
+Result<MillableVolume> MillableVolume::fromIntensity(const Volume& volume, double empty, double full,
+                                                     MillingMaterial material) {
+  if (!std::isfinite(empty) || !std::isfinite(full) || !(empty < full))
+    return fail(
+        ErrorCode::InvalidArgument,
+        formatString("the empty intensity (%g) must be below the full one (%g), both finite", empty, full),
+        std::string(kMillWhere) + "::fromIntensity: empty, full");
+  return fromFraction(
+      volume, "fromIntensity",
+      [](double value, double lo, double hi) { return std::clamp((value - lo) / (hi - lo), 0.0, 1.0); },
+      empty, full, std::move(material));
+}
+
+Status MillableVolume::setMaterials(std::vector<MillingMaterial> materials, const Volume* labels) {
+  const std::string where = std::string(kMillWhere) + "::setMaterials";
+  if (materials.empty() || materials.size() > 256)
+    return fail(ErrorCode::InvalidArgument,
+                formatString("1 to 256 materials are needed (got %zu)", materials.size()),
+                where + ": materials");
+  std::set<std::string> names;
+  for (std::size_t m = 0; m < materials.size(); ++m) {
+    const std::string at = where + ": materials[" + std::to_string(m) + "]";
+    if (materials[m].name.empty())
+      return fail(ErrorCode::InvalidArgument, "material has no name", at + ".name");
+    if (!names.insert(materials[m].name).second)
+      return fail(ErrorCode::InvalidArgument, "material name '" + materials[m].name + "' is used twice",
+                  at + ".name");
+    if (!std::isfinite(materials[m].hardness) || !(materials[m].hardness > 0.0))
+      return fail(ErrorCode::InvalidArgument,
+                  formatString("hardness must be finite and > 0 Pa (got %g)", materials[m].hardness),
+                  at + ".hardness");
+  }
+  std::vector<std::uint8_t> assigned;
+  if (labels) {
+    if (labels->dims() != dims_)
+      return fail(ErrorCode::InvalidArgument,
+                  formatString("label volume is %dx%dx%d, the bone %dx%dx%d", labels->dims().x(),
+                               labels->dims().y(), labels->dims().z(), dims_.x(), dims_.y(), dims_.z()),
+                  where + ": labels");
+    assigned.resize(material_.size());
+    for (std::size_t i = 0; i < assigned.size(); ++i) {
+      const double l = labels->valueAt(i);
+      if (!(l >= 0.0) || l != std::floor(l) || l >= static_cast<double>(materials.size()))
+        return fail(ErrorCode::InvalidArgument,
+                    formatString("label %g is not a material index (0..%zu)", l, materials.size() - 1),
+                    where + ": labels " + millVoxelName(dims_, i));
+      assigned[i] = static_cast<std::uint8_t>(l);
+    }
+  }
+  materials_ = std::move(materials);
+  hardness_.resize(materials_.size());
+  for (std::size_t m = 0; m < materials_.size(); ++m) hardness_[m] = materials_[m].hardness;
+  removed_.assign(materials_.size(), 0.0);
+  if (labels)
+    material_ = std::move(assigned);
+  else
+    std::fill(material_.begin(), material_.end(), std::uint8_t{0});
+  return ok();
+}
+
+// --- queries ---------------------------------------------------------------
+
+double MillableVolume::occupancy(int i, int j, int k) const noexcept {
+  if (i < 0 || j < 0 || k < 0 || i >= dims_.x() || j >= dims_.y() || k >= dims_.z()) return 0.0;
+  return occupancy_[index(i, j, k)] / static_cast<double>(kFull);
+}
+
+int MillableVolume::material(int i, int j, int k) const noexcept {
+  if (i < 0 || j < 0 || k < 0 || i >= dims_.x() || j >= dims_.y() || k >= dims_.z()) return 0;
+  return material_[index(i, j, k)];
+}
+
+double MillableVolume::materialVolume() const noexcept {
+  double sum = 0.0;
+  for (std::uint16_t o : occupancy_) sum += o;
+  return sum / kFull * cellVolume_;
+}
+
+double MillableVolume::removedVolume(std::size_t m) const noexcept {
+  return m < removed_.size() ? removed_[m] : 0.0;
+}
+
+MillableVolume::Box MillableVolume::toolBox(const MillingTool& tool, const Isometry3& pose,
+                                            double grow) const noexcept {
+  const double reach = tool.boundingRadius() + grow + 0.5 * h_;
+  const Vec3 centre = worldToIndex_ * pose.translation();
+  const Mat3& a = worldToIndex_.linear();
+  Box b{};
+  int* lo[3] = {&b.i0, &b.j0, &b.k0};
+  int* hi[3] = {&b.i1, &b.j1, &b.k1};
+  for (int axis = 0; axis < 3; ++axis) {
+    const double e = reach * a.row(axis).norm();
+    const double l = std::ceil(centre[axis] - e), u = std::floor(centre[axis] + e);
+    // Clamp in double first: a far-away or non-finite pose gives an empty box.
+    *lo[axis] =
+        static_cast<int>(std::clamp(std::isfinite(l) ? l : 1e9, 0.0, static_cast<double>(dims_[axis])));
+    *hi[axis] =
+        static_cast<int>(std::clamp(std::isfinite(u) ? u : -1e9, -1.0, static_cast<double>(dims_[axis] - 1)));
+  }
+  return b;
+}
+
+namespace {
+
+// Visits the occupied voxels of `box`, handing each its linear index, its
+// occupancy and its centre in the tool frame.
+template <class Box, class F>
+void forOccupiedCells(const Box& box, const Affine3& indexToTool, const Vec3i& dims,
+                      const std::vector<std::uint16_t>& occupancy, F&& f) noexcept {
+  const Vec3 cx = indexToTool.linear().col(0);
+  const auto nx = static_cast<std::size_t>(dims.x()), nxy = nx * static_cast<std::size_t>(dims.y());
+  for (int k = box.k0; k <= box.k1; ++k)
+    for (int j = box.j0; j <= box.j1; ++j) {
+      const std::size_t row = static_cast<std::size_t>(j) * nx + static_cast<std::size_t>(k) * nxy;
+      const Vec3 base = indexToTool * Vec3(0.0, j, k);
+      for (int i = box.i0; i <= box.i1; ++i) {
+        const std::size_t v = row + static_cast<std::size_t>(i);
+        const std::uint16_t o = occupancy[v];
+        if (o == 0) continue;
+        f(v, o, Vec3(base + static_cast<double>(i) * cx), i, j, k);
+      }
+    }
+}
+
+}  // namespace
+
+double MillableVolume::overlap(const MillingTool& tool, const Isometry3& pose) const noexcept {
+  if (occupancy_.empty()) return 0.0;
+  const Box box = toolBox(tool, pose, 0.0);
+  const Affine3 indexToTool = pose.inverse() * indexToWorld_;
+  const double invH = 1.0 / h_, invFull = 1.0 / kFull;
+  double sum = 0.0;
+  forOccupiedCells(box, indexToTool, dims_, occupancy_,
+                   [&](std::size_t, std::uint16_t o, const Vec3& p, int, int, int) {
+                     Vec3 g;
+                     const double k = millCoverage(tool.distance(p, g), invH);
+                     sum += std::max(0.0, o * invFull + k - 1.0);
+                   });
+  return sum * cellVolume_;
+}
+
+Vec3 MillableVolume::contactNormal(const MillingTool& tool, const Isometry3& pose,
+                                   double margin) const noexcept {
+  if (occupancy_.empty() || !(margin >= 0.0)) return Vec3::Zero();
+  const Box box = toolBox(tool, pose, margin);
+  const Affine3 indexToTool = pose.inverse() * indexToWorld_;
+  const double invH = 1.0 / h_, invFull = 1.0 / kFull;
+  Vec3 sum = Vec3::Zero();
+  forOccupiedCells(box, indexToTool, dims_, occupancy_,
+                   [&](std::size_t, std::uint16_t o, const Vec3& p, int, int, int) {
+                     Vec3 g;
+                     const double w = o * invFull * millCoverage(tool.distance(p, g) - margin, invH);
+                     if (w > 0.0) sum += w * g;
+                   });
+  const double n = sum.norm();
+  if (!(n > 0.0) || !std::isfinite(n)) return Vec3::Zero();
+  return pose.linear() * (-sum / n);
+}
+
+void MillableVolume::markChanged(int i, int j, int k) noexcept {
+  const auto b = static_cast<std::size_t>(i / kBlock) +
+                 static_cast<std::size_t>(blockDims_.x()) *
+                     (static_cast<std::size_t>(j / kBlock) +
+                      static_cast<std::size_t>(blockDims_.y()) * static_cast<std::size_t>(k / kBlock));
+  if (blockChanged_[b]) return;
+  blockChanged_[b] = 1;
+  DM_ASSERT(changedCount_ < changed_.size(), "a block is listed once");
+  changed_[changedCount_++] = static_cast<std::uint32_t>(b);
+}
+
+void MillableVolume::clearChanges() noexcept {
+  for (std::size_t c = 0; c < changedCount_; ++c) blockChanged_[changed_[c]] = 0;
+  changedCount_ = 0;
+}
+
+MillResult MillableVolume::mill(const MillingTool& tool, const Isometry3& pose, double work) noexcept {
+  MillResult out;
+  if (occupancy_.empty() || !std::isfinite(work) || !(work > 0.0)) return out;
+  const Box box = toolBox(tool, pose, 0.0);
+  const Affine3 indexToTool = pose.inverse() * indexToWorld_;
+  const double invH = 1.0 / h_, invFull = 1.0 / kFull;
+  // Pass 1: the overlap Σr that shares the force.
+  double total = 0.0;
+  forOccupiedCells(box, indexToTool, dims_, occupancy_,
+                   [&](std::size_t, std::uint16_t o, const Vec3& p, int, int, int) {
+                     Vec3 g;
+                     total += std::max(0.0, o * invFull + millCoverage(tool.distance(p, g), invH) - 1.0);
+                   });
+  if (!(total > 0.0)) return out;
+  // Pass 2: Archard per cell, ΔV = W·(r/Σr)/H, capped at the overlap r.
+  const double perOverlap = work / (total * cellVolume_);  // ΔV/cell volume per unit r per Pa
+  forOccupiedCells(box, indexToTool, dims_, occupancy_,
+                   [&](std::size_t v, std::uint16_t o, const Vec3& p, int i, int j, int k) {
+                     Vec3 g;
+                     const double r = o * invFull + millCoverage(tool.distance(p, g), invH) - 1.0;
+                     if (!(r > 0.0)) return;
+                     const std::uint8_t m = material_[v];
+                     const double take = std::min(r, r * perOverlap / hardness_[m]);
+                     const double next = std::max(0.0, o * invFull - take);
+                     const auto q = static_cast<std::uint16_t>(std::lround(next * kFull));
+                     if (q >= o) return;
+                     const double dv = (o - q) * invFull * cellVolume_;
+                     occupancy_[v] = q;
+                     removed_[m] += dv;
+                     out.removed += dv;
+                     if (materials_[m].forbidden) out.removedForbidden += dv;
+                     ++out.voxels;
+                     markChanged(i, j, k);
+                   });
+  return out;
+}
+
+// --- surfaces --------------------------------------------------------------
+
+Result<Volume> MillableVolume::occupancyVolume() const {
+  auto v = Volume::create(dims_, VoxelType::F32, indexToWorld_);
+  if (!v) return v.error().within(std::string(kMillWhere) + "::occupancyVolume");
+  float* out = v->data<float>();
+  for (std::size_t i = 0; i < occupancy_.size(); ++i)
+    out[i] = static_cast<float>(occupancy_[i] * (1.0 / kFull));
+  return v;
+}
+
+Result<std::vector<Mesh>> MillableVolume::blockSurfaces(std::span<const std::uint32_t> blocks) const {
+  const std::string where = std::string(kMillWhere) + "::blockSurfaces";
+  const auto count = static_cast<std::size_t>(blockDims_.prod());
+  std::vector<Mesh> pieces;
+  pieces.reserve(blocks.size());
+  for (std::uint32_t b : blocks) {
+    if (b >= count)
+      return fail(ErrorCode::InvalidArgument, formatString("block %u is not one of the %zu blocks", b, count),
+                  where);
+    const Vec3i bi(static_cast<int>(b % static_cast<std::uint32_t>(blockDims_.x())),
+                   static_cast<int>((b / static_cast<std::uint32_t>(blockDims_.x())) %
+                                    static_cast<std::uint32_t>(blockDims_.y())),
+                   static_cast<int>(b / static_cast<std::uint32_t>(blockDims_.x() * blockDims_.y())));
+    // The cells whose lowest corner is in this block: voxels [b·8, b·8 + 8]
+    // (the next block's first layer closes the seam), and one layer of empty
+    // space beyond the grid on its border so the bone's surface closes there.
+    Vec3i lo, hi;
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = bi[a] == 0 ? -1 : bi[a] * kBlock;
+      hi[a] = std::min(bi[a] * kBlock + kBlock, dims_[a]);
+    }
+    const Vec3i n = hi - lo + Vec3i::Ones();
+    Affine3 a = indexToWorld_;
+    a.translation() = indexToWorld_ * lo.cast<double>();
+    auto sub = Volume::create(n, VoxelType::F32, a);
+    if (!sub) return sub.error().within(where);
+    float* out = sub->data<float>();
+    for (int k = 0; k < n.z(); ++k)
+      for (int j = 0; j < n.y(); ++j)
+        for (int i = 0; i < n.x(); ++i)
+          *out++ = static_cast<float>(occupancy(lo.x() + i, lo.y() + j, lo.z() + k));
+    auto mesh = extractIsosurface(*sub, {.iso = 0.5, .threads = 1});
+    if (!mesh) return mesh.error().within(where);
+    pieces.push_back(std::move(*mesh));
+  }
+  return pieces;
+}
+
+}  // namespace dm

@@ -1,0 +1,248 @@
+// MillableVolume: partial-volume occupancy, the tool's overlap and contact
+// normal against analytic geometry, Archard removal, change sets and the
+// block surfaces that a renderer swaps in.
+#include <dm/collide/millable_volume.hpp>
+#include <dm/math/isosurface.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <functional>
+#include <numbers>
+#include <set>
+
+namespace dm {
+namespace millable_test {
+
+constexpr double kH = 0.25e-3;  // m, voxel
+
+// A float volume of n³ voxels of kH with its first centre at `origin`,
+// holding f(centre).
+Volume field(int n, const Vec3& origin, const std::function<double(const Vec3&)>& f) {
+  Affine3 a = Affine3::Identity();
+  a.linear() = Mat3::Identity() * kH;
+  a.translation() = origin;
+  auto v = Volume::create(Vec3i(n, n, n), VoxelType::F32, a);
+  EXPECT_TRUE(v.ok());
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) v->setValue(i, j, k, f(a * Vec3(i, j, k)));
+  return std::move(*v);
+}
+
+// Bone filling z < top over a 40³ grid centred on the origin.
+MillableVolume slab(double top, MillingMaterial m = {}) {
+  const Volume sdf = field(40, Vec3::Constant(-20 * kH), [top](const Vec3& p) { return p.z() - top; });
+  auto v = MillableVolume::fromSdf(sdf, std::move(m));
+  EXPECT_TRUE(v.ok()) << v.error().message();
+  return std::move(*v);
+}
+
+Isometry3 place(const Vec3& t) {
+  Isometry3 p = Isometry3::Identity();
+  p.translation() = t;
+  return p;
+}
+
+double capVolume(double r, double depth) { return std::numbers::pi * depth * depth * (3 * r - depth) / 3.0; }
+
+double angleDeg(const Vec3& a, const Vec3& b) {
+  return std::atan2(a.cross(b).norm(), a.dot(b)) * 180.0 / std::numbers::pi;
+}
+
+TEST(MillableVolume, OccupancyIsThePartialVolumeOfTheCells) {
+  // A plane at a sub-voxel height: the material is exactly the grid's area
+  // times the depth below the plane (partial volume of a plane is exact).
+  const double top = 0.37 * kH;
+  const MillableVolume bone = slab(top);
+  const double area = std::pow(40 * kH, 2),
+               depth = top + 20.5 * kH;  // the lowest cells' bottom face is at −20.5 h
+  EXPECT_NEAR(bone.materialVolume(), area * depth, 1e-5 * area * depth);
+  EXPECT_NEAR(bone.occupancy(20, 20, 20), 0.5 + 0.37, 1e-4);
+  EXPECT_DOUBLE_EQ(bone.occupancy(-1, 0, 0), 0.0);
+  auto asVolume = bone.occupancyVolume();
+  ASSERT_TRUE(asVolume.ok());
+  EXPECT_TRUE(asVolume->indexToWorld().isApprox(
+      field(1, Vec3::Constant(-20 * kH), [](const Vec3&) { return 0.0; }).indexToWorld()));
+  for (int k : {0, 19, 20, 21, 39}) EXPECT_NEAR(asVolume->value(7, 3, k), bone.occupancy(7, 3, k), 1e-7) << k;
+}
+
+TEST(MillableVolume, IntensityFollowsTheCtPartialVolumeLaw) {
+  const Volume ct = field(8, Vec3::Zero(), [](const Vec3& p) { return -100.0 + 1.0e6 * p.x(); });  // HU ramp
+  auto bone = MillableVolume::fromIntensity(ct, 0.0, 1000.0);
+  ASSERT_TRUE(bone.ok());
+  for (int i = 0; i < 8; ++i) {
+    const double hu = -100.0 + 1.0e6 * i * kH;
+    EXPECT_NEAR(bone->occupancy(i, 3, 3), std::clamp(hu / 1000.0, 0.0, 1.0), 1e-4) << i;
+  }
+}
+
+TEST(MillableVolume, SphereOverlapIsTheSphericalCap) {
+  const double r = 1.5e-3;
+  for (double depth : {0.4e-3, 0.8e-3, 1.3e-3}) {
+    const MillableVolume bone = slab(0.13 * kH);
+    const double got =
+        bone.overlap(MillingTool::sphere(r), place(Vec3(0.31 * kH, -0.22 * kH, 0.13 * kH + r - depth)));
+    EXPECT_NEAR(got, capVolume(r, depth), 0.03 * capVolume(r, depth)) << depth;
+  }
+}
+
+TEST(MillableVolume, ContactNormalIsTheSurfaceNormalOnPlanesAndSpheres) {
+  const MillingTool ball = MillingTool::sphere(1e-3);
+  const MillableVolume flat = slab(0.0);
+  for (double dx : {0.0, 0.17, 0.5, 0.71})
+    for (double dy : {0.0, 0.33, 0.5}) {
+      const Vec3 n = flat.contactNormal(ball, place(Vec3(dx * kH, dy * kH, 1e-3 + 0.1 * kH)), 2 * kH);
+      EXPECT_LT(angleDeg(n, Vec3::UnitZ()), 0.5) << dx << " " << dy;
+    }
+  // A ball of bone (radius 3 mm): the normal is the line of centres.
+  const Volume sdf = field(40, Vec3::Constant(-20 * kH), [](const Vec3& p) { return p.norm() - 3e-3; });
+  auto ball3 = MillableVolume::fromSdf(sdf);
+  ASSERT_TRUE(ball3.ok());
+  for (const Vec3& dir : {Vec3(1, 0, 0), Vec3(1, 1, 0), Vec3(0.3, -0.5, 0.8), Vec3(-0.2, 0.1, -1)}) {
+    const Vec3 u = dir.normalized();
+    const Vec3 n = ball3->contactNormal(ball, place(u * (3e-3 + 1e-3 + 0.1 * kH)), 2 * kH);
+    EXPECT_LT(angleDeg(n, u), 1.0) << dir.transpose();
+  }
+  EXPECT_EQ(flat.contactNormal(ball, place(Vec3(0, 0, 4e-3)), 2 * kH), Vec3::Zero());
+}
+
+TEST(MillableVolume, MillingLeavesTheToolsShapeAtSubVoxelPrecision) {
+  MillableVolume bone = slab(0.0);
+  const double r = 1.2e-3;
+  const Vec3 c(0.3 * kH, 0.1 * kH, 0.4e-3);
+  const double before = bone.materialVolume();
+  const MillResult cut = bone.mill(MillingTool::sphere(r), place(c), 1e9);  // enough to take all it reaches
+  const double cap = capVolume(r, r - c.z());
+  EXPECT_NEAR(cut.removed, cap, 0.03 * cap);
+  EXPECT_NEAR(before - bone.materialVolume(), cut.removed, 1e-12);
+  EXPECT_NEAR(bone.removedVolume(0), cut.removed, 1e-15);
+  EXPECT_LT(bone.overlap(MillingTool::sphere(r), place(c)), 1e-4 * cap);  // a tool fits the hole it cut
+  // The cavity's 0.5 level is the sphere: inside R − h/2 at most half full,
+  // beyond R + h/2 untouched.
+  int inside = 0;
+  for (int k = 0; k < 40; ++k)
+    for (int j = 0; j < 40; ++j)
+      for (int i = 0; i < 40; ++i) {
+        const Vec3 p = Vec3(i - 20, j - 20, k - 20) * kH;
+        const double d = (p - c).norm(), o = bone.occupancy(i, j, k),
+                     was = std::clamp(0.5 - p.z() / kH, 0.0, 1.0);
+        if (d < r - 0.5 * kH && was > 0.5) {
+          EXPECT_LE(o, 0.5) << i << " " << j << " " << k;
+          ++inside;
+        }
+        if (d > r + 0.5 * kH) {
+          EXPECT_NEAR(o, was, 1e-4) << i << " " << j << " " << k;
+        }
+      }
+  EXPECT_GT(inside, 40);  // the cap of radius R − h/2 below z = 0 holds about 60 centres
+}
+
+TEST(MillableVolume, RemovalFollowsArchardsLaw) {
+  // A tick's work (1 N at 10 m/s for 1 ms, k = 0.1): nothing is capped, so
+  // the removal is W/H — to the 1/65535-of-a-cell rounding of each voxel —
+  // and doubles with the work and halves with the hardness.
+  const MillingTool t = MillingTool::sphere(1e-3);
+  const Isometry3 p = place(Vec3(0, 0, 0.6e-3));
+  const double w = 1e-3;  // J
+  MillableVolume soft = slab(0.0, {.name = "bone", .hardness = 0.4e9});
+  MillableVolume hard = slab(0.0, {.name = "bone", .hardness = 0.8e9});
+  MillableVolume twice = slab(0.0, {.name = "bone", .hardness = 0.4e9});
+  const double a = soft.mill(t, p, w).removed, b = hard.mill(t, p, w).removed,
+               c = twice.mill(t, p, 2 * w).removed;
+  EXPECT_NEAR(a, w / 0.4e9, 5e-3 * a);
+  EXPECT_NEAR(b, 0.5 * a, 5e-3 * a);
+  EXPECT_NEAR(c, 2.0 * a, 5e-3 * a);
+  // Nothing where the tool never was, nothing for non-positive work.
+  EXPECT_EQ(soft.mill(t, place(Vec3(0, 0, 2e-3)), 1.0).removed, 0.0);
+  EXPECT_EQ(soft.mill(t, p, -1.0).voxels, 0);
+  EXPECT_EQ(soft.mill(t, p, std::nan("")).voxels, 0);
+}
+
+TEST(MillableVolume, ChangedBlocksAreListedOnceAndTheirSurfacesTileTheWhole) {
+  MillableVolume bone = slab(0.0);
+  EXPECT_TRUE(bone.changedBlocks().empty());
+  const MillingTool t = MillingTool::cylinder(0.6e-3, 1.5e-3);
+  for (int s = 0; s < 20; ++s) bone.mill(t, place(Vec3(-1.5e-3 + s * 0.15e-3, 0.0, 0.2e-3)), 1e9);
+  const auto changed = bone.changedBlocks();
+  const std::set<std::uint32_t> unique(changed.begin(), changed.end());
+  EXPECT_EQ(unique.size(), changed.size());
+  // Exactly the blocks with a voxel below its original occupancy.
+  const MillableVolume fresh = slab(0.0);
+  std::set<std::uint32_t> expected;
+  for (int k = 0; k < 40; ++k)
+    for (int j = 0; j < 40; ++j)
+      for (int i = 0; i < 40; ++i)
+        if (bone.occupancy(i, j, k) < fresh.occupancy(i, j, k))
+          expected.insert(static_cast<std::uint32_t>(i / 8 + 5 * (j / 8 + 5 * (k / 8))));
+  EXPECT_EQ(unique, expected);
+  bone.clearChanges();
+  EXPECT_TRUE(bone.changedBlocks().empty());
+
+  // Every block's piece together: the surface of the whole grid with a layer
+  // of empty cells around it (the pieces close the bone at the grid's border).
+  std::vector<std::uint32_t> all(125);
+  for (std::uint32_t b = 0; b < 125; ++b) all[b] = b;
+  auto pieces = bone.blockSurfaces(all);
+  ASSERT_TRUE(pieces.ok()) << pieces.error().message();
+  double pieceArea = 0.0;
+  std::size_t pieceTriangles = 0;
+  for (const Mesh& m : *pieces) {
+    pieceArea += m.surfaceArea();
+    pieceTriangles += m.triangles.size();
+  }
+  const Volume padded = field(42, Vec3::Constant(-21 * kH), [&bone](const Vec3& p) {
+    const Vec3 ijk = p / kH + Vec3::Constant(20.0);
+    return bone.occupancy(static_cast<int>(std::lround(ijk.x())), static_cast<int>(std::lround(ijk.y())),
+                          static_cast<int>(std::lround(ijk.z())));
+  });
+  auto whole = extractIsosurface(padded, {.iso = 0.5, .threads = 1});
+  ASSERT_TRUE(whole.ok());
+  EXPECT_EQ(pieceTriangles, whole->triangles.size());
+  EXPECT_NEAR(pieceArea, whole->surfaceArea(), 1e-9 * pieceArea);
+  EXPECT_FALSE(bone.blockSurfaces(std::vector<std::uint32_t>{125}).ok());
+}
+
+TEST(MillableVolume, ForbiddenMaterialsAreAccounted) {
+  MillableVolume bone = slab(0.0);
+  Volume labels = field(40, Vec3::Constant(-20 * kH), [](const Vec3& p) { return p.x() > 0.0 ? 1.0 : 0.0; });
+  ASSERT_TRUE(
+      bone.setMaterials({{.name = "bone"}, {.name = "nerve", .hardness = 0.1e9, .forbidden = true}}, &labels)
+          .ok());
+  const MillResult cut = bone.mill(MillingTool::sphere(1e-3), place(Vec3(0.5 * kH, 0, 0.5e-3)),
+                                   1e9);  // x = 0 splits the cells evenly
+  EXPECT_GT(cut.removedForbidden, 0.0);
+  EXPECT_NEAR(cut.removedForbidden, bone.removedVolume(1), 1e-15);
+  EXPECT_NEAR(cut.removed, bone.removedVolume(0) + bone.removedVolume(1), 1e-15);
+  EXPECT_NEAR(bone.removedVolume(0), bone.removedVolume(1), 1e-3 * cut.removed);
+}
+
+TEST(MillableVolume, BadInputIsNamed) {
+  const Volume sdf = field(4, Vec3::Zero(), [](const Vec3& p) { return p.z(); });
+  auto e = MillableVolume::fromIntensity(sdf, 1.0, 1.0);
+  ASSERT_FALSE(e.ok());
+  EXPECT_NE(e.error().where.find("empty, full"), std::string::npos);
+  Volume bad = sdf;
+  bad.setValue(1, 2, 3, std::nan(""));
+  auto n = MillableVolume::fromSdf(bad);
+  ASSERT_FALSE(n.ok());
+  EXPECT_NE(n.error().where.find("voxel (1, 2, 3)"), std::string::npos);
+  auto bone = MillableVolume::fromSdf(sdf);
+  ASSERT_TRUE(bone.ok());
+  Volume labels = field(4, Vec3::Zero(), [](const Vec3&) { return 2.0; });
+  auto s = bone->setMaterials({{.name = "bone"}, {.name = "dura"}}, &labels);
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().message().find("label 2"), std::string::npos);
+  s = bone->setMaterials({{.name = "bone"}, {.name = "bone"}});
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().where.find("materials[1].name"), std::string::npos);
+  s = bone->setMaterials({{.name = "bone", .hardness = 0.0}});
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.error().where.find("hardness"), std::string::npos);
+  EXPECT_FALSE(MillingTool::sphere(-1.0).validate("tool").ok());
+  EXPECT_FALSE(MillingTool::cylinder(1e-3, 0.0).validate("tool").ok());
+  EXPECT_FALSE(MillingTool::voxels(nullptr).validate("tool").ok());
+}
+
+}  // namespace millable_test
+}  // namespace dm
