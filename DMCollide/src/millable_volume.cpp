@@ -275,6 +275,7 @@ MillableVolume::Box MillableVolume::toolBox(const MillingTool& tool, const Isome
   const Vec3 centre = worldToIndex_ * pose.translation();
   const Mat3& a = worldToIndex_.linear();
   Box b{};
+  b.reach = reach;
   int* lo[3] = {&b.i0, &b.j0, &b.k0};
   int* hi[3] = {&b.i1, &b.j1, &b.k1};
   for (int axis = 0; axis < 3; ++axis) {
@@ -293,16 +294,66 @@ namespace {
 
 // Visits the occupied voxels of `box`, handing each its linear index, its
 // occupancy and its centre in the tool frame.
+// ⌈x⌉ and ⌊x⌋ of a value clamped to [lo − 1, hi + 1] (no libm call: the
+// baseline x86-64 has no rounding instruction, and these run per row).
+inline int millCeil(double x, int lo, int hi) noexcept {
+  x = std::min<double>(std::max<double>(x, lo - 1), hi + 1);
+  const int t = static_cast<int>(x);
+  return t + (t < x ? 1 : 0);
+}
+inline int millFloor(double x, int lo, int hi) noexcept {
+  x = std::min<double>(std::max<double>(x, lo - 1), hi + 1);
+  const int t = static_cast<int>(x);
+  return t - (t > x ? 1 : 0);
+}
+
+// The fraction K of a cell that the tool covers, at the cell centre's
+// tool-frame position; spheres (the common burr) without a square root
+// outside their one-voxel shell.
+class ToolCoverage {
+ public:
+  ToolCoverage(const MillingTool& tool, double h) noexcept : tool_(tool), invH_(1.0 / h) {
+    const double outer = tool.radius + 0.5 * h, inner = std::max(0.0, tool.radius - 0.5 * h);
+    outer2_ = outer * outer;
+    inner2_ = inner * inner;
+  }
+  double operator()(const Vec3& p) const noexcept {
+    if (tool_.kind == MillingTool::Kind::Sphere) {
+      const double r2 = p.squaredNorm();
+      if (r2 >= outer2_) return 0.0;
+      if (r2 <= inner2_) return 1.0;
+      return millCoverage(std::sqrt(r2) - tool_.radius, invH_);
+    }
+    Vec3 g;
+    return millCoverage(tool_.distance(p, g), invH_);
+  }
+
+ private:
+  const MillingTool& tool_;
+  double invH_, outer2_ = 0.0, inner2_ = 0.0;
+};
+
 template <class Box, class F>
 void forOccupiedCells(const Box& box, const Affine3& indexToTool, const Vec3i& dims,
                       const std::vector<std::uint16_t>& occupancy, F&& f) noexcept {
-  const Vec3 cx = indexToTool.linear().col(0);
+  // Only the cells whose centres lie in the ball of radius box.reach about
+  // the tool's origin can be covered: each row is clipped to its chord,
+  // |base + i·cx|² ≤ reach², solved for i.
+  const Vec3 cx = indexToTool.linear().col(0), cy = indexToTool.linear().col(1),
+             cz = indexToTool.linear().col(2);
+  const Vec3 origin = indexToTool.translation();
+  const double a = cx.squaredNorm(), invA = 1.0 / a, reach2 = box.reach * box.reach;
   const auto nx = static_cast<std::size_t>(dims.x()), nxy = nx * static_cast<std::size_t>(dims.y());
   for (int k = box.k0; k <= box.k1; ++k)
     for (int j = box.j0; j <= box.j1; ++j) {
+      const Vec3 base = origin + static_cast<double>(j) * cy + static_cast<double>(k) * cz;
+      const double b = base.dot(cx), disc = b * b - a * (base.squaredNorm() - reach2);
+      if (!(disc >= 0.0)) continue;
+      const double root = std::sqrt(disc);
+      const int i0 = std::max(box.i0, millCeil((-b - root) * invA, box.i0, box.i1));
+      const int i1 = std::min(box.i1, millFloor((-b + root) * invA, box.i0, box.i1));
       const std::size_t row = static_cast<std::size_t>(j) * nx + static_cast<std::size_t>(k) * nxy;
-      const Vec3 base = indexToTool * Vec3(0.0, j, k);
-      for (int i = box.i0; i <= box.i1; ++i) {
+      for (int i = i0; i <= i1; ++i) {
         const std::size_t v = row + static_cast<std::size_t>(i);
         const std::uint16_t o = occupancy[v];
         if (o == 0) continue;
@@ -313,16 +364,68 @@ void forOccupiedCells(const Box& box, const Affine3& indexToTool, const Vec3i& d
 
 }  // namespace
 
+namespace {
+
+// overlap() of a sphere of `radius` about the tool frame's origin: on each
+// row the cells deeper than half a voxel inside are covered whole (K = 1,
+// r = o: an integer sum), only the one-voxel shell needs a square root.
+double sphereOverlap(const MillableVolume::Box& box, const Affine3& indexToTool, const Vec3i& dims,
+                     const std::vector<std::uint16_t>& occupancy, double radius, double h) noexcept {
+  const Vec3 cx = indexToTool.linear().col(0), cy = indexToTool.linear().col(1),
+             cz = indexToTool.linear().col(2);
+  const Vec3 origin = indexToTool.translation();
+  const double a = cx.squaredNorm(), invA = 1.0 / a, invH = 1.0 / h, invFull = 1.0 / MillableVolume::kFull;
+  const double outer = box.reach, inner = radius - 0.5 * h;
+  const auto nx = static_cast<std::size_t>(dims.x()), nxy = nx * static_cast<std::size_t>(dims.y());
+  std::uint64_t whole = 0;  // Σ o over the covered cells, in 1/kFull
+  double shell = 0.0;
+  auto chord = [a, invA](double b, double c2, double r, int lo, int hi, int& i0, int& i1) {
+    const double disc = b * b - a * (c2 - r * r);
+    if (!(disc >= 0.0) || !(r > 0.0)) return false;
+    const double root = std::sqrt(disc);
+    i0 = std::max(lo, millCeil((-b - root) * invA, lo, hi));
+    i1 = std::min(hi, millFloor((-b + root) * invA, lo, hi));
+    return i0 <= i1;
+  };
+  for (int k = box.k0; k <= box.k1; ++k)
+    for (int j = box.j0; j <= box.j1; ++j) {
+      const Vec3 base = origin + static_cast<double>(j) * cy + static_cast<double>(k) * cz;
+      const double b = base.dot(cx), c2 = base.squaredNorm();
+      int i0 = 0, i1 = -1;
+      if (!chord(b, c2, outer, box.i0, box.i1, i0, i1)) continue;
+      int w0 = i1 + 1, w1 = i1;  // the covered run, empty unless the inner chord exists
+      if (!chord(b, c2, inner, i0, i1, w0, w1)) w0 = i1 + 1, w1 = i1;
+      const std::uint16_t* row =
+          occupancy.data() + static_cast<std::size_t>(j) * nx + static_cast<std::size_t>(k) * nxy;
+      auto edge = [&](int from, int to) {
+        for (int i = from; i <= to; ++i) {
+          const std::uint16_t o = row[i];
+          if (o == 0) continue;
+          const double r = (base + static_cast<double>(i) * cx).norm();
+          shell += std::max(0.0, o * invFull + std::clamp(0.5 - (r - radius) * invH, 0.0, 1.0) - 1.0);
+        }
+      };
+      edge(i0, std::min(i1, w0 - 1));
+      for (int i = w0; i <= w1; ++i) whole += row[i];
+      edge(std::max(i0, w1 + 1), i1);
+    }
+  return shell + static_cast<double>(whole) * invFull;
+}
+
+}  // namespace
+
 double MillableVolume::overlap(const MillingTool& tool, const Isometry3& pose) const noexcept {
   if (occupancy_.empty()) return 0.0;
   const Box box = toolBox(tool, pose, 0.0);
   const Affine3 indexToTool = pose.inverse() * indexToWorld_;
-  const double invH = 1.0 / h_, invFull = 1.0 / kFull;
+  if (tool.kind == MillingTool::Kind::Sphere)
+    return sphereOverlap(box, indexToTool, dims_, occupancy_, tool.radius, h_) * cellVolume_;
+  const ToolCoverage cover(tool, h_);
+  const double invFull = 1.0 / kFull;
   double sum = 0.0;
   forOccupiedCells(box, indexToTool, dims_, occupancy_,
                    [&](std::size_t, std::uint16_t o, const Vec3& p, int, int, int) {
-                     Vec3 g;
-                     const double k = millCoverage(tool.distance(p, g), invH);
+                     const double k = cover(p);
                      sum += std::max(0.0, o * invFull + k - 1.0);
                    });
   return sum * cellVolume_;
@@ -335,12 +438,23 @@ Vec3 MillableVolume::contactNormal(const MillingTool& tool, const Isometry3& pos
   const Affine3 indexToTool = pose.inverse() * indexToWorld_;
   const double invH = 1.0 / h_, invFull = 1.0 / kFull;
   Vec3 sum = Vec3::Zero();
-  forOccupiedCells(box, indexToTool, dims_, occupancy_,
-                   [&](std::size_t, std::uint16_t o, const Vec3& p, int, int, int) {
-                     Vec3 g;
-                     const double w = o * invFull * millCoverage(tool.distance(p, g) - margin, invH);
-                     if (w > 0.0) sum += w * g;
-                   });
+  if (tool.kind == MillingTool::Kind::Sphere) {
+    // The gradient is p/r: no call, one square root.
+    const double grown = tool.radius + margin;
+    forOccupiedCells(box, indexToTool, dims_, occupancy_,
+                     [&](std::size_t, std::uint16_t o, const Vec3& p, int, int, int) {
+                       const double r = p.norm();
+                       const double w = o * invFull * millCoverage(r - grown, invH);
+                       if (w > 0.0 && r > 0.0) sum += (w / r) * p;
+                     });
+  } else {
+    forOccupiedCells(box, indexToTool, dims_, occupancy_,
+                     [&](std::size_t, std::uint16_t o, const Vec3& p, int, int, int) {
+                       Vec3 g;
+                       const double w = o * invFull * millCoverage(tool.distance(p, g) - margin, invH);
+                       if (w > 0.0) sum += w * g;
+                     });
+  }
   const double n = sum.norm();
   if (!(n > 0.0) || !std::isfinite(n)) return Vec3::Zero();
   return pose.linear() * (-sum / n);
@@ -367,21 +481,20 @@ MillResult MillableVolume::mill(const MillingTool& tool, const Isometry3& pose, 
   if (occupancy_.empty() || !std::isfinite(work) || !(work > 0.0)) return out;
   const Box box = toolBox(tool, pose, 0.0);
   const Affine3 indexToTool = pose.inverse() * indexToWorld_;
-  const double invH = 1.0 / h_, invFull = 1.0 / kFull;
+  const ToolCoverage cover(tool, h_);
+  const double invFull = 1.0 / kFull;
   // Pass 1: the overlap Σr that shares the force.
   double total = 0.0;
   forOccupiedCells(box, indexToTool, dims_, occupancy_,
                    [&](std::size_t, std::uint16_t o, const Vec3& p, int, int, int) {
-                     Vec3 g;
-                     total += std::max(0.0, o * invFull + millCoverage(tool.distance(p, g), invH) - 1.0);
+                     total += std::max(0.0, o * invFull + cover(p) - 1.0);
                    });
   if (!(total > 0.0)) return out;
   // Pass 2: Archard per cell, ΔV = W·(r/Σr)/H, capped at the overlap r.
   const double perOverlap = work / (total * cellVolume_);  // ΔV/cell volume per unit r per Pa
   forOccupiedCells(box, indexToTool, dims_, occupancy_,
                    [&](std::size_t v, std::uint16_t o, const Vec3& p, int i, int j, int k) {
-                     Vec3 g;
-                     const double r = o * invFull + millCoverage(tool.distance(p, g), invH) - 1.0;
+                     const double r = o * invFull + cover(p) - 1.0;
                      if (!(r > 0.0)) return;
                      const std::uint8_t m = material_[v];
                      const double take = std::min(r, r * perOverlap / hardness_[m]);

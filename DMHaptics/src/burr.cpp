@@ -13,8 +13,12 @@ namespace dm {
 namespace {
 
 constexpr int kBurrMaxMoves = 64;            // proxy moves per tick (each ≤ step_)
-constexpr int kBurrBisections = 8;           // touching point to step/256
+constexpr int kBurrBisections = 6;           // touching point to step/64 (2 µm at 0.25 mm voxels)
 constexpr double kBurrSameNormal = 0.99985;  // cos 1°
+// Field queries per tick (a contact normal, over a larger ball, counts as
+// two): the bound that keeps a tick's time fixed; a proxy that needs more
+// goes on next tick.
+constexpr int kBurrQueryBudget = 14;
 
 }  // namespace
 
@@ -80,8 +84,14 @@ Isometry3 BurrRenderer::toolPose(const Vec3& centre) const noexcept {
   return pose;
 }
 
-double BurrRenderer::overlapAt(const Vec3& centre) const noexcept {
+double BurrRenderer::overlapAt(const Vec3& centre) noexcept {
+  ++queries_;
   return bone_->overlap(options_.tool, toolPose(centre));
+}
+
+Vec3 BurrRenderer::normalAt(const Vec3& centre) noexcept {
+  queries_ += 2;
+  return bone_->contactNormal(options_.tool, toolPose(centre), margin_);
 }
 
 void BurrRenderer::reset(const Isometry3& devicePose) noexcept {
@@ -93,14 +103,15 @@ void BurrRenderer::reset(const Isometry3& devicePose) noexcept {
   proxy_ = local.translation();
   // A pose inside the bone: walk out along the contact normal.
   for (int i = 0; i < 4 * kBurrMaxMoves && overlapAt(proxy_) > tolerance_; ++i) {
-    const Vec3 n = bone_->contactNormal(options_.tool, toolPose(proxy_), margin_);
+    const Vec3 n = normalAt(proxy_);
     proxy_ += (n.squaredNorm() > 0.0 ? n : Vec3::UnitZ()) * step_;
   }
 }
 
 void BurrRenderer::moveProxy(const Vec3& target) noexcept {
   normal_ = Vec3::Zero();
-  for (int move = 0; move < kBurrMaxMoves; ++move) {
+  queries_ = 0;
+  for (int move = 0; move < kBurrMaxMoves && queries_ < kBurrQueryBudget; ++move) {
     const bool sliding = normal_.squaredNorm() > 0.0;
     Vec3 d = target - proxy_;
     if (sliding && d.dot(normal_) < 0.0) d -= d.dot(normal_) * normal_;  // in the contact plane
@@ -116,16 +127,15 @@ void BurrRenderer::moveProxy(const Vec3& target) noexcept {
       // The surface curves or ripples under the plane: lift the step back
       // onto it along n, and take the normal there.
       double lo = 0.0, hi = step_;
-      for (int b = 0; b < kBurrBisections; ++b) {
+      for (int b = 0; b < kBurrBisections && queries_ < kBurrQueryBudget; ++b) {
         const double mid = 0.5 * (lo + hi);
         (overlapAt(q + mid * normal_) <= tolerance_ ? hi : lo) = mid;
       }
       const Vec3 next = q + hi * normal_;
       const bool stuck = (next - proxy_).squaredNorm() < 1e-18;
       proxy_ = next;
-      if (const Vec3 n = bone_->contactNormal(options_.tool, toolPose(proxy_), margin_);
-          n.squaredNorm() > 0.0)
-        normal_ = n;
+      if (queries_ >= kBurrQueryBudget) return;
+      if (const Vec3 n = normalAt(proxy_); n.squaredNorm() > 0.0) normal_ = n;
       if (stuck) return;
       continue;
     }
@@ -133,12 +143,14 @@ void BurrRenderer::moveProxy(const Vec3& target) noexcept {
     // describe (a wall ahead): stop at the last free point of the step and
     // take the normal there, which now sees that material too.
     double lo = 0.0, hi = 1.0;
-    for (int b = 0; b < kBurrBisections; ++b) {
+    const double first = 1.0 / (1 << kBurrBisections);
+    if (overlapAt(proxy_ + first * step) > tolerance_) hi = first;  // touching already: no way along the step
+    while (hi - lo > first && queries_ < kBurrQueryBudget) {
       const double mid = 0.5 * (lo + hi);
       (overlapAt(proxy_ + mid * step) <= tolerance_ ? lo : hi) = mid;
     }
     proxy_ += lo * step;
-    Vec3 n = bone_->contactNormal(options_.tool, toolPose(proxy_), margin_);
+    Vec3 n = normalAt(proxy_);
     if (n.squaredNorm() == 0.0) n = -step / step.norm();
     if (sliding && lo == 0.0 && n.dot(normal_) > kBurrSameNormal) return;  // a corner: no way on
     normal_ = n;
@@ -177,8 +189,8 @@ HapticResponse BurrRenderer::tick(const HapticInput& input) noexcept {
       const Vec3 across = axis.cross(n);
       if (const double s = across.norm(); s > 1e-6) force += options_.walkCoefficient * fn / s * across;
       const double t = static_cast<double>(input.timeNs) * 1e-9;
-      force += options_.vibrationAmplitude * fn *
-               std::sin(2.0 * std::numbers::pi * options_.vibrationHz * t) * n;
+      force +=
+          options_.vibrationAmplitude * fn * std::sin(2.0 * std::numbers::pi * options_.vibrationHz * t) * n;
       // Removal at the tool pressed toward the device by at most half a voxel.
       const double dt = std::isfinite(input.dt) && input.dt > 0.0 ? input.dt : 0.0;
       const double speed = rpm * (2.0 * std::numbers::pi / 60.0) * cuttingRadius_;

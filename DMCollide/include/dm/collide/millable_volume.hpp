@@ -109,6 +109,11 @@ class MillableVolume {
  public:
   static constexpr int kBlock = 8;  ///< block edge, voxels
   static constexpr std::uint16_t kFull = 65535;
+  /// The cells a tool can cover (internal to the queries).
+  struct Box {
+    int i0, i1, j0, j1, k0, k1;  ///< inclusive index ranges
+    double reach;                ///< m: radius about the tool's origin that holds every cell it can cover
+  };
 
   /// Occupancy from a signed distance volume (m, negative inside):
   /// o = clamp(1/2 − d/h), h the smallest spacing. One material.
@@ -184,9 +189,6 @@ class MillableVolume {
   static Result<MillableVolume> fromFraction(const Volume& v, const char* what,
                                              double (*fraction)(double value, double a, double b), double a,
                                              double b, MillingMaterial material);
-  struct Box {
-    int i0, i1, j0, j1, k0, k1;  // inclusive
-  };
   Box toolBox(const MillingTool& tool, const Isometry3& pose, double grow) const noexcept;
   std::size_t index(int i, int j, int k) const noexcept {
     return static_cast<std::size_t>(i) +

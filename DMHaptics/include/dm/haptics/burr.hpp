@@ -116,7 +116,8 @@ class BurrRenderer final : public HapticRenderer {
  private:
   BurrRenderer(std::shared_ptr<MillableVolume> bone, BurrOptions options) noexcept;
   Isometry3 toolPose(const Vec3& centre) const noexcept;
-  double overlapAt(const Vec3& centre) const noexcept;
+  double overlapAt(const Vec3& centre) noexcept;
+  Vec3 normalAt(const Vec3& centre) noexcept;
   void moveProxy(const Vec3& target) noexcept;
 
   std::shared_ptr<MillableVolume> bone_;
@@ -127,6 +128,7 @@ class BurrRenderer final : public HapticRenderer {
   Mat3 rotation_ = Mat3::Identity();  // tool orientation, bone frame
   Vec3 proxy_ = Vec3::Zero();         // tool centre, bone frame
   Vec3 normal_ = Vec3::Zero();        // contact plane of this tick, bone frame (zero: none)
+  int queries_ = 0;                   // field queries this tick
   double step_ = 0.0, tolerance_ = 0.0, margin_ = 0.0, cuttingRadius_ = 0.0;
   BurrTickInfo last_;
 };
