@@ -514,6 +514,15 @@ MillResult MillableVolume::mill(const MillingTool& tool, const Isometry3& pose, 
 
 // --- surfaces --------------------------------------------------------------
 
+Result<Volume> MillableVolume::forbiddenMask() const {
+  auto v = Volume::create(dims_, VoxelType::U8, indexToWorld_);
+  if (!v) return v.error().within(std::string(kMillWhere) + "::forbiddenMask");
+  std::uint8_t* out = v->data<std::uint8_t>();
+  for (std::size_t i = 0; i < occupancy_.size(); ++i)
+    out[i] = materials_[material_[i]].forbidden && occupancy_[i] >= kFull / 2 + 1 ? 1 : 0;
+  return v;
+}
+
 Result<Volume> MillableVolume::occupancyVolume() const {
   auto v = Volume::create(dims_, VoxelType::F32, indexToWorld_);
   if (!v) return v.error().within(std::string(kMillWhere) + "::occupancyVolume");

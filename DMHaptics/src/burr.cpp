@@ -46,6 +46,7 @@ Status BurrOptions::validate(std::string_view where) const {
     return fail(ErrorCode::InvalidArgument, "contact_tolerance must be finite", at + "/contact_tolerance");
   if (!std::isfinite(normalMargin))
     return fail(ErrorCode::InvalidArgument, "normal_margin must be finite", at + "/normal_margin");
+  if (auto s = check(warningDistance, "warning_distance", false); !s) return s;
   return ok();
 }
 
@@ -64,6 +65,7 @@ BurrRenderer::BurrRenderer(std::shared_ptr<MillableVolume> bone, BurrOptions opt
   tolerance_ = options_.contactTolerance >= 0.0 ? options_.contactTolerance : 1e-3 * bone_->voxelVolume();
   margin_ = options_.normalMargin >= 0.0 ? options_.normalMargin : 2.0 * h;
   cuttingRadius_ = options_.cuttingRadius > 0.0 ? options_.cuttingRadius : options_.tool.radius;
+  boundingRadius_ = options_.tool.boundingRadius();
   rpm_.store(options_.rpm, std::memory_order_relaxed);
 }
 
@@ -202,6 +204,16 @@ HapticResponse BurrRenderer::tick(const HapticInput& input) noexcept {
   } else {
     force = spring;  // the proxy lags only when the move budget ran out
   }
+  // Critical structures and the skill metrics.
+  const double dt = std::isfinite(input.dt) && input.dt > 0.0 ? input.dt : 0.0;
+  if (options_.critical) {
+    last_.criticalDistance = options_.critical->distance(proxy_) - boundingRadius_;
+    metrics_.closestApproach = std::min(metrics_.closestApproach, last_.criticalDistance);
+    if (last_.criticalDistance < options_.warningDistance) metrics_.secondsWithinWarning += dt;
+  }
+  ++metrics_.ticks;
+  metrics_.removed += last_.cut.removed;
+  metrics_.removedForbidden += last_.cut.removedForbidden;
   out.force = bonePose_.linear() * force;
   Vec3 torque = Vec3::Zero();
   sanitizeWrench(out.force, torque, options_.maxForce, 0.0);

@@ -273,6 +273,63 @@ TEST(BurrRenderer, LockstepDrillingIsBitReproducible) {
   EXPECT_GT(removed, 0.0);
 }
 
+// Drills straight down at the origin until the burr's centre is at `depth`
+// below the surface of a slab with a nerve (a forbidden cylinder along x,
+// radius 0.5 mm, axis 2 mm deep); the renderer after.
+std::unique_ptr<BurrRenderer> drillTowardNerve(double depth) {
+  auto b = slab(0.0, {.name = "bone", .hardness = 0.05e9});
+  Affine3 a = Affine3::Identity();
+  a.linear() = Mat3::Identity() * kH;
+  a.translation() = Vec3::Constant(-0.5 * (kN - 1) * kH);
+  auto labels = Volume::create(Vec3i(kN, kN, kN), VoxelType::U8, a);
+  EXPECT_TRUE(labels.ok());
+  for (int k = 0; k < kN; ++k)
+    for (int j = 0; j < kN; ++j)
+      for (int i = 0; i < kN; ++i) {
+        const Vec3 p = a * Vec3(i, j, k);
+        labels->setValue(i, j, k, std::hypot(p.y(), p.z() + 2e-3) < 0.5e-3 ? 1.0 : 0.0);
+      }
+  EXPECT_TRUE(b->setMaterials({{.name = "bone", .hardness = 0.05e9},
+                               {.name = "nerve", .hardness = 0.05e9, .forbidden = true}},
+                              &*labels)
+                  .ok());
+  auto mask = b->forbiddenMask();
+  EXPECT_TRUE(mask.ok());
+  auto nerve = VoxelModel::fromOccupancy(*mask, 0.5);
+  EXPECT_TRUE(nerve.ok());
+  BurrOptions o = still();
+  o.rpm = 80000.0;
+  o.critical = *nerve;
+  o.warningDistance = 0.5e-3;
+  auto r = burr(b, o);
+  const Vec3 above(0, 0, 2e-3), bottom(0, 0, -depth);
+  r->reset(test::at(above));
+  for (int i = 1; i <= 2500; ++i) r->tick(sample(above + (bottom - above) * std::min(1.0, i / 1500.0), i));
+  return r;
+}
+
+TEST(BurrRenderer, CriticalStructuresAreMeasured) {
+  // Stopping 0.3 mm short of the nerve: the closest approach is that gap (to
+  // the voxel model's half-voxel surface), nothing forbidden was removed, and
+  // the time within 0.5 mm is the time spent there.
+  auto near = drillTowardNerve(0.2e-3);
+  const BurrMetrics& m = near->metrics();
+  EXPECT_NEAR(m.closestApproach, 0.3e-3, 0.5 * kH);
+  EXPECT_NEAR(near->lastTick().criticalDistance, 0.3e-3, 0.5 * kH);
+  EXPECT_EQ(m.removedForbidden, 0.0);
+  EXPECT_GT(m.removed, 0.0);
+  EXPECT_GT(m.secondsWithinWarning, 0.5);  // the last second at the bottom, at least
+  EXPECT_LT(m.secondsWithinWarning, 2.5);  // never more than the run
+  EXPECT_EQ(m.ticks, 2500);
+  // Through the nerve: inside it, and its volume removed is counted.
+  auto through = drillTowardNerve(2.5e-3);
+  EXPECT_LT(through->metrics().closestApproach, 0.0);
+  EXPECT_GT(through->metrics().removedForbidden, 0.0);
+  EXPECT_NEAR(through->metrics().removedForbidden, through->volume().removedVolume(1), 1e-15);
+  EXPECT_NEAR(through->metrics().removed,
+              through->volume().removedVolume(0) + through->volume().removedVolume(1), 1e-15);
+}
+
 TEST(BurrRenderer, BadOptionsAreNamed) {
   auto b = slab(0.0);
   BurrOptions o = still();
@@ -292,6 +349,11 @@ TEST(BurrRenderer, BadOptionsAreNamed) {
   e = BurrRenderer::create(b, o);
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(e.error().where, "burr/tool/radius");
+  o = still();
+  o.warningDistance = -1.0;
+  e = BurrRenderer::create(b, o);
+  ASSERT_FALSE(e.ok());
+  EXPECT_EQ(e.error().where, "burr/warning_distance");
   EXPECT_FALSE(BurrRenderer::create(nullptr, still()).ok());
 }
 

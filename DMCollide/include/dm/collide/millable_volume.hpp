@@ -175,6 +175,10 @@ class MillableVolume {
   /// Blocks per axis.
   const Vec3i& blockDims() const noexcept { return blockDims_; }
 
+  /// 1 where a voxel of a forbidden material is at least half full, else 0
+  /// (U8, this grid's affine): the critical structures as they stand, for
+  /// VoxelModel::fromOccupancy(mask, 0.5) → BurrOptions::critical.
+  Result<Volume> forbiddenMask() const;
   /// The occupancy as a float volume (values in [0, 1], this grid's affine),
   /// for isosurfaces at 0.5 and ray casting.
   Result<Volume> occupancyVolume() const;

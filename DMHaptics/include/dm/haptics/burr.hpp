@@ -52,6 +52,8 @@
 #include <dm/haptics/renderer.hpp>
 
 #include <atomic>
+#include <cstdint>
+#include <limits>
 #include <memory>
 #include <string_view>
 
@@ -76,6 +78,12 @@ struct BurrOptions {
   double contactTolerance = -1.0;
   /// m, how far beyond the tool material shapes the contact normal; < 0: two voxels.
   double normalMargin = -1.0;
+  /// Critical structures (nerve, vessel, dura) as a signed distance in the
+  /// bone volume's frame, e.g. VoxelModel::fromOccupancy of
+  /// MillableVolume::forbiddenMask(); null: none. Each tick measures the
+  /// tool's distance to them (BurrTickInfo::criticalDistance).
+  std::shared_ptr<const VoxelModel> critical;
+  double warningDistance = 1e-3;  ///< m (≥ 0): closer than this counts as time within the margin
 
   /// Ok, or InvalidArgument naming the field of `where`.
   Status validate(std::string_view where) const;
@@ -87,6 +95,20 @@ struct BurrTickInfo {
   double normalForce = 0.0;    ///< N, F_n
   Vec3 normal = Vec3::Zero();  ///< contact normal, world
   MillResult cut;              ///< what this tick removed
+  /// m: the tool's distance to the nearest critical structure (its centre's
+  /// distance minus the tool's bounding radius: exact for a sphere, a lower
+  /// bound otherwise; negative: inside one); +∞ without critical structures.
+  double criticalDistance = std::numeric_limits<double>::infinity();
+};
+
+/// Skill metrics since the renderer was built or resetMetrics() (issue 31's
+/// critical structures).
+struct BurrMetrics {
+  std::int64_t ticks = 0;
+  double closestApproach = std::numeric_limits<double>::infinity();  ///< m, smallest criticalDistance
+  double secondsWithinWarning = 0.0;  ///< s with criticalDistance < warningDistance
+  double removed = 0.0;               ///< m³
+  double removedForbidden = 0.0;      ///< m³ of it in forbidden materials
 };
 
 /// Bone drilling and burring as a haptic renderer (file comment).
@@ -109,6 +131,8 @@ class BurrRenderer final : public HapticRenderer {
   void setRpm(double rpm) noexcept;
   double rpm() const noexcept { return rpm_.load(std::memory_order_relaxed); }
   const BurrTickInfo& lastTick() const noexcept { return last_; }
+  const BurrMetrics& metrics() const noexcept { return metrics_; }
+  void resetMetrics() noexcept { metrics_ = {}; }
   const MillableVolume& volume() const noexcept { return *bone_; }
   MillableVolume& volume() noexcept { return *bone_; }
   const BurrOptions& options() const noexcept { return options_; }
@@ -129,8 +153,9 @@ class BurrRenderer final : public HapticRenderer {
   Vec3 proxy_ = Vec3::Zero();         // tool centre, bone frame
   Vec3 normal_ = Vec3::Zero();        // contact plane of this tick, bone frame (zero: none)
   int queries_ = 0;                   // field queries this tick
-  double step_ = 0.0, tolerance_ = 0.0, margin_ = 0.0, cuttingRadius_ = 0.0;
+  double step_ = 0.0, tolerance_ = 0.0, margin_ = 0.0, cuttingRadius_ = 0.0, boundingRadius_ = 0.0;
   BurrTickInfo last_;
+  BurrMetrics metrics_;
 };
 
 }  // namespace dm
