@@ -514,6 +514,115 @@ MillResult MillableVolume::mill(const MillingTool& tool, const Isometry3& pose, 
 
 // --- surfaces --------------------------------------------------------------
 
+// --- fragments -------------------------------------------------------------
+
+Result<FragmentMap> MillableVolume::fragments() const {
+  const std::string where = std::string(kMillWhere) + "::fragments";
+  constexpr std::uint16_t kHalf = kFull / 2 + 1;  // o ≥ 0.5
+  FragmentMap map;
+  auto labels = Volume::create(dims_, VoxelType::U32, indexToWorld_);
+  if (!labels) return labels.error().within(where);
+  std::uint32_t* label = labels->data<std::uint32_t>();
+  std::vector<std::size_t> queue;
+  std::vector<BoneFragment> found;
+  const auto nx = static_cast<std::size_t>(dims_.x()), ny = static_cast<std::size_t>(dims_.y());
+  const auto nz = static_cast<std::size_t>(dims_.z());
+  const Mat3 cellOwn = indexToWorld_.linear() * indexToWorld_.linear().transpose() / 12.0;
+  try {
+    for (std::size_t seed = 0; seed < occupancy_.size(); ++seed) {
+      if (occupancy_[seed] < kHalf || label[seed] != 0) continue;
+      const auto id = static_cast<std::uint32_t>(found.size() + 1);
+      BoneFragment f;
+      f.lo = Vec3i::Constant(std::numeric_limits<int>::max());
+      f.hi = Vec3i::Constant(-1);
+      double mass = 0.0;
+      Vec3 first = Vec3::Zero();
+      Mat3 second = Mat3::Zero();
+      const Vec3 origin =
+          indexToWorld_ * Vec3(static_cast<double>(seed % nx), static_cast<double>((seed / nx) % ny),
+                               static_cast<double>(seed / (nx * ny)));
+      queue.clear();
+      queue.push_back(seed);
+      label[seed] = id;
+      for (std::size_t head = 0; head < queue.size(); ++head) {
+        const std::size_t v = queue[head];
+        const std::size_t i = v % nx, j = (v / nx) % ny, k = v / (nx * ny);
+        const Vec3i ijk(static_cast<int>(i), static_cast<int>(j), static_cast<int>(k));
+        f.lo = f.lo.cwiseMin(ijk);
+        f.hi = f.hi.cwiseMax(ijk);
+        const double m = occupancy_[v] * (1.0 / kFull);
+        const Vec3 r = indexToWorld_ * ijk.cast<double>() - origin;  // about the seed: no cancellation
+        mass += m;
+        first += m * r;
+        second += m * r * r.transpose();
+        ++f.cells;
+        auto visit = [&](std::size_t w) {
+          if (occupancy_[w] >= kHalf && label[w] == 0) {
+            label[w] = id;
+            queue.push_back(w);
+          }
+        };
+        if (i > 0) visit(v - 1);
+        if (i + 1 < nx) visit(v + 1);
+        if (j > 0) visit(v - nx);
+        if (j + 1 < ny) visit(v + nx);
+        if (k > 0) visit(v - nx * ny);
+        if (k + 1 < nz) visit(v + nx * ny);
+      }
+      const Vec3 mean = first / mass;
+      // Covariance of the centres, Σ m (r − r̄)(r − r̄)ᵀ / Σ m, plus each
+      // cell's own (a parallelepiped of edges A: A·Aᵀ/12).
+      const Mat3 cov = second / mass - mean * mean.transpose() + cellOwn;
+      f.volume = mass * cellVolume_;
+      f.centroid = origin + mean;
+      f.inertia = f.volume * (cov.trace() * Mat3::Identity() - cov);
+      found.push_back(f);
+    }
+  } catch (const std::bad_alloc&) {
+    return fail(ErrorCode::InvalidArgument, "out of memory while labelling fragments", where);
+  }
+  // Largest first, labels renumbered to match.
+  std::vector<std::uint32_t> order(found.size());
+  for (std::uint32_t f = 0; f < order.size(); ++f) order[f] = f;
+  std::stable_sort(order.begin(), order.end(),
+                   [&found](std::uint32_t x, std::uint32_t y) { return found[x].volume > found[y].volume; });
+  std::vector<std::uint32_t> rank(found.size() + 1, 0);
+  map.fragments.reserve(found.size());
+  for (std::uint32_t r = 0; r < order.size(); ++r) {
+    rank[order[r] + 1] = r + 1;
+    map.fragments.push_back(found[order[r]]);
+  }
+  for (std::size_t v = 0; v < occupancy_.size(); ++v) label[v] = rank[label[v]];
+  map.labels = std::move(*labels);
+  return map;
+}
+
+Result<Volume> MillableVolume::fragmentOccupancy(const FragmentMap& map, std::size_t k) const {
+  const std::string where = std::string(kMillWhere) + "::fragmentOccupancy";
+  if (k >= map.fragments.size())
+    return fail(ErrorCode::InvalidArgument,
+                formatString("fragment %zu of %zu does not exist", k, map.fragments.size()), where);
+  if (map.labels.dims() != dims_ || map.labels.type() != VoxelType::U32)
+    return fail(ErrorCode::InvalidArgument, "the fragment map is not of this volume", where);
+  const BoneFragment& f = map.fragments[k];
+  const Vec3i lo = f.lo - Vec3i::Ones(), n = f.hi - f.lo + Vec3i::Constant(3);
+  Affine3 a = indexToWorld_;
+  a.translation() = indexToWorld_ * lo.cast<double>();
+  auto v = Volume::create(n, VoxelType::F32, a);
+  if (!v) return v.error().within(where);
+  const std::uint32_t* label = map.labels.data<std::uint32_t>();
+  const auto id = static_cast<std::uint32_t>(k + 1);
+  float* out = v->data<float>();
+  for (int z = 0; z < n.z(); ++z)
+    for (int y = 0; y < n.y(); ++y)
+      for (int x = 0; x < n.x(); ++x) {
+        const int i = lo.x() + x, j = lo.y() + y, kk = lo.z() + z;
+        const bool inside = i >= 0 && j >= 0 && kk >= 0 && i < dims_.x() && j < dims_.y() && kk < dims_.z();
+        *out++ = inside && label[index(i, j, kk)] == id ? static_cast<float>(occupancy(i, j, kk)) : 0.0f;
+      }
+  return v;
+}
+
 Result<Volume> MillableVolume::forbiddenMask() const {
   auto v = Volume::create(dims_, VoxelType::U8, indexToWorld_);
   if (!v) return v.error().within(std::string(kMillWhere) + "::forbiddenMask");

@@ -2,6 +2,7 @@
 // normal against analytic geometry, Archard removal, change sets and the
 // block surfaces that a renderer swaps in.
 #include <dm/collide/millable_volume.hpp>
+#include <dm/collide/sphere_tree.hpp>
 #include <dm/math/isosurface.hpp>
 
 #include <gtest/gtest.h>
@@ -215,6 +216,55 @@ TEST(MillableVolume, ForbiddenMaterialsAreAccounted) {
   EXPECT_NEAR(cut.removedForbidden, bone.removedVolume(1), 1e-15);
   EXPECT_NEAR(cut.removed, bone.removedVolume(0) + bone.removedVolume(1), 1e-15);
   EXPECT_NEAR(bone.removedVolume(0), bone.removedVolume(1), 1e-3 * cut.removed);
+}
+
+TEST(MillableVolume, ASawCutMakesFragmentsWithTheirMassProperties) {
+  // A 6 × 3 × 2 mm bar sawn across at x = 0.6 mm by a 0.4 mm blade.
+  const Vec3 half(3e-3, 1.5e-3, 1e-3);
+  const Volume sdf = field(40, Vec3::Constant(-20 * kH) + Vec3::Constant(0.5 * kH), [&half](const Vec3& p) {
+    const Vec3 q = p.cwiseAbs() - half;
+    return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+  });
+  auto made = MillableVolume::fromSdf(sdf);
+  ASSERT_TRUE(made.ok());
+  MillableVolume bone = std::move(*made);
+  auto whole = bone.fragments();
+  ASSERT_TRUE(whole.ok()) << whole.error().message();
+  ASSERT_EQ(whole->fragments.size(), 1u);
+  EXPECT_NEAR(whole->fragments[0].volume, 36e-9, 0.01 * 36e-9);
+  EXPECT_LT(whole->fragments[0].centroid.norm(), 1e-6);
+
+  bone.mill(MillingTool::box(Vec3(0.2e-3, 3e-3, 3e-3)), place(Vec3(0.6e-3, 0, 0)), 1e9);
+  auto sawn = bone.fragments();
+  ASSERT_TRUE(sawn.ok());
+  ASSERT_EQ(sawn->fragments.size(), 2u);
+  // Left 3.4 mm long, right 2.2 mm: largest first.
+  const double lengths[2] = {3.4e-3, 2.2e-3}, centres[2] = {-1.3e-3, 1.9e-3};
+  for (int f = 0; f < 2; ++f) {
+    const BoneFragment& g = sawn->fragments[static_cast<std::size_t>(f)];
+    const double l = lengths[f], v = l * 3e-3 * 2e-3;
+    EXPECT_NEAR(g.volume, v, 0.02 * v) << f;
+    EXPECT_NEAR(g.centroid.x(), centres[f], 0.25 * kH) << f;
+    EXPECT_NEAR(g.centroid.y(), 0.0, 1e-6) << f;
+    // A box's second moments, V/12·(b² + c²) about each axis.
+    const Vec3 expected = v / 12.0 * Vec3(9e-6 + 4e-6, l * l + 4e-6, l * l + 9e-6);
+    for (int axis = 0; axis < 3; ++axis)
+      EXPECT_NEAR(g.inertia(axis, axis), expected[axis], 0.04 * expected[axis]) << f << " " << axis;
+    EXPECT_NEAR(g.inertia(0, 1), 0.0, 1e-3 * expected[0]);
+  }
+  std::size_t labelled = 0;
+  for (std::size_t v = 0; v < sawn->labels.voxelCount(); ++v) labelled += sawn->labels.valueAt(v) == 1.0;
+  EXPECT_EQ(labelled, sawn->fragments[0].cells);
+
+  // The smaller piece as bone placement's moving fragment.
+  auto piece = bone.fragmentOccupancy(*sawn, 1);
+  ASSERT_TRUE(piece.ok());
+  double sum = 0.0;
+  for (std::size_t v = 0; v < piece->voxelCount(); ++v) sum += piece->valueAt(v);
+  EXPECT_NEAR(sum * bone.voxelVolume(), sawn->fragments[1].volume,
+              1e-6 * sum * bone.voxelVolume());  // F32 values
+  EXPECT_TRUE(ImplicitSphereTree::create(*piece, 0.5).ok());
+  EXPECT_FALSE(bone.fragmentOccupancy(*sawn, 2).ok());
 }
 
 TEST(MillableVolume, BadInputIsNamed) {

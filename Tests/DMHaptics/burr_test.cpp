@@ -2,6 +2,7 @@
 // on flat and curved bone against geometry, no pop-through, the cavity
 // against the analytic swept volume, Archard monotonicity, the spinning
 // burr's walk and vibration, passivity and bit-for-bit lockstep.
+#include <dm/haptics/bone_placement.hpp>
 #include <dm/haptics/burr.hpp>
 #include <dm/haptics/safety.hpp>
 
@@ -328,6 +329,47 @@ TEST(BurrRenderer, CriticalStructuresAreMeasured) {
   EXPECT_NEAR(through->metrics().removedForbidden, through->volume().removedVolume(1), 1e-15);
   EXPECT_NEAR(through->metrics().removed,
               through->volume().removedVolume(0) + through->volume().removedVolume(1), 1e-15);
+}
+
+TEST(BurrRenderer, ASawSeparatesAFragmentThatBonePlacementMoves) {
+  // A 6 × 3 × 2 mm bar; a 0.4 mm saw blade (thin along x) pushed down
+  // through it at x = 0.6 mm: the osteotomy made interactively.
+  const Vec3 half(3e-3, 1.5e-3, 1e-3);
+  auto bar = bone(
+      [&half](const Vec3& p) {
+        const Vec3 q = p.cwiseAbs() - half;
+        return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+      },
+      {.name = "bone", .hardness = 0.05e9});
+  BurrOptions o = still();
+  o.tool = MillingTool::box(Vec3(0.2e-3, 3e-3, 3e-3));
+  o.cuttingRadius = 0.02;  // a sagittal saw's blade 20 mm from its pivot
+  o.rpm = 12000.0;
+  auto saw = burr(bar, o);
+  const Vec3 above(0.6e-3, 0, 4.5e-3), below(0.6e-3, 0, -4.5e-3);
+  saw->reset(test::at(above));
+  HapticResponse out;
+  for (int i = 1; i <= 4000; ++i)
+    out = saw->tick(sample(above + (below - above) * std::min(1.0, i / 3000.0), i));
+  EXPECT_LT(out.proxyPose.translation().z(), -4e-3 + kH);  // the blade went through
+  auto pieces = bar->fragments();
+  ASSERT_TRUE(pieces.ok());
+  ASSERT_EQ(pieces->fragments.size(), 2u);
+  EXPECT_NEAR(pieces->fragments[1].centroid.x(), 1.9e-3, kH);  // the 2.2 mm piece beyond the kerf
+
+  auto fixedVolume = bar->fragmentOccupancy(*pieces, 0), movingVolume = bar->fragmentOccupancy(*pieces, 1);
+  ASSERT_TRUE(fixedVolume.ok() && movingVolume.ok());
+  auto fixed = ImplicitSphereTree::create(*fixedVolume, 0.5),
+       moving = ImplicitSphereTree::create(*movingVolume, 0.5);
+  ASSERT_TRUE(fixed.ok() && moving.ok());
+  auto place = BonePlacementRenderer::create(*fixed, Isometry3::Identity(), *moving, *movingVolume,
+                                             {.threshold = 0.5});
+  ASSERT_TRUE(place.ok()) << place.error().message();
+  // Held where it was cut, the fragment sits in its place against the other.
+  (*place)->reset(Isometry3::Identity());
+  for (int i = 1; i <= 200; ++i) out = (*place)->tick(sample(Vec3::Zero(), i));
+  EXPECT_LT(out.proxyPose.translation().norm(), kH);
+  EXPECT_TRUE(out.force.allFinite());
 }
 
 TEST(BurrRenderer, BadOptionsAreNamed) {

@@ -104,6 +104,25 @@ struct MillResult {
   int voxels = 0;                 ///< voxels whose occupancy went down
 };
 
+/// One connected piece of bone (MillableVolume::fragments()).
+struct BoneFragment {
+  std::size_t cells = 0;         ///< voxels at least half full
+  double volume = 0.0;           ///< m³: Σ occupancy × cell volume over them
+  Vec3 centroid = Vec3::Zero();  ///< m, the volume's frame
+  /// m⁵: the second moment about the centroid, Σ o·V·(|r|²I − r rᵀ) plus each
+  /// cell's own (a cube's h²/6 per unit volume); times a density it is the
+  /// inertia tensor (kg·m²).
+  Mat3 inertia = Mat3::Zero();
+  Vec3i lo = Vec3i::Zero(), hi = Vec3i::Zero();  ///< index bounds of its cells, inclusive
+};
+
+/// The pieces of a millable volume: labels (U32, this grid's affine; 0 = no
+/// bone, k + 1 = fragments[k]) and the fragments, largest volume first.
+struct FragmentMap {
+  Volume labels;
+  std::vector<BoneFragment> fragments;
+};
+
 /// Fractional-occupancy voxel bone edited by milling tools (file comment).
 class MillableVolume {
  public:
@@ -175,6 +194,17 @@ class MillableVolume {
   /// Blocks per axis.
   const Vec3i& blockDims() const noexcept { return blockDims_; }
 
+  /// The bone's connected pieces after sawing: voxels at least half full,
+  /// joined across faces (6-connected; pieces that touch only along an edge
+  /// or at a corner are apart, as the 0.5 surface separates them), each with
+  /// its mass properties. O(voxels), 4 bytes a voxel for the labels; not for
+  /// the haptic thread. Fails with InvalidArgument when out of memory.
+  Result<FragmentMap> fragments() const;
+  /// Occupancy (F32, values in [0, 1]) of fragments[k] alone, cropped to its
+  /// cells with one empty layer around: ImplicitSphereTree::create(v, 0.5)
+  /// and BonePlacementRenderer take it as the moving fragment. InvalidArgument
+  /// for k out of range or a map of another volume.
+  Result<Volume> fragmentOccupancy(const FragmentMap& map, std::size_t k) const;
   /// 1 where a voxel of a forbidden material is at least half full, else 0
   /// (U8, this grid's affine): the critical structures as they stand, for
   /// VoxelModel::fromOccupancy(mask, 0.5) → BurrOptions::critical.
