@@ -1,7 +1,8 @@
-// dmtool probe MODEL --path PATH.csv --renderer godobject|vps|spheretree
+// dmtool probe MODEL --path PATH.csv --renderer godobject|vps|spheretree|burr
 //   [--stiffness N_per_m] [--damping Ns_per_m] [--friction MUS,MUD]
 //   [--tool TOOL_MODEL] [--tool-radius M] [--rate HZ] [--threshold T]
-//   [--voxel-size M] [--levels L] [--unit U] -o OUT.csv [--plot OUT.png] [--json]
+//   [--voxel-size M] [--levels L] [--unit U] [--rpm RPM] [--bone-range EMPTY,FULL]
+//   [--mesh-out MESH] -o OUT.csv [--plot OUT.png] [--json]
 // Replays a device path (CSV t,x,y,z[,qw,qx,qy,qz], SI units; see
 // dm/io/device_path.hpp) through a haptic renderer in lockstep
 // (dm::replayDevicePath) and writes t, force, torque and proxy pose per tick
@@ -13,12 +14,18 @@
 // inside, when --threshold is not given). The tool: godobject uses a point proxy, or a
 // ball tip of --tool-radius; vps samples TOOL_MODEL (or a ball of
 // --tool-radius, default 2 mm) into a point shell; spheretree builds the
-// tool's sphere tree the same way.
+// tool's sphere tree the same way. burr drills a volume with a sphere burr of
+// --tool-radius (default 2 mm) at --rpm (dm::BurrRenderer): the volume is
+// the bone's signed distance (negative inside), or with --bone-range the
+// intensities of empty space and of full bone (partial volume between);
+// --mesh-out writes the drilled bone's surface and the summary gives the
+// volume removed. --rpm, --bone-range and --mesh-out belong to burr alone.
 #include <dm/collide/bvh.hpp>
 #include <dm/collide/point_shell.hpp>
 #include <dm/collide/sphere_tree.hpp>
 #include <dm/collide/voxel_model.hpp>
 #include <dm/core/filesystem.hpp>
+#include <dm/haptics/burr.hpp>
 #include <dm/haptics/force_plot.hpp>
 #include <dm/haptics/god_object.hpp>
 #include <dm/haptics/probe.hpp>
@@ -63,6 +70,9 @@ struct ProbeCliOptions {
   std::string output;
   std::string plot;
   bool json = false;
+  std::optional<double> rpm;      // burr
+  std::vector<double> boneRange;  // burr: empty, full intensity
+  std::string meshOut;            // burr
 };
 
 // The environment as the renderer needs it: a mesh for godobject, a voxel
@@ -193,7 +203,44 @@ dm::Result<std::unique_ptr<dm::HapticRenderer>> makeSphereTree(const Environment
   return std::unique_ptr<dm::HapticRenderer>(std::move(*r));
 }
 
+// The bone a burr drills, kept to report and write what it removed.
+dm::Result<std::unique_ptr<dm::HapticRenderer>> makeBurr(const Environment& env, const ProbeCliOptions& o,
+                                                         std::shared_ptr<dm::MillableVolume>& bone) {
+  if (!env.volume)
+    return dm::fail(dm::ErrorCode::InvalidArgument, "burr drills a volume, not a mesh", "MODEL",
+                    "give a signed distance volume (negative inside) or a CT/MRI volume with --bone-range");
+  for (auto [given, option] :
+       {std::pair{!o.friction.empty(), "--friction"}, std::pair{!o.tool.empty(), "--tool"},
+        std::pair{o.threshold.has_value(), "--threshold"}})
+    if (given)
+      return dm::fail(dm::ErrorCode::InvalidArgument, std::string(option) + " does not apply to burr", option,
+                      "burr takes a sphere of --tool-radius, and --bone-range for intensity volumes");
+  auto made = o.boneRange.size() == 2
+                  ? dm::MillableVolume::fromIntensity(*env.volume, o.boneRange[0], o.boneRange[1])
+                  : dm::MillableVolume::fromSdf(*env.volume);
+  if (!made) return made.error();
+  bone = std::make_shared<dm::MillableVolume>(std::move(*made));
+  dm::BurrOptions options;
+  options.tool = dm::MillingTool::sphere(o.toolRadius > 0 ? o.toolRadius : 2e-3);
+  options.stiffness = o.stiffness;
+  options.damping = o.damping;
+  if (o.rpm) options.rpm = *o.rpm;
+  auto r = dm::BurrRenderer::create(bone, options);
+  if (!r) return r.error();
+  return std::unique_ptr<dm::HapticRenderer>(std::move(*r));
+}
+
 int runProbe(const ProbeCliOptions& o) {
+  if (o.renderer != "burr")
+    for (auto [given, option] :
+         {std::pair{o.rpm.has_value(), "--rpm"}, std::pair{!o.boneRange.empty(), "--bone-range"},
+          std::pair{!o.meshOut.empty(), "--mesh-out"}})
+      if (given)
+        return printError(dm::fail(dm::ErrorCode::InvalidArgument,
+                                   std::string(option) + " applies to --renderer burr only", option));
+  if (!o.boneRange.empty() && o.boneRange.size() != 2)
+    return printError(
+        dm::fail(dm::ErrorCode::InvalidArgument, "--bone-range takes two values EMPTY,FULL", "--bone-range"));
   if (!o.friction.empty() && o.friction.size() != 2)
     return printError(
         dm::fail(dm::ErrorCode::InvalidArgument, "--friction takes two values MUS,MUD", "--friction"));
@@ -206,10 +253,12 @@ int runProbe(const ProbeCliOptions& o) {
   auto env = loadModel(in, o);
   if (!env) return printError(env.error());
 
+  std::shared_ptr<dm::MillableVolume> bone;
   dm::Result<std::unique_ptr<dm::HapticRenderer>> renderer = o.renderer == "vps" ? makeVps(*env, o)
                                                              : o.renderer == "spheretree"
                                                                  ? makeSphereTree(*env, o)
-                                                                 : makeGodObject(*env, o);
+                                                             : o.renderer == "burr" ? makeBurr(*env, o, bone)
+                                                                                    : makeGodObject(*env, o);
   if (!renderer) return printError(renderer.error().within(in.string()));
 
   auto samples = dm::replayDevicePath(**renderer, *path, o.rate);
@@ -217,6 +266,13 @@ int runProbe(const ProbeCliOptions& o) {
   const std::string csv = dm::formatProbeCsv(*samples);
   if (dm::Status s = dm::writeFileAtomic(o.output, csv.data(), csv.size()); !s)
     return printError(s.error().within(o.output));
+  if (!o.meshOut.empty()) {
+    auto occupancy = bone->occupancyVolume();
+    if (!occupancy) return printError(occupancy.error());
+    auto surface = dm::extractIsosurface(*occupancy, {.iso = 0.5, .closeBorders = true});
+    if (!surface) return printError(surface.error());
+    if (dm::Status s = dm::writeMesh(*surface, o.meshOut); !s) return printError(s.error().within(o.meshOut));
+  }
   if (!o.plot.empty()) {
     auto image = dm::plotForceTrace(*samples);
     if (!image) return printError(image.error());
@@ -239,6 +295,8 @@ int runProbe(const ProbeCliOptions& o) {
     j["maxForce"] = maxForce;
     j["maxPenetration"] = maxPenetration;
     if (!o.plot.empty()) j["plot"] = o.plot;
+    if (bone) j["removedVolume"] = bone->removedVolume(0);
+    if (!o.meshOut.empty()) j["mesh"] = o.meshOut;
     printJson(j);
     return kExitOk;
   }
@@ -262,9 +320,10 @@ Command addProbeCommand(CLI::App& parent) {
                   "environment: mesh (any format Assimp reads) or volume (.nii, .nrrd, ...)")
       ->required();
   app->add_option("--path", o->path, "device path CSV: t,x,y,z[,qw,qx,qy,qz] in s and m")->required();
-  app->add_option("--renderer", o->renderer,
-                  "godobject (3-DOF proxy), vps (voxel point shell) or spheretree (6-DOF)")
-      ->check(CLI::IsMember({"godobject", "vps", "spheretree"}));
+  app->add_option(
+         "--renderer", o->renderer,
+         "godobject (3-DOF proxy), vps (voxel point shell), spheretree (6-DOF) or burr (drills a volume)")
+      ->check(CLI::IsMember({"godobject", "vps", "spheretree", "burr"}));
   app->add_option("--stiffness", o->stiffness, "surface stiffness, N/m")->check(finiteNumber());
   app->add_option("--damping", o->damping, "surface damping, N*s/m")->check(finiteNumber());
   app->add_option("--friction", o->friction, "static and dynamic friction coefficients MUS,MUD")
@@ -293,6 +352,16 @@ Command addProbeCommand(CLI::App& parent) {
       ->required();
   app->add_option("--plot", o->plot, "PNG of the force trace");
   app->add_flag("--json", o->json, "print one JSON summary on stdout");
+  app->add_option("--rpm", o->rpm, "burr: speed, revolutions per minute (default 80000)")
+      ->check(CLI::Range(0.0, 1e6));
+  app->add_option(
+         "--bone-range", o->boneRange,
+         "burr on CT/MRI: intensities of empty space and of full bone EMPTY,FULL (partial volume between)")
+      ->delimiter(',')
+      ->expected(2)
+      ->check(finiteNumber());
+  app->add_option("--mesh-out", o->meshOut,
+                  "burr: write the drilled bone's surface (any format writeMesh writes)");
   return {app, [o] { return runProbe(*o); }};
 }
 

@@ -3,11 +3,15 @@
 // stiffness × depth along +z, the 6-DOF methods push up, the CSV has one row
 // per tick, the plot is a PNG of the stated size; bad input exits 1 or 2
 // naming the file, line and column or the option.
+#include <dm/core/volume.hpp>
 #include <dm/io/image_io.hpp>
+#include <dm/io/mesh_io.hpp>
+#include <dm/io/volume_io.hpp>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <cmath>
 #include <fstream>
 #include <sstream>
 #include <string>
@@ -94,6 +98,56 @@ TEST(DmtoolProbe, SixDofRenderersPushOutOfTheFace) {
     EXPECT_NEAR(last[3], 20.0, 6.0) << renderer;
     EXPECT_LT(std::abs(last[1]) + std::abs(last[2]), 0.1 * last[3]) << renderer;
   }
+}
+
+// A 10 mm cube of bone below z = 0 as a signed distance volume (0.25 mm).
+std::string writeBoneSlab(const TempDir& dir) {
+  dm::Affine3 a = dm::Affine3::Identity();
+  a.linear() = dm::Mat3::Identity() * 0.25e-3;
+  a.translation() = dm::Vec3::Constant(-5e-3);
+  auto v = dm::Volume::create(dm::Vec3i(40, 40, 40), dm::VoxelType::F32, a);
+  EXPECT_TRUE(v.ok());
+  for (int k = 0; k < 40; ++k)
+    for (int j = 0; j < 40; ++j)
+      for (int i = 0; i < 40; ++i) v->setValue(i, j, k, (a * dm::Vec3(i, j, k)).z());
+  const std::string file = (dir.path / "bone.nii").string();
+  EXPECT_TRUE(dm::writeVolume(*v, file).ok());
+  return file;
+}
+
+TEST(DmtoolProbe, BurrDrillsAHoleAndWritesTheBone) {
+  // A 1 mm burr pushed from 3 mm above the bone to 1.5 mm below its rest
+  // height and held: it drills down, the hand feels the spring up, and the
+  // written surface has the hole.
+  TempDir dir;
+  const std::string press = (dir.path / "drill.csv").string();
+  std::ofstream(press) << "t,x,y,z\n0,0,0,0.003\n0.3,0,0,-0.0005\n1.5,0,0,-0.0005\n";
+  const std::string out = (dir.path / "f.csv").string(), mesh = (dir.path / "bone.ply").string();
+  const ToolRun r =
+      runTool({"probe", writeBoneSlab(dir), "--path", press, "--renderer", "burr", "--tool-radius", "0.001",
+               "--stiffness", "800", "--rpm", "80000", "--mesh-out", mesh, "-o", out, "--json"});
+  ASSERT_EQ(r.exitCode, 0) << describe(r);
+  const nlohmann::json j = parseJson(r);
+  EXPECT_EQ(j["renderer"], "burr");
+  EXPECT_GT(j["removedVolume"].get<double>(), 1e-10);  // well over 0.1 mm³
+  std::string header;
+  const auto rows = readCsv(out, header);
+  ASSERT_EQ(rows.size(), 1501u);
+  const std::vector<double>& last = rows.back();
+  EXPECT_LT(last[9], 1e-3 - 0.25e-3);  // the burr's centre went below its resting height: a hole
+  EXPECT_GT(last[3], 0.0);             // pushed up
+  EXPECT_LT(std::abs(last[1]) + std::abs(last[2]), 0.2 * last[3] + 1e-3);
+  auto surface = dm::readMesh(mesh);
+  ASSERT_TRUE(surface.ok()) << surface.error().message();
+  double lowestTop = 1.0;  // the hole's floor, near the axis
+  for (const dm::Vec3& p : surface->positions)
+    if (std::hypot(p.x(), p.y()) < 0.2e-3) lowestTop = std::min(lowestTop, p.z() > -4e-3 ? p.z() : 1.0);
+  EXPECT_LT(lowestTop, -0.25e-3);
+  // The burr's options belong to it alone.
+  const ToolRun wrong = runTool(
+      {"probe", writeBoneSlab(dir), "--path", press, "--renderer", "vps", "--rpm", "1000", "-o", out});
+  EXPECT_EQ(wrong.exitCode, 1) << describe(wrong);
+  EXPECT_NE(wrong.err.find("--rpm"), std::string::npos) << wrong.err;
 }
 
 TEST(DmtoolProbe, BadInputIsNamed) {
