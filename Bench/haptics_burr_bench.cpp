@@ -53,6 +53,8 @@
 #include <string_view>
 #include <vector>
 
+#include "bench_cpu_clock.hpp"
+
 namespace {
 
 using dm::Isometry3;
@@ -69,11 +71,7 @@ Vec3 device(int i, int ticks) {
   return Vec3(3e-3 * std::cos(a), 3e-3 * std::sin(a), kOuter + kBurr - depth);
 }
 
-std::int64_t threadCpuNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return std::int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
+using dm::bench::threadCpuNs;
 
 struct Row {
   dm::LatencyHistogram wall, cpu;

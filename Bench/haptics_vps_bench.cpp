@@ -53,6 +53,8 @@
 #include <numbers>
 #include <vector>
 
+#include "bench_cpu_clock.hpp"
+
 namespace {
 
 using dm::Isometry3;
@@ -96,13 +98,7 @@ Isometry3 devicePose(int i) {
   return p;
 }
 
-// Thread CPU time now, ns: unlike wall time it does not count the time this
-// thread waits while other processes run on a shared machine.
-std::int64_t threadCpuNs() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return std::int64_t{ts.tv_sec} * 1'000'000'000 + ts.tv_nsec;
-}
+using dm::bench::threadCpuNs;
 
 struct Row {
   dm::LatencyHistogram wall, cpu;
