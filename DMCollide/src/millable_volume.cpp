@@ -11,6 +11,8 @@
 #include <new>
 #include <set>
 
+#include "collide_internal.hpp"
+
 namespace dm {
 
 namespace {
@@ -29,22 +31,6 @@ std::string millVoxelName(const Vec3i& dims, std::size_t linear) {
 // tool's surface: the partial volume of a plane through a cell of width h.
 inline double millCoverage(double s, double invH) noexcept { return std::clamp(0.5 - s * invH, 0.0, 1.0); }
 
-// Signed distance to a box of half extents b, and its gradient.
-double millBoxDistance(const Vec3& p, const Vec3& b, Vec3& g) noexcept {
-  const Vec3 q = p.cwiseAbs() - b;
-  const Vec3 qPos = q.cwiseMax(0.0);
-  const double outside = qPos.norm();
-  if (outside > 0.0) {
-    g = (qPos / outside).cwiseProduct(p.cwiseSign());
-    return outside;
-  }
-  int axis = 0;
-  q.maxCoeff(&axis);
-  g = Vec3::Zero();
-  g[axis] = p[axis] < 0.0 ? -1.0 : 1.0;
-  return q[axis];
-}
-
 }  // namespace
 
 // --- MillingTool -----------------------------------------------------------
@@ -56,21 +42,10 @@ double MillingTool::distance(const Vec3& p, Vec3& gradient) const noexcept {
       gradient = r > 0.0 ? Vec3(p / r) : Vec3::UnitZ();
       return r - radius;
     }
-    case Kind::Cylinder: {
-      const double rho = std::hypot(p.x(), p.y());
-      const Vec3 radial = rho > 0.0 ? Vec3(p.x() / rho, p.y() / rho, 0.0) : Vec3::UnitX();
-      const Vec3 axial(0.0, 0.0, p.z() < 0.0 ? -1.0 : 1.0);
-      const double dr = rho - radius, dz = std::abs(p.z()) - halfLength;
-      if (dr > 0.0 && dz > 0.0) {
-        const double d = std::hypot(dr, dz);
-        gradient = (dr * radial + dz * axial) / d;
-        return d;
-      }
-      gradient = dr > dz ? radial : axial;
-      return std::max(dr, dz);
-    }
+    case Kind::Cylinder:
+      return detail::cylinderSignedDistance(p, radius, halfLength, &gradient);
     case Kind::Box:
-      return millBoxDistance(p, halfExtents, gradient);
+      return detail::boxSignedDistance(p, halfExtents, &gradient);
     case Kind::Voxels:
       return shape ? shape->distance(p, gradient) : std::numeric_limits<double>::infinity();
   }
@@ -307,6 +282,19 @@ inline int millFloor(double x, int lo, int hi) noexcept {
   return t - (t > x ? 1 : 0);
 }
 
+// The cells i ∈ [lo, hi] of a row whose centres base + i·cx lie within r of
+// the tool's origin: |base + i·cx|² ≤ r², with b = base·cx, c2 = |base|²,
+// a = |cx|². False when none.
+inline bool millChord(double a, double invA, double b, double c2, double r, int lo, int hi, int& i0,
+                      int& i1) noexcept {
+  const double disc = b * b - a * (c2 - r * r);
+  if (!(disc >= 0.0) || !(r > 0.0)) return false;
+  const double root = std::sqrt(disc);
+  i0 = std::max(lo, millCeil((-b - root) * invA, lo, hi));
+  i1 = std::min(hi, millFloor((-b + root) * invA, lo, hi));
+  return i0 <= i1;
+}
+
 // The fraction K of a cell that the tool covers, at the cell centre's
 // tool-frame position; spheres (the common burr) without a square root
 // outside their one-voxel shell.
@@ -342,16 +330,13 @@ void forOccupiedCells(const Box& box, const Affine3& indexToTool, const Vec3i& d
   const Vec3 cx = indexToTool.linear().col(0), cy = indexToTool.linear().col(1),
              cz = indexToTool.linear().col(2);
   const Vec3 origin = indexToTool.translation();
-  const double a = cx.squaredNorm(), invA = 1.0 / a, reach2 = box.reach * box.reach;
+  const double a = cx.squaredNorm(), invA = 1.0 / a;
   const auto nx = static_cast<std::size_t>(dims.x()), nxy = nx * static_cast<std::size_t>(dims.y());
   for (int k = box.k0; k <= box.k1; ++k)
     for (int j = box.j0; j <= box.j1; ++j) {
       const Vec3 base = origin + static_cast<double>(j) * cy + static_cast<double>(k) * cz;
-      const double b = base.dot(cx), disc = b * b - a * (base.squaredNorm() - reach2);
-      if (!(disc >= 0.0)) continue;
-      const double root = std::sqrt(disc);
-      const int i0 = std::max(box.i0, millCeil((-b - root) * invA, box.i0, box.i1));
-      const int i1 = std::min(box.i1, millFloor((-b + root) * invA, box.i0, box.i1));
+      int i0 = 0, i1 = -1;
+      if (!millChord(a, invA, base.dot(cx), base.squaredNorm(), box.reach, box.i0, box.i1, i0, i1)) continue;
       const std::size_t row = static_cast<std::size_t>(j) * nx + static_cast<std::size_t>(k) * nxy;
       for (int i = i0; i <= i1; ++i) {
         const std::size_t v = row + static_cast<std::size_t>(i);
@@ -379,22 +364,14 @@ double sphereOverlap(const MillableVolume::Box& box, const Affine3& indexToTool,
   const auto nx = static_cast<std::size_t>(dims.x()), nxy = nx * static_cast<std::size_t>(dims.y());
   std::uint64_t whole = 0;  // Σ o over the covered cells, in 1/kFull
   double shell = 0.0;
-  auto chord = [a, invA](double b, double c2, double r, int lo, int hi, int& i0, int& i1) {
-    const double disc = b * b - a * (c2 - r * r);
-    if (!(disc >= 0.0) || !(r > 0.0)) return false;
-    const double root = std::sqrt(disc);
-    i0 = std::max(lo, millCeil((-b - root) * invA, lo, hi));
-    i1 = std::min(hi, millFloor((-b + root) * invA, lo, hi));
-    return i0 <= i1;
-  };
   for (int k = box.k0; k <= box.k1; ++k)
     for (int j = box.j0; j <= box.j1; ++j) {
       const Vec3 base = origin + static_cast<double>(j) * cy + static_cast<double>(k) * cz;
       const double b = base.dot(cx), c2 = base.squaredNorm();
       int i0 = 0, i1 = -1;
-      if (!chord(b, c2, outer, box.i0, box.i1, i0, i1)) continue;
+      if (!millChord(a, invA, b, c2, outer, box.i0, box.i1, i0, i1)) continue;
       int w0 = i1 + 1, w1 = i1;  // the covered run, empty unless the inner chord exists
-      if (!chord(b, c2, inner, i0, i1, w0, w1)) w0 = i1 + 1, w1 = i1;
+      if (!millChord(a, invA, b, c2, inner, i0, i1, w0, w1)) w0 = i1 + 1, w1 = i1;
       const std::uint16_t* row =
           occupancy.data() + static_cast<std::size_t>(j) * nx + static_cast<std::size_t>(k) * nxy;
       auto edge = [&](int from, int to) {

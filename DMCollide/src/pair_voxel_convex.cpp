@@ -205,16 +205,11 @@ class ConvexSurface {
   // the depth. Triangles have no interior (+∞).
   double signedDistanceBound(const Vec3& p) const noexcept {
     switch (shape_.type()) {
-      case ShapeType::Box: {
-        const Vec3 q = p.cwiseAbs() - static_cast<const Box&>(shape_).halfExtents();
-        const double inside = q.maxCoeff();
-        return inside > 0 ? q.cwiseMax(0.0).norm() : inside;
-      }
+      case ShapeType::Box:
+        return detail::boxSignedDistance(p, static_cast<const Box&>(shape_).halfExtents());
       case ShapeType::Cylinder: {
         const auto& cyl = static_cast<const Cylinder&>(shape_);
-        const double qr = std::hypot(p.x(), p.y()) - cyl.radius(), qz = std::abs(p.z()) - cyl.halfLength();
-        if (qr <= 0 || qz <= 0) return std::max(qr, qz);
-        return std::hypot(qr, qz);
+        return detail::cylinderSignedDistance(p, cyl.radius(), cyl.halfLength());
       }
       case ShapeType::Ellipsoid: {
         // f = |p/r| has Lipschitz bound 1/rmin and is 1 on the surface, so

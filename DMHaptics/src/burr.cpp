@@ -171,6 +171,7 @@ HapticResponse BurrRenderer::tick(const HapticInput& input) noexcept {
   moveProxy(target);
 
   last_ = {};
+  const double dt = std::isfinite(input.dt) && input.dt > 0.0 ? input.dt : 0.0;
   const Vec3 spring = options_.stiffness * (proxy_ - target);
   Vec3 force = Vec3::Zero();
   if (normal_.squaredNorm() > 0.0) {
@@ -194,7 +195,6 @@ HapticResponse BurrRenderer::tick(const HapticInput& input) noexcept {
       force +=
           options_.vibrationAmplitude * fn * std::sin(2.0 * std::numbers::pi * options_.vibrationHz * t) * n;
       // Removal at the tool pressed toward the device by at most half a voxel.
-      const double dt = std::isfinite(input.dt) && input.dt > 0.0 ? input.dt : 0.0;
       const double speed = rpm * (2.0 * std::numbers::pi / 60.0) * cuttingRadius_;
       Vec3 reach = target - proxy_;
       if (const double r = reach.norm(), cap = 0.5 * bone_->voxelSize(); r > cap) reach *= cap / r;
@@ -205,7 +205,6 @@ HapticResponse BurrRenderer::tick(const HapticInput& input) noexcept {
     force = spring;  // the proxy lags only when the move budget ran out
   }
   // Critical structures and the skill metrics.
-  const double dt = std::isfinite(input.dt) && input.dt > 0.0 ? input.dt : 0.0;
   if (options_.critical) {
     last_.criticalDistance = options_.critical->distance(proxy_) - boundingRadius_;
     metrics_.closestApproach = std::min(metrics_.closestApproach, last_.criticalDistance);
