@@ -438,14 +438,25 @@ Vec3 MillableVolume::contactNormal(const MillingTool& tool, const Isometry3& pos
 }
 
 void MillableVolume::markChanged(int i, int j, int k) noexcept {
-  const auto b = static_cast<std::size_t>(i / kBlock) +
-                 static_cast<std::size_t>(blockDims_.x()) *
-                     (static_cast<std::size_t>(j / kBlock) +
-                      static_cast<std::size_t>(blockDims_.y()) * static_cast<std::size_t>(k / kBlock));
-  if (blockChanged_[b]) return;
-  blockChanged_[b] = 1;
-  DM_ASSERT(changedCount_ < changed_.size(), "a block is listed once");
-  changed_[changedCount_++] = static_cast<std::uint32_t>(b);
+  // A voxel on a block's low face is also the last layer of the piece of the
+  // block below it on that axis (blockSurfaces closes each seam with the next
+  // block's first layer), so that piece changes too.
+  const int bi = i / kBlock, bj = j / kBlock, bk = k / kBlock;
+  const int li = bi > 0 && i % kBlock == 0 ? 1 : 0;
+  const int lj = bj > 0 && j % kBlock == 0 ? 1 : 0;
+  const int lk = bk > 0 && k % kBlock == 0 ? 1 : 0;
+  for (int dk = 0; dk <= lk; ++dk)
+    for (int dj = 0; dj <= lj; ++dj)
+      for (int di = 0; di <= li; ++di) {
+        const auto b = static_cast<std::size_t>(bi - di) +
+                       static_cast<std::size_t>(blockDims_.x()) *
+                           (static_cast<std::size_t>(bj - dj) +
+                            static_cast<std::size_t>(blockDims_.y()) * static_cast<std::size_t>(bk - dk));
+        if (blockChanged_[b]) continue;
+        blockChanged_[b] = 1;
+        DM_ASSERT(changedCount_ < changed_.size(), "a block is listed once");
+        changed_[changedCount_++] = static_cast<std::uint32_t>(b);
+      }
 }
 
 void MillableVolume::clearChanges() noexcept {

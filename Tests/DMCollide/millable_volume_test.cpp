@@ -168,14 +168,22 @@ TEST(MillableVolume, ChangedBlocksAreListedOnceAndTheirSurfacesTileTheWhole) {
   const auto changed = bone.changedBlocks();
   const std::set<std::uint32_t> unique(changed.begin(), changed.end());
   EXPECT_EQ(unique.size(), changed.size());
-  // Exactly the blocks with a voxel below its original occupancy.
+  // Exactly the blocks whose piece holds a voxel below its original
+  // occupancy: block b's piece spans voxels [8b, 8b + 8] on each axis.
   const MillableVolume fresh = slab(0.0);
   std::set<std::uint32_t> expected;
+  const auto blocksOf = [](int i) {
+    std::vector<int> b{i / 8};
+    if (i % 8 == 0 && i > 0) b.push_back(i / 8 - 1);
+    return b;
+  };
   for (int k = 0; k < 40; ++k)
     for (int j = 0; j < 40; ++j)
       for (int i = 0; i < 40; ++i)
         if (bone.occupancy(i, j, k) < fresh.occupancy(i, j, k))
-          expected.insert(static_cast<std::uint32_t>(i / 8 + 5 * (j / 8 + 5 * (k / 8))));
+          for (int bk : blocksOf(k))
+            for (int bj : blocksOf(j))
+              for (int bi : blocksOf(i)) expected.insert(static_cast<std::uint32_t>(bi + 5 * (bj + 5 * bk)));
   EXPECT_EQ(unique, expected);
   bone.clearChanges();
   EXPECT_TRUE(bone.changedBlocks().empty());
@@ -202,6 +210,24 @@ TEST(MillableVolume, ChangedBlocksAreListedOnceAndTheirSurfacesTileTheWhole) {
   EXPECT_EQ(pieceTriangles, whole->triangles.size());
   EXPECT_NEAR(pieceArea, whole->surfaceArea(), 1e-9 * pieceArea);
   EXPECT_FALSE(bone.blockSurfaces(std::vector<std::uint32_t>{125}).ok());
+
+  // A renderer that swaps in just the changed pieces after more milling (a
+  // path across the block faces at y = ±1 mm, its bottom grazing the face
+  // at z = −1 mm, so only the first layer of the blocks above that face
+  // changes there) holds the same surface as meshing every block again.
+  std::vector<Mesh> held = std::move(*pieces);
+  for (int s = 0; s < 20; ++s)
+    bone.mill(MillingTool::sphere(0.7e-3), place(Vec3(0.1e-3, -1.5e-3 + s * 0.15e-3, -0.3e-3)), 1e9);
+  const std::vector<std::uint32_t> swap(bone.changedBlocks().begin(), bone.changedBlocks().end());
+  auto fresher = bone.blockSurfaces(swap);
+  ASSERT_TRUE(fresher.ok());
+  for (std::size_t n = 0; n < swap.size(); ++n) held[swap[n]] = std::move((*fresher)[n]);
+  auto again = bone.blockSurfaces(all);
+  ASSERT_TRUE(again.ok());
+  for (std::uint32_t b = 0; b < 125; ++b) {
+    EXPECT_EQ(held[b].triangles.size(), (*again)[b].triangles.size()) << "block " << b;
+    EXPECT_NEAR(held[b].surfaceArea(), (*again)[b].surfaceArea(), 1e-12) << "block " << b;
+  }
 }
 
 TEST(MillableVolume, ForbiddenMaterialsAreAccounted) {

@@ -186,9 +186,11 @@ class MillableVolume {
   /// Non-finite or non-positive work removes nothing. Real-time safe.
   MillResult mill(const MillingTool& tool, const Isometry3& pose, double work) noexcept;
 
-  /// Blocks changed since clearChanges(), each once, in the order first
-  /// changed. Block b covers voxels [bx·8, bx·8 + 8) × ... with
-  /// b = bx + nbx·(by + nby·bz).
+  /// Blocks whose surface piece (blockSurfaces) changed since
+  /// clearChanges(), each once, in the order first changed: the blocks of
+  /// the changed voxels, and the block below on an axis where a changed voxel
+  /// lies on its block's low face (that piece closes its seam with it).
+  /// Block b holds voxels [bx·8, bx·8 + 8) × ... with b = bx + nbx·(by + nby·bz).
   std::span<const std::uint32_t> changedBlocks() const noexcept { return {changed_.data(), changedCount_}; }
   void clearChanges() noexcept;
   /// Blocks per axis.
