@@ -7,22 +7,38 @@
 // (In CI's 30 s the children hit 4 GiB allocations from length fields and an
 // allocation-size-too-big inside OpenVDB; every one came back as an Error.) A parsed volume must also survive
 // writeVdb -> readVdb with identical dims and voxels (the writer's contract).
+// Forking (isolate) is safe only while no other thread can hold a lock, but
+// OpenVDB runs oneTBB tasks in-process (writing a grid evaluates its bounding
+// box in parallel), whose workers then outlive the call; a fork taken while
+// one held the allocator's lock left the child stuck until its deadline, and
+// CI once aborted on a read-back that timed out so. LLVMFuzzerInitialize caps
+// oneTBB at this one thread. The written file is ours, so it is read back
+// in-process, as trusted files are. maxBytes is small (2M float voxels) so a
+// crafted dense box costs seconds, not a minute (a 10 kB file asking for 256³
+// took 38 s under ASan).
 #include <dm/io/vdb.hpp>
 
+#include <oneapi/tbb/global_control.h>
 #include <unistd.h>
 
 #include <cstddef>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <span>
 #include <string>
 
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  static oneapi::tbb::global_control oneThread(oneapi::tbb::global_control::max_allowed_parallelism, 1);
+  return 0;
+}
+
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::span<const std::byte> bytes(reinterpret_cast<const std::byte*>(data), size);
   dm::VdbReadOptions options;
-  options.maxBytes = std::size_t{64} << 20;
-  options.isolate = true;  // the fuzzer runs no worker threads, so forking is safe
+  options.maxBytes = std::size_t{8} << 20;
+  options.isolate = true;  // safe: oneTBB runs no worker threads here
   options.timeoutSeconds = 10;
   auto v = dm::parseVdb(bytes, "<fuzz>", options);
   if (!v) {
@@ -32,13 +48,25 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   const std::filesystem::path file =
       std::filesystem::temp_directory_path() / ("dm_vdb_fuzz_" + std::to_string(::getpid()) + ".vdb");
   if (!dm::writeVdb(*v, file)) return 0;  // e.g. an unwritable temp dir
-  auto back = dm::readVdb(file, options);
+  dm::VdbReadOptions trusted = options;
+  trusted.isolate = false;
+  auto back = dm::readVdb(file, trusted);
   std::error_code ec;
   std::filesystem::remove(file, ec);
-  if (!back || back->dims() != v->dims() || back->type() != v->type()) std::abort();
+  if (!back) {
+    std::fprintf(stderr, "vdb_fuzz: the written volume did not read back: %s\n", back.error().message().c_str());
+    std::abort();
+  }
+  if (back->dims() != v->dims() || back->type() != v->type()) {
+    std::fprintf(stderr, "vdb_fuzz: the written volume read back with other dims or type\n");
+    std::abort();
+  }
   for (std::size_t n = 0; n < v->voxelCount(); ++n) {
     const double a = v->valueAt(n), b = back->valueAt(n);
-    if (a != b && !(a != a && b != b)) std::abort();  // equal, or both NaN
+    if (a != b && !(a != a && b != b)) {  // equal, or both NaN
+      std::fprintf(stderr, "vdb_fuzz: voxel %zu wrote %g and read back %g\n", n, a, b);
+      std::abort();
+    }
   }
   return 0;
 }
