@@ -500,6 +500,42 @@ MillResult MillableVolume::mill(const MillingTool& tool, const Isometry3& pose, 
   return out;
 }
 
+bool MillableVolume::blockRange(std::uint32_t b, Vec3i& lo, Vec3i& n) const noexcept {
+  if (static_cast<std::size_t>(b) >= blockChanged_.size()) return false;
+  const auto nx = static_cast<std::uint32_t>(blockDims_.x()), ny = static_cast<std::uint32_t>(blockDims_.y());
+  lo = Vec3i(static_cast<int>(b % nx), static_cast<int>((b / nx) % ny), static_cast<int>(b / (nx * ny))) *
+       kBlock;
+  n = (dims_ - lo).cwiseMin(kBlock);
+  return true;
+}
+
+bool MillableVolume::readBlock(std::uint32_t b, std::span<std::uint16_t, kBlockVoxels> out) const noexcept {
+  Vec3i lo, n;
+  if (!blockRange(b, lo, n)) return false;
+  std::fill(out.begin(), out.end(), std::uint16_t{0});
+  for (int k = 0; k < n.z(); ++k)
+    for (int j = 0; j < n.y(); ++j) {
+      const std::uint16_t* row = &occupancy_[index(lo.x(), lo.y() + j, lo.z() + k)];
+      std::copy(row, row + n.x(), &out[static_cast<std::size_t>(kBlock * (j + kBlock * k))]);
+    }
+  return true;
+}
+
+bool MillableVolume::writeBlock(std::uint32_t b, std::span<const std::uint16_t, kBlockVoxels> in) noexcept {
+  Vec3i lo, n;
+  if (!blockRange(b, lo, n)) return false;
+  for (int k = 0; k < n.z(); ++k)
+    for (int j = 0; j < n.y(); ++j)
+      for (int i = 0; i < n.x(); ++i) {
+        std::uint16_t& o = occupancy_[index(lo.x() + i, lo.y() + j, lo.z() + k)];
+        const std::uint16_t v = in[static_cast<std::size_t>(i + kBlock * (j + kBlock * k))];
+        if (o == v) continue;
+        o = v;
+        markChanged(lo.x() + i, lo.y() + j, lo.z() + k);
+      }
+  return true;
+}
+
 // --- surfaces --------------------------------------------------------------
 
 // --- fragments -------------------------------------------------------------
@@ -635,20 +671,17 @@ Result<std::vector<Mesh>> MillableVolume::blockSurfaces(std::span<const std::uin
   std::vector<Mesh> pieces;
   pieces.reserve(blocks.size());
   for (std::uint32_t b : blocks) {
-    if (b >= count)
+    Vec3i first, extent;
+    if (!blockRange(b, first, extent))
       return fail(ErrorCode::InvalidArgument, formatString("block %u is not one of the %zu blocks", b, count),
                   where);
-    const Vec3i bi(static_cast<int>(b % static_cast<std::uint32_t>(blockDims_.x())),
-                   static_cast<int>((b / static_cast<std::uint32_t>(blockDims_.x())) %
-                                    static_cast<std::uint32_t>(blockDims_.y())),
-                   static_cast<int>(b / static_cast<std::uint32_t>(blockDims_.x() * blockDims_.y())));
     // The cells whose lowest corner is in this block: voxels [b·8, b·8 + 8]
     // (the next block's first layer closes the seam), and one layer of empty
     // space beyond the grid on its border so the bone's surface closes there.
     Vec3i lo, hi;
     for (int a = 0; a < 3; ++a) {
-      lo[a] = bi[a] == 0 ? -1 : bi[a] * kBlock;
-      hi[a] = std::min(bi[a] * kBlock + kBlock, dims_[a]);
+      lo[a] = first[a] == 0 ? -1 : first[a];
+      hi[a] = std::min(first[a] + kBlock, dims_[a]);
     }
     const Vec3i n = hi - lo + Vec3i::Ones();
     Affine3 a = indexToWorld_;

@@ -54,7 +54,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   std::error_code ec;
   std::filesystem::remove(file, ec);
   if (!back) {
-    std::fprintf(stderr, "vdb_fuzz: the written volume did not read back: %s\n", back.error().message().c_str());
+    std::fprintf(stderr, "vdb_fuzz: the written volume did not read back: %s\n",
+                 back.error().message().c_str());
     std::abort();
   }
   if (back->dims() != v->dims() || back->type() != v->type()) {

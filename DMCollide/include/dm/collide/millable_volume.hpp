@@ -196,6 +196,19 @@ class MillableVolume {
   /// Blocks per axis.
   const Vec3i& blockDims() const noexcept { return blockDims_; }
 
+  /// Voxels of a block (8³), as readBlock() and writeBlock() copy them.
+  static constexpr std::size_t kBlockVoxels = std::size_t{kBlock} * kBlock * kBlock;
+  /// Copies block b's occupancy (raw, kFull = 1; x fastest; cells beyond
+  /// the grid read 0) into `out`: what changed, for a copy of this volume on
+  /// another thread. False for an unknown block. Real-time safe.
+  bool readBlock(std::uint32_t b, std::span<std::uint16_t, kBlockVoxels> out) const noexcept;
+  /// Sets block b's occupancy from `in` (as readBlock() gives it; cells
+  /// beyond the grid are skipped) and lists the changed blocks as mill()
+  /// does, so a copy kept on a render thread knows which pieces to remesh.
+  /// Removed volume is not counted (it is the original's). False for an
+  /// unknown block.
+  bool writeBlock(std::uint32_t b, std::span<const std::uint16_t, kBlockVoxels> in) noexcept;
+
   /// The bone's connected pieces after sawing: voxels at least half full,
   /// joined across faces (6-connected; pieces that touch only along an edge
   /// or at a corner are apart, as the 0.5 surface separates them), each with
@@ -233,6 +246,8 @@ class MillableVolume {
                 static_cast<std::size_t>(dims_.y()) * static_cast<std::size_t>(k));
   }
   void markChanged(int i, int j, int k) noexcept;
+  /// Block b's first voxel and its extent clipped to the grid; false for an unknown block.
+  bool blockRange(std::uint32_t b, Vec3i& lo, Vec3i& n) const noexcept;
 
   Vec3i dims_ = Vec3i::Zero();
   Affine3 indexToWorld_ = Affine3::Identity();
