@@ -145,11 +145,22 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     return s;
   }
 
+  // The milled bone's surface: what the burr removed since the last frame
+  // (only the changed blocks are remeshed), swapped in before drawing.
+  Status updateMillable() {
+    if (!feed_.millableSurface) return ok();
+    auto changed = feed_.millableSurface(surface_);
+    if (!changed) return changed.error().within("engines/render");
+    if (*changed) return view_.updateObjectMesh(feed_.millableObject, surface_);
+    return ok();
+  }
+
   // A frame while loading, neither counted nor written: the driver compiles
   // the frame's shader variants (llvmpipe JIT-compiles them at the first
   // draw, ~200 ms) and the HUD's atlas and plot here, not in the first
   // real-time period, which would cost the run its first frames.
   Status warmUp() {
+    if (auto s = updateMillable(); !s) return s;  // the whole bone's surface, meshed once here
     if (auto r = view_.render(target_, camera_, 0.0); !r) return r.error();
     hud(0.0, false, Vec3::Zero());
     overlay_.begin(target_);
@@ -175,6 +186,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   std::vector<double> renderMs_;
   std::vector<float> recent_;
   std::vector<Isometry3> poses_;  // of feed_.movingObjects
+  Mesh surface_;                  // the milled object's, as drawn
   Error error_;
   TickTime time_;
 
@@ -196,6 +208,11 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
           error_ = s.error();
           return false;
         }
+    if (auto s = updateMillable(); !s) {
+      error_ = s.error();
+      ctx_->release();
+      return false;
+    }
     const bool haptics = feed_.haptics && feed_.haptics(proxy, force);
     if (haptics && !proxyObject_.empty()) {
       if (auto s = view_.setObjectPose(proxyObject_, proxy); !s) {

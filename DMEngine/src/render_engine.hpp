@@ -3,6 +3,7 @@
 // writer thread for the frames. Compiled only when DMRenderer exists.
 #pragma once
 
+#include <dm/core/mesh.hpp>
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
 #include <dm/engine/engine.hpp>
@@ -31,6 +32,11 @@ struct RenderFeed {
   /// since the last call (the objects stay where they were drawn).
   std::vector<std::string> movingObjects;
   std::function<bool(std::vector<Isometry3>& poses)> objectPoses;
+  /// The object a burr mills, and its surface: true (and the whole surface)
+  /// when it changed since the last call and on the first call
+  /// (dm::MillableSurfaceFeed::update); empty when nothing is milled.
+  std::string millableObject;
+  std::function<Result<bool>(Mesh& surface)> millableSurface;
 };
 
 /// Counters of a render engine (control thread, after stop).

@@ -24,6 +24,7 @@
 #include <dm/network/teleop.hpp>
 #endif
 #include "physics_engine.hpp"
+#include "surgery.hpp"
 #ifdef DM_ENGINE_HAVE_RENDERER
 #include "render_engine.hpp"
 #endif
@@ -65,16 +66,17 @@ class HapticsEngine final : public Engine {
   std::string_view name() const noexcept override { return "haptics"; }
   bool tick(const TickInfo& info) noexcept override {
     loop->tick(info);
+    if (boneFeed) boneFeed->publish(burr->volume());  // the drilled blocks, to the render engine
     const HapticLoopSample& s = loop->lastSample();
     ProbeSample p;
     p.t = time.seconds(info);  // scene time, also in real time
     p.devicePose = s.input.devicePose;
     p.response = s.response;
     p.response.force = loop->config().deviceToWorld.linear() * s.deviceForce;  // what was sent, world frame
-    if (tools != nullptr) {
+    if (tools != nullptr && godObject != nullptr) {
       // Newton's third law: what pushes the hand pushes the object back,
       // where the proxy touches it, for as long as the command holds.
-      const GodObjectContact& c = renderer->contact();
+      const GodObjectContact& c = godObject->contact();
       if (c.active) {
         tools->add(c.object, -p.response.force, c.point, info.dt());
         tools->publish();
@@ -84,7 +86,12 @@ class HapticsEngine final : public Engine {
     return true;
   }
   std::unique_ptr<HapticDevice> device;
-  std::unique_ptr<GodObjectRenderer> renderer;
+  std::unique_ptr<HapticRenderer> renderer;
+  GodObjectRenderer* godObject = nullptr;  // = renderer, when it is the god-object
+  BurrRenderer* burr = nullptr;            // = renderer, when it is the burr
+  std::unique_ptr<MillableSurfaceFeed> boneFeed;
+  std::string milledObject;
+  double boneVolume = 0.0;  // m³ before milling
   std::unique_ptr<HapticLoop> loop;
   ToolImpulseChannel* tools = nullptr;  // owned by the physics engine
   SpscRing<ProbeSample, 16384> ring;
@@ -257,45 +264,34 @@ struct SceneRuntime::Impl {
   bool ran = false;
 
   Status buildHaptics(bool lockstep);
+  Result<std::unique_ptr<GodObjectRenderer>> buildGodObject();
   Status buildEngines(bool lockstep, const SceneRunOptions& options, const std::filesystem::path& out);
 };
 
 Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   const SceneHapticsEngine& h = *scene.engines.haptics;
   const std::string where = "engines/haptics";
-  if (h.renderer != SceneHapticsEngine::Renderer::GodObject)
-    return fail(ErrorCode::Unsupported, "dmplatform run drives the god-object renderer only",
-                where + "/renderer",
-                "use \"god-object\"; the VPS and sphere-tree renderers run through dmtool probe and the SDK");
-  std::vector<GodObjectObject> objects;
-  for (const std::string& name : h.objects) {
-    const SceneObject* o = scene.object(name);
-    if (o == nullptr) return fail(ErrorCode::NotFound, "no object \"" + name + "\"", where + "/objects");
-    const SceneMaterial* mat = scene.material(o->material);
-    if (mat == nullptr || !mat->haptic)
-      return fail(ErrorCode::InvalidArgument, "touchable object \"" + name + "\" has no haptic material",
-                  "objects/" + name + "/material",
-                  "give its material a \"haptic\" block with stiffness (N/m) and friction");
-    auto mesh = resources.mesh(o->mesh);
-    if (!mesh) return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", "objects/" + name);
-    auto bvh = objectBvh(*mesh, o->scale);
-    if (!bvh) return bvh.error().within("objects/" + name);
-    GodObjectObject g;
-    g.bvh = std::make_shared<const MeshBvh>(std::move(*bvh));
-    g.pose = o->pose.isometry();
-    g.material = {.stiffness = mat->haptic->stiffness,
-                  .damping = mat->haptic->damping,
-                  .staticFriction = mat->haptic->staticFriction,
-                  .dynamicFriction = mat->haptic->dynamicFriction};
-    objects.push_back(std::move(g));
+  auto e = std::make_shared<HapticsEngine>();
+  if (h.renderer == SceneHapticsEngine::Renderer::Burr) {
+    auto b = buildSceneBurr(scene, resources);
+    if (!b) return b.error();
+    e->burr = b->renderer.get();
+    e->renderer = std::move(b->renderer);
+    e->boneFeed = std::move(b->feed);
+    e->milledObject = b->object;
+    e->boneVolume = b->initialVolume;
+  } else if (h.renderer == SceneHapticsEngine::Renderer::GodObject) {
+    auto g = buildGodObject();
+    if (!g) return g.error();
+    e->godObject = g->get();
+    e->renderer = std::move(*g);
+  } else {
+    return fail(
+        ErrorCode::Unsupported, "dmplatform run drives the god-object and burr renderers",
+        where + "/renderer",
+        "use \"god-object\" or \"burr\"; the VPS and sphere-tree renderers run through dmtool probe and "
+        "the SDK");
   }
-  GodObjectOptions go;
-  go.proxyRadius = h.toolRadius;
-  go.forceShading = h.forceShading;
-  if (h.maxForce > 0) go.maxForce = h.maxForce;
-  auto renderer = GodObjectRenderer::create(std::move(objects), go);
-  if (!renderer) return renderer.error().within(where);
-
   const SceneDevice* dev = scene.device(h.device);
   if (dev == nullptr) return fail(ErrorCode::NotFound, "no device \"" + h.device + "\"", where + "/device");
   linker = std::make_unique<PluginLinker>(registry);
@@ -324,10 +320,8 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   auto device = HapticDevice::open(registry, dev->driver, params);
   if (!device) return device.error().within("devices/" + dev->name);
 
-  auto e = std::make_shared<HapticsEngine>();
   e->device = std::move(*device);
-  e->renderer = std::move(*renderer);
-  e->tools = physics ? physics->toolImpulses() : nullptr;
+  e->tools = physics && e->godObject != nullptr ? physics->toolImpulses() : nullptr;
   HapticLoopConfig config;
   config.loop = {.rate_hz = h.rateHz, .name = "haptics"};
   config.deviceToWorld = h.devicePose.isometry();
@@ -342,6 +336,40 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   e->loop = std::move(*loop);
   haptics = e;
   return ok();
+}
+
+Result<std::unique_ptr<GodObjectRenderer>> SceneRuntime::Impl::buildGodObject() {
+  const SceneHapticsEngine& h = *scene.engines.haptics;
+  const std::string where = "engines/haptics";
+  std::vector<GodObjectObject> objects;
+  for (const std::string& name : h.objects) {
+    const SceneObject* o = scene.object(name);
+    if (o == nullptr) return fail(ErrorCode::NotFound, "no object \"" + name + "\"", where + "/objects");
+    const SceneMaterial* mat = scene.material(o->material);
+    if (mat == nullptr || !mat->haptic)
+      return fail(ErrorCode::InvalidArgument, "touchable object \"" + name + "\" has no haptic material",
+                  "objects/" + name + "/material",
+                  "give its material a \"haptic\" block with stiffness (N/m) and friction");
+    auto mesh = resources.mesh(o->mesh);
+    if (!mesh) return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", "objects/" + name);
+    auto bvh = objectBvh(*mesh, o->scale);
+    if (!bvh) return bvh.error().within("objects/" + name);
+    GodObjectObject g;
+    g.bvh = std::make_shared<const MeshBvh>(std::move(*bvh));
+    g.pose = o->pose.isometry();
+    g.material = {.stiffness = mat->haptic->stiffness,
+                  .damping = mat->haptic->damping,
+                  .staticFriction = mat->haptic->staticFriction,
+                  .dynamicFriction = mat->haptic->dynamicFriction};
+    objects.push_back(std::move(g));
+  }
+  GodObjectOptions go;
+  go.proxyRadius = h.toolRadius;
+  go.forceShading = h.forceShading;
+  if (h.maxForce > 0) go.maxForce = h.maxForce;
+  auto renderer = GodObjectRenderer::create(std::move(objects), go);
+  if (!renderer) return renderer.error().within(where);
+  return std::move(*renderer);
 }
 
 nlohmann::json engineStatsJson(const std::vector<EngineStats>& stats) {
@@ -411,6 +439,10 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
         return true;
       };
       feed.recentForce = [r = &recent](std::vector<float>& v, double& secs) { r->copy(v, secs); };
+      if (h->boneFeed) {
+        feed.millableObject = h->milledObject;
+        feed.millableSurface = [f = h->boneFeed.get()](Mesh& surface) { return f->update(surface); };
+      }
     }
     auto made = makeRenderEngine(scene, resources, std::move(feed),
                                  scene.outputs.frames ? out / "frames" : std::filesystem::path(),
@@ -599,7 +631,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
                        {"cpu_steal_s", hostAfter->steal_s - hostBefore->steal_s}};
   if (im.haptics) {
     const HapticLoopStats hs = im.haptics->loop->stats();
-    summary["haptics"] = {{"renderer", "god-object"},
+    summary["haptics"] = {{"renderer", im.haptics->burr != nullptr ? "burr" : "god-object"},
                           {"device", scene.engines.haptics->device},
                           {"ticks", trace.size()},
                           {"contact_ticks", contactTicks},
@@ -612,6 +644,8 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
                           {"safety_fault_ticks", hs.faultTicks},
                           {"trace_dropped", im.haptics->dropped.load()}};
   }
+  if (im.haptics && im.haptics->burr != nullptr)
+    summary["burr"] = burrSummary(*im.haptics->burr, im.haptics->boneFeed.get(), im.haptics->boneVolume);
   if (im.physics) {
     summary["physics"] = im.physics->summary();
     summary["physics"]["rate_hz"] = scene.engines.physics->rateHz;

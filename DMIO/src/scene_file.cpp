@@ -15,19 +15,19 @@
 #include <set>
 #include <utility>
 
+#include "scene_parse.hpp"
+
 namespace dm {
 
 namespace fs = std::filesystem;
 
 namespace {
 
+using namespace scene_parse;
+
 constexpr std::string_view kFormatName = "dmplatform-scene";
 constexpr std::size_t kMaxDepth = 64;
 constexpr std::size_t kMaxSceneBytes = std::size_t{16} << 20;
-// A quaternion this far from unit length is a mistake, not rounding.
-constexpr double kUnitTolerance = 1e-3;
-// Closer to unit than this is kept bit for bit, so toJson() round trips.
-constexpr double kRenormalize = 1e-9;
 // Past this many problems, dangling names get no "did you mean".
 constexpr std::size_t kMaxSuggestions = 200;
 
@@ -38,177 +38,7 @@ constexpr std::array<std::string_view, 3> kVolumeModes{"composite", "mip", "slic
 constexpr std::array<std::string_view, 3> kAxes{"axial", "coronal", "sagittal"};
 constexpr std::array<std::string_view, 3> kLightTypes{"directional", "point", "spot"};
 constexpr std::array<std::string_view, 2> kProjections{"perspective", "orthographic"};
-constexpr std::array<std::string_view, 3> kRenderers{"god-object", "vps", "sphere-tree"};
-
-template <class E, std::size_t N>
-std::string nameOf(E e, const std::array<std::string_view, N>& names) {
-  return std::string(names[static_cast<std::size_t>(e)]);
-}
-
-template <std::size_t N, std::size_t... I>
-std::string oneOfArray(ConfigReader& r, std::string_view key, const std::array<std::string_view, N>& names,
-                       std::optional<std::string> fallback, std::index_sequence<I...>) {
-  return r.oneOf(key, {names[I]...}, std::move(fallback));
-}
-
-// An enum value named by one of `names`; nullopt (and an error) when it is
-// missing without a fallback or not one of them.
-template <class E, std::size_t N>
-std::optional<E> readEnum(ConfigReader& r, std::string_view key, const std::array<std::string_view, N>& names,
-                          std::optional<E> fallback = std::nullopt) {
-  const std::size_t before = r.errors().size();
-  std::optional<std::string> fb;
-  if (fallback) fb = nameOf(*fallback, names);
-  const std::string s = oneOfArray(r, key, names, fb, std::make_index_sequence<N>{});
-  if (r.errors().size() != before) return std::nullopt;
-  const auto it = std::find(names.begin(), names.end(), s);
-  return static_cast<E>(it - names.begin());
-}
-
-// The candidate closest to `word` by edit distance, if it is plausibly a
-// typo (at most max(2, length / 3) edits, like dm::closestMatch).
-std::string nearestName(std::string_view word, const std::vector<std::string>& names) {
-  if (word.size() > 256) return {};
-  const std::size_t limit = std::max<std::size_t>(2, word.size() / 3);
-  std::string best;
-  std::size_t bestD = limit + 1;
-  for (const std::string& n : names) {
-    // The length difference bounds the distance from below: skip early.
-    const std::size_t diff = n.size() > word.size() ? n.size() - word.size() : word.size() - n.size();
-    if (diff >= bestD) continue;
-    const std::size_t d = editDistance(word, n);
-    if (d < bestD) {
-      bestD = d;
-      best = n;
-    }
-  }
-  return best;
-}
-
-std::string inQuotes(std::string_view s) { return "\"" + std::string(s) + "\""; }
-
-bool isNull(const ConfigReader& r) { return r.node().is_null(); }
-
-// True if `r` is an object; records an error if it is present but is not.
-bool expectObject(ConfigReader& r) {
-  if (r.isObject()) return true;
-  if (!isNull(r)) r.addError(std::string("expected an object, got ") + r.node().type_name());
-  return false;
-}
-
-bool expectArray(ConfigReader& r) {
-  if (r.isArray()) return true;
-  if (!isNull(r)) r.addError(std::string("expected an array, got ") + r.node().type_name());
-  return false;
-}
-
-Vec3 readVec3(ConfigReader& r, std::string_view key, const Vec3& fallback) {
-  const std::vector<double> v =
-      r.numbers(key, 3, std::vector<double>{fallback.x(), fallback.y(), fallback.z()});
-  return {v[0], v[1], v[2]};
-}
-
-Vec3 readVec3(ConfigReader& r, std::string_view key) {
-  const std::vector<double> v = r.numbers(key, 3);
-  return {v[0], v[1], v[2]};
-}
-
-// A unit vector: any non-zero length is normalised (lengths within 1e-9 of
-// one are kept as written, so a written scene reads back bit for bit).
-Vec3 readDirection(ConfigReader& r, std::string_view key, const Vec3& fallback) {
-  const std::size_t before = r.errors().size();
-  Vec3 d = readVec3(r, key, fallback);
-  if (r.errors().size() != before) return fallback;
-  const double n = d.norm();
-  if (!(n > 1e-12)) {
-    r.addError("direction has zero length", key, "give a non-zero vector, e.g. [0, 0, -1]");
-    return fallback;
-  }
-  if (std::abs(n - 1.0) > kRenormalize) d /= n;
-  return d;
-}
-
-// A number that must be > 0 (and ≤ max).
-double readPositive(ConfigReader& r, std::string_view key, std::optional<double> fallback,
-                    double max = std::numeric_limits<double>::infinity()) {
-  const std::size_t before = r.errors().size();
-  const double v = r.number(key, {.min = 0.0, .max = max}, fallback);
-  if (r.errors().size() == before && !(v > 0.0)) {
-    r.addError("value must be greater than 0", key);
-    return fallback.value_or(1.0);
-  }
-  return v;
-}
-
-// Linear colour [r, g, b] (or [r, g, b, a] when alpha is allowed), each
-// component in [0, max].
-Vec4 readColor(ConfigReader& r, std::string_view key, const Vec4& fallback, bool alpha, double max = 1.0) {
-  if (!r.has(key)) return fallback;
-  ConfigReader c = r.child(key);
-  const Json& j = c.node();
-  if (!j.is_array() || !(j.size() == 3 || (alpha && j.size() == 4))) {
-    if (j.is_array())
-      c.addError("expected " + std::string(alpha ? "[r, g, b] or [r, g, b, a]" : "[r, g, b]") + ", got " +
-                     std::to_string(j.size()) + " numbers",
-                 {}, "give linear colour components between 0 and 1");
-    return fallback;
-  }
-  Vec4 out(0.0, 0.0, 0.0, 1.0);
-  for (std::size_t i = 0; i < j.size(); ++i) {
-    const Json& e = j[i];
-    if (!e.is_number() || !std::isfinite(e.get<double>())) {
-      c.addError("expected a number, got " + std::string(e.type_name()), std::to_string(i));
-      continue;
-    }
-    const double v = e.get<double>();
-    if (v < 0.0 || v > max) {
-      c.addError(formatString("component %g is outside [0, %g]", v, max), std::to_string(i),
-                 "colours are linear, 0..1 (not 0..255)");
-      continue;
-    }
-    out[static_cast<Eigen::Index>(i)] = v;
-  }
-  return out;
-}
-
-// {"position": [x, y, z], "rotation": [w, x, y, z]} or {..., "euler_deg": [rx, ry, rz]}.
-Pose readPose(ConfigReader p) {
-  Pose out;
-  if (!expectObject(p)) return out;
-  p.knownKeys({"position", "rotation", "euler_deg"});
-  out.p = readVec3(p, "position", Vec3::Zero());
-  if (p.has("rotation") && p.has("euler_deg")) {
-    p.addError("both \"rotation\" and \"euler_deg\" are given", "euler_deg", "give only one of them");
-    return out;
-  }
-  const std::size_t before = p.errors().size();
-  if (p.has("rotation")) {
-    const std::vector<double> q = p.numbers("rotation", 4);
-    if (p.errors().size() != before) return out;
-    Quat r(q[0], q[1], q[2], q[3]);
-    const double n = r.norm();
-    if (!(std::abs(n - 1.0) <= kUnitTolerance)) {
-      p.addError(formatString("rotation quaternion has length %g, not 1", n), "rotation",
-                 "give a unit quaternion [w, x, y, z], or use \"euler_deg\": [rx, ry, rz]");
-      return out;
-    }
-    if (std::abs(n - 1.0) > kRenormalize) r.normalize();
-    out.q = r;
-  } else if (p.has("euler_deg")) {
-    const Vec3 e = readVec3(p, "euler_deg") * units::deg;
-    if (p.errors().size() != before) return out;
-    out.q =
-        (AngleAxis(e.z(), Vec3::UnitZ()) * AngleAxis(e.y(), Vec3::UnitY()) * AngleAxis(e.x(), Vec3::UnitX()))
-            .normalized();
-  }
-  return out;
-}
-
-Json toJson(const Vec3& v) { return Json::array({v.x(), v.y(), v.z()}); }
-Json toJson(const Vec4& v) { return Json::array({v.x(), v.y(), v.z(), v.w()}); }
-Json toJson(const Pose& p) {
-  return {{"position", toJson(p.p)}, {"rotation", Json::array({p.q.w(), p.q.x(), p.q.y(), p.q.z()})}};
-}
+constexpr std::array<std::string_view, 4> kRenderers{"god-object", "vps", "sphere-tree", "burr"};
 
 // Finds keys that occur twice in one JSON object: nlohmann keeps only the
 // last, which would silently drop e.g. one of two resources named "skin".
@@ -360,6 +190,7 @@ class SceneParser {
     engines();
     outputs();
     physicsBodies();
+    checkSurgery(scene_, root_);
   }
 
   bool badVersion() const { return badVersion_; }
@@ -515,7 +346,7 @@ class SceneParser {
       if (fits(x)) fitting.push_back(x.name);
     if (res) {
       r.addError("resource " + inQuotes(name) + " is " + (res->type == Type::Image ? "an " : "a ") +
-                     nameOf(res->type, kResourceTypes) + ", not " + kind,
+                     enumName(res->type, kResourceTypes) + ", not " + kind,
                  key, fitting.empty() ? "define one under \"resources\"" : "use one of: " + joined(fitting));
       return;
     }
@@ -644,7 +475,8 @@ class SceneParser {
       ConfigReader r = sec.at(i);
       if (!expectObject(r)) continue;
       r.knownKeys({"name", "mesh", "render_mesh", "material", "pose", "scale", "visible", "haptic", "dynamic",
-                   "mass", "density", "velocity", "angular_velocity", "collide", "contact"});
+                   "mass", "density", "velocity", "angular_velocity", "collide", "contact", "millable",
+                   "critical"});
       SceneObject o;
       o.name = uniqueName(r, objectIndex_, scene_.objects.size());
       std::size_t before = r.errors().size();
@@ -666,6 +498,8 @@ class SceneParser {
       o.haptic = r.boolean("haptic", false);
       o.dynamic = r.boolean("dynamic", false);
       rigidBody(r, o);
+      if (v2Key(r, "millable")) readMillable(r, o);
+      if (v2Key(r, "critical")) readCritical(r, o);
       if (r.has("material") && !o.material.empty() &&
           checkName(r, "material", o.material, materialIndex_, "material", "materials")) {
         if (o.haptic && !scene_.materials[materialIndex_.at(o.material)].haptic)
@@ -1042,7 +876,7 @@ class SceneParser {
   void hapticsEngine(ConfigReader r) {
     if (!expectObject(r)) return;
     r.knownKeys({"rate_hz", "renderer", "device", "object", "objects", "tool_radius", "device_pose",
-                 "max_force", "force_shading", "proxy_object"});
+                 "max_force", "force_shading", "proxy_object", "burr"});
     SceneHapticsEngine h;
     h.rateHz = r.number("rate_hz", {.min = 100.0, .max = 10000.0}, h.rateHz);
     h.renderer =
@@ -1087,6 +921,7 @@ class SceneParser {
         r.addError("the proxy object " + inQuotes(h.proxyObject) + " is also a touched object",
                    "proxy_object", "show the tool with its own object");
     }
+    if (v2Key(r, "burr")) readBurr(r, h);
     scene_.engines.haptics = std::move(h);
   }
 
@@ -1185,14 +1020,15 @@ bool SceneObject::operator==(const SceneObject& o) const {
          pose.p == o.pose.p && pose.q.coeffs() == o.pose.q.coeffs() && scale == o.scale &&
          visible == o.visible && haptic == o.haptic && dynamic == o.dynamic && mass == o.mass &&
          density == o.density && velocity == o.velocity && angularVelocity == o.angularVelocity &&
-         collide == o.collide && friction == o.friction && restitution == o.restitution;
+         collide == o.collide && friction == o.friction && restitution == o.restitution &&
+         millable == o.millable && critical == o.critical;
 }
 
 bool SceneHapticsEngine::operator==(const SceneHapticsEngine& o) const {
   return rateHz == o.rateHz && renderer == o.renderer && device == o.device && objects == o.objects &&
          toolRadius == o.toolRadius && devicePose.p == o.devicePose.p &&
          devicePose.q.coeffs() == o.devicePose.q.coeffs() && maxForce == o.maxForce &&
-         forceShading == o.forceShading;
+         forceShading == o.forceShading && proxyObject == o.proxyObject && burr == o.burr;
 }
 
 const SceneResource* SceneDesc::resource(std::string_view n) const { return findNamed(resources, n); }
@@ -1279,7 +1115,7 @@ Json toJson(const SceneDesc& scene) {
 
   Json resources = Json::object();
   for (const SceneResource& r : scene.resources) {
-    Json o = {{"type", nameOf(r.type, kResourceTypes)}};
+    Json o = {{"type", enumName(r.type, kResourceTypes)}};
     switch (r.type) {
       case Type::Mesh:
         o["source"] = r.source;
@@ -1300,7 +1136,7 @@ Json toJson(const SceneDesc& scene) {
         o["downsample"] = r.downsample;
         break;
       case Type::Shape:
-        o["shape"] = nameOf(r.shape, kShapes);
+        o["shape"] = enumName(r.shape, kShapes);
         if (r.shape == S::Sphere || r.shape == S::Capsule || r.shape == S::Cylinder) o["radius"] = r.radius;
         if (r.shape == S::Capsule || r.shape == S::Cylinder) o["height"] = r.height;
         if (r.shape == S::Box) o["half_extents"] = toJson(r.halfExtents);
@@ -1314,7 +1150,7 @@ Json toJson(const SceneDesc& scene) {
 
   Json materials = Json::object();
   for (const SceneMaterial& m : scene.materials) {
-    Json o = {{"model", nameOf(m.model, kMaterialModels)},
+    Json o = {{"model", enumName(m.model, kMaterialModels)},
               {"color", toJson(m.color)},
               {"emissive", toJson(m.emissive)}};
     if (m.model == SceneMaterial::Model::BlinnPhong) {
@@ -1353,6 +1189,7 @@ Json toJson(const SceneDesc& scene) {
     }
     e["collide"] = o.collide;
     e["contact"] = {{"friction", o.friction}, {"restitution", o.restitution}};
+    writeSurgery(o, e);
     objects.push_back(std::move(e));
   }
   j["objects"] = std::move(objects);
@@ -1361,7 +1198,7 @@ Json toJson(const SceneDesc& scene) {
   for (const SceneVolume& v : scene.volumes) {
     Json e = {{"name", v.name},
               {"volume", v.volume},
-              {"mode", nameOf(v.mode, kVolumeModes)},
+              {"mode", enumName(v.mode, kVolumeModes)},
               {"visible", v.visible}};
     if (!v.transferFunction.empty()) {
       Json points = Json::array();
@@ -1370,14 +1207,14 @@ Json toJson(const SceneDesc& scene) {
       e["transfer_function"] = {{"points", std::move(points)}};
     }
     if (v.mode == SceneVolume::Mode::Slice)
-      e["slice"] = {{"axis", nameOf(v.sliceAxis, kAxes)}, {"position", v.slicePosition}};
+      e["slice"] = {{"axis", enumName(v.sliceAxis, kAxes)}, {"position", v.slicePosition}};
     volumes.push_back(std::move(e));
   }
   j["volumes"] = std::move(volumes);
 
   Json lights = Json::array();
   for (const SceneLight& l : scene.lights) {
-    Json e = {{"type", nameOf(l.type, kLightTypes)},
+    Json e = {{"type", enumName(l.type, kLightTypes)},
               {"color", toJson(l.color)},
               {"intensity", l.intensity},
               {"shadows", l.shadows}};
@@ -1397,7 +1234,7 @@ Json toJson(const SceneDesc& scene) {
   Json cameras = Json::array();
   for (const SceneCamera& c : scene.cameras) {
     Json e = {{"name", c.name},
-              {"projection", nameOf(c.projection, kProjections)},
+              {"projection", enumName(c.projection, kProjections)},
               {"position", toJson(c.position)},
               {"target", toJson(c.target)},
               {"up", toJson(c.up)},
@@ -1432,12 +1269,18 @@ Json toJson(const SceneDesc& scene) {
 
   Json engines = Json::object();
   if (const auto& h = scene.engines.haptics)
-    engines["haptics"] = {{"rate_hz", h->rateHz},         {"renderer", nameOf(h->renderer, kRenderers)},
+    engines["haptics"] = {{"rate_hz", h->rateHz},         {"renderer", enumName(h->renderer, kRenderers)},
                           {"device", h->device},          {"objects", h->objects},
                           {"tool_radius", h->toolRadius}, {"device_pose", toJson(h->devicePose)},
                           {"max_force", h->maxForce},     {"force_shading", h->forceShading}};
   if (scene.engines.haptics && !scene.engines.haptics->proxyObject.empty())
     engines["haptics"]["proxy_object"] = scene.engines.haptics->proxyObject;
+  if (scene.engines.haptics && scene.engines.haptics->burr) {
+    // The burr's tool is its block: no proxy radius, no force shading.
+    engines["haptics"].erase("tool_radius");
+    engines["haptics"].erase("force_shading");
+    writeBurr(*scene.engines.haptics->burr, engines["haptics"]);
+  }
   if (const auto& p = scene.engines.physics)
     engines["physics"] = {{"rate_hz", p->rateHz}, {"gravity", toJson(p->gravity)}, {"sleep", p->sleep}};
   if (const auto& r = scene.engines.render) {

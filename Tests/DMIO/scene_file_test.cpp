@@ -15,15 +15,13 @@
 #include <fstream>
 #include <string>
 
+#include "scene_test_support.hpp"
+
 namespace {
 
 namespace fs = std::filesystem;
 using dm::Json;
-
-fs::path sourceDir() {
-  if (const char* s = std::getenv("DM_SOURCE_DIR")) return s;
-  return fs::path(__FILE__).parent_path().parent_path().parent_path();
-}
+using namespace scene_test;
 
 // A small valid scene that the error tests break one key at a time.
 Json baseScene() {
@@ -59,22 +57,6 @@ Json baseScene() {
       "render": {"camera": "main"}
     }
   })");
-}
-
-std::vector<dm::Error> problemsOf(const Json& scene, dm::ErrorCode* code = nullptr) {
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(scene.dump(), "scene.json", "/data/scenes", &problems);
-  EXPECT_FALSE(s) << "the scene was expected to be invalid";
-  if (!s && code) *code = s.error().code;
-  return problems;
-}
-
-// The one problem recorded at `pointer`, or nullptr (with a failure listing all).
-const dm::Error* at(const std::vector<dm::Error>& problems, const std::string& pointer) {
-  for (const dm::Error& e : problems)
-    if (e.where == "scene.json: " + pointer) return &e;
-  ADD_FAILURE() << "no problem at " << pointer << "; got:\n" << dm::formatSceneErrors(problems);
-  return nullptr;
 }
 
 TEST(SceneFile, BaseSceneIsValid) {
@@ -747,7 +729,7 @@ TEST(SceneFile, ToJsonWritesEveryKeyAndReadsBackEqual) {
 }
 
 TEST(SceneFile, BundledSceneRoundTrips) {
-  for (const char* name : {"head_probe.json", "head_probe_teleop.json", "box_push.json"}) {
+  for (const char* name : {"head_probe.json", "head_probe_teleop.json", "box_push.json", "burr_hole.json"}) {
     auto a = dm::readScene(sourceDir() / "examples/scenes" / name);
     ASSERT_TRUE(a) << a.error();
     auto b = dm::parseScene(dm::toJson(*a).dump(2), "written.json", a->baseDir);

@@ -115,6 +115,24 @@ struct SceneMaterial {
   bool operator==(const SceneMaterial&) const = default;
 };
 
+/// Bone that a burr mills (v2 "millable"): the object's mesh as fractional
+/// occupancy on a grid (dm::MillableVolume), touched by the burr renderer.
+struct SceneMillable {
+  double voxelSize = 0.0;   ///< m, > 0, ≤ 0.01: the grid spacing
+  double hardness = 0.5e9;  ///< Pa, > 0: Archard hardness (cortical bone ≈ 0.3–0.7 GPa)
+
+  bool operator==(const SceneMillable&) const = default;
+};
+
+/// A critical structure (nerve, vessel, dura; v2 "critical"): where it lies
+/// inside the millable bone's grid it is a forbidden material the burr can
+/// remove (a violation, counted), and the burr's distance to it is measured.
+struct SceneCritical {
+  double hardness = 0.05e9;  ///< Pa, > 0
+
+  bool operator==(const SceneCritical&) const = default;
+};
+
 /// A mesh placed in the world.
 struct SceneObject {
   std::string name;
@@ -133,8 +151,10 @@ struct SceneObject {
   /// Takes part in rigid contact when the physics engine runs (v2). The
   /// haptics engine's proxy_object never does: it is the tool's picture.
   bool collide = true;
-  double friction = 0.5;     ///< rigid contact: Coulomb μ, 0..10 (v2 "contact")
-  double restitution = 0.0;  ///< rigid contact: coefficient of restitution, 0..1 (v2 "contact")
+  double friction = 0.5;                  ///< rigid contact: Coulomb μ, 0..10 (v2 "contact")
+  double restitution = 0.0;               ///< rigid contact: coefficient of restitution, 0..1 (v2 "contact")
+  std::optional<SceneMillable> millable;  ///< v2: bone the burr renderer mills
+  std::optional<SceneCritical> critical;  ///< v2: a structure the burr must not reach
 
   bool operator==(const SceneObject& o) const;
 };
@@ -241,9 +261,28 @@ struct SceneDevice {
   bool operator==(const SceneDevice&) const = default;
 };
 
+/// The burr of the burr renderer (v2 "burr"): its cutting part and model
+/// (dm::BurrOptions; stiffness and damping come from the milled object's
+/// haptic material).
+struct SceneBurr {
+  enum class Shape : std::uint8_t { Sphere, Cylinder };
+
+  Shape shape = Shape::Sphere;
+  double radius = 0.0;            ///< m, > 0, ≤ 0.05
+  double halfLength = 0.0;        ///< m, cylinder only: > 0, ≤ 0.05, along the tool's z
+  double rpm = 80000.0;           ///< 0..200000
+  double wear = 0.1;              ///< Archard wear coefficient, 0..10
+  double walk = 0.3;              ///< tangential / normal force of the spinning burr, 0..10
+  double vibration = 0.05;        ///< vibration force / normal force, 0..10
+  double vibrationHz = 160.0;     ///< ≥ 0, below half the haptic rate
+  double warningDistance = 1e-3;  ///< m, 0..0.1: nearer a critical structure counts as time within the margin
+
+  bool operator==(const SceneBurr&) const = default;
+};
+
 /// The haptic engine: one device rendering contact with objects.
 struct SceneHapticsEngine {
-  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree };
+  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr };
 
   double rateHz = 1000.0;  ///< 100..10000
   Renderer renderer = Renderer::GodObject;
@@ -253,7 +292,8 @@ struct SceneHapticsEngine {
   Pose devicePose;                   ///< device frame → world
   double maxForce = 0.0;             ///< N, ≥ 0 (0: the device's limit)
   bool forceShading = false;
-  std::string proxyObject;  ///< an object whose pose follows the proxy (the tool shown), or empty
+  std::string proxyObject;        ///< an object whose pose follows the proxy (the tool shown), or empty
+  std::optional<SceneBurr> burr;  ///< v2: with renderer "burr" (and only then)
 
   bool operator==(const SceneHapticsEngine& o) const;
 };

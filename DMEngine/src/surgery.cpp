@@ -1,0 +1,140 @@
+// surgery.cpp — the millable bone, critical structures and burr of a scene.
+#include "surgery.hpp"
+
+#include <dm/collide/voxel_model.hpp>
+#include <dm/io/scene_file.hpp>
+#include <dm/io/scene_resources.hpp>
+#include <dm/math/voxelize.hpp>
+
+#include <cmath>
+#include <limits>
+
+namespace dm {
+
+namespace {
+
+// The mesh of object `o` in the frame `toFrame` (object frame → that
+// frame), its scale baked in.
+Result<Mesh> placedMesh(const SceneResources& resources, const SceneObject& o, const Isometry3& toFrame) {
+  auto mesh = resources.mesh(o.mesh);
+  if (!mesh) return fail(ErrorCode::NotFound, "mesh \"" + o.mesh + "\" was not loaded", "objects/" + o.name);
+  Mesh m = *mesh;
+  for (Vec3& p : m.positions) p = toFrame * (p * o.scale);
+  m.normals.clear();
+  return m;
+}
+
+}  // namespace
+
+Result<SceneBurrBuild> buildSceneBurr(const SceneDesc& scene, const SceneResources& resources) {
+  const SceneHapticsEngine& h = *scene.engines.haptics;
+  const std::string where = "engines/haptics";
+  const SceneObject* bone = h.objects.size() == 1 ? scene.object(h.objects[0]) : nullptr;
+  if (bone == nullptr || !bone->millable || !h.burr)
+    return fail(ErrorCode::InvalidArgument,
+                "the burr renderer needs one millable object and a \"burr\" block", where);
+  const std::string boneWhere = "objects/" + bone->name;
+  const SceneMaterial* mat = scene.material(bone->material);
+  if (mat == nullptr || !mat->haptic)
+    return fail(ErrorCode::InvalidArgument, "the millable object has no haptic material",
+                boneWhere + "/material", "give its material a \"haptic\" block with the stiffness (N/m)");
+  const double voxel = bone->millable->voxelSize;
+
+  auto boneMesh = placedMesh(resources, *bone, Isometry3::Identity());
+  if (!boneMesh) return boneMesh.error();
+  auto sdf = voxelizeMesh(*boneMesh, {.voxelSize = voxel, .paddingVoxels = 2, .signedDistance = true});
+  if (!sdf) return sdf.error().within(boneWhere + "/millable");
+
+  // Critical structures in the bone's frame: their union is the distance
+  // the burr measures; each is a forbidden material where it lies inside
+  // the grid, and tissue the burr can cut there.
+  std::vector<MillingMaterial> materials{
+      {.name = bone->material.empty() ? bone->name : bone->material, .hardness = bone->millable->hardness}};
+  const Isometry3 boneInverse = bone->pose.isometry().inverse();
+  Mesh allCritical;
+  auto labels = Volume::create(sdf->dims(), VoxelType::U8, sdf->indexToWorld());
+  if (!labels) return labels.error().within(boneWhere);
+  float* d = sdf->data<float>();
+  for (const SceneObject& c : scene.objects) {
+    if (!c.critical) continue;
+    const std::string cWhere = "objects/" + c.name;
+    auto cm = placedMesh(resources, c, boneInverse * c.pose.isometry());
+    if (!cm) return cm.error();
+    auto model = VoxelModel::fromMesh(*cm, {.voxelSize = voxel, .paddingVoxels = 2});
+    if (!model) return model.error().within(cWhere + "/critical");
+    const auto label = static_cast<std::uint8_t>(materials.size());
+    materials.push_back({.name = c.name, .hardness = c.critical->hardness, .forbidden = true});
+    if (materials.size() > 255)
+      return fail(ErrorCode::InvalidArgument, "more than 254 critical structures", cWhere);
+    const Vec3i n = sdf->dims();
+    std::size_t v = 0;
+    for (int k = 0; k < n.z(); ++k)
+      for (int j = 0; j < n.y(); ++j)
+        for (int i = 0; i < n.x(); ++i, ++v) {
+          const double dc = (*model)->distance(sdf->indexToWorld() * Vec3(i, j, k));
+          if (!(dc < 0.5 * voxel)) continue;  // beyond the structure's partial-volume ramp
+          if (dc < d[v]) d[v] = static_cast<float>(dc);
+          if (dc < 0.0 && labels->data<std::uint8_t>()[v] == 0) labels->data<std::uint8_t>()[v] = label;
+        }
+    const auto base = static_cast<std::uint32_t>(allCritical.positions.size());
+    allCritical.positions.insert(allCritical.positions.end(), cm->positions.begin(), cm->positions.end());
+    for (const Triangle& t : cm->triangles)
+      allCritical.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  }
+  auto volume = MillableVolume::fromSdf(*sdf, materials[0]);
+  if (!volume) return volume.error().within(boneWhere + "/millable");
+  if (auto s = volume->setMaterials(materials, &*labels); !s) return s.error().within(boneWhere);
+
+  BurrOptions o;
+  const SceneBurr& b = *h.burr;
+  o.tool = b.shape == SceneBurr::Shape::Cylinder ? MillingTool::cylinder(b.radius, b.halfLength)
+                                                 : MillingTool::sphere(b.radius);
+  o.stiffness = mat->haptic->stiffness;
+  o.damping = mat->haptic->damping;
+  o.rpm = b.rpm;
+  o.wearCoefficient = b.wear;
+  o.walkCoefficient = b.walk;
+  o.vibrationAmplitude = b.vibration;
+  o.vibrationHz = b.vibrationHz;
+  o.warningDistance = b.warningDistance;
+  if (h.maxForce > 0) o.maxForce = h.maxForce;
+  if (!allCritical.triangles.empty()) {
+    auto critical = VoxelModel::fromMesh(allCritical, {.voxelSize = voxel, .paddingVoxels = 2});
+    if (!critical) return critical.error().within("objects (critical)");
+    o.critical = *critical;
+  }
+  auto shared = std::make_shared<MillableVolume>(std::move(*volume));
+  SceneBurrBuild out;
+  auto feed = MillableSurfaceFeed::create(*shared);
+  if (!feed) return feed.error().within(boneWhere);
+  out.feed = std::move(*feed);
+  auto renderer = BurrRenderer::create(shared, o);
+  if (!renderer) return renderer.error().within(where + "/burr");
+  (*renderer)->setObjectPose(0, bone->pose.isometry());
+  out.renderer = std::move(*renderer);
+  out.object = bone->name;
+  out.initialVolume = out.renderer->volume().materialVolume();
+  return out;
+}
+
+nlohmann::json burrSummary(const BurrRenderer& burr, const MillableSurfaceFeed* feed, double initialVolume) {
+  const MillableVolume& v = burr.volume();
+  const BurrMetrics& m = burr.metrics();
+  nlohmann::json removed = nlohmann::json::object();
+  for (std::size_t k = 0; k < v.materials().size(); ++k) removed[v.materials()[k].name] = v.removedVolume(k);
+  nlohmann::json j = {{"removed_m3", removed},
+                      {"removed_total_m3", m.removed},
+                      {"removed_forbidden_m3", m.removedForbidden},
+                      {"initial_m3", initialVolume},
+                      {"remaining_m3", v.materialVolume()},
+                      {"seconds_within_warning", m.secondsWithinWarning},
+                      {"rpm", burr.rpm()},
+                      {"voxel_size_m", v.voxelSize()},
+                      {"dims", {v.dims().x(), v.dims().y(), v.dims().z()}}};
+  j["closest_approach_m"] =
+      std::isfinite(m.closestApproach) ? nlohmann::json(m.closestApproach) : nlohmann::json();
+  if (feed != nullptr) j["surface_blocks_sent"] = feed->blocksSent();
+  return j;
+}
+
+}  // namespace dm

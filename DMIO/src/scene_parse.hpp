@@ -1,0 +1,211 @@
+// scene_parse.hpp (private) — the readers shared by the scene file's
+// sections (scene_file.cpp) and its surgical keys (scene_surgery.cpp):
+// enums by name, vectors, colours, poses, positive numbers, and their JSON.
+#pragma once
+
+#include <dm/core/config.hpp>
+#include <dm/core/result.hpp>
+#include <dm/core/types.hpp>
+#include <dm/core/units.hpp>
+#include <dm/io/scene_file.hpp>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstddef>
+#include <limits>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace dm::scene_parse {
+
+// A quaternion this far from unit length is a mistake, not rounding.
+constexpr double kUnitTolerance = 1e-3;
+// Closer to unit than this is kept bit for bit, so toJson() round trips.
+constexpr double kRenormalize = 1e-9;
+
+template <class E, std::size_t N>
+std::string enumName(E e, const std::array<std::string_view, N>& names) {
+  return std::string(names[static_cast<std::size_t>(e)]);
+}
+
+template <std::size_t N, std::size_t... I>
+std::string oneOfArray(ConfigReader& r, std::string_view key, const std::array<std::string_view, N>& names,
+                       std::optional<std::string> fallback, std::index_sequence<I...>) {
+  return r.oneOf(key, {names[I]...}, std::move(fallback));
+}
+
+// An enum value named by one of `names`; nullopt (and an error) when it is
+// missing without a fallback or not one of them.
+template <class E, std::size_t N>
+std::optional<E> readEnum(ConfigReader& r, std::string_view key, const std::array<std::string_view, N>& names,
+                          std::optional<E> fallback = std::nullopt) {
+  const std::size_t before = r.errors().size();
+  std::optional<std::string> fb;
+  if (fallback) fb = enumName(*fallback, names);
+  const std::string s = oneOfArray(r, key, names, fb, std::make_index_sequence<N>{});
+  if (r.errors().size() != before) return std::nullopt;
+  const auto it = std::find(names.begin(), names.end(), s);
+  return static_cast<E>(it - names.begin());
+}
+
+// The candidate closest to `word` by edit distance, if it is plausibly a
+// typo (at most max(2, length / 3) edits, like dm::closestMatch).
+inline std::string nearestName(std::string_view word, const std::vector<std::string>& names) {
+  if (word.size() > 256) return {};
+  const std::size_t limit = std::max<std::size_t>(2, word.size() / 3);
+  std::string best;
+  std::size_t bestD = limit + 1;
+  for (const std::string& n : names) {
+    // The length difference bounds the distance from below: skip early.
+    const std::size_t diff = n.size() > word.size() ? n.size() - word.size() : word.size() - n.size();
+    if (diff >= bestD) continue;
+    const std::size_t d = editDistance(word, n);
+    if (d < bestD) {
+      bestD = d;
+      best = n;
+    }
+  }
+  return best;
+}
+
+inline std::string inQuotes(std::string_view s) { return "\"" + std::string(s) + "\""; }
+
+inline bool isNull(const ConfigReader& r) { return r.node().is_null(); }
+
+// True if `r` is an object; records an error if it is present but is not.
+inline bool expectObject(ConfigReader& r) {
+  if (r.isObject()) return true;
+  if (!isNull(r)) r.addError(std::string("expected an object, got ") + r.node().type_name());
+  return false;
+}
+
+inline bool expectArray(ConfigReader& r) {
+  if (r.isArray()) return true;
+  if (!isNull(r)) r.addError(std::string("expected an array, got ") + r.node().type_name());
+  return false;
+}
+
+inline Vec3 readVec3(ConfigReader& r, std::string_view key, const Vec3& fallback) {
+  const std::vector<double> v =
+      r.numbers(key, 3, std::vector<double>{fallback.x(), fallback.y(), fallback.z()});
+  return {v[0], v[1], v[2]};
+}
+
+inline Vec3 readVec3(ConfigReader& r, std::string_view key) {
+  const std::vector<double> v = r.numbers(key, 3);
+  return {v[0], v[1], v[2]};
+}
+
+// A unit vector: any non-zero length is normalised (lengths within 1e-9 of
+// one are kept as written, so a written scene reads back bit for bit).
+inline Vec3 readDirection(ConfigReader& r, std::string_view key, const Vec3& fallback) {
+  const std::size_t before = r.errors().size();
+  Vec3 d = readVec3(r, key, fallback);
+  if (r.errors().size() != before) return fallback;
+  const double n = d.norm();
+  if (!(n > 1e-12)) {
+    r.addError("direction has zero length", key, "give a non-zero vector, e.g. [0, 0, -1]");
+    return fallback;
+  }
+  if (std::abs(n - 1.0) > kRenormalize) d /= n;
+  return d;
+}
+
+// A number that must be > 0 (and ≤ max).
+inline double readPositive(ConfigReader& r, std::string_view key, std::optional<double> fallback,
+                           double max = std::numeric_limits<double>::infinity()) {
+  const std::size_t before = r.errors().size();
+  const double v = r.number(key, {.min = 0.0, .max = max}, fallback);
+  if (r.errors().size() == before && !(v > 0.0)) {
+    r.addError("value must be greater than 0", key);
+    return fallback.value_or(1.0);
+  }
+  return v;
+}
+
+// Linear colour [r, g, b] (or [r, g, b, a] when alpha is allowed), each
+// component in [0, max].
+inline Vec4 readColor(ConfigReader& r, std::string_view key, const Vec4& fallback, bool alpha,
+                      double max = 1.0) {
+  if (!r.has(key)) return fallback;
+  ConfigReader c = r.child(key);
+  const Json& j = c.node();
+  if (!j.is_array() || !(j.size() == 3 || (alpha && j.size() == 4))) {
+    if (j.is_array())
+      c.addError("expected " + std::string(alpha ? "[r, g, b] or [r, g, b, a]" : "[r, g, b]") + ", got " +
+                     std::to_string(j.size()) + " numbers",
+                 {}, "give linear colour components between 0 and 1");
+    return fallback;
+  }
+  Vec4 out(0.0, 0.0, 0.0, 1.0);
+  for (std::size_t i = 0; i < j.size(); ++i) {
+    const Json& e = j[i];
+    if (!e.is_number() || !std::isfinite(e.get<double>())) {
+      c.addError("expected a number, got " + std::string(e.type_name()), std::to_string(i));
+      continue;
+    }
+    const double v = e.get<double>();
+    if (v < 0.0 || v > max) {
+      c.addError(formatString("component %g is outside [0, %g]", v, max), std::to_string(i),
+                 "colours are linear, 0..1 (not 0..255)");
+      continue;
+    }
+    out[static_cast<Eigen::Index>(i)] = v;
+  }
+  return out;
+}
+
+// {"position": [x, y, z], "rotation": [w, x, y, z]} or {..., "euler_deg": [rx, ry, rz]}.
+inline Pose readPose(ConfigReader p) {
+  Pose out;
+  if (!expectObject(p)) return out;
+  p.knownKeys({"position", "rotation", "euler_deg"});
+  out.p = readVec3(p, "position", Vec3::Zero());
+  if (p.has("rotation") && p.has("euler_deg")) {
+    p.addError("both \"rotation\" and \"euler_deg\" are given", "euler_deg", "give only one of them");
+    return out;
+  }
+  const std::size_t before = p.errors().size();
+  if (p.has("rotation")) {
+    const std::vector<double> q = p.numbers("rotation", 4);
+    if (p.errors().size() != before) return out;
+    Quat r(q[0], q[1], q[2], q[3]);
+    const double n = r.norm();
+    if (!(std::abs(n - 1.0) <= kUnitTolerance)) {
+      p.addError(formatString("rotation quaternion has length %g, not 1", n), "rotation",
+                 "give a unit quaternion [w, x, y, z], or use \"euler_deg\": [rx, ry, rz]");
+      return out;
+    }
+    if (std::abs(n - 1.0) > kRenormalize) r.normalize();
+    out.q = r;
+  } else if (p.has("euler_deg")) {
+    const Vec3 e = readVec3(p, "euler_deg") * units::deg;
+    if (p.errors().size() != before) return out;
+    out.q =
+        (AngleAxis(e.z(), Vec3::UnitZ()) * AngleAxis(e.y(), Vec3::UnitY()) * AngleAxis(e.x(), Vec3::UnitX()))
+            .normalized();
+  }
+  return out;
+}
+
+inline Json toJson(const Vec3& v) { return Json::array({v.x(), v.y(), v.z()}); }
+inline Json toJson(const Vec4& v) { return Json::array({v.x(), v.y(), v.z(), v.w()}); }
+inline Json toJson(const Pose& p) {
+  return {{"position", toJson(p.p)}, {"rotation", Json::array({p.q.w(), p.q.x(), p.q.y(), p.q.z()})}};
+}
+
+// Surgical keys (scene_surgery.cpp). Object keys "millable" and "critical",
+// the haptics engine's "burr" block, and the checks between them and the
+// engines once the whole scene is read.
+void readMillable(ConfigReader& object, SceneObject& o);
+void readCritical(ConfigReader& object, SceneObject& o);
+void readBurr(ConfigReader& haptics, SceneHapticsEngine& h);
+void checkSurgery(const SceneDesc& scene, ConfigReader root);
+void writeSurgery(const SceneObject& o, Json& object);
+void writeBurr(const SceneBurr& b, Json& haptics);
+
+}  // namespace dm::scene_parse

@@ -1,0 +1,139 @@
+// scene_surgery.cpp — the scene file's surgical keys: bone a burr mills
+// ("millable"), the critical structures in it ("critical"), the burr
+// renderer's tool ("burr"), their checks against each other and the
+// engines, and their JSON (docs/scene-format.md, "Bone surgery").
+#include "scene_parse.hpp"
+
+namespace dm::scene_parse {
+
+namespace {
+
+constexpr std::array<std::string_view, 2> kBurrShapes{"sphere", "cylinder"};
+
+double readHardness(ConfigReader& r, double fallback) { return readPositive(r, "hardness", fallback, 1e12); }
+
+}  // namespace
+
+void readMillable(ConfigReader& object, SceneObject& o) {
+  ConfigReader r = object.child("millable");
+  if (!expectObject(r)) return;
+  r.knownKeys({"voxel_size", "hardness"});
+  SceneMillable m;
+  m.voxelSize = readPositive(r, "voxel_size", {}, 0.01);
+  m.hardness = readHardness(r, m.hardness);
+  o.millable = m;
+}
+
+void readCritical(ConfigReader& object, SceneObject& o) {
+  ConfigReader r = object.child("critical");
+  if (!expectObject(r)) return;
+  r.knownKeys({"hardness"});
+  SceneCritical c;
+  c.hardness = readHardness(r, c.hardness);
+  o.critical = c;
+}
+
+void readBurr(ConfigReader& haptics, SceneHapticsEngine& h) {
+  ConfigReader r = haptics.child("burr");
+  if (!expectObject(r)) return;
+  SceneBurr b;
+  b.shape = readEnum<SceneBurr::Shape>(r, "shape", kBurrShapes, b.shape).value_or(b.shape);
+  if (b.shape == SceneBurr::Shape::Cylinder)
+    r.knownKeys({"shape", "radius", "half_length", "rpm", "wear", "walk", "vibration", "vibration_hz",
+                 "warning_distance"});
+  else
+    r.knownKeys({"shape", "radius", "rpm", "wear", "walk", "vibration", "vibration_hz", "warning_distance"});
+  b.radius = readPositive(r, "radius", {}, 0.05);
+  if (b.shape == SceneBurr::Shape::Cylinder) b.halfLength = readPositive(r, "half_length", {}, 0.05);
+  b.rpm = r.number("rpm", {.min = 0.0, .max = 200000.0}, b.rpm);
+  b.wear = r.number("wear", {.min = 0.0, .max = 10.0}, b.wear);
+  b.walk = r.number("walk", {.min = 0.0, .max = 10.0}, b.walk);
+  b.vibration = r.number("vibration", {.min = 0.0, .max = 10.0}, b.vibration);
+  const std::size_t before = r.errors().size();
+  b.vibrationHz = r.number("vibration_hz", {.min = 0.0, .max = 5000.0}, b.vibrationHz);
+  if (r.errors().size() == before && !(b.vibrationHz < 0.5 * h.rateHz))
+    r.addError(
+        formatString("vibration at %g Hz is not below half the haptic rate (%g Hz)", b.vibrationHz, h.rateHz),
+        "vibration_hz", "lower it, or raise the haptics engine's rate_hz");
+  b.warningDistance = r.number("warning_distance", {.min = 0.0, .max = 0.1}, b.warningDistance);
+  h.burr = b;
+}
+
+void checkSurgery(const SceneDesc& scene, ConfigReader root) {
+  ConfigReader objects = root.child("objects");
+  ConfigReader haptics = root.child("engines").child("haptics");
+  const auto& h = scene.engines.haptics;
+  const bool burr = h && h->renderer == SceneHapticsEngine::Renderer::Burr;
+  if (h && burr) {
+    if (!h->burr)
+      haptics.addError("the burr renderer needs its tool", "burr",
+                       "add \"burr\": {\"shape\": \"sphere\", \"radius\": <m>}");
+    if (haptics.has("tool_radius"))
+      haptics.addError("the burr renderer's tool is its \"burr\" block", "tool_radius",
+                       "remove \"tool_radius\"");
+    if (h->forceShading)
+      haptics.addError("the burr renderer has no force shading (the bone's surface is its voxels')",
+                       "force_shading", "remove \"force_shading\"");
+    const SceneObject* bone = h->objects.size() == 1 ? scene.object(h->objects[0]) : nullptr;
+    if (h->objects.size() != 1)
+      haptics.addError(formatString("the burr renderer mills one object, not %zu", h->objects.size()),
+                       "objects", "name the one millable object");
+    else if (bone != nullptr && !bone->millable)
+      haptics.addError("object " + inQuotes(bone->name) + " is not millable", "objects",
+                       "give it \"millable\": {\"voxel_size\": <m>}");
+  } else if (h && h->burr) {
+    haptics.addError("a \"burr\" block without the burr renderer", "burr",
+                     "set \"renderer\": \"burr\", or remove \"burr\"");
+  }
+  for (std::size_t i = 0; i < scene.objects.size() && objects.isArray() && i < objects.size(); ++i) {
+    const SceneObject& o = scene.objects[i];
+    ConfigReader r = objects.at(i);
+    if (o.millable) {
+      const bool milled = burr && std::find(h->objects.begin(), h->objects.end(), o.name) != h->objects.end();
+      if (!milled)
+        r.addError("millable object " + inQuotes(o.name) + " but no burr renderer mills it", "millable",
+                   "set the haptics engine's \"renderer\": \"burr\" with \"objects\": [" + inQuotes(o.name) +
+                       "], or remove \"millable\"");
+      if (o.dynamic)
+        r.addError("a millable object stays where it is (its voxels change, not its pose)", "dynamic",
+                   "remove \"dynamic\"");
+      if (o.critical)
+        r.addError("an object is either bone (\"millable\") or a critical structure in it", "critical",
+                   "make the critical structure an object of its own");
+      if (const SceneMaterial* m = scene.material(o.material); m != nullptr && m->haptic) {
+        if (m->haptic->staticFriction > 0 || m->haptic->dynamicFriction > 0)
+          r.addError(
+              "the burr renderer has no friction: the spinning burr's walk stands for it", "material",
+              "set the friction of material " + inQuotes(o.material) + " to 0 and tune the burr's \"walk\"");
+      }
+    }
+    if (o.critical) {
+      if (!burr)
+        r.addError("critical object " + inQuotes(o.name) + " but no burr renderer", "critical",
+                   "set the haptics engine's \"renderer\": \"burr\", or remove \"critical\"");
+      if (o.dynamic)
+        r.addError("a critical structure stays where it is in the bone", "dynamic", "remove \"dynamic\"");
+    }
+  }
+}
+
+void writeSurgery(const SceneObject& o, Json& object) {
+  if (o.millable)
+    object["millable"] = {{"voxel_size", o.millable->voxelSize}, {"hardness", o.millable->hardness}};
+  if (o.critical) object["critical"] = {{"hardness", o.critical->hardness}};
+}
+
+void writeBurr(const SceneBurr& b, Json& haptics) {
+  Json j = {{"shape", enumName(b.shape, kBurrShapes)},
+            {"radius", b.radius},
+            {"rpm", b.rpm},
+            {"wear", b.wear},
+            {"walk", b.walk},
+            {"vibration", b.vibration},
+            {"vibration_hz", b.vibrationHz},
+            {"warning_distance", b.warningDistance}};
+  if (b.shape == SceneBurr::Shape::Cylinder) j["half_length"] = b.halfLength;
+  haptics["burr"] = std::move(j);
+}
+
+}  // namespace dm::scene_parse

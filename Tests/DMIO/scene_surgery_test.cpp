@@ -1,0 +1,161 @@
+// The scene file's surgical keys (docs/scene-format.md, "Bone surgery"):
+// a millable bone, critical structures and the burr renderer's tool read
+// and written back; every misuse is an error at its JSON pointer.
+#include <dm/io/scene_file.hpp>
+
+#include <gtest/gtest.h>
+
+#include "scene_test_support.hpp"
+
+namespace scene_surgery_test {
+
+using dm::Json;
+using namespace scene_test;
+
+// A bone plate with a nerve under it, milled by a cylinder burr.
+Json burrScene() {
+  return Json::parse(R"({
+    "format": "dmplatform-scene", "version": 2, "name": "drill",
+    "resources": {
+      "plate": {"type": "shape", "shape": "box", "half_extents": [0.01, 0.01, 0.003]},
+      "nerve": {"type": "shape", "shape": "cylinder", "radius": 0.001, "height": 0.02}
+    },
+    "materials": {"bone": {"model": "blinn-phong", "haptic": {"stiffness": 1500, "damping": 0.4}}},
+    "objects": [
+      {"name": "skull", "mesh": "plate", "material": "bone", "haptic": true,
+       "millable": {"voxel_size": 0.0002, "hardness": 3e8}},
+      {"name": "nerve", "mesh": "nerve", "critical": {"hardness": 2e7}}
+    ],
+    "devices": [{"name": "hand", "driver": "sim-haptic", "config": {"path": "circle"}}],
+    "engines": {
+      "haptics": {"device": "hand", "renderer": "burr", "objects": ["skull"],
+                  "burr": {"shape": "cylinder", "radius": 0.002, "half_length": 0.004, "rpm": 60000,
+                           "wear": 0.2, "walk": 0.1, "vibration": 0.02, "vibration_hz": 120,
+                           "warning_distance": 0.0015}}
+    }
+  })");
+}
+
+TEST(SceneSurgery, KeysReadAndWriteBackEqual) {
+  auto s = dm::parseScene(burrScene().dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const dm::SceneObject& skull = s->objects[0];
+  ASSERT_TRUE(skull.millable);
+  EXPECT_EQ(skull.millable->voxelSize, 0.0002);
+  EXPECT_EQ(skull.millable->hardness, 3e8);
+  ASSERT_TRUE(s->objects[1].critical);
+  EXPECT_EQ(s->objects[1].critical->hardness, 2e7);
+  const auto& h = *s->engines.haptics;
+  EXPECT_EQ(h.renderer, dm::SceneHapticsEngine::Renderer::Burr);
+  ASSERT_TRUE(h.burr);
+  EXPECT_EQ(h.burr->shape, dm::SceneBurr::Shape::Cylinder);
+  EXPECT_EQ(h.burr->radius, 0.002);
+  EXPECT_EQ(h.burr->halfLength, 0.004);
+  EXPECT_EQ(h.burr->rpm, 60000);
+  EXPECT_EQ(h.burr->wear, 0.2);
+  EXPECT_EQ(h.burr->walk, 0.1);
+  EXPECT_EQ(h.burr->vibration, 0.02);
+  EXPECT_EQ(h.burr->vibrationHz, 120);
+  EXPECT_EQ(h.burr->warningDistance, 0.0015);
+  auto back = dm::parseScene(dm::toJson(*s).dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(back) << back.error();
+  EXPECT_TRUE(*s == *back);
+  // Defaults: a sphere burr at 80 000 rpm, cortical hardness.
+  Json j = burrScene();
+  j["objects"][0]["millable"].erase("hardness");
+  j["engines"]["haptics"]["burr"] = {{"radius", 0.002}};
+  auto d = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(d) << d.error();
+  EXPECT_EQ(d->objects[0].millable->hardness, 0.5e9);
+  EXPECT_EQ(d->engines.haptics->burr->shape, dm::SceneBurr::Shape::Sphere);
+  EXPECT_EQ(d->engines.haptics->burr->rpm, 80000);
+}
+
+TEST(SceneSurgery, EveryMisuseIsNamed) {
+  struct Case {
+    const char* what;
+    std::function<void(Json&)> edit;
+    const char* pointer;
+  };
+  const std::vector<Case> cases{
+      {"millable in a version-1 file",
+       [](Json& j) {
+         j["version"] = 1;
+         j["objects"][1].erase("critical");
+         j["engines"]["haptics"].erase("burr");
+         j["engines"]["haptics"]["renderer"] = "god-object";
+       },
+       "/objects/0/millable"},
+      {"a sphere burr has no half length",
+       [](Json& j) { j["engines"]["haptics"]["burr"]["shape"] = "sphere"; },
+       "/engines/haptics/burr/half_length"},
+      {"a cylinder burr needs its half length",
+       [](Json& j) { j["engines"]["haptics"]["burr"].erase("half_length"); },
+       "/engines/haptics/burr/half_length"},
+      {"an unknown burr shape", [](Json& j) { j["engines"]["haptics"]["burr"]["shape"] = "cone"; },
+       "/engines/haptics/burr/shape"},
+      {"vibration at the loop's Nyquist rate",
+       [](Json& j) { j["engines"]["haptics"]["burr"]["vibration_hz"] = 500; },
+       "/engines/haptics/burr/vibration_hz"},
+      {"a zero voxel size", [](Json& j) { j["objects"][0]["millable"]["voxel_size"] = 0; },
+       "/objects/0/millable/voxel_size"},
+      {"an unknown millable key", [](Json& j) { j["objects"][0]["millable"]["density"] = 1900; },
+       "/objects/0/millable/density"},
+      {"the burr renderer without its tool", [](Json& j) { j["engines"]["haptics"].erase("burr"); },
+       "/engines/haptics/burr"},
+      {"a tool radius besides the burr", [](Json& j) { j["engines"]["haptics"]["tool_radius"] = 0.001; },
+       "/engines/haptics/tool_radius"},
+      {"force shading on voxels", [](Json& j) { j["engines"]["haptics"]["force_shading"] = true; },
+       "/engines/haptics/force_shading"},
+      {"a burr block for the god-object",
+       [](Json& j) {
+         j["engines"]["haptics"]["renderer"] = "god-object";
+         j["objects"][0].erase("millable");
+         j["objects"][1].erase("critical");
+       },
+       "/engines/haptics/burr"},
+      {"a millable object nobody mills",
+       [](Json& j) {
+         j["engines"]["haptics"]["renderer"] = "god-object";
+         j["engines"]["haptics"].erase("burr");
+         j["objects"][1].erase("critical");
+       },
+       "/objects/0/millable"},
+      {"a critical structure without the burr",
+       [](Json& j) {
+         j["engines"]["haptics"]["renderer"] = "god-object";
+         j["engines"]["haptics"].erase("burr");
+         j["objects"][0].erase("millable");
+       },
+       "/objects/1/critical"},
+      {"friction the burr cannot render",
+       [](Json& j) { j["materials"]["bone"]["haptic"]["static_friction"] = 0.3; }, "/objects/0/material"},
+      {"bone and critical at once", [](Json& j) { j["objects"][0]["critical"] = Json::object(); },
+       "/objects/0/critical"},
+      {"a moving bone",
+       [](Json& j) {
+         j["objects"][0]["dynamic"] = true;
+         j["objects"][0]["mass"] = 0.1;
+         j["engines"]["physics"] = Json::object();
+       },
+       "/objects/0/dynamic"},
+  };
+  for (const Case& c : cases) {
+    Json j = burrScene();
+    c.edit(j);
+    const auto p = problemsOf(j);
+    const dm::Error* e = at(p, c.pointer);
+    EXPECT_TRUE(e != nullptr) << c.what;
+  }
+  // Two millable objects for one burr: the renderer mills one.
+  Json j = burrScene();
+  j["objects"][1] = {{"name", "jaw"},
+                     {"mesh", "plate"},
+                     {"material", "bone"},
+                     {"haptic", true},
+                     {"millable", {{"voxel_size", 0.0002}}}};
+  j["engines"]["haptics"]["objects"] = {"skull", "jaw"};
+  EXPECT_TRUE(at(problemsOf(j), "/engines/haptics/objects") != nullptr);
+}
+
+}  // namespace scene_surgery_test
