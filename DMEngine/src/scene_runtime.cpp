@@ -56,11 +56,13 @@ Status checkDuration(const SceneRunOptions& options) {
               "give a positive number of seconds");
 }
 
-// The haptic engine: device servo, god-object, safety — one HapticLoop tick
-// per engine tick; every tick's sample goes to the monitor through an SPSC
-// ring (the haptic thread never allocates, locks or logs). With a physics
-// engine, the loop applies the poses physics published (its local model)
-// and the tool's reaction goes back as impulses on the touched object.
+// The haptic engine: device servo, god-object or burr, safety — one
+// HapticLoop tick per engine tick (the burr's drilled blocks then go to the
+// render engine through a MillableSurfaceFeed); every tick's sample goes to
+// the monitor through an SPSC ring (the haptic thread never allocates,
+// locks or logs). With a physics engine, the loop applies the poses physics
+// published (its local model) and the god-object's reaction goes back as
+// impulses on the touched object.
 class HapticsEngine final : public Engine {
  public:
   std::string_view name() const noexcept override { return "haptics"; }

@@ -6,8 +6,10 @@
 // "engines" section asks for inside a dm::MasterEngine:
 //   - haptics: the device (a driver from the registry, e.g. sim-haptic),
 //     the god-object renderer over the touchable objects with their scene
-//     materials, force shading and the force limit, and dm::HapticLoop
-//     (device servo, safety, fade) at the scene's rate;
+//     materials, force shading and the force limit — or the burr renderer
+//     milling the one "millable" object (voxelized bone with its critical
+//     structures; docs/scene-format.md, "Bone surgery") — and
+//     dm::HapticLoop (device servo, safety, fade) at the scene's rate;
 //   - physics: every "dynamic" object a rigid body of one dm::PhysicsWorld,
 //     the other objects static colliders; the god-object feels the moving
 //     bodies where physics has them (HapticLocalModel) and pushes them back
@@ -16,7 +18,9 @@
 //   - render: a headless EGL context on the render engine's own thread,
 //     dm::SceneView drawing the render camera with the tool object following
 //     the haptic proxy, a HUD (time, force, force plot) from dm::Overlay,
-//     frames read back and written as PNG by a writer thread;
+//     frames read back and written as PNG by a writer thread; a milled
+//     object is drawn as its volume's surface, each frame remeshing only
+//     the blocks the burr changed (dm::MillableSurfaceFeed);
 //   - monitor: drains the haptic samples into the force trace.
 // prepare() builds and loads them (a model that cannot be built fails there,
 // before anything runs); run() starts them in lockstep on a virtual clock (bit-reproducible) or on
@@ -25,7 +29,9 @@
 // forces.csv, forces.png and summary.json (achieved rate and tick-time
 // percentiles per engine, deadline misses, contacts, maximum and final force,
 // frames; each dynamic body's final state, displacement, contact and tool
-// forces of the last step, and the tool impulse it received).
+// forces of the last step, and the tool impulse it received; with the burr,
+// removed volume per material, closest approach to critical structures and
+// the time within the warning margin).
 // User code adds engines of its own (addEngine) before run().
 //
 // @code
