@@ -538,6 +538,29 @@ bool MillableVolume::writeBlock(std::uint32_t b, std::span<const std::uint16_t, 
 
 // --- surfaces --------------------------------------------------------------
 
+void MillableVolume::colorByMaterial(Mesh& mesh, std::span<const Vec4f> materialColors) const {
+  mesh.colors.resize(mesh.positions.size());
+  for (std::size_t v = 0; v < mesh.positions.size(); ++v) {
+    // The vertex lies on an edge of its cell between an inside and an
+    // outside voxel: the cell's fullest voxel is the material it shows.
+    const Vec3 x = worldToIndex_ * mesh.positions[v];
+    const int i0 = millFloor(x.x(), -1, dims_.x()), j0 = millFloor(x.y(), -1, dims_.y()),
+              k0 = millFloor(x.z(), -1, dims_.z());
+    int best = 0;
+    std::uint16_t fullest = 0;
+    for (int c = 0; c < 8; ++c) {
+      const int i = i0 + (c & 1), j = j0 + ((c >> 1) & 1), k = k0 + (c >> 2);
+      if (i < 0 || j < 0 || k < 0 || i >= dims_.x() || j >= dims_.y() || k >= dims_.z()) continue;
+      const std::size_t n = index(i, j, k);
+      if (occupancy_[n] > fullest) {
+        fullest = occupancy_[n];
+        best = material_[n];
+      }
+    }
+    mesh.colors[v] = materialColors[static_cast<std::size_t>(best)];
+  }
+}
+
 // --- fragments -------------------------------------------------------------
 
 Result<FragmentMap> MillableVolume::fragments() const {
@@ -665,8 +688,13 @@ Result<Volume> MillableVolume::occupancyVolume() const {
   return v;
 }
 
-Result<std::vector<Mesh>> MillableVolume::blockSurfaces(std::span<const std::uint32_t> blocks) const {
+Result<std::vector<Mesh>> MillableVolume::blockSurfaces(std::span<const std::uint32_t> blocks,
+                                                        std::span<const Vec4f> materialColors) const {
   const std::string where = std::string(kMillWhere) + "::blockSurfaces";
+  if (!materialColors.empty() && materialColors.size() < materials_.size())
+    return fail(ErrorCode::InvalidArgument,
+                formatString("%zu colours for %zu materials", materialColors.size(), materials_.size()),
+                where, "give one colour per material, or none");
   const auto count = static_cast<std::size_t>(blockDims_.prod());
   std::vector<Mesh> pieces;
   pieces.reserve(blocks.size());
@@ -695,6 +723,7 @@ Result<std::vector<Mesh>> MillableVolume::blockSurfaces(std::span<const std::uin
           *out++ = static_cast<float>(occupancy(lo.x() + i, lo.y() + j, lo.z() + k));
     auto mesh = extractIsosurface(*sub, {.iso = 0.5, .threads = 1});
     if (!mesh) return mesh.error().within(where);
+    if (!materialColors.empty()) colorByMaterial(*mesh, materialColors);
     pieces.push_back(std::move(*mesh));
   }
   return pieces;

@@ -6,6 +6,7 @@
 #include <dm/io/scene_resources.hpp>
 #include <dm/math/voxelize.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -45,37 +46,56 @@ Result<SceneBurrBuild> buildSceneBurr(const SceneDesc& scene, const SceneResourc
   auto sdf = voxelizeMesh(*boneMesh, {.voxelSize = voxel, .paddingVoxels = 2, .signedDistance = true});
   if (!sdf) return sdf.error().within(boneWhere + "/millable");
 
-  // Critical structures in the bone's frame: their union is the distance
-  // the burr measures; each is a forbidden material where it lies inside
-  // the grid, and tissue the burr can cut there.
+  // The parts inside the bone (critical structures and inclusions), in the
+  // bone's frame and in scene order, a later part taking the voxels it shares
+  // with an earlier one: each is a material where it lies inside the grid,
+  // with the union of bone and part as the occupancy (a burr can cut into a
+  // nerve); the critical ones together are the distance the burr measures.
   std::vector<MillingMaterial> materials{
       {.name = bone->material.empty() ? bone->name : bone->material, .hardness = bone->millable->hardness}};
+  const Vec4 boneColor = mat->color;
+  std::vector<Vec4f> colors{Vec4f::Ones()};  // multiplied by the bone material's colour
   const Isometry3 boneInverse = bone->pose.isometry().inverse();
   Mesh allCritical;
   auto labels = Volume::create(sdf->dims(), VoxelType::U8, sdf->indexToWorld());
   if (!labels) return labels.error().within(boneWhere);
   float* d = sdf->data<float>();
+  std::uint8_t* label = labels->data<std::uint8_t>();
   for (const SceneObject& c : scene.objects) {
-    if (!c.critical) continue;
+    if (!c.critical && !c.inclusion) continue;
+    const std::string key = c.critical ? "critical" : "inclusion";
     const std::string cWhere = "objects/" + c.name;
+    if (materials.size() == 256)
+      return fail(ErrorCode::InvalidArgument, "more than 255 parts inside the bone", cWhere);
     auto cm = placedMesh(resources, c, boneInverse * c.pose.isometry());
     if (!cm) return cm.error();
     auto model = VoxelModel::fromMesh(*cm, {.voxelSize = voxel, .paddingVoxels = 2});
-    if (!model) return model.error().within(cWhere + "/critical");
-    const auto label = static_cast<std::uint8_t>(materials.size());
-    materials.push_back({.name = c.name, .hardness = c.critical->hardness, .forbidden = true});
-    if (materials.size() > 255)
-      return fail(ErrorCode::InvalidArgument, "more than 254 critical structures", cWhere);
+    if (!model) return model.error().within(cWhere + "/" + key);
+    const auto index = static_cast<std::uint8_t>(materials.size());
+    materials.push_back({.name = c.name,
+                         .hardness = c.critical ? c.critical->hardness : c.inclusion->hardness,
+                         .forbidden = c.critical.has_value()});
+    // Its own colour where it shows, relative to the bone's.
+    const SceneMaterial* cmat = scene.material(c.material);
+    const Vec4 want = cmat != nullptr ? cmat->color : boneColor;
+    Vec4f rel;
+    for (int ch = 0; ch < 4; ++ch)
+      rel[ch] = static_cast<float>(boneColor[ch] > 0 ? std::clamp(want[ch] / boneColor[ch], 0.0, 1.0) : 1.0);
+    colors.push_back(rel);
     const Vec3i n = sdf->dims();
     std::size_t v = 0;
     for (int k = 0; k < n.z(); ++k)
       for (int j = 0; j < n.y(); ++j)
         for (int i = 0; i < n.x(); ++i, ++v) {
           const double dc = (*model)->distance(sdf->indexToWorld() * Vec3(i, j, k));
-          if (!(dc < 0.5 * voxel)) continue;  // beyond the structure's partial-volume ramp
+          if (!(dc < 0.5 * voxel)) continue;  // beyond the part's partial-volume ramp
+          // Inside the part, or where its surface reaches as far as the
+          // bone's (a layer sharing the bone's face owns the surface voxels;
+          // the two voxelizations agree there to a small part of a voxel).
+          if (dc < 0.0 || dc <= d[v] + 0.05 * voxel) label[v] = index;
           if (dc < d[v]) d[v] = static_cast<float>(dc);
-          if (dc < 0.0 && labels->data<std::uint8_t>()[v] == 0) labels->data<std::uint8_t>()[v] = label;
         }
+    if (!c.critical) continue;
     const auto base = static_cast<std::uint32_t>(allCritical.positions.size());
     allCritical.positions.insert(allCritical.positions.end(), cm->positions.begin(), cm->positions.end());
     for (const Triangle& t : cm->triangles)
@@ -105,7 +125,7 @@ Result<SceneBurrBuild> buildSceneBurr(const SceneDesc& scene, const SceneResourc
   }
   auto shared = std::make_shared<MillableVolume>(std::move(*volume));
   SceneBurrBuild out;
-  auto feed = MillableSurfaceFeed::create(*shared);
+  auto feed = MillableSurfaceFeed::create(*shared, std::move(colors));
   if (!feed) return feed.error().within(boneWhere);
   out.feed = std::move(*feed);
   auto renderer = BurrRenderer::create(shared, o);

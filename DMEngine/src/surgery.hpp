@@ -28,11 +28,14 @@ struct SceneBurrBuild {
 
 /// Voxelizes the milled object's mesh (its scale baked in) at its
 /// "voxel_size" into a MillableVolume in the object's frame; every critical
-/// object's mesh, placed in that frame, becomes a forbidden material where
-/// it lies inside the grid (the occupancy there is the union of bone and
-/// structure) and, all together, the signed distance the burr measures its
-/// approach against. Stiffness and damping come from the bone's haptic
-/// material; the tool and cutting model from the "burr" block.
+/// and inclusion object's mesh, placed in that frame, becomes a material
+/// where it lies inside the grid (forbidden for critical ones; the
+/// occupancy there is the union of bone and part; a later part wins where
+/// two overlap), and the critical ones together the signed distance the burr
+/// measures its approach against. The feed colours the drawn surface by
+/// material (each part's scene colour relative to the bone's). Stiffness and
+/// damping come from the bone's haptic material; the tool and cutting model
+/// from the "burr" block.
 Result<SceneBurrBuild> buildSceneBurr(const SceneDesc& scene, const SceneResources& resources);
 
 /// summary.json's "burr": removed volume per material, removed forbidden

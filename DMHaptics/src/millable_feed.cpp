@@ -9,10 +9,16 @@ namespace dm {
 
 MillableSurfaceFeed::MillableSurfaceFeed(MillableVolume mirror) : mirror_(std::move(mirror)) {}
 
-Result<std::unique_ptr<MillableSurfaceFeed>> MillableSurfaceFeed::create(const MillableVolume& bone) {
+Result<std::unique_ptr<MillableSurfaceFeed>> MillableSurfaceFeed::create(const MillableVolume& bone,
+                                                                         std::vector<Vec4f> materialColors) {
+  if (!materialColors.empty() && materialColors.size() < bone.materials().size())
+    return fail(ErrorCode::InvalidArgument,
+                formatString("%zu colours for %zu materials", materialColors.size(), bone.materials().size()),
+                "MillableSurfaceFeed", "give one colour per material, or none");
   try {
     std::unique_ptr<MillableSurfaceFeed> feed(new MillableSurfaceFeed(bone));
     feed->mirror_.clearChanges();
+    feed->colors_ = std::move(materialColors);
     const auto blocks = static_cast<std::size_t>(bone.blockDims().prod());
     feed->pieces_.resize(blocks);
     feed->waiting_.reserve(blocks);
@@ -62,7 +68,7 @@ Result<bool> MillableSurfaceFeed::update(Mesh& surface) {
   }
   mirror_.clearChanges();
   if (remesh.empty()) return false;
-  auto fresh = mirror_.blockSurfaces(remesh);
+  auto fresh = mirror_.blockSurfaces(remesh, colors_);
   if (!fresh) return fresh.error();
   for (std::size_t n = 0; n < remesh.size(); ++n) pieces_[remesh[n]] = std::move((*fresh)[n]);
   first_ = false;
@@ -76,11 +82,13 @@ Result<bool> MillableSurfaceFeed::update(Mesh& surface) {
   surface.positions.reserve(vertices);
   surface.normals.reserve(vertices);
   surface.triangles.reserve(triangles);
+  if (!colors_.empty()) surface.colors.reserve(vertices);
   for (const Mesh& p : pieces_) {
     const auto base = static_cast<std::uint32_t>(surface.positions.size());
     surface.positions.insert(surface.positions.end(), p.positions.begin(), p.positions.end());
     if (p.normals.size() == p.positions.size())
       surface.normals.insert(surface.normals.end(), p.normals.begin(), p.normals.end());
+    if (!colors_.empty()) surface.colors.insert(surface.colors.end(), p.colors.begin(), p.colors.end());
     for (const Triangle& t : p.triangles)
       surface.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
   }

@@ -476,7 +476,7 @@ class SceneParser {
       if (!expectObject(r)) continue;
       r.knownKeys({"name", "mesh", "render_mesh", "material", "pose", "scale", "visible", "haptic", "dynamic",
                    "mass", "density", "velocity", "angular_velocity", "collide", "contact", "millable",
-                   "critical"});
+                   "critical", "inclusion"});
       SceneObject o;
       o.name = uniqueName(r, objectIndex_, scene_.objects.size());
       std::size_t before = r.errors().size();
@@ -500,6 +500,7 @@ class SceneParser {
       rigidBody(r, o);
       if (v2Key(r, "millable")) readMillable(r, o);
       if (v2Key(r, "critical")) readCritical(r, o);
+      if (v2Key(r, "inclusion")) readInclusion(r, o);
       if (r.has("material") && !o.material.empty() &&
           checkName(r, "material", o.material, materialIndex_, "material", "materials")) {
         if (o.haptic && !scene_.materials[materialIndex_.at(o.material)].haptic)
@@ -1021,7 +1022,7 @@ bool SceneObject::operator==(const SceneObject& o) const {
          visible == o.visible && haptic == o.haptic && dynamic == o.dynamic && mass == o.mass &&
          density == o.density && velocity == o.velocity && angularVelocity == o.angularVelocity &&
          collide == o.collide && friction == o.friction && restitution == o.restitution &&
-         millable == o.millable && critical == o.critical;
+         millable == o.millable && critical == o.critical && inclusion == o.inclusion;
 }
 
 bool SceneHapticsEngine::operator==(const SceneHapticsEngine& o) const {

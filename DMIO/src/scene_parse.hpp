@@ -203,6 +203,7 @@ inline Json toJson(const Pose& p) {
 // engines once the whole scene is read.
 void readMillable(ConfigReader& object, SceneObject& o);
 void readCritical(ConfigReader& object, SceneObject& o);
+void readInclusion(ConfigReader& object, SceneObject& o);
 void readBurr(ConfigReader& haptics, SceneHapticsEngine& h);
 void checkSurgery(const SceneDesc& scene, ConfigReader root);
 void writeSurgery(const SceneObject& o, Json& object);

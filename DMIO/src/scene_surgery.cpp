@@ -33,6 +33,15 @@ void readCritical(ConfigReader& object, SceneObject& o) {
   o.critical = c;
 }
 
+void readInclusion(ConfigReader& object, SceneObject& o) {
+  ConfigReader r = object.child("inclusion");
+  if (!expectObject(r)) return;
+  r.knownKeys({"hardness"});
+  SceneInclusion c;
+  c.hardness = readHardness(r, c.hardness);
+  o.inclusion = c;
+}
+
 void readBurr(ConfigReader& haptics, SceneHapticsEngine& h) {
   ConfigReader r = haptics.child("burr");
   if (!expectObject(r)) return;
@@ -45,7 +54,7 @@ void readBurr(ConfigReader& haptics, SceneHapticsEngine& h) {
     r.knownKeys({"shape", "radius", "rpm", "wear", "walk", "vibration", "vibration_hz", "warning_distance"});
   b.radius = readPositive(r, "radius", {}, 0.05);
   if (b.shape == SceneBurr::Shape::Cylinder) b.halfLength = readPositive(r, "half_length", {}, 0.05);
-  b.rpm = r.number("rpm", {.min = 0.0, .max = 200000.0}, b.rpm);
+  b.rpm = r.number("rpm", {.min = 0.0, .max = 500000.0}, b.rpm);
   b.wear = r.number("wear", {.min = 0.0, .max = 10.0}, b.wear);
   b.walk = r.number("walk", {.min = 0.0, .max = 10.0}, b.walk);
   b.vibration = r.number("vibration", {.min = 0.0, .max = 10.0}, b.vibration);
@@ -97,9 +106,10 @@ void checkSurgery(const SceneDesc& scene, ConfigReader root) {
       if (o.dynamic)
         r.addError("a millable object stays where it is (its voxels change, not its pose)", "dynamic",
                    "remove \"dynamic\"");
-      if (o.critical)
-        r.addError("an object is either bone (\"millable\") or a critical structure in it", "critical",
-                   "make the critical structure an object of its own");
+      for (const char* key : {"critical", "inclusion"})
+        if (r.has(key))
+          r.addError("an object is either the bone (\"millable\") or a part inside it", key,
+                     "make the part an object of its own");
       if (const SceneMaterial* m = scene.material(o.material); m != nullptr && m->haptic) {
         if (m->haptic->staticFriction > 0 || m->haptic->dynamicFriction > 0)
           r.addError(
@@ -107,12 +117,16 @@ void checkSurgery(const SceneDesc& scene, ConfigReader root) {
               "set the friction of material " + inQuotes(o.material) + " to 0 and tune the burr's \"walk\"");
       }
     }
-    if (o.critical) {
+    const char* part = o.critical ? "critical" : o.inclusion ? "inclusion" : nullptr;
+    if (part != nullptr) {
+      const std::string key(part);
       if (!burr)
-        r.addError("critical object " + inQuotes(o.name) + " but no burr renderer", "critical",
-                   "set the haptics engine's \"renderer\": \"burr\", or remove \"critical\"");
-      if (o.dynamic)
-        r.addError("a critical structure stays where it is in the bone", "dynamic", "remove \"dynamic\"");
+        r.addError(key + " object " + inQuotes(o.name) + " but no burr renderer", key,
+                   "set the haptics engine's \"renderer\": \"burr\", or remove \"" + key + "\"");
+      if (o.dynamic) r.addError("a part inside the bone stays where it is", "dynamic", "remove \"dynamic\"");
+      if (o.critical && o.inclusion)
+        r.addError("an object is a critical structure or an inclusion, not both", "inclusion",
+                   "remove one of them");
     }
   }
 }
@@ -121,6 +135,7 @@ void writeSurgery(const SceneObject& o, Json& object) {
   if (o.millable)
     object["millable"] = {{"voxel_size", o.millable->voxelSize}, {"hardness", o.millable->hardness}};
   if (o.critical) object["critical"] = {{"hardness", o.critical->hardness}};
+  if (o.inclusion) object["inclusion"] = {{"hardness", o.inclusion->hardness}};
 }
 
 void writeBurr(const SceneBurr& b, Json& haptics) {

@@ -244,6 +244,39 @@ TEST(MillableVolume, ForbiddenMaterialsAreAccounted) {
   EXPECT_NEAR(bone.removedVolume(0), bone.removedVolume(1), 1e-3 * cut.removed);
 }
 
+TEST(MillableVolume, TheSurfaceShowsTheMaterialItCutsInto) {
+  // Enamel (0) over dentin (1) below z = −0.75 mm: a hole down to −1.5 mm
+  // shows dentin on its floor and lower wall, enamel on top and above.
+  MillableVolume tooth = slab(0.0);
+  Volume labels =
+      field(40, Vec3::Constant(-20 * kH), [](const Vec3& p) { return p.z() < -0.75e-3 ? 1.0 : 0.0; });
+  ASSERT_TRUE(
+      tooth
+          .setMaterials({{.name = "enamel", .hardness = 3e9}, {.name = "dentin", .hardness = 0.6e9}}, &labels)
+          .ok());
+  tooth.mill(MillingTool::cylinder(0.8e-3, 1.5e-3), place(Vec3(0, 0, 0)), 1e9);
+  std::vector<std::uint32_t> all(125);
+  for (std::uint32_t b = 0; b < 125; ++b) all[b] = b;
+  const std::vector<Vec4f> colors{Vec4f(1, 1, 1, 1), Vec4f(1, 0.5f, 0, 1)};
+  auto pieces = tooth.blockSurfaces(all, colors);
+  ASSERT_TRUE(pieces.ok()) << pieces.error().message();
+  std::size_t dentinSeen = 0, wrong = 0;
+  for (const Mesh& m : *pieces) {
+    ASSERT_EQ(m.colors.size(), m.positions.size());
+    for (std::size_t v = 0; v < m.positions.size(); ++v) {
+      const double z = m.positions[v].z();
+      const bool dentin = m.colors[v] == colors[1];
+      dentinSeen += dentin;
+      // Away from the interface (a voxel either side), the colour is the layer's.
+      if ((z < -0.75e-3 - kH && !dentin) || (z > -0.75e-3 + kH && dentin)) ++wrong;
+    }
+  }
+  EXPECT_GT(dentinSeen, 100u);
+  EXPECT_EQ(wrong, 0u);
+  // One colour for two materials is refused.
+  EXPECT_FALSE(tooth.blockSurfaces(all, std::span<const Vec4f>(colors.data(), 1)).ok());
+}
+
 TEST(MillableVolume, ASawCutMakesFragmentsWithTheirMassProperties) {
   // A 6 × 3 × 2 mm bar sawn across at x = 0.6 mm by a 0.4 mm blade.
   const Vec3 half(3e-3, 1.5e-3, 1e-3);

@@ -59,15 +59,24 @@ std::string sceneJson(double rpm, bool render) {
   return s;
 }
 
-dm::SceneDesc parse(double rpm, bool render) {
-  auto s = dm::parseScene(sceneJson(rpm, render), "drill.json", fs::temp_directory_path());
+// With `softTop` > 0, the plate's top 1.8 mm are an inclusion of that hardness (Pa).
+dm::SceneDesc parse(double rpm, bool render, double softTop = 0) {
+  nlohmann::json j = nlohmann::json::parse(sceneJson(rpm, render));
+  if (softTop > 0) {
+    j["resources"]["layer"] = {{"type", "shape"}, {"shape", "box"}, {"half_extents", {0.005, 0.005, 0.0009}}};
+    j["objects"].push_back({{"name", "soft"},
+                            {"mesh", "layer"},
+                            {"pose", {{"position", {0, 0, 0.0011}}}},
+                            {"inclusion", {{"hardness", softTop}}}});
+  }
+  auto s = dm::parseScene(j.dump(), "drill.json", fs::temp_directory_path());
   EXPECT_TRUE(s) << (s ? "" : s.error().message());
   return *s;
 }
 
-nlohmann::json run(double rpm, bool render, const fs::path& out, double seconds = 1.5) {
+nlohmann::json run(double rpm, bool render, const fs::path& out, double seconds = 1.5, double softTop = 0) {
   fs::remove_all(out);
-  auto rt = dm::SceneRuntime::create(parse(rpm, render));
+  auto rt = dm::SceneRuntime::create(parse(rpm, render, softTop));
   EXPECT_TRUE(rt) << rt.error();
   if (!rt) return {};
   auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = seconds, .outDir = out});
@@ -118,6 +127,23 @@ TEST(SceneBurr, ASpinningBurrDrillsTheHoleTheRendererDraws) {
   EXPECT_TRUE(fs::exists(out / "frames" / "frame_00014.png"));
   // Drilling lets the burr go deeper than the still probe, so it comes nearer the nerve.
   EXPECT_LT(b["closest_approach_m"].get<double>(), 1.45e-3);
+}
+
+TEST(SceneBurr, ASofterLayerIsDrilledFasterAndAccountedByName) {
+  const fs::path base = fs::temp_directory_path() / "dm_scene_burr_test";
+  const nlohmann::json hard = run(80000.0, false, base / "hard");
+  const nlohmann::json soft = run(80000.0, false, base / "soft", 1.5, 2.5e7);  // half the bone's hardness
+  const double hardRemoved = hard["burr"]["removed_total_m3"].get<double>();
+  const nlohmann::json& s = soft["burr"];
+  // The burr stays in the top layer: all it removes is the layer's.
+  EXPECT_GT(s["removed_m3"]["soft"].get<double>(), 0.99 * s["removed_total_m3"].get<double>());
+  // Archard: removal goes as force / hardness. The stylus follows its path
+  // whatever the force, so the burr removes about what the path sweeps in
+  // both, and the softer layer lets it through with less force.
+  EXPECT_GE(s["removed_total_m3"].get<double>(), hardRemoved);
+  EXPECT_LT(soft["haptics"]["max_force_N"].get<double>(), 0.8 * hard["haptics"]["max_force_N"].get<double>());
+  EXPECT_NEAR(s["initial_m3"].get<double>(), hard["burr"]["initial_m3"].get<double>(),
+              1e-6 * hard["burr"]["initial_m3"].get<double>());
 }
 
 TEST(SceneBurr, LockstepDrillingIsBitReproducible) {

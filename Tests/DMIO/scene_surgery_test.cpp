@@ -24,7 +24,8 @@ Json burrScene() {
     "objects": [
       {"name": "skull", "mesh": "plate", "material": "bone", "haptic": true,
        "millable": {"voxel_size": 0.0002, "hardness": 3e8}},
-      {"name": "nerve", "mesh": "nerve", "critical": {"hardness": 2e7}}
+      {"name": "nerve", "mesh": "nerve", "critical": {"hardness": 2e7}},
+      {"name": "marrow", "mesh": "plate", "scale": 0.5, "inclusion": {"hardness": 1e8}}
     ],
     "devices": [{"name": "hand", "driver": "sim-haptic", "config": {"path": "circle"}}],
     "engines": {
@@ -45,6 +46,8 @@ TEST(SceneSurgery, KeysReadAndWriteBackEqual) {
   EXPECT_EQ(skull.millable->hardness, 3e8);
   ASSERT_TRUE(s->objects[1].critical);
   EXPECT_EQ(s->objects[1].critical->hardness, 2e7);
+  ASSERT_TRUE(s->objects[2].inclusion);
+  EXPECT_EQ(s->objects[2].inclusion->hardness, 1e8);
   const auto& h = *s->engines.haptics;
   EXPECT_EQ(h.renderer, dm::SceneHapticsEngine::Renderer::Burr);
   ASSERT_TRUE(h.burr);
@@ -132,6 +135,27 @@ TEST(SceneSurgery, EveryMisuseIsNamed) {
        [](Json& j) { j["materials"]["bone"]["haptic"]["static_friction"] = 0.3; }, "/objects/0/material"},
       {"bone and critical at once", [](Json& j) { j["objects"][0]["critical"] = Json::object(); },
        "/objects/0/critical"},
+      {"bone and inclusion at once", [](Json& j) { j["objects"][0]["inclusion"] = Json::object(); },
+       "/objects/0/inclusion"},
+      {"critical and inclusion at once", [](Json& j) { j["objects"][1]["inclusion"] = Json::object(); },
+       "/objects/1/inclusion"},
+      {"an inclusion without the burr",
+       [](Json& j) {
+         j["engines"]["haptics"]["renderer"] = "god-object";
+         j["engines"]["haptics"].erase("burr");
+         j["objects"][0].erase("millable");
+         j["objects"][1].erase("critical");
+       },
+       "/objects/2/inclusion"},
+      {"an inclusion in a version-1 file",
+       [](Json& j) {
+         j["version"] = 1;
+         j["objects"][0].erase("millable");
+         j["objects"][1].erase("critical");
+         j["engines"]["haptics"].erase("burr");
+         j["engines"]["haptics"]["renderer"] = "god-object";
+       },
+       "/objects/2/inclusion"},
       {"a moving bone",
        [](Json& j) {
          j["objects"][0]["dynamic"] = true;

@@ -230,8 +230,12 @@ class MillableVolume {
   /// Surface (0.5 level, outward normals) of the voxels of blocks `blocks`
   /// grown by one voxel each way, each block meshed on its own so a renderer
   /// replaces just those pieces: pieces[i] is the mesh of blocks[i].
-  /// InvalidArgument for an unknown block index.
-  Result<std::vector<Mesh>> blockSurfaces(std::span<const std::uint32_t> blocks) const;
+  /// With `materialColors` (one per material), each vertex is coloured by
+  /// the material of the fullest voxel of its cell, so what the tool
+  /// exposed (dentin under enamel, a nerve) shows. InvalidArgument for an
+  /// unknown block index or fewer colours than materials.
+  Result<std::vector<Mesh>> blockSurfaces(std::span<const std::uint32_t> blocks,
+                                          std::span<const Vec4f> materialColors = {}) const;
 
  private:
   MillableVolume() = default;
@@ -246,6 +250,7 @@ class MillableVolume {
                 static_cast<std::size_t>(dims_.y()) * static_cast<std::size_t>(k));
   }
   void markChanged(int i, int j, int k) noexcept;
+  void colorByMaterial(Mesh& mesh, std::span<const Vec4f> materialColors) const;
   /// Block b's first voxel and its extent clipped to the grid; false for an unknown block.
   bool blockRange(std::uint32_t b, Vec3i& lo, Vec3i& n) const noexcept;
 

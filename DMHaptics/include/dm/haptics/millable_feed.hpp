@@ -43,8 +43,12 @@ class MillableSurfaceFeed {
   static constexpr std::size_t kQueueBlocks = 1024;
 
   /// A feed whose mirror is a copy of `bone` as it is now (before the
-  /// haptic thread edits it). InvalidArgument when out of memory.
-  static Result<std::unique_ptr<MillableSurfaceFeed>> create(const MillableVolume& bone);
+  /// haptic thread edits it). With `materialColors` (one per material of
+  /// the bone) the surface's vertices are coloured by the material they
+  /// show (MillableVolume::blockSurfaces). InvalidArgument when out of
+  /// memory or for fewer colours than materials.
+  static Result<std::unique_ptr<MillableSurfaceFeed>> create(const MillableVolume& bone,
+                                                             std::vector<Vec4f> materialColors = {});
 
   /// Haptic thread, after a tick: queues the blocks `bone` changed (the
   /// volume create() copied) and clears its change set. Never allocates,
@@ -73,6 +77,7 @@ class MillableSurfaceFeed {
 
   MillableVolume mirror_;                // updater thread
   std::vector<Mesh> pieces_;             // updater thread, one per block
+  std::vector<Vec4f> colors_;            // per material, or empty
   bool first_ = true;                    // updater thread
   std::vector<std::uint32_t> waiting_;   // publisher: capacity = block count
   std::vector<std::uint8_t> isWaiting_;  // publisher

@@ -133,6 +133,15 @@ struct SceneCritical {
   bool operator==(const SceneCritical&) const = default;
 };
 
+/// Another material of the millable bone (v2 "inclusion"): dentin under
+/// enamel, cancellous bone inside cortical; where the object lies inside
+/// the bone's grid, the bone has this hardness.
+struct SceneInclusion {
+  double hardness = 0.5e9;  ///< Pa, > 0
+
+  bool operator==(const SceneInclusion&) const = default;
+};
+
 /// A mesh placed in the world.
 struct SceneObject {
   std::string name;
@@ -155,6 +164,7 @@ struct SceneObject {
   double restitution = 0.0;               ///< rigid contact: coefficient of restitution, 0..1 (v2 "contact")
   std::optional<SceneMillable> millable;  ///< v2: bone the burr renderer mills
   std::optional<SceneCritical> critical;  ///< v2: a structure the burr must not reach
+  std::optional<SceneInclusion> inclusion;  ///< v2: another material of the millable bone
 
   bool operator==(const SceneObject& o) const;
 };
@@ -270,7 +280,7 @@ struct SceneBurr {
   Shape shape = Shape::Sphere;
   double radius = 0.0;            ///< m, > 0, ≤ 0.05
   double halfLength = 0.0;        ///< m, cylinder only: > 0, ≤ 0.05, along the tool's z
-  double rpm = 80000.0;           ///< 0..200000
+  double rpm = 80000.0;           ///< 0..500000 (dental turbines run 300k–450k)
   double wear = 0.1;              ///< Archard wear coefficient, 0..10
   double walk = 0.3;              ///< tangential / normal force of the spinning burr, 0..10
   double vibration = 0.05;        ///< vibration force / normal force, 0..10
