@@ -39,13 +39,15 @@ inline double boxSignedDistance(const Vec3& p, const Vec3& half, Vec3* gradient 
 
 /// Signed distance of a flat-ended cylinder about local z (radius r, half
 /// length l), exact inside and out, and its unit gradient (if given).
+/// sqrt, not hypot: lengths in metres cannot overflow, and std::hypot is a
+/// libm call ~10x slower (it was a sixth of a milling tool's query time).
 inline double cylinderSignedDistance(const Vec3& p, double r, double l, Vec3* gradient = nullptr) noexcept {
-  const double rho = std::hypot(p.x(), p.y());
+  const double rho = std::sqrt(p.x() * p.x() + p.y() * p.y());
   const double qr = rho - r, qz = std::abs(p.z()) - l;
   const Vec3 radial = rho > 0.0 ? Vec3(p.x() / rho, p.y() / rho, 0.0) : Vec3::UnitX();
   const Vec3 axial(0.0, 0.0, p.z() < 0.0 ? -1.0 : 1.0);
   if (qr > 0.0 && qz > 0.0) {
-    const double d = std::hypot(qr, qz);
+    const double d = std::sqrt(qr * qr + qz * qz);
     if (gradient) *gradient = (qr * radial + qz * axial) / d;
     return d;
   }

@@ -69,6 +69,23 @@ double MillingTool::boundingRadius() const noexcept {
   return 0.0;
 }
 
+Vec3 MillingTool::boundingHalfExtents() const noexcept {
+  switch (kind) {
+    case Kind::Sphere:
+      return Vec3::Constant(radius);
+    case Kind::Cylinder:
+      return Vec3(radius, radius, halfLength);
+    case Kind::Box:
+      return halfExtents;
+    case Kind::Voxels: {
+      if (!shape) return Vec3::Zero();
+      const Aabb b = shape->localAabb();
+      return b.min().cwiseAbs().cwiseMax(b.max().cwiseAbs());
+    }
+  }
+  return Vec3::Zero();
+}
+
 double MillingTool::innerRadius() const noexcept {
   switch (kind) {
     case Kind::Sphere:
@@ -246,15 +263,20 @@ double MillableVolume::removedVolume(std::size_t m) const noexcept {
 
 MillableVolume::Box MillableVolume::toolBox(const MillingTool& tool, const Isometry3& pose,
                                             double grow) const noexcept {
-  const double reach = tool.boundingRadius() + grow + 0.5 * h_;
+  const double margin = grow + 0.5 * h_;
+  const double reach = tool.boundingRadius() + margin;
   const Vec3 centre = worldToIndex_ * pose.translation();
   const Mat3& a = worldToIndex_.linear();
   Box b{};
   b.reach = reach;
+  b.slab = tool.boundingHalfExtents() + Vec3::Constant(margin);
+  b.slabs = tool.kind != MillingTool::Kind::Sphere;
+  // The tool's oriented box in index space: its extent on each index axis.
+  const Mat3 toolToIndex = a * pose.linear();
   int* lo[3] = {&b.i0, &b.j0, &b.k0};
   int* hi[3] = {&b.i1, &b.j1, &b.k1};
   for (int axis = 0; axis < 3; ++axis) {
-    const double e = reach * a.row(axis).norm();
+    const double e = std::min(reach * a.row(axis).norm(), toolToIndex.row(axis).cwiseAbs().dot(b.slab));
     const double l = std::ceil(centre[axis] - e), u = std::floor(centre[axis] + e);
     // Clamp in double first: a far-away or non-finite pose gives an empty box.
     *lo[axis] =
@@ -295,6 +317,25 @@ inline bool millChord(double a, double invA, double b, double c2, double r, int 
   return i0 <= i1;
 }
 
+// Clips the cells [i0, i1] of a row, centres base + i·cx in the tool frame,
+// to the tool's oriented box |·| ≤ slab on each tool axis. False when none.
+inline bool millSlabs(const Vec3& base, const Vec3& cx, const Vec3& slab, int& i0, int& i1) noexcept {
+  for (int axis = 0; axis < 3; ++axis) {
+    const double c = cx[axis], p = base[axis], e = slab[axis];
+    if (std::abs(c) < 1e-12) {
+      if (std::abs(p) > e) return false;
+      continue;
+    }
+    const double inv = 1.0 / c;
+    double lo = (-e - p) * inv, hi = (e - p) * inv;
+    if (lo > hi) std::swap(lo, hi);
+    i0 = std::max(i0, millCeil(lo, i0, i1));
+    i1 = std::min(i1, millFloor(hi, i0, i1));
+    if (i0 > i1) return false;
+  }
+  return true;
+}
+
 // The fraction K of a cell that the tool covers, at the cell centre's
 // tool-frame position; spheres (the common burr) without a square root
 // outside their one-voxel shell.
@@ -325,8 +366,9 @@ template <class Box, class F>
 void forOccupiedCells(const Box& box, const Affine3& indexToTool, const Vec3i& dims,
                       const std::vector<std::uint16_t>& occupancy, F&& f) noexcept {
   // Only the cells whose centres lie in the ball of radius box.reach about
-  // the tool's origin can be covered: each row is clipped to its chord,
-  // |base + i·cx|² ≤ reach², solved for i.
+  // the tool's origin, and in its oriented box, can be covered: each row is
+  // clipped to its chord, |base + i·cx|² ≤ reach² solved for i, and to the
+  // box's slabs (a long burr's box holds a tenth of its ball).
   const Vec3 cx = indexToTool.linear().col(0), cy = indexToTool.linear().col(1),
              cz = indexToTool.linear().col(2);
   const Vec3 origin = indexToTool.translation();
@@ -337,6 +379,7 @@ void forOccupiedCells(const Box& box, const Affine3& indexToTool, const Vec3i& d
       const Vec3 base = origin + static_cast<double>(j) * cy + static_cast<double>(k) * cz;
       int i0 = 0, i1 = -1;
       if (!millChord(a, invA, base.dot(cx), base.squaredNorm(), box.reach, box.i0, box.i1, i0, i1)) continue;
+      if (box.slabs && !millSlabs(base, cx, box.slab, i0, i1)) continue;
       const std::size_t row = static_cast<std::size_t>(j) * nx + static_cast<std::size_t>(k) * nxy;
       for (int i = i0; i <= i1; ++i) {
         const std::size_t v = row + static_cast<std::size_t>(i);

@@ -88,6 +88,31 @@ TEST(MillableVolume, SphereOverlapIsTheSphericalCap) {
   }
 }
 
+TEST(MillableVolume, LongToolsTiltedAnyWayOverlapWhatEveryCellSays) {
+  // The cell walk visits only the tool's oriented box within its ball; the
+  // overlap must still be the sum over every cell of the grid:
+  // Σ max(0, o + K − 1)·V with K = clamp(1/2 − s/h) from the tool's own distance.
+  const MillableVolume bone = slab(0.1 * kH);
+  const double v = kH * kH * kH;
+  for (const MillingTool& tool :
+       {MillingTool::cylinder(0.3e-3, 1.8e-3), MillingTool::box(Vec3(1.6e-3, 0.2e-3, 0.5e-3))})
+    for (const Vec3& axis : {Vec3(1, 0, 0), Vec3(1, 2, 3), Vec3(-2, 1, 0.5)}) {
+      Isometry3 pose = place(Vec3(0.2e-3, -0.1e-3, 0.4e-3));
+      pose.linear() = AngleAxis(0.7, axis.normalized()).toRotationMatrix();
+      double brute = 0.0;
+      for (int k = 0; k < 40; ++k)
+        for (int j = 0; j < 40; ++j)
+          for (int i = 0; i < 40; ++i) {
+            const Vec3 p = pose.inverse() * (bone.indexToWorld() * Vec3(i, j, k));
+            Vec3 g;
+            const double cover = std::clamp(0.5 - tool.distance(p, g) / kH, 0.0, 1.0);
+            brute += std::max(0.0, bone.occupancy(i, j, k) + cover - 1.0) * v;
+          }
+      EXPECT_GT(brute, 0.0);
+      EXPECT_NEAR(bone.overlap(tool, pose), brute, 1e-9 * brute) << axis.transpose();
+    }
+}
+
 TEST(MillableVolume, ContactNormalIsTheSurfaceNormalOnPlanesAndSpheres) {
   const MillingTool ball = MillingTool::sphere(1e-3);
   const MillableVolume flat = slab(0.0);

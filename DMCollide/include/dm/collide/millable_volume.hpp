@@ -82,6 +82,9 @@ struct MillingTool {
   double distance(const Vec3& p, Vec3& gradient) const noexcept;
   /// Radius of a ball about the origin that holds the tool, m.
   double boundingRadius() const noexcept;
+  /// Half extents of a box about the origin, along the tool's axes, that
+  /// holds the tool, m (tighter than the ball for long tools).
+  Vec3 boundingHalfExtents() const noexcept;
   /// Radius of the largest ball about the origin inside the tool, m
   /// (sphere, cylinder, box; a voxel tool: −distance at the origin).
   double innerRadius() const noexcept;
@@ -132,6 +135,8 @@ class MillableVolume {
   struct Box {
     int i0, i1, j0, j1, k0, k1;  ///< inclusive index ranges
     double reach;                ///< m: radius about the tool's origin that holds every cell it can cover
+    Vec3 slab;                   ///< m: half extents along the tool's axes that hold every such cell
+    bool slabs;                  ///< clip to `slab` too (not for a sphere: its ball is exact)
   };
 
   /// Occupancy from a signed distance volume (m, negative inside):
