@@ -12,6 +12,15 @@ constexpr std::array<std::string_view, 2> kBurrShapes{"sphere", "cylinder"};
 
 double readHardness(ConfigReader& r, double fallback) { return readPositive(r, "hardness", fallback, 1e12); }
 
+// The block `key` of a part inside the bone ({"hardness": Pa}); nullopt when
+// it is not an object (the error is recorded).
+std::optional<double> readPartHardness(ConfigReader& object, std::string_view key, double fallback) {
+  ConfigReader r = object.child(key);
+  if (!expectObject(r)) return std::nullopt;
+  r.knownKeys({"hardness"});
+  return readHardness(r, fallback);
+}
+
 }  // namespace
 
 void readMillable(ConfigReader& object, SceneObject& o) {
@@ -25,21 +34,12 @@ void readMillable(ConfigReader& object, SceneObject& o) {
 }
 
 void readCritical(ConfigReader& object, SceneObject& o) {
-  ConfigReader r = object.child("critical");
-  if (!expectObject(r)) return;
-  r.knownKeys({"hardness"});
-  SceneCritical c;
-  c.hardness = readHardness(r, c.hardness);
-  o.critical = c;
+  if (auto h = readPartHardness(object, "critical", SceneCritical{}.hardness)) o.critical = SceneCritical{*h};
 }
 
 void readInclusion(ConfigReader& object, SceneObject& o) {
-  ConfigReader r = object.child("inclusion");
-  if (!expectObject(r)) return;
-  r.knownKeys({"hardness"});
-  SceneInclusion c;
-  c.hardness = readHardness(r, c.hardness);
-  o.inclusion = c;
+  if (auto h = readPartHardness(object, "inclusion", SceneInclusion{}.hardness))
+    o.inclusion = SceneInclusion{*h};
 }
 
 void readBurr(ConfigReader& haptics, SceneHapticsEngine& h) {
