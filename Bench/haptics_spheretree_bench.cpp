@@ -73,9 +73,8 @@ std::shared_ptr<fcl::BVHModel<fcl::OBBRSSd>> fclIndexedModel(const dm::Mesh& mes
 dm::Mesh probeMesh() {
   dm::Mesh tip = dm::makeIcosphere(0.0015, 3);
   dm::Mesh shaft = dm::makeBox(Vec3(0.0006, 0.0006, 0.006));
-  const auto base = static_cast<std::uint32_t>(tip.positions.size());
-  for (const Vec3& p : shaft.positions) tip.positions.push_back(p + Vec3(0, 0, 0.0072));
-  for (const auto& t : shaft.triangles) tip.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+  shaft.transform(dm::Affine3(Eigen::Translation3d(0, 0, 0.0072)));
+  tip.append(shaft);
   tip.normals.clear();  // per-vertex attributes are optional; the tree needs positions only
   tip.uvs.clear();
   tip.colors.clear();

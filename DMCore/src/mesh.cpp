@@ -90,4 +90,32 @@ void Mesh::transform(const Affine3& t) {
   }
 }
 
+namespace {
+
+// Appends one per-vertex attribute of `other` (see Mesh::append).
+template <typename T>
+void appendAttribute(std::vector<T>& into, std::size_t vertices, const std::vector<T>& from,
+                     std::size_t fromVertices) {
+  const bool have = vertices == 0 || into.size() == vertices;
+  if (have && from.size() == fromVertices) {
+    into.insert(into.end(), from.begin(), from.end());
+  } else {
+    into.clear();
+  }
+}
+
+}  // namespace
+
+void Mesh::append(const Mesh& other) {
+  const std::size_t n = positions.size();
+  const std::size_t m = other.positions.size();
+  appendAttribute(normals, n, other.normals, m);
+  appendAttribute(uvs, n, other.uvs, m);
+  appendAttribute(colors, n, other.colors, m);
+  positions.insert(positions.end(), other.positions.begin(), other.positions.end());
+  const auto base = static_cast<std::uint32_t>(n);
+  triangles.reserve(triangles.size() + other.triangles.size());
+  for (const Triangle& t : other.triangles) triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+}
+
 }  // namespace dm

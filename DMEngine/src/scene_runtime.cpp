@@ -153,7 +153,7 @@ class MonitorEngine final : public Engine {
 Result<MeshBvh> objectBvh(const Mesh& mesh, double scale) {
   if (scale == 1.0) return MeshBvh::build(mesh);
   Mesh m = mesh;
-  for (auto& p : m.positions) p *= scale;
+  m.transform(Affine3(Eigen::Scaling(scale)));
   return MeshBvh::build(m);
 }
 

@@ -20,8 +20,10 @@ Result<Mesh> placedMesh(const SceneResources& resources, const SceneObject& o, c
   auto mesh = resources.mesh(o.mesh);
   if (!mesh) return fail(ErrorCode::NotFound, "mesh \"" + o.mesh + "\" was not loaded", "objects/" + o.name);
   Mesh m = *mesh;
-  for (Vec3& p : m.positions) p = toFrame * (p * o.scale);
   m.normals.clear();
+  Affine3 t(toFrame.matrix());
+  t.scale(o.scale);
+  m.transform(t);
   return m;
 }
 
@@ -56,7 +58,7 @@ Result<SceneBurrBuild> buildSceneBurr(const SceneDesc& scene, const SceneResourc
   const Vec4 boneColor = mat->color;
   std::vector<Vec4f> colors{Vec4f::Ones()};  // multiplied by the bone material's colour
   const Isometry3 boneInverse = bone->pose.isometry().inverse();
-  Mesh allCritical;
+  std::vector<std::shared_ptr<const VoxelModel>> critical;
   auto labels = Volume::create(sdf->dims(), VoxelType::U8, sdf->indexToWorld());
   if (!labels) return labels.error().within(boneWhere);
   float* d = sdf->data<float>();
@@ -95,11 +97,7 @@ Result<SceneBurrBuild> buildSceneBurr(const SceneDesc& scene, const SceneResourc
           if (dc < 0.0 || dc <= d[v] + 0.05 * voxel) label[v] = index;
           if (dc < d[v]) d[v] = static_cast<float>(dc);
         }
-    if (!c.critical) continue;
-    const auto base = static_cast<std::uint32_t>(allCritical.positions.size());
-    allCritical.positions.insert(allCritical.positions.end(), cm->positions.begin(), cm->positions.end());
-    for (const Triangle& t : cm->triangles)
-      allCritical.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+    if (c.critical) critical.push_back(*model);
   }
   auto volume = MillableVolume::fromSdf(*sdf, materials[0]);
   if (!volume) return volume.error().within(boneWhere + "/millable");
@@ -118,11 +116,7 @@ Result<SceneBurrBuild> buildSceneBurr(const SceneDesc& scene, const SceneResourc
   o.vibrationHz = b.vibrationHz;
   o.warningDistance = b.warningDistance;
   if (h.maxForce > 0) o.maxForce = h.maxForce;
-  if (!allCritical.triangles.empty()) {
-    auto critical = VoxelModel::fromMesh(allCritical, {.voxelSize = voxel, .paddingVoxels = 2});
-    if (!critical) return critical.error().within("objects (critical)");
-    o.critical = *critical;
-  }
+  o.critical = std::move(critical);
   auto shared = std::make_shared<MillableVolume>(std::move(*volume));
   SceneBurrBuild out;
   auto feed = MillableSurfaceFeed::create(*shared, std::move(colors));

@@ -47,6 +47,10 @@ Status BurrOptions::validate(std::string_view where) const {
   if (!std::isfinite(normalMargin))
     return fail(ErrorCode::InvalidArgument, "normal_margin must be finite", at + "/normal_margin");
   if (auto s = check(warningDistance, "warning_distance", false); !s) return s;
+  for (std::size_t k = 0; k < critical.size(); ++k)
+    if (!critical[k])
+      return fail(ErrorCode::InvalidArgument, "critical structure " + std::to_string(k) + " is null",
+                  at + "/critical/" + std::to_string(k));
   return ok();
 }
 
@@ -205,8 +209,10 @@ HapticResponse BurrRenderer::tick(const HapticInput& input) noexcept {
     force = spring;  // the proxy lags only when the move budget ran out
   }
   // Critical structures and the skill metrics.
-  if (options_.critical) {
-    last_.criticalDistance = options_.critical->distance(proxy_) - boundingRadius_;
+  if (!options_.critical.empty()) {
+    double nearest = std::numeric_limits<double>::infinity();
+    for (const auto& c : options_.critical) nearest = std::min(nearest, c->distance(proxy_));
+    last_.criticalDistance = nearest - boundingRadius_;
     metrics_.closestApproach = std::min(metrics_.closestApproach, last_.criticalDistance);
     if (last_.criticalDistance < options_.warningDistance) metrics_.secondsWithinWarning += dt;
   }

@@ -83,15 +83,7 @@ Result<bool> MillableSurfaceFeed::update(Mesh& surface) {
   surface.normals.reserve(vertices);
   surface.triangles.reserve(triangles);
   if (!colors_.empty()) surface.colors.reserve(vertices);
-  for (const Mesh& p : pieces_) {
-    const auto base = static_cast<std::uint32_t>(surface.positions.size());
-    surface.positions.insert(surface.positions.end(), p.positions.begin(), p.positions.end());
-    if (p.normals.size() == p.positions.size())
-      surface.normals.insert(surface.normals.end(), p.normals.begin(), p.normals.end());
-    if (!colors_.empty()) surface.colors.insert(surface.colors.end(), p.colors.begin(), p.colors.end());
-    for (const Triangle& t : p.triangles)
-      surface.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
-  }
+  for (const Mesh& p : pieces_) surface.append(p);
   if (surface.normals.size() != surface.positions.size()) surface.computeNormals();
   return true;
 }

@@ -34,12 +34,7 @@ int meshInfo(const InfoOptions& o, const std::filesystem::path& path) {
     total = summaries.front();
   } else {
     dm::Mesh all;
-    for (const dm::Mesh& p : *parts) {
-      const auto offset = static_cast<std::uint32_t>(all.positions.size());
-      all.positions.insert(all.positions.end(), p.positions.begin(), p.positions.end());
-      for (const dm::Triangle& t : p.triangles)
-        all.triangles.push_back({t[0] + offset, t[1] + offset, t[2] + offset});
-    }
+    for (const dm::Mesh& p : *parts) all.append(p);
     total = summarize(all);
   }
   total.name = path.filename().string();

@@ -69,4 +69,37 @@ TEST(Mesh, TransformScalesAndRotatesNormals) {
   for (std::size_t v = 0; v < m.vertexCount(); ++v) EXPECT_LT((m.normals[v] - ref.normals[v]).norm(), 1e-12);
 }
 
+TEST(Mesh, AppendedMeshesKeepTheirTrianglesAndSharedAttributes) {
+  // A cube and a moved, scaled cube with normals: the union has both areas,
+  // every triangle of the second keeps its own face normal (its indices
+  // point at its own vertices), and normals stay per vertex.
+  dm::Mesh a = cube();
+  a.computeNormals();
+  dm::Mesh b = cube();
+  dm::Affine3 t = dm::Affine3::Identity();
+  t.linear() = dm::AngleAxis(0.3, dm::Vec3(1, 2, 3).normalized()).toRotationMatrix() * 0.5;
+  t.translation() = dm::Vec3(3, 0, 0);
+  b.transform(t);
+  b.computeNormals();
+  dm::Mesh u;
+  u.append(a);
+  u.append(b);
+  ASSERT_TRUE(u.validate());
+  EXPECT_EQ(u.vertexCount(), 16u);
+  EXPECT_NEAR(u.surfaceArea(), 6.0 + 1.5, 1e-12);
+  for (std::size_t k = 0; k < b.triangleCount(); ++k)
+    EXPECT_LT((u.faceNormal(12 + k) - b.faceNormal(k)).norm(), 1e-12) << "triangle " << k;
+  ASSERT_EQ(u.normals.size(), 16u);
+  EXPECT_EQ(u.normals[9], b.normals[1]);
+  // A mesh without normals or with colours the first lacks: the attribute
+  // that is not everyone's is dropped, never left short of the positions.
+  dm::Mesh c = cube();
+  c.colors.assign(8, dm::Vec4f(1, 0, 0, 1));
+  u.append(c);
+  ASSERT_TRUE(u.validate());
+  EXPECT_TRUE(u.normals.empty());
+  EXPECT_TRUE(u.colors.empty());
+  EXPECT_EQ(u.triangles.back()[0], 16u + 3u);  // cube's last triangle starts at its vertex 3
+}
+
 }  // namespace

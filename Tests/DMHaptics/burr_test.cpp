@@ -300,7 +300,7 @@ std::unique_ptr<BurrRenderer> drillTowardNerve(double depth) {
   EXPECT_TRUE(nerve.ok());
   BurrOptions o = still();
   o.rpm = 80000.0;
-  o.critical = *nerve;
+  o.critical = {*nerve};
   o.warningDistance = 0.5e-3;
   auto r = burr(b, o);
   const Vec3 above(0, 0, 2e-3), bottom(0, 0, -depth);
@@ -396,6 +396,11 @@ TEST(BurrRenderer, BadOptionsAreNamed) {
   e = BurrRenderer::create(b, o);
   ASSERT_FALSE(e.ok());
   EXPECT_EQ(e.error().where, "burr/warning_distance");
+  o = still();
+  o.critical = {nullptr};
+  e = BurrRenderer::create(b, o);
+  ASSERT_FALSE(e.ok());
+  EXPECT_EQ(e.error().where, "burr/critical/0");
   EXPECT_FALSE(BurrRenderer::create(nullptr, still()).ok());
 }
 

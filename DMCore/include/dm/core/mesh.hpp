@@ -49,6 +49,12 @@ struct Mesh {
 
   /// Applies `t` to positions and (rotation part) normals.
   void transform(const Affine3& t);
+
+  /// Appends `other`'s vertices and triangles (its indices offset by this
+  /// mesh's vertex count). A per-vertex attribute (normals, uvs, colors) is
+  /// kept where both meshes carry it for every vertex (or this mesh has no
+  /// vertices yet) and cleared otherwise, so the invariants hold. O(other).
+  void append(const Mesh& other);
 };
 
 }  // namespace dm

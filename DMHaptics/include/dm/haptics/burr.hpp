@@ -56,6 +56,7 @@
 #include <limits>
 #include <memory>
 #include <string_view>
+#include <vector>
 
 namespace dm {
 
@@ -78,11 +79,12 @@ struct BurrOptions {
   double contactTolerance = -1.0;
   /// m, how far beyond the tool material shapes the contact normal; < 0: two voxels.
   double normalMargin = -1.0;
-  /// Critical structures (nerve, vessel, dura) as a signed distance in the
-  /// bone volume's frame, e.g. VoxelModel::fromOccupancy of
-  /// MillableVolume::forbiddenMask(); null: none. Each tick measures the
-  /// tool's distance to them (BurrTickInfo::criticalDistance).
-  std::shared_ptr<const VoxelModel> critical;
+  /// Critical structures (nerve, vessel, dura), each a signed distance in
+  /// the bone volume's frame, e.g. VoxelModel::fromOccupancy of
+  /// MillableVolume::forbiddenMask() or one per structure; empty: none.
+  /// Each tick measures the tool's distance to the nearest
+  /// (BurrTickInfo::criticalDistance). Null entries are an error.
+  std::vector<std::shared_ptr<const VoxelModel>> critical;
   double warningDistance = 1e-3;  ///< m (≥ 0): closer than this counts as time within the margin
 
   /// Ok, or InvalidArgument naming the field of `where`.
