@@ -27,6 +27,38 @@ Result<Mesh> placedMesh(const SceneResources& resources, const SceneObject& o, c
   return m;
 }
 
+// The bone's signed distance on the grid it is milled on (m, negative
+// inside): its mesh voxelized at `voxel_size`, or, from a CT volume, the
+// distance that gives each voxel its partial-volume occupancy
+// o = clamp((I − empty) / (full − empty)) through MillableVolume::fromSdf's
+// o = clamp(1/2 − d/h), i.e. d = (1/2 − o)·h.
+Result<Volume> boneDistance(const SceneResources& resources, const SceneObject& bone) {
+  const SceneMillable& m = *bone.millable;
+  const std::string where = "objects/" + bone.name + "/millable";
+  if (m.volume.empty()) {
+    auto mesh = placedMesh(resources, bone, Isometry3::Identity());
+    if (!mesh) return mesh.error();
+    auto sdf = voxelizeMesh(*mesh, {.voxelSize = m.voxelSize, .paddingVoxels = 2, .signedDistance = true});
+    if (!sdf) return sdf.error().within(where);
+    return sdf;
+  }
+  auto ct = resources.volume(m.volume);
+  if (!ct) return fail(ErrorCode::NotFound, "volume \"" + m.volume + "\" was not loaded", where + "/volume");
+  auto sdf = Volume::create(ct->dims(), VoxelType::F32, ct->indexToWorld());
+  if (!sdf) return sdf.error().within(where);
+  const double h = ct->spacing().minCoeff();
+  float* d = sdf->data<float>();
+  for (std::size_t v = 0; v < ct->voxelCount(); ++v) {
+    const double value = ct->valueAt(v);
+    if (!std::isfinite(value))
+      return fail(ErrorCode::InvalidArgument, "voxel " + std::to_string(v) + " of the volume is not finite",
+                  where + "/volume");
+    const double o = std::clamp((value - m.empty) / (m.full - m.empty), 0.0, 1.0);
+    d[v] = static_cast<float>((0.5 - o) * h);
+  }
+  return sdf;
+}
+
 }  // namespace
 
 Result<SceneBurrBuild> buildSceneBurr(const SceneDesc& scene, const SceneResources& resources) {
@@ -41,12 +73,9 @@ Result<SceneBurrBuild> buildSceneBurr(const SceneDesc& scene, const SceneResourc
   if (mat == nullptr || !mat->haptic)
     return fail(ErrorCode::InvalidArgument, "the millable object has no haptic material",
                 boneWhere + "/material", "give its material a \"haptic\" block with the stiffness (N/m)");
-  const double voxel = bone->millable->voxelSize;
-
-  auto boneMesh = placedMesh(resources, *bone, Isometry3::Identity());
-  if (!boneMesh) return boneMesh.error();
-  auto sdf = voxelizeMesh(*boneMesh, {.voxelSize = voxel, .paddingVoxels = 2, .signedDistance = true});
-  if (!sdf) return sdf.error().within(boneWhere + "/millable");
+  auto sdf = boneDistance(resources, *bone);
+  if (!sdf) return sdf.error();
+  const double voxel = bone->millable->volume.empty() ? bone->millable->voxelSize : sdf->spacing().minCoeff();
 
   // The parts inside the bone (critical structures and inclusions), in the
   // bone's frame and in scene order, a later part taking the voxels it shares

@@ -26,9 +26,21 @@ std::optional<double> readPartHardness(ConfigReader& object, std::string_view ke
 void readMillable(ConfigReader& object, SceneObject& o) {
   ConfigReader r = object.child("millable");
   if (!expectObject(r)) return;
-  r.knownKeys({"voxel_size", "hardness"});
   SceneMillable m;
-  m.voxelSize = readPositive(r, "voxel_size", {}, 0.01);
+  if (r.has("volume")) {
+    // The bone from a CT's intensities on the CT's own grid.
+    r.knownKeys({"volume", "empty", "full", "hardness"});
+    m.volume = r.string("volume");
+    const std::size_t before = r.errors().size();
+    m.empty = r.number("empty");
+    m.full = r.number("full");
+    if (r.errors().size() == before && !(m.empty < m.full))
+      r.addError(formatString("the empty intensity (%g) is not below the full one (%g)", m.empty, m.full),
+                 "full", "give the intensity of solid bone above that of no bone");
+  } else {
+    r.knownKeys({"voxel_size", "hardness"});
+    m.voxelSize = readPositive(r, "voxel_size", {}, 0.01);
+  }
   m.hardness = readHardness(r, m.hardness);
   o.millable = m;
 }
@@ -106,6 +118,22 @@ void checkSurgery(const SceneDesc& scene, ConfigReader root) {
       if (o.dynamic)
         r.addError("a millable object stays where it is (its voxels change, not its pose)", "dynamic",
                    "remove \"dynamic\"");
+      if (!o.millable->volume.empty()) {
+        ConfigReader m = r.child("millable");
+        const SceneResource* res = scene.resource(o.millable->volume);
+        if (res == nullptr || res->type != SceneResource::Type::Volume) {
+          std::string names;
+          for (const SceneResource& x : scene.resources)
+            if (x.type == SceneResource::Type::Volume)
+              names += (names.empty() ? "" : ", ") + inQuotes(x.name);
+          m.addError(
+              "resource " + inQuotes(o.millable->volume) + (res ? " is not a volume" : " is not defined"),
+              "volume", names.empty() ? "define a \"volume\" resource (the CT)" : "use one of: " + names);
+        }
+        if (o.scale != 1.0)
+          r.addError("a bone from a volume has the volume's own size", "scale",
+                     "remove \"scale\" (the volume's spacing sets it)");
+      }
       for (const char* key : {"critical", "inclusion"})
         if (r.has(key))
           r.addError("an object is either the bone (\"millable\") or a part inside it", key,
@@ -133,7 +161,12 @@ void checkSurgery(const SceneDesc& scene, ConfigReader root) {
 
 void writeSurgery(const SceneObject& o, Json& object) {
   if (o.millable)
-    object["millable"] = {{"voxel_size", o.millable->voxelSize}, {"hardness", o.millable->hardness}};
+    object["millable"] = o.millable->volume.empty() ? nlohmann::json{{"voxel_size", o.millable->voxelSize},
+                                                                     {"hardness", o.millable->hardness}}
+                                                    : nlohmann::json{{"volume", o.millable->volume},
+                                                                     {"empty", o.millable->empty},
+                                                                     {"full", o.millable->full},
+                                                                     {"hardness", o.millable->hardness}};
   if (o.critical) object["critical"] = {{"hardness", o.critical->hardness}};
   if (o.inclusion) object["inclusion"] = {{"hardness", o.inclusion->hardness}};
 }

@@ -5,11 +5,14 @@
 // it drills, the material removed plus what remains is what there was,
 // the render engine draws the drilled surface, and lockstep reruns are
 // bit-identical.
+#include <dm/core/volume.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
+#include <dm/io/volume_io.hpp>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -154,6 +157,65 @@ TEST(SceneBurr, LockstepDrillingIsBitReproducible) {
   EXPECT_GT(fa.size(), 1000u);
   EXPECT_EQ(fa, fc);
   EXPECT_EQ(sa["burr"]["removed_total_m3"], sc["burr"]["removed_total_m3"]);
+}
+
+// A CT-like scan (int16 HU, 0.25 mm voxels) of a bone block x, y in
+// [-5.125, 5.125] mm, z in [-2, 2.5] mm in soft tissue (40 HU), each voxel
+// the partial-volume mix 40 + 1460 * (fraction of the voxel inside the
+// block): its side faces cut voxels in half, its top and bottom lie on
+// voxel faces.
+fs::path writeCtBlock(const fs::path& dir) {
+  constexpr double h = 0.25e-3;
+  dm::Affine3 a = dm::Affine3::Identity();
+  a.linear() *= h;
+  a.translation() = dm::Vec3(-5.875e-3, -5.875e-3, -2.875e-3);
+  auto v = dm::Volume::create(dm::Vec3i(48, 48, 24), dm::VoxelType::I16, a);
+  EXPECT_TRUE(v);
+  auto cover = [&](double c, double lo, double hi) {
+    return std::clamp((std::min(c + h / 2, hi) - std::max(c - h / 2, lo)) / h, 0.0, 1.0);
+  };
+  for (int k = 0; k < 24; ++k)
+    for (int j = 0; j < 48; ++j)
+      for (int i = 0; i < 48; ++i) {
+        const dm::Vec3 c = a * dm::Vec3(i, j, k);
+        const double f = cover(c.x(), -5.125e-3, 5.125e-3) * cover(c.y(), -5.125e-3, 5.125e-3) *
+                         cover(c.z(), -2e-3, 2.5e-3);
+        v->setValue(i, j, k, 40.0 + 1460.0 * f);
+      }
+  fs::create_directories(dir);
+  const fs::path file = dir / "block_ct.nrrd";
+  auto s = dm::writeVolume(*v, file);
+  EXPECT_TRUE(s) << s.error();
+  return file;
+}
+
+TEST(SceneBurr, ABoneFromACtScanIsItsVoxelsByThePartialVolumeLaw) {
+  const fs::path dir = fs::temp_directory_path() / "dm_scene_burr_test" / "ct";
+  const fs::path ct = writeCtBlock(dir);
+  nlohmann::json j = nlohmann::json::parse(sceneJson(0.0, false));
+  j["resources"]["ct"] = {{"type", "volume"}, {"source", ct.string()}};
+  j["resources"]["ct_surface"] = {{"type", "isosurface"}, {"volume", "ct"}, {"level", 770}};
+  j["objects"][0]["mesh"] = "ct_surface";
+  j["objects"][0]["millable"] = {{"volume", "ct"}, {"empty", 40}, {"full", 1500}, {"hardness", 5e7}};
+  auto scene = dm::parseScene(j.dump(), "ct.json", dir);
+  ASSERT_TRUE(scene) << scene.error();
+  auto rt = dm::SceneRuntime::create(*scene);
+  ASSERT_TRUE(rt) << rt.error();
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 1.5, .outDir = dir / "out"});
+  ASSERT_TRUE(r) << r.error();
+  const nlohmann::json& s = r->summary;
+  const nlohmann::json& b = s["burr"];
+  // On the scan's own grid, and every partial voxel counted by its fraction:
+  // 10.25 x 10.25 x 4.5 mm.
+  EXPECT_NEAR(b["voxel_size_m"].get<double>(), 0.25e-3, 1e-12);
+  EXPECT_EQ(b["dims"], nlohmann::json({48, 48, 24}));
+  EXPECT_NEAR(b["initial_m3"].get<double>(), 10.25e-3 * 10.25e-3 * 4.5e-3, 1e-6 * 4.728e-7);
+  // The still ball rests on the top at 2.5 mm, its centre at 3.5 mm, the
+  // stylus at 1.125 mm: 2.375 mm of spring at 1500 N/m.
+  EXPECT_NEAR(s["haptics"]["max_force_N"].get<double>(), 1500 * 2.375e-3, 0.03 * 3.5625);
+  // Ball bottom at 2.5 mm, the nerve's top at 0.5 mm.
+  EXPECT_NEAR(b["closest_approach_m"].get<double>(), 2.0e-3, 0.15e-3);
+  EXPECT_EQ(b["removed_total_m3"].get<double>(), 0.0);
 }
 
 }  // namespace scene_burr_test

@@ -74,6 +74,30 @@ TEST(SceneSurgery, KeysReadAndWriteBackEqual) {
   EXPECT_EQ(d->engines.haptics->burr->rpm, 80000);
 }
 
+// The bone from a CT volume's intensities instead of a voxelized mesh.
+Json ctScene() {
+  Json j = burrScene();
+  j["resources"]["ct"] = {{"type", "volume"}, {"source", "head_ct.nrrd"}};
+  j["objects"][0]["millable"] = {{"volume", "ct"}, {"empty", 100}, {"full", 1500}, {"hardness", 4e8}};
+  return j;
+}
+
+TEST(SceneSurgery, ABoneFromACtVolumeReadsAndWritesBack) {
+  auto s = dm::parseScene(ctScene().dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const dm::SceneMillable& m = *s->objects[0].millable;
+  EXPECT_EQ(m.volume, "ct");
+  EXPECT_EQ(m.empty, 100);
+  EXPECT_EQ(m.full, 1500);
+  EXPECT_EQ(m.hardness, 4e8);
+  EXPECT_EQ(m.voxelSize, 0.0);
+  const Json back = dm::toJson(*s);
+  EXPECT_FALSE(back["objects"][0]["millable"].contains("voxel_size"));
+  auto again = dm::parseScene(back.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(again) << again.error();
+  EXPECT_TRUE(*s == *again);
+}
+
 TEST(SceneSurgery, EveryMisuseIsNamed) {
   struct Case {
     const char* what;
@@ -170,6 +194,31 @@ TEST(SceneSurgery, EveryMisuseIsNamed) {
     const auto p = problemsOf(j);
     const dm::Error* e = at(p, c.pointer);
     EXPECT_TRUE(e != nullptr) << c.what;
+  }
+  // A bone from a CT volume: the intensity ramp instead of a voxel size.
+  const std::vector<Case> ctCases{
+      {"a voxel size besides the volume", [](Json& j) { j["objects"][0]["millable"]["voxel_size"] = 2e-4; },
+       "/objects/0/millable/voxel_size"},
+      {"no intensity of no bone", [](Json& j) { j["objects"][0]["millable"].erase("empty"); },
+       "/objects/0/millable/empty"},
+      {"full not above empty", [](Json& j) { j["objects"][0]["millable"]["full"] = 100; },
+       "/objects/0/millable/full"},
+      {"empty and full without a volume",
+       [](Json& j) {
+         j["objects"][0]["millable"].erase("volume");
+         j["objects"][0]["millable"]["voxel_size"] = 2e-4;
+       },
+       "/objects/0/millable/empty"},
+      {"an undefined volume", [](Json& j) { j["objects"][0]["millable"]["volume"] = "mri"; },
+       "/objects/0/millable/volume"},
+      {"a mesh for a volume", [](Json& j) { j["objects"][0]["millable"]["volume"] = "plate"; },
+       "/objects/0/millable/volume"},
+      {"a scaled CT", [](Json& j) { j["objects"][0]["scale"] = 2.0; }, "/objects/0/scale"},
+  };
+  for (const Case& c : ctCases) {
+    Json j = ctScene();
+    c.edit(j);
+    EXPECT_TRUE(at(problemsOf(j), c.pointer) != nullptr) << c.what;
   }
   // Two millable objects for one burr: the renderer mills one.
   Json j = burrScene();

@@ -118,8 +118,14 @@ struct SceneMaterial {
 /// Bone that a burr mills (v2 "millable"): the object's mesh as fractional
 /// occupancy on a grid (dm::MillableVolume), touched by the burr renderer.
 struct SceneMillable {
-  double voxelSize = 0.0;   ///< m, > 0, ≤ 0.01: the grid spacing
+  double voxelSize = 0.0;   ///< m, > 0, ≤ 0.01: the grid spacing of the voxelized mesh (0 with `volume`)
   double hardness = 0.5e9;  ///< Pa, > 0: Archard hardness (cortical bone ≈ 0.3–0.7 GPa)
+  /// A `volume` resource (CT): the bone is its voxels, occupancy
+  /// clamp((I − empty) / (full − empty)) (CT's partial-volume law) on the
+  /// volume's own grid, instead of the voxelized mesh. Empty: the mesh.
+  std::string volume;
+  double empty = 0.0;  ///< with `volume`: the intensity of no bone (e.g. soft tissue, HU)
+  double full = 0.0;   ///< with `volume`: the intensity of solid bone (> empty)
 
   bool operator==(const SceneMillable&) const = default;
 };
