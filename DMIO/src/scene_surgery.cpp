@@ -30,8 +30,11 @@ void readMillable(ConfigReader& object, SceneObject& o) {
   if (r.has("volume")) {
     // The bone from a CT's intensities on the CT's own grid.
     r.knownKeys({"volume", "empty", "full", "hardness"});
+    std::size_t before = r.errors().size();
     m.volume = r.string("volume");
-    const std::size_t before = r.errors().size();
+    if (r.errors().size() == before && m.volume.empty())
+      r.addError("no volume named", "volume", "name a \"volume\" resource (the CT)");
+    before = r.errors().size();
     m.empty = r.number("empty");
     m.full = r.number("full");
     if (r.errors().size() == before && !(m.empty < m.full))

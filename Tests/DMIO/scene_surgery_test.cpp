@@ -209,6 +209,8 @@ TEST(SceneSurgery, EveryMisuseIsNamed) {
          j["objects"][0]["millable"]["voxel_size"] = 2e-4;
        },
        "/objects/0/millable/empty"},
+      {"an empty volume name", [](Json& j) { j["objects"][0]["millable"]["volume"] = ""; },
+       "/objects/0/millable/volume"},
       {"an undefined volume", [](Json& j) { j["objects"][0]["millable"]["volume"] = "mri"; },
        "/objects/0/millable/volume"},
       {"a mesh for a volume", [](Json& j) { j["objects"][0]["millable"]["volume"] = "plate"; },
