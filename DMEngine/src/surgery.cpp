@@ -4,6 +4,7 @@
 #include <dm/collide/voxel_model.hpp>
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
+#include <dm/math/mesh_topology.hpp>
 #include <dm/math/voxelize.hpp>
 
 #include <algorithm>
@@ -15,7 +16,9 @@ namespace dm {
 namespace {
 
 // The mesh of object `o` in the frame `toFrame` (object frame → that
-// frame), its scale baked in.
+// frame), its scale baked in and coincident vertices welded: voxelizing
+// needs a closed 2-manifold, and shapes with sharp rims (a cylinder — the
+// typical nerve or vessel) duplicate their rim vertices for the normals.
 Result<Mesh> placedMesh(const SceneResources& resources, const SceneObject& o, const Isometry3& toFrame) {
   auto mesh = resources.mesh(o.mesh);
   if (!mesh) return fail(ErrorCode::NotFound, "mesh \"" + o.mesh + "\" was not loaded", "objects/" + o.name);
@@ -24,6 +27,7 @@ Result<Mesh> placedMesh(const SceneResources& resources, const SceneObject& o, c
   Affine3 t(toFrame.matrix());
   t.scale(o.scale);
   m.transform(t);
+  if (auto w = weldVertices(m, 0.0); !w) return w.error().within("objects/" + o.name);
   return m;
 }
 

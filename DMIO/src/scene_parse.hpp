@@ -202,6 +202,9 @@ inline Json toJson(const Pose& p) {
 // the haptics engine's "burr" block, and the checks between them and the
 // engines once the whole scene is read.
 void readMillable(ConfigReader& object, SceneObject& o);
+// A volume resource's "phantom" block (a generated CT) and its JSON.
+void readPhantom(ConfigReader& resource, SceneResource& res);
+Json phantomJson(const CalvariumPhantom& p);
 void readCritical(ConfigReader& object, SceneObject& o);
 void readInclusion(ConfigReader& object, SceneObject& o);
 void readBurr(ConfigReader& haptics, SceneHapticsEngine& h);

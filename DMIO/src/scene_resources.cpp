@@ -6,6 +6,7 @@
 #include <dm/io/scene_resources.hpp>
 #include <dm/math/isosurface.hpp>
 #include <dm/math/mesh_filters.hpp>
+#include <dm/math/phantom.hpp>
 #include <dm/math/primitives.hpp>
 
 #include <algorithm>
@@ -139,6 +140,12 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
   for (const SceneResource& r : scene.resources) {
     if (r.type != SceneResource::Type::Volume) continue;
     report(r);
+    if (r.phantom) {
+      auto v = makeCalvariumPhantom(*r.phantom);
+      if (!v) return v.error().within(where(r) + "/phantom");
+      out.volumes.emplace(r.name, std::make_shared<const Volume>(std::move(*v)));
+      continue;
+    }
     if (r.path.empty()) return missing(r);
     auto h = rm->load<Volume>(r.path);
     if (!h) return h.error().within(where(r));

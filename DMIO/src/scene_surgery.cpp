@@ -1,7 +1,8 @@
 // scene_surgery.cpp — the scene file's surgical keys: bone a burr mills
 // ("millable"), the critical structures in it ("critical"), the burr
-// renderer's tool ("burr"), their checks against each other and the
-// engines, and their JSON (docs/scene-format.md, "Bone surgery").
+// renderer's tool ("burr"), a generated CT-like volume to mill ("phantom"),
+// their checks against each other and the engines, and their JSON
+// (docs/scene-format.md, "Bone surgery").
 #include "scene_parse.hpp"
 
 namespace dm::scene_parse {
@@ -21,7 +22,101 @@ std::optional<double> readPartHardness(ConfigReader& object, std::string_view ke
   return readHardness(r, fallback);
 }
 
+// A phantom's number keys: JSON key (under "hu" for the values), the
+// member, CalvariumPhantom's field name (validate()'s error `where`) and range.
+struct PhantomKey {
+  std::string_view json;
+  double CalvariumPhantom::*member;
+  std::string_view field;
+  double min, max;
+};
+constexpr double kHuMin = -32768.0, kHuMax = 32767.0;
+constexpr std::array<PhantomKey, 12> kPhantomLengths{{
+    {"spacing", &CalvariumPhantom::spacing, "spacing", 0.0, 0.01},
+    {"half_width", &CalvariumPhantom::halfWidth, "halfWidth", 0.0, 1.0},
+    {"above", &CalvariumPhantom::above, "above", 0.0, 1.0},
+    {"below", &CalvariumPhantom::below, "below", 0.0, 1.0},
+    {"radius", &CalvariumPhantom::radius, "radius", 0.0, 10.0},
+    {"scalp", &CalvariumPhantom::scalp, "scalp", 0.0, 0.1},
+    {"outer_table", &CalvariumPhantom::outerTable, "outerTable", 0.0, 0.1},
+    {"diploe", &CalvariumPhantom::diploe, "diploe", 0.0, 0.1},
+    {"inner_table", &CalvariumPhantom::innerTable, "innerTable", 0.0, 0.1},
+    {"dura", &CalvariumPhantom::dura, "dura", 0.0, 0.1},
+    {"texture_hu", &CalvariumPhantom::textureHu, "textureHu", 0.0, kHuMax},
+    {"texture_scale", &CalvariumPhantom::textureScale, "textureScale", 0.0, 0.1},
+}};
+constexpr std::array<PhantomKey, 6> kPhantomValues{{
+    {"air", &CalvariumPhantom::airHu, "airHu", kHuMin, kHuMax},
+    {"soft_tissue", &CalvariumPhantom::softTissueHu, "softTissueHu", kHuMin, kHuMax},
+    {"cortical", &CalvariumPhantom::corticalHu, "corticalHu", kHuMin, kHuMax},
+    {"diploe", &CalvariumPhantom::diploeHu, "diploeHu", kHuMin, kHuMax},
+    {"dura", &CalvariumPhantom::duraHu, "duraHu", kHuMin, kHuMax},
+    {"brain", &CalvariumPhantom::brainHu, "brainHu", kHuMin, kHuMax},
+}};
+constexpr std::array<std::string_view, 1> kPhantomKinds{"calvarium"};
+// Largest generated scan: 1 GiB of int16 voxels.
+constexpr double kPhantomMaxBytes = 1024.0 * 1024.0 * 1024.0;
+
+template <std::size_t N>
+std::vector<std::string_view> jsonKeys(const std::array<PhantomKey, N>& keys) {
+  std::vector<std::string_view> out;
+  for (const PhantomKey& k : keys) out.push_back(k.json);
+  return out;
+}
+
 }  // namespace
+
+void readPhantom(ConfigReader& resource, SceneResource& res) {
+  ConfigReader r = resource.child("phantom");
+  if (!expectObject(r)) return;
+  std::vector<std::string_view> known = jsonKeys(kPhantomLengths);
+  for (std::string_view k : {"kind", "hu", "seed"}) known.push_back(k);
+  r.knownKeys(known);
+  const std::size_t before = r.errors().size();
+  readEnum<int>(r, "kind", kPhantomKinds);
+  CalvariumPhantom p;
+  for (const PhantomKey& k : kPhantomLengths)
+    p.*k.member = r.number(k.json, {.min = k.min, .max = k.max}, p.*k.member);
+  if (r.has("hu")) {
+    ConfigReader hu = r.child("hu");
+    if (expectObject(hu)) {
+      hu.knownKeys(jsonKeys(kPhantomValues));
+      for (const PhantomKey& k : kPhantomValues)
+        p.*k.member = hu.number(k.json, {.min = k.min, .max = k.max}, p.*k.member);
+    }
+  }
+  p.seed = static_cast<std::uint32_t>(r.integer("seed", {.min = 0, .max = 4294967295.0}, p.seed));
+  if (r.errors().size() != before) return;
+  if (auto s = validate(p); !s) {
+    // Back from the C++ field to the key the file wrote.
+    std::string key;
+    for (const PhantomKey& k : kPhantomLengths)
+      if (k.field == s.error().where) key = k.json;
+    for (const PhantomKey& k : kPhantomValues)
+      if (k.field == s.error().where) key = "hu/" + std::string(k.json);
+    const std::string& what = s.error().what;
+    r.addError(key.empty() ? what : what.substr(s.error().where.size() + 1), key, "see docs/phantoms.md");
+    return;
+  }
+  const Vec3i n = calvariumPhantomDims(p);
+  const double bytes = 2.0 * n.x() * n.y() * n.z();
+  if (bytes > kPhantomMaxBytes) {
+    r.addError(formatString("the scan would be %d×%d×%d voxels (%.3g GiB), more than 1 GiB", n.x(), n.y(),
+                            n.z(), bytes / kPhantomMaxBytes),
+               "spacing", "use larger voxels or a smaller patch");
+    return;
+  }
+  res.phantom = p;
+}
+
+Json phantomJson(const CalvariumPhantom& p) {
+  Json j = {{"kind", kPhantomKinds[0]}, {"seed", p.seed}};
+  for (const PhantomKey& k : kPhantomLengths) j[std::string(k.json)] = p.*k.member;
+  Json hu = Json::object();
+  for (const PhantomKey& k : kPhantomValues) hu[std::string(k.json)] = p.*k.member;
+  j["hu"] = std::move(hu);
+  return j;
+}
 
 void readMillable(ConfigReader& object, SceneObject& o) {
   ConfigReader r = object.child("millable");

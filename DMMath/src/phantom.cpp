@@ -86,7 +86,6 @@ Status validate(const CalvariumPhantom& p) {
                                                     {"below", p.below},
                                                     {"radius", p.radius},
                                                     {"scalp", p.scalp},
-                                                    {"windowRadius", p.windowRadius},
                                                     {"outerTable", p.outerTable},
                                                     {"diploe", p.diploe},
                                                     {"innerTable", p.innerTable},
@@ -114,15 +113,23 @@ Status validate(const CalvariumPhantom& p) {
   return {};
 }
 
+Vec3i calvariumPhantomDims(const CalvariumPhantom& p) noexcept {
+  auto count = [&](double length) {
+    return static_cast<int>(std::clamp(std::round(length / p.spacing), 1.0, 2147483647.0));
+  };
+  const int across = count(2.0 * p.halfWidth);
+  return {across, across, count(p.above + p.below)};
+}
+
 Result<Volume> makeCalvariumPhantom(const CalvariumPhantom& p, std::size_t maxBytes) {
   if (auto s = validate(p); !s) return s.error();
   const double h = p.spacing;
-  const int nxy = std::max(1, static_cast<int>(std::lround(2.0 * p.halfWidth / h)));
-  const int nz = std::max(1, static_cast<int>(std::lround((p.above + p.below) / h)));
+  const Vec3i dims = calvariumPhantomDims(p);
+  const int nxy = dims.x(), nz = dims.z();
   Affine3 indexToWorld = Affine3::Identity();
   indexToWorld.linear() = Mat3::Identity() * h;
   indexToWorld.translation() = Vec3(-0.5 * (nxy - 1) * h, -0.5 * (nxy - 1) * h, -p.below + 0.5 * h);
-  auto out = Volume::create(Vec3i(nxy, nxy, nz), VoxelType::I16, indexToWorld, maxBytes);
+  auto out = Volume::create(dims, VoxelType::I16, indexToWorld, maxBytes);
   if (!out) return out.error().within("phantom");
 
   // Layer boundaries (radii about c), outermost first, and the value of the
@@ -149,17 +156,9 @@ Result<Volume> makeCalvariumPhantom(const CalvariumPhantom& p, std::size_t maxBy
         };
         const double f0 = inside(r0), f1 = inside(r1), f2 = inside(r2), f3 = inside(r3), f4 = inside(r4),
                      f5 = inside(r5);
-        double scalpHu = p.softTissueHu;
-        if (f0 > f1 && p.windowRadius > 0.0) {
-          const double lateral = std::hypot(x.x(), x.y());
-          const double w =
-              lateral > 0.0 ? cubeFractionBelowPlane(x, h, Vec3(x.x(), x.y(), 0.0) / lateral, p.windowRadius)
-                            : (p.windowRadius >= 0.87 * h ? 1.0 : 0.5);
-          scalpHu = w * p.airHu + (1.0 - w) * p.softTissueHu;
-        }
         double diploeHu = p.diploeHu;
         if (f2 > f3 && p.textureHu > 0.0) diploeHu += p.textureHu * valueNoise(x / p.textureScale, p.seed);
-        const double value = (1.0 - f0) * p.airHu + (f0 - f1) * scalpHu + (f1 - f2) * p.corticalHu +
+        const double value = (1.0 - f0) * p.airHu + (f0 - f1) * p.softTissueHu + (f1 - f2) * p.corticalHu +
                              (f2 - f3) * diploeHu + (f3 - f4) * p.corticalHu + (f4 - f5) * p.duraHu +
                              f5 * p.brainHu;
         data[v] = static_cast<std::int16_t>(std::clamp(std::lround(value), -32768L, 32767L));

@@ -4,7 +4,8 @@
 // removal, the distance to the structure as geometry gives it); spinning,
 // it drills, the material removed plus what remains is what there was,
 // the render engine draws the drilled surface, and lockstep reruns are
-// bit-identical.
+// bit-identical. A bone from a CT: a scan of a block (partial-volume
+// voxels) and the generated calvarium phantom (a curved vault).
 #include <dm/core/volume.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
@@ -13,9 +14,13 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <numbers>
 #include <sstream>
+#include <string>
+#include <vector>
 
 namespace scene_burr_test {
 
@@ -216,6 +221,70 @@ TEST(SceneBurr, ABoneFromACtScanIsItsVoxelsByThePartialVolumeLaw) {
   // Ball bottom at 2.5 mm, the nerve's top at 0.5 mm.
   EXPECT_NEAR(b["closest_approach_m"].get<double>(), 2.0e-3, 0.15e-3);
   EXPECT_EQ(b["removed_total_m3"].get<double>(), 0.0);
+}
+
+// The still burr pressed along the vault's normal 6° off the apex of the
+// calvarium phantom (a uniform 6 mm shell of radius 90 mm, every soft
+// tissue at the scan's "empty" value so the partial-volume law is exact):
+// the ball rests on the curved outer table with its centre on the ray, the
+// force along the vault's normal, Hooke's law for its magnitude, and the
+// distance to a vessel under the inner table on the same ray is the
+// skull's thickness.
+TEST(SceneBurr, AStillBurrRestsOnTheCurvedVaultOfTheCalvariumPhantom) {
+  const fs::path dir = fs::temp_directory_path() / "dm_scene_burr_test" / "phantom";
+  constexpr double R = 0.09, inner = 0.084, rb = 0.001, rv = 0.002;
+  const double theta = 6.0 * std::numbers::pi / 180.0;
+  const dm::Vec3 c(0, 0, -R), n(std::sin(theta), 0, std::cos(theta));
+  auto at = [&](double radius) {
+    const dm::Vec3 p = c + radius * n;
+    return nlohmann::json{p.x(), p.y(), p.z()};
+  };
+  nlohmann::json j = nlohmann::json::parse(sceneJson(0.0, false));
+  j["resources"]["ct"] = nlohmann::json::parse(R"({"type": "volume", "phantom": {
+      "kind": "calvarium", "half_width": 0.016, "below": 0.012, "texture_hu": 0,
+      "hu": {"air": 40, "soft_tissue": 40, "dura": 40, "brain": 40, "cortical": 1500, "diploe": 1500}}})");
+  j["resources"]["ct_surface"] = {{"type", "isosurface"}, {"volume", "ct"}, {"level", 770}};
+  j["resources"]["vessel"] = {{"type", "shape"}, {"shape", "cylinder"}, {"radius", rv}, {"height", 0.03}};
+  j["objects"][0]["mesh"] = "ct_surface";
+  j["objects"][0]["millable"] = {{"volume", "ct"}, {"empty", 40}, {"full", 1500}, {"hardness", 5e7}};
+  // The vessel along y, touching the inner table from below on the ray.
+  j["objects"][1] = {{"name", "vessel"},
+                     {"mesh", "vessel"},
+                     {"pose", {{"position", at(inner - rv)}, {"euler_deg", {90, 0, 0}}}},
+                     {"critical", {{"hardness", 1e7}}}};
+  // The stylus from 4.5 mm above the vault to 2 mm into it along the ray in 2 s.
+  j["devices"][0]["config"]["from"] = at(R + 0.0045);
+  j["devices"][0]["config"]["to"] = at(R - 0.002);
+  auto scene = dm::parseScene(j.dump(), "phantom.json", dir);
+  ASSERT_TRUE(scene) << scene.error();
+  auto rt = dm::SceneRuntime::create(*scene);
+  ASSERT_TRUE(rt) << rt.error();
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 1.5, .outDir = dir / "out"});
+  ASSERT_TRUE(r) << r.error();
+  const nlohmann::json& b = r->summary["burr"];
+  EXPECT_NEAR(b["voxel_size_m"].get<double>(), 0.3e-3, 1e-12);
+  EXPECT_EQ(b["dims"], nlohmann::json({107, 107, 67}));
+  EXPECT_EQ(b["removed_total_m3"].get<double>(), 0.0);
+  // At 1.5 s the stylus is 0.375 mm inside the vault, the ball's centre 1 mm
+  // outside it: 1.375 mm of spring at 1500 N/m.
+  const double want = 1500 * 1.375e-3;
+  EXPECT_NEAR(r->summary["haptics"]["max_force_N"].get<double>(), want, 0.03 * want);
+  // The last tick: the force along the normal, the ball on the vault.
+  std::istringstream csv(readAll(dir / "out" / "forces.csv"));
+  std::string line, last;
+  while (std::getline(csv, line))
+    if (!line.empty()) last = line;
+  std::vector<double> v;
+  std::istringstream fields(last);
+  for (std::string f; std::getline(fields, f, ',');) v.push_back(std::stod(f));
+  ASSERT_GE(v.size(), 10u);
+  const dm::Vec3 force(v[1], v[2], v[3]), proxy(v[7], v[8], v[9]);
+  EXPECT_GT(force.norm(), 0.95 * want);
+  EXPECT_LT(std::acos(std::clamp(force.normalized().dot(n), -1.0, 1.0)) * 180.0 / std::numbers::pi, 2.0);
+  EXPECT_NEAR((proxy - c).norm(), R + rb, 0.05e-3);  // within a sixth of a voxel of the true vault
+  EXPECT_LT((proxy - c).normalized().cross(n).norm(), std::sin(0.5 * std::numbers::pi / 180.0));
+  // Ball bottom on the vault, the vessel's top 6 mm below it on the ray.
+  EXPECT_NEAR(b["closest_approach_m"].get<double>(), R - inner, 0.15e-3);
 }
 
 }  // namespace scene_burr_test

@@ -1,6 +1,7 @@
 // The scene file's surgical keys (docs/scene-format.md, "Bone surgery"):
-// a millable bone, critical structures and the burr renderer's tool read
-// and written back; every misuse is an error at its JSON pointer.
+// a millable bone, critical structures, the burr renderer's tool and a
+// generated CT phantom read and written back; every misuse is an error at
+// its JSON pointer.
 #include <dm/io/scene_file.hpp>
 
 #include <gtest/gtest.h>
@@ -93,6 +94,38 @@ TEST(SceneSurgery, ABoneFromACtVolumeReadsAndWritesBack) {
   EXPECT_EQ(m.voxelSize, 0.0);
   const Json back = dm::toJson(*s);
   EXPECT_FALSE(back["objects"][0]["millable"].contains("voxel_size"));
+  auto again = dm::parseScene(back.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(again) << again.error();
+  EXPECT_TRUE(*s == *again);
+}
+
+// The CT generated instead of read: a calvarium phantom.
+Json phantomScene() {
+  Json j = ctScene();
+  j["resources"]["ct"] = Json::parse(R"({"type": "volume", "phantom": {
+      "kind": "calvarium", "spacing": 0.0004, "half_width": 0.01, "radius": 0.08, "diploe": 0.003,
+      "texture_hu": 0, "seed": 7, "hu": {"air": -900, "cortical": 1600}}})");
+  return j;
+}
+
+TEST(SceneSurgery, AGeneratedPhantomReadsAndWritesBack) {
+  auto s = dm::parseScene(phantomScene().dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const dm::SceneResource* ct = s->resource("ct");
+  ASSERT_TRUE(ct != nullptr && ct->phantom.has_value());
+  EXPECT_TRUE(ct->source.empty());
+  dm::CalvariumPhantom want;  // the defaults, but for the keys given
+  want.spacing = 0.0004;
+  want.halfWidth = 0.01;
+  want.radius = 0.08;
+  want.diploe = 0.003;
+  want.textureHu = 0;
+  want.seed = 7;
+  want.airHu = -900;
+  want.corticalHu = 1600;
+  EXPECT_TRUE(*ct->phantom == want);
+  const Json back = dm::toJson(*s);
+  EXPECT_FALSE(back["resources"]["ct"].contains("source"));
   auto again = dm::parseScene(back.dump(), "scene.json", "/data/scenes");
   ASSERT_TRUE(again) << again.error();
   EXPECT_TRUE(*s == *again);
@@ -219,6 +252,44 @@ TEST(SceneSurgery, EveryMisuseIsNamed) {
   };
   for (const Case& c : ctCases) {
     Json j = ctScene();
+    c.edit(j);
+    EXPECT_TRUE(at(problemsOf(j), c.pointer) != nullptr) << c.what;
+  }
+  // A generated CT: every key checked, the phantom's own checks at the key
+  // the file wrote.
+  const std::vector<Case> phantomCases{
+      {"a source besides the phantom", [](Json& j) { j["resources"]["ct"]["source"] = "ct.nrrd"; },
+       "/resources/ct/source"},
+      {"a phantom in a version-1 file", [](Json& j) { j["version"] = 1; }, "/resources/ct/phantom"},
+      {"an unknown kind", [](Json& j) { j["resources"]["ct"]["phantom"]["kind"] = "femur"; },
+       "/resources/ct/phantom/kind"},
+      {"no kind", [](Json& j) { j["resources"]["ct"]["phantom"].erase("kind"); },
+       "/resources/ct/phantom/kind"},
+      {"an unknown key", [](Json& j) { j["resources"]["ct"]["phantom"]["noise_hu"] = 10; },
+       "/resources/ct/phantom/noise_hu"},
+      {"an unknown tissue", [](Json& j) { j["resources"]["ct"]["phantom"]["hu"]["fat"] = -100; },
+       "/resources/ct/phantom/hu/fat"},
+      {"a zero spacing", [](Json& j) { j["resources"]["ct"]["phantom"]["spacing"] = 0; },
+       "/resources/ct/phantom/spacing"},
+      {"a negative diploë", [](Json& j) { j["resources"]["ct"]["phantom"]["diploe"] = -0.001; },
+       "/resources/ct/phantom/diploe"},
+      {"no outer table", [](Json& j) { j["resources"]["ct"]["phantom"]["outer_table"] = 0; },
+       "/resources/ct/phantom/outer_table"},
+      {"a vault flatter than the patch is wide",
+       [](Json& j) { j["resources"]["ct"]["phantom"]["radius"] = 0.005; }, "/resources/ct/phantom/radius"},
+      {"a value no int16 holds", [](Json& j) { j["resources"]["ct"]["phantom"]["hu"]["cortical"] = 40000; },
+       "/resources/ct/phantom/hu/cortical"},
+      {"a negative seed", [](Json& j) { j["resources"]["ct"]["phantom"]["seed"] = -1; },
+       "/resources/ct/phantom/seed"},
+      {"a scan too large to generate",
+       [](Json& j) {
+         j["resources"]["ct"]["phantom"]["spacing"] = 2e-5;
+         j["resources"]["ct"]["phantom"]["half_width"] = 0.05;
+       },
+       "/resources/ct/phantom/spacing"},
+  };
+  for (const Case& c : phantomCases) {
+    Json j = phantomScene();
     c.edit(j);
     EXPECT_TRUE(at(problemsOf(j), c.pointer) != nullptr) << c.what;
   }

@@ -107,12 +107,12 @@ TEST(CalvariumPhantom, EachColumnsBoneIsTheChordThroughTheCurvedShell) {
 }
 
 TEST(CalvariumPhantom, AVoxelWhollyInALayerHasThatLayersValue) {
-  const dm::CalvariumPhantom p;  // defaults: 0.3 mm voxels, 12 mm window
+  const dm::CalvariumPhantom p;  // defaults: 0.3 mm voxels
   auto ct = dm::makeCalvariumPhantom(p);
   ASSERT_TRUE(ct) << ct.error().message();
   const dm::Vec3i n = ct->dims();
   EXPECT_EQ(n, dm::Vec3i(133, 133, 60));
-  // Along the axis (inside the window) and at the patch's corner (scalp):
+  // Along the axis and at the patch's corner (where the vault lies lower):
   // every voxel whose half diagonal fits in one layer holds its value.
   const double h = p.spacing, reach = std::sqrt(3.0) / 2.0 * h;
   const double r1 = p.radius, r2 = r1 - p.outerTable, r3 = r2 - p.diploe, r4 = r3 - p.innerTable,
@@ -130,7 +130,7 @@ TEST(CalvariumPhantom, AVoxelWhollyInALayerHasThatLayersValue) {
         EXPECT_EQ(value, p.airHu) << k;
         ++checked[0];
       } else if (within(r1, r0)) {
-        EXPECT_EQ(value, corner == 0 ? p.airHu : p.softTissueHu) << k;  // reflected in the window
+        EXPECT_EQ(value, p.softTissueHu) << k;
         ++checked[1];
       } else if (within(r2, r1) || within(r4, r3)) {
         EXPECT_EQ(value, p.corticalHu) << k;
@@ -145,7 +145,7 @@ TEST(CalvariumPhantom, AVoxelWhollyInALayerHasThatLayersValue) {
     }
   }
   EXPECT_GT(checked[0], 0);
-  EXPECT_GT(checked[1], 0);  // the scalp, at the corner
+  EXPECT_GT(checked[1], 10);
   EXPECT_GE(checked[2], 4);
   EXPECT_GE(checked[3], 10);
   EXPECT_GT(checked[4], 0);

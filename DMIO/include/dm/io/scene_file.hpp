@@ -3,11 +3,12 @@
 // shared by `dmtool render`, the master engine and `dmplatform run`.
 //
 // parseScene() validates a scene document and turns it into SceneDesc, a
-// plain-data description: resources (meshes, volumes, isosurfaces, analytic
-// shapes, images), materials, objects, volume views, lights, cameras,
-// devices, engine settings and outputs. Nothing is loaded here: no file but
-// the scene itself is opened, no GL, no device. docs/scene-format.md documents
-// every key, type, unit, default and range.
+// plain-data description: resources (meshes, volumes — files or generated
+// CT-like phantoms —, isosurfaces, analytic shapes, images), materials,
+// objects, volume views, lights, cameras, devices, engine settings and
+// outputs. Nothing is loaded here: no file but the scene itself is opened,
+// no GL, no device. docs/scene-format.md documents every key, type, unit,
+// default and range.
 //
 // Validation runs on dm::ConfigReader, so every problem (missing key, wrong
 // type, value out of range, unknown key, dangling reference, duplicate name,
@@ -32,6 +33,7 @@
 #include <dm/core/pose.hpp>
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
+#include <dm/math/phantom.hpp>
 
 #include <cstdint>
 #include <filesystem>
@@ -58,11 +60,15 @@ struct SceneResource {
 
   std::string name;
   Type type = Type::Mesh;
-  /// Mesh, Volume, Image: the source as written ("mricron:ch2.nii.gz", "tool.stl").
+  /// Mesh, Volume, Image: the source as written ("mricron:ch2.nii.gz", "tool.stl");
+  /// empty for a generated volume.
   std::string source;
   /// The resolved source: the mount's file if it exists (else empty: loading
   /// reports it), an absolute path as is, a relative one under the scene's directory.
   std::filesystem::path path;
+  /// Volume (v2, "phantom"): generated, not read — a CT-like scan of a
+  /// calvarium in HU (dm/math/phantom.hpp), instead of a source.
+  std::optional<CalvariumPhantom> phantom;
   std::string unit = "m";  ///< Mesh: length unit of the file (dm::metresPerUnit names)
   double scale = 1.0;      ///< Mesh: extra factor after the unit, > 0
 

@@ -1,6 +1,7 @@
 // dm/io/scene_resources.hpp — loads what a scene file's "resources" name:
 // meshes and volumes from files (through the resource manager, so a file
-// used twice is read once), isosurfaces extracted from volume resources,
+// used twice is read once), generated volumes (CT-like phantoms,
+// dm/math/phantom.hpp), isosurfaces extracted from volume resources,
 // generated shapes, and images.
 //
 // The scene file itself is parsed by dm/io/scene_file.hpp; this turns its
@@ -60,8 +61,10 @@ struct SceneLoadOptions {
 /// not load, naming it. Isosurfaces are extracted with closed borders
 /// (watertight where the scan is cut), optionally from the volume averaged
 /// over downsample³ voxel blocks (about downsample² fewer triangles: a light
-/// mesh to draw), reduced to their largest component and Taubin-smoothed. Shapes: icosphere (sphere), box, capsule,
-/// cylinder and plane, finer with `subdivisions`.
+/// mesh to draw), reduced to their largest component and Taubin-smoothed.
+/// Shapes: icosphere (sphere), box, capsule, cylinder and plane, finer with
+/// `subdivisions`. A volume with a `phantom` is generated
+/// (dm::makeCalvariumPhantom), not read.
 Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoadOptions& options = {});
 
 /// The generated mesh of one Shape resource (no file access). InvalidArgument
