@@ -43,6 +43,7 @@ Command addDevicesCommand(CLI::App& parent);
 Command addCollideCommand(CLI::App& parent);
 Command addProbeCommand(CLI::App& parent);
 Command addValidateCommand(CLI::App& parent);
+Command addPhantomCommand(CLI::App& parent);
 #ifdef DM_HAVE_NETWORK
 Command addTeleopDeviceCommand(CLI::App& parent);
 #endif

@@ -1,8 +1,8 @@
 // dmtool — the command line for the SDK's resources: inspect meshes and
 // volumes, convert between formats, extract isosurfaces, voxelize and
 // simplify meshes, replay device paths (probe), check scene files (validate)
-// and render them headless (render), serve a haptic device over the network
-// (teleop-device) (see --help).
+// and render them headless (render), write CT-like phantoms (phantom), serve
+// a haptic device over the network (teleop-device) (see --help).
 // Exit codes: 0 success, 1 the operation failed (message on stderr),
 // 2 bad command line (usage on stderr).
 #include <exception>
@@ -20,7 +20,7 @@ int main(int argc, char** argv) {
       dmtool::addInfoCommand(app),       dmtool::addDevicesCommand(app),    dmtool::addConvertCommand(app),
       dmtool::addIsosurfaceCommand(app), dmtool::addSimplifyCommand(app),   dmtool::addCollideCommand(app),
       dmtool::addVoxelizeCommand(app),   dmtool::addSpheretreeCommand(app), dmtool::addProbeCommand(app),
-      dmtool::addValidateCommand(app),
+      dmtool::addValidateCommand(app),   dmtool::addPhantomCommand(app),
   };
 #ifdef DM_HAVE_RENDERER
   commands.push_back(dmtool::addRenderCommand(app));
