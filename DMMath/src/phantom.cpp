@@ -106,10 +106,10 @@ Status validate(const CalvariumPhantom& p) {
   for (const auto& [field, v] : values)
     if (!std::isfinite(v)) return bad(field, "must be finite");
   if (!(p.radius > p.halfWidth))
-    return bad("radius", "must exceed halfWidth (the patch is a part of the vault)");
+    return bad("radius", "must exceed the half width (the patch is a part of the vault)");
   if (!(p.radius > p.outerTable + p.diploe + p.innerTable + p.dura + p.spacing))
     return bad("radius", "must exceed the layers' total thickness plus a voxel");
-  if (p.spacing > p.halfWidth) return bad("spacing", "must not exceed halfWidth");
+  if (p.spacing > p.halfWidth) return bad("spacing", "must not exceed the half width");
   return {};
 }
 
