@@ -68,7 +68,7 @@ std::string sceneJson(double rpm, bool render) {
 }
 
 // With `softTop` > 0, the plate's top 1.8 mm are an inclusion of that hardness (Pa).
-dm::SceneDesc parse(double rpm, bool render, double softTop = 0) {
+nlohmann::json sceneDoc(double rpm, bool render, double softTop = 0) {
   nlohmann::json j = nlohmann::json::parse(sceneJson(rpm, render));
   if (softTop > 0) {
     j["resources"]["layer"] = {{"type", "shape"}, {"shape", "box"}, {"half_extents", {0.005, 0.005, 0.0009}}};
@@ -77,19 +77,26 @@ dm::SceneDesc parse(double rpm, bool render, double softTop = 0) {
                             {"pose", {{"position", {0, 0, 0.0011}}}},
                             {"inclusion", {{"hardness", softTop}}}});
   }
-  auto s = dm::parseScene(j.dump(), "drill.json", fs::temp_directory_path());
-  EXPECT_TRUE(s) << (s ? "" : s.error().message());
-  return *s;
+  return j;
 }
 
-nlohmann::json run(double rpm, bool render, const fs::path& out, double seconds = 1.5, double softTop = 0) {
+// Runs scene `j` (relative paths under `dir`) in lockstep for `seconds`
+// into `out`, emptied first; its summary.json, or null after a failure.
+nlohmann::json runScene(const nlohmann::json& j, const fs::path& dir, const fs::path& out, double seconds) {
   fs::remove_all(out);
-  auto rt = dm::SceneRuntime::create(parse(rpm, render, softTop));
+  auto scene = dm::parseScene(j.dump(), "drill.json", dir);
+  EXPECT_TRUE(scene) << (scene ? "" : scene.error().message());
+  if (!scene) return {};
+  auto rt = dm::SceneRuntime::create(*scene);
   EXPECT_TRUE(rt) << rt.error();
   if (!rt) return {};
   auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = seconds, .outDir = out});
   EXPECT_TRUE(r) << r.error();
   return r ? r->summary : nlohmann::json();
+}
+
+nlohmann::json run(double rpm, bool render, const fs::path& out, double seconds = 1.5, double softTop = 0) {
+  return runScene(sceneDoc(rpm, render, softTop), fs::temp_directory_path(), out, seconds);
 }
 
 std::string readAll(const fs::path& p) {
@@ -202,13 +209,8 @@ TEST(SceneBurr, ABoneFromACtScanIsItsVoxelsByThePartialVolumeLaw) {
   j["resources"]["ct_surface"] = {{"type", "isosurface"}, {"volume", "ct"}, {"level", 770}};
   j["objects"][0]["mesh"] = "ct_surface";
   j["objects"][0]["millable"] = {{"volume", "ct"}, {"empty", 40}, {"full", 1500}, {"hardness", 5e7}};
-  auto scene = dm::parseScene(j.dump(), "ct.json", dir);
-  ASSERT_TRUE(scene) << scene.error();
-  auto rt = dm::SceneRuntime::create(*scene);
-  ASSERT_TRUE(rt) << rt.error();
-  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 1.5, .outDir = dir / "out"});
-  ASSERT_TRUE(r) << r.error();
-  const nlohmann::json& s = r->summary;
+  const nlohmann::json s = runScene(j, dir, dir / "out", 1.5);
+  ASSERT_TRUE(s.contains("burr"));
   const nlohmann::json& b = s["burr"];
   // On the scan's own grid, and every partial voxel counted by its fraction:
   // 10.25 x 10.25 x 4.5 mm.
@@ -255,20 +257,16 @@ TEST(SceneBurr, AStillBurrRestsOnTheCurvedVaultOfTheCalvariumPhantom) {
   // The stylus from 4.5 mm above the vault to 2 mm into it along the ray in 2 s.
   j["devices"][0]["config"]["from"] = at(R + 0.0045);
   j["devices"][0]["config"]["to"] = at(R - 0.002);
-  auto scene = dm::parseScene(j.dump(), "phantom.json", dir);
-  ASSERT_TRUE(scene) << scene.error();
-  auto rt = dm::SceneRuntime::create(*scene);
-  ASSERT_TRUE(rt) << rt.error();
-  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 1.5, .outDir = dir / "out"});
-  ASSERT_TRUE(r) << r.error();
-  const nlohmann::json& b = r->summary["burr"];
+  const nlohmann::json summary = runScene(j, dir, dir / "out", 1.5);
+  ASSERT_TRUE(summary.contains("burr"));
+  const nlohmann::json& b = summary["burr"];
   EXPECT_NEAR(b["voxel_size_m"].get<double>(), 0.3e-3, 1e-12);
   EXPECT_EQ(b["dims"], nlohmann::json({107, 107, 67}));
   EXPECT_EQ(b["removed_total_m3"].get<double>(), 0.0);
   // At 1.5 s the stylus is 0.375 mm inside the vault, the ball's centre 1 mm
   // outside it: 1.375 mm of spring at 1500 N/m.
   const double want = 1500 * 1.375e-3;
-  EXPECT_NEAR(r->summary["haptics"]["max_force_N"].get<double>(), want, 0.03 * want);
+  EXPECT_NEAR(summary["haptics"]["max_force_N"].get<double>(), want, 0.03 * want);
   // The last tick: the force along the normal, the ball on the vault.
   std::istringstream csv(readAll(dir / "out" / "forces.csv"));
   std::string line, last;
