@@ -22,6 +22,8 @@
 #include <string>
 #include <vector>
 
+#include "../DMIO/scene_test_support.hpp"
+
 namespace scene_burr_test {
 
 namespace fs = std::filesystem;
@@ -283,6 +285,35 @@ TEST(SceneBurr, AStillBurrRestsOnTheCurvedVaultOfTheCalvariumPhantom) {
   EXPECT_LT((proxy - c).normalized().cross(n).norm(), std::sin(0.5 * std::numbers::pi / 180.0));
   // Ball bottom on the vault, the vessel's top 6 mm below it on the ray.
   EXPECT_NEAR(b["closest_approach_m"].get<double>(), R - inner, 0.15e-3);
+}
+
+// The bundled burr hole on the generated calvarium (examples/scenes/
+// burr_hole_ct.json), haptics alone for 3 s of its spiral: the burr drills
+// bone and nothing else, the bone's books balance, and it stays as far from
+// the sagittal sinus as its path allows — the spiral keeps the burr's centre
+// at least 10 − 1.5 mm lateral, the sinus reaches 4 mm from the midline and
+// the burr's radius is 2.5 mm: at least 2 mm between their surfaces.
+TEST(SceneBurr, TheBundledCalvariumBurrHoleDrillsBoneBesideTheSinus) {
+  const fs::path file = scene_test::sourceDir() / "examples/scenes/burr_hole_ct.json";
+  std::ifstream in(file);
+  ASSERT_TRUE(in.good()) << file;
+  nlohmann::json j = nlohmann::json::parse(in);
+  j["engines"].erase("render");
+  j["outputs"] = {{"frames", false}, {"forces", false}, {"plot", false}, {"summary", true}};
+  const nlohmann::json s =
+      runScene(j, file.parent_path(), fs::temp_directory_path() / "dm_scene_burr_test" / "bundled_ct", 3.0);
+  ASSERT_TRUE(s.contains("burr"));
+  const nlohmann::json& b = s["burr"];
+  EXPECT_EQ(b["dims"], nlohmann::json({80, 80, 55}));  // 32 mm across, 22 mm deep at 0.4 mm
+  const double removed = b["removed_total_m3"].get<double>();
+  EXPECT_GT(removed, 1e-9);  // at least 1 mm³ of bone
+  EXPECT_NEAR(b["removed_m3"]["bone"].get<double>(), removed, 1e-12 * removed);
+  EXPECT_EQ(b["removed_m3"]["sinus"].get<double>(), 0.0);
+  EXPECT_EQ(b["removed_forbidden_m3"].get<double>(), 0.0);
+  EXPECT_NEAR(b["remaining_m3"].get<double>() + removed, b["initial_m3"].get<double>(),
+              1e-9 * b["initial_m3"].get<double>());
+  EXPECT_GE(b["closest_approach_m"].get<double>(), 2.0e-3 - 0.15e-3);
+  EXPECT_EQ(b["seconds_within_warning"].get<double>(), 0.0);
 }
 
 }  // namespace scene_burr_test
