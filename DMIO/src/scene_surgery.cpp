@@ -95,7 +95,9 @@ void readPhantom(ConfigReader& resource, SceneResource& res) {
     for (const PhantomKey& k : kPhantomValues)
       if (k.field == s.error().where) key = "hu/" + std::string(k.json);
     const std::string& what = s.error().what;
-    r.addError(key.empty() ? what : what.substr(s.error().where.size() + 1), key, "see docs/phantoms.md");
+    const std::string field = s.error().where + " ";  // validate() says "<field> <what>"
+    r.addError(!key.empty() && what.starts_with(field) ? what.substr(field.size()) : what, key,
+               "see docs/phantoms.md");
     return;
   }
   const Vec3i n = calvariumPhantomDims(p);

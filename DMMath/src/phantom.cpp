@@ -110,6 +110,8 @@ Status validate(const CalvariumPhantom& p) {
   if (!(p.radius > p.outerTable + p.diploe + p.innerTable + p.dura + p.spacing))
     return bad("radius", "must exceed the layers' total thickness plus a voxel");
   if (p.spacing > p.halfWidth) return bad("spacing", "must not exceed the half width");
+  // The texture's lattice index of a point must stay far inside 64 bits.
+  if (p.textureScale < 1e-6) return bad("textureScale", "must be at least 1e-6 m");
   return {};
 }
 

@@ -210,6 +210,7 @@ TEST(CalvariumPhantom, BadOptionsAreNamed) {
       {"outerTable", [](dm::CalvariumPhantom& p) { p.outerTable = 0.0; }},
       {"corticalHu", [](dm::CalvariumPhantom& p) { p.corticalHu = std::nan(""); }},
       {"textureScale", [](dm::CalvariumPhantom& p) { p.textureScale = INFINITY; }},
+      {"textureScale", [](dm::CalvariumPhantom& p) { p.textureScale = 1e-300; }},
   };
   for (const Case& c : cases) {
     dm::CalvariumPhantom p;

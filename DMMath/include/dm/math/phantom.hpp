@@ -55,7 +55,7 @@ struct CalvariumPhantom {
   double duraHu = 60.0;
   double brainHu = 35.0;
   double textureHu = 250.0;      ///< amplitude of the diploë's texture, ≥ 0 (0: uniform)
-  double textureScale = 0.0008;  ///< lattice spacing of the texture, > 0
+  double textureScale = 0.0008;  ///< lattice spacing of the texture, ≥ 1e-6
   std::uint32_t seed = 1;        ///< the texture's
 
   bool operator==(const CalvariumPhantom&) const = default;
