@@ -53,7 +53,17 @@ struct Ball {
   double r2 = -1.0;  // < 0: empty
 };
 
-bool inside(const Ball& b, const Vec3& p) { return (p - b.c).squaredNorm() <= b.r2 * (1.0 + 1e-10); }
+// |a − b|² in plain arithmetic. The build's inner loops (Welzl's test,
+// k-means) call it millions of times; the Eigen expression it replaces is
+// the same code at -O2 but a chain of checked calls at the sanitizer trees'
+// -O1, which made this file most of the slowest ASan tests.
+inline double dist2(const Vec3& a, const Vec3& b) {
+  const double *p = a.data(), *q = b.data();
+  const double x = p[0] - q[0], y = p[1] - q[1], z = p[2] - q[2];
+  return x * x + y * y + z * z;
+}
+
+bool inside(const Ball& b, const Vec3& p) { return dist2(p, b.c) <= b.r2 * (1.0 + 1e-10); }
 
 Ball ballOf2(const Vec3& a, const Vec3& b) {
   const Vec3 c = 0.5 * (a + b);
@@ -141,7 +151,7 @@ BoundingSphere minimalSphere(std::vector<Vec3>& points) {
   Vec3 boundary[4];
   const Ball b = welzl(points.data(), points.size(), boundary, 0);
   double r2 = 0.0;
-  for (const Vec3& q : points) r2 = std::max(r2, (q - b.c).squaredNorm());
+  for (const Vec3& q : points) r2 = std::max(r2, dist2(q, b.c));
   s.center = b.c;
   s.radius = std::sqrt(r2) * (1.0 + 1e-12);
   return s;
@@ -284,7 +294,7 @@ Result<Pieces> mergeRecords(std::vector<Record>& records, const std::vector<Vec3
   for (std::size_t i = 0; i < sorted.size(); ++i) {
     double r2 = 0.0;
     for (std::uint32_t k = sorted.start[i]; k < sorted.start[i + 1]; ++k)
-      r2 = std::max(r2, (sorted.points[k] - sorted.centroid[i]).squaredNorm());
+      r2 = std::max(r2, dist2(sorted.points[k], sorted.centroid[i]));
     sorted.radius[i] = std::sqrt(r2);
   }
   return sorted;
@@ -296,17 +306,17 @@ Result<Pieces> mergeRecords(std::vector<Record>& records, const std::vector<Vec3
 int clipPolygon(const Vec3* in, int n, Vec3* out, int axis, double v, bool keepAbove) {
   int m = 0;
   for (int i = 0; i < n; ++i) {
-    const Vec3& p = in[(i + n - 1) % n];
-    const Vec3& q = in[i];
+    const double* p = in[(i + n - 1) % n].data();
+    const double* q = in[i].data();
     const bool pin = keepAbove ? p[axis] >= v : p[axis] <= v;
     const bool qin = keepAbove ? q[axis] >= v : q[axis] <= v;
     if (pin != qin) {
       const double t = (v - p[axis]) / (q[axis] - p[axis]);
-      Vec3 x = p + t * (q - p);
+      double* x = out[m++].data();
+      for (int k = 0; k < 3; ++k) x[k] = p[k] + t * (q[k] - p[k]);
       x[axis] = v;
-      out[m++] = x;
     }
-    if (qin) out[m++] = q;
+    if (qin) out[m++] = in[i];
   }
   return m;
 }
@@ -689,22 +699,23 @@ struct Split {
 // compare candidate partitions. The final spheres are exact (Welzl).
 double splitCost(const Pieces& p, const std::uint32_t* order, std::uint32_t b, std::uint32_t e,
                  const std::vector<int>& label, int k) {
-  double cost = 0.0;
-  for (int c = 0; c < k; ++c) {
-    Aabb box;
-    for (std::uint32_t i = b; i < e; ++i)
-      if (label[i - b] == c) {
-        const Vec3 r = Vec3::Constant(p.radius[order[i]]);
-        box.extend(p.centroid[order[i]] - r);
-        box.extend(p.centroid[order[i]] + r);
-      }
-    if (box.isEmpty()) continue;
-    const Vec3 centre = box.center();
-    double r = 0.0;
-    for (std::uint32_t i = b; i < e; ++i)
-      if (label[i - b] == c) r = std::max(r, (p.centroid[order[i]] - centre).norm() + p.radius[order[i]]);
-    cost += r * r * r;
+  // Two passes over the pieces, all clusters at once (a pass per cluster
+  // made this the tree build's hot spot).
+  std::vector<Aabb> box(static_cast<std::size_t>(k));
+  for (std::uint32_t i = b; i < e; ++i) {
+    const Vec3 r = Vec3::Constant(p.radius[order[i]]);
+    Aabb& x = box[static_cast<std::size_t>(label[i - b])];
+    x.extend(p.centroid[order[i]] - r);
+    x.extend(p.centroid[order[i]] + r);
   }
+  std::vector<double> radius(static_cast<std::size_t>(k), 0.0);
+  for (std::uint32_t i = b; i < e; ++i) {
+    const std::size_t c = static_cast<std::size_t>(label[i - b]);
+    radius[c] = std::max(radius[c], (p.centroid[order[i]] - box[c].center()).norm() + p.radius[order[i]]);
+  }
+  double cost = 0.0;
+  for (std::size_t c = 0; c < box.size(); ++c)
+    if (!box[c].isEmpty()) cost += radius[c] * radius[c] * radius[c];
   return cost;
 }
 
@@ -722,7 +733,10 @@ int compact(std::vector<int>& label, int k) {
 Split kmeansSplit(const Pieces& p, const std::uint32_t* order, std::uint32_t b, std::uint32_t e, int k,
                   int iterations) {
   const std::size_t n = e - b;
-  auto centroid = [&](std::uint32_t i) -> const Vec3& { return p.centroid[order[i]]; };
+  // The node's piece centroids, gathered once: every pass below reads them.
+  std::vector<Vec3> gathered(n);
+  for (std::uint32_t i = b; i < e; ++i) gathered[i - b] = p.centroid[order[i]];
+  auto centroid = [&](std::uint32_t i) -> const Vec3& { return gathered[i - b]; };
   std::vector<std::vector<int>> starts;
   // Start 1: the octant split of the pieces' centroid box (when it gives ≤ k).
   Aabb box;
@@ -743,7 +757,7 @@ Split kmeansSplit(const Pieces& p, const std::uint32_t* order, std::uint32_t b, 
     while (static_cast<int>(seeds.size()) < k) {
       std::size_t far = 0;
       for (std::uint32_t i = b; i < e; ++i) {
-        d2[i - b] = std::min(d2[i - b], (centroid(i) - seeds.back()).squaredNorm());
+        d2[i - b] = std::min(d2[i - b], dist2(centroid(i), seeds.back()));
         if (d2[i - b] > d2[far]) far = i - b;
       }
       if (d2[far] <= 0) break;
@@ -753,8 +767,8 @@ Split kmeansSplit(const Pieces& p, const std::uint32_t* order, std::uint32_t b, 
     for (std::uint32_t i = b; i < e; ++i) {
       int best = 0;
       for (int s = 1; s < static_cast<int>(seeds.size()); ++s)
-        if ((centroid(i) - seeds[static_cast<std::size_t>(s)]).squaredNorm() <
-            (centroid(i) - seeds[static_cast<std::size_t>(best)]).squaredNorm())
+        if (dist2(centroid(i), seeds[static_cast<std::size_t>(s)]) <
+            dist2(centroid(i), seeds[static_cast<std::size_t>(best)]))
           best = s;
       label[i - b] = best;
     }
@@ -781,8 +795,8 @@ Split kmeansSplit(const Pieces& p, const std::uint32_t* order, std::uint32_t b, 
       for (std::uint32_t i = b; i < e; ++i) {
         int nearest = 0;
         for (int c = 1; c < kk; ++c)
-          if ((centroid(i) - mean[static_cast<std::size_t>(c)]).squaredNorm() <
-              (centroid(i) - mean[static_cast<std::size_t>(nearest)]).squaredNorm())
+          if (dist2(centroid(i), mean[static_cast<std::size_t>(c)]) <
+              dist2(centroid(i), mean[static_cast<std::size_t>(nearest)]))
             nearest = c;
         changed = changed || nearest != label[i - b];
         label[i - b] = nearest;
