@@ -103,9 +103,12 @@ class TriangleBvh {
         }
         continue;
       }
+      // The nearer child first: a hit there ends the search.
+      const std::uint32_t l = node.first, r = node.first + 1;
+      const bool leftNearer = boxDistSq(nodes_[l], p) <= boxDistSq(nodes_[r], p);
       DM_DEMAND(top + 2 <= static_cast<int>(stack.size()), "BVH deeper than its stack");
-      stack[top++] = node.first + 1;
-      stack[top++] = node.first;
+      stack[top++] = leftNearer ? r : l;
+      stack[top++] = leftNearer ? l : r;
     }
     return false;
   }
