@@ -79,16 +79,29 @@ SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& ar
   p.tangentU = (axis - axis.dot(p.normal) * p.normal).normalized();
   p.tangentV = p.normal.cross(p.tangentU);
 
+  // The loops over the points work on plain doubles: they run for every
+  // node of every tree built, and the Eigen expressions they replace (a dot
+  // product per coordinate, a 6×6 rank update per point) are chains of
+  // checked calls in the sanitizer trees at -O1 (docs/build-time.md).
+  const auto local = [&p](const Vec3& x, double& u, double& v, double& w) {
+    const double *q = x.data(), *o = p.origin.data();
+    const double d[3] = {q[0] - o[0], q[1] - o[1], q[2] - o[2]};
+    const auto dot = [&d](const Vec3& e) {
+      return d[0] * e.data()[0] + d[1] * e.data()[1] + d[2] * e.data()[2];
+    };
+    u = dot(p.tangentU), v = dot(p.tangentV), w = dot(p.normal);
+  };
+  double u = 0.0, v = 0.0, dn = 0.0;
   double width = 0.0;
   for (const Vec3& x : points) {
-    const Vec3 d = x - p.origin;
-    width = std::max(width, std::hypot(d.dot(p.tangentU), d.dot(p.tangentV)));
+    local(x, u, v, dn);
+    width = std::max(width, std::hypot(u, v));
   }
   p.halfWidth = width;
   double fitWidth = 0.0;  // fit in coordinates scaled to the unit disc
   for (const Vec3& x : fit) {
-    const Vec3 d = x - p.origin;
-    fitWidth = std::max(fitWidth, std::hypot(d.dot(p.tangentU), d.dot(p.tangentV)));
+    local(x, u, v, dn);
+    fitWidth = std::max(fitWidth, std::hypot(u, v));
   }
   const double s = fitWidth > 0.0 ? fitWidth : 1.0;
 
@@ -98,13 +111,18 @@ SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& ar
   using Vec6 = Eigen::Matrix<double, 6, 1>;
   Mat6 ata = Mat6::Zero();
   Vec6 atb = Vec6::Zero();
+  double* const A = ata.data();  // column-major: A[6·c + r] = ata(r, c)
+  double* const B = atb.data();
   for (const Vec3& x : fit) {
-    const Vec3 d = x - p.origin;
-    const double u = d.dot(p.tangentU) / s, v = d.dot(p.tangentV) / s;
-    const Vec6 row(1.0, u, v, 0.5 * u * u, u * v, 0.5 * v * v);
+    local(x, u, v, dn);
+    u /= s, v /= s;
+    const double row[6] = {1.0, u, v, 0.5 * u * u, u * v, 0.5 * v * v};
     const double w = fitScale > 0.0 ? std::exp(-(u * u + v * v) * (s * s) / (fitScale * fitScale)) : 1.0;
-    ata.selfadjointView<Eigen::Lower>().rankUpdate(row, w);
-    atb += w * row * d.dot(p.normal);
+    for (int c = 0; c < 6; ++c) {  // the lower triangle of w·row·rowᵀ, and w·row·dn
+      const double wc = w * row[c];
+      for (int r = c; r < 6; ++r) A[6 * c + r] += wc * row[r];
+      B[c] += wc * dn;
+    }
   }
   ata.triangularView<Eigen::StrictlyUpper>() = ata.transpose();
   const auto solved = [](const auto& m, const auto& rhs, auto& out) {
@@ -128,8 +146,8 @@ SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& ar
   // Raise the patch above every surface point; the spread is the deviation.
   double hi = -std::numeric_limits<double>::infinity(), lo = std::numeric_limits<double>::infinity();
   for (const Vec3& x : points) {
-    const Vec3 d = x - p.origin;
-    const double r = d.dot(p.normal) - p.height(d.dot(p.tangentU), d.dot(p.tangentV));
+    local(x, u, v, dn);
+    const double r = dn - p.height(u, v);
     hi = std::max(hi, r);
     lo = std::min(lo, r);
   }
