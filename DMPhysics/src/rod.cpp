@@ -202,6 +202,9 @@ Result<CosseratRod> CosseratRod::create(const RodOptions& o) {
   rod.force_.assign(n, Vec3::Zero());
   rod.torque_.assign(n, Vec3::Zero());
   rod.nodeForce_.assign(n + 1, Vec3::Zero());
+  rod.kinematic_.assign(n, 0);
+  rod.graspCenter_.assign(n, Vec3::Zero());
+  rod.graspFrame_.assign(n, Quat::Identity());
 
   const std::size_t m = n + 1;
   rod.restRel_.assign(m, Quat::Identity());
@@ -296,6 +299,33 @@ void CosseratRod::release(RodEnd end) noexcept {
 }
 
 RodWrench CosseratRod::reaction(RodEnd end) const noexcept { return reaction_[endIndex(end)]; }
+
+Status CosseratRod::grasp(std::size_t segment, const Vec3& center, const Quat& orientation) {
+  if (segment >= segmentCount())
+    return rodimpl::invalidRod(formatString("segment %zu of %zu", segment, segmentCount()),
+                               "CosseratRod::grasp: segment");
+  if (!center.allFinite())
+    return rodimpl::invalidRod("the centre is not finite", "CosseratRod::grasp: center");
+  if (!orientation.coeffs().allFinite() || orientation.norm() < 1e-6)
+    return rodimpl::invalidRod("the orientation is not a rotation", "CosseratRod::grasp: orientation",
+                               "give a finite, non-zero quaternion");
+  kinematic_[segment] = 1;
+  graspCenter_[segment] = center;
+  graspFrame_[segment] = orientation.normalized();
+  return ok();
+}
+
+void CosseratRod::releaseGrasp(std::size_t segment) noexcept {
+  if (segment < kinematic_.size()) kinematic_[segment] = 0;
+}
+
+RodWrench CosseratRod::graspLoad(std::size_t segment) const noexcept {
+  if (!grasped(segment) || lastH_ <= 0) return {};
+  const Vec6 load =
+      (jr_[segment].transpose() * lambda_[segment] + jl_[segment + 1].transpose() * lambda_[segment + 1]) /
+      (lastH_ * lastH_);
+  return {load.head<3>(), load.tail<3>()};
+}
 
 Status CosseratRod::setNodeForce(std::size_t k, const Vec3& force) {
   if (k >= nodeCount())
@@ -430,6 +460,12 @@ void CosseratRod::assemble() {
   // Segment i is the right side of constraint i and the left side of
   // constraint i+1, so it adds to diag_[i], diag_[i+1] and off_[i].
   for (std::size_t i = 0; i < n; ++i) {
+    if (kinematic_[i]) {  // held by the jaws: W = 0, nothing to correct
+      invInertia_[i].setZero();
+      wg_[i].setZero();
+      off_[i].setZero();
+      continue;
+    }
     const double invMass = 1.0 / mass_[i];
     const Vec3 z = axisOf(q_[i]);
     const Mat3 inertia =
@@ -492,6 +528,7 @@ void CosseratRod::solveSystem() {
 void CosseratRod::applyCorrection() {
   const std::size_t n = segmentCount();
   for (std::size_t i = 0; i < n; ++i) {
+    if (kinematic_[i]) continue;
     const Vec6 impulse = jr_[i].transpose() * dlambda_[i] + jl_[i + 1].transpose() * dlambda_[i + 1];
     p_[i] += impulse.head<3>() / mass_[i] - wg_[i].head<3>();
     rodimpl::rotate(q_[i], invInertia_[i] * impulse.tail<3>() - wg_[i].tail<3>());
@@ -526,8 +563,14 @@ Result<RodStepReport> CosseratRod::step(double h) {
     qPrev_[i] = q_[i];
     kick_[i].head<3>() = (h * h) * (gravity_ + force_[i] / mass_[i]);
     kick_[i].tail<3>() = (h * h) * torque_[i];
-    p_[i] += h * v_[i];
-    rodimpl::rotate(q_[i], h * w_[i]);
+    if (kinematic_[i]) {  // the jaws put it where they are
+      kick_[i].setZero();
+      p_[i] = graspCenter_[i];
+      q_[i] = graspFrame_[i];
+    } else {
+      p_[i] += h * v_[i];
+      rodimpl::rotate(q_[i], h * w_[i]);
+    }
     pStart_[i] = p_[i];
     qStart_[i] = q_[i];
   }

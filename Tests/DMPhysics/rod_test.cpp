@@ -285,6 +285,49 @@ TEST(CosseratRod, LightThreadUnderAStrongPullStaysStable) {
   EXPECT_NEAR(rod.reaction(RodEnd::Start).force.x(), -load, 1e-3 * load);
 }
 
+// A needle driver grasps a free thread by its middle segment and holds it:
+// the two halves fall and hang straight down, and the jaws hold the weight
+// of the rest of the thread. Then the jaws lift it 5 cm: the thread follows
+// and the load is the same weight again once it has settled.
+TEST(CosseratRod, GraspedThreadHangsFromTheJaws) {
+  using namespace rodtest;
+  const double length = 0.41;
+  const int segments = 41;
+  RodOptions o;
+  o.nodes = straight(Vec3(-0.5 * length, 0, 0), Vec3(0.5 * length, 0, 0), segments);
+  o.radius = 1.25e-4;
+  // A limp cord (bending length √(EI/μg) = 0.6 mm; at 6 mm the bends at the
+  // jaws alone lift each free end by 3.5 mm, measured). Strain ≤ 0.3 %.
+  o.youngModulus = 1e6;
+  o.damping = 6;
+  CosseratRod rod = make(o);
+  const std::size_t middle = 20;
+  const dm::Quat jawFrame = rod.segmentOrientation(middle);
+  ASSERT_TRUE(rod.grasp(middle, Vec3::Zero(), jawFrame).ok());
+  EXPECT_TRUE(rod.grasped(middle));
+  EXPECT_FALSE(rod.grasped(middle + 1));
+  const double hanging = (segments - 1) * rod.segmentMass(0) * 9.81;
+  for (const double lift : {0.0, 0.05}) {
+    for (int i = 0; i < 2500; ++i) {
+      ASSERT_TRUE(rod.grasp(middle, Vec3(0, 0, lift * std::min(1.0, i / 500.0)), jawFrame).ok());
+      ASSERT_TRUE(rod.step(2e-3).ok());
+    }
+    EXPECT_LT(maxSpeed(rod), 1e-4) << "lift " << lift;
+    EXPECT_NEAR(rod.graspLoad(middle).force.z(), -hanging, 2e-3 * hanging) << "lift " << lift;
+    EXPECT_NEAR(rod.graspLoad(middle).force.x(), 0, 1e-3 * hanging) << "lift " << lift;
+    // Each half hangs from its end of the jaws: its free end (L − l)/2 below.
+    const double halfLength = 0.5 * (length - length / segments);
+    EXPECT_NEAR(rod.node(0).z(), lift - halfLength, 0.01 * halfLength) << "lift " << lift;
+    EXPECT_NEAR(rod.node(rod.nodeCount() - 1).z(), lift - halfLength, 0.01 * halfLength) << "lift " << lift;
+    EXPECT_NEAR(rod.segmentCenter(middle).z(), lift, 1e-12);
+  }
+  rod.releaseGrasp(middle);
+  EXPECT_FALSE(rod.grasped(middle));
+  for (int i = 0; i < 10; ++i) ASSERT_TRUE(rod.step(2e-3).ok());
+  EXPECT_LT(rod.segmentCenter(middle).z(), 0.05) << "released, it falls";
+  EXPECT_FALSE(rod.grasp(segments, Vec3::Zero(), jawFrame).ok());
+}
+
 // The joints' forces are internal: a free rod, released bent (its rest shape
 // is straight) and thrown, springs straight and wobbles while its linear
 // momentum stays what the throw gave it.

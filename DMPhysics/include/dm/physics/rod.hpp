@@ -27,7 +27,8 @@
 // Ends can be free, pinned (a ball joint at a world point: the three C_p
 // rows) or clamped (all six rows, against a world point and frame); moving
 // the point (and frame) from step to step drags the end, as a grasper or
-// needle driver does. Forces can be applied at any node (segment end).
+// needle driver does. Any segment can be grasped (held at a pose the caller
+// moves: the jaws of a needle driver), and forces applied at any node.
 //
 // Integration (Macklin, Müller & Chentanez 2016, "XPBD: position-based
 // simulation of compliant constrained dynamics"; Deul, Kugelstadt, Weiler &
@@ -207,6 +208,21 @@ class CosseratRod {
   /// rows (zero when free).
   RodWrench reaction(RodEnd end) const noexcept;
 
+  /// Holds segment i in a needle driver's (or grasper's) jaws: from the next
+  /// step on it sits at `center` with orientation `orientation` (body z along
+  /// the rod) and the rest of the rod does not move it. Call again each step
+  /// to drag it; the segment's velocity follows from the motion.
+  Status grasp(std::size_t segment, const Vec3& center, const Quat& orientation);
+  /// Lets a grasped segment go (it keeps the jaws' last velocity).
+  void releaseGrasp(std::size_t segment) noexcept;
+  bool grasped(std::size_t segment) const noexcept {
+    return segment < kinematic_.size() && kinematic_[segment];
+  }
+  /// What the rest of the rod exerted on a grasped segment during the last
+  /// step (its joints' λ/h²; torque about the segment's centre): the load the
+  /// jaws hold against, the segment's own weight aside. Zero when not grasped.
+  RodWrench graspLoad(std::size_t segment) const noexcept;
+
   /// A constant force (N, world) on node k from the next step on, until
   /// changed; Vec3::Zero() removes it.
   Status setNodeForce(std::size_t k, const Vec3& force);
@@ -248,6 +264,9 @@ class CosseratRod {
   std::vector<Mat6> elim_;          // S_c⁻¹ B_c of the elimination
   std::vector<std::uint8_t> rows_;  // active rows per constraint (bit r: row r)
   std::vector<Vec3> nodeForce_;
+  std::vector<std::uint8_t> kinematic_;  // 1: grasped (moved by the jaws, not by the rod)
+  std::vector<Vec3> graspCenter_;
+  std::vector<Quat> graspFrame_;
   End ends_[2];
   RodWrench reaction_[2];
   double restLength_ = 0;
