@@ -1,5 +1,7 @@
 // Cosserat rods: building, the end attachments and the direct XPBD step.
 // See dm/physics/rod.hpp for the model and the solver.
+#include <dm/collide/triangle.hpp>
+#include <dm/math/geometry.hpp>
 #include <dm/physics/rod.hpp>
 
 #include <Eigen/Cholesky>
@@ -203,6 +205,8 @@ Result<CosseratRod> CosseratRod::create(const RodOptions& o) {
   rod.torque_.assign(n, Vec3::Zero());
   rod.nodeForce_.assign(n + 1, Vec3::Zero());
   rod.kinematic_.assign(n, 0);
+  rod.contactImpulse_.assign(n, Vec6::Zero());
+  rod.radius_ = r;
   rod.graspCenter_.assign(n, Vec3::Zero());
   rod.graspFrame_.assign(n, Quat::Identity());
 
@@ -325,6 +329,130 @@ RodWrench CosseratRod::graspLoad(std::size_t segment) const noexcept {
       (jr_[segment].transpose() * lambda_[segment] + jl_[segment + 1].transpose() * lambda_[segment + 1]) /
       (lastH_ * lastH_);
   return {load.head<3>(), load.tail<3>()};
+}
+
+Status CosseratRod::setObstacles(const std::vector<RodObstacle>& obstacles) {
+  using ObstacleShape = RodObstacle::Shape;
+  std::vector<RodObstacle> checked = obstacles;
+  for (std::size_t k = 0; k < checked.size(); ++k) {
+    RodObstacle& o = checked[k];
+    const std::string where = formatString("CosseratRod::setObstacles: obstacles[%zu]", k);
+    if (o.shape != ObstacleShape::Plane && o.shape != ObstacleShape::Sphere &&
+        o.shape != ObstacleShape::Capsule)
+      return rodimpl::invalidRod(formatString("unknown shape %d", int(o.shape)), where + ".shape");
+    if (!o.a.allFinite() || !o.b.allFinite() || !o.normal.allFinite() || !std::isfinite(o.radius))
+      return rodimpl::invalidRod("a field is not finite", where);
+    if (o.shape == ObstacleShape::Plane) {
+      if (o.normal.norm() < 1e-12) return rodimpl::invalidRod("the normal is zero", where + ".normal");
+      if (o.radius != 0) return rodimpl::invalidRod("a plane has no radius", where + ".radius", "leave it 0");
+      if (!o.b.isZero(0)) return rodimpl::invalidRod("a plane has one point", where + ".b", "leave it zero");
+      o.normal.normalize();
+    } else {
+      if (!(o.radius > 0))
+        return rodimpl::invalidRod(formatString("radius is %g m", o.radius), where + ".radius",
+                                   "give a radius > 0 m");
+      if (o.shape == ObstacleShape::Sphere && !o.b.isZero(0))
+        return rodimpl::invalidRod("a sphere has one point", where + ".b", "leave it zero");
+      if (o.normal != Vec3::UnitZ())
+        return rodimpl::invalidRod("only a plane has a normal", where + ".normal", "leave it at its default");
+    }
+  }
+  const std::size_t pairs = nodeCount() * checked.size();
+  if (checked.size() != obstacles_.size()) {  // a new set: no warm start
+    contactLambda_.assign(pairs, 0.0);
+    for (Vec6& c : contactImpulse_) c.setZero();
+  }
+  obstacles_ = std::move(checked);
+  return ok();
+}
+
+Vec3 CosseratRod::contactForce() const noexcept {
+  if (lastH_ <= 0) return Vec3::Zero();
+  Vec3 sum = Vec3::Zero();
+  for (const Vec6& c : contactImpulse_) sum += c.head<3>();
+  return sum / (lastH_ * lastH_);
+}
+
+// Gap between the rod's surface at node k (a sphere of the rod's radius on
+// the node, as node() places it) and the obstacle's (negative: overlap), and
+// the contact normal out of the obstacle.
+double CosseratRod::contactGap(std::size_t k, const RodObstacle& o, Vec3& normal) const {
+  const Vec3 x = node(k);
+  Vec3 onObstacle = o.a;
+  switch (o.shape) {
+    case RodObstacle::Shape::Plane:
+      normal = o.normal;
+      return o.normal.dot(x - o.a) - radius_;
+    case RodObstacle::Shape::Sphere:
+      break;
+    case RodObstacle::Shape::Capsule:
+      onObstacle = closestPointOnSegment(x, o.a, o.b);
+      break;
+  }
+  const Vec3 d = x - onObstacle;
+  const double distance = d.norm();
+  // On the obstacle's centre or axis (not reached by a rod that was outside):
+  // push out across the rod.
+  normal = distance > 1e-15 ? Vec3(d / distance)
+                            : rodimpl::axisOf(q_[std::min(k, segmentCount() - 1)]).unitOrthogonal();
+  return distance - radius_ - o.radius;
+}
+
+// One Gauss–Seidel sweep of the unilateral contacts (zero compliance, the
+// accumulated impulse kept ≥ 0), with the same W as the pass before it. A
+// node where two segments meet is the midpoint of their joint points, so
+// its contact acts on both (half the Jacobian each) and does not pull the
+// joint apart; an end node is one segment's end.
+void CosseratRod::projectContacts() {
+  const std::size_t k = obstacles_.size();
+  if (k == 0) return;
+  const std::size_t n = segmentCount();
+  for (std::size_t node = 0; node <= n; ++node) {
+    // The segments at this node, their share of it and its arm on each.
+    std::size_t seg[2];
+    double share[2];
+    Vec3 arm[2];
+    int count = 0;
+    const bool inner = node > 0 && node < n;
+    if (node > 0 && !kinematic_[node - 1]) {
+      seg[count] = node - 1;
+      share[count] = inner ? 0.5 : 1.0;
+      arm[count++] = 0.5 * len_[node - 1] * rodimpl::axisOf(q_[node - 1]);
+    }
+    if (node < n && !kinematic_[node]) {
+      seg[count] = node;
+      share[count] = inner ? 0.5 : 1.0;
+      arm[count++] = -0.5 * len_[node] * rodimpl::axisOf(q_[node]);
+    }
+    if (count == 0) continue;  // held by the jaws
+    if ((node == 0 && ends_[0].kind != RodAttachment::Free) ||
+        (node == n && ends_[1].kind != RodAttachment::Free))
+      continue;  // an attached end node stays where it is held
+    for (std::size_t o = 0; o < k; ++o) {
+      double& lambda = contactLambda_[node * k + o];
+      Vec3 normal;
+      const double gap = contactGap(node, obstacles_[o], normal);
+      if (gap >= 0 && lambda == 0) continue;
+      Vec3 rn[2], turn[2];
+      double w = 0;
+      for (int a = 0; a < count; ++a) {
+        rn[a] = share[a] * arm[a].cross(normal);
+        turn[a] = invInertia_[seg[a]] * rn[a];
+        w += share[a] * share[a] / mass_[seg[a]] + rn[a].dot(turn[a]);
+      }
+      const double next = std::max(lambda - gap / w, 0.0);
+      const double d = next - lambda;
+      if (d == 0) continue;
+      lambda = next;
+      for (int a = 0; a < count; ++a) {
+        const std::size_t i = seg[a];
+        p_[i] += (share[a] * d / mass_[i]) * normal;
+        rodimpl::rotate(q_[i], d * turn[a]);
+        contactImpulse_[i].head<3>() += share[a] * d * normal;
+        contactImpulse_[i].tail<3>() += d * rn[a];
+      }
+    }
+  }
 }
 
 Status CosseratRod::setNodeForce(std::size_t k, const Vec3& force) {
@@ -484,7 +612,8 @@ void CosseratRod::assemble() {
         (inertia + stiffeningPart(lambda_[i].head<3>() + lambda_[i + 1].head<3>(), 0.5 * len_[i] * z))
             .inverse();
     invInertia_[i] = invInertia;
-    const Vec6 jtl = jr_[i].transpose() * lambda_[i] + jl_[i + 1].transpose() * lambda_[i + 1];
+    const Vec6 jtl =
+        jr_[i].transpose() * lambda_[i] + jl_[i + 1].transpose() * lambda_[i + 1] + contactImpulse_[i];
     Vec6& u = wg_[i];  // W g, with W = K⁻¹ for the rotation
     u.head<3>() = (p_[i] - pStart_[i]) - kick_[i].head<3>() - invMass * jtl.head<3>();
     u.tail<3>() = invInertia * (inertia * logRotation(q_[i] * qStart_[i].conjugate()) - kick_[i].tail<3>() -
@@ -575,12 +704,15 @@ Result<RodStepReport> CosseratRod::step(double h) {
     qStart_[i] = q_[i];
   }
   for (std::size_t c = 0; c <= n; ++c) lambda_[c] *= rescale;
+  for (double& l : contactLambda_) l *= rescale;
+  for (Vec6& c : contactImpulse_) c *= rescale;
   lastH_ = h;
   for (int it = 0; it < iterations_; ++it) {
     evaluate(h);
     assemble();
     solveSystem();
     applyCorrection();
+    projectContacts();
   }
   // Residuals and reactions at the final state.
   evaluate(h);
@@ -589,6 +721,11 @@ Result<RodStepReport> CosseratRod::step(double h) {
     report.positionResidual = std::max(report.positionResidual, rhs_[c].head<3>().cwiseAbs().maxCoeff());
     report.rotationResidual = std::max(report.rotationResidual, rhs_[c].tail<3>().cwiseAbs().maxCoeff());
   }
+  for (std::size_t node = 0; node <= n; ++node)
+    for (const RodObstacle& o : obstacles_) {
+      Vec3 normal;
+      report.penetration = std::max(report.penetration, -contactGap(node, o, normal));
+    }
   const double invH2 = 1.0 / (h * h);
   const Mat6* rodSide[2] = {&jr_[0], &jl_[n]};  // the rod is right of c = 0 and left of c = n
   const std::size_t endConstraint[2] = {0, n};

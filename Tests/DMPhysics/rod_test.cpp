@@ -20,6 +20,7 @@ namespace rodtest {
 using dm::CosseratRod;
 using dm::RodEnd;
 using dm::RodOptions;
+using dm::Status;
 using dm::Vec3;
 
 // n + 1 nodes from a to b.
@@ -328,6 +329,76 @@ TEST(CosseratRod, GraspedThreadHangsFromTheJaws) {
   EXPECT_FALSE(rod.grasp(segments, Vec3::Zero(), jawFrame).ok());
 }
 
+// A thread dropped on a table comes to rest lying on it: every node one
+// thread radius above the surface, and the table carries its weight.
+TEST(CosseratRod, ThreadDroppedOnATableRestsOnIt) {
+  using namespace rodtest;
+  RodOptions o;
+  o.nodes = straight(Vec3(0, 0, 0.01), Vec3(0.3, 0.05, 0.02), 30);
+  o.damping = 8;
+  o.iterations = 3;  // with 1 or 2 passes this stiff suture chatters on the table (rod.hpp)
+  CosseratRod rod = make(o);
+  dm::RodObstacle table;  // the plane z = 0
+  ASSERT_TRUE(rod.setObstacles({table}).ok());
+  dm::RodStepReport last;
+  for (int i = 0; i < 1500; ++i) {
+    auto r = rod.step(1e-3);
+    ASSERT_TRUE(r.ok());
+    last = *r;
+  }
+  EXPECT_LT(maxSpeed(rod), 1e-5);
+  EXPECT_LT(last.penetration, 1e-7);
+  for (std::size_t k = 0; k < rod.nodeCount(); ++k)
+    EXPECT_NEAR(rod.node(k).z(), 1.5e-4, 1e-6) << "node " << k;
+  const double weight = 30 * rod.segmentMass(0) * 9.81;
+  EXPECT_NEAR(rod.contactForce().z(), weight, 1e-3 * weight);
+  EXPECT_NEAR(rod.contactForce().head<2>().norm(), 0, 1e-9 * weight);
+}
+
+// A thread pinned at both ends and pulled up over a bar (a capsule, a tool
+// shaft) off its centre: the thread does not enter the bar, and the bar, the
+// pins and gravity balance. (A frictionless bar should also leave the two
+// pins' tensions equal, the capstan law with μ = 0; they differ by 1–3 %
+// here, with 40 to 160 segments, ten times the bending stiffness or a
+// hundred times the axial one alike: an open defect of the node contacts,
+// recorded in rod.hpp, not asserted until it is found.)
+TEST(CosseratRod, ThreadPulledOverABarBalancesAndStaysOutside) {
+  using namespace rodtest;
+  RodOptions o;
+  o.nodes = straight(Vec3(-0.15, 0, 0), Vec3(0.15, 0, 0), 40);
+  o.youngModulus = 1e8;  // EA = 7 N: the bar stretches it by about 1 %
+  o.damping = 20;
+  o.iterations = 3;
+  CosseratRod rod = make(o);
+  ASSERT_TRUE(rod.pin(RodEnd::Start, Vec3(-0.15, 0, 0)).ok());
+  ASSERT_TRUE(rod.pin(RodEnd::End, Vec3(0.15, 0, 0)).ok());
+  dm::RodObstacle bar;
+  bar.shape = dm::RodObstacle::Shape::Capsule;
+  bar.radius = 0.01;
+  dm::RodStepReport last;
+  for (int i = 0; i < 1500; ++i) {
+    // The bar rises from below the thread to 2 cm above the pins' line.
+    const double z = -0.0105 + 0.0305 * std::min(1.0, i / 500.0);
+    bar.a = Vec3(0.02, -0.05, z);
+    bar.b = Vec3(0.02, 0.05, z);  // off centre: the two sides differ in length and angle
+    ASSERT_TRUE(rod.setObstacles({bar}).ok());
+    auto r = rod.step(1e-3);
+    ASSERT_TRUE(r.ok());
+    last = *r;
+  }
+  EXPECT_LT(maxSpeed(rod), 1e-5);
+  EXPECT_LT(last.penetration, 1e-6);
+  const Vec3 start = rod.reaction(RodEnd::Start).force, end = rod.reaction(RodEnd::End).force;
+  EXPECT_GT(start.norm(), 0.02) << "the thread is taut";
+  EXPECT_GT(end.norm(), 0.02) << "the thread is taut";
+  const Vec3 weight = -9.81 * 40 * rod.segmentMass(0) * Vec3::UnitZ();
+  EXPECT_LT((rod.contactForce() + start + end + weight).norm(), 1e-3 * start.norm());
+  for (std::size_t k = 0; k < rod.nodeCount(); ++k) {  // nothing inside the bar
+    const Vec3 x = rod.node(k);
+    EXPECT_GT(std::hypot(x.x() - 0.02, x.z() - 0.02), 0.01 + 1.5e-4 - 1e-6) << "node " << k;
+  }
+}
+
 // The joints' forces are internal: a free rod, released bent (its rest shape
 // is straight) and thrown, springs straight and wobbles while its linear
 // momentum stays what the throw gave it.
@@ -423,6 +494,23 @@ TEST(CosseratRod, BadInputNamesTheField) {
   EXPECT_NE(errorOf(o).find("gravity"), std::string::npos) << errorOf(o);
 
   CosseratRod rod = make(good);
+  dm::RodObstacle sphere;
+  sphere.shape = dm::RodObstacle::Shape::Sphere;
+  auto obstacleError = [&](const dm::RodObstacle& ob) {
+    Status st = rod.setObstacles({ob});
+    return st.ok() ? std::string("(accepted)") : st.error().message();
+  };
+  EXPECT_NE(obstacleError(sphere).find("obstacles[0].radius"), std::string::npos) << obstacleError(sphere);
+  dm::RodObstacle plane;
+  plane.radius = 0.1;
+  EXPECT_NE(obstacleError(plane).find("obstacles[0].radius"), std::string::npos) << obstacleError(plane);
+  plane.radius = 0;
+  plane.normal = Vec3::Zero();
+  EXPECT_NE(obstacleError(plane).find("obstacles[0].normal"), std::string::npos) << obstacleError(plane);
+  sphere.radius = 0.1;
+  sphere.normal = Vec3::UnitX();
+  EXPECT_NE(obstacleError(sphere).find("obstacles[0].normal"), std::string::npos) << obstacleError(sphere);
+  EXPECT_EQ(rod.obstacleCount(), 0u);
   EXPECT_FALSE(rod.step(0).ok());
   EXPECT_FALSE(rod.step(std::nan("")).ok());
   EXPECT_FALSE(rod.setNodeForce(5, Vec3::Zero()).ok());
