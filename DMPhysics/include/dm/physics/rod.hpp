@@ -74,20 +74,19 @@
 //
 // Cost and real time: step() is serial, allocates nothing and takes no
 // lock; it returns an error (and does nothing) only for a bad step size. One
-// pass costs about 0.85 µs per segment on the 2-core build machine (200
-// segments, one pass: 0.17 ms a step; Bench/physics_rod_bench.cpp measures it
-// against Bullet's rope, which is 17 times cheaper a pass and stretches by
-// 86 % where this rod stretches by 5e-6).
-// Bit-reproducible: the same calls in the same order give the same bits.
+// pass costs about 1.1 µs per segment on the 2-core build machine (200
+// segments, one pass: 0.22 ms a step, RelWithDebInfo;
+// Bench/physics_rod_bench.cpp and docs/performance.md): Bullet's rope
+// makes 21 passes in that time, and with 72 it still stretches by 2.8 % in
+// a swing where this rod stretches by 5e-6.
 //
 // Contact: planes, spheres and capsules (tools, bone, the table), without
 // friction, at the nodes (spheres of the rod's radius). Known defect, cause
 // not found yet: a thread pinned at both ends and pulled over a smooth bar
 // off its centre settles with its two tensions 1–3 % apart, where a
 // frictionless bar leaves them equal (the test says what was ruled out).
-// Not yet: friction
-// and the capstan law, self-collision, contact with tissue meshes (issue 33's
-// next slices).
+// Not yet: friction and the capstan law, self-collision, contact with
+// tissue meshes (issue 33's next slices).
 //
 // @code
 //   std::vector<dm::Vec3> nodes;
