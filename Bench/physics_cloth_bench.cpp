@@ -50,6 +50,8 @@
 #include <string>
 #include <vector>
 
+#include "bench_bullet_soft.hpp"
+
 namespace {
 
 double cpuSeconds() {
@@ -161,19 +163,11 @@ std::unique_ptr<BulletSheet> makeBullet(const Params& p, int piterations) {
     }
   for (int i = 0; i < sb.m_nodes.size(); ++i)
     sb.setMass(i, (i == 0 || i == n - 1) ? btScalar(0) : btScalar(p.nodeMass));
-  sb.m_cfg.piterations = piterations;
-  sb.m_cfg.viterations = 0;
-  sb.m_cfg.diterations = 0;
-  sb.m_cfg.citerations = 0;
-  sb.m_cfg.kDP = 0;
+  dm::bench::usePositionSolverOnly(sb, piterations);
   return s;
 }
 
-void stepBullet(btSoftBody& sb, double h) {
-  sb.predictMotion(btScalar(h));
-  sb.solveConstraints();
-  sb.integrateMotion();
-}
+void stepBullet(btSoftBody& sb, double h) { dm::bench::stepSoftBody(sb, h); }
 
 double lowestOurs(const dm::MassSpringBody& b) {
   double z = 0;

@@ -35,6 +35,7 @@
 #include <memory>
 #include <vector>
 
+#include "bench_bullet_soft.hpp"
 #include "bench_cpu_clock.hpp"
 
 namespace {
@@ -80,19 +81,13 @@ std::unique_ptr<BulletRun> makeBullet(int n, int piterations, double nodeMass, d
   btSoftBody& sb = *r->body;
   for (int i = 1; i < sb.m_nodes.size(); ++i) sb.setMass(i, btScalar(nodeMass));
   sb.m_materials[0]->m_kLST = 1;
-  sb.m_cfg.piterations = piterations;
-  sb.m_cfg.viterations = 0;
-  sb.m_cfg.diterations = 0;
-  sb.m_cfg.citerations = 0;
-  sb.m_cfg.kDP = 0;
+  dm::bench::usePositionSolverOnly(sb, piterations);
   return r;
 }
 
 void stepBullet(btSoftBody& sb, double pull) {
   if (pull != 0) sb.addForce(btVector3(btScalar(pull), 0, 0), sb.m_nodes.size() - 1);
-  sb.predictMotion(btScalar(kStep));
-  sb.solveConstraints();
-  sb.integrateMotion();
+  dm::bench::stepSoftBody(sb, kStep);
 }
 
 double strainBullet(const btSoftBody& sb) {
