@@ -398,58 +398,90 @@ double CosseratRod::contactGap(std::size_t k, const RodObstacle& o, Vec3& normal
   return distance - radius_ - o.radius;
 }
 
+// The segments a contact at `node` acts on, their share of it and the arm
+// of their joint point there: a node where two segments meet is the
+// midpoint of their joint points, so its contact acts on both (half the
+// Jacobian each) and does not pull the joint apart; an end node is one
+// segment's end. None for an attached end or a grasped segment.
+int CosseratRod::nodeSegments(std::size_t node, std::size_t* seg, double* share, Vec3* arm) const {
+  const std::size_t n = segmentCount();
+  if ((node == 0 && ends_[0].kind != RodAttachment::Free) ||
+      (node == n && ends_[1].kind != RodAttachment::Free))
+    return 0;  // an attached end node stays where it is held
+  int count = 0;
+  const bool inner = node > 0 && node < n;
+  if (node > 0 && !kinematic_[node - 1]) {
+    seg[count] = node - 1;
+    share[count] = inner ? 0.5 : 1.0;
+    arm[count++] = 0.5 * len_[node - 1] * rodimpl::axisOf(q_[node - 1]);
+  }
+  if (node < n && !kinematic_[node]) {
+    seg[count] = node;
+    share[count] = inner ? 0.5 : 1.0;
+    arm[count++] = -0.5 * len_[node] * rodimpl::axisOf(q_[node]);
+  }
+  return count;  // 0: held by the jaws
+}
+
 // One Gauss–Seidel sweep of the unilateral contacts (zero compliance, the
-// accumulated impulse kept ≥ 0), with the same W as the pass before it. A
-// node where two segments meet is the midpoint of their joint points, so
-// its contact acts on both (half the Jacobian each) and does not pull the
-// joint apart; an end node is one segment's end.
+// accumulated λ kept ≥ 0), with the same W as the pass before it.
 void CosseratRod::projectContacts() {
   const std::size_t k = obstacles_.size();
   if (k == 0) return;
-  const std::size_t n = segmentCount();
-  for (std::size_t node = 0; node <= n; ++node) {
-    // The segments at this node, their share of it and its arm on each.
+  for (std::size_t node = 0; node <= segmentCount(); ++node) {
     std::size_t seg[2];
     double share[2];
     Vec3 arm[2];
-    int count = 0;
-    const bool inner = node > 0 && node < n;
-    if (node > 0 && !kinematic_[node - 1]) {
-      seg[count] = node - 1;
-      share[count] = inner ? 0.5 : 1.0;
-      arm[count++] = 0.5 * len_[node - 1] * rodimpl::axisOf(q_[node - 1]);
-    }
-    if (node < n && !kinematic_[node]) {
-      seg[count] = node;
-      share[count] = inner ? 0.5 : 1.0;
-      arm[count++] = -0.5 * len_[node] * rodimpl::axisOf(q_[node]);
-    }
-    if (count == 0) continue;  // held by the jaws
-    if ((node == 0 && ends_[0].kind != RodAttachment::Free) ||
-        (node == n && ends_[1].kind != RodAttachment::Free))
-      continue;  // an attached end node stays where it is held
+    const int count = nodeSegments(node, seg, share, arm);
+    if (count == 0) continue;
     for (std::size_t o = 0; o < k; ++o) {
       double& lambda = contactLambda_[node * k + o];
       Vec3 normal;
       const double gap = contactGap(node, obstacles_[o], normal);
       if (gap >= 0 && lambda == 0) continue;
-      Vec3 rn[2], turn[2];
+      Vec3 turn[2];
       double w = 0;
       for (int a = 0; a < count; ++a) {
-        rn[a] = share[a] * arm[a].cross(normal);
-        turn[a] = invInertia_[seg[a]] * rn[a];
-        w += share[a] * share[a] / mass_[seg[a]] + rn[a].dot(turn[a]);
+        const Vec3 rn = share[a] * arm[a].cross(normal);
+        turn[a] = invInertia_[seg[a]] * rn;
+        w += share[a] * share[a] / mass_[seg[a]] + rn.dot(turn[a]);
       }
       const double next = std::max(lambda - gap / w, 0.0);
       const double d = next - lambda;
       if (d == 0) continue;
       lambda = next;
       for (int a = 0; a < count; ++a) {
-        const std::size_t i = seg[a];
-        p_[i] += (share[a] * d / mass_[i]) * normal;
-        rodimpl::rotate(q_[i], d * turn[a]);
-        contactImpulse_[i].head<3>() += share[a] * d * normal;
-        contactImpulse_[i].tail<3>() += d * rn[a];
+        p_[seg[a]] += (share[a] * d / mass_[seg[a]]) * normal;
+        rodimpl::rotate(q_[seg[a]], d * turn[a]);
+      }
+    }
+  }
+  refreshContactImpulses();
+}
+
+// Σ J_cᵀ λ_c per segment from the contacts' λ and their normals and arms
+// where the rod is now. Rebuilt, not accumulated: an impulse kept from
+// where a node touched before would point along the old normal, and as the
+// thread slid over a bar those stale directions acted as friction (a
+// frictionless bar held 3 % more tension on one side than on the other, and
+// a suture dropped on a table chattered at 0.01–0.07 m/s with one or two
+// passes a step).
+void CosseratRod::refreshContactImpulses() {
+  for (Vec6& c : contactImpulse_) c.setZero();
+  const std::size_t k = obstacles_.size();
+  for (std::size_t node = 0; k > 0 && node <= segmentCount(); ++node) {
+    std::size_t seg[2];
+    double share[2];
+    Vec3 arm[2];
+    const int count = nodeSegments(node, seg, share, arm);
+    for (std::size_t o = 0; count > 0 && o < k; ++o) {
+      const double lambda = contactLambda_[node * k + o];
+      if (lambda == 0) continue;
+      Vec3 normal;
+      (void)contactGap(node, obstacles_[o], normal);
+      for (int a = 0; a < count; ++a) {
+        contactImpulse_[seg[a]].head<3>() += share[a] * lambda * normal;
+        contactImpulse_[seg[a]].tail<3>() += share[a] * lambda * arm[a].cross(normal);
       }
     }
   }
@@ -705,7 +737,7 @@ Result<RodStepReport> CosseratRod::step(double h) {
   }
   for (std::size_t c = 0; c <= n; ++c) lambda_[c] *= rescale;
   for (double& l : contactLambda_) l *= rescale;
-  for (Vec6& c : contactImpulse_) c *= rescale;
+  refreshContactImpulses();
   lastH_ = h;
   for (int it = 0; it < iterations_; ++it) {
     evaluate(h);
