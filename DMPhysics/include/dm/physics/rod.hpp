@@ -77,7 +77,7 @@
 // pass costs about 1.1 µs per segment on the 2-core build machine (200
 // segments, one pass: 0.22 ms a step, RelWithDebInfo;
 // Bench/physics_rod_bench.cpp and docs/performance.md): Bullet's rope
-// makes 21 passes in that time, and with 72 it still stretches by 2.8 % in
+// makes 21 passes in that time, and with 71 it still stretches by 2.8 % in
 // a swing where this rod stretches by 5e-6.
 //
 // Contact: planes, spheres and capsules (tools, bone, the table), without
