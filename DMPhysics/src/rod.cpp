@@ -35,7 +35,10 @@ Mat3 cross(const Vec3& r) {
 }
 
 // Rotates body z to the world: the tangent of a segment of orientation q.
-Vec3 axisOf(const Quat& q) { return q * Vec3::UnitZ(); }
+Vec3 axisOf(const Quat& q) {  // the third column of q's rotation matrix
+  const double x = q.x(), y = q.y(), z = q.z(), w = q.w();
+  return Vec3(2 * (x * z + w * y), 2 * (y * z - w * x), 1 - 2 * (x * x + y * y));
+}
 
 // exp(dθ) ⊗ q: q turned by |dθ| about dθ in the world frame (exactly, so
 // that a step's corrections and logRotation() agree at any angle).
@@ -678,7 +681,22 @@ void CosseratRod::solveSystem() {
       return;
     }
     dlambda_[c] = llt.solve(y);
-    if (c < n) elim_[c] = llt.solve(off_[c]);
+    if (c < n) {
+      // S⁻¹ B by row operations on a row-major copy (six columns at once):
+      // LLT::solve with a matrix takes Eigen's blocked general path, a sixth
+      // of the whole step at this size (perf).
+      const Mat6& l = llt.matrixLLT();
+      Eigen::Matrix<double, 6, 6, Eigen::RowMajor> x = off_[c];
+      for (int i = 0; i < 6; ++i) {  // L Y = B
+        for (int k = 0; k < i; ++k) x.row(i) -= l(i, k) * x.row(k);
+        x.row(i) /= l(i, i);
+      }
+      for (int i = 5; i >= 0; --i) {  // Lᵀ X = Y
+        for (int k = i + 1; k < 6; ++k) x.row(i) -= l(k, i) * x.row(k);
+        x.row(i) /= l(i, i);
+      }
+      elim_[c] = x;
+    }
   }
   for (std::size_t c = n; c-- > 0;) dlambda_[c].noalias() -= elim_[c] * dlambda_[c + 1];
 }
