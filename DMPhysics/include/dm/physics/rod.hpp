@@ -74,11 +74,11 @@
 //
 // Cost and real time: step() is serial, allocates nothing and takes no
 // lock; it returns an error (and does nothing) only for a bad step size. One
-// pass costs about 1.1 µs per segment on the 2-core build machine (200
-// segments, one pass: 0.22 ms a step, RelWithDebInfo;
+// pass costs about 0.95 µs per segment on the 2-core build machine (200
+// segments, one pass: 0.19 ms a step, RelWithDebInfo;
 // Bench/physics_rod_bench.cpp and docs/performance.md): Bullet's rope
-// makes 21 passes in that time, and with 71 it still stretches by 2.8 % in
-// a swing where this rod stretches by 5e-6.
+// makes 18 passes in that time, and with 62 it still stretches by 3.2 % in
+// a swing where this rod stretches by 5e-6. With contacts (two passes) 0.4 ms.
 //
 // Contact: planes, spheres and capsules (tools, bone, the table), without
 // friction, at the nodes (spheres of the rod's radius). Segments long
