@@ -336,36 +336,40 @@ RodWrench CosseratRod::graspLoad(std::size_t segment) const noexcept {
 
 Status CosseratRod::setObstacles(const std::vector<RodObstacle>& obstacles) {
   using ObstacleShape = RodObstacle::Shape;
-  std::vector<RodObstacle> checked = obstacles;
-  for (std::size_t k = 0; k < checked.size(); ++k) {
-    RodObstacle& o = checked[k];
-    const std::string where = formatString("CosseratRod::setObstacles: obstacles[%zu]", k);
+  // Checked in place and copied only once valid, so that moving the same
+  // number of obstacles each step allocates nothing (the messages are built
+  // on the error path alone).
+  for (std::size_t k = 0; k < obstacles.size(); ++k) {
+    const RodObstacle& o = obstacles[k];
+    auto where = [k](const char* field) {
+      return formatString("CosseratRod::setObstacles: obstacles[%zu]%s", k, field);
+    };
     if (o.shape != ObstacleShape::Plane && o.shape != ObstacleShape::Sphere &&
         o.shape != ObstacleShape::Capsule)
-      return rodimpl::invalidRod(formatString("unknown shape %d", int(o.shape)), where + ".shape");
+      return rodimpl::invalidRod(formatString("unknown shape %d", int(o.shape)), where(".shape"));
     if (!o.a.allFinite() || !o.b.allFinite() || !o.normal.allFinite() || !std::isfinite(o.radius))
-      return rodimpl::invalidRod("a field is not finite", where);
+      return rodimpl::invalidRod("a field is not finite", where(""));
     if (o.shape == ObstacleShape::Plane) {
-      if (o.normal.norm() < 1e-12) return rodimpl::invalidRod("the normal is zero", where + ".normal");
-      if (o.radius != 0) return rodimpl::invalidRod("a plane has no radius", where + ".radius", "leave it 0");
-      if (!o.b.isZero(0)) return rodimpl::invalidRod("a plane has one point", where + ".b", "leave it zero");
-      o.normal.normalize();
+      if (o.normal.norm() < 1e-12) return rodimpl::invalidRod("the normal is zero", where(".normal"));
+      if (o.radius != 0) return rodimpl::invalidRod("a plane has no radius", where(".radius"), "leave it 0");
+      if (!o.b.isZero(0)) return rodimpl::invalidRod("a plane has one point", where(".b"), "leave it zero");
     } else {
       if (!(o.radius > 0))
-        return rodimpl::invalidRod(formatString("radius is %g m", o.radius), where + ".radius",
+        return rodimpl::invalidRod(formatString("radius is %g m", o.radius), where(".radius"),
                                    "give a radius > 0 m");
       if (o.shape == ObstacleShape::Sphere && !o.b.isZero(0))
-        return rodimpl::invalidRod("a sphere has one point", where + ".b", "leave it zero");
+        return rodimpl::invalidRod("a sphere has one point", where(".b"), "leave it zero");
       if (o.normal != Vec3::UnitZ())
-        return rodimpl::invalidRod("only a plane has a normal", where + ".normal", "leave it at its default");
+        return rodimpl::invalidRod("only a plane has a normal", where(".normal"), "leave it at its default");
     }
   }
-  const std::size_t pairs = nodeCount() * checked.size();
-  if (checked.size() != obstacles_.size()) {  // a new set: no warm start
-    contactLambda_.assign(pairs, 0.0);
+  if (obstacles.size() != obstacles_.size()) {  // a new set: no warm start
+    contactLambda_.assign(nodeCount() * obstacles.size(), 0.0);
     for (Vec6& c : contactImpulse_) c.setZero();
   }
-  obstacles_ = std::move(checked);
+  obstacles_ = obstacles;  // same size: copied into the existing storage
+  for (RodObstacle& o : obstacles_)
+    if (o.shape == ObstacleShape::Plane) o.normal.normalize();
   return ok();
 }
 
@@ -753,10 +757,10 @@ Result<RodStepReport> CosseratRod::step(double h) {
   }
   for (std::size_t c = 0; c <= n; ++c) lambda_[c] *= rescale;
   for (double& l : contactLambda_) l *= rescale;
-  refreshContactImpulses();
   lastH_ = h;
   // Contacts first, so that the first pass starts outside the obstacles
-  // (with the last step's W; it then sweeps them after every pass).
+  // (with the last step's W; it then sweeps them after every pass). The
+  // sweep ends by rebuilding the contacts' impulses for the first pass.
   projectContacts();
   for (int it = 0; it < iterations_; ++it) {
     evaluate(h);
