@@ -263,20 +263,79 @@ void FemBody::setExternalForce(std::size_t i, const Vec3& f) {
 
 void FemBody::clearExternalForces() { std::fill(fext_.begin(), fext_.end(), Vec3::Zero()); }
 
+namespace {
+
+// Checks one spring's nodes, weights and anchor (the contact spring's and
+// the point springs'); `name` says which spring, for the message.
+Status checkSpring(const FemPointSpring& s, std::size_t nodeCount, const std::string& name,
+                   const char* where) {
+  double sum = 0.0;
+  for (std::size_t i = 0; i < 4; ++i) {
+    const double w = s.weights[i];
+    if (!std::isfinite(w) || w < 0.0)
+      return femimpl::invalid(
+          name + " weight " + std::to_string(i) + " = " + femimpl::num(w) + " is negative or not finite",
+          where, "give barycentric weights >= 0");
+    if (w > 0.0 && s.nodes[i] >= nodeCount)
+      return femimpl::invalid(
+          formatString("%s node %u is out of range (%zu nodes)", name.c_str(), s.nodes[i], nodeCount), where,
+          "use indices of positions()");
+    sum += w;
+  }
+  if (std::abs(sum - 1.0) > 1e-6)
+    return femimpl::invalid(name + " weights sum to " + femimpl::num(sum) + ", not 1", where,
+                            "give barycentric weights that sum to 1");
+  if (!s.anchor.allFinite())
+    return femimpl::invalid(name + " anchor is not finite", where, "give a point in metres");
+  return ok();
+}
+
+}  // namespace
+
 Status FemBody::setContactSpring(const std::array<std::uint32_t, 3>& nodes, const Vec3& weights,
                                  const Vec3& anchor, double stiffness) {
   constexpr const char* where = "FemBody::setContactSpring";
-  for (int i = 0; i < 3; ++i)
+  const FemPointSpring spring{.nodes = {nodes[0], nodes[1], nodes[2], nodes[0]},
+                              .weights = {weights.x(), weights.y(), weights.z(), 0.0},
+                              .anchor = anchor,
+                              .stiffness = stiffness * Mat3::Identity()};
+  for (int i = 0; i < 3; ++i)  // every node must exist, weighted or not
     if (nodes[std::size_t(i)] >= x_.size())
-      return femimpl::invalid(formatString("node %u is out of range (%zu nodes)", nodes[std::size_t(i)], x_.size()),
-                     where, "use indices of positions()");
-  if (!weights.allFinite() || weights.minCoeff() < 0.0 || std::abs(weights.sum() - 1.0) > 1e-6)
-    return femimpl::invalid(formatString("weights (%g, %g, %g) are not barycentric", weights.x(), weights.y(), weights.z()),
-                   where, "give non-negative weights that sum to 1");
-  if (!anchor.allFinite()) return femimpl::invalid("the anchor is not finite", where, "give a point in metres");
+      return femimpl::invalid(
+          formatString("node %u is out of range (%zu nodes)", nodes[std::size_t(i)], x_.size()), where,
+          "use indices of positions()");
+  if (Status st = checkSpring(spring, x_.size(), "the contact spring's", where); !st) return st;
   if (!std::isfinite(stiffness) || stiffness < 0.0)
-    return femimpl::invalid("stiffness " + femimpl::num(stiffness) + " N/m is negative or not finite", where, "give k >= 0");
-  spring_ = {.active = true, .nodes = nodes, .weights = weights, .anchor = anchor, .stiffness = stiffness};
+    return femimpl::invalid("stiffness " + femimpl::num(stiffness) + " N/m is negative or not finite", where,
+                            "give k >= 0");
+  spring_ = {.active = true, .spring = spring};
+  return ok();
+}
+
+Status FemBody::setPointSprings(std::span<const FemPointSpring> springs) {
+  constexpr const char* where = "FemBody::setPointSprings";
+  for (std::size_t j = 0; j < springs.size(); ++j) {
+    const FemPointSpring& s = springs[j];
+    const std::string name = "springs[" + std::to_string(j) + "]";
+    if (Status st = checkSpring(s, x_.size(), name, where); !st) return st;
+    const Mat3& k = s.stiffness;
+    const double scale = k.cwiseAbs().maxCoeff();
+    if (!s.load.allFinite())
+      return femimpl::invalid(name + " load is not finite", where, "give a force in newtons");
+    if (!k.allFinite())
+      return femimpl::invalid(name + " stiffness is not finite", where, "give a symmetric 3x3 matrix in N/m");
+    if ((k - k.transpose()).cwiseAbs().maxCoeff() > 1e-9 * scale)
+      return femimpl::invalid(name + " stiffness is not symmetric", where,
+                              "use FemPointSpring::axial or a symmetric matrix");
+    // Positive semi-definite: the leading minors of K + εI (ε a round-off
+    // allowance) are positive.
+    const Mat3 kk = k + 1e-12 * scale * Mat3::Identity();
+    const double m1 = kk(0, 0), m2 = kk(0, 0) * kk(1, 1) - kk(0, 1) * kk(1, 0), m3 = kk.determinant();
+    if (scale > 0.0 && !(m1 > 0.0 && m2 > 0.0 && m3 > 0.0))
+      return femimpl::invalid(name + " stiffness is not positive semi-definite", where,
+                              "a spring cannot push away from its anchor: give stiffnesses >= 0");
+  }
+  points_.assign(springs.begin(), springs.end());
   return ok();
 }
 
@@ -387,11 +446,21 @@ Vec3 FemBody::contactForce(const NodeContact& c, double h) const noexcept {
   return (c.stiffness * c.depth - h * contactRate(c)) * c.normal;
 }
 
+Vec3 FemBody::springPoint(const FemPointSpring& s) const noexcept {
+  Vec3 point = Vec3::Zero();
+  for (std::size_t i = 0; i < 4; ++i)
+    if (s.weights[i] != 0.0) point += s.weights[i] * x_[s.nodes[i]];
+  return point;
+}
+
 Vec3 FemBody::contactSpringForce() const noexcept {
   if (!spring_.active) return Vec3::Zero();
-  Vec3 point = Vec3::Zero();
-  for (int i = 0; i < 3; ++i) point += spring_.weights[i] * x_[spring_.nodes[std::size_t(i)]];
-  return spring_.stiffness * (spring_.anchor - point);
+  return spring_.spring.stiffness * (spring_.spring.anchor - springPoint(spring_.spring));
+}
+
+Vec3 FemBody::pointSpringForce(std::size_t i) const noexcept {
+  if (i >= points_.size()) return Vec3::Zero();
+  return points_[i].stiffness * (points_[i].anchor - springPoint(points_[i])) + points_[i].load;
 }
 
 void FemBody::setSolverOptions(const FemSolverOptions& options) {
@@ -627,19 +696,19 @@ void FemBody::applySystem(const VecX& input, VecX& out, double massScale, double
       out.segment<3>(r + 3) -= kg * c.arm.cross(c.normal);
     }
   }
-  // The contact spring: h²·k·w wᵀ (⊗ I) over its three nodes' free rows and columns.
-  if (spring_.active) {
-    Vec3 point = Vec3::Zero();
-    for (int j = 0; j < 3; ++j) {
-      const std::uint32_t c = spring_.nodes[std::size_t(j)];
-      if (!fixed_[c]) point += spring_.weights[j] * in.segment<3>(Eigen::Index(3 * c));
-    }
-    const double k = sysContactScale_ * spring_.stiffness;
-    for (int i = 0; i < 3; ++i) {
-      const std::uint32_t r = spring_.nodes[std::size_t(i)];
-      if (!fixed_[r]) out.segment<3>(Eigen::Index(3 * r)) += (k * spring_.weights[i]) * point;
-    }
-  }
+  // The springs: h²·w wᵀ ⊗ K over their nodes' free rows and columns.
+  forEachSpring([&](const FemPointSpring& s) {
+    double point[3] = {0.0, 0.0, 0.0};
+    for (std::size_t j = 0; j < 4; ++j)
+      if (s.weights[j] != 0.0 && !fixed_[s.nodes[j]])
+        for (int a = 0; a < 3; ++a) point[a] += s.weights[j] * in[Eigen::Index(3 * s.nodes[j] + a)];
+    double kp[3] = {0.0, 0.0, 0.0};
+    addMul(s.stiffness, point, kp);
+    for (std::size_t i = 0; i < 4; ++i)
+      if (s.weights[i] != 0.0 && !fixed_[s.nodes[i]])
+        for (int a = 0; a < 3; ++a)
+          out[Eigen::Index(3 * s.nodes[i] + a)] += sysContactScale_ * s.weights[i] * kp[a];
+  });
   if (hangs) foldHanging(out, &input);
 }
 
@@ -738,8 +807,7 @@ Result<FemStepReport> FemBody::step(double h) {
   applyStiffness(Eigen::Map<const VecX>(v_.data()->data(), Eigen::Index(3 * n)), tmp_);
   // Contact, implicitly. Obstacles: the penalty k·depth·n less its velocity
   // term h·k·n(n·v) in the right-hand side, h²·k·n nᵀ on the diagonal. The
-  // contact spring: f_s = k·(a − Σwⱼxⱼ − hΣwⱼvⱼ) shared by weight wᵢ, and
-  // h²·k·wᵢ² on the diagonal (its off-diagonal terms live in applySystem).
+  // springs after the node loop.
   for (std::size_t j = 0; j < obstacles_.size(); ++j) {
     const FemObstacle& o = obstacles_[j];
     obstacleCenter_[j] = o.pose * o.centerOfMass;
@@ -747,15 +815,6 @@ Result<FemStepReport> FemBody::step(double h) {
   }
   findObstacleContacts();
   sysContactScale_ = h * h;
-  Vec3 pull = Vec3::Zero();
-  if (spring_.active) {
-    Vec3 point = Vec3::Zero(), velocity = Vec3::Zero();
-    for (int j = 0; j < 3; ++j) {
-      point += spring_.weights[j] * x_[spring_.nodes[std::size_t(j)]];
-      velocity += spring_.weights[j] * v_[spring_.nodes[std::size_t(j)]];
-    }
-    pull = spring_.stiffness * (spring_.anchor - point - h * velocity);
-  }
   forRange(n, 512, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const Eigen::Index o = Eigen::Index(3 * i);
@@ -775,15 +834,24 @@ Result<FemStepReport> FemBody::step(double h) {
         f += contactForce(c, h);
         d += (h * h * c.stiffness) * (c.normal * c.normal.transpose());
       }
-      if (spring_.active)
-        for (int j = 0; j < 3; ++j)
-          if (spring_.nodes[std::size_t(j)] == i) {
-            f += spring_.weights[j] * pull;
-            d.diagonal().array() += h * h * spring_.stiffness * spring_.weights[j] * spring_.weights[j];
-          }
       rhs_.segment<3>(o) = h * f;
       invBlockDiag_[i] = d;
       sweepSkip_[i] = 0;
+    }
+  });
+  // The springs: f_s = K·(a − Σwⱼxⱼ − hΣwⱼvⱼ) + load shared by weight wᵢ, and
+  // h²·wᵢ²·K on the diagonal blocks (the rest is in applySystem).
+  forEachSpring([&](const FemPointSpring& s) {
+    Vec3 point = Vec3::Zero(), velocity = Vec3::Zero();
+    for (std::size_t j = 0; j < 4; ++j)
+      if (s.weights[j] != 0.0)
+        point += s.weights[j] * x_[s.nodes[j]], velocity += s.weights[j] * v_[s.nodes[j]];
+    const Vec3 pull = s.stiffness * (s.anchor - point - h * velocity) + s.load;
+    for (std::size_t j = 0; j < 4; ++j) {
+      const std::uint32_t i = s.nodes[j];
+      if (s.weights[j] == 0.0 || fixed_[i]) continue;
+      rhs_.segment<3>(Eigen::Index(3 * i)) += (h * s.weights[j]) * pull;
+      invBlockDiag_[i] += (h * h * s.weights[j] * s.weights[j]) * s.stiffness;
     }
   });
   // Hanging nodes: their loads act on their masters (Pᵀb). The

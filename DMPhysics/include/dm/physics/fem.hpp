@@ -58,8 +58,10 @@
 // hanging node's state is its masters' mean after every step.
 // Contact: rigid obstacles (FemObstacle, closed meshes) push the boundary
 // nodes they contain out along their normal with penalty springs, and one
-// contact spring pulls a boundary point toward an anchor (a haptic tool);
-// both enter the system matrix (h²k terms), so stiff contact stays stable.
+// contact spring pulls a boundary point toward an anchor (a haptic tool),
+// and point springs (FemPointSpring: anisotropic, at points inside
+// tetrahedra) hold material points to a tool (a needle's shaft); all enter
+// the system matrix (h²k terms), so stiff contact stays stable.
 // A dynamic obstacle (mass > 0, a free rigid body) adds six unknowns, its
 // velocity change, to that system: the contact springs act on both sides
 // (dm/physics/soft_rigid.hpp couples such bodies to a PhysicsWorld).
@@ -92,6 +94,29 @@ namespace dm {
 
 class MeshBvh;
 class Volume;
+
+/// A zero-length spring from a material point of the body, Σ wᵢ x_{nodes[i]}
+/// over up to four nodes (a point inside a tetrahedron: its barycentric
+/// coordinates; unused entries weigh 0), to an anchor, with a 3×3 stiffness:
+/// anisotropic where a tool holds tissue differently across and along it (a
+/// needle's shaft: stiff across, sliding along). Integrated implicitly by
+/// FemBody::step() like the contact spring. Set as a group
+/// (FemBody::setPointSprings), e.g. by dm::NeedleInsertion each step.
+struct FemPointSpring {
+  std::array<std::uint32_t, 4> nodes{};
+  std::array<double, 4> weights{};  ///< ≥ 0, summing to 1
+  Vec3 anchor = Vec3::Zero();       ///< m, the body's frame
+  Mat3 stiffness = Mat3::Zero();    ///< N/m, symmetric positive semi-definite
+  /// N, a constant force on the point besides the spring's (a needle tip's
+  /// cutting force); zero stiffness and a load make a point load.
+  Vec3 load = Vec3::Zero();
+  /// across·(I − d dᵀ) + along·d dᵀ for a unit direction d: a spring that
+  /// holds across d with `across` N/m and along it with `along` N/m.
+  static Mat3 axial(const Vec3& unitDirection, double across, double along) {
+    const Mat3 ddt = unitDirection * unitDirection.transpose();
+    return across * (Mat3::Identity() - ddt) + along * ddt;
+  }
+};
 
 /// A rigid obstacle the tissue rests on or is pushed by (a bone, an
 /// instrument, a table): a closed mesh's tree (MeshBvh::isClosed(), so
@@ -418,6 +443,26 @@ class FemBody {
   /// The force (N) the contact spring applies to the body at the current
   /// positions, k·(anchor − Σ wᵢxᵢ); zero without one.
   Vec3 contactSpringForce() const noexcept;
+  /// Point springs (FemPointSpring), replacing the previous set; an empty
+  /// span removes them. They act beside the contact spring and the
+  /// obstacles, with the same implicit terms (h²·wᵢwⱼ·K between their
+  /// nodes). Fails (InvalidArgument naming the spring, set unchanged) on a
+  /// node out of range, weights that are negative, not finite or do not sum
+  /// to 1 (±1e-6), a non-finite anchor or load, or a stiffness that is not finite,
+  /// not symmetric or not positive semi-definite. Allocates only when the
+  /// set outgrows every earlier one.
+  /// @code
+  ///   dm::FemPointSpring s{.nodes = tet, .weights = bary, .anchor = onShaft,
+  ///                        .stiffness = dm::FemPointSpring::axial(shaftDir, 300.0, 50.0)};
+  ///   body.setPointSprings({&s, 1});
+  ///   body.step(1e-3);
+  ///   dm::Vec3 onNeedle = -body.pointSpringForce(0);
+  /// @endcode
+  Status setPointSprings(std::span<const FemPointSpring> springs);
+  std::size_t pointSpringCount() const noexcept { return points_.size(); }
+  /// The force (N) point spring i applies to the body at the current
+  /// positions, K·(anchor − Σ wᵢxᵢ) + load; zero for an index out of range.
+  Vec3 pointSpringForce(std::size_t i) const noexcept;
   /// Rigid obstacles (soft–rigid contact), replacing the previous set; an
   /// empty span removes them. Each step finds the boundary nodes inside an
   /// obstacle (signed distance to its closed mesh, negative inside) and
@@ -577,14 +622,20 @@ class FemBody {
   std::vector<Mat3> invBlockDiag_;  // inverse diagonal blocks (both preconditioners)
   std::vector<std::uint8_t> sweepSkip_;  // per node: fixed or hanging (identity rows), this step
   void applyPreconditioner(const VecX& r, VecX& z) const;
+  // The contact spring (a FemPointSpring on three nodes, isotropic) and
+  // the point springs: one code path for their implicit terms.
   struct ContactSpring {
     bool active = false;
-    std::array<std::uint32_t, 3> nodes{};
-    Vec3 weights = Vec3::Zero();
-    Vec3 anchor = Vec3::Zero();
-    double stiffness = 0.0;
+    FemPointSpring spring;
   };
   ContactSpring spring_;
+  std::vector<FemPointSpring> points_;
+  template <class F>
+  void forEachSpring(F&& fn) const {
+    if (spring_.active) fn(spring_.spring);
+    for (const FemPointSpring& p : points_) fn(p);
+  }
+  Vec3 springPoint(const FemPointSpring& s) const noexcept;
   struct NodeContact {
     std::uint32_t node = 0;
     std::uint32_t obstacle = 0;

@@ -1,0 +1,326 @@
+// A rigid needle in FEM tissue: pressing, puncture, cutting, shaft friction
+// and release; see dm/physics/needle.hpp for the model and its references.
+#include <dm/core/volume.hpp>
+#include <dm/physics/needle.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <utility>
+
+namespace dm {
+
+namespace {
+namespace needleimpl {
+
+Error invalidNeedle(std::string what, std::string where, std::string hint = {}) {
+  return fail(ErrorCode::InvalidArgument, std::move(what), std::move(where), std::move(hint));
+}
+
+bool positiveFinite(double v) { return v > 0.0 && std::isfinite(v); }
+
+}  // namespace needleimpl
+}  // namespace
+
+Result<NeedleInsertion> NeedleInsertion::create(FemBody& body, std::span<const std::uint8_t> tetLayers,
+                                                std::span<const NeedleLayer> layers,
+                                                const NeedleOptions& options) {
+  using needleimpl::invalidNeedle;
+  constexpr const char* where = "NeedleInsertion::create";
+  if (tetLayers.size() != body.tetCount())
+    return invalidNeedle("tetLayers has " + std::to_string(tetLayers.size()) + " entries but the body has " +
+                             std::to_string(body.tetCount()) + " tetrahedra",
+                         where, "give one layer index per tetrahedron");
+  if (layers.empty()) return invalidNeedle("layers is empty", where, "give at least one NeedleLayer");
+  if (layers.size() > 256)
+    return invalidNeedle("layers has " + std::to_string(layers.size()) + " entries", where,
+                         "at most 256 layers (tetLayers holds bytes)");
+  for (std::size_t t = 0; t < tetLayers.size(); ++t)
+    if (tetLayers[t] >= layers.size())
+      return invalidNeedle("tetLayers[" + std::to_string(t) + "] = " + std::to_string(tetLayers[t]) +
+                               " but there are " + std::to_string(layers.size()) + " layers",
+                           where, "each entry indexes layers");
+  for (std::size_t l = 0; l < layers.size(); ++l) {
+    const NeedleLayer& y = layers[l];
+    const std::pair<const char*, double> fields[] = {
+        {"punctureForce", y.punctureForce}, {"cuttingForce", y.cuttingForce}, {"friction", y.friction}};
+    for (const auto& [name, value] : fields)
+      if (!(value >= 0.0) || !std::isfinite(value))
+        return invalidNeedle("layers[" + std::to_string(l) + "]." + name + " = " + std::to_string(value) +
+                                 " is negative or not finite",
+                             where, "forces in N and friction in N/m, >= 0");
+  }
+  const std::pair<const char*, double> opts[] = {{"length", options.length},
+                                                 {"couplingSpacing", options.couplingSpacing},
+                                                 {"acrossStiffness", options.acrossStiffness},
+                                                 {"alongStiffness", options.alongStiffness},
+                                                 {"tipStiffness", options.tipStiffness}};
+  for (const auto& [name, value] : opts)
+    if (!needleimpl::positiveFinite(value))
+      return invalidNeedle(
+          std::string("options.") + name + " = " + std::to_string(value) + " is not positive and finite",
+          where, "lengths in m, stiffnesses in N/m, > 0");
+  NeedleInsertion n;
+  n.body_ = &body;
+  n.tetLayer_.assign(tetLayers.begin(), tetLayers.end());
+  n.layers_.assign(layers.begin(), layers.end());
+  n.options_ = options;
+  return n;
+}
+
+Vec3 NeedleInsertion::positionOf(const MaterialPoint& m) const {
+  const auto& x = body_->positions();
+  const Tet& t = body_->tets()[m.tet];
+  return m.weights[0] * x[t[0]] + m.weights[1] * x[t[1]] + m.weights[2] * x[t[2]] + m.weights[3] * x[t[3]];
+}
+
+// The tetrahedron holding p at the current positions, and p's barycentric
+// weights in it: the hint first (the tip moves little in a step), then
+// every tetrahedron whose box holds p.
+bool NeedleInsertion::locate(const Vec3& p, std::uint32_t hint, MaterialPoint& out) const {
+  const auto& x = body_->positions();
+  const auto& tets = body_->tets();
+  constexpr double kSlack = 1e-12;
+  const auto inside = [&](std::uint32_t t) {
+    const Tet& e = tets[t];
+    const Vec3 &a = x[e[0]], &b = x[e[1]], &c = x[e[2]], &d = x[e[3]];
+    for (int k = 0; k < 3; ++k) {
+      const double lo = std::min({a[k], b[k], c[k], d[k]}), hi = std::max({a[k], b[k], c[k], d[k]});
+      if (p[k] < lo - kSlack || p[k] > hi + kSlack) return false;
+    }
+    Mat3 D;
+    D << b - a, c - a, d - a;
+    const double det = D.determinant();
+    if (!(std::abs(det) > 0.0)) return false;  // a flattened element holds nothing
+    const Vec3 l = D.inverse() * (p - a);
+    const double l0 = 1.0 - l.sum();
+    if (l0 < -kSlack || l.minCoeff() < -kSlack) return false;
+    out.tet = t;
+    out.weights = {l0, l.x(), l.y(), l.z()};
+    // Round-off may leave a weight a hair below zero: clamp and renormalise
+    // so the point is a valid FemPointSpring.
+    double sum = 0.0;
+    for (double& w : out.weights) sum += (w = std::max(w, 0.0));
+    for (double& w : out.weights) w /= sum;
+    return true;
+  };
+  if (hint < tets.size() && inside(hint)) return true;
+  for (std::uint32_t t = 0; t < tets.size(); ++t)
+    if (t != hint && inside(t)) return true;
+  return false;
+}
+
+FemPointSpring NeedleInsertion::springAt(const MaterialPoint& m) const {
+  const Tet& t = body_->tets()[m.tet];
+  return FemPointSpring{.nodes = {t[0], t[1], t[2], t[3]}, .weights = m.weights};
+}
+
+void NeedleInsertion::beginMembrane(const MaterialPoint& m) {
+  state_ = NeedleTip::Pressing;
+  membrane_ = m;
+  tipLayer_ = tetLayer_[m.tet];
+}
+
+void NeedleInsertion::addTrackPoint(const MaterialPoint& m) {
+  track_.push_back({.at = m, .stick = (positionOf(m) - tip_).dot(dir_), .active = true});
+}
+
+std::size_t NeedleInsertion::activeCouplingCount() const noexcept {
+  return std::size_t(
+      std::count_if(track_.begin(), track_.end(), [](const TrackPoint& p) { return p.active; }));
+}
+
+double NeedleInsertion::trackLength() const noexcept {
+  if (track_.empty() || !haveEnd_) return 0.0;
+  return std::max(0.0, (positionOf(end_) - positionOf(track_.front().at)).dot(dir_));
+}
+
+Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& direction, double h) {
+  using needleimpl::invalidNeedle;
+  constexpr const char* where = "NeedleInsertion::step";
+  if (!tip.allFinite()) return invalidNeedle("the tip is not finite", where, "give a point in metres");
+  const double norm = direction.norm();
+  if (!(norm > 1e-12) || !std::isfinite(norm))
+    return invalidNeedle("the direction is zero or not finite", where,
+                         "give the shaft's direction, handle to tip");
+  if (!needleimpl::positiveFinite(h))
+    return invalidNeedle("h is not positive and finite", where, "e.g. 1e-3 s");
+  tip_ = tip;
+  dir_ = direction / norm;
+  const double spacing = options_.couplingSpacing;
+
+  // The tip: entering, reaching past the track's end, or leaving.
+  MaterialPoint at;
+  switch (state_) {
+    case NeedleTip::Outside:
+      if (locate(tip_, haveEnd_ ? end_.tet : 0, at)) {
+        const bool reentry = !track_.empty() && [&] {
+          const Vec3 r = positionOf(track_.front().at) - tip_;
+          return (r - r.dot(dir_) * dir_).norm() < spacing;
+        }();
+        if (reentry) {
+          state_ = NeedleTip::InTrack;
+          tipLayer_ = tetLayer_[at.tet];
+        } else {
+          track_.clear();
+          haveEnd_ = false;
+          if (layers_[tetLayer_[at.tet]].punctureForce > 0.0) {
+            beginMembrane(at);
+          } else {
+            state_ = NeedleTip::Cutting;
+            tipLayer_ = tetLayer_[at.tet];
+            end_ = at, haveEnd_ = true;
+            addTrackPoint(at);
+          }
+        }
+      }
+      break;
+    case NeedleTip::Pressing:
+      break;  // the membrane holds the tip until it breaks or is let go (after the step)
+    case NeedleTip::Cutting:
+    case NeedleTip::InTrack:
+      if (haveEnd_ && (tip_ - positionOf(end_)).dot(dir_) > 0.0) {
+        if (!locate(tip_, end_.tet, at)) {
+          state_ = NeedleTip::InTrack;  // out through the far side
+        } else if (const int layer = tetLayer_[at.tet];
+                   layer != tetLayer_[end_.tet] && layers_[std::size_t(layer)].punctureForce > 0.0) {
+          beginMembrane(at);
+        } else {
+          state_ = NeedleTip::Cutting;
+          tipLayer_ = layer;
+          end_ = at;
+          if (track_.empty() || (positionOf(at) - positionOf(track_.back().at)).dot(dir_) >= spacing)
+            addTrackPoint(at);
+        }
+      } else {
+        state_ = NeedleTip::InTrack;
+      }
+      if (state_ == NeedleTip::InTrack && !track_.empty() &&
+          (tip_ - positionOf(track_.front().at)).dot(dir_) < 0.0) {
+        state_ = NeedleTip::Outside;  // pulled out behind the entry
+        tipLayer_ = -1;
+      }
+      break;
+  }
+
+  // Track points on the shaft hold it; off it (ahead of the tip, behind the
+  // shaft's end, or the needle out) they let go, and take hold again, where
+  // they are, when the shaft comes back over them.
+  axial_.resize(track_.size());
+  for (std::size_t k = 0; k < track_.size(); ++k) {
+    TrackPoint& p = track_[k];
+    const double s = axial_[k] = (positionOf(p.at) - tip_).dot(dir_);
+    const bool on = state_ != NeedleTip::Outside && s <= 0.0 && s >= -options_.length;
+    if (on && !p.active) p.stick = s;
+    p.active = on;
+  }
+  // Coulomb stick–slip along the shaft. Each point stands for the shaft
+  // between the midpoints to its neighbours on the track (the shallowest
+  // from itself, the deepest to the tip), measured now: the track stretches
+  // and shortens with the tissue, and the friction is per metre of shaft in
+  // contact. Where the needle's move would stretch a point's axial spring
+  // past its limit, the point slides this step: along the shaft it feels
+  // exactly the limit (a load), across it the spring still holds.
+  std::size_t prev = track_.size();
+  for (std::size_t k = 0; k < track_.size(); ++k) {
+    TrackPoint& p = track_[k];
+    p.slide = 0.0;
+    if (!p.active) continue;
+    std::size_t next = k + 1;
+    while (next < track_.size() && !track_[next].active) ++next;
+    const double from = prev < track_.size() ? 0.5 * (axial_[prev] + axial_[k]) : axial_[k];
+    const double to = next < track_.size() ? 0.5 * (axial_[k] + axial_[next]) : 0.0;
+    const double limit = layers_[tetLayer_[p.at.tet]].friction * std::max(0.0, to - from);
+    const double along = options_.alongStiffness * (p.stick - axial_[k]);  // on the tissue, along the needle
+    if (std::abs(along) > limit) p.slide = std::copysign(limit, along);
+    prev = k;
+  }
+
+  // The springs for this step: the shaft's couplings, the tip's membrane
+  // spring or its cutting load.
+  springs_.clear();
+  const Mat3 sticking = FemPointSpring::axial(dir_, options_.acrossStiffness, options_.alongStiffness);
+  const Mat3 sliding = FemPointSpring::axial(dir_, options_.acrossStiffness, 0.0);
+  for (const TrackPoint& p : track_) {
+    if (!p.active) continue;
+    FemPointSpring s = springAt(p.at);
+    s.anchor = tip_ + p.stick * dir_;
+    s.stiffness = p.slide != 0.0 ? sliding : sticking;
+    s.load = p.slide * dir_;
+    springs_.push_back(s);
+  }
+  std::int32_t tipSpring = -1;
+  if (state_ == NeedleTip::Pressing) {
+    FemPointSpring s = springAt(membrane_);
+    s.anchor = tip_;
+    s.stiffness = options_.tipStiffness * Mat3::Identity();
+    tipSpring = std::int32_t(springs_.size());
+    springs_.push_back(s);
+  } else if (state_ == NeedleTip::Cutting) {
+    FemPointSpring s = springAt(end_);
+    s.anchor = tip_;
+    s.load = layers_[std::size_t(tipLayer_)].cuttingForce * dir_;
+    springs_.push_back(s);
+  }
+  if (Status st = body_->setPointSprings(springs_); !st) return std::move(st).error().within(where);
+  auto report = body_->step(h);
+  if (!report) return std::move(report).error().within(where);
+
+  // What the needle feels: every spring's and load's reaction, applied on
+  // the axis at its anchor.
+  wrench_ = Wrench{};
+  for (std::size_t i = 0; i < springs_.size(); ++i) {
+    const Vec3 f = -body_->pointSpringForce(i);
+    wrench_ += Wrench{f, (springs_[i].anchor - tip_).cross(f)};
+  }
+  // Puncture, or the tip drawn back off its membrane.
+  tipForce_ = 0.0;
+  if (tipSpring >= 0) {
+    tipForce_ = body_->pointSpringForce(std::size_t(tipSpring)).dot(dir_);
+    if (tipForce_ >= layers_[std::size_t(tipLayer_)].punctureForce) {
+      ++punctures_;
+      state_ = NeedleTip::Cutting;
+      end_ = membrane_, haveEnd_ = true;
+      addTrackPoint(membrane_);
+    } else if (tipForce_ < 0.0) {
+      state_ = track_.empty() ? NeedleTip::Outside : NeedleTip::InTrack;
+      if (state_ == NeedleTip::Outside) tipLayer_ = -1;
+    }
+  }
+  // A point that slid sticks where its spring would pull with the limit,
+  // so stopping holds it there and reversing unloads it first.
+  for (TrackPoint& p : track_)
+    if (p.active && p.slide != 0.0)
+      p.stick = (positionOf(p.at) - tip_).dot(dir_) + p.slide / options_.alongStiffness;
+  return report;
+}
+
+Result<std::vector<std::uint8_t>> tetLayersFromLabels(const TetMesh& mesh, const Volume& labels,
+                                                      std::span<const std::uint8_t> layerOfLabel) {
+  std::vector<std::uint8_t> out(mesh.tets.size());
+  const Vec3i& dims = labels.dims();
+  for (std::size_t t = 0; t < mesh.tets.size(); ++t) {
+    Vec3 c = Vec3::Zero();
+    for (std::uint32_t n : mesh.tets[t]) c += 0.25 * mesh.nodes[n];
+    const Vec3 ijk = labels.worldToIndex() * c;
+    const int i = int(std::lround(ijk.x())), j = int(std::lround(ijk.y())), k = int(std::lround(ijk.z()));
+    double value = 0.0;
+    if (i >= 0 && j >= 0 && k >= 0 && i < dims.x() && j < dims.y() && k < dims.z())
+      value = labels.value(i, j, k);
+    if (!std::isfinite(value))
+      return needleimpl::invalidNeedle(
+          "tetrahedron " + std::to_string(t) + " lies on a label that is not finite", "tetLayersFromLabels",
+          "give a label volume of whole numbers");
+    const long label = std::lround(value);
+    if (label < 0 || std::size_t(label) >= layerOfLabel.size())
+      return needleimpl::invalidNeedle("tetrahedron " + std::to_string(t) + " lies on label " +
+                                           std::to_string(label) + ", which layerOfLabel (" +
+                                           std::to_string(layerOfLabel.size()) + " entries) does not map",
+                                       "tetLayersFromLabels", "give a layer for every label of the volume");
+    out[t] = layerOfLabel[std::size_t(label)];
+  }
+  return out;
+}
+
+}  // namespace dm
