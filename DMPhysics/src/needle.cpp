@@ -231,7 +231,7 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
     while (next < track_.size() && !track_[next].active) ++next;
     const double from = prev < track_.size() ? 0.5 * (axial_[prev] + axial_[k]) : axial_[k];
     const double to = next < track_.size() ? 0.5 * (axial_[k] + axial_[next]) : 0.0;
-    const double limit = layers_[tetLayer_[p.at.tet]].friction * std::max(0.0, to - from);
+    const double limit = p.limit = layers_[tetLayer_[p.at.tet]].friction * std::max(0.0, to - from);
     const double along = options_.alongStiffness * (p.stick - axial_[k]);  // on the tissue, along the needle
     if (std::abs(along) > limit) p.slide = std::copysign(limit, along);
     prev = k;
@@ -267,10 +267,31 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
   auto report = body_->step(h);
   if (!report) return std::move(report).error().within(where);
 
-  // What the needle feels: every spring's and load's reaction, applied on
-  // the axis at its anchor.
+  // What the needle feels, and where each shaft point sticks now. A point
+  // that slid sticks where its spring pulls with the limit, so stopping
+  // holds it there and reversing unloads it first; one that stuck but was
+  // stretched past its limit during the step (the tissue moved under it)
+  // slipped, and sticks at the limit too. The shaft's points act on the
+  // axis at their anchors with at most their limit along it; the tip's
+  // spring and cutting load with what the body took.
   wrench_ = Wrench{};
-  for (std::size_t i = 0; i < springs_.size(); ++i) {
+  std::size_t i = 0;
+  const Mat3 acrossK = options_.acrossStiffness * (Mat3::Identity() - dir_ * dir_.transpose());
+  for (TrackPoint& p : track_) {
+    if (!p.active) continue;
+    const Vec3 point = positionOf(p.at);
+    const double s = (point - tip_).dot(dir_);
+    if (p.slide != 0.0) p.stick = s + p.slide / options_.alongStiffness;
+    double onTissue = options_.alongStiffness * (p.stick - s);
+    if (std::abs(onTissue) > p.limit) {
+      onTissue = std::copysign(p.limit, onTissue);
+      p.stick = s + onTissue / options_.alongStiffness;
+    }
+    const Vec3 f = acrossK * (point - tip_) - onTissue * dir_;
+    wrench_ += Wrench{f, (p.stick * dir_).cross(f)};
+    ++i;
+  }
+  for (; i < springs_.size(); ++i) {
     const Vec3 f = -body_->pointSpringForce(i);
     wrench_ += Wrench{f, (springs_[i].anchor - tip_).cross(f)};
   }
@@ -288,12 +309,79 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
       if (state_ == NeedleTip::Outside) tipLayer_ = -1;
     }
   }
-  // A point that slid sticks where its spring would pull with the limit,
-  // so stopping holds it there and reversing unloads it first.
-  for (TrackPoint& p : track_)
-    if (p.active && p.slide != 0.0)
-      p.stick = (positionOf(p.at) - tip_).dot(dir_) + p.slide / options_.alongStiffness;
   return report;
+}
+
+void NeedleInsertion::localModel(NeedleLocalModel& out) const {
+  out.state = state_;
+  out.tip = tip_;
+  out.direction = dir_;
+  out.length = options_.length;
+  out.across = options_.acrossStiffness;
+  out.along = options_.alongStiffness;
+  out.tipStiffness = options_.tipStiffness;
+  out.punctureForce = state_ == NeedleTip::Pressing ? layers_[std::size_t(tipLayer_)].punctureForce : 0.0;
+  out.cuttingForce = tipLayer_ >= 0 ? layers_[std::size_t(tipLayer_)].cuttingForce : 0.0;
+  out.membrane = state_ == NeedleTip::Pressing ? positionOf(membrane_) : Vec3::Zero();
+  out.hasTrack = haveEnd_;
+  out.trackEnd = haveEnd_ ? positionOf(end_) : Vec3::Zero();
+  std::size_t n = 0;
+  for (const TrackPoint& p : track_) {
+    if (!p.active) continue;
+    if (n == NeedleLocalModel::kMaxPoints) {  // merge pairwise to make room
+      for (std::size_t k = 0; k < n / 2; ++k) {
+        const auto &a = out.points[2 * k], &b = out.points[2 * k + 1];
+        out.points[k] = {0.5 * (a.position + b.position), 0.5 * (a.stick + b.stick), a.limit + b.limit};
+      }
+      n /= 2;
+    }
+    out.points[n++] = {positionOf(p.at), p.stick, p.limit};
+  }
+  out.pointCount = n;
+}
+
+void NeedleLocalModel::assign(const NeedleLocalModel& o) noexcept {
+  state = o.state, tip = o.tip, direction = o.direction, length = o.length;
+  across = o.across, along = o.along, membrane = o.membrane, tipStiffness = o.tipStiffness;
+  punctureForce = o.punctureForce, cuttingForce = o.cuttingForce, hasTrack = o.hasTrack,
+  trackEnd = o.trackEnd;
+  std::copy_n(o.points.begin(), o.pointCount, points.begin());
+  pointCount = o.pointCount;
+}
+
+Wrench NeedleLocalModel::evaluate(const Vec3& at, const Vec3& d) noexcept {
+  Wrench w;
+  const Mat3 acrossK = across * (Mat3::Identity() - d * d.transpose());
+  for (std::size_t k = 0; k < pointCount; ++k) {
+    Point& p = points[k];
+    const double s = (p.position - at).dot(d);
+    if (s > 0.0 || s < -length) continue;  // off the shaft
+    double onTissue = along * (p.stick - s);
+    if (std::abs(onTissue) > p.limit) {
+      onTissue = std::copysign(p.limit, onTissue);
+      p.stick = s + onTissue / along;
+    }
+    const Vec3 f = acrossK * (p.position - at) - onTissue * d;  // on the needle
+    w += Wrench{f, (p.stick * d).cross(f)};                     // at its anchor on the axis, as in the step
+  }
+  if (state == NeedleTip::Pressing) {
+    const Vec3 onTissue = tipStiffness * (at - membrane);
+    if (onTissue.dot(d) >= punctureForce) {
+      state = NeedleTip::Cutting;  // broken: the tip cuts from here
+      hasTrack = true;
+      trackEnd = membrane;
+    } else {
+      w.force -= onTissue;
+    }
+  }
+  // The tip cuts while it advances: cutting at the step and not drawn back
+  // from the step's pose, or in the track at the step and pushed on past
+  // its end since.
+  const double advance = (at - tip).dot(d);
+  const bool cutting = (state == NeedleTip::Cutting && advance >= 0.0) ||
+                       (state == NeedleTip::InTrack && hasTrack && advance > 0.0 && (at - trackEnd).dot(d) > 0.0);
+  if (cutting) w.force -= cuttingForce * d;
+  return w;
 }
 
 Result<std::vector<std::uint8_t>> tetLayersFromLabels(const TetMesh& mesh, const Volume& labels,

@@ -349,6 +349,80 @@ TEST(NeedleInsertion, LockstepRunsAreBitIdentical) {
   EXPECT_EQ(std::memcmp(nodes[0].data(), nodes[1].data(), nodes[0].size() * sizeof(Vec3)), 0);
 }
 
+// The local model a haptic loop runs between physics steps gives, at the
+// step's own pose, the step's wrench (but at the puncture's step), whatever the tip is doing: pressing,
+// cutting, sliding back, and with the needle tilted and moved sideways (the
+// shaft's points then push across it and make a torque).
+TEST(NeedleLocalModel, ReproducesTheStepsWrenchAtItsPose) {
+  Block b = makeBlock(3e4);
+  const std::vector<std::uint8_t> layerOf(b.body.tetCount(), 0);
+  const NeedleLayer tissue{.punctureForce = 0.8, .cuttingForce = 0.3, .friction = 40.0};
+  auto needle = NeedleInsertion::create(b.body, layerOf, {&tissue, 1});
+  ASSERT_TRUE(needle.ok());
+  NeedleLocalModel model;
+  int seen[4] = {0, 0, 0, 0};
+  const double h = 4e-3;
+  for (int i = 0; i < 500; ++i) {
+    const double t = i * h;
+    // In 12 mm at 10 mm/s, with a sideways drift and a tilt, then back 3 mm.
+    const double depth = t < 1.4 ? -0.002 + 0.01 * t : 0.012 - 0.01 * (t - 1.4);
+    const Vec3 dir = Vec3(0.05 * std::min(t, 1.0), 0.0, -1.0).normalized();
+    const Vec3 tip = kEntry + Vec3(0.001 * std::min(t, 1.0), 0.0, 0.0) + depth * Vec3(0, 0, -1);
+    const std::size_t punctures = needle->punctureCount();
+    ASSERT_TRUE(needle->step(tip, dir, h).ok());
+    // The step that breaks the membrane reports the force that broke it;
+    // the model already holds what comes after.
+    if (needle->punctureCount() != punctures) continue;
+    needle->localModel(model);
+    const Wrench w = model.evaluate(tip, dir);
+    ++seen[int(needle->tipState())];
+    ASSERT_LT((w.force - needle->force()).norm(), 1e-9 + 1e-9 * needle->force().norm()) << "t = " << t;
+    ASSERT_LT((w.torque - needle->wrench().torque).norm(), 1e-11) << "t = " << t;
+  }
+  EXPECT_GT(seen[int(NeedleTip::Pressing)], 0);
+  EXPECT_GT(seen[int(NeedleTip::Cutting)], 0);
+  EXPECT_GT(seen[int(NeedleTip::InTrack)], 0);
+  EXPECT_GT(needle->wrench().torque.norm(), 1e-5);
+}
+
+// Frozen at a step while pressing, the model pushed further in breaks the
+// membrane where the tip's spring reaches the threshold, and the force falls
+// at once by the spring's pull less the cutting force; drawn back, the
+// shaft's friction reverses.
+TEST(NeedleLocalModel, BreaksTheMembraneAtItsThresholdBetweenSteps) {
+  Block b = makeBlock(3e4);
+  const std::vector<std::uint8_t> layerOf(b.body.tetCount(), 0);
+  const NeedleLayer tissue{.punctureForce = 1.0, .cuttingForce = 0.3, .friction = 40.0};
+  const NeedleOptions options{.tipStiffness = 2000.0};
+  auto needle = NeedleInsertion::create(b.body, layerOf, {&tissue, 1}, options);
+  ASSERT_TRUE(needle.ok());
+  const Vec3 dir(0, 0, -1);
+  double d = -0.002;
+  while (needle->tipState() != NeedleTip::Pressing || needle->tipForce() < 0.5) {
+    d += 4e-5;
+    ASSERT_TRUE(needle->step(kEntry + d * dir, dir, 4e-3).ok());
+    ASSERT_LT(d, 0.02);
+  }
+  NeedleLocalModel model;
+  needle->localModel(model);
+  const double f0 = needle->tipForce();
+  // With the tissue frozen, only the tip's spring yields: the threshold
+  // comes (1.0 − f0)/2000 further in.
+  const double breakAt = d + (tissue.punctureForce - f0) / options.tipStiffness;
+  double last = -needle->force().dot(dir), x = d;
+  for (; x < d + 1e-3; x += 1e-6) {
+    const double f = -model.evaluate(kEntry + x * dir, dir).force.dot(dir);
+    if (model.state != NeedleTip::Pressing) {
+      EXPECT_NEAR(x, breakAt, 2e-6);
+      EXPECT_NEAR(f, tissue.cuttingForce, 1e-9);
+      EXPECT_GT(last, tissue.punctureForce - 0.01);
+      break;
+    }
+    last = f;
+  }
+  EXPECT_EQ(model.state, NeedleTip::Cutting);
+}
+
 TEST(NeedleInsertion, BadInputIsNamed) {
   Block b = makeBlock(3e4, {2, 2, 2});
   std::vector<std::uint8_t> layerOf(b.body.tetCount(), 0);

@@ -104,6 +104,49 @@ enum class NeedleTip : std::uint8_t {
   InTrack,   ///< inside the track it cut (or out through the far side)
 };
 
+/// The needle's coupling with the tissue frozen as the last step left it:
+/// what a haptic loop evaluates at 1 kHz between physics steps
+/// (dm/haptics/needle.hpp). The tissue's points stay where they are; the
+/// needle moves, and the same rules as the step's act on it: the shaft's
+/// points hold across it and stick or slide along it (their stick positions
+/// move, so friction reverses at once when the hand does), the membrane
+/// spring pulls until its threshold and then breaks (locally, at once: the
+/// pop is felt in the tick it happens; the physics breaks it too at the
+/// same pose), and the tip feels the cutting force while it advances. A
+/// fixed-size value (no allocation to copy or evaluate), so it can pass
+/// between threads in a triple buffer.
+struct NeedleLocalModel {
+  /// Coupling points kept; a longer shaft contact is merged pairwise
+  /// (positions and stick positions averaged, limits summed) to fit.
+  static constexpr std::size_t kMaxPoints = 256;
+  struct Point {
+    Vec3 position = Vec3::Zero();  ///< m, the tissue point, frozen
+    double stick = 0.0;            ///< m along the needle from the tip where it sticks
+    double limit = 0.0;            ///< N, its friction limit
+  };
+  NeedleTip state = NeedleTip::Outside;
+  Vec3 tip = Vec3::Zero();  ///< the needle at the step (tissue frame)
+  Vec3 direction = Vec3::UnitZ();
+  double length = 0.1;               ///< m, the shaft
+  double across = 0.0, along = 0.0;  ///< N/m, the points' springs
+  Vec3 membrane = Vec3::Zero();      ///< Pressing: the held point
+  double tipStiffness = 0.0;         ///< N/m
+  double punctureForce = 0.0;        ///< N, the membrane's threshold
+  double cuttingForce = 0.0;         ///< N, of the layer at the tip
+  bool hasTrack = false;
+  Vec3 trackEnd = Vec3::Zero();  ///< the deepest point cut
+  std::array<Point, kMaxPoints> points{};
+  std::size_t pointCount = 0;
+
+  /// Force and torque (about the tip) on the needle with its tip at `tip`
+  /// along the unit `direction` (tissue frame); moves the points' stick
+  /// positions where they slide and breaks the membrane when its threshold
+  /// is reached. Real-time safe.
+  Wrench evaluate(const Vec3& tip, const Vec3& direction) noexcept;
+  /// Copies the used part of `other` (not the unused points).
+  void assign(const NeedleLocalModel& other) noexcept;
+};
+
 /// A rigid, straight needle in a FemBody: see the file comment for the
 /// model. Holds a pointer to the body (it must outlive the needle) and
 /// owns the body's point springs (FemBody::setPointSprings) while it steps
@@ -146,6 +189,10 @@ class NeedleInsertion {
   /// insertion) that the tip's spring applied last step while pressing.
   double tipForce() const noexcept { return tipForce_; }
   const NeedleOptions& options() const noexcept { return options_; }
+  /// The coupling as the last step left it, for a haptic loop (see
+  /// NeedleLocalModel). Evaluated at the last step's pose it gives that
+  /// step's wrench().
+  void localModel(NeedleLocalModel& out) const;
 
  private:
   NeedleInsertion() = default;
@@ -158,6 +205,7 @@ class NeedleInsertion {
     MaterialPoint at;
     double stick = 0.0;  // m, its stick position along the needle from the tip
     double slide = 0.0;  // N on the tissue along the needle while it slides this step, else 0
+    double limit = 0.0;  // N, its friction limit this step
     bool active = false;
   };
   Vec3 positionOf(const MaterialPoint& m) const;
