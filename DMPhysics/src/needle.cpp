@@ -119,6 +119,8 @@ FemPointSpring NeedleInsertion::springAt(const MaterialPoint& m) const {
 void NeedleInsertion::beginMembrane(const MaterialPoint& m) {
   state_ = NeedleTip::Pressing;
   membrane_ = m;
+  pressedFrom_ = positionOf(m);
+  pressSunk_ = pressForce_ = pressStiffness_ = 0.0;
   tipLayer_ = tetLayer_[m.tet];
 }
 
@@ -190,8 +192,12 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
           state_ = NeedleTip::Cutting;
           tipLayer_ = layer;
           end_ = at;
+          // A new shaft point every `spacing` of track, half a spacing
+          // behind the tip: cut tissue on the shaft, which the cutting load
+          // at the tip does not carry past the tip during the step.
+          MaterialPoint behind;
           if (track_.empty() || (positionOf(at) - positionOf(track_.back().at)).dot(dir_) >= spacing)
-            addTrackPoint(at);
+            addTrackPoint(locate(tip_ - 0.5 * spacing * dir_, at.tet, behind) ? behind : at);
         }
       } else {
         state_ = NeedleTip::InTrack;
@@ -232,6 +238,11 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
     const double from = prev < track_.size() ? 0.5 * (axial_[prev] + axial_[k]) : axial_[k];
     const double to = next < track_.size() ? 0.5 * (axial_[k] + axial_[next]) : 0.0;
     const double limit = p.limit = layers_[tetLayer_[p.at.tet]].friction * std::max(0.0, to - from);
+    // A point the tip has just cut is dragged in by the needle moving
+    // through it: it starts sliding at its limit, not unloaded (which
+    // would drop the friction by the share it takes from its neighbour
+    // each time the track grows a point).
+    if (p.fresh) p.stick = axial_[k] + limit / options_.alongStiffness, p.fresh = false;
     const double along = options_.alongStiffness * (p.stick - axial_[k]);  // on the tissue, along the needle
     if (std::abs(along) > limit) p.slide = std::copysign(limit, along);
     prev = k;
@@ -272,8 +283,9 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
   // holds it there and reversing unloads it first; one that stuck but was
   // stretched past its limit during the step (the tissue moved under it)
   // slipped, and sticks at the limit too. The shaft's points act on the
-  // axis at their anchors with at most their limit along it; the tip's
-  // spring and cutting load with what the body took.
+  // axis at their anchors with at most their limit along it (a point the
+  // tissue carried off the shaft during the step, past the tip, no longer
+  // touches it); the tip's spring and cutting load with what the body took.
   wrench_ = Wrench{};
   std::size_t i = 0;
   const Mat3 acrossK = options_.acrossStiffness * (Mat3::Identity() - dir_ * dir_.transpose());
@@ -282,6 +294,8 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
     const Vec3 point = positionOf(p.at);
     const double s = (point - tip_).dot(dir_);
     if (p.slide != 0.0) p.stick = s + p.slide / options_.alongStiffness;
+    ++i;
+    if (s > 0.0 || s < -options_.length) continue;  // the tissue moved it off the shaft during the step
     double onTissue = options_.alongStiffness * (p.stick - s);
     if (std::abs(onTissue) > p.limit) {
       onTissue = std::copysign(p.limit, onTissue);
@@ -289,7 +303,6 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
     }
     const Vec3 f = acrossK * (point - tip_) - onTissue * dir_;
     wrench_ += Wrench{f, (p.stick * dir_).cross(f)};
-    ++i;
   }
   for (; i < springs_.size(); ++i) {
     const Vec3 f = -body_->pointSpringForce(i);
@@ -299,6 +312,12 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
   tipForce_ = 0.0;
   if (tipSpring >= 0) {
     tipForce_ = body_->pointSpringForce(std::size_t(tipSpring)).dot(dir_);
+    // The tissue's tangent stiffness under the tip, from this step's and the
+    // last one's force and sink (for the local model's yielding membrane).
+    const double sunk = (positionOf(membrane_) - pressedFrom_).dot(dir_);
+    if (sunk - pressSunk_ > 1e-9 && tipForce_ > pressForce_)
+      pressStiffness_ = (tipForce_ - pressForce_) / (sunk - pressSunk_);
+    pressSunk_ = sunk, pressForce_ = tipForce_;
     if (tipForce_ >= layers_[std::size_t(tipLayer_)].punctureForce) {
       ++punctures_;
       state_ = NeedleTip::Cutting;
@@ -323,6 +342,12 @@ void NeedleInsertion::localModel(NeedleLocalModel& out) const {
   out.punctureForce = state_ == NeedleTip::Pressing ? layers_[std::size_t(tipLayer_)].punctureForce : 0.0;
   out.cuttingForce = tipLayer_ >= 0 ? layers_[std::size_t(tipLayer_)].cuttingForce : 0.0;
   out.membrane = state_ == NeedleTip::Pressing ? positionOf(membrane_) : Vec3::Zero();
+  // Unknown until the tip has pushed the tissue for a step: it then yields
+  // fully (no stiffness is made up) for that one step.
+  out.membraneYield = 0.0;
+  if (state_ == NeedleTip::Pressing)
+    out.membraneYield =
+        pressStiffness_ > 0.0 ? options_.tipStiffness / (options_.tipStiffness + pressStiffness_) : 1.0;
   out.hasTrack = haveEnd_;
   out.trackEnd = haveEnd_ ? positionOf(end_) : Vec3::Zero();
   std::size_t n = 0;
@@ -342,7 +367,8 @@ void NeedleInsertion::localModel(NeedleLocalModel& out) const {
 
 void NeedleLocalModel::assign(const NeedleLocalModel& o) noexcept {
   state = o.state, tip = o.tip, direction = o.direction, length = o.length;
-  across = o.across, along = o.along, membrane = o.membrane, tipStiffness = o.tipStiffness;
+  across = o.across, along = o.along, membrane = o.membrane, membraneYield = o.membraneYield;
+  tipStiffness = o.tipStiffness;
   punctureForce = o.punctureForce, cuttingForce = o.cuttingForce, hasTrack = o.hasTrack,
   trackEnd = o.trackEnd;
   std::copy_n(o.points.begin(), o.pointCount, points.begin());
@@ -365,11 +391,12 @@ Wrench NeedleLocalModel::evaluate(const Vec3& at, const Vec3& d) noexcept {
     w += Wrench{f, (p.stick * d).cross(f)};                     // at its anchor on the axis, as in the step
   }
   if (state == NeedleTip::Pressing) {
-    const Vec3 onTissue = tipStiffness * (at - membrane);
+    const Vec3 yielded = membrane + membraneYield * (at - tip).dot(d) * d;
+    const Vec3 onTissue = tipStiffness * (at - yielded);
     if (onTissue.dot(d) >= punctureForce) {
       state = NeedleTip::Cutting;  // broken: the tip cuts from here
       hasTrack = true;
-      trackEnd = membrane;
+      trackEnd = yielded;
     } else {
       w.force -= onTissue;
     }
@@ -378,8 +405,9 @@ Wrench NeedleLocalModel::evaluate(const Vec3& at, const Vec3& d) noexcept {
   // from the step's pose, or in the track at the step and pushed on past
   // its end since.
   const double advance = (at - tip).dot(d);
-  const bool cutting = (state == NeedleTip::Cutting && advance >= 0.0) ||
-                       (state == NeedleTip::InTrack && hasTrack && advance > 0.0 && (at - trackEnd).dot(d) > 0.0);
+  const bool cutting =
+      (state == NeedleTip::Cutting && advance >= 0.0) ||
+      (state == NeedleTip::InTrack && hasTrack && advance > 0.0 && (at - trackEnd).dot(d) > 0.0);
   if (cutting) w.force -= cuttingForce * d;
   return w;
 }

@@ -130,9 +130,16 @@ struct NeedleLocalModel {
   double length = 0.1;               ///< m, the shaft
   double across = 0.0, along = 0.0;  ///< N/m, the points' springs
   Vec3 membrane = Vec3::Zero();      ///< Pressing: the held point
-  double tipStiffness = 0.0;         ///< N/m
-  double punctureForce = 0.0;        ///< N, the membrane's threshold
-  double cuttingForce = 0.0;         ///< N, of the layer at the tip
+  /// Pressing: the share of the tip's advance (along the needle, since the
+  /// step) the membrane follows, k_tip/(k_tip + k_tissue) with k_tissue the
+  /// tissue's tangent stiffness under the tip over the last step (1 before
+  /// it is known): the tissue yields in series with the tip's spring, where
+  /// a frozen membrane would feel the tip's spring alone (ten times too
+  /// stiff on soft tissue).
+  double membraneYield = 0.0;
+  double tipStiffness = 0.0;   ///< N/m
+  double punctureForce = 0.0;  ///< N, the membrane's threshold
+  double cuttingForce = 0.0;   ///< N, of the layer at the tip
   bool hasTrack = false;
   Vec3 trackEnd = Vec3::Zero();  ///< the deepest point cut
   std::array<Point, kMaxPoints> points{};
@@ -189,6 +196,8 @@ class NeedleInsertion {
   /// insertion) that the tip's spring applied last step while pressing.
   double tipForce() const noexcept { return tipForce_; }
   const NeedleOptions& options() const noexcept { return options_; }
+  /// The tissue the needle is in.
+  FemBody& body() noexcept { return *body_; }
   /// The coupling as the last step left it, for a haptic loop (see
   /// NeedleLocalModel). Evaluated at the last step's pose it gives that
   /// step's wrench().
@@ -207,6 +216,7 @@ class NeedleInsertion {
     double slide = 0.0;  // N on the tissue along the needle while it slides this step, else 0
     double limit = 0.0;  // N, its friction limit this step
     bool active = false;
+    bool fresh = true;  // made by the last step, not yet coupled
   };
   Vec3 positionOf(const MaterialPoint& m) const;
   bool locate(const Vec3& p, std::uint32_t hint, MaterialPoint& out) const;
@@ -223,7 +233,10 @@ class NeedleInsertion {
   int tipLayer_ = -1;
   std::size_t punctures_ = 0;
   Vec3 tip_ = Vec3::Zero(), dir_ = Vec3::UnitZ();
-  MaterialPoint membrane_;  // Pressing: the point the tip holds
+  MaterialPoint membrane_;                     // Pressing: the point the tip holds
+  Vec3 pressedFrom_ = Vec3::Zero();            // Pressing: where that point was when the tip took it
+  double pressSunk_ = 0.0, pressForce_ = 0.0;  // Pressing: how far it has gone in (m) and the tip force (N)
+  double pressStiffness_ = 0.0;  // Pressing: the tissue's tangent stiffness under the tip (N/m), 0 unknown
   bool haveEnd_ = false;
   MaterialPoint end_;  // the deepest point of the track
   std::vector<TrackPoint> track_;
