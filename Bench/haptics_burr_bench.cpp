@@ -47,13 +47,12 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
-#include <functional>
 #include <memory>
 #include <numbers>
 #include <string_view>
 #include <vector>
 
-#include "bench_cpu_clock.hpp"
+#include "bench_latency.hpp"
 
 namespace {
 
@@ -71,31 +70,9 @@ Vec3 device(int i, int ticks) {
   return Vec3(3e-3 * std::cos(a), 3e-3 * std::sin(a), kOuter + kBurr - depth);
 }
 
-using dm::bench::threadCpuNs;
-
-struct Row {
-  dm::LatencyHistogram wall, cpu;
-};
-
-void timeCall(Row& row, const std::function<void()>& call) {
-  const std::int64_t c0 = threadCpuNs();
-  const auto t0 = std::chrono::steady_clock::now();
-  call();
-  const auto t1 = std::chrono::steady_clock::now();
-  row.wall.record(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count());
-  row.cpu.record(threadCpuNs() - c0);
-}
-
-void printRow(const char* name, const Row& r, double ratio) {
-  const dm::LatencyHistogram::Summary s = r.wall.summary(), c = r.cpu.summary();
-  std::printf("%-16s %7llu %10.2f %10.2f %10.2f %10.2f %10.2f %10.2f %10.2f", name,
-              static_cast<unsigned long long>(s.count), s.mean_us, s.p50_us, s.p99_us, s.p999_us, s.max_us,
-              c.mean_us, c.p999_us);
-  if (ratio > 0)
-    std::printf("  %6.3f\n", ratio);
-  else
-    std::printf("  %6s\n", "-");
-}
+using dm::bench::timeCall;
+using Row = dm::bench::LatencyRow;
+void printRow(const char* name, const Row& r, double ratio) { dm::bench::printLatencyRow(name, r, ratio); }
 
 openvdb::FloatGrid::Ptr vdbSkull(int n, const dm::Affine3& a) {
   auto grid = openvdb::FloatGrid::create(static_cast<float>(3 * kVoxel));
@@ -149,7 +126,7 @@ int main(int argc, char** argv) {
 
   std::printf("haptics_burr_bench: %d ticks, %d^3 voxels of %.2f mm (%.0f MB dense), burr %.1f mm\n", ticks,
               n, kVoxel * 1e3, n * double(n) * n * 3 / 1e6, kBurr * 1e3);
-  std::printf("%-16s %7s %10s %10s %10s %10s %10s %10s %10s  %6s\n", "", "calls", "mean_us", "p50_us",
+  std::printf("%-16s %7s %10s %10s %10s %10s %10s %10s %10s  %8s\n", "", "calls", "mean_us", "p50_us",
               "p99_us", "p999_us", "max_us", "cpu_mean", "cpu_p999", "dm/vdb");
 
   // Tick row.
