@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <string>
 #include <utility>
 
@@ -19,6 +20,27 @@ Error invalidNeedle(std::string what, std::string where, std::string hint = {}) 
 }
 
 bool positiveFinite(double v) { return v > 0.0 && std::isfinite(v); }
+
+// What a shaft point (the tissue at `point`, sticking at arc length
+// `stick`, friction limit `limit`) does to the needle: across, the spring
+// to its nearest shaft point; along the tangent there, the spring to its
+// stick position, at most the limit (past it the point slips: `stick`
+// moves to where the spring pulls with the limit). Applied at the spring's
+// anchor; zero off the shaft. The step's report and the local model both
+// use it, so they agree.
+Wrench shaftPointWrench(const NeedleShaft& shaft, const Vec3& point, double& stick, double limit,
+                        double across, double along) noexcept {
+  const double u = shaft.coordinate(point);
+  if (u > 0.0 || u < -shaft.length) return {};
+  double onTissue = along * (stick - u);
+  if (std::abs(onTissue) > limit) {
+    onTissue = std::copysign(limit, onTissue);
+    stick = u + onTissue / along;
+  }
+  const Vec3 tangent = shaft.tangentAt(u), nearest = shaft.point(u);
+  const Vec3 f = across * (point - nearest) - onTissue * tangent;
+  return {f, (nearest + (stick - u) * tangent - shaft.tip).cross(f)};
+}
 
 }  // namespace needleimpl
 }  // namespace
@@ -56,6 +78,13 @@ Result<NeedleInsertion> NeedleInsertion::create(FemBody& body, std::span<const s
                                                  {"acrossStiffness", options.acrossStiffness},
                                                  {"alongStiffness", options.alongStiffness},
                                                  {"tipStiffness", options.tipStiffness}};
+  if (!(options.radius >= 0.0) || !std::isfinite(options.radius))
+    return invalidNeedle("options.radius = " + std::to_string(options.radius) + " is negative or not finite",
+                         where, "0 for a straight needle, else the arc's radius in m");
+  if (options.radius > 0.0 && options.length > 1.5 * std::numbers::pi * options.radius)
+    return invalidNeedle("options.length = " + std::to_string(options.length) +
+                             " m is more than a ¾ circle of radius " + std::to_string(options.radius) + " m",
+                         where, "a curved needle's arc is at most 1.5·π·radius long");
   for (const auto& [name, value] : opts)
     if (!needleimpl::positiveFinite(value))
       return invalidNeedle(
@@ -67,6 +96,43 @@ Result<NeedleInsertion> NeedleInsertion::create(FemBody& body, std::span<const s
   n.layers_.assign(layers.begin(), layers.end());
   n.options_ = options;
   return n;
+}
+
+NeedleShaft NeedleShaft::fromPose(const Isometry3& pose, double radius, double length) noexcept {
+  return {.tip = pose.translation(),
+          .tangent = pose.linear().col(2),
+          .normal = pose.linear().col(0),
+          .radius = radius,
+          .length = length};
+}
+
+NeedleShaft NeedleShaft::straight(const Vec3& tip, const Vec3& direction, double length) noexcept {
+  // Any unit normal: a straight shaft has no plane.
+  const Vec3 other = std::abs(direction.x()) < 0.9 ? Vec3::UnitX() : Vec3::UnitY();
+  return {.tip = tip,
+          .tangent = direction,
+          .normal = direction.cross(other).normalized(),
+          .radius = 0.0,
+          .length = length};
+}
+
+// The arc: centre c = tip + R·n; the point at u is c + R(−n cos(u/R) + t sin(u/R)).
+double NeedleShaft::coordinate(const Vec3& p) const noexcept {
+  if (radius == 0.0) return (p - tip).dot(tangent);
+  const Vec3 q = p - (tip + radius * normal);
+  return radius * std::atan2(q.dot(tangent), -q.dot(normal));
+}
+
+Vec3 NeedleShaft::point(double u) const noexcept {
+  if (radius == 0.0) return tip + u * tangent;
+  const double a = u / radius;
+  return tip + radius * ((1.0 - std::cos(a)) * normal + std::sin(a) * tangent);
+}
+
+Vec3 NeedleShaft::tangentAt(double u) const noexcept {
+  if (radius == 0.0) return tangent;
+  const double a = u / radius;
+  return std::sin(a) * normal + std::cos(a) * tangent;
 }
 
 Vec3 NeedleInsertion::positionOf(const MaterialPoint& m) const {
@@ -125,7 +191,7 @@ void NeedleInsertion::beginMembrane(const MaterialPoint& m) {
 }
 
 void NeedleInsertion::addTrackPoint(const MaterialPoint& m) {
-  track_.push_back({.at = m, .stick = (positionOf(m) - tip_).dot(dir_), .active = true});
+  track_.push_back({.at = m, .stick = shaft_.coordinate(positionOf(m)), .active = true});
 }
 
 std::size_t NeedleInsertion::activeCouplingCount() const noexcept {
@@ -135,21 +201,40 @@ std::size_t NeedleInsertion::activeCouplingCount() const noexcept {
 
 double NeedleInsertion::trackLength() const noexcept {
   if (track_.empty() || !haveEnd_) return 0.0;
-  return std::max(0.0, (positionOf(end_) - positionOf(track_.front().at)).dot(dir_));
+  return std::max(0.0,
+                  shaft_.coordinate(positionOf(end_)) - shaft_.coordinate(positionOf(track_.front().at)));
 }
 
 Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& direction, double h) {
   using needleimpl::invalidNeedle;
   constexpr const char* where = "NeedleInsertion::step";
+  if (options_.radius > 0.0)
+    return invalidNeedle("a curved needle (options.radius = " + std::to_string(options_.radius) +
+                             " m) needs the plane of its arc",
+                         where, "step it with its pose: step(Isometry3, h)");
   if (!tip.allFinite()) return invalidNeedle("the tip is not finite", where, "give a point in metres");
   const double norm = direction.norm();
   if (!(norm > 1e-12) || !std::isfinite(norm))
     return invalidNeedle("the direction is zero or not finite", where,
                          "give the shaft's direction, handle to tip");
+  return stepShaft(NeedleShaft::straight(tip, direction / norm, options_.length), h);
+}
+
+Result<FemStepReport> NeedleInsertion::step(const Isometry3& needlePose, double h) {
+  if (!isRigidPose(needlePose))
+    return needleimpl::invalidNeedle("the needle's pose is not a finite rigid transform",
+                                     "NeedleInsertion::step", "give a rotation and a translation");
+  return stepShaft(NeedleShaft::fromPose(needlePose, options_.radius, options_.length), h);
+}
+
+Result<FemStepReport> NeedleInsertion::stepShaft(const NeedleShaft& shaft, double h) {
+  using needleimpl::invalidNeedle;
+  constexpr const char* where = "NeedleInsertion::step";
   if (!needleimpl::positiveFinite(h))
     return invalidNeedle("h is not positive and finite", where, "e.g. 1e-3 s");
-  tip_ = tip;
-  dir_ = direction / norm;
+  shaft_ = shaft;
+  tip_ = shaft.tip;
+  dir_ = shaft.tangent;
   const double spacing = options_.couplingSpacing;
 
   // The tip: entering, reaching past the track's end, or leaving.
@@ -158,8 +243,8 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
     case NeedleTip::Outside:
       if (locate(tip_, haveEnd_ ? end_.tet : 0, at)) {
         const bool reentry = !track_.empty() && [&] {
-          const Vec3 r = positionOf(track_.front().at) - tip_;
-          return (r - r.dot(dir_) * dir_).norm() < spacing;
+          const Vec3 r = positionOf(track_.front().at);
+          return (r - shaft_.point(shaft_.coordinate(r))).norm() < spacing;
         }();
         if (reentry) {
           state_ = NeedleTip::InTrack;
@@ -182,7 +267,7 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
       break;  // the membrane holds the tip until it breaks or is let go (after the step)
     case NeedleTip::Cutting:
     case NeedleTip::InTrack:
-      if (haveEnd_ && (tip_ - positionOf(end_)).dot(dir_) > 0.0) {
+      if (haveEnd_ && shaft_.coordinate(positionOf(end_)) < 0.0) {
         if (!locate(tip_, end_.tet, at)) {
           state_ = NeedleTip::InTrack;  // out through the far side
         } else if (const int layer = tetLayer_[at.tet];
@@ -196,14 +281,15 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
           // behind the tip: cut tissue on the shaft, which the cutting load
           // at the tip does not carry past the tip during the step.
           MaterialPoint behind;
-          if (track_.empty() || (positionOf(at) - positionOf(track_.back().at)).dot(dir_) >= spacing)
-            addTrackPoint(locate(tip_ - 0.5 * spacing * dir_, at.tet, behind) ? behind : at);
+          if (track_.empty() ||
+              shaft_.coordinate(positionOf(at)) - shaft_.coordinate(positionOf(track_.back().at)) >= spacing)
+            addTrackPoint(locate(shaft_.point(-0.5 * spacing), at.tet, behind) ? behind : at);
         }
       } else {
         state_ = NeedleTip::InTrack;
       }
       if (state_ == NeedleTip::InTrack && !track_.empty() &&
-          (tip_ - positionOf(track_.front().at)).dot(dir_) < 0.0) {
+          shaft_.coordinate(positionOf(track_.front().at)) > 0.0) {
         state_ = NeedleTip::Outside;  // pulled out behind the entry
         tipLayer_ = -1;
       }
@@ -216,7 +302,7 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
   axial_.resize(track_.size());
   for (std::size_t k = 0; k < track_.size(); ++k) {
     TrackPoint& p = track_[k];
-    const double s = axial_[k] = (positionOf(p.at) - tip_).dot(dir_);
+    const double s = axial_[k] = shaft_.coordinate(positionOf(p.at));
     const bool on = state_ != NeedleTip::Outside && s <= 0.0 && s >= -options_.length;
     if (on && !p.active) p.stick = s;
     p.active = on;
@@ -251,14 +337,20 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
   // The springs for this step: the shaft's couplings, the tip's membrane
   // spring or its cutting load.
   springs_.clear();
-  const Mat3 sticking = FemPointSpring::axial(dir_, options_.acrossStiffness, options_.alongStiffness);
-  const Mat3 sliding = FemPointSpring::axial(dir_, options_.acrossStiffness, 0.0);
-  for (const TrackPoint& p : track_) {
+  // A point at arc length u on the shaft: across, held to the shaft's point
+  // there; along the tangent there, to its stick position (the anchor is
+  // offset along that tangent, so the spring's force along it is exactly
+  // alongStiffness·(stick − u), straight or curved).
+  for (std::size_t k = 0; k < track_.size(); ++k) {
+    const TrackPoint& p = track_[k];
     if (!p.active) continue;
+    const double u = axial_[k];
+    const Vec3 tangent = shaft_.tangentAt(u);
     FemPointSpring s = springAt(p.at);
-    s.anchor = tip_ + p.stick * dir_;
-    s.stiffness = p.slide != 0.0 ? sliding : sticking;
-    s.load = p.slide * dir_;
+    s.anchor = shaft_.point(u) + (p.stick - u) * tangent;
+    s.stiffness = FemPointSpring::axial(tangent, options_.acrossStiffness,
+                                        p.slide != 0.0 ? 0.0 : options_.alongStiffness);
+    s.load = p.slide * tangent;
     springs_.push_back(s);
   }
   std::int32_t tipSpring = -1;
@@ -288,21 +380,13 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
   // touches it); the tip's spring and cutting load with what the body took.
   wrench_ = Wrench{};
   std::size_t i = 0;
-  const Mat3 acrossK = options_.acrossStiffness * (Mat3::Identity() - dir_ * dir_.transpose());
   for (TrackPoint& p : track_) {
     if (!p.active) continue;
-    const Vec3 point = positionOf(p.at);
-    const double s = (point - tip_).dot(dir_);
-    if (p.slide != 0.0) p.stick = s + p.slide / options_.alongStiffness;
     ++i;
-    if (s > 0.0 || s < -options_.length) continue;  // the tissue moved it off the shaft during the step
-    double onTissue = options_.alongStiffness * (p.stick - s);
-    if (std::abs(onTissue) > p.limit) {
-      onTissue = std::copysign(p.limit, onTissue);
-      p.stick = s + onTissue / options_.alongStiffness;
-    }
-    const Vec3 f = acrossK * (point - tip_) - onTissue * dir_;
-    wrench_ += Wrench{f, (p.stick * dir_).cross(f)};
+    const Vec3 point = positionOf(p.at);
+    if (p.slide != 0.0) p.stick = shaft_.coordinate(point) + p.slide / options_.alongStiffness;
+    wrench_ += needleimpl::shaftPointWrench(shaft_, point, p.stick, p.limit, options_.acrossStiffness,
+                                            options_.alongStiffness);
   }
   for (; i < springs_.size(); ++i) {
     const Vec3 f = -body_->pointSpringForce(i);
@@ -333,9 +417,7 @@ Result<FemStepReport> NeedleInsertion::step(const Vec3& tip, const Vec3& directi
 
 void NeedleInsertion::localModel(NeedleLocalModel& out) const {
   out.state = state_;
-  out.tip = tip_;
-  out.direction = dir_;
-  out.length = options_.length;
+  out.shaft = shaft_;
   out.across = options_.acrossStiffness;
   out.along = options_.alongStiffness;
   out.tipStiffness = options_.tipStiffness;
@@ -366,7 +448,7 @@ void NeedleInsertion::localModel(NeedleLocalModel& out) const {
 }
 
 void NeedleLocalModel::assign(const NeedleLocalModel& o) noexcept {
-  state = o.state, tip = o.tip, direction = o.direction, length = o.length;
+  state = o.state, shaft = o.shaft;
   across = o.across, along = o.along, membrane = o.membrane, membraneYield = o.membraneYield;
   tipStiffness = o.tipStiffness;
   punctureForce = o.punctureForce, cuttingForce = o.cuttingForce, hasTrack = o.hasTrack,
@@ -375,24 +457,16 @@ void NeedleLocalModel::assign(const NeedleLocalModel& o) noexcept {
   pointCount = o.pointCount;
 }
 
-Wrench NeedleLocalModel::evaluate(const Vec3& at, const Vec3& d) noexcept {
+Wrench NeedleLocalModel::evaluate(const NeedleShaft& at) noexcept {
   Wrench w;
-  const Mat3 acrossK = across * (Mat3::Identity() - d * d.transpose());
-  for (std::size_t k = 0; k < pointCount; ++k) {
-    Point& p = points[k];
-    const double s = (p.position - at).dot(d);
-    if (s > 0.0 || s < -length) continue;  // off the shaft
-    double onTissue = along * (p.stick - s);
-    if (std::abs(onTissue) > p.limit) {
-      onTissue = std::copysign(p.limit, onTissue);
-      p.stick = s + onTissue / along;
-    }
-    const Vec3 f = acrossK * (p.position - at) - onTissue * d;  // on the needle
-    w += Wrench{f, (p.stick * d).cross(f)};                     // at its anchor on the axis, as in the step
-  }
+  for (std::size_t k = 0; k < pointCount; ++k)
+    w +=
+        needleimpl::shaftPointWrench(at, points[k].position, points[k].stick, points[k].limit, across, along);
+  const Vec3& d = at.tangent;
+  const double advance = (at.tip - shaft.tip).dot(d);  // since the step, along the tip's tangent
   if (state == NeedleTip::Pressing) {
-    const Vec3 yielded = membrane + membraneYield * (at - tip).dot(d) * d;
-    const Vec3 onTissue = tipStiffness * (at - yielded);
+    const Vec3 yielded = membrane + membraneYield * advance * d;
+    const Vec3 onTissue = tipStiffness * (at.tip - yielded);
     if (onTissue.dot(d) >= punctureForce) {
       state = NeedleTip::Cutting;  // broken: the tip cuts from here
       hasTrack = true;
@@ -404,10 +478,9 @@ Wrench NeedleLocalModel::evaluate(const Vec3& at, const Vec3& d) noexcept {
   // The tip cuts while it advances: cutting at the step and not drawn back
   // from the step's pose, or in the track at the step and pushed on past
   // its end since.
-  const double advance = (at - tip).dot(d);
   const bool cutting =
       (state == NeedleTip::Cutting && advance >= 0.0) ||
-      (state == NeedleTip::InTrack && hasTrack && advance > 0.0 && (at - trackEnd).dot(d) > 0.0);
+      (state == NeedleTip::InTrack && hasTrack && advance > 0.0 && at.coordinate(trackEnd) < 0.0);
   if (cutting) w.force -= cuttingForce * d;
   return w;
 }

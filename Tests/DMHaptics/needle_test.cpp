@@ -91,12 +91,66 @@ TEST(HapticNeedle, PopIsFeltInTheTickItHappensThenCuttingAndFriction) {
   for (std::size_t s = 0; s < physics.size(); ++s) {
     const std::size_t tick = 10 * s + 9;
     if (tick + 10 >= p && tick < p + 100) continue;
-    if (s > 0 && physics[s - 1] == 0.0) continue;  // the first step in contact: the tissue's stiffness is not known yet
+    if (s > 0 && physics[s - 1] == 0.0)
+      continue;  // the first step in contact: the tissue's stiffness is not known yet
     worst = std::max(worst, std::abs(felt1k[tick] - physics[s]));
   }
   EXPECT_LT(worst, 0.01);
   // And the force grows with depth: friction, f_cut + μL.
   EXPECT_GT(felt1k.back(), kTissue.cuttingForce + 0.8 * kTissue.friction * 0.01);
+}
+
+// A curved needle (R = 10 mm) mounted on the device with its tip 5 mm off
+// the device point, its axis along the device's −y and its centre toward
+// the device's +z, turned about its centre: at the step's own pose the
+// hand feels exactly the physics' force and torque (moved to the world and
+// about the device point), so the mounting's frames are right.
+TEST(HapticNeedle, CurvedNeedleMountedOffTheDevicePointFeelsThePhysicsAtItsPose) {
+  Tissue t = makeTissue();
+  const double R = 0.01;
+  auto needle = NeedleInsertion::create(t.body, t.layerOf, {&kTissue, 1}, {.length = 0.03, .radius = R});
+  ASSERT_TRUE(needle.ok());
+  const Vec3 tipInDevice(0.0, 0.0, 0.005), axis(0, -1, 0), normal(0, 0, 1);
+  auto felt = HapticNeedle::create(*needle, {.tip = tipInDevice,
+                                             .axis = axis,
+                                             .normal = normal,
+                                             .tissuePose = kTissuePose,
+                                             .maxForce = 100.0,
+                                             .maxTorque = 100.0});
+  ASSERT_TRUE(felt.ok());
+  // The needle's frame in the world at turn θ: tip on the circle about a
+  // centre 5 mm above the block, in the world's xz plane.
+  const Vec3 centre = kEntryWorld + Vec3(0, 0, 0.005);
+  Isometry3 mount = Isometry3::Identity();  // needle frame in the device frame
+  mount.linear().col(0) = normal, mount.linear().col(1) = axis.cross(normal), mount.linear().col(2) = axis;
+  mount.translation() = tipInDevice;
+  int compared = 0;
+  for (int i = 0; i < 1500; ++i) {
+    const double theta = 0.3 + 1e-3 * i;
+    const Vec3 tangent(std::sin(theta), 0.0, -std::cos(theta)),
+        toCentre(std::cos(theta), 0.0, std::sin(theta));
+    Isometry3 needlePose = Isometry3::Identity();
+    needlePose.linear().col(0) = toCentre, needlePose.linear().col(1) = tangent.cross(toCentre);
+    needlePose.linear().col(2) = tangent;
+    needlePose.translation() = centre - R * toCentre;
+    const Isometry3 device = needlePose * mount.inverse();
+    (*felt)->tick({.dt = 1e-3, .devicePose = device});
+    if (i % 10 != 0) continue;
+    // A step at this tick's pose, then a tick at the same pose with the
+    // model it published (but at the puncture's step: see NeedleLocalModel).
+    const std::size_t punctures = needle->punctureCount();
+    ASSERT_TRUE((*felt)->step(0.01).ok());
+    const HapticResponse r = (*felt)->tick({.dt = 1e-3, .devicePose = device});
+    if (needle->punctureCount() != punctures) continue;
+    const Vec3 force = kTissuePose.linear() * needle->force();
+    const Vec3 torque = kTissuePose.linear() * needle->wrench().torque +
+                        (needlePose.translation() - device.translation()).cross(force);
+    ASSERT_LT((r.force - force).norm(), 1e-9) << "tick " << i;
+    ASSERT_LT((r.torque - torque).norm(), 1e-11) << "tick " << i;
+    compared += needle->activeCouplingCount() > 0;
+  }
+  EXPECT_EQ(needle->punctureCount(), 1u);
+  EXPECT_GT(compared, 50);
 }
 
 TEST(HapticNeedle, ForceIsClampedAndNotFiniteIsZero) {
@@ -153,6 +207,7 @@ TEST(HapticNeedle, BadOptionsAreNamed) {
   };
   EXPECT_NE(message({.axis = Vec3::Zero()}).find("options.axis"), std::string::npos);
   EXPECT_NE(message({.tip = Vec3(NAN, 0, 0)}).find("options.tip"), std::string::npos);
+  EXPECT_NE(message({.normal = Vec3(0, 0, 2)}).find("options.normal"), std::string::npos);  // along the axis
   EXPECT_NE(message({.maxForce = 0.0}).find("options.maxForce"), std::string::npos);
   EXPECT_NE(message({.maxTorque = NAN}).find("options.maxTorque"), std::string::npos);
   Isometry3 sheared = Isometry3::Identity();

@@ -50,7 +50,10 @@ namespace dm {
 /// Options of HapticNeedle::create().
 struct HapticNeedleOptions {
   Vec3 tip = Vec3::Zero();     ///< m, the needle's tip in the device frame
-  Vec3 axis = -Vec3::UnitZ();  ///< the shaft's direction, handle → tip, device frame (normalised)
+  Vec3 axis = -Vec3::UnitZ();  ///< the shaft's direction at the tip, handle → tip, device frame (normalised)
+  /// Device frame: toward a curved needle's centre (the part ⊥ axis is
+  /// used, normalised); not parallel to axis. Unused by a straight needle.
+  Vec3 normal = Vec3::UnitX();
   Isometry3 tissuePose = Isometry3::Identity();  ///< the tissue's (body's) frame → world, rigid
   double maxForce = 8.0;                         ///< N, > 0: the largest force sent to the hand
   double maxTorque = 0.3;                        ///< N·m, ≥ 0: the largest torque (0 for a 3-DOF device)
@@ -62,7 +65,8 @@ class HapticNeedle final : public HapticRenderer {
  public:
   /// `needle` must outlive this and be stepped only through step() while
   /// it is in use. Fails (InvalidArgument naming the option) on a
-  /// non-finite tip, a zero or non-finite axis, a non-rigid tissue pose, a
+  /// non-finite tip, a zero or non-finite axis, a normal parallel to it or
+  /// not finite, a non-rigid tissue pose, a
   /// maxForce that is not positive and finite or a negative or NaN maxTorque.
   static Result<std::unique_ptr<HapticNeedle>> create(NeedleInsertion& needle,
                                                       const HapticNeedleOptions& options = {});
@@ -90,13 +94,13 @@ class HapticNeedle final : public HapticRenderer {
  private:
   struct Pose {
     bool valid = false;
-    Vec3 tip = Vec3::Zero();  // tissue frame
-    Vec3 direction = Vec3::UnitZ();
+    Isometry3 needle = Isometry3::Identity();  // the needle's frame in the tissue's (NeedleShaft::fromPose)
   };
   HapticNeedle(NeedleInsertion& needle, const HapticNeedleOptions& options);
 
   NeedleInsertion* needle_;
   HapticNeedleOptions options_;
+  Isometry3 mount_ = Isometry3::Identity();  // the needle's frame in the device's
   TripleBuffer<NeedleLocalModel> models_;
   TripleBuffer<Pose> poses_;
   NeedleLocalModel working_;  // haptic thread: the newest model, as the ticks move it

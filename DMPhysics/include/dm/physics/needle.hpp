@@ -1,4 +1,5 @@
-// dm/physics/needle.hpp — a rigid needle inserted into FEM tissue: the
+// dm/physics/needle.hpp — a rigid needle (straight, or a curved suture
+// needle: a circular arc) inserted into FEM tissue: the
 // tissue deforms before puncture, the tip breaks through when its force
 // passes the layer's threshold, then the shaft is held by the track it cut,
 // with friction along it and a cutting force at the tip; retraction frees
@@ -27,8 +28,9 @@
 //    load on the tissue at the tip, its reaction on the needle), and every
 //    NeedleOptions::couplingSpacing of new track a coupling point is made: a
 //    material point of the tissue on the track.
-//  * Shaft coupling: each coupling point on the shaft is held to the needle
-//    axis by an anisotropic implicit spring (dm::FemPointSpring: stiff
+//  * Shaft coupling: each coupling point on the shaft is held to the shaft
+//    (its nearest point on the line or arc, NeedleShaft) by an anisotropic
+//    implicit spring (dm::FemPointSpring: stiff
 //    across the shaft, acrossStiffness; along it, alongStiffness to its
 //    stick position). A point whose axial spring force would pass its
 //    friction limit at the needle's new pose (the layer's
@@ -89,7 +91,10 @@ struct NeedleLayer {
 
 /// Coupling settings of NeedleInsertion.
 struct NeedleOptions {
-  double length = 0.1;             ///< m, > 0: shaft length behind the tip
+  double length = 0.1;  ///< m, > 0: shaft length behind the tip
+  /// m, ≥ 0: 0 a straight needle; else a curved (suture) needle, a circular
+  /// arc of this radius (length ≤ 1.5·π·radius: up to a ¾ circle).
+  double radius = 0.0;
   double couplingSpacing = 2e-3;   ///< m, > 0: track length per coupling point
   double acrossStiffness = 400.0;  ///< N/m, > 0: a coupling point across the shaft
   double alongStiffness = 400.0;   ///< N/m, > 0: a coupling point along the shaft while it sticks
@@ -102,6 +107,31 @@ enum class NeedleTip : std::uint8_t {
   Pressing,  ///< holding a membrane (surface or layer boundary), not through it yet
   Cutting,   ///< advancing through uncut tissue
   InTrack,   ///< inside the track it cut (or out through the far side)
+};
+
+/// The needle's shaft in the tissue's frame: straight, or a circular arc of
+/// `radius` (a suture needle), `length` long behind the tip. Points along it
+/// are named by their arc length u from the tip: 0 at the tip, −length at
+/// the shaft's end.
+struct NeedleShaft {
+  Vec3 tip = Vec3::Zero();
+  Vec3 tangent = Vec3::UnitZ();  ///< unit, at the tip, handle → tip
+  Vec3 normal = Vec3::UnitX();   ///< unit, ⊥ tangent: toward the arc's centre
+  double radius = 0.0;           ///< m, 0 straight
+  double length = 0.1;           ///< m
+
+  /// The shaft of a needle whose frame is `pose` (the tissue's frame): the
+  /// tip at its origin, the tangent at the tip its +z axis, the arc's
+  /// centre toward its +x axis.
+  static NeedleShaft fromPose(const Isometry3& pose, double radius, double length) noexcept;
+  /// A straight shaft with its tip at `tip` along the unit `direction`.
+  static NeedleShaft straight(const Vec3& tip, const Vec3& direction, double length) noexcept;
+  /// Arc length u of the shaft point nearest p (> 0: ahead of the tip; <
+  /// −length: past the shaft's end; either way off the shaft).
+  double coordinate(const Vec3& p) const noexcept;
+  /// The shaft's point and unit tangent at arc length u.
+  Vec3 point(double u) const noexcept;
+  Vec3 tangentAt(double u) const noexcept;
 };
 
 /// The needle's coupling with the tissue frozen as the last step left it:
@@ -125,9 +155,7 @@ struct NeedleLocalModel {
     double limit = 0.0;            ///< N, its friction limit
   };
   NeedleTip state = NeedleTip::Outside;
-  Vec3 tip = Vec3::Zero();  ///< the needle at the step (tissue frame)
-  Vec3 direction = Vec3::UnitZ();
-  double length = 0.1;               ///< m, the shaft
+  NeedleShaft shaft;                 ///< the needle at the step
   double across = 0.0, along = 0.0;  ///< N/m, the points' springs
   Vec3 membrane = Vec3::Zero();      ///< Pressing: the held point
   /// Pressing: the share of the tip's advance (along the needle, since the
@@ -149,7 +177,16 @@ struct NeedleLocalModel {
   /// along the unit `direction` (tissue frame); moves the points' stick
   /// positions where they slide and breaks the membrane when its threshold
   /// is reached. Real-time safe.
-  Wrench evaluate(const Vec3& tip, const Vec3& direction) noexcept;
+  Wrench evaluate(const NeedleShaft& at) noexcept;
+  /// The same with the needle's frame (NeedleShaft::fromPose), its radius
+  /// and length the model's.
+  Wrench evaluate(const Isometry3& needlePose) noexcept {
+    return evaluate(NeedleShaft::fromPose(needlePose, shaft.radius, shaft.length));
+  }
+  /// The same for a straight needle, tip and unit direction.
+  Wrench evaluate(const Vec3& tip, const Vec3& direction) noexcept {
+    return evaluate(NeedleShaft::straight(tip, direction, shaft.length));
+  }
   /// Copies the used part of `other` (not the unused points).
   void assign(const NeedleLocalModel& other) noexcept;
 };
@@ -175,6 +212,14 @@ class NeedleInsertion {
   /// direction or h ≤ 0, and with the body's step error (state unchanged
   /// then, except that the body's own step failed).
   Result<FemStepReport> step(const Vec3& tip, const Vec3& direction, double h);
+  /// The same for a needle of any shape (NeedleOptions::radius), its frame
+  /// given as NeedleShaft::fromPose takes it: tip at the origin, the tip's
+  /// tangent along +z, a curved needle's centre toward +x. Fails also on a
+  /// pose that is not rigid and finite; the (tip, direction) form fails for
+  /// a curved needle (it needs the plane of its arc).
+  Result<FemStepReport> step(const Isometry3& needlePose, double h);
+  /// The shaft at the last step.
+  const NeedleShaft& shaft() const noexcept { return shaft_; }
 
   /// Force (N) and torque about the tip (N·m) the tissue applies to the
   /// needle at the end of the last step.
@@ -232,7 +277,9 @@ class NeedleInsertion {
   NeedleTip state_ = NeedleTip::Outside;
   int tipLayer_ = -1;
   std::size_t punctures_ = 0;
-  Vec3 tip_ = Vec3::Zero(), dir_ = Vec3::UnitZ();
+  NeedleShaft shaft_;
+  Vec3 tip_ = Vec3::Zero(), dir_ = Vec3::UnitZ();  // shaft_.tip and shaft_.tangent
+  Result<FemStepReport> stepShaft(const NeedleShaft& shaft, double h);
   MaterialPoint membrane_;                     // Pressing: the point the tip holds
   Vec3 pressedFrom_ = Vec3::Zero();            // Pressing: where that point was when the tip took it
   double pressSunk_ = 0.0, pressForce_ = 0.0;  // Pressing: how far it has gone in (m) and the tip force (N)
