@@ -232,6 +232,9 @@ Result<FemStepReport> NeedleInsertion::stepShaft(const NeedleShaft& shaft, doubl
   constexpr const char* where = "NeedleInsertion::step";
   if (!needleimpl::positiveFinite(h))
     return invalidNeedle("h is not positive and finite", where, "e.g. 1e-3 s");
+  // The tip cuts only while it advances: tissue springing back over a tip
+  // that holds still or withdraws is not cut.
+  const bool advancing = (shaft.tip - shaft_.tip).dot(shaft.tangent) > 0.0;
   shaft_ = shaft;
   tip_ = shaft.tip;
   dir_ = shaft.tangent;
@@ -267,7 +270,7 @@ Result<FemStepReport> NeedleInsertion::stepShaft(const NeedleShaft& shaft, doubl
       break;  // the membrane holds the tip until it breaks or is let go (after the step)
     case NeedleTip::Cutting:
     case NeedleTip::InTrack:
-      if (haveEnd_ && shaft_.coordinate(positionOf(end_)) < 0.0) {
+      if (haveEnd_ && advancing && shaft_.coordinate(positionOf(end_)) < 0.0) {
         if (!locate(tip_, end_.tet, at)) {
           state_ = NeedleTip::InTrack;  // out through the far side
         } else if (const int layer = tetLayer_[at.tet];
@@ -281,8 +284,7 @@ Result<FemStepReport> NeedleInsertion::stepShaft(const NeedleShaft& shaft, doubl
           // behind the tip: cut tissue on the shaft, which the cutting load
           // at the tip does not carry past the tip during the step.
           MaterialPoint behind;
-          if (track_.empty() ||
-              shaft_.coordinate(positionOf(at)) - shaft_.coordinate(positionOf(track_.back().at)) >= spacing)
+          if (track_.empty() || -0.5 * spacing - shaft_.coordinate(positionOf(track_.back().at)) >= spacing)
             addTrackPoint(locate(shaft_.point(-0.5 * spacing), at.tet, behind) ? behind : at);
         }
       } else {

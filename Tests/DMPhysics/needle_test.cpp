@@ -57,17 +57,18 @@ constexpr double kTop = 0.03;             // m, the block's top face
 const Vec3 kEntry(0.0203, 0.0196, kTop);  // off the grid's nodes and edges
 
 // Drives the needle straight down (tip at depth d below the top, over
-// kEntry) at `speed` through the depths in `path`, starting 2 mm above.
+// kEntry) at `speed` through the depths in `path`, starting at depth
+// `from` (2 mm above).
 std::vector<Sample> insert(NeedleInsertion& needle, double speed, std::initializer_list<double> path,
-                           double h = 4e-3) {
+                           double h = 4e-3, double from = -0.002) {
   const Vec3 dir(0, 0, -1);
   std::vector<Sample> trace;
-  double d = -0.002;
+  double d = from;
   for (double target : path) {
     const int n = int(std::ceil(std::abs(target - d) / (speed * h)));
-    const double from = d;
+    const double start = d;
     for (int i = 1; i <= n; ++i) {
-      d = from + (target - from) * i / n;
+      d = start + (target - start) * i / n;
       auto r = needle.step(kEntry + d * dir, dir, h);
       EXPECT_TRUE(r.ok()) << r.error().message();
       if (!r) return trace;
@@ -177,11 +178,13 @@ TEST(FemPointSpring, BadInputNamesTheSpringAndKeepsTheSet) {
 // force rises while the surface tents, drops when the tip breaks through
 // at the configured threshold, then grows linearly with the track, F =
 // f_cut + μ·L. Fitting those lines gives back the configured cutting force
-// and friction within 5 %; the stiffness before puncture is the tissue's,
-// in series with the tip's spring: once that spring's compliance is taken
-// out it doubles with Young's modulus (linear elasticity). Pulling the
-// needle out, friction reverses (−μ per metre of shaft still in), and once
-// out the needle holds nothing and the tissue goes back to rest.
+// and friction within 1 % (the issue asks 5 %; 0.04 % measured); the
+// stiffness before puncture is the tissue's, in series with the tip's
+// spring: once that spring's compliance is taken out it doubles with
+// Young's modulus (linear elasticity). Pulling the needle out (at 20 mm/s),
+// friction reverses (−μ per metre of shaft still in, the surface dragged
+// up with it), and once out the needle holds nothing and the tissue goes
+// back to rest.
 TEST(NeedleInsertion, HomogeneousBlockShowsTheThreePhasesAndTheFitRecoversTheModel) {
   const NeedleLayer tissue{.punctureForce = 1.0, .cuttingForce = 0.3, .friction = 40.0};
   const NeedleOptions options{.couplingSpacing = 5e-4, .tipStiffness = 2000.0};
@@ -191,10 +194,11 @@ TEST(NeedleInsertion, HomogeneousBlockShowsTheThreePhasesAndTheFitRecoversTheMod
     const std::vector<std::uint8_t> layerOf(b.body.tetCount(), 0);
     auto needle = NeedleInsertion::create(b.body, layerOf, {&tissue, 1}, options);
     ASSERT_TRUE(needle.ok());
-    // 2 ms steps: the fit's 5 % needs the quasi-static limit (at 4 ms the
-    // cutting force comes out 3 % high).
-    const auto trace =
-        run == 0 ? insert(*needle, 0.01, {0.02, -0.002}, 2e-3) : insert(*needle, 0.01, {0.004}, 2e-3);
+    auto trace = run == 0 ? insert(*needle, 0.01, {0.02}, 4e-3) : insert(*needle, 0.01, {0.004}, 4e-3);
+    if (run == 0) {  // out at twice the speed
+      const auto out = insert(*needle, 0.02, {-0.002}, 4e-3, 0.02);
+      trace.insert(trace.end(), out.begin(), out.end());
+    }
     // Pressing: the tip holds the surface from where it meets it, and the
     // force rises with depth.
     const auto [peak, at] = firstPeak(trace);
@@ -224,13 +228,13 @@ TEST(NeedleInsertion, HomogeneousBlockShowsTheThreePhasesAndTheFitRecoversTheMod
     const auto [fCut, mu] = fitLine(
         trace, [](const Sample& s) { return s.track; },
         [&](const Sample& s) { return s.state == NeedleTip::Cutting && s.depth > dp + 2e-3; });
-    EXPECT_NEAR(fCut, tissue.cuttingForce, 0.05 * tissue.cuttingForce);
-    EXPECT_NEAR(mu, tissue.friction, 0.05 * tissue.friction);
+    EXPECT_NEAR(fCut, tissue.cuttingForce, 0.01 * tissue.cuttingForce);
+    EXPECT_NEAR(mu, tissue.friction, 0.01 * tissue.friction);
     // Pulling out: −μ per metre of depth still in, no cutting force.
     const auto [r0, muOut] = fitLine(
         trace, [](const Sample& s) { return s.depth; },
         [&](const Sample& s) {
-          return s.state == NeedleTip::InTrack && s.force < -0.1 && s.depth > 0.005 && s.depth < 0.015;
+          return s.state == NeedleTip::InTrack && s.force < -0.1 && s.depth > 0.004 && s.depth < 0.010;
         });
     EXPECT_NEAR(-muOut, tissue.friction, 0.1 * tissue.friction);
     EXPECT_LT(std::abs(r0), 0.05);
@@ -277,8 +281,8 @@ TEST(NeedleInsertion, LayersGiveOnePeakPerMembrane) {
   int inLayer[3] = {0, 0, 0};
   std::size_t punctures = 0;
   double d = -0.002;
-  for (; d < 0.021; d += 2e-5) {
-    ASSERT_TRUE(needle->step(kEntry + d * dir, dir, 2e-3).ok());
+  for (; d < 0.021; d += 4e-5) {
+    ASSERT_TRUE(needle->step(kEntry + d * dir, dir, 4e-3).ok());
     const double f = -needle->force().dot(dir);
     if (needle->tipLayer() >= 0 && needle->tipState() == NeedleTip::Cutting) ++inLayer[needle->tipLayer()];
     if (needle->punctureCount() > punctures) {  // this step broke a membrane
@@ -316,7 +320,7 @@ TEST(NeedleInsertion, ReinsertionAlongTheTrackOnlySlides) {
   const double firstAt10 =
       std::find_if(first.begin(), first.end(), [](const Sample& s) { return s.depth >= 0.010; })->force;
   const double track = needle->trackLength();
-  const auto again = insert(*needle, 0.01, {0.006, 0.0105});
+  const auto again = insert(*needle, 0.01, {0.006, 0.0105}, 4e-3, 0.012);
   for (const Sample& s : again) {
     ASSERT_NE(s.state, NeedleTip::Pressing) << s.depth;
     ASSERT_NE(s.state, NeedleTip::Cutting) << s.depth;
@@ -506,7 +510,8 @@ TEST(NeedleInsertion, CurvedNeedleTurnedAboutItsCentreFollowsItsArc) {
       const Vec3 aboutCentre = needle->wrench().torque + (shaft.tip - centre).cross(needle->force());
       torqueSeen = aboutCentre.y();
       torqueExpected = R * (tissue.cuttingForce + tissue.friction * needle->trackLength());
-      offPlane = std::max(offPlane, (std::abs(aboutCentre.x()) + std::abs(aboutCentre.z())) / std::abs(aboutCentre.y()));
+      offPlane = std::max(
+          offPlane, (std::abs(aboutCentre.x()) + std::abs(aboutCentre.z())) / std::abs(aboutCentre.y()));
     }
   }
   // Within half a millimetre (a tenth of the cells): the entry point was
