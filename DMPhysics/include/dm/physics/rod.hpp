@@ -85,6 +85,13 @@
 // against a curved obstacle make the polygon's corners catch on it: over a
 // smooth bar the two sides' tensions differ by up to 3 % with 7.5 mm
 // segments on a 1 cm bar, by under 0.1 % with 3 mm on 2 cm (l/R ≲ 0.15).
+// Known limit: the node contacts do not hold a thread under tension. A 3-0
+// suture wrapped half round a 2 cm bar (2 mm segments) with a load ramped
+// on one end and the other pinned below the bar goes through the bar at
+// about 0.3 N (a node jumps a centimetre inside within two steps), with 2
+// or 6 passes a step; found building the capstan test (branch
+// wip/rod-contact-friction holds Coulomb friction and that test). Contacts
+// solved with the joints in the direct solve are the next step.
 // Not yet: friction and the capstan law, self-collision, contact with
 // tissue meshes (issue 33's next slices).
 //
