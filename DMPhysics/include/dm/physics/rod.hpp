@@ -86,12 +86,15 @@
 // smooth bar the two sides' tensions differ by up to 3 % with 7.5 mm
 // segments on a 1 cm bar, by under 0.1 % with 3 mm on 2 cm (l/R ≲ 0.15).
 // Known limit: the node contacts do not hold a thread under tension. A 3-0
-// suture wrapped half round a 2 cm bar (2 mm segments) with a load ramped
-// on one end and the other pinned below the bar goes through the bar at
-// about 0.3 N (a node jumps a centimetre inside within two steps), with 2
-// or 6 passes a step; found building the capstan test (branch
-// wip/rod-contact-friction holds Coulomb friction and that test). Contacts
-// solved with the joints in the direct solve are the next step.
+// suture wrapped half round a 2 cm bar (2 mm segments), pinned below it on
+// one side, a load ramped on the other: the tension waves of the first
+// steps press the arc into the bar (1.6 mm by step 13) and the thread is
+// through it by step 20, with 2 or 6 passes a step. The contacts' sweep,
+// alternating with the joints' direct solve, cannot carry a stiff string's
+// pressure on a curve; found building a capstan test (branch
+// wip/rod-contact-friction: Coulomb friction, that test and the smallest
+// reproduction). Next: the active contacts as a seventh row of their
+// joint's block in the direct solve.
 // Not yet: friction and the capstan law, self-collision, contact with
 // tissue meshes (issue 33's next slices).
 //
