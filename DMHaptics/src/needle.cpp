@@ -46,6 +46,7 @@ HapticNeedle::HapticNeedle(NeedleInsertion& needle, const HapticNeedleOptions& o
   mount_.linear().col(1) = options.axis.cross(options.normal);
   mount_.linear().col(2) = options.axis;
   mount_.translation() = options.tip;
+  toTissue_ = options.tissuePose.inverse(Eigen::Isometry);
   needle.localModel(models_.writeBuffer());
   models_.publish();
   working_.assign(models_.read());
@@ -57,7 +58,10 @@ void HapticNeedle::reset(const Isometry3& /*devicePose*/) noexcept {
 }
 
 void HapticNeedle::setObjectPose(std::size_t index, const Isometry3& pose) noexcept {
-  if (index == 0 && isRigidPose(pose)) options_.tissuePose = pose;
+  if (index == 0 && isRigidPose(pose)) {
+    options_.tissuePose = pose;
+    toTissue_ = pose.inverse(Eigen::Isometry);
+  }
 }
 
 HapticResponse HapticNeedle::tick(const HapticInput& input) noexcept {
@@ -65,7 +69,7 @@ HapticResponse HapticNeedle::tick(const HapticInput& input) noexcept {
   HapticResponse out;
   out.proxyPose = input.devicePose;  // the needle is rigid in the hand: drawn where the device is
   const Isometry3& device = input.devicePose;
-  const Isometry3 needle = options_.tissuePose.inverse(Eigen::Isometry) * device * mount_;
+  const Isometry3 needle = toTissue_ * device * mount_;
   if (!isRigidPose(needle)) {
     out.force.setZero(), out.torque.setZero();
     return out;

@@ -236,15 +236,13 @@ Result<FemStepReport> NeedleInsertion::stepShaft(const NeedleShaft& shaft, doubl
   // that holds still or withdraws is not cut.
   const bool advancing = (shaft.tip - shaft_.tip).dot(shaft.tangent) > 0.0;
   shaft_ = shaft;
-  tip_ = shaft.tip;
-  dir_ = shaft.tangent;
   const double spacing = options_.couplingSpacing;
 
   // The tip: entering, reaching past the track's end, or leaving.
   MaterialPoint at;
   switch (state_) {
     case NeedleTip::Outside:
-      if (locate(tip_, haveEnd_ ? end_.tet : 0, at)) {
+      if (locate(shaft_.tip, haveEnd_ ? end_.tet : 0, at)) {
         const bool reentry = !track_.empty() && [&] {
           const Vec3 r = positionOf(track_.front().at);
           return (r - shaft_.point(shaft_.coordinate(r))).norm() < spacing;
@@ -271,7 +269,7 @@ Result<FemStepReport> NeedleInsertion::stepShaft(const NeedleShaft& shaft, doubl
     case NeedleTip::Cutting:
     case NeedleTip::InTrack:
       if (haveEnd_ && advancing && shaft_.coordinate(positionOf(end_)) < 0.0) {
-        if (!locate(tip_, end_.tet, at)) {
+        if (!locate(shaft_.tip, end_.tet, at)) {
           state_ = NeedleTip::InTrack;  // out through the far side
         } else if (const int layer = tetLayer_[at.tet];
                    layer != tetLayer_[end_.tet] && layers_[std::size_t(layer)].punctureForce > 0.0) {
@@ -358,14 +356,14 @@ Result<FemStepReport> NeedleInsertion::stepShaft(const NeedleShaft& shaft, doubl
   std::int32_t tipSpring = -1;
   if (state_ == NeedleTip::Pressing) {
     FemPointSpring s = springAt(membrane_);
-    s.anchor = tip_;
+    s.anchor = shaft_.tip;
     s.stiffness = options_.tipStiffness * Mat3::Identity();
     tipSpring = std::int32_t(springs_.size());
     springs_.push_back(s);
   } else if (state_ == NeedleTip::Cutting) {
     FemPointSpring s = springAt(end_);
-    s.anchor = tip_;
-    s.load = layers_[std::size_t(tipLayer_)].cuttingForce * dir_;
+    s.anchor = shaft_.tip;
+    s.load = layers_[std::size_t(tipLayer_)].cuttingForce * shaft_.tangent;
     springs_.push_back(s);
   }
   if (Status st = body_->setPointSprings(springs_); !st) return std::move(st).error().within(where);
@@ -392,15 +390,15 @@ Result<FemStepReport> NeedleInsertion::stepShaft(const NeedleShaft& shaft, doubl
   }
   for (; i < springs_.size(); ++i) {
     const Vec3 f = -body_->pointSpringForce(i);
-    wrench_ += Wrench{f, (springs_[i].anchor - tip_).cross(f)};
+    wrench_ += Wrench{f, (springs_[i].anchor - shaft_.tip).cross(f)};
   }
   // Puncture, or the tip drawn back off its membrane.
   tipForce_ = 0.0;
   if (tipSpring >= 0) {
-    tipForce_ = body_->pointSpringForce(std::size_t(tipSpring)).dot(dir_);
+    tipForce_ = body_->pointSpringForce(std::size_t(tipSpring)).dot(shaft_.tangent);
     // The tissue's tangent stiffness under the tip, from this step's and the
     // last one's force and sink (for the local model's yielding membrane).
-    const double sunk = (positionOf(membrane_) - pressedFrom_).dot(dir_);
+    const double sunk = (positionOf(membrane_) - pressedFrom_).dot(shaft_.tangent);
     if (sunk - pressSunk_ > 1e-9 && tipForce_ > pressForce_)
       pressStiffness_ = (tipForce_ - pressForce_) / (sunk - pressSunk_);
     pressSunk_ = sunk, pressForce_ = tipForce_;

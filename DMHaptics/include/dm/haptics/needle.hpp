@@ -100,7 +100,8 @@ class HapticNeedle final : public HapticRenderer {
 
   NeedleInsertion* needle_;
   HapticNeedleOptions options_;
-  Isometry3 mount_ = Isometry3::Identity();  // the needle's frame in the device's
+  Isometry3 mount_ = Isometry3::Identity();     // the needle's frame in the device's
+  Isometry3 toTissue_ = Isometry3::Identity();  // world → the tissue's frame (options_.tissuePose⁻¹)
   TripleBuffer<NeedleLocalModel> models_;
   TripleBuffer<Pose> poses_;
   NeedleLocalModel working_;  // haptic thread: the newest model, as the ticks move it

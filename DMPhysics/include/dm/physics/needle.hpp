@@ -278,7 +278,6 @@ class NeedleInsertion {
   int tipLayer_ = -1;
   std::size_t punctures_ = 0;
   NeedleShaft shaft_;
-  Vec3 tip_ = Vec3::Zero(), dir_ = Vec3::UnitZ();  // shaft_.tip and shaft_.tangent
   Result<FemStepReport> stepShaft(const NeedleShaft& shaft, double h);
   MaterialPoint membrane_;                     // Pressing: the point the tip holds
   Vec3 pressedFrom_ = Vec3::Zero();            // Pressing: where that point was when the tip took it
