@@ -1,5 +1,6 @@
 // physics_engine.cpp — the scene's rigid bodies on one dm::PhysicsWorld,
-// coupled to the haptic tool by impulses and poses (physics_engine.hpp).
+// coupled to the haptic tool by impulses and poses, and its soft objects
+// (soft_tissue.hpp) (physics_engine.hpp).
 #include "physics_engine.hpp"
 
 #include <dm/collide/shapes.hpp>
@@ -13,6 +14,9 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+
+#include "engine_json.hpp"
+#include "soft_tissue.hpp"
 
 namespace dm {
 
@@ -124,8 +128,6 @@ Result<BodyGeometry> meshGeometry(std::shared_ptr<const Mesh> mesh, double scale
   return g;
 }
 
-Json vecJson(const Vec3& v) { return Json::array({v.x(), v.y(), v.z()}); }
-
 }  // namespace
 
 struct PhysicsEngine::Impl {
@@ -148,6 +150,7 @@ struct PhysicsEngine::Impl {
   std::vector<ToolImpulse> impulses;        // per touched object, this tick
   std::vector<Vec3> toolForce, toolTorque;  // per body, applied over this step
   std::unique_ptr<TripleBuffer<std::vector<Isometry3>>> renderPoses;
+  std::unique_ptr<SoftTissues> soft;  // the soft objects, stepped after the rigid bodies
   std::uint64_t steps = 0;
   double lastDt = 0.0;
 
@@ -180,7 +183,7 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
   const std::string proxy = scene.engines.haptics ? scene.engines.haptics->proxyObject : std::string();
 
   for (const SceneObject& o : scene.objects) {
-    if (o.name == proxy || (!o.dynamic && !o.collide)) continue;
+    if (o.name == proxy || o.soft || (!o.dynamic && !o.collide)) continue;
     const std::string where = "objects/" + o.name;
     const SceneResource* res = scene.resource(o.mesh);
     auto mesh = resources.mesh(o.mesh);
@@ -249,6 +252,9 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
   m->renderPoses = std::make_unique<TripleBuffer<std::vector<Isometry3>>>(
       std::vector<Isometry3>(m->moving.size(), Isometry3::Identity()));
   m->state = m->world.makeState();
+  auto soft = SoftTissues::build(scene, resources);
+  if (!soft) return soft.error();
+  m->soft = std::move(*soft);
   return std::shared_ptr<PhysicsEngine>(new PhysicsEngine(std::move(m)));
 }
 
@@ -273,7 +279,12 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
                                    m.state.linearVelocity(id), m.state.angularVelocity(id));
     }
   }
-  if (auto s = m.world.step(m.state, dt); !s) {
+  if (!m.moving.empty())  // (static bodies alone never move)
+    if (auto s = m.world.step(m.state, dt); !s) {
+      error_ = s.error().within("physics step " + std::to_string(m.steps));
+      return false;
+    }
+  if (auto s = m.soft->step(dt); !s) {
     error_ = s.error().within("physics step " + std::to_string(m.steps));
     return false;
   }
@@ -290,6 +301,10 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
   m.renderPoses->publish();
   return true;
 }
+
+const std::vector<std::string>& PhysicsEngine::softObjects() const noexcept { return impl_->soft->names(); }
+HapticTissue* PhysicsEngine::tissue(std::string_view object) noexcept { return impl_->soft->tissue(object); }
+bool PhysicsEngine::latestSurface(std::size_t i, Mesh& out) { return impl_->soft->latestSurface(i, out); }
 
 bool PhysicsEngine::latestPoses(std::vector<Isometry3>& out) {
   if (!impl_->renderPoses->update()) return false;
@@ -317,23 +332,24 @@ nlohmann::json PhysicsEngine::summary() const {
     const Quat& q = m.state.orientation(body.id);
     Json j = {{"name", body.object},
               {"mass_kg", m.world.bodies()[body.id.index].mass},
-              {"position_m", vecJson(m.state.position(body.id))},
+              {"position_m", engine_json::vec3(m.state.position(body.id))},
               {"displacement_m", (m.state.position(body.id) - body.start).norm()},
               {"orientation_wxyz", Json::array({q.w(), q.x(), q.y(), q.z()})},
-              {"velocity_m_s", vecJson(m.state.linearVelocity(body.id))},
-              {"angular_velocity_rad_s", vecJson(m.state.angularVelocity(body.id))},
+              {"velocity_m_s", engine_json::vec3(m.state.linearVelocity(body.id))},
+              {"angular_velocity_rad_s", engine_json::vec3(m.state.angularVelocity(body.id))},
               {"asleep", m.state.asleep(body.id)},
-              {"contact_force_N", vecJson(contactForce[b])},
-              {"tool_force_N", vecJson(m.toolForce[b])}};
+              {"contact_force_N", engine_json::vec3(contactForce[b])},
+              {"tool_force_N", engine_json::vec3(m.toolForce[b])}};
     for (std::size_t k = 0; k < m.touchedBody.size(); ++k)
       if (m.touchedBody[k] == static_cast<int>(b) && m.tools)
-        j["tool_impulse_Ns"] = vecJson(m.tools->taken(k).linear);
+        j["tool_impulse_Ns"] = engine_json::vec3(m.tools->taken(k).linear);
     bodies.push_back(std::move(j));
   }
   return {{"steps", m.steps},
           {"bodies", std::move(bodies)},
           {"static_bodies", m.bodies.size() - m.moving.size()},
-          {"contacts", m.state.contacts().size()}};
+          {"contacts", m.state.contacts().size()},
+          {"soft", m.soft->summary()}};
 }
 
 }  // namespace dm

@@ -1,7 +1,10 @@
 // physics_engine.hpp (private) — the physics engine of a scene run: the
 // scene's objects as rigid bodies of one dm::PhysicsWorld (dynamic objects
 // move, the others are static colliders), stepped at the engine's rate, with
-// the haptic tool's impulses applied and the new poses handed on.
+// the haptic tool's impulses applied and the new poses handed on; and its
+// soft objects as FEM bodies (soft_tissue.hpp), stepped after the rigid
+// bodies at the same rate, pressed by the god-object through their
+// HapticTissue and drawn deformed.
 //
 // Data flow per physics tick (docs/architecture.md, "Scene runtime"):
 //   haptics → ToolImpulseChannel → the impulse the tool gave each touched
@@ -23,6 +26,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace dm {
@@ -30,15 +34,17 @@ namespace dm {
 struct SceneDesc;
 struct SceneResources;
 class HapticLocalModel;
+class HapticTissue;
 class ToolImpulseChannel;
+struct Mesh;
 
 /// The physics engine; build() it before the haptics engine, which takes
 /// its hapticModel() and toolImpulses().
 class PhysicsEngine final : public Engine {
  public:
   /// Bodies from `scene` (which has engines.physics): every object with
-  /// "dynamic" a rigid body, every other object that collides a static one,
-  /// the haptics proxy object none. `touched` are the haptics engine's
+  /// "dynamic" a rigid body, every "soft" one an FEM body, every other
+  /// object that collides a static one, the haptics proxy object none. `touched` are the haptics engine's
   /// objects in its order (empty without haptics). Fails naming the object
   /// (a mesh that is not closed, a bad mass) before anything runs.
   static Result<std::shared_ptr<PhysicsEngine>> build(const SceneDesc& scene, const SceneResources& resources,
@@ -58,6 +64,14 @@ class PhysicsEngine final : public Engine {
 
   /// The objects physics moves (dynamic ones), in scene order.
   const std::vector<std::string>& movingObjects() const noexcept { return movingNames_; }
+  /// The soft objects, in scene order; tissue(name) is the haptic side of
+  /// one (for a TissueGodObject), nullptr for any other name.
+  const std::vector<std::string>& softObjects() const noexcept;
+  HapticTissue* tissue(std::string_view object) noexcept;
+  /// Render thread (one reader): soft object i's deformed surface (object
+  /// frame, before its scale) when a step finished since the last call,
+  /// and on the first call (SoftTissues::latestSurface).
+  bool latestSurface(std::size_t i, Mesh& out);
   /// Render thread (one reader): the newest poses of movingObjects()
   /// (object frame → world) when a step finished since the last call.
   bool latestPoses(std::vector<Isometry3>& out);

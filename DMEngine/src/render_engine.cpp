@@ -155,12 +155,25 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     return ok();
   }
 
+  // The soft objects' deformed surfaces (the physics engine's newest step),
+  // swapped in before drawing: in place once the topology is set.
+  Status updateSoft() {
+    if (!feed_.softSurface) return ok();
+    softSurfaces_.resize(feed_.softObjects.size());
+    for (std::size_t i = 0; i < feed_.softObjects.size(); ++i)
+      if (feed_.softSurface(i, softSurfaces_[i]))
+        if (auto s = view_.updateObjectMesh(feed_.softObjects[i], softSurfaces_[i]); !s)
+          return s.error().within("engines/render");
+    return ok();
+  }
+
   // A frame while loading, neither counted nor written: the driver compiles
   // the frame's shader variants (llvmpipe JIT-compiles them at the first
   // draw, ~200 ms) and the HUD's atlas and plot here, not in the first
   // real-time period, which would cost the run its first frames.
   Status warmUp() {
     if (auto s = updateMillable(); !s) return s;  // the whole bone's surface, meshed once here
+    if (auto s = updateSoft(); !s) return s;      // the tissues at rest
     if (auto r = view_.render(target_, camera_, 0.0); !r) return r.error();
     hud(0.0, false, Vec3::Zero());
     overlay_.begin(target_);
@@ -187,6 +200,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   std::vector<float> recent_;
   std::vector<Isometry3> poses_;  // of feed_.movingObjects
   Mesh surface_;                  // the milled object's, as drawn
+  std::vector<Mesh> softSurfaces_;  // of feed_.softObjects, as drawn
   Error error_;
   TickTime time_;
 
@@ -209,6 +223,11 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
           return false;
         }
     if (auto s = updateMillable(); !s) {
+      error_ = s.error();
+      ctx_->release();
+      return false;
+    }
+    if (auto s = updateSoft(); !s) {
       error_ = s.error();
       ctx_->release();
       return false;

@@ -37,6 +37,11 @@ struct RenderFeed {
   /// (dm::MillableSurfaceFeed::update); empty when nothing is milled.
   std::string millableObject;
   std::function<Result<bool>(Mesh& surface)> millableSurface;
+  /// Soft objects physics deforms, and soft object i's surface (its frame,
+  /// before its scale): true when it changed since the last call and on the
+  /// first call; triangles set on the first call, positions every time.
+  std::vector<std::string> softObjects;
+  std::function<bool(std::size_t i, Mesh& surface)> softSurface;
 };
 
 /// Counters of a render engine (control thread, after stop).

@@ -11,6 +11,7 @@
 #include <dm/haptics/god_object.hpp>
 #include <dm/haptics/haptic_loop.hpp>
 #include <dm/haptics/probe.hpp>
+#include <dm/haptics/tissue.hpp>
 #include <dm/haptics/tool_impulse.hpp>
 #include <dm/io/drivers.hpp>
 #include <dm/io/haptic_device.hpp>
@@ -88,8 +89,9 @@ class HapticsEngine final : public Engine {
     return true;
   }
   std::unique_ptr<HapticDevice> device;
+  std::unique_ptr<GodObjectRenderer> feltGodObject;  // inside renderer, when it presses soft tissue
   std::unique_ptr<HapticRenderer> renderer;
-  GodObjectRenderer* godObject = nullptr;  // = renderer, when it is the god-object
+  GodObjectRenderer* godObject = nullptr;  // = renderer (or inside it), when it is the god-object
   BurrRenderer* burr = nullptr;            // = renderer, when it is the burr
   std::unique_ptr<MillableSurfaceFeed> boneFeed;
   std::string milledObject;
@@ -286,7 +288,17 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
     auto g = buildGodObject();
     if (!g) return g.error();
     e->godObject = g->get();
-    e->renderer = std::move(*g);
+    // Soft objects it touches: their surfaces come from physics each tick
+    // and the grip goes back (dm::TissueGodObject).
+    std::vector<TissueBinding> felt;
+    for (std::size_t k = 0; k < h.objects.size() && physics; ++k)
+      if (HapticTissue* t = physics->tissue(h.objects[k])) felt.push_back({t, k});
+    if (felt.empty()) {
+      e->renderer = std::move(*g);
+    } else {
+      e->feltGodObject = std::move(*g);
+      e->renderer = std::make_unique<TissueGodObject>(*e->godObject, felt);
+    }
   } else {
     return fail(
         ErrorCode::Unsupported, "dmplatform run drives the god-object and burr renderers",
@@ -352,12 +364,17 @@ Result<std::unique_ptr<GodObjectRenderer>> SceneRuntime::Impl::buildGodObject() 
       return fail(ErrorCode::InvalidArgument, "touchable object \"" + name + "\" has no haptic material",
                   "objects/" + name + "/material",
                   "give its material a \"haptic\" block with stiffness (N/m) and friction");
-    auto mesh = resources.mesh(o->mesh);
-    if (!mesh) return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", "objects/" + name);
-    auto bvh = objectBvh(*mesh, o->scale);
-    if (!bvh) return bvh.error().within("objects/" + name);
     GodObjectObject g;
-    g.bvh = std::make_shared<const MeshBvh>(std::move(*bvh));
+    if (HapticTissue* t = physics ? physics->tissue(name) : nullptr) {
+      g.bvh = t->restTree();  // the FEM body's surface, deformed by physics
+    } else {
+      auto mesh = resources.mesh(o->mesh);
+      if (!mesh)
+        return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", "objects/" + name);
+      auto bvh = objectBvh(*mesh, o->scale);
+      if (!bvh) return bvh.error().within("objects/" + name);
+      g.bvh = std::make_shared<const MeshBvh>(std::move(*bvh));
+    }
     g.pose = o->pose.isometry();
     g.material = {.stiffness = mat->haptic->stiffness,
                   .damping = mat->haptic->damping,
@@ -431,6 +448,10 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
     if (physics) {
       feed.movingObjects = physics->movingObjects();
       feed.objectPoses = [p = physics.get()](std::vector<Isometry3>& poses) { return p->latestPoses(poses); };
+      feed.softObjects = physics->softObjects();
+      feed.softSurface = [p = physics.get()](std::size_t i, Mesh& surface) {
+        return p->latestSurface(i, surface);
+      };
     }
     if (haptics) {
       HapticsEngine* h = haptics.get();

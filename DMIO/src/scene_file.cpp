@@ -191,6 +191,7 @@ class SceneParser {
     outputs();
     physicsBodies();
     checkSurgery(scene_, root_);
+    checkSoft(scene_, root_);
   }
 
   bool badVersion() const { return badVersion_; }
@@ -487,7 +488,7 @@ class SceneParser {
       if (!expectObject(r)) continue;
       r.knownKeys({"name", "mesh", "render_mesh", "material", "pose", "scale", "visible", "haptic", "dynamic",
                    "mass", "density", "velocity", "angular_velocity", "collide", "contact", "millable",
-                   "critical", "inclusion"});
+                   "critical", "inclusion", "soft"});
       SceneObject o;
       o.name = uniqueName(r, objectIndex_, scene_.objects.size());
       std::size_t before = r.errors().size();
@@ -512,6 +513,7 @@ class SceneParser {
       if (v2Key(r, "millable")) readMillable(r, o);
       if (v2Key(r, "critical")) readCritical(r, o);
       if (v2Key(r, "inclusion")) readInclusion(r, o);
+      if (v2Key(r, "soft")) readSoft(r, o);
       if (r.has("material") && !o.material.empty() &&
           checkName(r, "material", o.material, materialIndex_, "material", "materials")) {
         if (o.haptic && !scene_.materials[materialIndex_.at(o.material)].haptic)
@@ -573,7 +575,7 @@ class SceneParser {
   void physicsBodies() {
     ConfigReader objects = root_.child("objects");
     const auto& h = scene_.engines.haptics;
-    bool anyDynamic = false;
+    bool anyMoving = false;  // a dynamic or soft object
     for (std::size_t i = 0; i < scene_.objects.size() && objects.isArray() && i < objects.size(); ++i) {
       const SceneObject o = scene_.objects[i];
       ConfigReader r = objects.at(i);
@@ -586,8 +588,9 @@ class SceneParser {
                        " is the tool's picture and collides with nothing",
                    "collide", "remove \"collide\"");
       if (proxy) scene_.objects[i].collide = false;  // what toJson writes back
+      if (o.soft) anyMoving = true;
       if (!o.dynamic) continue;
-      anyDynamic = true;  // a dynamic proxy is reported above, not as "nothing to move" too
+      anyMoving = true;  // a dynamic proxy is reported above, not as "nothing to move" too
       if (proxy) continue;
       if (!scene_.engines.physics)
         r.addError("dynamic object " + inQuotes(o.name) + " but no physics engine runs this scene", "dynamic",
@@ -598,10 +601,10 @@ class SceneParser {
                      "use a thin box shape");
       }
     }
-    if (scene_.engines.physics && !anyDynamic)
+    if (scene_.engines.physics && !anyMoving)
       root_.child("engines").child("physics").addError(
-          "the physics engine has no dynamic object to move", {},
-          "set \"dynamic\": true and a mass on an object, or remove the engine");
+          "the physics engine has no dynamic or soft object to move", {},
+          "set \"dynamic\": true and a mass on an object, give one a \"soft\" block, or remove the engine");
   }
 
   void transferFunction(ConfigReader tf, SceneVolume& v) {
@@ -1033,7 +1036,7 @@ bool SceneObject::operator==(const SceneObject& o) const {
          visible == o.visible && haptic == o.haptic && dynamic == o.dynamic && mass == o.mass &&
          density == o.density && velocity == o.velocity && angularVelocity == o.angularVelocity &&
          collide == o.collide && friction == o.friction && restitution == o.restitution &&
-         millable == o.millable && critical == o.critical && inclusion == o.inclusion;
+         millable == o.millable && critical == o.critical && inclusion == o.inclusion && soft == o.soft;
 }
 
 bool SceneHapticsEngine::operator==(const SceneHapticsEngine& o) const {
@@ -1204,9 +1207,12 @@ Json toJson(const SceneDesc& scene) {
       e["velocity"] = toJson(o.velocity);
       e["angular_velocity"] = toJson(o.angularVelocity);
     }
-    e["collide"] = o.collide;
-    e["contact"] = {{"friction", o.friction}, {"restitution", o.restitution}};
+    if (!o.soft) {  // soft objects take part in no rigid contact
+      e["collide"] = o.collide;
+      e["contact"] = {{"friction", o.friction}, {"restitution", o.restitution}};
+    }
     writeSurgery(o, e);
+    writeSoft(o, e);
     objects.push_back(std::move(e));
   }
   j["objects"] = std::move(objects);

@@ -1,5 +1,6 @@
 // scene_parse.hpp (private) — the readers shared by the scene file's
-// sections (scene_file.cpp) and its surgical keys (scene_surgery.cpp):
+// sections (scene_file.cpp), its surgical keys (scene_surgery.cpp) and its
+// soft tissue (scene_soft.cpp):
 // enums by name, vectors, colours, poses, positive numbers, and their JSON.
 #pragma once
 
@@ -211,5 +212,11 @@ void readBurr(ConfigReader& haptics, SceneHapticsEngine& h);
 void checkSurgery(const SceneDesc& scene, ConfigReader root);
 void writeSurgery(const SceneObject& o, Json& object);
 void writeBurr(const SceneBurr& b, Json& haptics);
+
+// Soft tissue (scene_soft.cpp): an object's "soft" block, its checks once
+// the whole scene is read, and its JSON.
+void readSoft(ConfigReader& object, SceneObject& o);
+void checkSoft(const SceneDesc& scene, ConfigReader root);
+void writeSoft(const SceneObject& o, Json& object);
 
 }  // namespace dm::scene_parse

@@ -14,13 +14,17 @@
 //     the other objects static colliders; the god-object feels the moving
 //     bodies where physics has them (HapticLocalModel) and pushes them back
 //     with the tool's impulses (dm::ToolImpulseChannel), so the hand and the
-//     body exchange equal and opposite momentum;
+//     body exchange equal and opposite momentum; every "soft" object an FEM
+//     body (dm::FemBody on tetrahedra from its mesh, held faces, gravity)
+//     that the god-object presses through dm::HapticTissue — felt on its
+//     newest surface at the haptic rate, deformed at the physics rate;
 //   - render: a headless EGL context on the render engine's own thread,
 //     dm::SceneView drawing the render camera with the tool object following
 //     the haptic proxy, a HUD (time, force, force plot) from dm::Overlay,
 //     frames read back and written as PNG by a writer thread; a milled
 //     object is drawn as its volume's surface, each frame remeshing only
-//     the blocks the burr changed (dm::MillableSurfaceFeed);
+//     the blocks the burr changed (dm::MillableSurfaceFeed); a soft object
+//     as its deformed boundary;
 //   - monitor: drains the haptic samples into the force trace.
 // prepare() builds and loads them (a model that cannot be built fails there,
 // before anything runs); run() starts them in lockstep on a virtual clock (bit-reproducible) or on
@@ -29,7 +33,9 @@
 // forces.csv, forces.png and summary.json (achieved rate and tick-time
 // percentiles per engine, deadline misses, contacts, maximum and final force,
 // frames; each dynamic body's final state, displacement, contact and tool
-// forces of the last step, and the tool impulse it received; with the burr,
+// forces of the last step, and the tool impulse it received; each soft
+// body's model, solver counters, deformation and the tool's, held and
+// weight forces; with the burr,
 // removed volume per material, closest approach to critical structures and
 // the time within the warning margin).
 // User code adds engines of its own (addEngine) before run().

@@ -35,6 +35,7 @@
 #include <dm/core/types.hpp>
 #include <dm/math/phantom.hpp>
 
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <limits>
@@ -154,6 +155,30 @@ struct SceneInclusion {
   bool operator==(const SceneInclusion&) const = default;
 };
 
+/// Soft tissue (v2 "soft"): the object is a deformable body — co-rotational
+/// FEM (dm::FemBody) on tetrahedra made from its mesh — that the physics
+/// engine steps, the god-object presses (felt at the haptic rate through
+/// dm::HapticTissue) and the render engine draws deformed.
+struct SceneSoft {
+  /// Faces of the object's rest bounding box (object frame) whose nodes are
+  /// held in place; face i (in kFaces) is bit 1 << i of fixedFaces.
+  static constexpr std::array<std::string_view, 6> kFaces{"-x", "+x", "-y", "+y", "-z", "+z"};
+
+  double youngsModulus = 0.0;  ///< E, Pa, > 0 (soft tissue: 1e3–1e5)
+  double poissonRatio = 0.45;  ///< ν, 0 ≤ ν < 0.5
+  double density = 1000.0;     ///< kg/m³, > 0
+  double alpha = 0.0;          ///< Rayleigh mass damping, 1/s, ≥ 0 ("damping": {"alpha"})
+  double beta = 0.0;           ///< Rayleigh stiffness damping, s, ≥ 0 ("damping": {"beta"})
+  /// m, > 0, ≤ 0.05: tetrahedra edge scale. A box shape splits into cubes of
+  /// about this size (its faces kept exactly); any other closed mesh is
+  /// voxelized at it (a voxel-shaped surface).
+  double voxelSize = 0.0;
+  std::uint8_t fixedFaces = 0;    ///< bit i: kFaces[i] is held ("fixed": ["-z"])
+  std::size_t maxTets = 100'000;  ///< a larger model is an error before it is built, ≤ 4,000,000
+
+  bool operator==(const SceneSoft&) const = default;
+};
+
 /// A mesh placed in the world.
 struct SceneObject {
   std::string name;
@@ -177,6 +202,7 @@ struct SceneObject {
   std::optional<SceneMillable> millable;  ///< v2: bone the burr renderer mills
   std::optional<SceneCritical> critical;  ///< v2: a structure the burr must not reach
   std::optional<SceneInclusion> inclusion;  ///< v2: another material of the millable bone
+  std::optional<SceneSoft> soft;            ///< v2: soft tissue the physics engine deforms
 
   bool operator==(const SceneObject& o) const;
 };

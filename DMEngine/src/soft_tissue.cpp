@@ -1,0 +1,226 @@
+// soft_tissue.cpp — a scene's soft objects as FEM bodies (soft_tissue.hpp).
+#include "soft_tissue.hpp"
+
+#include <dm/core/triple_buffer.hpp>
+#include <dm/haptics/god_object.hpp>
+#include <dm/haptics/tissue.hpp>
+#include <dm/io/scene_file.hpp>
+#include <dm/io/scene_resources.hpp>
+#include <dm/math/voxelize.hpp>
+#include <dm/physics/fem.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "engine_json.hpp"
+
+namespace dm {
+
+namespace {
+
+// The tetrahedra of soft object `o` in its frame, at its scale (m).
+Result<TetMesh> softTetMesh(const SceneObject& o, const SceneResource& res, const Mesh& mesh) {
+  const SceneSoft& s = *o.soft;
+  if (res.type == SceneResource::Type::Shape && res.shape == SceneResource::Shape::Box) {
+    // Cubes of about voxel_size that fill the box exactly: the tissue's
+    // surface is the box the scene draws.
+    const Vec3 size = 2.0 * res.halfExtents * o.scale;
+    Vec3i cells;
+    for (int a = 0; a < 3; ++a)
+      cells[a] = static_cast<int>(std::clamp(std::round(size[a] / s.voxelSize), 1.0, 1e6));
+    return tetMeshBox(cells, size, -0.5 * size, s.maxTets);
+  }
+  Mesh scaled = mesh;
+  if (o.scale != 1.0) scaled.transform(Affine3(Eigen::Scaling(o.scale)));
+  auto occupancy = voxelizeMesh(scaled, {.voxelSize = s.voxelSize, .paddingVoxels = 1});
+  if (!occupancy) return occupancy.error();
+  return tetMeshFromVolume(*occupancy, {.threshold = 0.5, .maxTets = s.maxTets});
+}
+
+}  // namespace
+
+struct SoftTissues::Body {
+  std::string name;
+  Isometry3 pose = Isometry3::Identity();  // object → world
+  double scale = 1.0;
+  std::unique_ptr<FemBody> fem;
+  std::unique_ptr<HapticTissue> haptic;
+  std::size_t fixedNodes = 0;
+  // The surface the render engine draws: its vertices are these body nodes.
+  std::vector<std::uint32_t> surfaceNodes;
+  std::vector<Triangle> surfaceTriangles;  // indexing surfaceNodes
+  std::unique_ptr<TripleBuffer<std::vector<Vec3>>> surface;
+  // Counters (physics thread; read after the run).
+  std::uint64_t steps = 0, unconverged = 0, cgIterations = 0;
+  int cgMax = 0;
+  double maxToolForce = 0.0;
+  Vec3 restCenterOfMass = Vec3::Zero();  // object frame
+};
+
+SoftTissues::~SoftTissues() = default;
+
+// The surface the render engine draws: the boundary's nodes, renumbered.
+// With `creases` (a box: its faces are exact) a node on an edge gets one
+// vertex per face it lies on (rest normals more than 60° apart), so the
+// renderer's per-vertex normals keep the edges sharp as the tissue deforms;
+// otherwise (a voxelized mesh) one vertex per node, whose averaged normals
+// smooth the voxels' steps.
+void SoftTissues::drawnSurface(const FemBody& fem, bool creases, Body& b) {
+  constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+  const std::vector<Vec3>& x = fem.positions();
+  std::vector<std::uint32_t> first(fem.nodeCount(), kNone);  // node → its first vertex
+  std::vector<std::uint32_t> next;                           // vertex → the node's next vertex
+  std::vector<Vec3> normal;                                  // vertex → the rest normal of its face
+  for (const Triangle& t : fem.surfaceTriangles()) {
+    const Vec3 n = (x[t[1]] - x[t[0]]).cross(x[t[2]] - x[t[0]]).normalized();
+    Triangle r;
+    for (int k = 0; k < 3; ++k) {
+      std::uint32_t v = first[t[k]];
+      while (v != kNone && creases && normal[v].dot(n) < 0.5) v = next[v];
+      if (v == kNone) {
+        v = static_cast<std::uint32_t>(b.surfaceNodes.size());
+        b.surfaceNodes.push_back(t[k]);
+        normal.push_back(n);
+        next.push_back(first[t[k]]);
+        first[t[k]] = v;
+      }
+      r[k] = v;
+    }
+    b.surfaceTriangles.push_back(r);
+  }
+}
+
+Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
+                                                        const SceneResources& resources) {
+  std::unique_ptr<SoftTissues> out(new SoftTissues());
+  const auto& haptics = scene.engines.haptics;
+  const Vec3 gravity = scene.engines.physics ? scene.engines.physics->gravity : Vec3::Zero();
+  for (const SceneObject& o : scene.objects) {
+    if (!o.soft) continue;
+    const std::string where = "objects/" + o.name;
+    const SceneSoft& s = *o.soft;
+    const SceneResource* res = scene.resource(o.mesh);
+    auto mesh = resources.mesh(o.mesh);
+    if (res == nullptr || !mesh)
+      return fail(ErrorCode::NotFound, "mesh \"" + o.mesh + "\" was not loaded", where);
+    const bool isBox = res->type == SceneResource::Type::Shape && res->shape == SceneResource::Shape::Box;
+    auto tets = softTetMesh(o, *res, *mesh);
+    if (!tets) return tets.error().within(where + "/soft");
+    auto fem = FemBody::create(
+        *tets, {.youngsModulus = s.youngsModulus, .poissonRatio = s.poissonRatio, .density = s.density},
+        {.alpha = s.alpha, .beta = s.beta});
+    if (!fem) return fem.error().within(where + "/soft");
+    auto b = std::make_unique<Body>();
+    b->name = o.name;
+    b->pose = o.pose.isometry();
+    b->scale = o.scale;
+    b->fem = std::make_unique<FemBody>(std::move(*fem));
+    b->fem->setGravity(b->pose.linear().transpose() * gravity);
+    b->restCenterOfMass = b->fem->centerOfMass();
+    // The held faces: nodes within a quarter of a tetrahedron's size of a
+    // face of the rest bounding box.
+    Aabb box;
+    for (const Vec3& p : tets->nodes) box.extend(p);
+    const double tol = 0.25 * s.voxelSize;
+    b->fixedNodes = b->fem->fixNodesWhere([&](const Vec3& p) {
+      for (int f = 0; f < 6; ++f) {
+        if (((s.fixedFaces >> f) & 1u) == 0) continue;
+        const int axis = f / 2;
+        const double face = (f % 2 == 0) ? box.min()[axis] : box.max()[axis];
+        if (std::abs(p[axis] - face) <= tol) return true;
+      }
+      return false;
+    });
+    // The god-object's spring on this tissue is its haptic material's.
+    const SceneMaterial* mat = scene.material(o.material);
+    HapticTissueOptions ho;
+    if (mat != nullptr && mat->haptic) ho.stiffness = mat->haptic->stiffness;
+    if (haptics) ho.tipRadius = haptics->toolRadius + GodObjectOptions{}.skin;
+    auto tissue = HapticTissue::create(*b->fem, ho);
+    if (!tissue) return tissue.error().within(where);
+    b->haptic = std::move(*tissue);
+    drawnSurface(*b->fem, isBox, *b);
+    std::vector<Vec3> rest(b->surfaceNodes.size());
+    for (std::size_t i = 0; i < rest.size(); ++i)
+      rest[i] = b->fem->positions()[b->surfaceNodes[i]] / b->scale;
+    b->surface = std::make_unique<TripleBuffer<std::vector<Vec3>>>(rest);
+    b->surface->publish();  // the rest surface: the first frame draws it
+    out->names_.push_back(o.name);
+    out->bodies_.push_back(std::move(b));
+  }
+  return out;
+}
+
+HapticTissue* SoftTissues::tissue(std::string_view name) noexcept {
+  for (const auto& b : bodies_)
+    if (b->name == name) return b->haptic.get();
+  return nullptr;
+}
+
+Status SoftTissues::step(double h) {
+  for (const auto& bp : bodies_) {
+    Body& b = *bp;
+    auto report = b.haptic->step(h);
+    if (!report) return report.error().within("soft object \"" + b.name + "\"");
+    ++b.steps;
+    b.unconverged += !report->converged;
+    b.cgIterations += static_cast<std::uint64_t>(report->cgIterations);
+    b.cgMax = std::max(b.cgMax, report->cgIterations);
+    b.maxToolForce = std::max(b.maxToolForce, b.haptic->toolForce().norm());
+    std::vector<Vec3>& positions = b.surface->writeBuffer();  // sized at build: no allocation
+    const std::vector<Vec3>& x = b.fem->positions();
+    for (std::size_t i = 0; i < positions.size(); ++i) positions[i] = x[b.surfaceNodes[i]] / b.scale;
+    b.surface->publish();
+  }
+  return ok();
+}
+
+bool SoftTissues::latestSurface(std::size_t i, Mesh& out) {
+  if (i >= bodies_.size()) return false;
+  Body& b = *bodies_[i];
+  if (!b.surface->update() && !out.triangles.empty()) return false;
+  if (out.triangles.empty()) out.triangles = b.surfaceTriangles;
+  out.positions = b.surface->readBuffer();
+  out.normals.clear();  // recomputed by the renderer
+  return true;
+}
+
+nlohmann::json SoftTissues::summary() const {
+  Json list = Json::array();
+  std::vector<Vec3> held;
+  for (const auto& bp : bodies_) {
+    const Body& b = *bp;
+    const FemBody& f = *b.fem;
+    double maxDisplacement = 0.0;
+    for (std::size_t i = 0; i < f.nodeCount(); ++i)
+      maxDisplacement = std::max(maxDisplacement, (f.positions()[i] - f.restPositions()[i]).norm());
+    // What holds the body: the fixed nodes' constraint forces. At rest it
+    // balances the tool and the weight.
+    f.computeConstraintForces(held);
+    Vec3 heldForce = Vec3::Zero();
+    for (const Vec3& r : held) heldForce += r;
+    const Mat3 R = b.pose.linear();
+    list.push_back(
+        {{"name", b.name},
+         {"tets", f.tetCount()},
+         {"nodes", f.nodeCount()},
+         {"fixed_nodes", b.fixedNodes},
+         {"surface_triangles", b.surfaceTriangles.size()},
+         {"mass_kg", f.totalMass()},
+         {"steps", b.steps},
+         {"cg_iterations_mean", b.steps > 0 ? double(b.cgIterations) / double(b.steps) : 0.0},
+         {"cg_iterations_max", b.cgMax},
+         {"unconverged_steps", b.unconverged},
+         {"gripped_steps", b.haptic->grippedSteps()},
+         {"max_displacement_m", maxDisplacement},
+         {"center_of_mass_displacement_m", engine_json::vec3(R * (f.centerOfMass() - b.restCenterOfMass))},
+         {"tool_force_N", engine_json::vec3(R * b.haptic->toolForce())},
+         {"max_tool_force_N", b.maxToolForce},
+         {"held_force_N", engine_json::vec3(R * heldForce)},
+         {"weight_N", engine_json::vec3(f.totalMass() * (R * f.gravity()))}});
+  }
+  return list;
+}
+
+}  // namespace dm

@@ -1,0 +1,76 @@
+// soft_tissue.hpp (private) — a scene's soft objects ("soft" blocks) as FEM
+// bodies the physics engine steps, the god-object presses and the render
+// engine draws deformed.
+//
+// Per soft object: tetrahedra from its mesh (a box shape split into cubes
+// of about voxel_size, its faces kept; any other closed mesh voxelized at
+// voxel_size), a dm::FemBody in the object's frame (the scene's scale baked
+// in) with the held faces fixed and gravity turned into that frame, and a
+// dm::HapticTissue joining it to the god-object (stiffness of the object's
+// haptic material, tip radius of the haptics engine's tool).
+//
+// Data flow (docs/architecture.md, "Scene runtime"):
+//   haptics → HapticTissue grip → step() (physics thread): the touched
+//   point pulled toward the device point, implicitly; FEM step;
+//   step() → HapticTissue surface → the god-object (haptic thread);
+//   step() → a TripleBuffer of surface positions → latestSurface()
+//   (render thread).
+// step() allocates nothing (a failed FEM step's message aside).
+#pragma once
+
+#include <dm/core/mesh.hpp>
+#include <dm/core/result.hpp>
+#include <dm/core/types.hpp>
+
+#include <nlohmann/json.hpp>
+
+#include <memory>
+#include <string>
+#include <string_view>
+#include <vector>
+
+namespace dm {
+
+struct SceneDesc;
+struct SceneResources;
+class FemBody;
+class HapticTissue;
+
+class SoftTissues {
+ public:
+  /// Every soft object of `scene` (which has engines.physics), in scene
+  /// order. Fails naming the object (a mesh that cannot be filled, more
+  /// tetrahedra than its max_tets, a bad material) before anything runs.
+  static Result<std::unique_ptr<SoftTissues>> build(const SceneDesc& scene, const SceneResources& resources);
+  ~SoftTissues();
+  SoftTissues(const SoftTissues&) = delete;
+  SoftTissues& operator=(const SoftTissues&) = delete;
+
+  /// Names of the soft objects, in scene order.
+  const std::vector<std::string>& names() const noexcept { return names_; }
+  /// The haptic side of soft object `name`, nullptr when it is not one.
+  HapticTissue* tissue(std::string_view name) noexcept;
+
+  /// Physics thread: steps every body by h; fails naming the object whose
+  /// step failed (a blown-up state).
+  Status step(double h);
+
+  /// Render thread (one reader): soft object i's surface (object frame,
+  /// before the object's scale) when a step finished since the last call,
+  /// and on the first call; its triangles are set on the first call and
+  /// stay, its positions are overwritten.
+  bool latestSurface(std::size_t i, Mesh& out);
+
+  /// Control thread, after the run: each body's model, solver counters,
+  /// deformation and the forces on it (world frame).
+  nlohmann::json summary() const;
+
+ private:
+  struct Body;
+  SoftTissues() = default;
+  static void drawnSurface(const FemBody& fem, bool creases, Body& b);
+  std::vector<std::unique_ptr<Body>> bodies_;
+  std::vector<std::string> names_;
+};
+
+}  // namespace dm

@@ -1,0 +1,201 @@
+// Soft tissue in a scene run: "soft" objects as FEM bodies the physics
+// engine deforms. Checked against mechanics: a cantilever posed and scaled
+// in the world sags in the world's −z exactly as the same FEM model built by
+// hand (gravity turned into the object's frame, held face, scale baked in)
+// and its held face carries its weight; the bundled tissue press
+// (examples/scenes/tissue_press.json) ends at rest with the hand feeling
+// what the tissue feels (Newton's third law across the haptic–physics
+// threads) and the held bottom carrying push plus weight. Lockstep reruns
+// are bit-identical; a model that cannot be built fails before anything
+// runs.
+#include <dm/core/filesystem.hpp>
+#include <dm/engine/scene_runtime.hpp>
+#include <dm/io/scene_file.hpp>
+#include <dm/physics/fem.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <numbers>
+
+#include "../common/build_paths.hpp"
+#include "../common/temp_dir.hpp"
+
+namespace scene_soft_test {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+constexpr double kG = 9.80665;
+
+dm::Vec3 vec(const json& j) { return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()}; }
+
+const json& softBody(const json& summary, const std::string& name) {
+  for (const json& b : summary.at("physics").at("soft"))
+    if (b.at("name") == name) return b;
+  ADD_FAILURE() << "no soft body " << name << " in " << summary.dump(2);
+  static const json none = json::object();
+  return none;
+}
+
+std::string fileText(const fs::path& p) {
+  auto bytes = dm::readFile(p);
+  EXPECT_TRUE(bytes) << bytes.error();
+  return bytes ? std::string(reinterpret_cast<const char*>(bytes->data()), bytes->size()) : std::string();
+}
+
+json runScene(const dm::SceneDesc& scene, double seconds, const fs::path& out) {
+  fs::remove_all(out);
+  auto rt = dm::SceneRuntime::create(scene);
+  EXPECT_TRUE(rt) << rt.error();
+  if (!rt) return {};
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = seconds, .outDir = out});
+  EXPECT_TRUE(r) << r.error();
+  return r ? r->summary : json();
+}
+
+// The bundled tissue press, without its render engine (the mechanics is
+// what is checked here; example_tissue_press_lockstep renders it).
+dm::SceneDesc tissuePress() {
+  std::vector<dm::Error> problems;
+  auto s = dm::readScene(fs::path(dm::test::besideExecutable(DM_EXAMPLE_SCENES_DIR)) / "tissue_press.json",
+                         &problems);
+  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+  dm::SceneDesc scene = *s;
+  scene.engines.render.reset();
+  scene.outputs.frames = false;
+  scene.outputs.plot = false;
+  return scene;
+}
+
+// A 100 × 10 × 10 mm beam (a 50 × 5 × 5 mm box at scale 2) held at its −x
+// end, turned 90° about x: its local y is the world's z, so gravity acts
+// along its local −y.
+constexpr double kBeamE = 1e7, kBeamNu = 0.3, kBeamRho = 1000, kBeamAlpha = 20, kBeamVoxel = 0.0025;
+dm::SceneDesc cantilever() {
+  const std::string text = R"({
+    "format": "dmplatform-scene", "version": 2, "name": "cantilever",
+    "resources": {"beam": {"type": "shape", "shape": "box", "half_extents": [0.025, 0.0025, 0.0025]}},
+    "objects": [
+      {"name": "beam", "mesh": "beam", "scale": 2,
+       "pose": {"position": [0.1, 0.2, 0.3], "euler_deg": [90, 0, 0]},
+       "soft": {"youngs_modulus": 1e7, "poisson_ratio": 0.3, "density": 1000, "damping": {"alpha": 20},
+                "voxel_size": 0.0025, "fixed": ["-x"]}}
+    ],
+    "engines": {"physics": {"rate_hz": 100}},
+    "outputs": {"summary": true}
+  })";
+  std::vector<dm::Error> problems;
+  auto s = dm::parseScene(text, "cantilever.json", fs::temp_directory_path(), &problems);
+  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+  return s ? *s : dm::SceneDesc{};
+}
+
+TEST(SceneSoft, CantileverSagsInTheWorldLikeTheSameModelBuiltByHand) {
+  const dm::SceneDesc scene = cantilever();
+  const json s = runScene(scene, 2.0, dm::test::TempDir("soft_beam").path());
+  const json& b = softBody(s, "beam");
+  // The model: 40 × 4 × 4 cubes of 2.5 mm, six tetrahedra each; the held
+  // face's 5 × 5 nodes.
+  EXPECT_EQ(b.at("tets").get<int>(), 40 * 4 * 4 * 6);
+  EXPECT_EQ(b.at("fixed_nodes").get<int>(), 25);
+  const double mass = kBeamRho * 0.1 * 0.01 * 0.01;
+  EXPECT_NEAR(b.at("mass_kg").get<double>(), mass, 1e-12);
+  EXPECT_EQ(b.at("steps").get<int>(), 200);
+  EXPECT_EQ(b.at("unconverged_steps").get<int>(), 0);
+
+  // The same model by hand, in the object frame (scale baked in), gravity
+  // along local −y (turned by the same rotation, so the inputs are the same
+  // to the bit: the solver's tolerance would otherwise set the agreement),
+  // 200 steps of 10 ms.
+  auto mesh = dm::tetMeshBox({40, 4, 4}, {0.1, 0.01, 0.01}, {-0.05, -0.005, -0.005});
+  ASSERT_TRUE(mesh) << mesh.error();
+  auto body = dm::FemBody::create(
+      *mesh, {.youngsModulus = kBeamE, .poissonRatio = kBeamNu, .density = kBeamRho}, {.alpha = kBeamAlpha});
+  ASSERT_TRUE(body) << body.error();
+  body->fixNodesWhere([](const dm::Vec3& p) { return std::abs(p.x() + 0.05) < 0.25 * kBeamVoxel; });
+  const dm::Mat3 R = scene.objects[0].pose.isometry().linear();
+  body->setGravity(R.transpose() * dm::Vec3(0, 0, -kG));
+  EXPECT_NEAR(body->gravity().y(), -kG, 1e-12);
+  const dm::Vec3 com0 = body->centerOfMass();
+  for (int i = 0; i < 200; ++i) ASSERT_TRUE(body->step(0.01));
+  const dm::Vec3 local = body->centerOfMass() - com0;
+  double maxDisplacement = 0;
+  for (std::size_t i = 0; i < body->nodeCount(); ++i)
+    maxDisplacement = std::max(maxDisplacement, (body->positions()[i] - body->restPositions()[i]).norm());
+
+  // The scene's sag, in the world: the local −y is the world −z.
+  const dm::Vec3 sag = vec(b.at("center_of_mass_displacement_m"));
+  ASSERT_LT(local.y(), 0.0);
+  EXPECT_NEAR(sag.z(), local.y(), 1e-12 * std::abs(local.y())) << sag.transpose();
+  EXPECT_NEAR(sag.x(), local.x(), 1e-15);
+  EXPECT_NEAR(sag.y(), -local.z(), 1e-15);
+  EXPECT_NEAR(b.at("max_displacement_m").get<double>(), maxDisplacement, 1e-12 * maxDisplacement);
+  // Euler–Bernoulli for the tip, q L⁴ / (8 E I) = 1.47 mm: the centre of
+  // mass of a cantilever under uniform load sags 0.4 × the tip's deflection
+  // (∫₀ᴸ w dx / L with w = q x²(6L² − 4Lx + x²)/(24 E I)); four linear
+  // tetrahedra across are stiffer than the beam (Tests/DMPhysics/fem_test
+  // measures the convergence), so the sag lies below it, and above half.
+  const double I = 0.01 * 0.01 * 0.01 * 0.01 / 12.0, q = mass / 0.1 * kG;
+  const double comBeam = 0.4 * q * std::pow(0.1, 4) / (8.0 * kBeamE * I);
+  EXPECT_LT(-sag.z(), comBeam);
+  EXPECT_GT(-sag.z(), 0.5 * comBeam);
+  // At rest the held face carries the weight: held + weight = 0.
+  const dm::Vec3 held = vec(b.at("held_force_N")), weight = vec(b.at("weight_N"));
+  EXPECT_NEAR(weight.z(), -mass * kG, 1e-9);
+  EXPECT_LE((held + weight).norm(), 1e-3 * mass * kG) << held.transpose();
+}
+
+TEST(SceneSoft, TissuePressHandFeelsWhatTheTissueFeels) {
+  const json s = runScene(tissuePress(), 4.0, dm::test::TempDir("soft_press").path());
+  const json& pad = softBody(s, "pad");
+  EXPECT_GE(pad.at("tets").get<int>(), 5000);
+  EXPECT_EQ(pad.at("unconverged_steps").get<int>(), 0);
+  EXPECT_GT(pad.at("gripped_steps").get<int>(), 300);  // pressed from about 0.44 s on, 100 steps a second
+  // At rest the hand feels the tissue's force on the tool (Newton's third
+  // law across the haptic and physics threads), to 1 %.
+  const dm::Vec3 hand = vec(s.at("haptics").at("final_force_N"));
+  const dm::Vec3 onTissue = vec(pad.at("tool_force_N"));
+  ASSERT_GT(hand.z(), 0.5) << "the stylus no longer presses";
+  EXPECT_LE((hand + onTissue).norm(), 0.01 * hand.norm())
+      << hand.transpose() << " vs " << onTissue.transpose();
+  // The held bottom carries the push and the weight: held + tool + weight = 0.
+  const dm::Vec3 held = vec(pad.at("held_force_N")), weight = vec(pad.at("weight_N"));
+  EXPECT_NEAR(weight.z(), -0.06 * 0.06 * 0.03 * 1000 * kG, 1e-9);
+  EXPECT_LE((held + onTissue + weight).norm(), 0.01 * (onTissue.norm() + weight.norm()))
+      << held.transpose() << " vs " << (onTissue + weight).transpose();
+  // The stylus ends 8 mm below the pad's top: the god-object's spring
+  // (500 N/m) stretches by F/k, the rest is the tissue's dimple.
+  const double stretch = hand.norm() / 500.0;
+  EXPECT_GT(pad.at("max_displacement_m").get<double>(), 0.008 - stretch - 1e-3);
+  EXPECT_LT(pad.at("max_displacement_m").get<double>(), 0.012);
+}
+
+TEST(SceneSoft, LockstepRunsAreBitIdentical) {
+  const dm::SceneDesc scene = tissuePress();
+  const dm::test::TempDir dir("soft_rerun");
+  const json sa = runScene(scene, 1.5, dir / "a");
+  const json sb = runScene(scene, 1.5, dir / "b");
+  EXPECT_EQ(fileText(dir / "a" / "forces.csv"), fileText(dir / "b" / "forces.csv"));
+  EXPECT_EQ(sa.at("physics"), sb.at("physics"));
+  EXPECT_GT(softBody(sa, "pad").at("gripped_steps").get<int>(), 0);  // pressed by then
+}
+
+TEST(SceneSoft, AModelThatCannotBeBuiltFailsBeforeAnythingRuns) {
+  // More tetrahedra than max_tets: the run fails naming the object's soft
+  // block, and no output folder is left behind.
+  dm::SceneDesc scene = tissuePress();
+  for (dm::SceneObject& o : scene.objects)
+    if (o.soft) o.soft->maxTets = 1000;
+  const dm::test::TempDir dir("soft_never");
+  const fs::path out = dir / "out";
+  auto rt = dm::SceneRuntime::create(scene);
+  ASSERT_TRUE(rt) << rt.error();
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 1.0, .outDir = out});
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.error().where.find("objects/pad/soft"), std::string::npos) << r.error();
+  EXPECT_FALSE(fs::exists(out));
+}
+
+}  // namespace scene_soft_test

@@ -1,0 +1,190 @@
+// The scene file's soft tissue (docs/scene-format.md, "Soft tissue"): an
+// object's "soft" block read and written back with its defaults, and every
+// misuse — a bad value, a face that is not one, a soft object the engines
+// cannot deform, keys that contradict it — an error at its JSON pointer.
+#include <dm/io/scene_file.hpp>
+
+#include <gtest/gtest.h>
+
+#include "scene_test_support.hpp"
+
+namespace scene_soft_test {
+
+using dm::Json;
+using namespace scene_test;
+
+// A pad of tissue on a table, pressed by the god-object.
+Json padScene() {
+  return Json::parse(R"({
+    "format": "dmplatform-scene", "version": 2, "name": "press",
+    "resources": {
+      "table": {"type": "shape", "shape": "plane", "half_extents": [0.1, 0.1]},
+      "pad": {"type": "shape", "shape": "box", "half_extents": [0.03, 0.03, 0.01]},
+      "tip": {"type": "shape", "shape": "sphere", "radius": 0.002}
+    },
+    "materials": {"tissue": {"model": "blinn-phong", "haptic": {"stiffness": 500}}},
+    "objects": [
+      {"name": "table", "mesh": "table"},
+      {"name": "pad", "mesh": "pad", "material": "tissue", "haptic": true,
+       "soft": {"youngs_modulus": 2e4, "poisson_ratio": 0.4, "density": 1050,
+                "damping": {"alpha": 2, "beta": 0.01}, "voxel_size": 0.004, "fixed": ["-z", "+x"],
+                "max_tets": 50000}},
+      {"name": "tool", "mesh": "tip"}
+    ],
+    "devices": [{"name": "hand", "driver": "sim-haptic", "config": {"path": "point"}}],
+    "engines": {
+      "haptics": {"device": "hand", "objects": ["pad"], "tool_radius": 0.002, "proxy_object": "tool"},
+      "physics": {"rate_hz": 100}
+    }
+  })");
+}
+
+TEST(SceneSoft, KeysReadAndWriteBackEqual) {
+  auto s = dm::parseScene(padScene().dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const dm::SceneObject& pad = s->objects[1];
+  ASSERT_TRUE(pad.soft);
+  EXPECT_EQ(pad.soft->youngsModulus, 2e4);
+  EXPECT_EQ(pad.soft->poissonRatio, 0.4);
+  EXPECT_EQ(pad.soft->density, 1050);
+  EXPECT_EQ(pad.soft->alpha, 2);
+  EXPECT_EQ(pad.soft->beta, 0.01);
+  EXPECT_EQ(pad.soft->voxelSize, 0.004);
+  EXPECT_EQ(pad.soft->fixedFaces, (1u << 4) | (1u << 1));  // "-z" and "+x"
+  EXPECT_EQ(pad.soft->maxTets, 50000u);
+  EXPECT_FALSE(pad.collide) << "soft objects take part in no rigid contact";
+  const Json back = dm::toJson(*s);
+  EXPECT_FALSE(back["objects"][1].contains("contact"));
+  EXPECT_EQ(back["objects"][1]["soft"]["fixed"], Json::parse(R"(["+x", "-z"])"));
+  auto again = dm::parseScene(back.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(again) << again.error();
+  EXPECT_TRUE(*s == *again);
+  // Defaults: ν 0.45, water's density, no damping, nothing held.
+  Json j = padScene();
+  j["objects"][1]["soft"] = {{"youngs_modulus", 5000}, {"voxel_size", 0.005}};
+  auto d = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(d) << d.error();
+  const dm::SceneSoft& soft = *d->objects[1].soft;
+  EXPECT_EQ(soft.poissonRatio, 0.45);
+  EXPECT_EQ(soft.density, 1000);
+  EXPECT_EQ(soft.alpha, 0);
+  EXPECT_EQ(soft.beta, 0);
+  EXPECT_EQ(soft.fixedFaces, 0);
+  EXPECT_EQ(soft.maxTets, 100000u);
+}
+
+TEST(SceneSoft, BadValuesAreErrorsAtTheirKeys) {
+  Json j = padScene();
+  Json& soft = j["objects"][1]["soft"];
+  soft["youngs_modulus"] = 0;
+  soft["poisson_ratio"] = 0.5;
+  soft["damping"] = {{"alpha", -1}, {"gamma", 1}};
+  soft["voxel_size"] = 0.2;
+  soft["fixed"] = Json::parse(R"(["-z", "bottom", 3, "-z"])");
+  soft["max_tets"] = 10.5;
+  soft["stiffness"] = 1;
+  const auto problems = problemsOf(j);
+  const std::string p = "/objects/1/soft";
+  EXPECT_TRUE(at(problems, p + "/youngs_modulus"));
+  if (const dm::Error* e = at(problems, p + "/poisson_ratio")) {
+    EXPECT_NE(e->what.find("incompressible"), std::string::npos);
+  }
+  EXPECT_TRUE(at(problems, p + "/damping/alpha"));
+  EXPECT_TRUE(at(problems, p + "/damping/gamma"));
+  EXPECT_TRUE(at(problems, p + "/voxel_size"));
+  if (const dm::Error* e = at(problems, p + "/fixed/1")) {
+    EXPECT_NE(e->what.find("\"bottom\""), std::string::npos);
+  }
+  EXPECT_TRUE(at(problems, p + "/fixed/2"));
+  if (const dm::Error* e = at(problems, p + "/fixed/3")) {
+    EXPECT_NE(e->what.find("twice"), std::string::npos);
+  }
+  EXPECT_TRUE(at(problems, p + "/max_tets"));
+  EXPECT_TRUE(at(problems, p + "/stiffness"));
+  // A version-1 file has no soft tissue.
+  Json v1 = padScene();
+  v1["version"] = 1;
+  v1["objects"][1].erase("soft");
+  v1["objects"][1]["soft"] = {{"youngs_modulus", 5000}, {"voxel_size", 0.005}};
+  const auto v1Problems = problemsOf(v1);
+  EXPECT_TRUE(at(v1Problems, "/objects/1/soft"));
+}
+
+TEST(SceneSoft, ASoftObjectTheEnginesCannotDeformIsAnError) {
+  {  // no physics engine
+    Json j = padScene();
+    j["engines"].erase("physics");
+    const auto found1 = problemsOf(j);
+    if (const dm::Error* e = at(found1, "/objects/1/soft")) {
+      EXPECT_NE(e->what.find("no physics engine"), std::string::npos) << e->what;
+    }
+  }
+  {  // rigid keys on tissue
+    Json j = padScene();
+    j["objects"][1]["dynamic"] = true;
+    j["objects"][1]["mass"] = 0.1;
+    j["objects"][1]["collide"] = true;
+    j["objects"][1]["contact"] = {{"friction", 0.2}};
+    const auto problems = problemsOf(j);
+    EXPECT_TRUE(at(problems, "/objects/1/dynamic"));
+    EXPECT_TRUE(at(problems, "/objects/1/collide"));
+    EXPECT_TRUE(at(problems, "/objects/1/contact"));
+  }
+  {  // a dynamic body elsewhere would pass through the tissue
+    Json j = padScene();
+    j["resources"]["box"] = {{"type", "shape"}, {"shape", "box"}, {"half_extents", {0.01, 0.01, 0.01}}};
+    j["objects"].push_back({{"name", "box"}, {"mesh", "box"}, {"dynamic", true}, {"mass", 0.1}});
+    const auto found2 = problemsOf(j);
+    if (const dm::Error* e = at(found2, "/objects/1/soft")) {
+      EXPECT_NE(e->what.find("\"box\""), std::string::npos) << e->what;
+    }
+  }
+  {  // drawn by another object too, a render mesh, a plane
+    Json j = padScene();
+    j["objects"].push_back({{"name", "copy"}, {"mesh", "pad"}});
+    j["objects"][1]["render_mesh"] = "tip";
+    const auto problems = problemsOf(j);
+    if (const dm::Error* e = at(problems, "/objects/1/mesh")) {
+      EXPECT_NE(e->what.find("\"copy\""), std::string::npos) << e->what;
+    }
+    EXPECT_TRUE(at(problems, "/objects/1/render_mesh"));
+    Json plane = padScene();
+    plane["objects"][1]["mesh"] = "table";
+    plane["objects"][0]["mesh"] = "pad";
+    const auto found3 = problemsOf(plane);
+    if (const dm::Error* e = at(found3, "/objects/1/mesh")) {
+      EXPECT_NE(e->what.find("plane"), std::string::npos) << e->what;
+    }
+  }
+  {  // the tool's picture, and a renderer that does not press tissue
+    Json j = padScene();
+    j["objects"][2]["soft"] = {{"youngs_modulus", 5000}, {"voxel_size", 0.001}};
+    const auto found4 = problemsOf(j);
+    if (const dm::Error* e = at(found4, "/objects/2/soft")) {
+      EXPECT_NE(e->what.find("proxy"), std::string::npos) << e->what;
+    }
+    Json vps = padScene();
+    vps["engines"]["haptics"]["renderer"] = "vps";
+    vps["engines"]["haptics"].erase("proxy_object");
+    vps["engines"]["haptics"].erase("tool_radius");
+    const auto found5 = problemsOf(vps);
+    if (const dm::Error* e = at(found5, "/objects/1/soft")) {
+      EXPECT_NE(e->what.find("god-object"), std::string::npos) << e->what;
+    }
+  }
+}
+
+TEST(SceneSoft, PhysicsWithOnlySoftObjectsHasSomethingToMove) {
+  // The physics engine needs something to move: a soft object is enough,
+  // a static table alone is not.
+  Json j = padScene();
+  auto s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  j["objects"][1].erase("soft");
+  const auto found6 = problemsOf(j);
+  if (const dm::Error* e = at(found6, "/engines/physics")) {
+    EXPECT_NE(e->what.find("dynamic or soft"), std::string::npos) << e->what;
+  }
+}
+
+}  // namespace scene_soft_test
