@@ -304,6 +304,7 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
 
 const std::vector<std::string>& PhysicsEngine::softObjects() const noexcept { return impl_->soft->names(); }
 HapticTissue* PhysicsEngine::tissue(std::string_view object) noexcept { return impl_->soft->tissue(object); }
+HapticRenderer* PhysicsEngine::needleRenderer() noexcept { return impl_->soft->needle(); }
 bool PhysicsEngine::latestSurface(std::size_t i, Mesh& out) { return impl_->soft->latestSurface(i, out); }
 
 bool PhysicsEngine::latestPoses(std::vector<Isometry3>& out) {

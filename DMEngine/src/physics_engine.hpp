@@ -34,6 +34,7 @@ namespace dm {
 struct SceneDesc;
 struct SceneResources;
 class HapticLocalModel;
+class HapticRenderer;
 class HapticTissue;
 class ToolImpulseChannel;
 struct Mesh;
@@ -68,6 +69,9 @@ class PhysicsEngine final : public Engine {
   /// one (for a TissueGodObject), nullptr for any other name.
   const std::vector<std::string>& softObjects() const noexcept;
   HapticTissue* tissue(std::string_view object) noexcept;
+  /// The needle renderer going into the soft object with "layers" (the
+  /// haptics engine's renderer; stepped here), nullptr without one.
+  HapticRenderer* needleRenderer() noexcept;
   /// Render thread (one reader): soft object i's deformed surface (object
   /// frame, before its scale) when a step finished since the last call,
   /// and on the first call (SoftTissues::latestSurface).

@@ -91,6 +91,8 @@ class HapticsEngine final : public Engine {
   std::unique_ptr<HapticDevice> device;
   std::unique_ptr<GodObjectRenderer> feltGodObject;  // inside renderer, when it presses soft tissue
   std::unique_ptr<HapticRenderer> renderer;
+  std::shared_ptr<PhysicsEngine> needleOwner;  // owns the needle renderer, when the loop drives that
+  HapticRenderer* active = nullptr;            // what the loop ticks: renderer, or the needle
   GodObjectRenderer* godObject = nullptr;  // = renderer (or inside it), when it is the god-object
   BurrRenderer* burr = nullptr;            // = renderer, when it is the burr
   std::unique_ptr<MillableSurfaceFeed> boneFeed;
@@ -299,12 +301,19 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
       e->feltGodObject = std::move(*g);
       e->renderer = std::make_unique<TissueGodObject>(*e->godObject, felt);
     }
+  } else if (h.renderer == SceneHapticsEngine::Renderer::Needle) {
+    // The needle and its tissue live in the physics engine, which steps
+    // them; the loop ticks the needle's renderer.
+    if (!physics || physics->needleRenderer() == nullptr)
+      return fail(ErrorCode::InvalidArgument, "the needle renderer has no soft object with layers", where,
+                  "name one in \"objects\" and give it \"layers\"");
+    e->needleOwner = physics;
   } else {
     return fail(
-        ErrorCode::Unsupported, "dmplatform run drives the god-object and burr renderers",
+        ErrorCode::Unsupported, "dmplatform run drives the god-object, burr and needle renderers",
         where + "/renderer",
-        "use \"god-object\" or \"burr\"; the VPS and sphere-tree renderers run through dmtool probe and "
-        "the SDK");
+        "use \"god-object\", \"burr\" or \"needle\"; the VPS and sphere-tree renderers run through dmtool "
+        "probe and the SDK");
   }
   const SceneDevice* dev = scene.device(h.device);
   if (dev == nullptr) return fail(ErrorCode::NotFound, "no device \"" + h.device + "\"", where + "/device");
@@ -343,8 +352,10 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   // In lockstep an overrun says how loaded this machine is, not what the
   // simulation did: count it but keep the output (bit-identical reruns).
   config.overrunFades = !lockstep;
+  HapticRenderer& renderer = e->needleOwner ? *e->needleOwner->needleRenderer() : *e->renderer;
+  e->active = &renderer;
   auto loop = HapticLoop::create(
-      {.device = *e->device, .renderer = *e->renderer, .model = physics ? physics->hapticModel() : nullptr},
+      {.device = *e->device, .renderer = renderer, .model = physics ? physics->hapticModel() : nullptr},
       config);
   if (!loop) return loop.error().within(where);
   e->loop = std::move(*loop);
@@ -566,7 +577,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
                 "SceneRuntime::run", "pass the same options to both");
   if (auto s = checkDuration(options); !s) return s.error();
 
-  if (im.haptics) im.haptics->renderer->reset(im.haptics->loop->config().deviceToWorld);
+  if (im.haptics) im.haptics->active->reset(im.haptics->loop->config().deviceToWorld);
   if (auto s = im.master.start(options.mode); !s) return s.error();
 
   // Run: lockstep in 0.1 s chunks of simulated time, real time polling.
@@ -654,7 +665,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
                        {"cpu_steal_s", hostAfter->steal_s - hostBefore->steal_s}};
   if (im.haptics) {
     const HapticLoopStats hs = im.haptics->loop->stats();
-    summary["haptics"] = {{"renderer", im.haptics->burr != nullptr ? "burr" : "god-object"},
+    summary["haptics"] = {{"renderer", std::string(rendererName(scene.engines.haptics->renderer))},
                           {"device", scene.engines.haptics->device},
                           {"ticks", trace.size()},
                           {"contact_ticks", contactTicks},

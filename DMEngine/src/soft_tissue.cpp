@@ -3,11 +3,13 @@
 
 #include <dm/core/triple_buffer.hpp>
 #include <dm/haptics/god_object.hpp>
+#include <dm/haptics/needle.hpp>
 #include <dm/haptics/tissue.hpp>
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
 #include <dm/math/voxelize.hpp>
 #include <dm/physics/fem.hpp>
+#include <dm/physics/needle.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -38,6 +40,27 @@ Result<TetMesh> softTetMesh(const SceneObject& o, const SceneResource& res, cons
   return tetMeshFromVolume(*occupancy, {.threshold = 0.5, .maxTets = s.maxTets});
 }
 
+// Each tetrahedron's needle layer: the layer whose slab (top down from the
+// +z face of the rest bounding box) holds its centroid; the last layer
+// reaches the bottom.
+std::vector<std::uint8_t> tetLayersBySlab(const TetMesh& mesh, double top,
+                                          const std::vector<SceneSoftLayer>& layers) {
+  std::vector<std::uint8_t> out(mesh.tetCount());
+  for (std::size_t t = 0; t < mesh.tetCount(); ++t) {
+    Vec3 c = Vec3::Zero();
+    for (std::uint32_t n : mesh.tets[t]) c += mesh.nodes[n];
+    const double depth = top - 0.25 * c.z();
+    std::size_t layer = 0;
+    double bottom = 0.0;
+    for (; layer + 1 < layers.size(); ++layer) {
+      bottom += layers[layer].thickness;
+      if (depth < bottom) break;
+    }
+    out[t] = static_cast<std::uint8_t>(layer);
+  }
+  return out;
+}
+
 }  // namespace
 
 struct SoftTissues::Body {
@@ -45,7 +68,9 @@ struct SoftTissues::Body {
   Isometry3 pose = Isometry3::Identity();  // object → world
   double scale = 1.0;
   std::unique_ptr<FemBody> fem;
-  std::unique_ptr<HapticTissue> haptic;
+  std::unique_ptr<HapticTissue> haptic;     // pressed by the god-object, or
+  std::unique_ptr<NeedleInsertion> needle;  // a needle goes into it,
+  std::unique_ptr<HapticNeedle> felt;       // felt through this renderer
   std::size_t fixedNodes = 0;
   // The surface the render engine draws: its vertices are these body nodes.
   std::vector<std::uint32_t> surfaceNodes;
@@ -132,14 +157,21 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
       }
       return false;
     });
-    // The god-object's spring on this tissue is its haptic material's.
     const SceneMaterial* mat = scene.material(o.material);
-    HapticTissueOptions ho;
-    if (mat != nullptr && mat->haptic) ho.stiffness = mat->haptic->stiffness;
-    if (haptics) ho.tipRadius = haptics->toolRadius + GodObjectOptions{}.skin;
-    auto tissue = HapticTissue::create(*b->fem, ho);
-    if (!tissue) return tissue.error().within(where);
-    b->haptic = std::move(*tissue);
+    const double stiffness = mat != nullptr && mat->haptic ? mat->haptic->stiffness : 0.0;
+    if (!s.layers.empty() && haptics) {
+      // The needle renderer's tissue (the parser checked that it is).
+      if (auto st = out->attachNeedle(*b, *tets, box.max().z(), s.layers, *haptics, stiffness); !st)
+        return st.error().within(where);
+    } else {
+      // The god-object's spring on this tissue is its haptic material's.
+      HapticTissueOptions ho;
+      if (stiffness > 0) ho.stiffness = stiffness;
+      if (haptics) ho.tipRadius = haptics->toolRadius + GodObjectOptions{}.skin;
+      auto tissue = HapticTissue::create(*b->fem, ho);
+      if (!tissue) return tissue.error().within(where);
+      b->haptic = std::move(*tissue);
+    }
     drawnSurface(*b->fem, isBox, *b);
     std::vector<Vec3> rest(b->surfaceNodes.size());
     for (std::size_t i = 0; i < rest.size(); ++i)
@@ -152,6 +184,45 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
   return out;
 }
 
+Status SoftTissues::attachNeedle(Body& b, const TetMesh& mesh, double top,
+                                 const std::vector<SceneSoftLayer>& layers, const SceneHapticsEngine& h,
+                                 double tipStiffness) {
+  if (!h.needle)
+    return fail(ErrorCode::InvalidArgument, "the needle renderer has no needle", "engines/haptics");
+  const SceneNeedle& n = *h.needle;
+  std::vector<NeedleLayer> needleLayers;
+  for (const SceneSoftLayer& l : layers)
+    needleLayers.push_back(
+        {.punctureForce = l.punctureForce, .cuttingForce = l.cuttingForce, .friction = l.friction});
+  NeedleOptions options{.length = n.length,
+                        .radius = n.radius,
+                        .couplingSpacing = n.couplingSpacing,
+                        .acrossStiffness = n.acrossStiffness,
+                        .alongStiffness = n.alongStiffness};
+  if (tipStiffness > 0) options.tipStiffness = tipStiffness;
+  auto needle = NeedleInsertion::create(*b.fem, tetLayersBySlab(mesh, top, layers), needleLayers, options);
+  if (!needle) return needle.error().within("soft");
+  b.needle = std::make_unique<NeedleInsertion>(std::move(*needle));
+  // The hand's limit is the haptic loop's (max_force, else the device's).
+  auto felt = HapticNeedle::create(*b.needle, {.tip = n.tip,
+                                               .axis = n.axis,
+                                               .normal = n.normal,
+                                               .tissuePose = b.pose,
+                                               .maxForce = 1000.0,
+                                               .maxTorque = n.maxTorque});
+  if (!felt) return felt.error().within("engines/haptics/needle");
+  b.felt = std::move(*felt);
+  layerNames_.clear();
+  for (const SceneSoftLayer& l : layers) layerNames_.push_back(l.name);
+  return ok();
+}
+
+HapticRenderer* SoftTissues::needle() noexcept {
+  for (const auto& b : bodies_)
+    if (b->felt) return b->felt.get();
+  return nullptr;
+}
+
 HapticTissue* SoftTissues::tissue(std::string_view name) noexcept {
   for (const auto& b : bodies_)
     if (b->name == name) return b->haptic.get();
@@ -161,13 +232,13 @@ HapticTissue* SoftTissues::tissue(std::string_view name) noexcept {
 Status SoftTissues::step(double h) {
   for (const auto& bp : bodies_) {
     Body& b = *bp;
-    auto report = b.haptic->step(h);
+    auto report = b.felt ? b.felt->step(h) : b.haptic->step(h);
     if (!report) return report.error().within("soft object \"" + b.name + "\"");
     ++b.steps;
     b.unconverged += !report->converged;
     b.cgIterations += static_cast<std::uint64_t>(report->cgIterations);
     b.cgMax = std::max(b.cgMax, report->cgIterations);
-    b.maxToolForce = std::max(b.maxToolForce, b.haptic->toolForce().norm());
+    b.maxToolForce = std::max(b.maxToolForce, toolForce(b).norm());
     std::vector<Vec3>& positions = b.surface->writeBuffer();  // sized at build: no allocation
     const std::vector<Vec3>& x = b.fem->positions();
     for (std::size_t i = 0; i < positions.size(); ++i) positions[i] = x[b.surfaceNodes[i]] / b.scale;
@@ -184,6 +255,12 @@ bool SoftTissues::latestSurface(std::size_t i, Mesh& out) {
   out.positions = b.surface->readBuffer();
   out.normals.clear();  // recomputed by the renderer
   return true;
+}
+
+// The tool's force on the tissue (body frame): the god-object's spring, or
+// the reverse of the tissue's force on the needle.
+Vec3 SoftTissues::toolForce(const Body& b) noexcept {
+  return b.needle ? Vec3(-b.needle->force()) : b.haptic->toolForce();
 }
 
 nlohmann::json SoftTissues::summary() const {
@@ -212,13 +289,28 @@ nlohmann::json SoftTissues::summary() const {
          {"cg_iterations_mean", b.steps > 0 ? double(b.cgIterations) / double(b.steps) : 0.0},
          {"cg_iterations_max", b.cgMax},
          {"unconverged_steps", b.unconverged},
-         {"gripped_steps", b.haptic->grippedSteps()},
+         {"gripped_steps", b.haptic ? b.haptic->grippedSteps() : 0},
          {"max_displacement_m", maxDisplacement},
          {"center_of_mass_displacement_m", engine_json::vec3(R * (f.centerOfMass() - b.restCenterOfMass))},
-         {"tool_force_N", engine_json::vec3(R * b.haptic->toolForce())},
+         {"tool_force_N", engine_json::vec3(R * toolForce(b))},
          {"max_tool_force_N", b.maxToolForce},
          {"held_force_N", engine_json::vec3(R * heldForce)},
          {"weight_N", engine_json::vec3(f.totalMass() * (R * f.gravity()))}});
+    if (b.needle) {
+      static constexpr const char* kTip[] = {"outside", "pressing", "cutting", "in-track"};
+      const NeedleInsertion& n = *b.needle;
+      const int layer = n.tipLayer();
+      list.back()["needle"] = {{"tip", kTip[static_cast<int>(n.tipState())]},
+                               {"tip_layer", layer >= 0 && std::size_t(layer) < layerNames_.size()
+                                                 ? Json(layerNames_[std::size_t(layer)])
+                                                 : Json(nullptr)},
+                               {"punctures", n.punctureCount()},
+                               {"track_points", n.trackPointCount()},
+                               {"active_couplings", n.activeCouplingCount()},
+                               {"track_length_m", n.trackLength()},
+                               {"force_N", engine_json::vec3(R * n.force())},
+                               {"models_published", b.felt->publishedModels()}};
+    }
   }
   return list;
 }

@@ -7,7 +7,10 @@
 // voxel_size), a dm::FemBody in the object's frame (the scene's scale baked
 // in) with the held faces fixed and gravity turned into that frame, and a
 // dm::HapticTissue joining it to the god-object (stiffness of the object's
-// haptic material, tip radius of the haptics engine's tool).
+// haptic material, tip radius of the haptics engine's tool) — or, for the
+// object with needle "layers", a dm::NeedleInsertion (each tetrahedron's
+// layer from its depth below the top face) felt through a dm::HapticNeedle,
+// the haptics engine's renderer, whose step() runs here.
 //
 // Data flow (docs/architecture.md, "Scene runtime"):
 //   haptics → HapticTissue grip → step() (physics thread): the touched
@@ -34,7 +37,11 @@ namespace dm {
 struct SceneDesc;
 struct SceneResources;
 class FemBody;
+class HapticRenderer;
 class HapticTissue;
+struct SceneHapticsEngine;
+struct SceneSoftLayer;
+struct TetMesh;
 
 class SoftTissues {
  public:
@@ -48,8 +55,13 @@ class SoftTissues {
 
   /// Names of the soft objects, in scene order.
   const std::vector<std::string>& names() const noexcept { return names_; }
-  /// The haptic side of soft object `name`, nullptr when it is not one.
+  /// The god-object's side of soft object `name`, nullptr when it is not
+  /// one or a needle goes into it.
   HapticTissue* tissue(std::string_view name) noexcept;
+  /// The needle renderer (dm::HapticNeedle) going into the soft object with
+  /// "layers", for the haptics engine's loop; nullptr without one. Owned
+  /// here: its step() is the physics thread's.
+  HapticRenderer* needle() noexcept;
 
   /// Physics thread: steps every body by h; fails naming the object whose
   /// step failed (a blown-up state).
@@ -69,6 +81,10 @@ class SoftTissues {
   struct Body;
   SoftTissues() = default;
   static void drawnSurface(const FemBody& fem, bool creases, Body& b);
+  Status attachNeedle(Body& b, const TetMesh& mesh, double top, const std::vector<SceneSoftLayer>& layers,
+                      const SceneHapticsEngine& h, double tipStiffness);
+  static Vec3 toolForce(const Body& b) noexcept;
+  std::vector<std::string> layerNames_;  // of the needle's body
   std::vector<std::unique_ptr<Body>> bodies_;
   std::vector<std::string> names_;
 };

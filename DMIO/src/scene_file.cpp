@@ -38,7 +38,7 @@ constexpr std::array<std::string_view, 3> kVolumeModes{"composite", "mip", "slic
 constexpr std::array<std::string_view, 3> kAxes{"axial", "coronal", "sagittal"};
 constexpr std::array<std::string_view, 3> kLightTypes{"directional", "point", "spot"};
 constexpr std::array<std::string_view, 2> kProjections{"perspective", "orthographic"};
-constexpr std::array<std::string_view, 4> kRenderers{"god-object", "vps", "sphere-tree", "burr"};
+constexpr std::array<std::string_view, 5> kRenderers{"god-object", "vps", "sphere-tree", "burr", "needle"};
 
 // Finds keys that occur twice in one JSON object: nlohmann keeps only the
 // last, which would silently drop e.g. one of two resources named "skin".
@@ -891,7 +891,7 @@ class SceneParser {
   void hapticsEngine(ConfigReader r) {
     if (!expectObject(r)) return;
     r.knownKeys({"rate_hz", "renderer", "device", "object", "objects", "tool_radius", "device_pose",
-                 "max_force", "force_shading", "proxy_object", "burr"});
+                 "max_force", "force_shading", "proxy_object", "burr", "needle"});
     SceneHapticsEngine h;
     h.rateHz = r.number("rate_hz", {.min = 100.0, .max = 10000.0}, h.rateHz);
     h.renderer =
@@ -937,6 +937,7 @@ class SceneParser {
                    "proxy_object", "show the tool with its own object");
     }
     if (v2Key(r, "burr")) readBurr(r, h);
+    if (v2Key(r, "needle")) readNeedle(r, h);
     scene_.engines.haptics = std::move(h);
   }
 
@@ -1039,11 +1040,17 @@ bool SceneObject::operator==(const SceneObject& o) const {
          millable == o.millable && critical == o.critical && inclusion == o.inclusion && soft == o.soft;
 }
 
+std::string_view rendererName(SceneHapticsEngine::Renderer renderer) noexcept {
+  const auto i = static_cast<std::size_t>(renderer);
+  return i < kRenderers.size() ? kRenderers[i] : std::string_view("?");
+}
+
 bool SceneHapticsEngine::operator==(const SceneHapticsEngine& o) const {
   return rateHz == o.rateHz && renderer == o.renderer && device == o.device && objects == o.objects &&
          toolRadius == o.toolRadius && devicePose.p == o.devicePose.p &&
          devicePose.q.coeffs() == o.devicePose.q.coeffs() && maxForce == o.maxForce &&
-         forceShading == o.forceShading && proxyObject == o.proxyObject && burr == o.burr;
+         forceShading == o.forceShading && proxyObject == o.proxyObject && burr == o.burr &&
+         needle == o.needle;
 }
 
 const SceneResource* SceneDesc::resource(std::string_view n) const { return findNamed(resources, n); }
@@ -1303,6 +1310,12 @@ Json toJson(const SceneDesc& scene) {
     engines["haptics"].erase("tool_radius");
     engines["haptics"].erase("force_shading");
     writeBurr(*scene.engines.haptics->burr, engines["haptics"]);
+  }
+  if (scene.engines.haptics && scene.engines.haptics->needle) {
+    // The needle is its block: no proxy radius, no force shading.
+    engines["haptics"].erase("tool_radius");
+    engines["haptics"].erase("force_shading");
+    writeNeedle(*scene.engines.haptics->needle, engines["haptics"]);
   }
   if (const auto& p = scene.engines.physics)
     engines["physics"] = {{"rate_hz", p->rateHz}, {"gravity", toJson(p->gravity)}, {"sleep", p->sleep}};

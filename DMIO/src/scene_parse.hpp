@@ -218,5 +218,8 @@ void writeBurr(const SceneBurr& b, Json& haptics);
 void readSoft(ConfigReader& object, SceneObject& o);
 void checkSoft(const SceneDesc& scene, ConfigReader root);
 void writeSoft(const SceneObject& o, Json& object);
+// The haptics engine's "needle" block (the needle renderer's needle).
+void readNeedle(ConfigReader& haptics, SceneHapticsEngine& h);
+void writeNeedle(const SceneNeedle& n, Json& haptics);
 
 }  // namespace dm::scene_parse

@@ -1,7 +1,10 @@
 // scene_soft.cpp — the scene file's soft tissue: an object's "soft" block
-// (FEM material, damping, tetrahedra size, held faces), its checks against
-// the other keys and the engines, and its JSON (docs/scene-format.md,
-// "Soft tissue").
+// (FEM material, damping, tetrahedra size, held faces, the layers a needle
+// meets), the needle renderer's "needle" block, their checks against the
+// other keys and the engines, and their JSON (docs/scene-format.md, "Soft
+// tissue" and "Needles").
+#include <numbers>
+
 #include "scene_parse.hpp"
 
 namespace dm::scene_parse {
@@ -11,12 +14,96 @@ namespace {
 // Largest model a scene may ask for (FemBody holds ~0.5 kB a tetrahedron).
 constexpr double kMaxTetsLimit = 4'000'000.0;
 
+// Most layers a needle meets (each tetrahedron's layer is a byte).
+constexpr std::size_t kMaxLayers = 255;
+
+void readLayers(ConfigReader& soft, SceneSoft& s) {
+  ConfigReader r = soft.child("layers");
+  if (!expectArray(r)) return;
+  if (r.size() == 0 || r.size() > kMaxLayers) {
+    r.addError(formatString("%zu layers", r.size()), {}, "give 1 to 255 layers, the top one first");
+    return;
+  }
+  for (std::size_t i = 0; i < r.size(); ++i) {
+    ConfigReader e = r.at(i);
+    if (!expectObject(e)) continue;
+    e.knownKeys({"name", "thickness", "puncture_force", "cutting_force", "friction"});
+    SceneSoftLayer layer;
+    const std::size_t before = e.errors().size();
+    layer.name = e.string("name");
+    if (e.errors().size() == before) {
+      if (layer.name.empty()) e.addError("empty name", "name");
+      for (const SceneSoftLayer& l : s.layers)
+        if (l.name == layer.name) e.addError("layer " + inQuotes(layer.name) + " is listed twice", "name");
+    }
+    if (i + 1 < r.size())
+      layer.thickness = readPositive(e, "thickness", {}, 1.0);
+    else if (e.has("thickness"))
+      e.addError("the last layer reaches down to the bottom", "thickness", "remove \"thickness\"");
+    layer.punctureForce = e.number("puncture_force", {.min = 0.0, .max = 1000.0}, layer.punctureForce);
+    layer.cuttingForce = e.number("cutting_force", {.min = 0.0, .max = 1000.0}, layer.cuttingForce);
+    layer.friction = e.number("friction", {.min = 0.0, .max = 1e6}, layer.friction);
+    s.layers.push_back(std::move(layer));
+  }
+}
+
 }  // namespace
+
+void readNeedle(ConfigReader& haptics, SceneHapticsEngine& h) {
+  ConfigReader r = haptics.child("needle");
+  if (!expectObject(r)) return;
+  r.knownKeys({"length", "radius", "coupling_spacing", "across_stiffness", "along_stiffness", "tip", "axis",
+               "normal", "max_torque"});
+  SceneNeedle n;
+  n.length = readPositive(r, "length", n.length, 1.0);
+  std::size_t before = r.errors().size();
+  n.radius = r.number("radius", {.min = 0.0, .max = 10.0}, n.radius);
+  if (r.errors().size() == before && n.radius > 0 && n.length > 1.5 * std::numbers::pi * n.radius)
+    r.addError(
+        formatString("a %g m arc of radius %g m is more than three quarters of a circle", n.length, n.radius),
+        "length", "shorten it to at most 1.5·π·radius");
+  before = r.errors().size();
+  n.couplingSpacing = readPositive(r, "coupling_spacing", n.couplingSpacing, 1.0);
+  if (r.errors().size() == before && n.couplingSpacing > n.length)
+    r.addError(
+        formatString("coupling spacing %g m is longer than the needle (%g m)", n.couplingSpacing, n.length),
+        "coupling_spacing");
+  n.acrossStiffness = readPositive(r, "across_stiffness", n.acrossStiffness, 1e6);
+  n.alongStiffness = readPositive(r, "along_stiffness", n.alongStiffness, 1e6);
+  n.tip = readVec3(r, "tip", n.tip);
+  n.axis = readDirection(r, "axis", n.axis);
+  if (n.radius > 0) {
+    before = r.errors().size();
+    n.normal = readDirection(r, "normal", n.normal);
+    if (r.errors().size() == before && n.normal.cross(n.axis).norm() < 1e-6)
+      r.addError("the normal is parallel to the axis", "normal",
+                 "point it from the tip toward the arc's centre, across the axis");
+  } else if (r.has("normal")) {
+    r.addError("a straight needle has no arc to point the normal at", "normal",
+               "remove \"normal\", or give the needle a \"radius\"");
+  }
+  n.maxTorque = r.number("max_torque", {.min = 0.0, .max = 100.0}, n.maxTorque);
+  h.needle = n;
+}
+
+void writeNeedle(const SceneNeedle& n, Json& haptics) {
+  Json j = {{"length", n.length},
+            {"radius", n.radius},
+            {"coupling_spacing", n.couplingSpacing},
+            {"across_stiffness", n.acrossStiffness},
+            {"along_stiffness", n.alongStiffness},
+            {"tip", toJson(n.tip)},
+            {"axis", toJson(n.axis)},
+            {"max_torque", n.maxTorque}};
+  if (n.radius > 0) j["normal"] = toJson(n.normal);
+  haptics["needle"] = std::move(j);
+}
 
 void readSoft(ConfigReader& object, SceneObject& o) {
   ConfigReader r = object.child("soft");
   if (!expectObject(r)) return;
-  r.knownKeys({"youngs_modulus", "poisson_ratio", "density", "damping", "voxel_size", "fixed", "max_tets"});
+  r.knownKeys(
+      {"youngs_modulus", "poisson_ratio", "density", "damping", "voxel_size", "fixed", "max_tets", "layers"});
   SceneSoft s;
   s.youngsModulus = readPositive(r, "youngs_modulus", {}, 1e12);
   std::size_t before = r.errors().size();
@@ -63,6 +150,7 @@ void readSoft(ConfigReader& object, SceneObject& o) {
     else
       s.maxTets = static_cast<std::size_t>(maxTets);
   }
+  if (r.has("layers")) readLayers(r, s);
   // Soft–rigid contact is not modelled by the scene runtime: say so rather
   // than let bodies pass through the tissue.
   for (const char* key : {"collide", "contact"})
@@ -75,7 +163,39 @@ void readSoft(ConfigReader& object, SceneObject& o) {
 
 void checkSoft(const SceneDesc& scene, ConfigReader root) {
   ConfigReader objects = root.child("objects");
+  ConfigReader haptics = root.child("engines").child("haptics");
   const auto& h = scene.engines.haptics;
+  const bool needle = h && h->renderer == SceneHapticsEngine::Renderer::Needle;
+  const SceneObject* needled = nullptr;  // the soft object the needle goes into
+  if (needle) {
+    if (!h->needle)
+      haptics.addError("the needle renderer needs its needle", "needle", "add \"needle\": {\"length\": <m>}");
+    for (const char* key : {"tool_radius", "force_shading"})
+      if (haptics.has(key))
+        haptics.addError("the needle renderer's tool is its \"needle\" block", key,
+                         "remove \"" + std::string(key) + "\"");
+    const SceneObject* o = h->objects.size() == 1 ? scene.object(h->objects[0]) : nullptr;
+    if (h->objects.size() != 1)
+      haptics.addError(formatString("the needle goes into one soft object, not %zu", h->objects.size()),
+                       "objects", "name the one soft object with \"layers\"");
+    else if (o != nullptr && (!o->soft || o->soft->layers.empty()))
+      haptics.addError("object " + inQuotes(o->name) + " has no needle layers", "objects",
+                       "give it \"soft\": {..., \"layers\": [{\"name\": \"skin\", ...}]}");
+    else
+      needled = o;
+    if (needled != nullptr)
+      if (const SceneMaterial* m = scene.material(needled->material); m != nullptr && m->haptic) {
+        const SceneHapticMaterial& hm = *m->haptic;
+        if (hm.damping > 0 || hm.staticFriction > 0 || hm.dynamicFriction > 0)
+          objects.at(static_cast<std::size_t>(needled - scene.objects.data()))
+              .addError("the needle's friction is each layer's, and it has no damping", "material",
+                        "set the damping and friction of material " + inQuotes(needled->material) +
+                            " to 0 (its stiffness holds a membrane before it breaks)");
+      }
+  } else if (h && h->needle) {
+    haptics.addError("a \"needle\" block without the needle renderer", "needle",
+                     "set \"renderer\": \"needle\", or remove \"needle\"");
+  }
   std::string dynamicBody;  // a rigid body the soft objects would not stop
   for (const SceneObject& o : scene.objects)
     if (o.dynamic && dynamicBody.empty()) dynamicBody = o.name;
@@ -119,9 +239,13 @@ void checkSoft(const SceneDesc& scene, ConfigReader root) {
                      ": contact between rigid bodies and soft tissue is not part of scene runs",
                  "soft", "run the rigid bodies and the tissue in separate scenes, or make the body static");
     if (h && std::find(h->objects.begin(), h->objects.end(), o.name) != h->objects.end() &&
-        h->renderer != SceneHapticsEngine::Renderer::GodObject)
-      r.addError("soft object " + inQuotes(o.name) + " is pressed by the god-object only", "soft",
-                 "set the haptics engine's \"renderer\": \"god-object\"");
+        h->renderer != SceneHapticsEngine::Renderer::GodObject && !needle)
+      r.addError("soft object " + inQuotes(o.name) + " is touched by the god-object or the needle only",
+                 "soft", "set the haptics engine's \"renderer\": \"god-object\" or \"needle\"");
+    if (!o.soft->layers.empty() && needled != &o)
+      r.child("soft").addError("layers but no needle goes into " + inQuotes(o.name), "layers",
+                               "set the haptics engine's \"renderer\": \"needle\" with \"objects\": [" +
+                                   inQuotes(o.name) + "], or remove \"layers\"");
   }
 }
 
@@ -138,6 +262,19 @@ void writeSoft(const SceneObject& o, Json& object) {
                     {"voxel_size", s.voxelSize},
                     {"fixed", std::move(fixed)},
                     {"max_tets", s.maxTets}};
+  if (!s.layers.empty()) {
+    Json layers = Json::array();
+    for (std::size_t i = 0; i < s.layers.size(); ++i) {
+      const SceneSoftLayer& l = s.layers[i];
+      Json j = {{"name", l.name},
+                {"puncture_force", l.punctureForce},
+                {"cutting_force", l.cuttingForce},
+                {"friction", l.friction}};
+      if (i + 1 < s.layers.size()) j["thickness"] = l.thickness;
+      layers.push_back(std::move(j));
+    }
+    object["soft"]["layers"] = std::move(layers);
+  }
 }
 
 }  // namespace dm::scene_parse

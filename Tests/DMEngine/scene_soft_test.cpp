@@ -18,6 +18,9 @@
 #include <cmath>
 #include <filesystem>
 #include <numbers>
+#include <sstream>
+#include <string>
+#include <vector>
 
 #include "../common/build_paths.hpp"
 #include "../common/temp_dir.hpp"
@@ -196,6 +199,98 @@ TEST(SceneSoft, AModelThatCannotBeBuiltFailsBeforeAnythingRuns) {
   ASSERT_FALSE(r);
   EXPECT_NE(r.error().where.find("objects/pad/soft"), std::string::npos) << r.error();
   EXPECT_FALSE(fs::exists(out));
+}
+
+}  // namespace scene_soft_test
+
+namespace scene_soft_test {
+
+// The bundled needle insertion (examples/scenes/needle_insertion.json)
+// without its render engine.
+dm::SceneDesc needleInsertion() {
+  std::vector<dm::Error> problems;
+  auto s = dm::readScene(
+      fs::path(dm::test::besideExecutable(DM_EXAMPLE_SCENES_DIR)) / "needle_insertion.json", &problems);
+  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+  dm::SceneDesc scene = *s;
+  scene.engines.render.reset();
+  scene.outputs.frames = false;
+  scene.outputs.plot = false;
+  return scene;
+}
+
+// One haptic tick of a force trace: time, the force on the hand along z
+// and the tip's depth below the block's top (30 mm; the tip is 40 mm below
+// the device point).
+struct NeedleTick {
+  double t, fz, depth;
+};
+std::vector<NeedleTick> needleTrace(const fs::path& csv) {
+  std::vector<NeedleTick> out;
+  std::istringstream in(fileText(csv));
+  std::string line;
+  std::getline(in, line);  // t,fx,fy,fz,tx,ty,tz,px,py,pz,…
+  while (std::getline(in, line)) {
+    double v[10];
+    if (std::sscanf(line.c_str(), "%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf", &v[0], &v[1], &v[2], &v[3],
+                    &v[4], &v[5], &v[6], &v[7], &v[8], &v[9]) != 10)
+      break;
+    out.push_back({v[0], v[3], 0.03 - (v[9] - 0.04)});
+  }
+  return out;
+}
+
+TEST(SceneNeedle, LayeredInsertionPopsAtEachMembraneAndReleasesOnRetraction) {
+  const dm::test::TempDir dir("soft_needle");
+  const json s = runScene(needleInsertion(), 6.4, dir.path());
+  const json& block = softBody(s, "block");
+  const json& n = block.at("needle");
+  // Down to 22 mm: the skin's and the muscle's fascia broke (fat has no
+  // membrane); back out: the tip is outside and nothing holds the shaft.
+  EXPECT_EQ(n.at("punctures").get<int>(), 2) << n.dump();
+  EXPECT_EQ(n.at("tip").get<std::string>(), "outside");
+  EXPECT_EQ(n.at("active_couplings").get<int>(), 0);
+  EXPECT_GT(n.at("track_points").get<int>(), 5);  // the track it cut stays
+  EXPECT_EQ(s.at("haptics").at("renderer"), "needle");
+  // The pops, in the trace the hand felt: a fall of more than 0.2 N in one
+  // tick while going in. The first is the skin's, at its 1.2 N threshold
+  // (felt in the tick the tip's force reaches it, so just under) after the
+  // skin tented in; the second the fascia's, 15 mm down, tented in too.
+  const std::vector<NeedleTick> trace = needleTrace(dir.path() / "forces.csv");
+  ASSERT_GT(trace.size(), 6000u);
+  std::vector<std::size_t> pops;
+  for (std::size_t i = 1; i < trace.size() && trace[i].t < 3.2; ++i)
+    if (trace[i - 1].fz - trace[i].fz > 0.2 &&
+        (pops.empty() || trace[i].depth > trace[pops.back()].depth + 0.005))
+      pops.push_back(i);
+  ASSERT_EQ(pops.size(), 2u);
+  const NeedleTick& skin = trace[pops[0] - 1];
+  EXPECT_NEAR(skin.fz, 1.2, 0.02) << "at t = " << skin.t;
+  EXPECT_GT(skin.depth, 0.001);
+  EXPECT_LT(skin.depth, 0.015);
+  const NeedleTick& fascia = trace[pops[1] - 1];
+  EXPECT_GT(fascia.depth, 0.015);
+  EXPECT_LT(fascia.depth, 0.022);
+  // Going in the tissue resists (force up on the hand), coming out the
+  // shaft's friction holds it back (force down).
+  for (const NeedleTick& k : trace) {
+    if (k.t > 1.2 && k.t < 3.15) {
+      EXPECT_GT(k.fz, 0.0) << "at t = " << k.t;
+    }
+    if (k.t > 3.5 && k.t < 5.0) {
+      EXPECT_LT(k.fz, 0.0) << "at t = " << k.t;
+    }
+  }
+}
+
+TEST(SceneNeedle, LockstepRunsAreBitIdentical) {
+  const dm::SceneDesc scene = needleInsertion();
+  const dm::test::TempDir dir("soft_needle_rerun");
+  const json sa = runScene(scene, 2.0, dir / "a");
+  const json sb = runScene(scene, 2.0, dir / "b");
+  EXPECT_EQ(fileText(dir / "a" / "forces.csv"), fileText(dir / "b" / "forces.csv"));
+  EXPECT_EQ(sa.at("physics"), sb.at("physics"));
+  EXPECT_EQ(softBody(sa, "block").at("needle").at("punctures").get<int>(), 1);  // through the skin by then
 }
 
 }  // namespace scene_soft_test

@@ -187,4 +187,126 @@ TEST(SceneSoft, PhysicsWithOnlySoftObjectsHasSomethingToMove) {
   }
 }
 
+// The pad with a needle going into it through two layers.
+Json needleScene() {
+  Json j = padScene();
+  j["objects"][1]["soft"]["layers"] = Json::parse(R"([
+      {"name": "skin", "thickness": 0.004, "puncture_force": 1.1, "cutting_force": 0.35, "friction": 45},
+      {"name": "muscle", "puncture_force": 0.7, "cutting_force": 0.25, "friction": 30}])");
+  Json& h = j["engines"]["haptics"];
+  h["renderer"] = "needle";
+  h.erase("tool_radius");
+  h["needle"] = Json::parse(R"({"length": 0.06, "radius": 0.02, "coupling_spacing": 0.003,
+      "across_stiffness": 500, "along_stiffness": 300, "tip": [0, 0, -0.03], "axis": [0, 0, -1],
+      "normal": [1, 0, 0], "max_torque": 0.2})");
+  return j;
+}
+
+TEST(SceneNeedle, KeysReadAndWriteBackEqual) {
+  auto s = dm::parseScene(needleScene().dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const std::vector<dm::SceneSoftLayer>& layers = s->objects[1].soft->layers;
+  ASSERT_EQ(layers.size(), 2u);
+  EXPECT_EQ(layers[0].name, "skin");
+  EXPECT_EQ(layers[0].thickness, 0.004);
+  EXPECT_EQ(layers[0].punctureForce, 1.1);
+  EXPECT_EQ(layers[0].cuttingForce, 0.35);
+  EXPECT_EQ(layers[0].friction, 45);
+  EXPECT_EQ(layers[1].thickness, 0.0);  // down to the bottom
+  const auto& h = *s->engines.haptics;
+  EXPECT_EQ(h.renderer, dm::SceneHapticsEngine::Renderer::Needle);
+  EXPECT_EQ(dm::rendererName(h.renderer), "needle");
+  ASSERT_TRUE(h.needle);
+  EXPECT_EQ(h.needle->length, 0.06);
+  EXPECT_EQ(h.needle->radius, 0.02);
+  EXPECT_EQ(h.needle->couplingSpacing, 0.003);
+  EXPECT_EQ(h.needle->acrossStiffness, 500);
+  EXPECT_EQ(h.needle->alongStiffness, 300);
+  EXPECT_EQ(h.needle->tip, dm::Vec3(0, 0, -0.03));
+  EXPECT_EQ(h.needle->axis, dm::Vec3(0, 0, -1));
+  EXPECT_EQ(h.needle->normal, dm::Vec3(1, 0, 0));
+  EXPECT_EQ(h.needle->maxTorque, 0.2);
+  const Json back = dm::toJson(*s);
+  EXPECT_FALSE(back["engines"]["haptics"].contains("tool_radius"));
+  EXPECT_FALSE(back["objects"][1]["soft"]["layers"][1].contains("thickness"));
+  auto again = dm::parseScene(back.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(again) << again.error();
+  EXPECT_TRUE(*s == *again);
+}
+
+TEST(SceneNeedle, MisusesAreErrorsAtTheirKeys) {
+  {  // the needle's own values
+    Json j = needleScene();
+    Json& n = j["engines"]["haptics"]["needle"];
+    n["length"] = 0.1;  // more than ¾ of a 20 mm circle
+    n["coupling_spacing"] = 0.2;
+    n["normal"] = {0, 0, 1};
+    n["stiffness"] = 3;
+    const auto problems = problemsOf(j);
+    const std::string p = "/engines/haptics/needle";
+    EXPECT_TRUE(at(problems, p + "/length"));
+    EXPECT_TRUE(at(problems, p + "/coupling_spacing"));
+    EXPECT_TRUE(at(problems, p + "/normal"));
+    EXPECT_TRUE(at(problems, p + "/stiffness"));
+    Json straight = needleScene();
+    straight["engines"]["haptics"]["needle"].erase("radius");
+    const auto found = problemsOf(straight);
+    if (const dm::Error* e = at(found, p + "/normal")) {
+      EXPECT_NE(e->what.find("straight"), std::string::npos) << e->what;
+    }
+  }
+  {  // layers: names, thickness of all but the last
+    Json j = needleScene();
+    Json& l = j["objects"][1]["soft"]["layers"];
+    l[0].erase("thickness");
+    l[1]["thickness"] = 0.01;
+    l[1]["name"] = "skin";
+    l.push_back({{"name", "bone"}, {"friction", -1}});
+    const auto problems = problemsOf(j);
+    const std::string p = "/objects/1/soft/layers";
+    EXPECT_TRUE(at(problems, p + "/0/thickness"));
+    EXPECT_TRUE(at(problems, p + "/1/name"));
+    EXPECT_TRUE(at(problems, p + "/2/friction"));
+  }
+  {  // the renderer without its needle, or with the god-object's keys
+    Json j = needleScene();
+    j["engines"]["haptics"].erase("needle");
+    j["engines"]["haptics"]["tool_radius"] = 0.001;
+    j["engines"]["haptics"]["force_shading"] = true;
+    const auto problems = problemsOf(j);
+    EXPECT_TRUE(at(problems, "/engines/haptics/needle"));
+    EXPECT_TRUE(at(problems, "/engines/haptics/tool_radius"));
+    EXPECT_TRUE(at(problems, "/engines/haptics/force_shading"));
+  }
+  {  // a needle block under another renderer, and layers nothing goes into
+    Json j = needleScene();
+    j["engines"]["haptics"]["renderer"] = "god-object";
+    const auto problems = problemsOf(j);
+    EXPECT_TRUE(at(problems, "/engines/haptics/needle"));
+    if (const dm::Error* e = at(problems, "/objects/1/soft/layers")) {
+      EXPECT_NE(e->what.find("no needle"), std::string::npos) << e->what;
+    }
+  }
+  {  // the needle goes into a soft object with layers, and only one
+    Json j = needleScene();
+    j["objects"][1]["soft"].erase("layers");
+    const auto found = problemsOf(j);
+    if (const dm::Error* e = at(found, "/engines/haptics/objects")) {
+      EXPECT_NE(e->what.find("no needle layers"), std::string::npos) << e->what;
+    }
+    Json two = needleScene();
+    two["objects"][0]["haptic"] = true;
+    two["objects"][0]["material"] = "tissue";
+    two["engines"]["haptics"]["objects"] = {"pad", "table"};
+    const auto found2 = problemsOf(two);
+    EXPECT_TRUE(at(found2, "/engines/haptics/objects"));
+  }
+  {  // the tissue's material: friction and damping are the layers' business
+    Json j = needleScene();
+    j["materials"]["tissue"]["haptic"]["damping"] = 0.5;
+    const auto found = problemsOf(j);
+    EXPECT_TRUE(at(found, "/objects/1/material"));
+  }
+}
+
 }  // namespace scene_soft_test

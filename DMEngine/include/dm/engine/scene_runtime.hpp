@@ -8,7 +8,9 @@
 //     the god-object renderer over the touchable objects with their scene
 //     materials, force shading and the force limit — or the burr renderer
 //     milling the one "millable" object (voxelized bone with its critical
-//     structures; docs/scene-format.md, "Bone surgery") — and
+//     structures; docs/scene-format.md, "Bone surgery"), or the needle
+//     renderer going into the soft object with "layers" (dm::HapticNeedle;
+//     "Needles") — and
 //     dm::HapticLoop (device servo, safety, fade) at the scene's rate;
 //   - physics: every "dynamic" object a rigid body of one dm::PhysicsWorld,
 //     the other objects static colliders; the god-object feels the moving

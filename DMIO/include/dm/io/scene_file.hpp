@@ -155,6 +155,19 @@ struct SceneInclusion {
   bool operator==(const SceneInclusion&) const = default;
 };
 
+/// A layer of a soft object that a needle goes through (v2 "layers";
+/// dm::NeedleLayer), the first at the top (the +z face of the object's rest
+/// bounding box), each below the one before.
+struct SceneSoftLayer {
+  std::string name;
+  double thickness = 0.0;      ///< m, > 0; 0 on the last layer: down to the bottom
+  double punctureForce = 1.0;  ///< N, ≥ 0: the tip force that breaks the layer's surface (0: none)
+  double cuttingForce = 0.3;   ///< N, ≥ 0: the force on the tip while it cuts through the layer
+  double friction = 50.0;      ///< N/m, ≥ 0: sliding friction per metre of shaft in the layer
+
+  bool operator==(const SceneSoftLayer&) const = default;
+};
+
 /// Soft tissue (v2 "soft"): the object is a deformable body — co-rotational
 /// FEM (dm::FemBody) on tetrahedra made from its mesh — that the physics
 /// engine steps, the god-object presses (felt at the haptic rate through
@@ -175,6 +188,9 @@ struct SceneSoft {
   double voxelSize = 0.0;
   std::uint8_t fixedFaces = 0;    ///< bit i: kFaces[i] is held ("fixed": ["-z"])
   std::size_t maxTets = 100'000;  ///< a larger model is an error before it is built, ≤ 4,000,000
+  /// What a needle meets, top down ("layers"); only with the needle renderer
+  /// on this object, and required there.
+  std::vector<SceneSoftLayer> layers;
 
   bool operator==(const SceneSoft&) const = default;
 };
@@ -328,9 +344,27 @@ struct SceneBurr {
   bool operator==(const SceneBurr&) const = default;
 };
 
+/// The needle of the needle renderer (v2 "needle"; dm::NeedleOptions and
+/// dm::HapticNeedleOptions): where it sits on the device and how it couples
+/// to the tissue. The tip's spring on a membrane is the tissue material's
+/// haptic stiffness.
+struct SceneNeedle {
+  double length = 0.1;  ///< m, > 0, ≤ 1: shaft behind the tip
+  double radius = 0.0;  ///< m, 0 (straight) or > 0: a curved needle's arc, length ≤ 1.5·π·radius
+  double couplingSpacing = 2e-3;   ///< m, > 0, ≤ length: track length per coupling point
+  double acrossStiffness = 400.0;  ///< N/m, > 0: a coupling point across the shaft
+  double alongStiffness = 400.0;   ///< N/m, > 0: a coupling point along the shaft while it sticks
+  Vec3 tip = Vec3::Zero();         ///< m, device frame: the tip
+  Vec3 axis = -Vec3::UnitZ();      ///< device frame, unit: the shaft at the tip, handle → tip
+  Vec3 normal = Vec3::UnitX();     ///< device frame, unit: toward a curved needle's centre (⊥ axis)
+  double maxTorque = 0.0;          ///< N·m, ≥ 0: torque sent to the hand (0: a 3-DOF device)
+
+  bool operator==(const SceneNeedle&) const = default;
+};
+
 /// The haptic engine: one device rendering contact with objects.
 struct SceneHapticsEngine {
-  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr };
+  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr, Needle };
 
   double rateHz = 1000.0;  ///< 100..10000
   Renderer renderer = Renderer::GodObject;
@@ -342,9 +376,13 @@ struct SceneHapticsEngine {
   bool forceShading = false;
   std::string proxyObject;        ///< an object whose pose follows the proxy (the tool shown), or empty
   std::optional<SceneBurr> burr;  ///< v2: with renderer "burr" (and only then)
+  std::optional<SceneNeedle> needle;  ///< v2: with renderer "needle" (and only then)
 
   bool operator==(const SceneHapticsEngine& o) const;
 };
+
+/// The scene file's name of a haptic renderer ("god-object", "burr", …).
+std::string_view rendererName(SceneHapticsEngine::Renderer renderer) noexcept;
 
 /// The physics engine.
 struct ScenePhysicsEngine {
