@@ -1,12 +1,15 @@
 // soft_tissue.cpp — a scene's soft objects as FEM bodies (soft_tissue.hpp).
 #include "soft_tissue.hpp"
 
+#include <dm/collide/bvh.hpp>
 #include <dm/core/triple_buffer.hpp>
 #include <dm/haptics/god_object.hpp>
 #include <dm/haptics/needle.hpp>
 #include <dm/haptics/tissue.hpp>
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
+#include <dm/math/mesh_topology.hpp>
+#include <dm/math/primitives.hpp>
 #include <dm/math/voxelize.hpp>
 #include <dm/physics/fem.hpp>
 #include <dm/physics/needle.hpp>
@@ -61,7 +64,36 @@ std::vector<std::uint8_t> tetLayersBySlab(const TetMesh& mesh, double top,
   return out;
 }
 
+// The closed mesh (object frame, at its scale) a static object is to the
+// tissue: its own mesh welded (shapes keep separate rim vertices for sharp
+// normals), or for a plane the slab below it that the rigid world uses.
+Result<MeshBvh> obstacleTree(const SceneObject& o, const SceneResource& res, const Mesh& mesh) {
+  Mesh m;
+  if (res.type == SceneResource::Type::Shape && res.shape == SceneResource::Shape::Plane) {
+    const double depth = 0.5 * std::min(res.halfExtents.x(), res.halfExtents.y());
+    m = makeBox(Vec3(res.halfExtents.x(), res.halfExtents.y(), depth));
+    m.transform(Affine3(Eigen::Translation3d(0, 0, -depth)));
+  } else {
+    m = mesh;
+  }
+  if (o.scale != 1.0) m.transform(Affine3(Eigen::Scaling(o.scale)));
+  if (auto w = weldVertices(m, 1e-9); !w) return w.error();
+  auto tree = MeshBvh::build(m);
+  if (!tree) return tree.error();
+  if (!tree->isClosed())
+    return fail(ErrorCode::InvalidArgument,
+                "its mesh is not closed, so soft tissue cannot tell inside from outside", "mesh",
+                "close it (an isosurface's \"close_borders\"), or set \"collide\": false on it");
+  return tree;
+}
+
 }  // namespace
+
+struct SoftTissues::Obstacle {
+  std::string name;
+  Isometry3 pose = Isometry3::Identity();  // object → world
+  std::unique_ptr<MeshBvh> tree;
+};
 
 struct SoftTissues::Body {
   std::string name;
@@ -119,6 +151,19 @@ void SoftTissues::drawnSurface(const FemBody& fem, bool creases, Body& b) {
 Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
                                                         const SceneResources& resources) {
   std::unique_ptr<SoftTissues> out(new SoftTissues());
+  // The static objects that collide: obstacles every soft object meets.
+  const std::string proxy = scene.engines.haptics ? scene.engines.haptics->proxyObject : std::string();
+  if (std::any_of(scene.objects.begin(), scene.objects.end(), [](const SceneObject& o) { return o.soft; }))
+    for (const SceneObject& o : scene.objects) {
+      if (o.soft || o.dynamic || !o.collide || o.name == proxy) continue;
+      const SceneResource* res = scene.resource(o.mesh);
+      auto mesh = resources.mesh(o.mesh);
+      if (res == nullptr || !mesh)
+        return fail(ErrorCode::NotFound, "mesh \"" + o.mesh + "\" was not loaded", "objects/" + o.name);
+      auto tree = obstacleTree(o, *res, *mesh);
+      if (!tree) return tree.error().within("objects/" + o.name);
+      out->obstacles_.push_back({o.name, o.pose.isometry(), std::make_unique<MeshBvh>(std::move(*tree))});
+    }
   const auto& haptics = scene.engines.haptics;
   const Vec3 gravity = scene.engines.physics ? scene.engines.physics->gravity : Vec3::Zero();
   for (const SceneObject& o : scene.objects) {
@@ -142,6 +187,15 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     b->scale = o.scale;
     b->fem = std::make_unique<FemBody>(std::move(*fem));
     b->fem->setGravity(b->pose.linear().transpose() * gravity);
+    // The static objects, in the body's frame, each node held out of them
+    // by a penalty spring.
+    std::vector<FemObstacle> obstacles;
+    const double contactStiffness =
+        s.contactStiffness > 0 ? s.contactStiffness : 20.0 * s.youngsModulus * s.voxelSize;
+    for (const Obstacle& ob : out->obstacles_)
+      obstacles.push_back(
+          {.tree = ob.tree.get(), .pose = b->pose.inverse() * ob.pose, .stiffness = contactStiffness});
+    if (auto st = b->fem->setObstacles(obstacles); !st) return st.error().within(where + "/soft");
     b->restCenterOfMass = b->fem->centerOfMass();
     // The held faces: nodes within a quarter of a tetrahedron's size of a
     // face of the rest bounding box.
@@ -296,6 +350,14 @@ nlohmann::json SoftTissues::summary() const {
          {"max_tool_force_N", b.maxToolForce},
          {"held_force_N", engine_json::vec3(R * heldForce)},
          {"weight_N", engine_json::vec3(f.totalMass() * (R * f.gravity()))}});
+    if (!obstacles_.empty()) {
+      Json touching = Json::array();
+      for (std::size_t i = 0; i < obstacles_.size(); ++i)
+        touching.push_back(
+            {{"name", obstacles_[i].name}, {"force_N", engine_json::vec3(R * f.obstacleForce(i))}});
+      list.back()["obstacles"] = std::move(touching);
+      list.back()["obstacle_contacts"] = f.obstacleContactCount();
+    }
     if (b.needle) {
       static constexpr const char* kTip[] = {"outside", "pressing", "cutting", "in-track"};
       const NeedleInsertion& n = *b.needle;

@@ -5,7 +5,9 @@
 // Per soft object: tetrahedra from its mesh (a box shape split into cubes
 // of about voxel_size, its faces kept; any other closed mesh voxelized at
 // voxel_size), a dm::FemBody in the object's frame (the scene's scale baked
-// in) with the held faces fixed and gravity turned into that frame, and a
+// in) with the held faces fixed, gravity turned into that frame and every
+// static object that collides an obstacle it cannot enter (dm::FemObstacle:
+// a penalty spring per boundary node, implicit), and a
 // dm::HapticTissue joining it to the god-object (stiffness of the object's
 // haptic material, tip radius of the haptics engine's tool) — or, for the
 // object with needle "layers", a dm::NeedleInsertion (each tetrahedron's
@@ -79,12 +81,14 @@ class SoftTissues {
 
  private:
   struct Body;
+  struct Obstacle;
   SoftTissues() = default;
   static void drawnSurface(const FemBody& fem, bool creases, Body& b);
   Status attachNeedle(Body& b, const TetMesh& mesh, double top, const std::vector<SceneSoftLayer>& layers,
                       const SceneHapticsEngine& h, double tipStiffness);
   static Vec3 toolForce(const Body& b) noexcept;
   std::vector<std::string> layerNames_;  // of the needle's body
+  std::vector<Obstacle> obstacles_;      // before bodies_: their FemObstacles point into it
   std::vector<std::unique_ptr<Body>> bodies_;
   std::vector<std::string> names_;
 };

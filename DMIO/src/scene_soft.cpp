@@ -102,8 +102,8 @@ void writeNeedle(const SceneNeedle& n, Json& haptics) {
 void readSoft(ConfigReader& object, SceneObject& o) {
   ConfigReader r = object.child("soft");
   if (!expectObject(r)) return;
-  r.knownKeys(
-      {"youngs_modulus", "poisson_ratio", "density", "damping", "voxel_size", "fixed", "max_tets", "layers"});
+  r.knownKeys({"youngs_modulus", "poisson_ratio", "density", "damping", "voxel_size", "fixed", "max_tets",
+               "layers", "contact_stiffness"});
   SceneSoft s;
   s.youngsModulus = readPositive(r, "youngs_modulus", {}, 1e12);
   std::size_t before = r.errors().size();
@@ -121,6 +121,7 @@ void readSoft(ConfigReader& object, SceneObject& o) {
     }
   }
   s.voxelSize = readPositive(r, "voxel_size", {}, 0.05);
+  if (r.has("contact_stiffness")) s.contactStiffness = readPositive(r, "contact_stiffness", {}, 1e9);
   if (r.has("fixed")) {
     ConfigReader f = r.child("fixed");
     if (expectArray(f)) {
@@ -151,12 +152,15 @@ void readSoft(ConfigReader& object, SceneObject& o) {
       s.maxTets = static_cast<std::size_t>(maxTets);
   }
   if (r.has("layers")) readLayers(r, s);
-  // Soft–rigid contact is not modelled by the scene runtime: say so rather
-  // than let bodies pass through the tissue.
+  // The tissue meets every static object that collides (their "collide");
+  // its own rigid-contact keys mean nothing.
   for (const char* key : {"collide", "contact"})
     if (object.has(key))
-      object.addError("a soft object takes part in no rigid contact (its held faces keep it in place)", key,
-                      "remove \"" + std::string(key) + "\"");
+      object.addError(
+          "a soft object meets the static objects that collide; its own rigid-contact keys do not apply", key,
+          "remove \"" + std::string(key) +
+              "\" (set \"collide\": false on an object it should pass through, "
+              "\"contact_stiffness\" in \"soft\" for the contact's spring)");
   o.collide = false;
   o.soft = s;
 }
@@ -235,8 +239,7 @@ void checkSoft(const SceneDesc& scene, ConfigReader root) {
       }
     if (!dynamicBody.empty())
       r.addError("dynamic body " + inQuotes(dynamicBody) + " would pass through soft object " +
-                     inQuotes(o.name) +
-                     ": contact between rigid bodies and soft tissue is not part of scene runs",
+                     inQuotes(o.name) + ": soft tissue meets static objects only in scene runs",
                  "soft", "run the rigid bodies and the tissue in separate scenes, or make the body static");
     if (h && std::find(h->objects.begin(), h->objects.end(), o.name) != h->objects.end() &&
         h->renderer != SceneHapticsEngine::Renderer::GodObject && !needle)
@@ -262,6 +265,7 @@ void writeSoft(const SceneObject& o, Json& object) {
                     {"voxel_size", s.voxelSize},
                     {"fixed", std::move(fixed)},
                     {"max_tets", s.maxTets}};
+  if (s.contactStiffness > 0) object["soft"]["contact_stiffness"] = s.contactStiffness;
   if (!s.layers.empty()) {
     Json layers = Json::array();
     for (std::size_t i = 0; i < s.layers.size(); ++i) {

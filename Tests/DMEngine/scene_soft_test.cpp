@@ -294,3 +294,85 @@ TEST(SceneNeedle, LockstepRunsAreBitIdentical) {
 }
 
 }  // namespace scene_soft_test
+
+namespace scene_soft_test {
+
+// A 40 × 40 × 10 mm pad of tissue (its faces `fixed` held) above a static
+// object under gravity (no haptics).
+dm::SceneDesc padOn(const std::string& support, const std::string& supportPose, const std::string& fixed) {
+  const std::string text = R"({
+    "format": "dmplatform-scene", "version": 2, "name": "pad_on",
+    "resources": {
+      "table": {"type": "shape", "shape": "plane", "half_extents": [0.1, 0.1]},
+      "ball": {"type": "shape", "shape": "sphere", "radius": 0.02, "subdivisions": 4},
+      "pad": {"type": "shape", "shape": "box", "half_extents": [0.02, 0.02, 0.005]}
+    },
+    "objects": [
+      {"name": "support", "mesh": ")" +
+                           support + R"(", "pose": )" + supportPose + R"(},
+      {"name": "pad", "mesh": "pad", "pose": {"position": [0, 0, 0.0055]},
+       "soft": {"youngs_modulus": 2e4, "density": 1000, "damping": {"alpha": 20, "beta": 0.005},
+                "voxel_size": 0.0025, "fixed": )" +
+                           fixed + R"(}}
+    ],
+    "engines": {"physics": {"rate_hz": 100}},
+    "outputs": {"summary": true}
+  })";
+  std::vector<dm::Error> problems;
+  auto s = dm::parseScene(text, "pad_on.json", fs::temp_directory_path(), &problems);
+  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+  return s ? *s : dm::SceneDesc{};
+}
+
+TEST(SceneSoft, TissueRestsOnATableThatCarriesItsWeight) {
+  // Dropped 0.5 mm onto a table, nothing held: at rest the table carries
+  // the pad's weight, to 1 %.
+  const json s = runScene(padOn("table", R"({"position": [0, 0, 0]})", "[]"), 3.0,
+                          dm::test::TempDir("soft_on_table").path());
+  const json& pad = softBody(s, "pad");
+  ASSERT_TRUE(pad.contains("obstacles")) << pad.dump(2);
+  const json& ob = pad.at("obstacles").at(0);
+  EXPECT_EQ(ob.at("name"), "support");
+  const dm::Vec3 weight = vec(pad.at("weight_N"));
+  EXPECT_NEAR(weight.z(), -0.04 * 0.04 * 0.01 * 1000 * kG, 1e-9);
+  const dm::Vec3 onTable = vec(ob.at("force_N"));
+  EXPECT_LE((onTable - weight).norm(), 0.01 * weight.norm()) << onTable.transpose();
+  EXPECT_EQ(pad.at("fixed_nodes").get<int>(), 0);
+  EXPECT_GT(pad.at("obstacle_contacts").get<int>(), 0);
+  // It fell the 0.5 mm gap and sank a little into the penalty springs
+  // (about its weight / (nodes × stiffness): µm).
+  const double drop = -vec(pad.at("center_of_mass_displacement_m")).z();
+  EXPECT_GT(drop, 0.0004);
+  EXPECT_LT(drop, 0.0006);
+}
+
+TEST(SceneSoft, ABallHoldsUpATissueHeldAtItsEnds) {
+  // A curved support: the pad held at its −x and +x faces sags under its
+  // weight onto a ball whose top is 1 mm into its underside. At rest the
+  // tissue is in equilibrium: what the ball takes from it is what the ends
+  // hold plus the weight, to 1 %; the ball carries part of the weight, and
+  // the pad sags less than with the ball out of reach.
+  const json s = runScene(padOn("ball", R"({"position": [0, 0, -0.0195]})", R"(["-x", "+x"])"), 3.0,
+                          dm::test::TempDir("soft_on_ball").path());
+  const json& pad = softBody(s, "pad");
+  ASSERT_TRUE(pad.contains("obstacles")) << pad.dump(2);
+  const dm::Vec3 onBall = vec(pad.at("obstacles").at(0).at("force_N"));
+  const dm::Vec3 held = vec(pad.at("held_force_N")), weight = vec(pad.at("weight_N"));
+  EXPECT_LE((onBall - (held + weight)).norm(), 0.01 * onBall.norm())
+      << onBall.transpose() << " vs " << (held + weight).transpose();
+  EXPECT_LT(onBall.z(), -0.05 * weight.norm()) << onBall.transpose();
+  EXPECT_GT(onBall.z(), weight.z());
+  EXPECT_GT(pad.at("obstacle_contacts").get<int>(), 0);
+  const json free = runScene(padOn("ball", R"({"position": [0, 0, -0.5]})", R"(["-x", "+x"])"), 3.0,
+                             dm::test::TempDir("soft_off_ball").path());
+  const json& alone = softBody(free, "pad");
+  EXPECT_EQ(alone.at("obstacle_contacts").get<int>(), 0);
+  const double sagOn = -vec(pad.at("center_of_mass_displacement_m")).z();
+  const double sagOff = -vec(alone.at("center_of_mass_displacement_m")).z();
+  EXPECT_GT(sagOff, 0.0);
+  EXPECT_LT(sagOn, sagOff) << "the ball does not hold the pad up";
+  // Without the ball the ends carry all the weight.
+  EXPECT_LE((vec(alone.at("held_force_N")) + weight).norm(), 0.01 * weight.norm());
+}
+
+}  // namespace scene_soft_test

@@ -186,6 +186,10 @@ struct SceneSoft {
   /// about this size (its faces kept exactly); any other closed mesh is
   /// voxelized at it (a voxel-shaped surface).
   double voxelSize = 0.0;
+  /// N/m per boundary node, > 0: the penalty spring that keeps the tissue
+  /// out of the static objects that collide ("contact_stiffness"); 0 (not
+  /// given): 20·E·voxel_size, a node's own stiffness times 20.
+  double contactStiffness = 0.0;
   std::uint8_t fixedFaces = 0;    ///< bit i: kFaces[i] is held ("fixed": ["-z"])
   std::size_t maxTets = 100'000;  ///< a larger model is an error before it is built, ≤ 4,000,000
   /// What a needle meets, top down ("layers"); only with the needle renderer
