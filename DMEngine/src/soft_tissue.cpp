@@ -87,6 +87,36 @@ Result<MeshBvh> obstacleTree(const SceneObject& o, const SceneResource& res, con
   return tree;
 }
 
+// Each tetrahedron's needle layer: by slabs, or by the label of the voxel
+// of a label volume its centroid is in (the tissue placed in the world by
+// the object's pose, where the volume is).
+// Errors name `where` + "/labels".
+Result<std::vector<std::uint8_t>> tetLayers(const SceneObject& o, const TetMesh& mesh, double top,
+                                            const SceneResources& resources, const std::string& where) {
+  const SceneSoft& s = *o.soft;
+  if (s.labels.empty()) return tetLayersBySlab(mesh, top, s.layers);
+  auto volume = resources.volume(s.labels);
+  const std::string at = where + "/labels";
+  if (!volume) return fail(ErrorCode::NotFound, "volume \"" + s.labels + "\" was not loaded", at);
+  constexpr std::uint8_t kNoLayer = 255;  // (at most 255 layers: 0..254)
+  int maxLabel = 0;
+  for (const SceneSoftLayer& l : s.layers) maxLabel = std::max(maxLabel, l.label);
+  std::vector<std::uint8_t> layerOfLabel(static_cast<std::size_t>(maxLabel) + 1, kNoLayer);
+  for (std::size_t i = 0; i < s.layers.size(); ++i)
+    layerOfLabel[static_cast<std::size_t>(s.layers[i].label)] = static_cast<std::uint8_t>(i);
+  TetMesh world = mesh;
+  const Isometry3 pose = o.pose.isometry();
+  for (Vec3& p : world.nodes) p = pose * p;
+  auto layers = tetLayersFromLabels(world, *volume, layerOfLabel);
+  if (!layers) return layers.error().within(at);
+  for (std::size_t t = 0; t < layers->size(); ++t)
+    if ((*layers)[t] == kNoLayer)
+      return fail(ErrorCode::InvalidArgument,
+                  "tetrahedron " + std::to_string(t) + " lies on a label that no layer names", at,
+                  "give a layer for every label the tissue covers (0 is the background)");
+  return layers;
+}
+
 }  // namespace
 
 struct SoftTissues::Obstacle {
@@ -215,7 +245,9 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     const double stiffness = mat != nullptr && mat->haptic ? mat->haptic->stiffness : 0.0;
     if (!s.layers.empty() && haptics) {
       // The needle renderer's tissue (the parser checked that it is).
-      if (auto st = out->attachNeedle(*b, *tets, box.max().z(), s.layers, *haptics, stiffness); !st)
+      auto layerOfTet = tetLayers(o, *tets, box.max().z(), resources, where + "/soft");
+      if (!layerOfTet) return layerOfTet.error();
+      if (auto st = out->attachNeedle(*b, *layerOfTet, s.layers, *haptics, stiffness); !st)
         return st.error().within(where);
     } else {
       // The god-object's spring on this tissue is its haptic material's.
@@ -238,7 +270,7 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
   return out;
 }
 
-Status SoftTissues::attachNeedle(Body& b, const TetMesh& mesh, double top,
+Status SoftTissues::attachNeedle(Body& b, std::span<const std::uint8_t> layerOfTet,
                                  const std::vector<SceneSoftLayer>& layers, const SceneHapticsEngine& h,
                                  double tipStiffness) {
   if (!h.needle)
@@ -254,7 +286,7 @@ Status SoftTissues::attachNeedle(Body& b, const TetMesh& mesh, double top,
                         .acrossStiffness = n.acrossStiffness,
                         .alongStiffness = n.alongStiffness};
   if (tipStiffness > 0) options.tipStiffness = tipStiffness;
-  auto needle = NeedleInsertion::create(*b.fem, tetLayersBySlab(mesh, top, layers), needleLayers, options);
+  auto needle = NeedleInsertion::create(*b.fem, layerOfTet, needleLayers, options);
   if (!needle) return needle.error().within("soft");
   b.needle = std::make_unique<NeedleInsertion>(std::move(*needle));
   // The hand's limit is the haptic loop's (max_force, else the device's).

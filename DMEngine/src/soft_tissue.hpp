@@ -29,7 +29,9 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -84,8 +86,9 @@ class SoftTissues {
   struct Obstacle;
   SoftTissues() = default;
   static void drawnSurface(const FemBody& fem, bool creases, Body& b);
-  Status attachNeedle(Body& b, const TetMesh& mesh, double top, const std::vector<SceneSoftLayer>& layers,
-                      const SceneHapticsEngine& h, double tipStiffness);
+  Status attachNeedle(Body& b, std::span<const std::uint8_t> layerOfTet,
+                      const std::vector<SceneSoftLayer>& layers, const SceneHapticsEngine& h,
+                      double tipStiffness);
   static Vec3 toolForce(const Body& b) noexcept;
   std::vector<std::string> layerNames_;  // of the needle's body
   std::vector<Obstacle> obstacles_;      // before bodies_: their FemObstacles point into it

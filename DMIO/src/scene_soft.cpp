@@ -27,7 +27,11 @@ void readLayers(ConfigReader& soft, SceneSoft& s) {
   for (std::size_t i = 0; i < r.size(); ++i) {
     ConfigReader e = r.at(i);
     if (!expectObject(e)) continue;
-    e.knownKeys({"name", "thickness", "puncture_force", "cutting_force", "friction"});
+    const bool byLabel = !s.labels.empty();
+    if (byLabel)
+      e.knownKeys({"name", "label", "puncture_force", "cutting_force", "friction"});
+    else
+      e.knownKeys({"name", "thickness", "puncture_force", "cutting_force", "friction"});
     SceneSoftLayer layer;
     const std::size_t before = e.errors().size();
     layer.name = e.string("name");
@@ -36,10 +40,21 @@ void readLayers(ConfigReader& soft, SceneSoft& s) {
       for (const SceneSoftLayer& l : s.layers)
         if (l.name == layer.name) e.addError("layer " + inQuotes(layer.name) + " is listed twice", "name");
     }
-    if (i + 1 < r.size())
+    if (byLabel) {
+      const std::size_t b = e.errors().size();
+      const double label = e.number("label", {.min = 0.0, .max = 65535.0});
+      if (e.errors().size() == b && label != std::floor(label))
+        e.addError(formatString("label %g is not a whole number", label), "label");
+      else if (e.errors().size() == b)
+        layer.label = static_cast<int>(label);
+      for (const SceneSoftLayer& l : s.layers)
+        if (layer.label >= 0 && l.label == layer.label)
+          e.addError(formatString("label %d is layer \"%s\" already", layer.label, l.name.c_str()), "label");
+    } else if (i + 1 < r.size()) {
       layer.thickness = readPositive(e, "thickness", {}, 1.0);
-    else if (e.has("thickness"))
+    } else if (e.has("thickness")) {
       e.addError("the last layer reaches down to the bottom", "thickness", "remove \"thickness\"");
+    }
     layer.punctureForce = e.number("puncture_force", {.min = 0.0, .max = 1000.0}, layer.punctureForce);
     layer.cuttingForce = e.number("cutting_force", {.min = 0.0, .max = 1000.0}, layer.cuttingForce);
     layer.friction = e.number("friction", {.min = 0.0, .max = 1e6}, layer.friction);
@@ -103,7 +118,7 @@ void readSoft(ConfigReader& object, SceneObject& o) {
   ConfigReader r = object.child("soft");
   if (!expectObject(r)) return;
   r.knownKeys({"youngs_modulus", "poisson_ratio", "density", "damping", "voxel_size", "fixed", "max_tets",
-               "layers", "contact_stiffness"});
+               "layers", "labels", "contact_stiffness"});
   SceneSoft s;
   s.youngsModulus = readPositive(r, "youngs_modulus", {}, 1e12);
   std::size_t before = r.errors().size();
@@ -150,6 +165,14 @@ void readSoft(ConfigReader& object, SceneObject& o) {
       r.addError(formatString("max_tets %g is not a whole number", maxTets), "max_tets");
     else
       s.maxTets = static_cast<std::size_t>(maxTets);
+  }
+  if (r.has("labels")) {
+    const std::size_t b = r.errors().size();
+    s.labels = r.string("labels");
+    if (r.errors().size() == b && s.labels.empty())
+      r.addError("no volume named", "labels", "name a \"volume\" resource of labels");
+    if (!r.has("layers"))
+      r.addError("labels but no layers", "labels", "add \"layers\" naming each label's layer");
   }
   if (r.has("layers")) readLayers(r, s);
   // The tissue meets every static object that collides (their "collide");
@@ -245,6 +268,13 @@ void checkSoft(const SceneDesc& scene, ConfigReader root) {
         h->renderer != SceneHapticsEngine::Renderer::GodObject && !needle)
       r.addError("soft object " + inQuotes(o.name) + " is touched by the god-object or the needle only",
                  "soft", "set the haptics engine's \"renderer\": \"god-object\" or \"needle\"");
+    if (!o.soft->labels.empty()) {
+      const SceneResource* res = scene.resource(o.soft->labels);
+      if (res == nullptr || res->type != SceneResource::Type::Volume)
+        r.child("soft").addError(
+            "resource " + inQuotes(o.soft->labels) + (res ? " is not a volume" : " is not defined"), "labels",
+            "name a \"volume\" resource of labels (a segmentation)");
+    }
     if (!o.soft->layers.empty() && needled != &o)
       r.child("soft").addError("layers but no needle goes into " + inQuotes(o.name), "layers",
                                "set the haptics engine's \"renderer\": \"needle\" with \"objects\": [" +
@@ -274,10 +304,14 @@ void writeSoft(const SceneObject& o, Json& object) {
                 {"puncture_force", l.punctureForce},
                 {"cutting_force", l.cuttingForce},
                 {"friction", l.friction}};
-      if (i + 1 < s.layers.size()) j["thickness"] = l.thickness;
+      if (!s.labels.empty())
+        j["label"] = l.label;
+      else if (i + 1 < s.layers.size())
+        j["thickness"] = l.thickness;
       layers.push_back(std::move(j));
     }
     object["soft"]["layers"] = std::move(layers);
+    if (!s.labels.empty()) object["soft"]["labels"] = s.labels;
   }
 }
 

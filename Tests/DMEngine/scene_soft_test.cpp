@@ -10,6 +10,7 @@
 // runs.
 #include <dm/core/filesystem.hpp>
 #include <dm/engine/scene_runtime.hpp>
+#include <dm/io/nifti.hpp>
 #include <dm/io/scene_file.hpp>
 #include <dm/physics/fem.hpp>
 
@@ -373,6 +374,78 @@ TEST(SceneSoft, ABallHoldsUpATissueHeldAtItsEnds) {
   EXPECT_LT(sagOn, sagOff) << "the ball does not hold the pad up";
   // Without the ball the ends carry all the weight.
   EXPECT_LE((vec(alone.at("held_force_N")) + weight).norm(), 0.01 * weight.norm());
+}
+
+}  // namespace scene_soft_test
+
+namespace scene_soft_test {
+
+// The bundled needle scene with its layers from a label volume written
+// beside it: 1 mm voxels over the block, labelled by depth below its top
+// as the slabs are (skin 5 mm, fat 10 mm, muscle), or with `gap` a depth
+// range left as background (label 0).
+dm::Result<dm::SceneDesc> needleByLabels(const fs::path& dir, double gapFrom = 1.0, double gapTo = 1.0) {
+  auto v = dm::Volume::create({40, 40, 30}, dm::VoxelType::U8,
+                              Eigen::Translation3d(-0.0195, -0.0195, 0.0005) * Eigen::Scaling(0.001));
+  if (!v) return v.error();
+  for (int k = 0; k < 30; ++k)
+    for (int j = 0; j < 40; ++j)
+      for (int i = 0; i < 40; ++i) {
+        const double depth = 0.03 - (0.0005 + 0.001 * k);
+        const int label = depth >= gapFrom && depth < gapTo ? 0 : depth < 0.005 ? 1 : depth < 0.015 ? 2 : 3;
+        v->setValue(i, j, k, label);
+      }
+  if (auto s = dm::writeNifti(*v, dir / "layers.nii"); !s) return s.error();
+  auto text =
+      dm::readFile(fs::path(dm::test::besideExecutable(DM_EXAMPLE_SCENES_DIR)) / "needle_insertion.json");
+  if (!text) return text.error();
+  json j = json::parse(std::string(reinterpret_cast<const char*>(text->data()), text->size()), nullptr, true,
+                       true);
+  j["resources"]["layers"] = {{"type", "volume"}, {"source", "layers.nii"}};
+  json& soft = j["objects"][0]["soft"];
+  soft["labels"] = "layers";
+  for (std::size_t i = 0; i < 3; ++i) {
+    soft["layers"][i].erase("thickness");
+    soft["layers"][i]["label"] = i + 1;
+  }
+  std::vector<dm::Error> problems;
+  auto s = dm::parseScene(j.dump(), "needle_labels.json", dir, &problems);
+  if (!s)
+    return dm::fail(dm::ErrorCode::InvalidArgument, dm::formatSceneErrors(problems), "needle_labels.json");
+  s->engines.render.reset();
+  s->outputs.frames = false;
+  s->outputs.plot = false;
+  return s;
+}
+
+TEST(SceneNeedle, LayersFromALabelVolumeAreTheSlabsItLabels) {
+  // A label map that labels the slabs' depths gives every tetrahedron the
+  // same layer: the same run, to the byte.
+  const dm::test::TempDir dir("soft_needle_labels");
+  auto byLabels = needleByLabels(dir.path());
+  ASSERT_TRUE(byLabels) << byLabels.error();
+  const json a = runScene(*byLabels, 3.0, dir / "labels");
+  const json b = runScene(needleInsertion(), 3.0, dir / "slabs");
+  EXPECT_EQ(fileText(dir / "labels" / "forces.csv"), fileText(dir / "slabs" / "forces.csv"));
+  EXPECT_EQ(softBody(a, "block").at("needle").at("punctures").get<int>(), 2);
+  EXPECT_EQ(a.at("physics"), b.at("physics"));
+}
+
+TEST(SceneNeedle, ATissueOnALabelNoLayerNamesFailsBeforeAnythingRuns) {
+  // Background (label 0) inside the block between 20 and 25 mm down: no
+  // layer names it, and the run fails at the object's labels, leaving no
+  // output folder.
+  const dm::test::TempDir dir("soft_needle_gap");
+  auto scene = needleByLabels(dir.path(), 0.020, 0.025);
+  ASSERT_TRUE(scene) << scene.error();
+  auto rt = dm::SceneRuntime::create(*scene);
+  ASSERT_TRUE(rt) << rt.error();
+  const fs::path out = dir / "out";
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 1.0, .outDir = out});
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.error().where.find("objects/block/soft/labels"), std::string::npos) << r.error();
+  EXPECT_NE(r.error().what.find("no layer names"), std::string::npos) << r.error();
+  EXPECT_FALSE(fs::exists(out));
 }
 
 }  // namespace scene_soft_test

@@ -313,4 +313,46 @@ TEST(SceneNeedle, MisusesAreErrorsAtTheirKeys) {
   }
 }
 
+TEST(SceneNeedle, LayersFromALabelVolumeReadAndWriteBack) {
+  Json j = needleScene();
+  j["resources"]["seg"] = {{"type", "volume"}, {"source", "seg.nii.gz"}};
+  Json& soft = j["objects"][1]["soft"];
+  soft["labels"] = "seg";
+  soft["layers"][0].erase("thickness");
+  soft["layers"][0]["label"] = 1;
+  soft["layers"][1]["label"] = 3;
+  auto s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const dm::SceneSoft& got = *s->objects[1].soft;
+  EXPECT_EQ(got.labels, "seg");
+  EXPECT_EQ(got.layers[0].label, 1);
+  EXPECT_EQ(got.layers[1].label, 3);
+  EXPECT_EQ(got.layers[0].thickness, 0.0);
+  auto again = dm::parseScene(dm::toJson(*s).dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(again) << again.error();
+  EXPECT_TRUE(*s == *again);
+  // Misuses: a thickness beside labels, a label twice, a label that is not
+  // a whole number, labels that name no volume.
+  Json bad = j;
+  Json& b = bad["objects"][1]["soft"];
+  b["layers"][0]["thickness"] = 0.004;
+  b["layers"][1]["label"] = 1;
+  b["layers"].push_back({{"name", "bone"}, {"label", 2.5}});
+  b["labels"] = "pad";
+  const auto problems = problemsOf(bad);
+  const std::string p = "/objects/1/soft";
+  EXPECT_TRUE(at(problems, p + "/layers/0/thickness"));
+  EXPECT_TRUE(at(problems, p + "/layers/1/label"));
+  EXPECT_TRUE(at(problems, p + "/layers/2/label"));
+  if (const dm::Error* e = at(problems, p + "/labels")) {
+    EXPECT_NE(e->what.find("not a volume"), std::string::npos) << e->what;
+  }
+  Json none = padScene();
+  none["objects"][1]["soft"]["labels"] = "pad";
+  const auto found = problemsOf(none);
+  if (const dm::Error* e = at(found, p + "/labels")) {
+    EXPECT_NE(e->what.find("no layers"), std::string::npos) << e->what;
+  }
+}
+
 }  // namespace scene_soft_test

@@ -160,7 +160,8 @@ struct SceneInclusion {
 /// bounding box), each below the one before.
 struct SceneSoftLayer {
   std::string name;
-  double thickness = 0.0;      ///< m, > 0; 0 on the last layer: down to the bottom
+  double thickness = 0.0;      ///< m, > 0; 0 on the last layer (down to the bottom) and with labels
+  int label = -1;              ///< with SceneSoft::labels: the label value of the layer's voxels, 0..65535
   double punctureForce = 1.0;  ///< N, ≥ 0: the tip force that breaks the layer's surface (0: none)
   double cuttingForce = 0.3;   ///< N, ≥ 0: the force on the tip while it cuts through the layer
   double friction = 50.0;      ///< N/m, ≥ 0: sliding friction per metre of shaft in the layer
@@ -195,6 +196,11 @@ struct SceneSoft {
   /// What a needle meets, top down ("layers"); only with the needle renderer
   /// on this object, and required there.
   std::vector<SceneSoftLayer> layers;
+  /// A volume resource of labels ("labels"): each tetrahedron is in the
+  /// layer whose label its centroid's voxel has (the volume placed in the
+  /// world, the object's pose and scale applied to the tissue), instead of
+  /// slabs by thickness. Empty: slabs.
+  std::string labels;
 
   bool operator==(const SceneSoft&) const = default;
 };
