@@ -20,6 +20,17 @@
 // the needle), the torque its moment about the device point; each is
 // clamped to its limit and zeroed if not finite (dm::sanitizeWrench).
 //
+// Known limit: between physics steps the shaft's coupling points are frozen
+// in the tissue, so while they stick the hand feels their springs alone,
+// not in series with the tissue that holds them. Where the hand reverses
+// (the friction turning from pushing to pulling) the force therefore falls
+// faster than the tissue would let it and steps back at each physics step:
+// a sawtooth at the physics rate, about N·k_along·v/rate (0.3 N at 100 Hz
+// for nine points at 10 mm/s in examples/scenes/needle_insertion.json), for
+// the ~0.15 s until the points slide. The membrane already yields in series
+// with the tissue (NeedleLocalModel::membraneYield); the shaft points need
+// the same, from the tissue's stiffness along the track.
+//
 // Threads: tick() on the haptic thread (no allocation, lock, log or throw);
 // step() on one physics thread. It is a HapticRenderer, so a HapticLoop
 // (real time or lockstep) drives it like any renderer; its one object is
