@@ -27,20 +27,35 @@ namespace {
 // The tetrahedra of soft object `o` in its frame, at its scale (m).
 Result<TetMesh> softTetMesh(const SceneObject& o, const SceneResource& res, const Mesh& mesh) {
   const SceneSoft& s = *o.soft;
+  // The occupied voxels: a box split into cuboids of about voxel_size that
+  // fill it exactly (the tissue's surface is the box the scene draws), or
+  // the voxelized mesh.
+  std::vector<std::uint8_t> occupancy;
+  Vec3i dims;
+  Vec3 spacing, origin;
   if (res.type == SceneResource::Type::Shape && res.shape == SceneResource::Shape::Box) {
-    // Cubes of about voxel_size that fill the box exactly: the tissue's
-    // surface is the box the scene draws.
     const Vec3 size = 2.0 * res.halfExtents * o.scale;
-    Vec3i cells;
     for (int a = 0; a < 3; ++a)
-      cells[a] = static_cast<int>(std::clamp(std::round(size[a] / s.voxelSize), 1.0, 1e6));
-    return tetMeshBox(cells, size, -0.5 * size, s.maxTets);
+      dims[a] = static_cast<int>(std::clamp(std::round(size[a] / s.voxelSize), 1.0, 1e6));
+    if (s.levels == 0) return tetMeshBox(dims, size, -0.5 * size, s.maxTets);
+    spacing = size.cwiseQuotient(dims.cast<double>());
+    origin = -0.5 * size;
+    occupancy.assign(static_cast<std::size_t>(dims.prod()), 1);
+  } else {
+    Mesh scaled = mesh;
+    if (o.scale != 1.0) scaled.transform(Affine3(Eigen::Scaling(o.scale)));
+    auto v = voxelizeMesh(scaled, {.voxelSize = s.voxelSize, .paddingVoxels = 1});
+    if (!v) return v.error();
+    if (s.levels == 0) return tetMeshFromVolume(*v, {.threshold = 0.5, .maxTets = s.maxTets});
+    dims = v->dims();
+    spacing = Vec3::Constant(s.voxelSize);
+    origin = v->indexToWorld() * Vec3::Constant(-0.5);  // the first voxel's corner
+    occupancy.resize(static_cast<std::size_t>(dims.prod()));
+    for (std::size_t i = 0; i < occupancy.size(); ++i) occupancy[i] = v->valueAt(i) >= 0.5 ? 1 : 0;
   }
-  Mesh scaled = mesh;
-  if (o.scale != 1.0) scaled.transform(Affine3(Eigen::Scaling(o.scale)));
-  auto occupancy = voxelizeMesh(scaled, {.voxelSize = s.voxelSize, .paddingVoxels = 1});
-  if (!occupancy) return occupancy.error();
-  return tetMeshFromVolume(*occupancy, {.threshold = 0.5, .maxTets = s.maxTets});
+  HierarchicalTetOptions h{.levels = s.levels, .maxTets = s.maxTets};
+  if (s.fineRegion) h.fineRegion = Aabb(s.fineRegion->min * o.scale, s.fineRegion->max * o.scale);
+  return tetMeshHierarchical(occupancy, dims, spacing, origin, h);
 }
 
 // Each tetrahedron's needle layer: the layer whose slab (top down from the
@@ -233,6 +248,8 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     for (const Vec3& p : tets->nodes) box.extend(p);
     const double tol = 0.25 * s.voxelSize;
     b->fixedNodes = b->fem->fixNodesWhere([&](const Vec3& p) {
+      for (const SceneBox& fb : s.fixedBoxes)
+        if (Aabb(fb.min * o.scale, fb.max * o.scale).contains(p)) return true;
       for (int f = 0; f < 6; ++f) {
         if (((s.fixedFaces >> f) & 1u) == 0) continue;
         const int axis = f / 2;

@@ -14,6 +14,23 @@ namespace {
 // Largest model a scene may ask for (FemBody holds ~0.5 kB a tetrahedron).
 constexpr double kMaxTetsLimit = 4'000'000.0;
 
+// {"min": [x, y, z], "max": [x, y, z]}, min ≤ max; nullopt on an error
+// (recorded).
+std::optional<SceneBox> readBox(ConfigReader& r) {
+  if (!expectObject(r)) return std::nullopt;
+  r.knownKeys({"min", "max"});
+  const std::size_t before = r.errors().size();
+  SceneBox box{readVec3(r, "min"), readVec3(r, "max")};
+  if (r.errors().size() != before) return std::nullopt;
+  if ((box.max - box.min).minCoeff() < 0.0) {
+    r.addError("max is below min", "max", "give the box's lowest corner as min, its highest as max");
+    return std::nullopt;
+  }
+  return box;
+}
+
+Json boxJson(const SceneBox& b) { return {{"min", toJson(b.min)}, {"max", toJson(b.max)}}; }
+
 // Most layers a needle meets (each tetrahedron's layer is a byte).
 constexpr std::size_t kMaxLayers = 255;
 
@@ -118,7 +135,7 @@ void readSoft(ConfigReader& object, SceneObject& o) {
   ConfigReader r = object.child("soft");
   if (!expectObject(r)) return;
   r.knownKeys({"youngs_modulus", "poisson_ratio", "density", "damping", "voxel_size", "fixed", "max_tets",
-               "layers", "labels", "contact_stiffness"});
+               "layers", "labels", "contact_stiffness", "fixed_boxes", "levels", "fine_region"});
   SceneSoft s;
   s.youngsModulus = readPositive(r, "youngs_modulus", {}, 1e12);
   std::size_t before = r.errors().size();
@@ -157,6 +174,28 @@ void readSoft(ConfigReader& object, SceneObject& o) {
         s.fixedFaces |= bit;
       }
     }
+  }
+  if (r.has("fixed_boxes")) {
+    ConfigReader f = r.child("fixed_boxes");
+    if (expectArray(f))
+      for (std::size_t i = 0; i < f.size(); ++i) {
+        ConfigReader b = f.at(i);
+        if (auto box = readBox(b)) s.fixedBoxes.push_back(*box);
+      }
+  }
+  if (r.has("levels")) {
+    const std::size_t b = r.errors().size();
+    const double levels = r.number("levels", {.min = 0.0, .max = 10.0});
+    if (r.errors().size() == b && levels != std::floor(levels))
+      r.addError(formatString("levels %g is not a whole number", levels), "levels");
+    else if (r.errors().size() == b)
+      s.levels = static_cast<int>(levels);
+  }
+  if (r.has("fine_region")) {
+    ConfigReader b = r.child("fine_region");
+    s.fineRegion = readBox(b);
+    if (s.levels == 0)
+      r.addError("a fine region on a uniform grid", "fine_region", "set \"levels\" > 0, or remove it");
   }
   before = r.errors().size();
   const double maxTets = r.number("max_tets", {.min = 1.0, .max = kMaxTetsLimit}, double(s.maxTets));
@@ -296,6 +335,13 @@ void writeSoft(const SceneObject& o, Json& object) {
                     {"fixed", std::move(fixed)},
                     {"max_tets", s.maxTets}};
   if (s.contactStiffness > 0) object["soft"]["contact_stiffness"] = s.contactStiffness;
+  if (!s.fixedBoxes.empty()) {
+    Json boxes = Json::array();
+    for (const SceneBox& b : s.fixedBoxes) boxes.push_back(boxJson(b));
+    object["soft"]["fixed_boxes"] = std::move(boxes);
+  }
+  if (s.levels > 0) object["soft"]["levels"] = s.levels;
+  if (s.fineRegion) object["soft"]["fine_region"] = boxJson(*s.fineRegion);
   if (!s.layers.empty()) {
     Json layers = Json::array();
     for (std::size_t i = 0; i < s.layers.size(); ++i) {

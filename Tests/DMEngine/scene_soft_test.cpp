@@ -449,3 +449,43 @@ TEST(SceneNeedle, ATissueOnALabelNoLayerNamesFailsBeforeAnythingRuns) {
 }
 
 }  // namespace scene_soft_test
+
+namespace scene_soft_test {
+
+TEST(SceneSoft, AFixedBoxAroundAFaceHoldsWhatTheFaceDoes) {
+  // The cantilever held by a box around its −x end face (object frame,
+  // before the scale of 2) instead of by the face: the same nodes, the
+  // same run.
+  dm::SceneDesc byBox = cantilever();
+  dm::SceneSoft& soft = *byBox.objects[0].soft;
+  soft.fixedFaces = 0;
+  soft.fixedBoxes.push_back({dm::Vec3(-0.026, -0.01, -0.01), dm::Vec3(-0.0249, 0.01, 0.01)});
+  const dm::test::TempDir dir("soft_fixed_box");
+  const json a = runScene(byBox, 1.0, dir / "box");
+  const json b = runScene(cantilever(), 1.0, dir / "face");
+  EXPECT_EQ(softBody(a, "beam").at("fixed_nodes").get<int>(), 25);
+  EXPECT_EQ(a.at("physics").at("soft"), b.at("physics").at("soft"));
+}
+
+TEST(SceneSoft, AHierarchicalPadRestsOnTheTableWithFewerTetrahedra) {
+  // The pad on the table at 1.25 mm voxels (32 × 32 × 8: 49,152
+  // tetrahedra on a uniform grid) with cells of up to 4 voxels away from a
+  // fine region at its top centre: about a tenth of them (5,136), hanging
+  // nodes where fine meets coarse, and the table still carries the weight,
+  // to 1 %.
+  dm::SceneDesc scene = padOn("table", R"({"position": [0, 0, 0]})", "[]");
+  dm::SceneSoft& soft = *scene.objects[1].soft;
+  soft.voxelSize = 0.00125;  // 32 × 32 × 8 voxels
+  soft.levels = 2;
+  soft.fineRegion = dm::SceneBox{dm::Vec3(-0.004, -0.004, 0.004), dm::Vec3(0.004, 0.004, 0.005)};
+  const json s = runScene(scene, 3.0, dm::test::TempDir("soft_hier").path());
+  const json& pad = softBody(s, "pad");
+  EXPECT_LT(pad.at("tets").get<int>(), 32 * 32 * 8 * 6 / 5) << "no coarser cells";
+  const dm::Vec3 weight = vec(pad.at("weight_N"));
+  const dm::Vec3 onTable = vec(pad.at("obstacles").at(0).at("force_N"));
+  EXPECT_LE((onTable - weight).norm(), 0.01 * weight.norm()) << onTable.transpose();
+  EXPECT_NEAR(pad.at("mass_kg").get<double>(), 0.04 * 0.04 * 0.01 * 1000, 1e-9);  // the cells cover the box
+  EXPECT_EQ(pad.at("unconverged_steps").get<int>(), 0);
+}
+
+}  // namespace scene_soft_test

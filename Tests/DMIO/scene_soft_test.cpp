@@ -355,4 +355,35 @@ TEST(SceneNeedle, LayersFromALabelVolumeReadAndWriteBack) {
   }
 }
 
+TEST(SceneSoft, FixedBoxesAndAGradedGridReadAndWriteBack) {
+  Json j = padScene();
+  Json& soft = j["objects"][1]["soft"];
+  soft["fixed_boxes"] = Json::parse(R"([{"min": [-0.03, -0.03, -0.01], "max": [-0.02, 0.03, 0.01]}])");
+  soft["levels"] = 3;
+  soft["fine_region"] = Json::parse(R"({"min": [-0.005, -0.005, 0], "max": [0.005, 0.005, 0.01]})");
+  auto s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const dm::SceneSoft& got = *s->objects[1].soft;
+  ASSERT_EQ(got.fixedBoxes.size(), 1u);
+  EXPECT_EQ(got.fixedBoxes[0].min, dm::Vec3(-0.03, -0.03, -0.01));
+  EXPECT_EQ(got.fixedBoxes[0].max, dm::Vec3(-0.02, 0.03, 0.01));
+  EXPECT_EQ(got.levels, 3);
+  ASSERT_TRUE(got.fineRegion);
+  EXPECT_EQ(got.fineRegion->max, dm::Vec3(0.005, 0.005, 0.01));
+  auto again = dm::parseScene(dm::toJson(*s).dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(again) << again.error();
+  EXPECT_TRUE(*s == *again);
+  Json bad = j;
+  Json& b = bad["objects"][1]["soft"];
+  b["fixed_boxes"][0]["max"] = {-0.04, 0.03, 0.01};
+  b["levels"] = 2.5;
+  const auto problems = problemsOf(bad);
+  EXPECT_TRUE(at(problems, "/objects/1/soft/fixed_boxes/0/max"));
+  EXPECT_TRUE(at(problems, "/objects/1/soft/levels"));
+  Json uniform = j;
+  uniform["objects"][1]["soft"].erase("levels");
+  const auto found = problemsOf(uniform);
+  EXPECT_TRUE(at(found, "/objects/1/soft/fine_region"));
+}
+
 }  // namespace scene_soft_test

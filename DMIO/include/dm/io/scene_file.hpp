@@ -169,6 +169,14 @@ struct SceneSoftLayer {
   bool operator==(const SceneSoftLayer&) const = default;
 };
 
+/// An axis-aligned box in an object's frame (before its scale), m.
+struct SceneBox {
+  Vec3 min = Vec3::Zero();
+  Vec3 max = Vec3::Zero();  ///< ≥ min on every axis
+
+  bool operator==(const SceneBox&) const = default;
+};
+
 /// Soft tissue (v2 "soft"): the object is a deformable body — co-rotational
 /// FEM (dm::FemBody) on tetrahedra made from its mesh — that the physics
 /// engine steps, the god-object presses (felt at the haptic rate through
@@ -191,7 +199,16 @@ struct SceneSoft {
   /// out of the static objects that collide ("contact_stiffness"); 0 (not
   /// given): 20·E·voxel_size, a node's own stiffness times 20.
   double contactStiffness = 0.0;
-  std::uint8_t fixedFaces = 0;    ///< bit i: kFaces[i] is held ("fixed": ["-z"])
+  std::uint8_t fixedFaces = 0;
+  /// Boxes whose nodes are held too ("fixed_boxes"): where the tissue is
+  /// attached (to bone, to a clamp).
+  std::vector<SceneBox> fixedBoxes;
+  /// Octree grading ("levels", 0..10): 0 a uniform grid; n > 0 cells of up
+  /// to 2ⁿ voxels where the occupancy allows, voxel-sized ones in and
+  /// around fineRegion (dm::tetMeshHierarchical).
+  int levels = 0;
+  std::optional<SceneBox>
+      fineRegion;  ///< "fine_region", with levels > 0    ///< bit i: kFaces[i] is held ("fixed": ["-z"])
   std::size_t maxTets = 100'000;  ///< a larger model is an error before it is built, ≤ 4,000,000
   /// What a needle meets, top down ("layers"); only with the needle renderer
   /// on this object, and required there.
