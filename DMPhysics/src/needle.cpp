@@ -378,15 +378,37 @@ Result<FemStepReport> NeedleInsertion::stepShaft(const NeedleShaft& shaft, doubl
   // axis at their anchors with at most their limit along it (a point the
   // tissue carried off the shaft during the step, past the tip, no longer
   // touches it); the tip's spring and cutting load with what the body took.
+  // The tissue's stiffness along the track: how far the points that stuck
+  // through this step and the last moved along the shaft for the change in
+  // their springs' pull (for the local model's yielding points).
   wrench_ = Wrench{};
   std::size_t i = 0;
+  double pulled = 0.0, moved = 0.0;
+  std::size_t stuck = 0;
   for (TrackPoint& p : track_) {
-    if (!p.active) continue;
+    if (!p.active) {
+      p.stuck = false;
+      continue;
+    }
     ++i;
     const Vec3 point = positionOf(p.at);
     if (p.slide != 0.0) p.stick = shaft_.coordinate(point) + p.slide / options_.alongStiffness;
     wrench_ += needleimpl::shaftPointWrench(shaft_, point, p.stick, p.limit, options_.acrossStiffness,
                                             options_.alongStiffness);
+    const double u = shaft_.coordinate(point);
+    const double force = std::clamp(options_.alongStiffness * (p.stick - u), -p.limit, p.limit);
+    if (p.slide == 0.0 && p.stuck) {
+      pulled += force - p.force;
+      moved += (point - p.where).dot(shaft_.tangentAt(u));
+      ++stuck;
+    }
+    p.stuck = p.slide == 0.0;
+    p.force = force;
+    p.where = point;
+  }
+  if (stuck > 0 && std::abs(moved) > 1e-9 * double(stuck) && std::abs(pulled) > 1e-6 * double(stuck)) {
+    const double k = pulled / moved;  // per point: Σ Δf / Σ Δx
+    if (k > 0.0) trackStiffness_ = std::clamp(k, 1e-2 * options_.alongStiffness, 1e2 * options_.alongStiffness);
   }
   for (; i < springs_.size(); ++i) {
     const Vec3 f = -body_->pointSpringForce(i);
@@ -430,6 +452,10 @@ void NeedleInsertion::localModel(NeedleLocalModel& out) const {
   if (state_ == NeedleTip::Pressing)
     out.membraneYield =
         pressStiffness_ > 0.0 ? options_.tipStiffness / (options_.tipStiffness + pressStiffness_) : 1.0;
+  // Until the points have stuck for two steps the tissue's stiffness under
+  // the tip when it last pressed a membrane stands in for the track's.
+  const double track = trackStiffness_ > 0.0 ? trackStiffness_ : pressStiffness_;
+  out.shaftYield = track > 0.0 ? options_.alongStiffness / (options_.alongStiffness + track) : 0.0;
   out.hasTrack = haveEnd_;
   out.trackEnd = haveEnd_ ? positionOf(end_) : Vec3::Zero();
   std::size_t n = 0;
@@ -438,11 +464,13 @@ void NeedleInsertion::localModel(NeedleLocalModel& out) const {
     if (n == NeedleLocalModel::kMaxPoints) {  // merge pairwise to make room
       for (std::size_t k = 0; k < n / 2; ++k) {
         const auto &a = out.points[2 * k], &b = out.points[2 * k + 1];
-        out.points[k] = {0.5 * (a.position + b.position), 0.5 * (a.stick + b.stick), a.limit + b.limit};
+        out.points[k] = {0.5 * (a.position + b.position), 0.5 * (a.stick + b.stick), a.limit + b.limit,
+                         (a.tangent + b.tangent).normalized()};
       }
       n /= 2;
     }
-    out.points[n++] = {positionOf(p.at), p.stick, p.limit};
+    const Vec3 point = positionOf(p.at);
+    out.points[n++] = {point, p.stick, p.limit, shaft_.tangentAt(shaft_.coordinate(point))};
   }
   out.pointCount = n;
 }
@@ -450,6 +478,7 @@ void NeedleInsertion::localModel(NeedleLocalModel& out) const {
 void NeedleLocalModel::assign(const NeedleLocalModel& o) noexcept {
   state = o.state, shaft = o.shaft;
   across = o.across, along = o.along, membrane = o.membrane, membraneYield = o.membraneYield;
+  shaftYield = o.shaftYield;
   tipStiffness = o.tipStiffness;
   punctureForce = o.punctureForce, cuttingForce = o.cuttingForce, hasTrack = o.hasTrack,
   trackEnd = o.trackEnd;
@@ -459,11 +488,14 @@ void NeedleLocalModel::assign(const NeedleLocalModel& o) noexcept {
 
 Wrench NeedleLocalModel::evaluate(const NeedleShaft& at) noexcept {
   Wrench w;
-  for (std::size_t k = 0; k < pointCount; ++k)
-    w +=
-        needleimpl::shaftPointWrench(at, points[k].position, points[k].stick, points[k].limit, across, along);
   const Vec3& d = at.tangent;
   const double advance = (at.tip - shaft.tip).dot(d);  // since the step, along the tip's tangent
+  // Each point yields along the shaft with its share of the advance (the
+  // shaft moves along itself by `advance` at every point).
+  const double follow = shaftYield * advance;
+  for (std::size_t k = 0; k < pointCount; ++k)
+    w += needleimpl::shaftPointWrench(at, points[k].position + follow * points[k].tangent, points[k].stick,
+                                      points[k].limit, across, along);
   if (state == NeedleTip::Pressing) {
     const Vec3 yielded = membrane + membraneYield * advance * d;
     const Vec3 onTissue = tipStiffness * (at.tip - yielded);

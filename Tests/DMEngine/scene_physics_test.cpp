@@ -19,6 +19,7 @@
 
 #include "../common/build_paths.hpp"
 #include "../common/temp_dir.hpp"
+#include "scene_run_support.hpp"
 
 namespace {
 
@@ -27,7 +28,9 @@ using nlohmann::json;
 
 constexpr double kG = 9.80665;
 
-dm::Vec3 vec(const json& j) { return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()}; }
+using scene_run::fileText;
+using scene_run::runScene;
+using scene_run::vec;
 
 const json& body(const json& summary, const std::string& name) {
   for (const json& b : summary.at("physics").at("bodies"))
@@ -37,36 +40,9 @@ const json& body(const json& summary, const std::string& name) {
   return none;
 }
 
-// The bytes of a run's output file, as text.
-std::string fileText(const fs::path& p) {
-  auto bytes = dm::readFile(p);
-  EXPECT_TRUE(bytes) << bytes.error();
-  return bytes ? std::string(reinterpret_cast<const char*>(bytes->data()), bytes->size()) : std::string();
-}
-
-json runScene(const dm::SceneDesc& scene, double seconds, const fs::path& out) {
-  fs::remove_all(out);
-  auto rt = dm::SceneRuntime::create(scene);
-  EXPECT_TRUE(rt) << rt.error();
-  if (!rt) return {};
-  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = seconds, .outDir = out});
-  EXPECT_TRUE(r) << r.error();
-  return r ? r->summary : json();
-}
-
 // The bundled box-push scene, without its render engine (the physics is
 // what is checked here; example_box_push_lockstep renders it).
-dm::SceneDesc boxPush() {
-  std::vector<dm::Error> problems;
-  auto s =
-      dm::readScene(fs::path(dm::test::besideExecutable(DM_EXAMPLE_SCENES_DIR)) / "box_push.json", &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  dm::SceneDesc scene = *s;
-  scene.engines.render.reset();
-  scene.outputs.frames = false;
-  scene.outputs.plot = false;
-  return scene;
-}
+dm::SceneDesc boxPush() { return scene_run::bundledScene("box_push.json"); }
 
 // A table and one dynamic body on it, no haptics.
 dm::SceneDesc tableScene(const std::string& bodyResource, const std::string& bodyKeys) {

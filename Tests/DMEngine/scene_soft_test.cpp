@@ -25,6 +25,7 @@
 
 #include "../common/build_paths.hpp"
 #include "../common/temp_dir.hpp"
+#include "scene_run_support.hpp"
 
 namespace scene_soft_test {
 
@@ -33,7 +34,9 @@ using nlohmann::json;
 
 constexpr double kG = 9.80665;
 
-dm::Vec3 vec(const json& j) { return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()}; }
+using scene_run::fileText;
+using scene_run::runScene;
+using scene_run::vec;
 
 const json& softBody(const json& summary, const std::string& name) {
   for (const json& b : summary.at("physics").at("soft"))
@@ -43,35 +46,9 @@ const json& softBody(const json& summary, const std::string& name) {
   return none;
 }
 
-std::string fileText(const fs::path& p) {
-  auto bytes = dm::readFile(p);
-  EXPECT_TRUE(bytes) << bytes.error();
-  return bytes ? std::string(reinterpret_cast<const char*>(bytes->data()), bytes->size()) : std::string();
-}
-
-json runScene(const dm::SceneDesc& scene, double seconds, const fs::path& out) {
-  fs::remove_all(out);
-  auto rt = dm::SceneRuntime::create(scene);
-  EXPECT_TRUE(rt) << rt.error();
-  if (!rt) return {};
-  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = seconds, .outDir = out});
-  EXPECT_TRUE(r) << r.error();
-  return r ? r->summary : json();
-}
-
 // The bundled tissue press, without its render engine (the mechanics is
 // what is checked here; example_tissue_press_lockstep renders it).
-dm::SceneDesc tissuePress() {
-  std::vector<dm::Error> problems;
-  auto s = dm::readScene(fs::path(dm::test::besideExecutable(DM_EXAMPLE_SCENES_DIR)) / "tissue_press.json",
-                         &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  dm::SceneDesc scene = *s;
-  scene.engines.render.reset();
-  scene.outputs.frames = false;
-  scene.outputs.plot = false;
-  return scene;
-}
+dm::SceneDesc tissuePress() { return scene_run::bundledScene("tissue_press.json"); }
 
 // A 100 × 10 × 10 mm beam (a 50 × 5 × 5 mm box at scale 2) held at its −x
 // end, turned 90° about x: its local y is the world's z, so gravity acts
@@ -208,17 +185,7 @@ namespace scene_soft_test {
 
 // The bundled needle insertion (examples/scenes/needle_insertion.json)
 // without its render engine.
-dm::SceneDesc needleInsertion() {
-  std::vector<dm::Error> problems;
-  auto s = dm::readScene(
-      fs::path(dm::test::besideExecutable(DM_EXAMPLE_SCENES_DIR)) / "needle_insertion.json", &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  dm::SceneDesc scene = *s;
-  scene.engines.render.reset();
-  scene.outputs.frames = false;
-  scene.outputs.plot = false;
-  return scene;
-}
+dm::SceneDesc needleInsertion() { return scene_run::bundledScene("needle_insertion.json"); }
 
 // One haptic tick of a force trace: time, the force on the hand along z
 // and the tip's depth below the block's top (30 mm; the tip is 40 mm below

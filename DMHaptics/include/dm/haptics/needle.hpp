@@ -20,16 +20,15 @@
 // the needle), the torque its moment about the device point; each is
 // clamped to its limit and zeroed if not finite (dm::sanitizeWrench).
 //
-// Known limit: between physics steps the shaft's coupling points are frozen
-// in the tissue, so while they stick the hand feels their springs alone,
-// not in series with the tissue that holds them. Where the hand reverses
-// (the friction turning from pushing to pulling) the force therefore falls
-// faster than the tissue would let it and steps back at each physics step:
-// a sawtooth at the physics rate, about N·k_along·v/rate (0.3 N at 100 Hz
-// for nine points at 10 mm/s in examples/scenes/needle_insertion.json), for
-// the ~0.15 s until the points slide. The membrane already yields in series
-// with the tissue (NeedleLocalModel::membraneYield); the shaft points need
-// the same, from the tissue's stiffness along the track.
+// Between physics steps the shaft's coupling points yield along the track
+// with their share of the needle's motion (NeedleLocalModel::shaftYield,
+// the tissue's stiffness there in series with the points' springs), as the
+// membrane does under the tip: where the hand reverses and the points stick,
+// the force follows the tissue instead of stepping back at each physics
+// step (frozen points gave a 0.3 N sawtooth at 100 Hz in
+// examples/scenes/needle_insertion.json; the first two steps after a
+// reversal, before the track's stiffness is measured, use the tissue's
+// under the tip and keep a third of it).
 //
 // Threads: tick() on the haptic thread (no allocation, lock, log or throw);
 // step() on one physics thread. It is a HapticRenderer, so a HapticLoop

@@ -153,6 +153,7 @@ struct NeedleLocalModel {
     Vec3 position = Vec3::Zero();  ///< m, the tissue point, frozen
     double stick = 0.0;            ///< m along the needle from the tip where it sticks
     double limit = 0.0;            ///< N, its friction limit
+    Vec3 tangent = Vec3::Zero();   ///< the shaft's tangent there at the step (the way it yields)
   };
   NeedleTip state = NeedleTip::Outside;
   NeedleShaft shaft;                 ///< the needle at the step
@@ -165,6 +166,16 @@ struct NeedleLocalModel {
   /// a frozen membrane would feel the tip's spring alone (ten times too
   /// stiff on soft tissue).
   double membraneYield = 0.0;
+  /// The share of the needle's advance along itself (since the step) that
+  /// the shaft's points follow, k_along/(k_along + k_track) with k_track the
+  /// tissue's stiffness along the track per point, measured while the points
+  /// stuck over the last steps (before that, the tissue's stiffness under the
+  /// tip when it last pressed a membrane; 0 without either: they stay put):
+  /// the tissue holding
+  /// a point yields in series with its spring, where a frozen point would
+  /// feel the spring alone — too stiff where the hand reverses, and
+  /// stepping back at each physics step.
+  double shaftYield = 0.0;
   double tipStiffness = 0.0;   ///< N/m
   double punctureForce = 0.0;  ///< N, the membrane's threshold
   double cuttingForce = 0.0;   ///< N, of the layer at the tip
@@ -262,6 +273,9 @@ class NeedleInsertion {
     double limit = 0.0;  // N, its friction limit this step
     bool active = false;
     bool fresh = true;  // made by the last step, not yet coupled
+    bool stuck = false;            // on the shaft and not sliding at the last step's end
+    double force = 0.0;            // N on the tissue along the needle then
+    Vec3 where = Vec3::Zero();     // its position then
   };
   Vec3 positionOf(const MaterialPoint& m) const;
   bool locate(const Vec3& p, std::uint32_t hint, MaterialPoint& out) const;
@@ -283,6 +297,7 @@ class NeedleInsertion {
   Vec3 pressedFrom_ = Vec3::Zero();            // Pressing: where that point was when the tip took it
   double pressSunk_ = 0.0, pressForce_ = 0.0;  // Pressing: how far it has gone in (m) and the tip force (N)
   double pressStiffness_ = 0.0;  // Pressing: the tissue's tangent stiffness under the tip (N/m), 0 unknown
+  double trackStiffness_ = 0.0;  // the tissue's along the track per point (N/m), 0 unknown
   bool haveEnd_ = false;
   MaterialPoint end_;  // the deepest point of the track
   std::vector<TrackPoint> track_;

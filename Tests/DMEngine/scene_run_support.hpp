@@ -1,0 +1,62 @@
+// Shared by the scene-run tests: a scene run in lockstep, its output files,
+// the bundled scenes without their render engine (the mechanics is what
+// those tests check; the examples' integration tests render them).
+#pragma once
+
+#include <dm/core/filesystem.hpp>
+#include <dm/core/types.hpp>
+#include <dm/engine/scene_runtime.hpp>
+#include <dm/io/scene_file.hpp>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "../common/build_paths.hpp"
+
+namespace scene_run {
+
+namespace fs = std::filesystem;
+
+/// [x, y, z] of a summary.
+inline dm::Vec3 vec(const nlohmann::json& j) {
+  return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()};
+}
+
+/// The bytes of a run's output file, as text.
+inline std::string fileText(const fs::path& p) {
+  auto bytes = dm::readFile(p);
+  EXPECT_TRUE(bytes) << bytes.error();
+  return bytes ? std::string(reinterpret_cast<const char*>(bytes->data()), bytes->size()) : std::string();
+}
+
+/// Runs `scene` in lockstep for `seconds` into `out` (emptied first); its
+/// summary, or null after a failure (reported).
+inline nlohmann::json runScene(const dm::SceneDesc& scene, double seconds, const fs::path& out) {
+  fs::remove_all(out);
+  auto rt = dm::SceneRuntime::create(scene);
+  EXPECT_TRUE(rt) << rt.error();
+  if (!rt) return {};
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = seconds, .outDir = out});
+  EXPECT_TRUE(r) << r.error();
+  return r ? r->summary : nlohmann::json();
+}
+
+/// examples/scenes/`file`, without its render engine, frames and plot.
+inline dm::SceneDesc bundledScene(std::string_view file) {
+  std::vector<dm::Error> problems;
+  auto s = dm::readScene(fs::path(dm::test::besideExecutable(DM_EXAMPLE_SCENES_DIR)) / file, &problems);
+  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+  if (!s) return {};
+  dm::SceneDesc scene = *s;
+  scene.engines.render.reset();
+  scene.outputs.frames = false;
+  scene.outputs.plot = false;
+  return scene;
+}
+
+}  // namespace scene_run
