@@ -25,7 +25,10 @@ namespace dm {
 namespace {
 
 // The tetrahedra of soft object `o` in its frame, at its scale (m).
-Result<TetMesh> softTetMesh(const SceneObject& o, const SceneResource& res, const Mesh& mesh) {
+// `h` is the grid spacing the tetrahedra are made at (voxel_size, or the
+// volume's smallest spacing).
+Result<TetMesh> softTetMesh(const SceneObject& o, const SceneResource& res, const Mesh& mesh,
+                            const Volume* volume) {
   const SceneSoft& s = *o.soft;
   // The occupied voxels: a box split into cuboids of about voxel_size that
   // fill it exactly (the tissue's surface is the box the scene draws), or
@@ -33,7 +36,20 @@ Result<TetMesh> softTetMesh(const SceneObject& o, const SceneResource& res, cons
   std::vector<std::uint8_t> occupancy;
   Vec3i dims;
   Vec3 spacing, origin;
-  if (res.type == SceneResource::Type::Shape && res.shape == SceneResource::Shape::Box) {
+  if (volume != nullptr) {
+    // The volume's own voxels (its affine places them).
+    if (s.levels == 0) return tetMeshFromVolume(*volume, {.threshold = s.threshold, .maxTets = s.maxTets});
+    const Mat3 a = volume->indexToWorld().linear();
+    if (!a.isDiagonal(1e-12) || a.diagonal().minCoeff() <= 0.0)
+      return fail(ErrorCode::InvalidArgument, "a graded grid needs a volume whose axes are the world's",
+                  "levels", "use \"levels\": 0 on this volume, or resample it axis-aligned");
+    dims = volume->dims();
+    spacing = a.diagonal();
+    origin = volume->indexToWorld() * Vec3::Constant(-0.5);  // the first voxel's corner
+    occupancy.resize(static_cast<std::size_t>(dims.prod()));
+    for (std::size_t i = 0; i < occupancy.size(); ++i)
+      occupancy[i] = volume->valueAt(i) >= s.threshold ? 1 : 0;
+  } else if (res.type == SceneResource::Type::Shape && res.shape == SceneResource::Shape::Box) {
     const Vec3 size = 2.0 * res.halfExtents * o.scale;
     for (int a = 0; a < 3; ++a)
       dims[a] = static_cast<int>(std::clamp(std::round(size[a] / s.voxelSize), 1.0, 1e6));
@@ -220,7 +236,16 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     if (res == nullptr || !mesh)
       return fail(ErrorCode::NotFound, "mesh \"" + o.mesh + "\" was not loaded", where);
     const bool isBox = res->type == SceneResource::Type::Shape && res->shape == SceneResource::Shape::Box;
-    auto tets = softTetMesh(o, *res, *mesh);
+    std::shared_ptr<const Volume> volume;
+    if (!s.volume.empty()) {
+      volume = resources.volume(s.volume);
+      if (!volume)
+        return fail(ErrorCode::NotFound, "volume \"" + s.volume + "\" was not loaded",
+                    where + "/soft/volume");
+    }
+    // The tetrahedra's size: voxel_size, or the volume's smallest spacing.
+    const double h = volume ? volume->indexToWorld().linear().colwise().norm().minCoeff() : s.voxelSize;
+    auto tets = softTetMesh(o, *res, *mesh, volume.get());
     if (!tets) return tets.error().within(where + "/soft");
     auto fem = FemBody::create(
         *tets, {.youngsModulus = s.youngsModulus, .poissonRatio = s.poissonRatio, .density = s.density},
@@ -235,8 +260,7 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     // The static objects, in the body's frame, each node held out of them
     // by a penalty spring.
     std::vector<FemObstacle> obstacles;
-    const double contactStiffness =
-        s.contactStiffness > 0 ? s.contactStiffness : 20.0 * s.youngsModulus * s.voxelSize;
+    const double contactStiffness = s.contactStiffness > 0 ? s.contactStiffness : 20.0 * s.youngsModulus * h;
     for (const Obstacle& ob : out->obstacles_)
       obstacles.push_back(
           {.tree = ob.tree.get(), .pose = b->pose.inverse() * ob.pose, .stiffness = contactStiffness});
@@ -246,7 +270,7 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     // face of the rest bounding box.
     Aabb box;
     for (const Vec3& p : tets->nodes) box.extend(p);
-    const double tol = 0.25 * s.voxelSize;
+    const double tol = 0.25 * h;
     b->fixedNodes = b->fem->fixNodesWhere([&](const Vec3& p) {
       for (const SceneBox& fb : s.fixedBoxes)
         if (Aabb(fb.min * o.scale, fb.max * o.scale).contains(p)) return true;

@@ -135,7 +135,8 @@ void readSoft(ConfigReader& object, SceneObject& o) {
   ConfigReader r = object.child("soft");
   if (!expectObject(r)) return;
   r.knownKeys({"youngs_modulus", "poisson_ratio", "density", "damping", "voxel_size", "fixed", "max_tets",
-               "layers", "labels", "contact_stiffness", "fixed_boxes", "levels", "fine_region"});
+               "layers", "labels", "contact_stiffness", "fixed_boxes", "levels", "fine_region", "volume",
+               "threshold"});
   SceneSoft s;
   s.youngsModulus = readPositive(r, "youngs_modulus", {}, 1e12);
   std::size_t before = r.errors().size();
@@ -152,7 +153,20 @@ void readSoft(ConfigReader& object, SceneObject& o) {
       s.beta = d.number("beta", {.min = 0.0, .max = 10.0}, s.beta);
     }
   }
-  s.voxelSize = readPositive(r, "voxel_size", {}, 0.05);
+  if (r.has("volume")) {
+    // The tissue from a volume's voxels on its own grid.
+    const std::size_t b = r.errors().size();
+    s.volume = r.string("volume");
+    if (r.errors().size() == b && s.volume.empty())
+      r.addError("no volume named", "volume", "name a \"volume\" resource (a segmentation or a scan)");
+    s.threshold = r.number("threshold", {.min = -1e12, .max = 1e12});
+    if (r.has("voxel_size"))
+      r.addError("the volume's spacing sets the tetrahedra's size", "voxel_size", "remove \"voxel_size\"");
+  } else {
+    if (r.has("threshold"))
+      r.addError("a threshold without a volume", "threshold", "add \"volume\", or remove \"threshold\"");
+    s.voxelSize = readPositive(r, "voxel_size", {}, 0.05);
+  }
   if (r.has("contact_stiffness")) s.contactStiffness = readPositive(r, "contact_stiffness", {}, 1e9);
   if (r.has("fixed")) {
     ConfigReader f = r.child("fixed");
@@ -307,6 +321,16 @@ void checkSoft(const SceneDesc& scene, ConfigReader root) {
         h->renderer != SceneHapticsEngine::Renderer::GodObject && !needle)
       r.addError("soft object " + inQuotes(o.name) + " is touched by the god-object or the needle only",
                  "soft", "set the haptics engine's \"renderer\": \"god-object\" or \"needle\"");
+    if (!o.soft->volume.empty()) {
+      const SceneResource* res = scene.resource(o.soft->volume);
+      if (res == nullptr || res->type != SceneResource::Type::Volume)
+        r.child("soft").addError(
+            "resource " + inQuotes(o.soft->volume) + (res ? " is not a volume" : " is not defined"), "volume",
+            "name a \"volume\" resource");
+      if (o.scale != 1.0)
+        r.addError("tissue from a volume has the volume's own size", "scale",
+                   "remove \"scale\" (the volume's spacing sets it)");
+    }
     if (!o.soft->labels.empty()) {
       const SceneResource* res = scene.resource(o.soft->labels);
       if (res == nullptr || res->type != SceneResource::Type::Volume)
@@ -335,6 +359,11 @@ void writeSoft(const SceneObject& o, Json& object) {
                     {"fixed", std::move(fixed)},
                     {"max_tets", s.maxTets}};
   if (s.contactStiffness > 0) object["soft"]["contact_stiffness"] = s.contactStiffness;
+  if (!s.volume.empty()) {
+    object["soft"].erase("voxel_size");
+    object["soft"]["volume"] = s.volume;
+    object["soft"]["threshold"] = s.threshold;
+  }
   if (!s.fixedBoxes.empty()) {
     Json boxes = Json::array();
     for (const SceneBox& b : s.fixedBoxes) boxes.push_back(boxJson(b));

@@ -456,3 +456,65 @@ TEST(SceneSoft, AHierarchicalPadRestsOnTheTableWithFewerTetrahedra) {
 }
 
 }  // namespace scene_soft_test
+
+namespace scene_soft_test {
+
+TEST(SceneSoft, TissueFromASegmentationRestsOnTheTableLikeTheSameBox) {
+  // A segmentation (2 mm voxels, a 20 × 20 × 10 mm block of ones in zeros)
+  // made tissue by its threshold, on its own grid: the block's voxels, six
+  // tetrahedra each, as many as the same box shape split at 2 mm; dropped
+  // 0.5 mm onto a table, it rests with the table carrying its weight (1 %),
+  // as the box does.
+  const dm::test::TempDir dir("soft_from_volume");
+  auto v = dm::Volume::create({14, 14, 9}, dm::VoxelType::U8,
+                              Eigen::Translation3d(-0.013, -0.013, -0.003) * Eigen::Scaling(0.002));
+  ASSERT_TRUE(v) << v.error();
+  for (int k = 2; k < 7; ++k)  // voxel centres z = 1 … 9 mm: cells [0, 10] mm
+    for (int j = 2; j < 12; ++j)
+      for (int i = 2; i < 12; ++i) v->setValue(i, j, k, 1);
+  ASSERT_TRUE(dm::writeNifti(*v, dir / "block.nii"));
+  const auto scene = [&](const std::string& soft, const std::string& mesh) {
+    const std::string text = R"({
+      "format": "dmplatform-scene", "version": 2, "name": "from_volume",
+      "resources": {
+        "table": {"type": "shape", "shape": "plane", "half_extents": [0.1, 0.1]},
+        "seg": {"type": "volume", "source": "block.nii"},
+        "skin": {"type": "isosurface", "volume": "seg", "level": 0.5},
+        "box": {"type": "shape", "shape": "box", "half_extents": [0.01, 0.01, 0.005]}
+      },
+      "objects": [
+        {"name": "table", "mesh": "table"},
+        {"name": "pad", "mesh": ")" +
+                             mesh + R"(", "pose": {"position": [0, 0, )" +
+                             (mesh == "box" ? "0.0055" : "0.0005") + R"(]},
+         "soft": {"youngs_modulus": 2e4, "density": 1000, "damping": {"alpha": 20, "beta": 0.005}, )" +
+                             soft +
+                             R"(}}
+      ],
+      "engines": {"physics": {"rate_hz": 100}},
+      "outputs": {"summary": true}
+    })";
+    std::vector<dm::Error> problems;
+    auto s = dm::parseScene(text, "from_volume.json", dir.path(), &problems);
+    EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+    return s ? *s : dm::SceneDesc{};
+  };
+  const json fromVolume =
+      runScene(scene(R"("volume": "seg", "threshold": 0.5)", "skin"), 2.0, dir / "volume");
+  const json fromBox = runScene(scene(R"("voxel_size": 0.002)", "box"), 2.0, dir / "box");
+  const json& a = softBody(fromVolume, "pad");
+  const json& b = softBody(fromBox, "pad");
+  EXPECT_EQ(a.at("tets").get<int>(), 10 * 10 * 5 * 6);
+  EXPECT_EQ(a.at("tets"), b.at("tets"));
+  EXPECT_NEAR(a.at("mass_kg").get<double>(), 0.02 * 0.02 * 0.01 * 1000, 1e-12);
+  for (const json* pad : {&a, &b}) {
+    const dm::Vec3 weight = vec(pad->at("weight_N"));
+    const dm::Vec3 onTable = vec(pad->at("obstacles").at(0).at("force_N"));
+    EXPECT_LE((onTable - weight).norm(), 0.01 * weight.norm()) << onTable.transpose();
+  }
+  // The same fall and the same sinking into the table.
+  EXPECT_NEAR(vec(a.at("center_of_mass_displacement_m")).z(), vec(b.at("center_of_mass_displacement_m")).z(),
+              2e-6);
+}
+
+}  // namespace scene_soft_test

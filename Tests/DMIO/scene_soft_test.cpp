@@ -386,4 +386,42 @@ TEST(SceneSoft, FixedBoxesAndAGradedGridReadAndWriteBack) {
   EXPECT_TRUE(at(found, "/objects/1/soft/fine_region"));
 }
 
+TEST(SceneSoft, TissueFromAVolumeReadsAndWritesBack) {
+  Json j = padScene();
+  j["resources"]["seg"] = {{"type", "volume"}, {"source", "liver_mask.nii.gz"}};
+  Json& soft = j["objects"][1]["soft"];
+  soft.erase("voxel_size");
+  soft["volume"] = "seg";
+  soft["threshold"] = 0.5;
+  auto s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  const dm::SceneSoft& got = *s->objects[1].soft;
+  EXPECT_EQ(got.volume, "seg");
+  EXPECT_EQ(got.threshold, 0.5);
+  EXPECT_EQ(got.voxelSize, 0.0);
+  const Json back = dm::toJson(*s);
+  EXPECT_FALSE(back["objects"][1]["soft"].contains("voxel_size"));
+  auto again = dm::parseScene(back.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(again) << again.error();
+  EXPECT_TRUE(*s == *again);
+  // Misuses: a voxel size beside the volume, a scale, a volume that is not
+  // one, a threshold without a volume.
+  Json bad = j;
+  bad["objects"][1]["soft"]["voxel_size"] = 0.002;
+  bad["objects"][1]["scale"] = 2;
+  const auto problems = problemsOf(bad);
+  EXPECT_TRUE(at(problems, "/objects/1/soft/voxel_size"));
+  EXPECT_TRUE(at(problems, "/objects/1/scale"));
+  Json wrong = j;
+  wrong["objects"][1]["soft"]["volume"] = "pad";
+  const auto found = problemsOf(wrong);
+  if (const dm::Error* e = at(found, "/objects/1/soft/volume")) {
+    EXPECT_NE(e->what.find("not a volume"), std::string::npos) << e->what;
+  }
+  Json stray = padScene();
+  stray["objects"][1]["soft"]["threshold"] = 0.5;
+  const auto found2 = problemsOf(stray);
+  EXPECT_TRUE(at(found2, "/objects/1/soft/threshold"));
+}
+
 }  // namespace scene_soft_test

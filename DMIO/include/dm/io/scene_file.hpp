@@ -193,8 +193,14 @@ struct SceneSoft {
   double beta = 0.0;           ///< Rayleigh stiffness damping, s, ≥ 0 ("damping": {"beta"})
   /// m, > 0, ≤ 0.05: tetrahedra edge scale. A box shape splits into cubes of
   /// about this size (its faces kept exactly); any other closed mesh is
-  /// voxelized at it (a voxel-shaped surface).
+  /// voxelized at it (a voxel-shaped surface). 0 with `volume`.
   double voxelSize = 0.0;
+  /// A volume resource (a segmentation or a scan, "volume"): the tissue is
+  /// its voxels whose value is ≥ threshold, on the volume's own grid, instead
+  /// of the object's mesh (which static views such as `dmtool render` still
+  /// draw). Empty: the mesh.
+  std::string volume;
+  double threshold = 0.5;  ///< with `volume`: a voxel is tissue from this value up
   /// N/m per boundary node, > 0: the penalty spring that keeps the tissue
   /// out of the static objects that collide ("contact_stiffness"); 0 (not
   /// given): 20·E·voxel_size, a node's own stiffness times 20.
