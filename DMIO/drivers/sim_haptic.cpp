@@ -24,6 +24,8 @@
 //                skipped
 //   loop         0 | 1: line and csv paths loop (1), or run once from the
 //                first sample and hold their end (0)                     (1)
+// Every path's time starts at the device's first sample (lockstep and real
+// time alike).
 //   hand         0 | 1: drive a virtual hand instead of the stylus (0)
 //   hand_mass    kg (0.2)   hand_stiffness N/m (300)   hand_damping N·s/m (8)
 //   noise        m, standard deviation per axis                 (0)
@@ -109,7 +111,7 @@ struct SimHaptic {
   std::vector<std::array<double, 8>> csv;  // t, x, y, z, qw, qx, qy, qz; t strictly increasing
   bool csvOrientation = false;             // the file has the quaternion columns
   bool repeat = true;
-  std::int64_t originNs = -1;  // !repeat: the path's time starts at the first sample
+  std::int64_t originNs = -1;  // the path's time starts at the first sample
 
   bool hand = false;
   double mass = 0.2, stiffness = 300.0, damping = 8.0;
@@ -183,10 +185,11 @@ struct SimHaptic {
     return slerp({a[4], a[5], a[6], a[7]}, {b[4], b[5], b[6], b[7]}, u);
   }
 
-  // Seconds along the path at device time `ns`: the clock's own time for
-  // looping paths, time since the first sample for paths that run once.
+  // Seconds along the path at device time `ns`: the time since the first
+  // sample, for looping paths too, so a run on the machine's monotonic
+  // clock starts the path at its beginning as a lockstep run (whose clock
+  // starts at 0) does, not at whatever phase the clock's uptime gives.
   double pathSeconds(std::int64_t ns) {
-    if (repeat) return 1e-9 * static_cast<double>(ns);
     if (originNs < 0) originNs = ns;
     return 1e-9 * static_cast<double>(ns - originNs);
   }

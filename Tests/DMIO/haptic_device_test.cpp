@@ -80,15 +80,23 @@ TEST(SimHaptic, CircleFollowsItsFormula) {
 }
 
 TEST(SimHaptic, LineSweepsBetweenItsEnds) {
+  // A looping path starts at its first sample too, whatever the clock reads
+  // then (a real-time clock does not start at zero): the sweep begins at
+  // `from` and repeats every period.
   Builtin b;
   auto d =
       openHapticOrFail(b.registry, {{"path", "line"}, {"from", "0,0,0"}, {"to", "0.1,0,0"}, {"period", "1"}});
   ASSERT_TRUE(d);
-  d->servo(250 * kMs);  // a quarter period: halfway out
+  const std::int64_t t0 = 987654 * kMs;
+  d->servo(t0);
+  EXPECT_NEAR(d->state().position.x(), 0.0, 1e-12);
+  d->servo(t0 + 250 * kMs);  // a quarter period: halfway out
   EXPECT_NEAR(d->state().position.x(), 0.05, 1e-12);
-  d->servo(500 * kMs);  // half: at the far end
+  d->servo(t0 + 500 * kMs);  // half: at the far end
   EXPECT_NEAR(d->state().position.x(), 0.1, 1e-12);
-  d->servo(750 * kMs);  // three quarters: halfway back
+  d->servo(t0 + 750 * kMs);  // three quarters: halfway back
+  EXPECT_NEAR(d->state().position.x(), 0.05, 1e-12);
+  d->servo(t0 + 1250 * kMs);  // the next sweep
   EXPECT_NEAR(d->state().position.x(), 0.05, 1e-12);
 }
 
@@ -171,6 +179,7 @@ TEST(SimHaptic, CsvPathInterpolatesAndLoops) {
   Builtin b;
   auto d = openHapticOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "path.csv").string()}});
   ASSERT_TRUE(d);
+  d->servo(0);  // the path's time starts at the first sample
   d->servo(500 * kMs);
   EXPECT_NEAR((d->state().position - Vec3(0.05, 0, 0)).norm(), 0.0, 1e-12);
   d->servo(1500 * kMs);
