@@ -24,15 +24,15 @@ namespace dm {
 
 namespace {
 
-// The tetrahedra of soft object `o` in its frame, at its scale (m).
-// `h` is the grid spacing the tetrahedra are made at (voxel_size, or the
-// volume's smallest spacing).
+// The tetrahedra of soft object `o` in its frame, at its scale (m): from
+// `volume`'s voxels when it has one, else its box shape or voxelized mesh;
+// on a uniform grid, or graded (levels).
 Result<TetMesh> softTetMesh(const SceneObject& o, const SceneResource& res, const Mesh& mesh,
                             const Volume* volume) {
   const SceneSoft& s = *o.soft;
-  // The occupied voxels: a box split into cuboids of about voxel_size that
-  // fill it exactly (the tissue's surface is the box the scene draws), or
-  // the voxelized mesh.
+  // The occupied voxels: the volume's from the threshold up, a box split
+  // into cuboids of about voxel_size that fill it exactly (the tissue's
+  // surface is the box the scene draws), or the voxelized mesh.
   std::vector<std::uint8_t> occupancy;
   Vec3i dims;
   Vec3 spacing, origin;
