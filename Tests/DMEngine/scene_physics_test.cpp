@@ -33,11 +33,7 @@ using scene_run::runScene;
 using scene_run::vec;
 
 const json& body(const json& summary, const std::string& name) {
-  for (const json& b : summary.at("physics").at("bodies"))
-    if (b.at("name") == name) return b;
-  ADD_FAILURE() << "no body " << name << " in " << summary.dump(2);
-  static const json none = json::object();
-  return none;
+  return scene_run::named(summary.at("physics").at("bodies"), name);
 }
 
 // The bundled box-push scene, without its render engine (the physics is

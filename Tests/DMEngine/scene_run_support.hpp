@@ -27,6 +27,16 @@ inline dm::Vec3 vec(const nlohmann::json& j) {
   return {j[0].get<double>(), j[1].get<double>(), j[2].get<double>()};
 }
 
+/// The entry of `list` (a summary's array of objects) whose "name" is
+/// `name`; an empty object (and a failure) when there is none.
+inline const nlohmann::json& named(const nlohmann::json& list, const std::string& name) {
+  for (const nlohmann::json& e : list)
+    if (e.at("name") == name) return e;
+  ADD_FAILURE() << "no entry " << name << " in " << list.dump(2);
+  static const nlohmann::json none = nlohmann::json::object();
+  return none;
+}
+
 /// The bytes of a run's output file, as text.
 inline std::string fileText(const fs::path& p) {
   auto bytes = dm::readFile(p);

@@ -39,11 +39,7 @@ using scene_run::runScene;
 using scene_run::vec;
 
 const json& softBody(const json& summary, const std::string& name) {
-  for (const json& b : summary.at("physics").at("soft"))
-    if (b.at("name") == name) return b;
-  ADD_FAILURE() << "no soft body " << name << " in " << summary.dump(2);
-  static const json none = json::object();
-  return none;
+  return scene_run::named(summary.at("physics").at("soft"), name);
 }
 
 // The bundled tissue press, without its render engine (the mechanics is
