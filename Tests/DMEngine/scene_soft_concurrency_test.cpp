@@ -3,7 +3,8 @@
 // and the physics engine (the FEM steps) exchange grips, surfaces, poses and
 // models through their triple buffers while both run. Run under TSan in CI:
 // any unsynchronised access between the two threads is a failure. The
-// outcome checks are loose (a sanitizer slows the threads).
+// outcome checks are loose (a sanitizer slows the threads, the FEM steps
+// most: 40× under TSan).
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
 
@@ -30,7 +31,9 @@ TEST(SceneSoftRealTime, TheGodObjectPressesTissueWhilePhysicsStepsIt) {
                              dm::test::TempDir("soft_rt_press").path());
   ASSERT_TRUE(s.contains("physics")) << s.dump(2);
   const json& pad = s.at("physics").at("soft").at(0);
-  EXPECT_GT(pad.at("steps").get<int>(), 10);
+  // Under TSan a 5,184-tetrahedron step takes about a quarter of a second
+  // (6 steps in 1.5 s), so the physics lags; the haptic loop does not wait.
+  EXPECT_GE(pad.at("steps").get<int>(), 2);
   EXPECT_GT(pad.at("gripped_steps").get<int>(), 0) << "the stylus reaches the pad at about 0.44 s";
   EXPECT_GT(s.at("haptics").at("contact_ticks").get<int>(), 100);
 }
