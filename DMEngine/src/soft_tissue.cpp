@@ -164,6 +164,7 @@ struct SoftTissues::Body {
   std::unique_ptr<HapticTissue> haptic;     // pressed by the god-object, or
   std::unique_ptr<NeedleInsertion> needle;  // a needle goes into it,
   std::unique_ptr<HapticNeedle> felt;       // felt through this renderer
+  std::vector<std::string> layerNames;      // the needle's layers, by index
   std::size_t fixedNodes = 0;
   // The surface the render engine draws: its vertices are these body nodes.
   std::vector<std::uint32_t> surfaceNodes;
@@ -339,8 +340,7 @@ Status SoftTissues::attachNeedle(Body& b, std::span<const std::uint8_t> layerOfT
                                                .maxTorque = n.maxTorque});
   if (!felt) return felt.error().within("engines/haptics/needle");
   b.felt = std::move(*felt);
-  layerNames_.clear();
-  for (const SceneSoftLayer& l : layers) layerNames_.push_back(l.name);
+  for (const SceneSoftLayer& l : layers) b.layerNames.push_back(l.name);
   return ok();
 }
 
@@ -436,8 +436,8 @@ nlohmann::json SoftTissues::summary() const {
       const NeedleInsertion& n = *b.needle;
       const int layer = n.tipLayer();
       list.back()["needle"] = {{"tip", kTip[static_cast<int>(n.tipState())]},
-                               {"tip_layer", layer >= 0 && std::size_t(layer) < layerNames_.size()
-                                                 ? Json(layerNames_[std::size_t(layer)])
+                               {"tip_layer", layer >= 0 && std::size_t(layer) < b.layerNames.size()
+                                                 ? Json(b.layerNames[std::size_t(layer)])
                                                  : Json(nullptr)},
                                {"punctures", n.punctureCount()},
                                {"track_points", n.trackPointCount()},

@@ -90,8 +90,7 @@ class SoftTissues {
                       const std::vector<SceneSoftLayer>& layers, const SceneHapticsEngine& h,
                       double tipStiffness);
   static Vec3 toolForce(const Body& b) noexcept;
-  std::vector<std::string> layerNames_;  // of the needle's body
-  std::vector<Obstacle> obstacles_;      // before bodies_: their FemObstacles point into it
+  std::vector<Obstacle> obstacles_;  // before bodies_: their FemObstacles point into it
   std::vector<std::unique_ptr<Body>> bodies_;
   std::vector<std::string> names_;
 };
