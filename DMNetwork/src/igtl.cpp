@@ -1,5 +1,5 @@
 // OpenIGTLink codec: header (v1-v3, extended header, metadata), TRANSFORM,
-// POSITION, STATUS, STRING, COMMAND, POINT and the GET_/STT_/STP_/RTS_
+// POSITION, STATUS, STRING, COMMAND, POINT, SENSOR and the GET_/STT_/STP_/RTS_
 // queries. IMAGE and POLYDATA live in igtl_image.cpp and igtl_polydata.cpp.
 #include <dm/network/crc.hpp>
 
@@ -18,6 +18,7 @@ using namespace wire;
 namespace {
 
 constexpr std::size_t kStatusHeaderBytes = 30;
+constexpr std::size_t kSensorHeaderBytes = 10;  // length, status, unit
 constexpr std::size_t kStringHeaderBytes = 4;
 constexpr std::size_t kCommandHeaderBytes = 4 + 128 + 2 + 4;
 constexpr std::size_t kPointBytes = 136;
@@ -534,6 +535,81 @@ Result<std::vector<std::byte>> encodePoints(const Envelope& env, std::span<const
     if (auto s = putFixedString(c, pt.owner, 20, "point owner"); !s) return std::move(s).error();
   }
   return encodeRaw(env, "POINT", c);
+}
+
+// ---- SENSOR ---------------------------------------------------------------
+
+Result<std::uint64_t> packUnit(const Unit& unit) {
+  if (unit.prefix > 0xF)
+    return fail(ErrorCode::InvalidArgument, formatString("unit prefix code %u, at most 15", unit.prefix),
+                "OpenIGTLink encoder");
+  std::uint64_t packed = std::uint64_t{unit.prefix} << 60;
+  for (std::size_t i = 0; i < unit.factors.size(); ++i) {
+    const UnitFactor& f = unit.factors[i];
+    if (f.unit > 0x3F || f.exponent < -7 || f.exponent > 7)
+      return fail(ErrorCode::InvalidArgument,
+                  formatString("unit factor %zu: code %u, exponent %d (code ≤ 63, exponent −7..7)", i, f.unit,
+                               f.exponent),
+                  "OpenIGTLink encoder");
+    const int shift = 10 * (5 - static_cast<int>(i));
+    packed |= std::uint64_t{f.unit} << (shift + 4);
+    packed |= std::uint64_t(static_cast<std::uint8_t>(f.exponent) & 0x0F) << shift;
+  }
+  return packed;
+}
+
+Unit unpackUnit(std::uint64_t packed) noexcept {
+  Unit u;
+  u.prefix = static_cast<std::uint8_t>(packed >> 60);
+  for (std::size_t i = 0; i < u.factors.size(); ++i) {
+    const int shift = 10 * (5 - static_cast<int>(i));
+    u.factors[i].unit = static_cast<std::uint8_t>((packed >> (shift + 4)) & 0x3F);
+    const int e = static_cast<int>((packed >> shift) & 0x0F);
+    u.factors[i].exponent = static_cast<std::int8_t>(e >= 8 ? e - 16 : e);  // 4-bit two's complement
+  }
+  return u;
+}
+
+Result<SensorInfo> decodeSensor(const MessageView& m) {
+  if (auto s = expectType(m, "SENSOR"); !s) return std::move(s).error();
+  if (m.content.size() < kSensorHeaderBytes)
+    return bad(m, 0, ErrorCode::Parse,
+               formatString("SENSOR content is %zu bytes, the header needs 10", m.content.size()));
+  const std::byte* p = m.content.data();
+  const std::size_t n = std::to_integer<std::size_t>(p[0]);
+  if (m.content.size() != kSensorHeaderBytes + 8 * n)
+    return bad(m, 0, ErrorCode::Parse,
+               formatString("SENSOR length field says %zu values (%zu bytes), the content has %zu", n,
+                            kSensorHeaderBytes + 8 * n, m.content.size()));
+  SensorInfo s;
+  s.status = std::to_integer<std::uint8_t>(p[1]);
+  s.unit = getBe64(p + 2);
+  s.data.resize(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    s.data[i] = std::bit_cast<double>(getBe64(p + kSensorHeaderBytes + 8 * i));
+    if (!std::isfinite(s.data[i]))
+      return bad(m, kSensorHeaderBytes + 8 * i, ErrorCode::Parse,
+                 formatString("SENSOR value %zu is not finite", i));
+  }
+  return s;
+}
+
+Result<std::vector<std::byte>> encodeSensor(const Envelope& env, const SensorInfo& s) {
+  if (s.data.size() > 255)
+    return fail(ErrorCode::InvalidArgument, formatString("SENSOR of %zu values, at most 255", s.data.size()),
+                "OpenIGTLink encoder", "send several SENSOR messages");
+  std::vector<std::byte> c;
+  c.reserve(kSensorHeaderBytes + 8 * s.data.size());
+  c.push_back(std::byte{static_cast<std::uint8_t>(s.data.size())});
+  c.push_back(std::byte{s.status});
+  putBe64(c, s.unit);
+  for (std::size_t i = 0; i < s.data.size(); ++i) {
+    if (!std::isfinite(s.data[i]))
+      return fail(ErrorCode::InvalidArgument, formatString("SENSOR value %zu is not finite", i),
+                  "OpenIGTLink encoder");
+    putBe64(c, std::bit_cast<std::uint64_t>(s.data[i]));
+  }
+  return encodeRaw(env, "SENSOR", c);
 }
 
 // ---- queries --------------------------------------------------------------

@@ -213,6 +213,7 @@ std::optional<Error> dispatch(ConnectionId id, const igtl::MessageView& m, const
   if (type == "STATUS") return h.onStatus ? typed(h.onStatus, [&] { return igtl::decodeStatus(m); }) : raw();
   if (type == "STRING") return h.onString ? typed(h.onString, [&] { return igtl::decodeString(m); }) : raw();
   if (type == "POINT") return h.onPoints ? typed(h.onPoints, [&] { return igtl::decodePoints(m); }) : raw();
+  if (type == "SENSOR") return h.onSensor ? typed(h.onSensor, [&] { return igtl::decodeSensor(m); }) : raw();
   if (type == "POLYDATA")
     return h.onPolyData ? typed(h.onPolyData, [&] { return igtl::decodePolyData(m); }) : raw();
   if (type == "COMMAND" || type == "RTS_COMMAND")

@@ -14,11 +14,14 @@
 #include <igtlPointMessage.h>
 #include <igtlPolyDataMessage.h>
 #include <igtlPositionMessage.h>
+#include <igtlSensorMessage.h>
 #include <igtlStatusMessage.h>
 #include <igtlStringMessage.h>
 #include <igtlTrackingDataMessage.h>
 #include <igtlTransformMessage.h>
+#include <igtlUnit.h>
 #include <igtl_header.h>
+#include <igtl_unit.h>
 #include <igtl_util.h>
 
 #include <cstring>
@@ -276,6 +279,46 @@ TEST(IgtlInterop, Points) {
   EXPECT_NEAR(p[0], 1.f, 1e-5);
   EXPECT_NEAR(p[2], 3.5f, 1e-5);
   EXPECT_NEAR(e->GetRadius(), 1.5f, 1e-6);
+}
+
+// SENSOR: a force in newtons (the scene's network engine publishes the
+// haptic force this way) and a unit with a prefix and a negative exponent.
+TEST(IgtlInterop, SensorAndUnitAreByteExact) {
+  igtl::Unit::Pointer newton = igtl::Unit::New();
+  newton->Append(igtl::Unit::SI_DERIVED_NEWTON, 1);
+  EXPECT_EQ(newton->Pack(), dmi::kUnitNewton);
+  // A unit of several factors goes through the C packer: the reference
+  // igtl::Unit::Append (1.11) never advances its count, so each factor
+  // overwrites the first.
+  igtl_unit_data mmPerS;
+  igtl_unit_init(&mmPerS);
+  mmPerS.prefix = IGTL_UNIT_PREFIX_MILLI;
+  mmPerS.unit[0] = IGTL_UNIT_SI_BASE_METER;
+  mmPerS.exp[0] = 1;
+  mmPerS.unit[1] = IGTL_UNIT_SI_BASE_SECOND;
+  mmPerS.exp[1] = -1;
+  const dmi::Unit ours{.prefix = 0xB,
+                       .factors = {{{.unit = 0x01, .exponent = 1}, {.unit = 0x03, .exponent = -1}}}};
+  EXPECT_EQ(dmi::packUnit(ours).value(), igtl_unit_pack(&mmPerS));
+  EXPECT_EQ(dmi::unpackUnit(igtl_unit_pack(&mmPerS)), ours);
+
+  igtl::SensorMessage::Pointer ref = igtl::SensorMessage::New();
+  ref->SetDeviceName("Force");
+  ref->SetLength(3);
+  ref->SetUnit(newton);
+  ref->SetValue(0, 0.25);
+  ref->SetValue(1, -1.5);
+  ref->SetValue(2, 3.0e-3);
+  const Bytes refBytes = packed(ref);
+  auto v = dmi::decodeSensor(decode(refBytes));
+  ASSERT_TRUE(v.ok()) << v.error().message();
+  EXPECT_EQ(v->unit, dmi::kUnitNewton);
+  EXPECT_EQ(v->data, (std::vector<double>{0.25, -1.5, 3.0e-3}));
+  EXPECT_SAME_BYTES(dmi::encodeSensor(envOf(refBytes), *v).value(), refBytes);
+  auto back = refUnpack<igtl::SensorMessage>(dmi::encodeSensor({.deviceName = "Force"}, *v).value());
+  ASSERT_EQ(back->GetLength(), 3u);
+  EXPECT_EQ(back->GetValue(1), -1.5);
+  EXPECT_EQ(back->GetUnit(), dmi::kUnitNewton);
 }
 
 TEST(IgtlInterop, PolyData) {

@@ -8,7 +8,9 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <bit>
 #include <cstring>
+#include <limits>
 #include <random>
 
 #include "network_test_support.hpp"
@@ -418,6 +420,43 @@ TEST(IgtlPoint, RoundTripsInMetresAndChecksTheElementSize) {
   EXPECT_NEAR((*back)[0].radius, 0.002, 1e-9);
   EXPECT_EQ((*back)[0].owner, "CT");
   EXPECT_FALSE(igtl::decodePoints(*igtl::decodeMessage(frame(1, "POINT", "p", Bytes(135)))).ok());
+}
+
+// SENSOR laid out by hand from the v3 specification: count, status, unit
+// (N: code 0x0B with exponent 1 in the first 10-bit field), float64 values.
+TEST(IgtlSensor, DecodesHandBuiltBytesAndRefusesBadCounts) {
+  Bytes c;
+  be(c, 2, 1);
+  be(c, 0, 1);
+  be(c, (std::uint64_t{0x0B} << 54) | (std::uint64_t{1} << 50), 8);
+  for (double v : {1.25, -0.5}) be(c, std::bit_cast<std::uint64_t>(v), 8);
+  auto s = igtl::decodeSensor(*igtl::decodeMessage(frame(1, "SENSOR", "Force", c)));
+  ASSERT_TRUE(s.ok()) << s.error().message();
+  EXPECT_EQ(s->unit, igtl::kUnitNewton);
+  EXPECT_EQ(s->data, (std::vector<double>{1.25, -0.5}));
+  EXPECT_EQ(igtl::encodeSensor({.deviceName = "Force", .timestamp = 0x0000000580000000ull}, *s).value(),
+            frame(1, "SENSOR", "Force", c));
+  const igtl::Unit u = igtl::unpackUnit(s->unit);
+  EXPECT_EQ(u.factors[0], (igtl::UnitFactor{.unit = 0x0B, .exponent = 1}));
+  EXPECT_EQ(u.factors[1], igtl::UnitFactor{});
+
+  Bytes shortBody(c.begin(), c.end() - 1);  // count says 2, 1.875 values follow
+  auto bad = igtl::decodeSensor(*igtl::decodeMessage(frame(1, "SENSOR", "Force", shortBody)));
+  ASSERT_FALSE(bad.ok());
+  EXPECT_NE(bad.error().message().find("2 values"), std::string::npos) << bad.error().message();
+  Bytes nan = c;
+  const Bytes q = [] {
+    Bytes b;
+    be(b, std::bit_cast<std::uint64_t>(std::numeric_limits<double>::quiet_NaN()), 8);
+    return b;
+  }();
+  std::copy(q.begin(), q.end(), nan.end() - 8);
+  EXPECT_FALSE(igtl::decodeSensor(*igtl::decodeMessage(frame(1, "SENSOR", "Force", nan))).ok());
+  EXPECT_FALSE(igtl::encodeSensor({}, {.data = std::vector<double>(256, 0.0)}).ok());
+  EXPECT_FALSE(igtl::packUnit({.factors = {{{.unit = 1, .exponent = 8}}}}).ok());
+  EXPECT_EQ(
+      igtl::unpackUnit(igtl::packUnit({.prefix = 0xC, .factors = {{{.unit = 2, .exponent = -7}}}}).value()),
+      (igtl::Unit{.prefix = 0xC, .factors = {{{.unit = 2, .exponent = -7}}}}));
 }
 
 TEST(IgtlStatusString, RoundTripAndBounds) {

@@ -33,6 +33,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   asType(*m, "COMMAND", [](const auto& v) { return igtl::decodeCommand(v); });
   asType(*m, "POINT", [](const auto& v) { return igtl::decodePoints(v); });
   asType(*m, "POLYDATA", [](const auto& v) { return igtl::decodePolyData(v); });
+  asType(*m, "SENSOR", [](const auto& v) { return igtl::decodeSensor(v); });
   asType(*m, "STT_TDATA", [](const auto& v) { return igtl::decodeQuery(v); });
   asType(*m, "RTS_TDATA", [](const auto& v) { return igtl::decodeQuery(v); });
   (void)igtl::decodeQuery(*m);
@@ -49,6 +50,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       if (!again) std::abort();
       auto back = igtl::decodeMessage(*again);
       if (!back || igtl::decodeString(*back).value() != *s || back->metadata != m->metadata) std::abort();
+    }
+  } else if (m->header.type == "SENSOR") {
+    if (auto v = igtl::decodeSensor(*m); v) {
+      auto again = igtl::encodeSensor(env, *v);
+      if (!again) std::abort();
+      auto back = igtl::decodeMessage(*again);
+      if (!back || igtl::decodeSensor(*back).value() != *v) std::abort();
     }
   } else if (m->header.type == "COMMAND") {
     if (auto c = igtl::decodeCommand(*m); c) {

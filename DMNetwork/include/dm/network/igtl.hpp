@@ -272,6 +272,49 @@ Result<std::vector<Point>> decodePoints(const MessageView& m);
 /// POINT message (m → mm); fails on names longer than their fields.
 Result<std::vector<std::byte>> encodePoints(const Envelope& env, std::span<const Point> points);
 
+// ---- SENSOR --------------------------------------------------------------
+
+/// One factor of an OpenIGTLink unit: an SI base or derived unit code
+/// (igtl_unit.h: 0x01 metre, 0x02 gram, 0x03 second, 0x0B newton,
+/// 0x0C pascal, ...) and its exponent, −7..7.
+struct UnitFactor {
+  std::uint8_t unit = 0;  ///< 6 bits
+  std::int8_t exponent = 0;
+  bool operator==(const UnitFactor&) const = default;
+};
+/// An OpenIGTLink unit unpacked: a prefix code (0 none, 0xB milli, ...) and
+/// up to six factors, in the 64-bit packing of igtl_unit_pack (prefix in the
+/// top 4 bits, then six 10-bit unit/exponent fields).
+struct Unit {
+  std::uint8_t prefix = 0;  ///< 4 bits
+  std::array<UnitFactor, 6> factors{};
+  bool operator==(const Unit&) const = default;
+};
+/// The packed form; fails on a prefix over 15, a unit code over 63 or an
+/// exponent outside −7..7.
+Result<std::uint64_t> packUnit(const Unit& unit);
+/// The unpacked form of any 64-bit value (every bit pattern is a unit).
+Unit unpackUnit(std::uint64_t packed) noexcept;
+/// Newtons (N, SI derived unit 0x0B), the unit of a force SENSOR.
+inline constexpr std::uint64_t kUnitNewton = std::uint64_t{0x0B} << 54 | std::uint64_t{1} << 50;
+
+/// SENSOR content (protocol v3): an array of float64 readings with a unit.
+struct SensorInfo {
+  std::uint8_t status = 0;   ///< reserved by the protocol, 0
+  std::uint64_t unit = 0;    ///< packed (packUnit), e.g. kUnitNewton
+  std::vector<double> data;  ///< at most 255 values
+  bool operator==(const SensorInfo&) const = default;
+};
+/// SENSOR content: length u8, status u8, unit u64, then float64 × length;
+/// fails on a length that does not match the body or a non-finite value.
+Result<SensorInfo> decodeSensor(const MessageView& m);
+/// SENSOR message; fails on more than 255 values or a non-finite one.
+/// @code
+///   auto f = dm::igtl::encodeSensor({.version = 2, .deviceName = "Force"},
+///                                   {.unit = dm::igtl::kUnitNewton, .data = {fx, fy, fz}});
+/// @endcode
+Result<std::vector<std::byte>> encodeSensor(const Envelope& env, const SensorInfo& s);
+
 // ---- POLYDATA ------------------------------------------------------------
 
 /// POLYDATA as a Mesh: points (mm → m), polygons fan-triangulated (n ≥ 3),

@@ -120,6 +120,7 @@ struct IgtlHandlers {
   IgtlHandler<igtl::StringInfo> onString;
   IgtlHandler<std::vector<igtl::Point>> onPoints;  ///< POINT
   IgtlHandler<Mesh> onPolyData;                    ///< POLYDATA
+  IgtlHandler<igtl::SensorInfo> onSensor;          ///< SENSOR
   IgtlHandler<igtl::CommandInfo> onCommand;        ///< COMMAND and RTS_COMMAND (header.type tells)
   /// GET_/STT_/STP_/RTS_ messages. At a server, after the session has
   /// answered the query (when answerQueries is on).
