@@ -139,6 +139,11 @@ struct Counters {
   }
 };
 
+bool isPowerOfTen(std::uint64_t n) {
+  while (n >= 10 && n % 10 == 0) n /= 10;
+  return n == 1;
+}
+
 void add(IgtlStats& a, const IgtlStats& b) {
   a.messagesIn += b.messagesIn;
   a.messagesOut += b.messagesOut;
@@ -296,8 +301,12 @@ struct IgtlServer::Impl {
     if (s) {
       c.counters.out.fetch_add(1, std::memory_order_relaxed);
     } else {
-      c.counters.sendFailures.fetch_add(1, std::memory_order_relaxed);
-      log::warn("%s: could not send: %s", c.name.c_str(), s.error().message().c_str());
+      // A slow peer refuses many in a row: the 1st, 10th, 100th, ... are
+      // logged, all are counted (stats().sendFailures).
+      const std::uint64_t n = c.counters.sendFailures.fetch_add(1, std::memory_order_relaxed) + 1;
+      if (isPowerOfTen(n))
+        log::warn("%s: could not send (%llu so far): %s", c.name.c_str(), static_cast<unsigned long long>(n),
+                  s.error().message().c_str());
     }
     return s;
   }
@@ -518,7 +527,7 @@ Result<IgtlFanout> IgtlServer::broadcast(std::span<const std::byte> message) {
   return impl_->fanOut(message, targets);
 }
 
-Result<IgtlFanout> IgtlServer::publish(std::span<const std::byte> message) {
+Result<IgtlFanout> IgtlServer::publish(std::span<const std::byte> message, IgtlPublishTo to) {
   auto h = checkOneMessage(message, "IgtlServer::publish");
   if (!h) return std::move(h).error();
   auto stored = std::make_shared<const Bytes>(message.begin(), message.end());
@@ -530,7 +539,10 @@ Result<IgtlFanout> IgtlServer::publish(std::span<const std::byte> message) {
     impl_->latest[{h->type, h->deviceName}] = {stored, ++impl_->sequence};
     for (auto& [id, c] : impl_->connections) {
       auto it = c->subscriptions.find(h->type);
-      if (it == c->subscriptions.end()) continue;
+      if (it == c->subscriptions.end()) {
+        if (to == IgtlPublishTo::Everyone) targets.emplace_back(id, c);
+        continue;
+      }
       Impl::Subscription& sub = it->second;
       if (!sub.device.empty() && sub.device != h->deviceName) continue;
       if (sub.resolution.count() > 0 && sub.last && now - *sub.last < sub.resolution) {
@@ -545,6 +557,13 @@ Result<IgtlFanout> IgtlServer::publish(std::span<const std::byte> message) {
   IgtlFanout f = impl_->fanOut(*stored, targets);
   f.throttled = throttled;
   return f;
+}
+
+std::uint64_t IgtlServer::queuedBytes() const {
+  std::uint64_t total = 0;
+  for (ConnectionId id : connections())
+    if (auto st = impl_->tcp->stats(id)) total += st->queuedBytes;
+  return total;
 }
 
 Status IgtlServer::disconnect(ConnectionId connection) { return impl_->tcp->disconnect(connection); }

@@ -453,6 +453,36 @@ TEST(IgtlSession, SttResolutionSkipsPublishesThatComeTooSoon) {
   ASSERT_TRUE(eventually([&] { return in.rawCount("TDATA") == 1; }));
 }
 
+// Publishing to everyone (a streaming server, as a scene's OpenIGTLink
+// engine is): a client that never subscribed gets every message, one that
+// subscribed with a resolution still gets them as its STT_ asked.
+TEST(IgtlSession, PublishToEveryoneReachesClientsThatNeverSubscribed) {
+  Pair p;
+  Inbox& in = p.clientBox;
+  const Bytes t = dmi::encodeTransform({.deviceName = "Tool"}, dm::Isometry3::Identity()).value();
+  for (int i = 0; i < 3; ++i) {
+    auto f = p.server->publish(t, dm::IgtlPublishTo::Everyone);
+    ASSERT_TRUE(f.ok());
+    EXPECT_EQ(f->sent, 1u);
+  }
+  EXPECT_EQ(p.server->publish(t)->sent, 0u);  // to subscribers only: none
+  ASSERT_TRUE(eventually([&] { return in.with([&] { return in.transforms.size() == 3; }); }));
+  ASSERT_TRUE(eventually([&] { return p.server->queuedBytes() == 0; }));
+
+  ASSERT_TRUE(p.client
+                  ->send(dmi::encodeQuery({}, {.kind = dmi::QueryKind::Start,
+                                               .dataType = "TDATA",
+                                               .resolutionMs = 60'000,
+                                               .coordinateName = "Patient"})
+                             .value())
+                  .ok());
+  ASSERT_TRUE(eventually([&] { return in.with([&] { return in.queries.size() == 1; }); }));
+  const Bytes m = dmi::encodeRaw({.deviceName = "Tracker"}, "TDATA", Bytes(70)).value();
+  EXPECT_EQ(p.server->publish(m, dm::IgtlPublishTo::Everyone)->sent, 1u);
+  EXPECT_EQ(p.server->publish(m, dm::IgtlPublishTo::Everyone)->throttled, 1u);
+  ASSERT_TRUE(eventually([&] { return in.rawCount("TDATA") == 1; }));
+}
+
 TEST(IgtlSession, OversizeBodySizeClosesTheConnectionBeforeTheBody) {
   dm::IoThread net;
   ASSERT_TRUE(net.start().ok());

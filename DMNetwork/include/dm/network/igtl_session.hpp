@@ -150,6 +150,12 @@ struct IgtlFanout {
   std::vector<std::pair<ConnectionId, Error>> failures;
 };
 
+/// Who IgtlServer::publish() sends to besides storing for GET_.
+enum class IgtlPublishTo : std::uint8_t {
+  Subscribers,  ///< the connections that sent STT_ for the type
+  Everyone,     ///< and every connection not subscribed to it
+};
+
 /// Settings of an IgtlServer.
 struct IgtlServerOptions {
   TcpServerOptions tcp;        ///< address (port 0: ephemeral), allow-list, queue limits
@@ -203,15 +209,22 @@ class IgtlServer {
   /// only for a malformed `message`; per-connection refusals are listed.
   Result<IgtlFanout> broadcast(std::span<const std::byte> message);
   /// Stores `message` as the latest of its (type, device name) for GET_
-  /// queries and sends it to the subscribers of its type. Fails like
-  /// broadcast(). Any thread. O(message size + subscribers).
+  /// queries and sends it to the subscribers of its type (as their STT_
+  /// asked); with IgtlPublishTo::Everyone also to every connection not
+  /// subscribed to that type (a streaming server, as PLUS is: 3D Slicer
+  /// shows what arrives without asking). Fails like broadcast(). Any
+  /// thread. O(message size + connections).
   /// @code
   ///   auto t = dm::igtl::encodeTransform({.deviceName = "Needle"}, needle.isometry());
   ///   if (t) if (auto f = server->publish(*t); f && !f->failures.empty()) slowPeers(f->failures);
   /// @endcode
-  Result<IgtlFanout> publish(std::span<const std::byte> message);
+  Result<IgtlFanout> publish(std::span<const std::byte> message,
+                             IgtlPublishTo to = IgtlPublishTo::Subscribers);
   /// Closes one connection. NotFound if unknown.
   Status disconnect(ConnectionId connection);
+  /// Bytes accepted for the open connections and not yet written to their
+  /// sockets (0: everything sent went out). Any thread.
+  std::uint64_t queuedBytes() const;
   /// Stops listening and closes every connection. Idempotent; no handler
   /// runs after it returns.
   void close();
