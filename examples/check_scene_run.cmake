@@ -4,6 +4,8 @@
 #         -DMIN_CONTACT_TICKS=N (FRAMES: at least that many frames)
 #         -DMIN_FORCE=F -DMAX_FORCE=F -P check_scene_run.cmake
 #         -DMOVED_BODY=name -DMIN_DISPLACEMENT=m (scenes with physics)
+#         -DIGTL_IMAGES=N (scenes with an "igtl" engine): it published at
+#         least N IMAGE messages, and TRANSFORM and SENSOR messages
 # Tele-operation scenes (a device with "serve") run in real time:
 #         -DMODE=realtime -DMIN_ROUND_TRIP_MS=T: the served device's link
 #         measured a round trip of at least T ms (p50), received a force
@@ -133,3 +135,12 @@ if(DEFINED MOVED_BODY)
   message(STATUS "physics: ${MOVED_BODY} moved ${moved} m")
 endif()
 message(STATUS "ok: ${contact}/${ticks} ticks in contact, max force ${maxForce} N")
+if(DEFINED IGTL_IMAGES)
+  string(JSON images GET "${summary}" igtl published image)
+  string(JSON transforms GET "${summary}" igtl published transform)
+  string(JSON sensors GET "${summary}" igtl published sensor)
+  if(images LESS IGTL_IMAGES OR transforms LESS 1 OR sensors LESS 1)
+    message(FATAL_ERROR "OpenIGTLink: ${images} IMAGE (expected >= ${IGTL_IMAGES}), ${transforms} TRANSFORM, "
+                        "${sensors} SENSOR messages published")
+  endif()
+endif()

@@ -12,6 +12,7 @@
 #include <dm/physics/world.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 
@@ -149,7 +150,8 @@ struct PhysicsEngine::Impl {
   std::unique_ptr<HapticLocalModel> model;
   std::vector<ToolImpulse> impulses;        // per touched object, this tick
   std::vector<Vec3> toolForce, toolTorque;  // per body, applied over this step
-  std::unique_ptr<TripleBuffer<std::vector<Isometry3>>> renderPoses;
+  // The moving objects' poses for each reader thread (PoseReader order).
+  std::array<std::unique_ptr<TripleBuffer<std::vector<Isometry3>>>, 2> readerPoses;
   std::unique_ptr<SoftTissues> soft;  // the soft objects, stepped after the rigid bodies
   std::uint64_t steps = 0;
   double lastDt = 0.0;
@@ -249,8 +251,9 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
         !s)
       return s.error();
   }
-  m->renderPoses = std::make_unique<TripleBuffer<std::vector<Isometry3>>>(
-      std::vector<Isometry3>(m->moving.size(), Isometry3::Identity()));
+  for (auto& buffer : m->readerPoses)
+    buffer = std::make_unique<TripleBuffer<std::vector<Isometry3>>>(
+        std::vector<Isometry3>(m->moving.size(), Isometry3::Identity()));
   m->state = m->world.makeState();
   auto soft = SoftTissues::build(scene, resources);
   if (!soft) return soft.error();
@@ -296,9 +299,11 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
         m.touchedPoses[k] = m.objectPose(static_cast<std::uint32_t>(m.touchedBody[k]));
     m.model->publish(m.touchedPoses, info.scheduled_ns);
   }
-  std::vector<Isometry3>& poses = m.renderPoses->writeBuffer();  // sized at build: no allocation
-  for (std::size_t i = 0; i < m.moving.size(); ++i) poses[i] = m.objectPose(m.moving[i]);
-  m.renderPoses->publish();
+  for (auto& buffer : m.readerPoses) {
+    std::vector<Isometry3>& poses = buffer->writeBuffer();  // sized at build: no allocation
+    for (std::size_t i = 0; i < m.moving.size(); ++i) poses[i] = m.objectPose(m.moving[i]);
+    buffer->publish();
+  }
   return true;
 }
 
@@ -307,9 +312,10 @@ HapticTissue* PhysicsEngine::tissue(std::string_view object) noexcept { return i
 HapticRenderer* PhysicsEngine::needleRenderer() noexcept { return impl_->soft->needle(); }
 bool PhysicsEngine::latestSurface(std::size_t i, Mesh& out) { return impl_->soft->latestSurface(i, out); }
 
-bool PhysicsEngine::latestPoses(std::vector<Isometry3>& out) {
-  if (!impl_->renderPoses->update()) return false;
-  out = impl_->renderPoses->readBuffer();
+bool PhysicsEngine::latestPoses(PoseReader reader, std::vector<Isometry3>& out) {
+  TripleBuffer<std::vector<Isometry3>>& buffer = *impl_->readerPoses[static_cast<std::size_t>(reader)];
+  if (!buffer.update()) return false;
+  out = buffer.readBuffer();
   return true;
 }
 

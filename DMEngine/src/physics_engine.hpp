@@ -9,8 +9,9 @@
 // Data flow per physics tick (docs/architecture.md, "Scene runtime"):
 //   haptics → ToolImpulseChannel → the impulse the tool gave each touched
 //   body since the last tick, applied as a force and torque over the step;
-//   step; body poses → HapticLocalModel (the god-object's objects move) and
-//   → a TripleBuffer the render engine reads (the drawn objects move).
+//   step; body poses → HapticLocalModel (the god-object's objects move),
+//   → a TripleBuffer the render engine reads (the drawn objects move) and
+//   → one the OpenIGTLink engine reads (the bodies' TRANSFORMs).
 // Each channel has one writer and one reader thread, so the engine runs on
 // real-time threads and in lockstep alike; tick() allocates nothing.
 #pragma once
@@ -23,6 +24,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
@@ -38,6 +40,9 @@ class HapticRenderer;
 class HapticTissue;
 class ToolImpulseChannel;
 struct Mesh;
+
+/// Who reads the moving objects' poses (each has its own triple buffer).
+enum class PoseReader : std::uint8_t { Render, Network };
 
 /// The physics engine; build() it before the haptics engine, which takes
 /// its hapticModel() and toolImpulses().
@@ -76,9 +81,9 @@ class PhysicsEngine final : public Engine {
   /// frame, before its scale) when a step finished since the last call,
   /// and on the first call (SoftTissues::latestSurface).
   bool latestSurface(std::size_t i, Mesh& out);
-  /// Render thread (one reader): the newest poses of movingObjects()
-  /// (object frame → world) when a step finished since the last call.
-  bool latestPoses(std::vector<Isometry3>& out);
+  /// The newest poses of movingObjects() (object frame → world) when a step
+  /// finished since this reader's last call; one thread per reader.
+  bool latestPoses(PoseReader reader, std::vector<Isometry3>& out);
 
   /// Control thread, after the run: each body's final state, the forces on
   /// it in the last step (contacts, tool) and the step counters.

@@ -17,6 +17,8 @@
 #include <mutex>
 #include <thread>
 
+#include "frame_slot.hpp"
+
 namespace dm {
 
 namespace {
@@ -247,14 +249,16 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     }
     hud(t, haptics, force);
     const std::uint64_t index = stats_.frames++;
-    if (writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0) {
+    const bool write = writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0;
+    if (write || feed_.frames) {
       auto img = target_.readColor();
       if (!img) {
         error_ = img.error();
         ctx_->release();
         return false;
       }
-      writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(*img));
+      if (feed_.frames) feed_.frames->put(*img, t);  // shares the pixels; never written again
+      if (write) writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(*img));
     }
     ctx_->release();
     renderMs_.push_back(

@@ -17,6 +17,7 @@
 
 namespace dm {
 
+class FrameSlot;
 struct SceneDesc;
 struct SceneResources;
 
@@ -42,6 +43,9 @@ struct RenderFeed {
   /// first call; triangles set on the first call, positions every time.
   std::vector<std::string> softObjects;
   std::function<bool(std::size_t i, Mesh& surface)> softSurface;
+  /// Where every frame goes, read back (RGBA), for a streaming engine; null:
+  /// frames are read back only to be written.
+  std::shared_ptr<FrameSlot> frames;
 };
 
 /// Counters of a render engine (control thread, after stop).

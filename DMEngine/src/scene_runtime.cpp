@@ -6,6 +6,7 @@
 #include <dm/core/log.hpp>
 #include <dm/core/plugin.hpp>
 #include <dm/core/ring.hpp>
+#include <dm/core/triple_buffer.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/haptics/force_plot.hpp>
 #include <dm/haptics/god_object.hpp>
@@ -23,7 +24,10 @@
 #include <dm/core/rt_loop.hpp>
 #include <dm/network/drivers.hpp>
 #include <dm/network/teleop.hpp>
+
+#include "igtl_engine.hpp"
 #endif
+#include "frame_slot.hpp"
 #include "physics_engine.hpp"
 #include "surgery.hpp"
 #ifdef DM_ENGINE_HAVE_RENDERER
@@ -86,6 +90,15 @@ class HapticsEngine final : public Engine {
       }
     }
     if (!ring.tryPush(p)) dropped.fetch_add(1, std::memory_order_relaxed);
+    if (streamed) {
+      StreamedSample& out = streamed->writeBuffer();
+      out.tool = s.response.proxyPose;
+      out.handle = s.input.devicePose;  // world
+      out.force = p.response.force;
+      out.t = p.t;
+      out.valid = true;
+      streamed->publish();
+    }
     return true;
   }
   std::unique_ptr<HapticDevice> device;
@@ -102,6 +115,14 @@ class HapticsEngine final : public Engine {
   ToolImpulseChannel* tools = nullptr;  // owned by the physics engine
   SpscRing<ProbeSample, 16384> ring;
   std::atomic<std::uint64_t> dropped{0};
+  // The newest tick for a streaming engine (OpenIGTLink); null without one.
+  struct StreamedSample {
+    Isometry3 tool = Isometry3::Identity(), handle = Isometry3::Identity();
+    Vec3 force = Vec3::Zero();
+    double t = 0.0;  // scene time of the tick
+    bool valid = false;
+  };
+  std::unique_ptr<TripleBuffer<StreamedSample>> streamed;
   TickTime time;
 };
 
@@ -263,6 +284,7 @@ struct SceneRuntime::Impl {
   std::vector<std::pair<std::shared_ptr<Engine>, EngineSchedule>> userEngines;
 #ifdef DM_ENGINE_HAVE_NETWORK
   std::vector<std::unique_ptr<ServedDevice>> served;  // destroyed before the registry and linker
+  std::shared_ptr<IgtlEngineHandle> igtl;
 #endif
   bool prepared = false;
   RunMode preparedMode = RunMode::Lockstep;
@@ -272,6 +294,7 @@ struct SceneRuntime::Impl {
   Status buildHaptics(bool lockstep);
   Result<std::unique_ptr<GodObjectRenderer>> buildGodObject();
   Status buildEngines(bool lockstep, const SceneRunOptions& options, const std::filesystem::path& out);
+  Status buildIgtl(std::shared_ptr<FrameSlot> frames);
 };
 
 Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
@@ -453,12 +476,15 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
   monitor->trace.reserve(haptics ? static_cast<std::size_t>(options.duration * hapticRate * 1.05) + 64 : 0);
   const double monitorRate = scene.engines.monitor ? scene.engines.monitor->rateHz : 30.0;
   if (auto s = master.addEngine(monitor, {.rateHz = monitorRate}); !s) return s.error();
+  std::shared_ptr<FrameSlot> frames;  // render → OpenIGTLink
   if (scene.engines.render) {
 #ifdef DM_ENGINE_HAVE_RENDERER
     RenderFeed feed;
     if (physics) {
       feed.movingObjects = physics->movingObjects();
-      feed.objectPoses = [p = physics.get()](std::vector<Isometry3>& poses) { return p->latestPoses(poses); };
+      feed.objectPoses = [p = physics.get()](std::vector<Isometry3>& poses) {
+        return p->latestPoses(PoseReader::Render, poses);
+      };
       feed.softObjects = physics->softObjects();
       feed.softSurface = [p = physics.get()](std::size_t i, Mesh& surface) {
         return p->latestSurface(i, surface);
@@ -478,6 +504,10 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
         feed.millableSurface = [f = h->boneFeed.get()](Mesh& surface) { return f->update(surface); };
       }
     }
+    if (scene.engines.igtl && !scene.engines.igtl->image.empty()) {
+      frames = std::make_shared<FrameSlot>();
+      feed.frames = frames;
+    }
     auto made = makeRenderEngine(scene, resources, std::move(feed),
                                  scene.outputs.frames ? out / "frames" : std::filesystem::path(),
                                  scene.outputs.frameEvery, lockstep);
@@ -494,10 +524,50 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
                 "install libegl-dev libegl1-mesa-dev libgl1-mesa-dri and rebuild, or remove it");
 #endif
   }
+  if (scene.engines.igtl)
+    if (auto s = buildIgtl(std::move(frames)); !s) return s.error();
   for (auto& [engine, schedule] : userEngines)
     if (auto s = master.addEngine(engine, schedule); !s) return s.error();
 
   return ok();
+}
+
+// The OpenIGTLink engine, after the render engine (in lockstep it then
+// streams the frame of the same time); listening from here on.
+Status SceneRuntime::Impl::buildIgtl(std::shared_ptr<FrameSlot> frames) {
+#ifdef DM_ENGINE_HAVE_NETWORK
+  const SceneIgtlEngine& g = *scene.engines.igtl;
+  IgtlFeed feed;
+  feed.frames = std::move(frames);
+  if (haptics && (!g.tool.empty() || !g.handle.empty() || !g.force.empty())) {
+    haptics->streamed = std::make_unique<TripleBuffer<HapticsEngine::StreamedSample>>();
+    feed.haptics = [b = haptics->streamed.get()](Isometry3& tool, Isometry3& handle, Vec3& force, double& t) {
+      const HapticsEngine::StreamedSample& s = b->read();
+      tool = s.tool;
+      handle = s.handle;
+      force = s.force;
+      t = s.t;
+      return s.valid;
+    };
+  }
+  if (physics && g.bodies) {
+    feed.bodies = physics->movingObjects();
+    feed.bodyPoses = [p = physics.get()](std::vector<Isometry3>& poses) {
+      return p->latestPoses(PoseReader::Network, poses);
+    };
+  }
+  std::size_t frameBytes = 0;
+  if (scene.engines.render && !g.image.empty())
+    frameBytes = std::size_t(scene.engines.render->width) * std::size_t(scene.engines.render->height) * 3;
+  auto made = makeIgtlEngine(g, std::move(feed), frameBytes);
+  if (!made) return made.error();
+  igtl = *made;
+  return master.addEngine(igtl->engine(), {.rateHz = g.rateHz});
+#else
+  (void)frames;
+  return fail(ErrorCode::Unsupported, "this build has no DMNetwork, which the OpenIGTLink engine needs",
+              "engines/igtl", "build with DMNetwork (libasio-dev) or remove it");
+#endif
 }
 
 Result<std::unique_ptr<SceneRuntime>> SceneRuntime::load(const std::filesystem::path& sceneFile) {
@@ -530,6 +600,14 @@ Status SceneRuntime::addEngine(std::shared_ptr<Engine> engine, const EngineSched
 }
 
 MasterEngine& SceneRuntime::master() { return impl_->master; }
+
+std::uint16_t SceneRuntime::igtlPort() const {
+#ifdef DM_ENGINE_HAVE_NETWORK
+  return impl_->igtl ? impl_->igtl->port() : 0;
+#else
+  return 0;
+#endif
+}
 const SceneDesc& SceneRuntime::scene() const { return impl_->scene; }
 
 Status SceneRuntime::prepare(const SceneRunOptions& options) {
@@ -578,6 +656,16 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   if (auto s = checkDuration(options); !s) return s.error();
 
   if (im.haptics) im.haptics->active->reset(im.haptics->loop->config().deviceToWorld);
+#ifdef DM_ENGINE_HAVE_NETWORK
+  if (im.igtl && scene.engines.igtl->waitForClients > 0) {
+    log::info("waiting for %d OpenIGTLink client(s) on port %u", scene.engines.igtl->waitForClients,
+              unsigned{im.igtl->port()});
+    if (auto s = im.igtl->waitForClients(options.stop); !s) {
+      (void)im.master.stop("no OpenIGTLink clients");
+      return s.error();
+    }
+  }
+#endif
   if (auto s = im.master.start(options.mode); !s) return s.error();
 
   // Run: lockstep in 0.1 s chunks of simulated time, real time polling.
@@ -700,6 +788,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
 #endif
 #ifdef DM_ENGINE_HAVE_NETWORK
   if (!teleop.empty()) summary["teleop"] = std::move(teleop);
+  if (im.igtl) summary["igtl"] = im.igtl->summary();
 #endif
   if (scene.outputs.summary) written.push_back("summary.json");
   summary["outputs"] = written;

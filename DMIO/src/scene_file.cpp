@@ -192,6 +192,7 @@ class SceneParser {
     physicsBodies();
     checkSurgery(scene_, root_);
     checkSoft(scene_, root_);
+    checkIgtl(scene_, root_);
   }
 
   bool badVersion() const { return badVersion_; }
@@ -944,7 +945,7 @@ class SceneParser {
   void engines() {
     ConfigReader sec = root_.child("engines");
     if (!expectObject(sec)) return;
-    sec.knownKeys({"haptics", "physics", "render", "monitor"});
+    sec.knownKeys({"haptics", "physics", "render", "monitor", "igtl"});
     hapticsEngine(sec.child("haptics"));
     if (ConfigReader r = sec.child("physics"); expectObject(r)) {
       r.knownKeys({"rate_hz", "gravity", "sleep"});
@@ -980,6 +981,7 @@ class SceneParser {
       m.rateHz = r.number("rate_hz", {.min = 1.0, .max = 1000.0}, m.rateHz);
       scene_.engines.monitor = m;
     }
+    if (v2Key(sec, "igtl")) readIgtl(sec, scene_.engines);
   }
 
   void outputs() {
@@ -1325,6 +1327,7 @@ Json toJson(const SceneDesc& scene) {
     if (!r->camera.empty()) engines["render"]["camera"] = r->camera;
   }
   if (const auto& m = scene.engines.monitor) engines["monitor"] = {{"rate_hz", m->rateHz}};
+  if (const auto& g = scene.engines.igtl) writeIgtl(*g, engines);
   j["engines"] = std::move(engines);
 
   const SceneOutputs& o = scene.outputs;

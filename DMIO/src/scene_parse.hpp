@@ -1,6 +1,6 @@
 // scene_parse.hpp (private) — the readers shared by the scene file's
-// sections (scene_file.cpp), its surgical keys (scene_surgery.cpp) and its
-// soft tissue (scene_soft.cpp):
+// sections (scene_file.cpp), its surgical keys (scene_surgery.cpp), its
+// soft tissue (scene_soft.cpp) and its OpenIGTLink engine (scene_igtl.cpp):
 // enums by name, vectors, colours, poses, positive numbers, and their JSON.
 #pragma once
 
@@ -221,5 +221,11 @@ void writeSoft(const SceneObject& o, Json& object);
 // The haptics engine's "needle" block (the needle renderer's needle).
 void readNeedle(ConfigReader& haptics, SceneHapticsEngine& h);
 void writeNeedle(const SceneNeedle& n, Json& haptics);
+
+// The OpenIGTLink engine (scene_igtl.cpp): "engines"/"igtl", its checks
+// against the other engines and objects once the scene is read, its JSON.
+void readIgtl(ConfigReader& engines, SceneEngines& e);
+void checkIgtl(const SceneDesc& scene, ConfigReader root);
+void writeIgtl(const SceneIgtlEngine& g, Json& engines);
 
 }  // namespace dm::scene_parse

@@ -27,7 +27,11 @@
 //     object is drawn as its volume's surface, each frame remeshing only
 //     the blocks the burr changed (dm::MillableSurfaceFeed); a soft object
 //     as its deformed boundary;
-//   - monitor: drains the haptic samples into the force trace.
+//   - monitor: drains the haptic samples into the force trace;
+//   - igtl: an OpenIGTLink server (dm::IgtlServer) publishing the tool and
+//     handle poses (TRANSFORM), the force (SENSOR), the dynamic bodies
+//     (TRANSFORM) and the rendered frames (IMAGE) to every client at its
+//     rate, and answering GET_/STT_ queries; run() can wait for clients.
 // prepare() builds and loads them (a model that cannot be built fails there,
 // before anything runs); run() starts them in lockstep on a virtual clock (bit-reproducible) or on
 // real-time threads, for a duration or until `stop` is raised (Ctrl-C), then
@@ -55,6 +59,7 @@
 #include <nlohmann/json.hpp>
 
 #include <atomic>
+#include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <memory>
@@ -109,6 +114,9 @@ class SceneRuntime {
   Status addEngine(std::shared_ptr<Engine> engine, const EngineSchedule& schedule);
   /// The master engine (state, transitions, stats).
   MasterEngine& master();
+  /// The port the OpenIGTLink engine listens on once prepare() built it
+  /// (the free one picked for port 0); 0 without that engine.
+  std::uint16_t igtlPort() const;
   const SceneDesc& scene() const;
 
   /// Builds the engines for a run with `options` (mode, output folder) and

@@ -444,12 +444,32 @@ struct SceneMonitorEngine {
   bool operator==(const SceneMonitorEngine&) const = default;
 };
 
+/// v2: the OpenIGTLink server engine: what a running scene publishes to
+/// 3D Slicer, PLUS or any OpenIGTLink client (docs/scene-format.md, "igtl").
+/// Each name is an OpenIGTLink device name (1..20 characters); an empty one
+/// is not published.
+struct SceneIgtlEngine {
+  double rateHz = 30.0;                    ///< 1..1000
+  std::string listen = "127.0.0.1:18944";  ///< "address:port"; port 0: any free port
+  std::vector<std::string> allow;          ///< peers allowed (addresses or CIDR blocks); empty: everyone
+  std::string tool;                        ///< TRANSFORM of the tool (the haptic proxy), world
+  std::string handle;                      ///< TRANSFORM of the device's handle, world
+  std::string force;                       ///< SENSOR: the force sent to the hand (N, world x, y, z)
+  bool bodies = false;                     ///< TRANSFORM of each dynamic object, named as the object
+  std::string image;                       ///< IMAGE: the rendered frames (RGB, 8 bits)
+  int waitForClients = 0;                  ///< 0..64: the run starts once this many clients are connected
+  double waitTimeout = 30.0;               ///< s, 0.1..3600: then the run fails
+
+  bool operator==(const SceneIgtlEngine&) const = default;
+};
+
 /// Which engines run; each is optional.
 struct SceneEngines {
   std::optional<SceneHapticsEngine> haptics;
   std::optional<ScenePhysicsEngine> physics;
   std::optional<SceneRenderEngine> render;
   std::optional<SceneMonitorEngine> monitor;
+  std::optional<SceneIgtlEngine> igtl;  ///< v2
 
   bool operator==(const SceneEngines&) const = default;
 };
