@@ -17,7 +17,9 @@
 #include <dm/io/drivers.hpp>
 #include <dm/io/haptic_device.hpp>
 #include <dm/io/image_io.hpp>
+#include <dm/io/recorder.hpp>
 #include <dm/io/scene_file.hpp>
+#include <dm/io/scene_replay.hpp>
 #include <dm/io/scene_resources.hpp>
 
 #ifdef DM_ENGINE_HAVE_NETWORK
@@ -90,6 +92,15 @@ class HapticsEngine final : public Engine {
       }
     }
     if (!ring.tryPush(p)) dropped.fetch_add(1, std::memory_order_relaxed);
+    if (recorder) {
+      // The device's state this tick, stamped with the tick's scene time
+      // (what a replay's lockstep tick asks the replay-haptic device for).
+      HapticState state = device->state();
+      state.timeNs = static_cast<std::int64_t>(std::llround(p.t * 1e9));
+      if (waitForRecorder)  // lockstep: as fast as the disk, never a dropped tick
+        while (!recorder->hasRoom()) std::this_thread::yield();
+      (void)recorder->pushHapticState(state);  // a drop is counted (summary)
+    }
     if (streamed) {
       StreamedSample& out = streamed->writeBuffer();
       out.tool = s.response.proxyPose;
@@ -123,6 +134,8 @@ class HapticsEngine final : public Engine {
     bool valid = false;
   };
   std::unique_ptr<TripleBuffer<StreamedSample>> streamed;
+  std::unique_ptr<DeviceRecorder> recorder;  // the device's stream, when the scene records it
+  bool waitForRecorder = false;              // lockstep: wait for queue room instead of dropping
   TickTime time;
 };
 
@@ -295,7 +308,22 @@ struct SceneRuntime::Impl {
   Result<std::unique_ptr<GodObjectRenderer>> buildGodObject();
   Status buildEngines(bool lockstep, const SceneRunOptions& options, const std::filesystem::path& out);
   Status buildIgtl(std::shared_ptr<FrameSlot> frames);
+  Status startRecording(bool lockstep, const std::filesystem::path& out);
 };
+
+// The haptic device's stream to out/recording.dmrec, from the first tick:
+// the header holds what a replay needs (dm::sceneRecordingMetadata).
+Status SceneRuntime::Impl::startRecording(bool lockstep, const std::filesystem::path& out) {
+  const SceneDevice* dev = scene.device(scene.engines.haptics->device);
+  if (dev == nullptr || !haptics) return ok();  // (refused earlier)
+  const nlohmann::json meta = sceneRecordingMetadata(scene, *dev, haptics->device->info(), lockstep);
+  auto rec = DeviceRecorder::create(out / std::string(kSceneRecordingFile),
+                                    {.metadata = meta.dump(), .overwrite = true});
+  if (!rec) return rec.error().within("outputs/recording");
+  haptics->recorder = std::move(*rec);
+  haptics->waitForRecorder = lockstep;
+  return ok();
+}
 
 Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   const SceneHapticsEngine& h = *scene.engines.haptics;
@@ -464,6 +492,8 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
     if (auto s = buildHaptics(lockstep); !s) return s.error();
     if (auto s = master.addEngine(haptics, {.rateHz = scene.engines.haptics->rateHz, .priority = 80}); !s)
       return s.error();
+    if (scene.outputs.recording)
+      if (auto s = startRecording(lockstep, out); !s) return s.error();
   }
   if (physics)
     if (auto s = master.addEngine(
@@ -710,6 +740,8 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   const Result<HostCpuTimes> hostAfter = readHostCpuTimes();
   Status stopStatus = im.master.stop(result.interrupted ? "interrupted" : "done");
   im.monitor->drain();
+  Status recordStatus = ok();
+  if (im.haptics && im.haptics->recorder) recordStatus = im.haptics->recorder->close();
 #ifdef DM_ENGINE_HAVE_NETWORK
   nlohmann::json teleop = nlohmann::json::array();
   for (const auto& sd : im.served) {
@@ -790,6 +822,12 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   if (!teleop.empty()) summary["teleop"] = std::move(teleop);
   if (im.igtl) summary["igtl"] = im.igtl->summary();
 #endif
+  if (im.haptics && im.haptics->recorder) {
+    summary["recording"] = {{"file", std::string(kSceneRecordingFile)},
+                            {"records", im.haptics->recorder->written()},
+                            {"dropped", im.haptics->recorder->dropped()}};
+    written.push_back(std::string(kSceneRecordingFile));
+  }
   if (scene.outputs.summary) written.push_back("summary.json");
   summary["outputs"] = written;
   if (scene.outputs.summary) {
@@ -800,6 +838,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   if (!runStatus)
     return runStatus.error().within(formatString("at t = %.3f s (outputs written to %s)", done, out.c_str()));
   if (!stopStatus) return stopStatus.error();
+  if (!recordStatus) return recordStatus.error().within("outputs/recording");
   return result;
 }
 

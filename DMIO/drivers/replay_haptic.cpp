@@ -6,7 +6,10 @@
 //   rate   playback speed, > 0 (1 = as recorded, 2 = twice as fast)
 //   loop   0 | 1: start over after the last record (0: hold the last one)
 //   strict 0 | 1: refuse a recording with a damaged tail
-//   max_force N (8), servo_rate Hz (1000), workspace m, half extent (0.15)
+//   max_force N (8), servo_rate Hz (1000), workspace m, half extent (0.15),
+//   max_torque N·m (0: no torque output), max_stiffness N/m (2000),
+//   max_damping N·s/m (20) — what the device reports (HapticDeviceInfo),
+//   so a recorded run replays under the recorded device's limits
 // The first read_state call maps host time to the first record; later
 // calls return the latest record at or before
 // first + rate · (now − start) (sample and hold, exact recorded values).
@@ -31,6 +34,7 @@ struct HapticFrame {
 struct ReplayHaptic {
   dm::driver::ReplayStream<HapticFrame> stream;
   double maxForce = 8.0, servoRate = 1000.0, workspace = 0.15;
+  double maxTorque = 0.0, maxStiffness = 2000.0, maxDamping = 20.0;
 };
 
 ReplayHaptic* asReplayHaptic(DmDevice* d) { return reinterpret_cast<ReplayHaptic*>(d); }
@@ -47,11 +51,15 @@ std::string decodeHapticFrame(const dm::record::RecordView& v, std::vector<Hapti
 DmDevice* replayOpen(const DmDeviceParam* params, size_t count, char* error, size_t errorSize) {
   return dm::driver::openReplay<ReplayHaptic>(
       params, count, error, errorSize,
-      {"file", "rate", "loop", "strict", "max_force", "servo_rate", "workspace"},
+      {"file", "rate", "loop", "strict", "max_force", "servo_rate", "workspace", "max_torque",
+       "max_stiffness", "max_damping"},
       [](ReplayHaptic& r, const dm::driver::ReplayOptions& o, ParamReader& p) {
         r.maxForce = p.number("max_force", 8.0, 1e-6, 1e4);
         r.servoRate = p.number("servo_rate", 1000.0, 1.0, 1e6);
         r.workspace = p.number("workspace", 0.15, 1e-6, 100.0);
+        r.maxTorque = p.number("max_torque", 0.0, 0.0, 1e4);
+        r.maxStiffness = p.number("max_stiffness", 2000.0, 1e-6, 1e9);
+        r.maxDamping = p.number("max_damping", 20.0, 0.0, 1e9);
         if (p.ok())
           r.stream.load(o, dm::record::kHapticState, dm::record::kHapticStateBytes, "haptic-state", p,
                         decodeHapticFrame);
@@ -64,14 +72,16 @@ int replayInfo(DmDevice* dev, DmHapticInfo* info) {
   dm::driver::replayIdentity(info->identity, "replay-haptic", "haptic stream", r->stream.source);
   info->capabilities =
       DM_HAPTIC_CAP_POSITION | DM_HAPTIC_CAP_ORIENTATION | DM_HAPTIC_CAP_VELOCITY | DM_HAPTIC_CAP_FORCE;
+  if (r->maxTorque > 0.0) info->capabilities |= DM_HAPTIC_CAP_TORQUE;
+  info->max_torque = r->maxTorque;
   info->button_count = 32;
   for (int i = 0; i < 3; ++i) {
     info->workspace_min[i] = -r->workspace;
     info->workspace_max[i] = r->workspace;
   }
   info->max_force = r->maxForce;
-  info->max_stiffness = 2000.0;
-  info->max_damping = 20.0;
+  info->max_stiffness = r->maxStiffness;
+  info->max_damping = r->maxDamping;
   info->servo_rate_hz = r->servoRate;
   return DM_DEVICE_OK;
 }

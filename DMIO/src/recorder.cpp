@@ -92,6 +92,11 @@ bool DeviceRecorder::push(std::uint16_t type, std::int64_t timeNs,
   return true;
 }
 
+bool DeviceRecorder::hasRoom() const noexcept {
+  return !closed_.load(std::memory_order_relaxed) &&
+         tail_.load(std::memory_order_relaxed) - head_.load(std::memory_order_acquire) < kQueueCapacity;
+}
+
 bool DeviceRecorder::pushHapticState(const HapticState& state) noexcept {
   unsigned char bytes[record::kHapticStateBytes];
   encodeHapticState(state, bytes);

@@ -987,7 +987,7 @@ class SceneParser {
   void outputs() {
     ConfigReader r = root_.child("outputs");
     if (!expectObject(r)) return;
-    r.knownKeys({"directory", "frames", "frame_every", "forces", "plot", "summary"});
+    r.knownKeys({"directory", "frames", "frame_every", "forces", "plot", "summary", "recording"});
     SceneOutputs& o = scene_.outputs;
     const std::size_t before = r.errors().size();
     o.directory = r.string("directory", o.directory);
@@ -998,9 +998,11 @@ class SceneParser {
     o.forces = r.boolean("forces", false);
     o.plot = r.boolean("plot", false);
     o.summary = r.boolean("summary", true);
+    if (v2Key(r, "recording")) o.recording = r.boolean("recording");
     if (o.frames && !scene_.engines.render)
       r.addError("frames need a render engine", "frames", "add \"render\" under \"engines\"");
-    for (auto [key, on] : {std::pair{"forces", o.forces}, std::pair{"plot", o.plot}})
+    for (auto [key, on] :
+         {std::pair{"forces", o.forces}, std::pair{"plot", o.plot}, std::pair{"recording", o.recording}})
       if (on && !scene_.engines.haptics)
         r.addError(std::string(key) + " needs a haptics engine", key, "add \"haptics\" under \"engines\"");
   }
@@ -1332,7 +1334,8 @@ Json toJson(const SceneDesc& scene) {
 
   const SceneOutputs& o = scene.outputs;
   j["outputs"] = {{"directory", o.directory}, {"frames", o.frames}, {"frame_every", o.frameEvery},
-                  {"forces", o.forces},       {"plot", o.plot},     {"summary", o.summary}};
+                  {"forces", o.forces},       {"plot", o.plot},     {"summary", o.summary},
+                  {"recording", o.recording}};
   return j;
 }
 

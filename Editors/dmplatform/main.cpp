@@ -1,6 +1,7 @@
 // dmplatform — the main job: runs a simulation scene file headless.
 //
 //   dmplatform run [SCENE.json] [--lockstep | --realtime] [--duration S] [--out DIR]
+//   dmplatform replay RECORDING [--out DIR]
 //
 // With no SCENE it runs the bundled default scene (examples/scenes/
 // head_probe.json: the Colin27 head from ch2.nii.gz probed through the
@@ -9,9 +10,17 @@
 // outputs.directory): frames/frame_NNNNN.png, forces.csv, forces.png and
 // summary.json. A progress bar shows on a terminal; Ctrl-C stops the run
 // cleanly and the outputs are still written.
-// Exit codes: 0 done, 1 the run failed (message on stderr), 2 bad command
-// line, 130 interrupted (outputs written).
+// `replay` re-runs a run recorded with "outputs": {"recording": true}
+// (recording.dmrec) in lockstep, with the recorded device stream, into DIR
+// (default: replay/ beside the recording), and compares its forces.csv with
+// the recorded one beside the recording, tick by tick (replay.json).
+// Exit codes: 0 done (replay: the same force trace, or none to compare), 1
+// the run failed (message on stderr), 2 bad command line, scene or
+// recording, 3 the replay's force trace differs from the recorded one, 130
+// interrupted (outputs written).
+#include <dm/core/filesystem.hpp>
 #include <dm/core/log.hpp>
+#include <dm/io/scene_replay.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
 
@@ -43,6 +52,132 @@ std::filesystem::path defaultScene() {
   return (exe.parent_path() / DM_SOURCE_SCENES_DIR / "head_probe.json").lexically_normal();
 }
 
+// The run's figures from its summary, one line per engine and model.
+void printSummary(const nlohmann::json& s, const std::filesystem::path& outDir, bool interrupted) {
+  for (const auto& e : s["engines"])
+    std::printf(
+        "engine %-8s %8llu ticks at %7.1f Hz (scheduled %6.0f Hz), tick p50 %8.1f us, p99.9 %8.1f us, "
+        "max %8.1f us, deadline misses %llu\n",
+        e["name"].get<std::string>().c_str(), e["ticks"].get<unsigned long long>(),
+        e["achieved_hz"].get<double>(), e["rate_hz"].get<double>(), e["execution_us"]["p50"].get<double>(),
+        e["execution_us"]["p999"].get<double>(), e["execution_us"]["max"].get<double>(),
+        e["deadline_misses"].get<unsigned long long>());
+  if (s.contains("haptics"))
+    std::printf("haptics: %llu of %llu ticks in contact, max force %.2f N, max depth %.1f mm\n",
+                s["haptics"]["contact_ticks"].get<unsigned long long>(),
+                s["haptics"]["ticks"].get<unsigned long long>(), s["haptics"]["max_force_N"].get<double>(),
+                s["haptics"]["max_depth_m"].get<double>() * 1e3);
+  if (s.contains("physics"))
+    for (const auto& b : s["physics"]["bodies"])
+      std::printf("physics: %s moved %.1f mm, now at (%.1f, %.1f, %.1f) mm\n",
+                  b["name"].get<std::string>().c_str(), b["displacement_m"].get<double>() * 1e3,
+                  b["position_m"][0].get<double>() * 1e3, b["position_m"][1].get<double>() * 1e3,
+                  b["position_m"][2].get<double>() * 1e3);
+  if (s.contains("render"))
+    std::printf("render: %llu frames (%llu written) on %s, frame p50 %.1f ms\n",
+                s["render"]["frames"].get<unsigned long long>(),
+                s["render"]["frames_written"].get<unsigned long long>(),
+                s["render"]["gl_renderer"].get<std::string>().c_str(),
+                s["render"]["frame_ms_p50"].get<double>());
+  if (s.contains("host") && s["mode"] == "realtime")
+    std::printf("host: %d CPUs, %.2f CPU-s busy, %.3f s stolen by the hypervisor%s\n",
+                s["host"]["cpus"].get<int>(), s["host"]["cpu_busy_s"].get<double>(),
+                s["host"]["cpu_steal_s"].get<double>(),
+                s["host"]["cpu_steal_s"].get<double>() > 0 ? " (deadline misses may be the host's)" : "");
+  std::printf("wrote %s in %s%s\n", s["outputs"].dump().c_str(), outDir.c_str(),
+              interrupted ? " (interrupted)" : "");
+}
+
+// `dmplatform replay`: the recorded scene with the recorded device stream,
+// in lockstep, its trace compared with the recorded run's forces.csv
+// (beside the recording) tick by tick; replay.json says how they compare.
+int replayRecording(const std::filesystem::path& recording, const std::string& out) {
+  auto plan = dm::loadReplay(recording);
+  if (!plan) {
+    std::cerr << "dmplatform: " << plan.error().message() << '\n';
+    return 2;
+  }
+  const std::filesystem::path outDir =
+      out.empty() ? recording.parent_path() / "replay" : std::filesystem::path(out);
+  std::printf(
+      "dmplatform: replaying %s (%s, recorded %s: %zu haptic ticks, %.3f s) in lockstep, outputs in %s\n",
+      recording.c_str(), plan->scene.name.c_str(), plan->recordedMode.c_str(), plan->records, plan->duration,
+      outDir.c_str());
+  if (!plan->tail.empty())
+    std::printf("dmplatform: the recording was cut (%s): its complete ticks replay\n", plan->tail.c_str());
+  std::fflush(stdout);
+  auto runtime = dm::SceneRuntime::create(plan->scene);
+  if (!runtime) {
+    std::cerr << "dmplatform: " << runtime.error().message() << '\n';
+    return 2;
+  }
+  dmtool::ProgressBar bar("dmplatform replay " + plan->scene.name);
+  dm::SceneRunOptions options;
+  options.mode = dm::RunMode::Lockstep;
+  options.duration = plan->duration;
+  options.outDir = outDir;
+  options.stop = &gStop;
+  options.progress = [&](double f, const std::string&) { bar.update(f); };
+  if (auto s = (*runtime)->prepare(options); !s) {
+    bar.finish();
+    std::cerr << "dmplatform: " << s.error().message() << '\n';
+    return 2;
+  }
+  auto result = (*runtime)->run(options);
+  bar.finish();
+  if (!result) {
+    std::cerr << "dmplatform: " << result.error().message() << '\n';
+    return 1;
+  }
+  printSummary(result->summary, outDir, result->interrupted);
+  nlohmann::json report = {{"recording", recording.string()},
+                           {"recorded_mode", plan->recordedMode},
+                           {"records", plan->records},
+                           {"cut", plan->tail}};
+  int code = result->interrupted ? 130 : 0;
+  if (!plan->recordedForces.empty() && !result->interrupted) {
+    auto recorded = dm::readFile(plan->recordedForces);
+    auto replayed = dm::readFile(outDir / "forces.csv");
+    if (!recorded || !replayed) {
+      std::cerr << "dmplatform: " << (recorded ? replayed.error() : recorded.error()).message() << '\n';
+      return 1;
+    }
+    auto text = [](const std::vector<std::byte>& b) {
+      return std::string_view(reinterpret_cast<const char*>(b.data()), b.size());
+    };
+    auto c = dm::compareForceTraces(text(*recorded), text(*replayed));
+    if (!c) {
+      std::cerr << "dmplatform: " << c.error().message() << '\n';
+      return 1;
+    }
+    report["compared_with"] = plan->recordedForces.string();
+    report["ticks_compared"] = c->compared;
+    report["ticks_identical"] = c->identical;
+    report["ticks_only_recorded"] = c->onlyInRecorded;
+    report["ticks_only_replayed"] = c->onlyInReplayed;
+    report["max_force_difference_N"] = c->maxForceDifference;
+    report["identical"] = c->same();
+    if (c->same()) {
+      std::printf("replay: the force trace is the recorded one, %zu of %zu ticks bit for bit\n", c->identical,
+                  c->compared);
+    } else {
+      std::printf(
+          "replay: %zu of %zu ticks identical (%zu recorded ticks missing), first difference at t = %.3f s, "
+          "max |dF| = %.3g N%s\n",
+          c->identical, c->compared, c->onlyInRecorded, c->firstDifferenceT, c->maxForceDifference,
+          plan->recordedMode == "realtime" ? " (a real-time run's physics steps when its thread gets to it)"
+                                           : "");
+      code = 3;
+    }
+  }
+  const std::string json = report.dump(2) + "\n";
+  if (auto s = dm::writeFileAtomic(outDir / "replay.json", json.data(), json.size()); !s) {
+    std::cerr << "dmplatform: " << s.error().message() << '\n';
+    return 1;
+  }
+  return code;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -60,14 +195,23 @@ int main(int argc, char** argv) {
   run->add_option("--duration", duration, "seconds to run (simulated in lockstep, wall clock in real time)")
       ->check(CLI::Range(1e-3, 1e7));
   run->add_option("--out", out, "output folder (default: the scene's outputs.directory)");
+  std::string recordingPath, replayOut;
+  CLI::App* replay = app.add_subcommand(
+      "replay", "Re-run a recorded scene run in lockstep and compare its force trace with the recording's");
+  replay
+      ->add_option("recording", recordingPath,
+                   "recording.dmrec of a run with \"outputs\": {\"recording\": true}")
+      ->required();
+  replay->add_option("--out", replayOut, "output folder (default: replay/ beside the recording)");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? 0 : 2;
   }
-  const std::filesystem::path scene = scenePath.empty() ? defaultScene() : std::filesystem::path(scenePath);
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
+  if (replay->parsed()) return replayRecording(recordingPath, replayOut);
+  const std::filesystem::path scene = scenePath.empty() ? defaultScene() : std::filesystem::path(scenePath);
 
   // Exit codes: 2 for a scene that cannot be run (invalid, a resource or a
   // model that cannot be built), 1 for a run that failed, 130 interrupted.
@@ -100,38 +244,6 @@ int main(int argc, char** argv) {
     std::cerr << "dmplatform: " << result.error().message() << '\n';
     return 1;
   }
-  const nlohmann::json& s = result->summary;
-  for (const auto& e : s["engines"])
-    std::printf(
-        "engine %-8s %8llu ticks at %7.1f Hz (scheduled %6.0f Hz), tick p50 %8.1f us, p99.9 %8.1f us, "
-        "max %8.1f us, deadline misses %llu\n",
-        e["name"].get<std::string>().c_str(), e["ticks"].get<unsigned long long>(),
-        e["achieved_hz"].get<double>(), e["rate_hz"].get<double>(), e["execution_us"]["p50"].get<double>(),
-        e["execution_us"]["p999"].get<double>(), e["execution_us"]["max"].get<double>(),
-        e["deadline_misses"].get<unsigned long long>());
-  if (s.contains("haptics"))
-    std::printf("haptics: %llu of %llu ticks in contact, max force %.2f N, max depth %.1f mm\n",
-                s["haptics"]["contact_ticks"].get<unsigned long long>(),
-                s["haptics"]["ticks"].get<unsigned long long>(), s["haptics"]["max_force_N"].get<double>(),
-                s["haptics"]["max_depth_m"].get<double>() * 1e3);
-  if (s.contains("physics"))
-    for (const auto& b : s["physics"]["bodies"])
-      std::printf("physics: %s moved %.1f mm, now at (%.1f, %.1f, %.1f) mm\n",
-                  b["name"].get<std::string>().c_str(), b["displacement_m"].get<double>() * 1e3,
-                  b["position_m"][0].get<double>() * 1e3, b["position_m"][1].get<double>() * 1e3,
-                  b["position_m"][2].get<double>() * 1e3);
-  if (s.contains("render"))
-    std::printf("render: %llu frames (%llu written) on %s, frame p50 %.1f ms\n",
-                s["render"]["frames"].get<unsigned long long>(),
-                s["render"]["frames_written"].get<unsigned long long>(),
-                s["render"]["gl_renderer"].get<std::string>().c_str(),
-                s["render"]["frame_ms_p50"].get<double>());
-  if (s.contains("host") && s["mode"] == "realtime")
-    std::printf("host: %d CPUs, %.2f CPU-s busy, %.3f s stolen by the hypervisor%s\n",
-                s["host"]["cpus"].get<int>(), s["host"]["cpu_busy_s"].get<double>(),
-                s["host"]["cpu_steal_s"].get<double>(),
-                s["host"]["cpu_steal_s"].get<double>() > 0 ? " (deadline misses may be the host's)" : "");
-  std::printf("wrote %s in %s%s\n", s["outputs"].dump().c_str(), outDir.c_str(),
-              result->interrupted ? " (interrupted)" : "");
+  printSummary(result->summary, outDir, result->interrupted);
   return result->interrupted ? 130 : 0;
 }

@@ -36,7 +36,8 @@
 // before anything runs); run() starts them in lockstep on a virtual clock (bit-reproducible) or on
 // real-time threads, for a duration or until `stop` is raised (Ctrl-C), then
 // stops them and writes the outputs the scene asks for: frames/frame_NNNNN.png,
-// forces.csv, forces.png and summary.json (achieved rate and tick-time
+// forces.csv, forces.png, recording.dmrec (the haptic device's stream, for
+// dm::loadReplay: dm/io/scene_replay.hpp) and summary.json (achieved rate and tick-time
 // percentiles per engine, deadline misses, contacts, maximum and final force,
 // frames; each dynamic body's final state, displacement, contact and tool
 // forces of the last step, and the tool impulse it received; each soft

@@ -11,8 +11,9 @@
 //  * "sim-haptic" (kind "haptic-device"): scripted paths, virtual hand,
 //    noise, quantization, latency, loss window (DMIO/drivers/sim_haptic.cpp);
 //  * "replay-haptic" (kind "haptic-device"): plays a recording made with
-//    dm::DeviceRecorder at the recorded or a scaled rate
-//    (DMIO/drivers/replay_haptic.cpp);
+//    dm::DeviceRecorder at the recorded or a scaled rate, reporting the
+//    force, torque, stiffness and damping limits it is given (a scene
+//    replay gives the recorded device's) (DMIO/drivers/replay_haptic.cpp);
 //  * "replay-controller" (kind "controller"), "replay-daq" (kind "daq"),
 //    "replay-sensor" (kind "sensor"): play the controller states, DAQ
 //    frames or sensor readings of a recording at the recorded or a scaled

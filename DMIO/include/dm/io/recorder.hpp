@@ -82,6 +82,10 @@ class DeviceRecorder {
   /// (and counts a drop) when the queue is full, the payload is larger than
   /// kMaxQueuedPayload, or the recorder is closed.
   bool push(std::uint16_t type, std::int64_t timeNs, std::span<const std::byte> payload) noexcept;
+  /// True when push() would find a free queue slot (producer thread): a
+  /// producer that may wait (a lockstep run, faster than the disk) yields
+  /// until then instead of dropping. Real-time safe.
+  bool hasRoom() const noexcept;
   /// push() of a haptic state (RecordType::HapticState).
   bool pushHapticState(const HapticState& state) noexcept;
   /// push() of a controller state (RecordType::ControllerState, 64 bytes:

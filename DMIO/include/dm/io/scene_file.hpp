@@ -482,6 +482,9 @@ struct SceneOutputs {
   bool forces = false;            ///< haptic force trace (CSV)
   bool plot = false;              ///< force plot (PNG)
   bool summary = true;            ///< summary.json
+  /// v2: the haptic device's stream as recording.dmrec (crash-safe, as the
+  /// run goes), which `dmplatform replay` re-runs in lockstep
+  bool recording = false;
 
   bool operator==(const SceneOutputs&) const = default;
 };
