@@ -4,6 +4,8 @@
 #         -DMIN_CONTACT_TICKS=N (FRAMES: at least that many frames)
 #         -DMIN_FORCE=F -DMAX_FORCE=F -P check_scene_run.cmake
 #         -DMOVED_BODY=name -DMIN_DISPLACEMENT=m (scenes with physics)
+#         -DVISION_FRAMES=N (scenes with a "vision" engine): its graph
+#         stepped N frames and wrote vision/edge_pixels.csv with N rows
 #         -DIGTL_IMAGES=N (scenes with an "igtl" engine): it published at
 #         least N IMAGE messages, and TRANSFORM and SENSOR messages
 # Tele-operation scenes (a device with "serve") run in real time:
@@ -142,5 +144,13 @@ if(DEFINED IGTL_IMAGES)
   if(images LESS IGTL_IMAGES OR transforms LESS 1 OR sensors LESS 1)
     message(FATAL_ERROR "OpenIGTLink: ${images} IMAGE (expected >= ${IGTL_IMAGES}), ${transforms} TRANSFORM, "
                         "${sensors} SENSOR messages published")
+  endif()
+endif()
+if(DEFINED VISION_FRAMES)
+  string(JSON visionFrames GET "${summary}" vision frames)
+  file(STRINGS "${OUT}/vision/edge_pixels.csv" visionRows REGEX "^[0-9]")
+  list(LENGTH visionRows visionRowCount)
+  if(NOT visionFrames EQUAL VISION_FRAMES OR NOT visionRowCount EQUAL VISION_FRAMES)
+    message(FATAL_ERROR "vision: ${visionFrames} frames stepped, ${visionRowCount} CSV rows (expected ${VISION_FRAMES})")
   endif()
 endif()

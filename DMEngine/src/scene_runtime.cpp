@@ -30,6 +30,9 @@
 #include "igtl_engine.hpp"
 #endif
 #include "frame_slot.hpp"
+#ifdef DM_ENGINE_HAVE_VISION
+#include "vision_engine.hpp"
+#endif
 #include "physics_engine.hpp"
 #include "surgery.hpp"
 #ifdef DM_ENGINE_HAVE_RENDERER
@@ -299,6 +302,9 @@ struct SceneRuntime::Impl {
   std::vector<std::unique_ptr<ServedDevice>> served;  // destroyed before the registry and linker
   std::shared_ptr<IgtlEngineHandle> igtl;
 #endif
+#ifdef DM_ENGINE_HAVE_VISION
+  std::shared_ptr<VisionEngineHandle> vision;
+#endif
   bool prepared = false;
   RunMode preparedMode = RunMode::Lockstep;
   std::filesystem::path preparedOut;
@@ -506,7 +512,21 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
   monitor->trace.reserve(haptics ? static_cast<std::size_t>(options.duration * hapticRate * 1.05) + 64 : 0);
   const double monitorRate = scene.engines.monitor ? scene.engines.monitor->rateHz : 30.0;
   if (auto s = master.addEngine(monitor, {.rateHz = monitorRate}); !s) return s.error();
-  std::shared_ptr<FrameSlot> frames;  // render → OpenIGTLink
+  // The vision graph first: whether it takes rendered frames decides
+  // whether the render engine reads them back.
+  bool visionWantsFrames = false;
+  if (scene.engines.vision) {
+#ifdef DM_ENGINE_HAVE_VISION
+    auto v = makeVisionEngine(scene, out);
+    if (!v) return v.error();
+    vision = *v;
+    visionWantsFrames = !vision->inputs().empty();
+#else
+    return fail(ErrorCode::Unsupported, "this build has no DMVision, which the vision engine needs",
+                "engines/vision", "build with DMVision (libopencv-dev) or remove it");
+#endif
+  }
+  std::shared_ptr<FrameSlot> frames;  // render → OpenIGTLink and vision
   if (scene.engines.render) {
 #ifdef DM_ENGINE_HAVE_RENDERER
     RenderFeed feed;
@@ -534,7 +554,7 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
         feed.millableSurface = [f = h->boneFeed.get()](Mesh& surface) { return f->update(surface); };
       }
     }
-    if (scene.engines.igtl && !scene.engines.igtl->image.empty()) {
+    if ((scene.engines.igtl && !scene.engines.igtl->image.empty()) || visionWantsFrames) {
       frames = std::make_shared<FrameSlot>();
       feed.frames = frames;
     }
@@ -555,7 +575,14 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
 #endif
   }
   if (scene.engines.igtl)
-    if (auto s = buildIgtl(std::move(frames)); !s) return s.error();
+    if (auto s = buildIgtl(frames); !s) return s.error();
+#ifdef DM_ENGINE_HAVE_VISION
+  if (vision) {
+    vision->setFrames(frames);
+    if (auto s = master.addEngine(vision->engine(), {.rateHz = scene.engines.vision->rateHz}); !s)
+      return s.error();
+  }
+#endif
   for (auto& [engine, schedule] : userEngines)
     if (auto s = master.addEngine(engine, schedule); !s) return s.error();
 
@@ -821,6 +848,9 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
 #ifdef DM_ENGINE_HAVE_NETWORK
   if (!teleop.empty()) summary["teleop"] = std::move(teleop);
   if (im.igtl) summary["igtl"] = im.igtl->summary();
+#endif
+#ifdef DM_ENGINE_HAVE_VISION
+  if (im.vision) summary["vision"] = im.vision->summary();
 #endif
   if (im.haptics && im.haptics->recorder) {
     summary["recording"] = {{"file", std::string(kSceneRecordingFile)},

@@ -945,7 +945,7 @@ class SceneParser {
   void engines() {
     ConfigReader sec = root_.child("engines");
     if (!expectObject(sec)) return;
-    sec.knownKeys({"haptics", "physics", "render", "monitor", "igtl"});
+    sec.knownKeys({"haptics", "physics", "render", "monitor", "igtl", "vision"});
     hapticsEngine(sec.child("haptics"));
     if (ConfigReader r = sec.child("physics"); expectObject(r)) {
       r.knownKeys({"rate_hz", "gravity", "sleep"});
@@ -982,6 +982,28 @@ class SceneParser {
       scene_.engines.monitor = m;
     }
     if (v2Key(sec, "igtl")) readIgtl(sec, scene_.engines);
+    if (v2Key(sec, "vision")) visionEngine(sec.child("vision"));
+  }
+
+  // The vision engine: its rate and its graph, a file (a source like a
+  // resource's: relative to the scene, confined) or inline. The graph
+  // itself is DMVision's to check, when the engine is built.
+  void visionEngine(ConfigReader r) {
+    if (!expectObject(r)) return;
+    r.knownKeys({"rate_hz", "graph"});
+    SceneVisionEngine v;
+    v.rateHz = r.number("rate_hz", {.min = 1.0, .max = 240.0}, v.rateHz);
+    const Json& graph = r.node().contains("graph") ? r.node()["graph"] : Json();
+    if (graph.is_string()) {
+      v.graphFile = resolveSource(r, graph.get<std::string>(), "graph");
+    } else if (graph.is_object()) {
+      v.graph = graph;
+    } else {
+      r.addError(graph.is_null() ? "missing required graph"
+                                 : std::string("expected a file name or an object, got ") + graph.type_name(),
+                 "graph", "a filter graph file (docs/vision.md) or {\"nodes\": [...]}");
+    }
+    scene_.engines.vision = std::move(v);
   }
 
   void outputs() {
@@ -1330,6 +1352,9 @@ Json toJson(const SceneDesc& scene) {
   }
   if (const auto& m = scene.engines.monitor) engines["monitor"] = {{"rate_hz", m->rateHz}};
   if (const auto& g = scene.engines.igtl) writeIgtl(*g, engines);
+  if (const auto& v = scene.engines.vision)
+    engines["vision"] = {{"rate_hz", v->rateHz},
+                         {"graph", v->graphFile.empty() ? v->graph : Json(v->graphFile.string())}};
   j["engines"] = std::move(engines);
 
   const SceneOutputs& o = scene.outputs;

@@ -6,9 +6,9 @@
 #include <atomic>
 #include <chrono>
 #include <functional>
-#include <optional>
 #include <map>
 #include <opencv2/core.hpp>
+#include <optional>
 
 #include "filter_nodes.hpp"
 
@@ -52,6 +52,45 @@ std::string withArticle(PortType t) {
   return (t == PortType::Image ? "an " : "a ") + std::string(toString(t));
 }
 
+// One filter or sink on the frame's values (inputs by index into `values`),
+// timed; an OpenCV exception becomes an error.
+Status processNode(NodeEntry& e, const std::vector<graph::Value>& values, graph::Value& out,
+                   std::int64_t frame) {
+  const graph::Value* ins[2] = {nullptr, nullptr};
+  for (std::size_t k = 0; k < e.in.size(); ++k) ins[k] = &values[e.in[k]];
+  const auto t0 = Clock::now();
+  Status s = ok();
+  try {
+    s = e.node->process(std::span<const graph::Value* const>(ins, e.in.size()), out, frame);
+  } catch (const std::exception& ex) {
+    s = fail(ErrorCode::Internal, std::string("OpenCV: ") + ex.what(), "", "check the input's size and type");
+  }
+  e.seconds += std::chrono::duration<double>(Clock::now() - t0).count();
+  ++e.calls;
+  return s;
+}
+
+// One source's next frame, timed; an OpenCV exception becomes an error.
+Result<bool> readSource(NodeEntry& e, graph::Value& out, std::int64_t frame) {
+  const auto t0 = Clock::now();
+  Result<bool> r = false;
+  try {
+    r = e.node->read(out, frame);
+  } catch (const std::exception& ex) {
+    r = fail(ErrorCode::Io, std::string("OpenCV: ") + ex.what(), "");
+  }
+  e.seconds += std::chrono::duration<double>(Clock::now() - t0).count();
+  ++e.calls;
+  return r;
+}
+
+// An error of node `e` at `frame`, located as run() locates them.
+Error atNode(const NodeEntry& e, Error err, std::int64_t frame) {
+  err.where = "node \"" + e.name + "\" (" + e.kind + "), frame " + std::to_string(frame) +
+              (err.where.empty() ? "" : ": " + err.where);
+  return err;
+}
+
 }  // namespace
 
 struct FilterGraph::Impl {
@@ -61,6 +100,13 @@ struct FilterGraph::Impl {
   bool validated = false;
   std::map<std::string, GraphCallback, std::less<>> callbacks;
   std::map<std::string, std::shared_ptr<graph::SlotState>, std::less<>> slots;
+  std::map<std::string, std::shared_ptr<graph::InputState>, std::less<>> inputs;
+  std::filesystem::path outputDir;  // sinks' relative paths go here
+  // step(): the values of the frame being stepped, its number, whether a
+  // source has ended.
+  std::vector<graph::Value> stepValues;
+  std::int64_t stepFrame = 0;
+  bool stepEnded = false;
 
   Error located(const std::string& where, std::string what, std::string hint = {}) const {
     return Error{ErrorCode::InvalidArgument, std::move(what), source + ": " + where, std::move(hint)};
@@ -190,7 +236,7 @@ Status FilterGraph::validate() {
     ConfigReader params(e.params, g.source, e.path);
     std::vector<std::string_view> keys = e.info->keys;
     params.knownKeys(keys);
-    graph::NodeContext context{e.name, &g.callbacks, &g.slots};
+    graph::NodeContext context{e.name, &g.callbacks, &g.slots, &g.inputs, g.outputDir};
     try {
       e.node = e.info->make(params, context);
     } catch (const std::exception& ex) {  // OpenCV throws cv::Exception on what it refuses
@@ -354,30 +400,15 @@ Result<GraphRunStats> FilterGraph::run(const GraphRunOptions& options) {
   auto recordError = [&](const NodeEntry& e, const Error& err, std::int64_t frame) {
     std::lock_guard lock(errorMutex);
     if (firstError) return;
-    Error located = err;
-    located.where = "node \"" + e.name + "\" (" + e.kind + "), frame " + std::to_string(frame) +
-                    (err.where.empty() ? "" : ": " + err.where);
-    firstError = std::move(located);
+    firstError = atNode(e, err, frame);
     failed = true;
   };
 
   std::int64_t frame = 0;
   auto runNode = [&](std::size_t i) {
     if (failed.load(std::memory_order_relaxed)) return;
-    NodeEntry& e = g.nodes[i];
-    const graph::Value* ins[2] = {nullptr, nullptr};
-    for (std::size_t k = 0; k < e.in.size(); ++k) ins[k] = &values[e.in[k]];
-    const auto t0 = Clock::now();
-    Status s = ok();
-    try {
-      s = e.node->process(std::span<const graph::Value* const>(ins, e.in.size()), values[i], frame);
-    } catch (const std::exception& ex) {
-      s = fail(ErrorCode::Internal, std::string("OpenCV: ") + ex.what(), "",
-               "check the input's size and type");
-    }
-    e.seconds += std::chrono::duration<double>(Clock::now() - t0).count();
-    ++e.calls;
-    if (!s) recordError(e, s.error(), frame);
+    if (Status s = processNode(g.nodes[i], values, values[i], frame); !s)
+      recordError(g.nodes[i], s.error(), frame);
   };
 
   // Dependency counting over oneTBB tasks: a filter or sink runs once all of
@@ -433,15 +464,7 @@ Result<GraphRunStats> FilterGraph::run(const GraphRunOptions& options) {
     more = true;
     for (std::size_t i : sources) {
       NodeEntry& e = g.nodes[i];
-      const auto t0 = Clock::now();
-      Result<bool> r = false;
-      try {
-        r = e.node->read(next[i], k);
-      } catch (const std::exception& ex) {
-        r = fail(ErrorCode::Io, std::string("OpenCV: ") + ex.what(), "");
-      }
-      e.seconds += std::chrono::duration<double>(Clock::now() - t0).count();
-      ++e.calls;
+      Result<bool> r = readSource(e, next[i], k);
       if (!r) {
         recordError(e, r.error(), k);
         more = false;
@@ -481,6 +504,70 @@ Result<GraphRunStats> FilterGraph::run(const GraphRunOptions& options) {
   stats.seconds = std::chrono::duration<double>(Clock::now() - t0).count();
   stats.framesPerSecond = stats.seconds > 0 ? double(frame) / stats.seconds : 0;
   for (const NodeEntry& e : g.nodes) stats.nodes.push_back({e.name, e.kind, e.calls, e.seconds});
+  return stats;
+}
+
+void FilterGraph::setOutputDirectory(std::filesystem::path dir) {
+  impl_->outputDir = std::move(dir);
+  impl_->validated = false;
+}
+
+Status FilterGraph::setInput(std::string_view source, const Image& image) {
+  auto it = impl_->inputs.find(source);
+  if (it == impl_->inputs.end())
+    return fail(
+        ErrorCode::NotFound, "no \"input\" node named \"" + std::string(source) + "\"", impl_->source,
+        "validate() the graph first; inputs: " + [&] {
+          std::string names;
+          for (const auto& [name, state] : impl_->inputs) names += (names.empty() ? "" : ", ") + name;
+          return names.empty() ? std::string("none") : names;
+        }());
+  std::lock_guard lock(it->second->mutex);
+  it->second->image = image;
+  return ok();
+}
+
+std::vector<std::string> FilterGraph::inputs() const {
+  std::vector<std::string> names;
+  for (const auto& [name, state] : impl_->inputs) names.push_back(name);
+  return names;
+}
+
+Result<bool> FilterGraph::step() {
+  Impl& g = *impl_;
+  if (!g.validated)
+    if (auto s = validate(); !s) return s.error();
+  if (g.stepEnded) return false;
+  g.stepValues.resize(g.nodes.size());
+  const std::int64_t frame = g.stepFrame;
+  for (std::size_t i : g.order) {
+    NodeEntry& e = g.nodes[i];
+    if (isSource(e)) {
+      Result<bool> r = readSource(e, g.stepValues[i], frame);
+      if (!r) return atNode(e, r.error(), frame);
+      if (!*r) {
+        g.stepEnded = true;
+        return false;
+      }
+    } else if (Status s = processNode(e, g.stepValues, g.stepValues[i], frame); !s) {
+      return atNode(e, s.error(), frame);
+    }
+  }
+  ++g.stepFrame;
+  return true;
+}
+
+Status FilterGraph::finish() {
+  Impl& g = *impl_;
+  if (!g.validated) return ok();
+  for (std::size_t i : g.order)
+    if (auto s = g.nodes[i].node->finish(); !s) return atNode(g.nodes[i], s.error(), g.stepFrame);
+  return ok();
+}
+
+std::vector<GraphNodeStats> FilterGraph::nodeStats() const {
+  std::vector<GraphNodeStats> stats;
+  for (const NodeEntry& e : impl_->nodes) stats.push_back({e.name, e.kind, e.calls, e.seconds});
   return stats;
 }
 

@@ -968,11 +968,12 @@ const cv::Mat& forWriting(const Value& v, cv::Mat& scratch) {
 
 class FileSink final : public Node {
  public:
-  static std::unique_ptr<Node> make(ConfigReader& r, const NodeContext&) {
+  static std::unique_ptr<Node> make(ConfigReader& r, const NodeContext& c) {
     auto n = std::make_unique<FileSink>();
     n->pattern_ = r.string("pattern");
     if (!n->pattern_.empty() && !validPattern(n->pattern_))
       r.addError("needs exactly one integer conversion such as %04d", "pattern");
+    n->pattern_ = outputPath(c, n->pattern_);
     n->every_ = r.integer("every", {1, 1e9}, 1);
     return n;
   }
@@ -997,9 +998,9 @@ class FileSink final : public Node {
 
 class VideoWriterSink final : public Node {
  public:
-  static std::unique_ptr<Node> make(ConfigReader& r, const NodeContext&) {
+  static std::unique_ptr<Node> make(ConfigReader& r, const NodeContext& c) {
     auto n = std::make_unique<VideoWriterSink>();
-    n->path_ = r.string("path");
+    n->path_ = outputPath(c, r.string("path"));
     n->fps_ = r.number("fps", {0.1, 1000}, 25);
     const std::string fourcc = r.string("fourcc", "MJPG");
     if (fourcc.size() != 4)
@@ -1083,6 +1084,51 @@ class SlotSink final : public Node {
   bool texture_ = false;
 };
 
+// The host's images (FilterGraph::setInput): the newest one at every read,
+// 8-bit gray, RGB or RGBA (as RGB: the alpha a renderer reads back is
+// opaque), copied into OpenCV's layout so the caller may reuse its buffer.
+class InputSource final : public Node {
+ public:
+  static std::unique_ptr<Node> make(ConfigReader&, const NodeContext& c) {
+    auto n = std::make_unique<InputSource>();
+    auto& state = (*c.inputs)[c.name];
+    if (!state) state = std::make_shared<InputState>();
+    n->state_ = state;
+    n->name_ = c.name;
+    return n;
+  }
+  Result<bool> read(Value& out, std::int64_t) override {
+    Image image;
+    {
+      std::lock_guard lock(state_->mutex);
+      image = state_->image;  // shares the pixels; the host replaces, never rewrites, them
+    }
+    if (image.empty())
+      return fail(ErrorCode::InvalidArgument, "input \"" + name_ + "\" was given no image", "",
+                  "call FilterGraph::setInput before running the graph");
+    const int channels = image.channels();
+    if (image.type() != PixelType::U8 || channels == 2)
+      return fail(ErrorCode::InvalidArgument,
+                  formatString("input \"%s\" takes 8-bit gray, RGB or RGBA images, got %d channels of %s",
+                               name_.c_str(), channels, toString(image.type())),
+                  "");
+    const cv::Mat view(image.height(), image.width(), CV_MAKETYPE(CV_8U, channels),
+                       const_cast<std::byte*>(image.data()), image.strideBytes());
+    ownOutput(out.mat);
+    if (channels == 4)
+      cv::cvtColor(view, out.mat, cv::COLOR_RGBA2RGB);
+    else
+      view.copyTo(out.mat);
+    out.type = PortType::Image;
+    out.space = channels == 1 ? ColorSpace::Gray : ColorSpace::Rgb;
+    return true;
+  }
+
+ private:
+  std::shared_ptr<InputState> state_;
+  std::string name_;
+};
+
 class CallbackSink final : public Node {
  public:
   static std::unique_ptr<Node> make(ConfigReader&, const NodeContext& c) {
@@ -1116,9 +1162,9 @@ class CallbackSink final : public Node {
 
 class CsvSink final : public Node {
  public:
-  static std::unique_ptr<Node> make(ConfigReader& r, const NodeContext&) {
+  static std::unique_ptr<Node> make(ConfigReader& r, const NodeContext& c) {
     auto n = std::make_unique<CsvSink>();
-    n->path_ = r.string("path");
+    n->path_ = outputPath(c, r.string("path"));
     return n;
   }
   Status process(Inputs in, Value&, std::int64_t frame) override {
@@ -1185,6 +1231,8 @@ const std::vector<KindInfo>& kindTable() {
                "8-bit frames with known motion: moving_disc, moving_texture, checkerboard, noise",
                {"pattern", "width", "height", "frames", "velocity", "radius", "square", "seed"},
                &SyntheticSource::make),
+        source("input", I, "the host's images (FilterGraph::setInput): a scene's rendered frames", {},
+               &InputSource::make),
         source("volume_file", V, "a volume file (NIfTI, NRRD, MetaImage, DICOM, VDB)", {"path", "frames"},
                &VolumeFileSource::make),
         filter("color", {I}, I, "colour conversion to gray, rgb, bgr, hsv or lab", {"code"},
@@ -1229,8 +1277,9 @@ const std::vector<KindInfo>& kindTable() {
         sink("file", {I}, "image files named by a printf pattern", {"pattern", "every"}, &FileSink::make),
         sink("video_writer", {I}, "a video file", {"path", "fps", "fourcc"}, &VideoWriterSink::make),
         sink("slot", {I}, "keeps the latest image for FilterGraph::slot(name)", {}, &SlotSink::make),
-        sink("texture", {I}, "the latest 8-bit gray/RGB/BGR(A) frame for a renderer texture (FilterGraph::texture)",
-             {}, &SlotSink::makeTexture),
+        sink("texture", {I},
+             "the latest 8-bit gray/RGB/BGR(A) frame for a renderer texture (FilterGraph::texture)", {},
+             &SlotSink::makeTexture),
         sink("callback", {}, "calls the function given to FilterGraph::setCallback", {}, &CallbackSink::make),
         sink("csv", {S}, "frame,value lines", {"path"}, &CsvSink::make),
     };

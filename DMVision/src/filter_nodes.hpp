@@ -4,6 +4,7 @@
 
 #include <dm/vision/filter_graph.hpp>
 
+#include <filesystem>
 #include <map>
 #include <mutex>
 #include <opencv2/core.hpp>
@@ -42,12 +43,27 @@ struct SlotState {
   ColorSpace space = ColorSpace::Gray;
 };
 
+/// The image the host gives an "input" source (FilterGraph::setInput),
+/// shared with the host's thread.
+struct InputState {
+  mutable std::mutex mutex;
+  Image image;  ///< empty until the first setInput()
+};
+
 /// Where nodes find things owned by the graph.
 struct NodeContext {
   std::string name;
   std::map<std::string, GraphCallback, std::less<>>* callbacks = nullptr;
   std::map<std::string, std::shared_ptr<SlotState>, std::less<>>* slots = nullptr;
+  std::map<std::string, std::shared_ptr<InputState>, std::less<>>* inputs = nullptr;
+  std::filesystem::path outputDir;  ///< where sinks' relative paths go (empty: the working directory)
 };
+
+/// A sink's path: relative ones under the graph's output directory.
+inline std::string outputPath(const NodeContext& c, std::string path) {
+  if (c.outputDir.empty() || path.empty() || std::filesystem::path(path).is_absolute()) return path;
+  return (c.outputDir / path).string();
+}
 
 class Node {
  public:

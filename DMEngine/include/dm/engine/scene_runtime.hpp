@@ -31,7 +31,9 @@
 //   - igtl: an OpenIGTLink server (dm::IgtlServer) publishing the tool and
 //     handle poses (TRANSFORM), the force (SENSOR), the dynamic bodies
 //     (TRANSFORM) and the rendered frames (IMAGE) to every client at its
-//     rate, and answering GET_/STT_ queries; run() can wait for clients.
+//     rate, and answering GET_/STT_ queries; run() can wait for clients;
+//   - vision: a DMVision filter graph stepped one frame per tick, its
+//     "input" sources fed the rendered frames (a simulated endoscope).
 // prepare() builds and loads them (a model that cannot be built fails there,
 // before anything runs); run() starts them in lockstep on a virtual clock (bit-reproducible) or on
 // real-time threads, for a duration or until `stop` is raised (Ctrl-C), then

@@ -463,13 +463,25 @@ struct SceneIgtlEngine {
   bool operator==(const SceneIgtlEngine&) const = default;
 };
 
+/// v2: the vision engine: a DMVision filter graph (docs/vision.md) stepped
+/// one frame per tick; its "input" sources get the render engine's frames
+/// (a simulated endoscope), its other sources read their own (video files).
+struct SceneVisionEngine {
+  double rateHz = 15.0;             ///< 1..240
+  std::filesystem::path graphFile;  ///< "graph" as a file (resolved like a resource source), or empty
+  Json graph;                       ///< "graph" given inline ({"nodes": [...]}), or null
+
+  bool operator==(const SceneVisionEngine&) const = default;
+};
+
 /// Which engines run; each is optional.
 struct SceneEngines {
   std::optional<SceneHapticsEngine> haptics;
   std::optional<ScenePhysicsEngine> physics;
   std::optional<SceneRenderEngine> render;
   std::optional<SceneMonitorEngine> monitor;
-  std::optional<SceneIgtlEngine> igtl;  ///< v2
+  std::optional<SceneIgtlEngine> igtl;      ///< v2
+  std::optional<SceneVisionEngine> vision;  ///< v2
 
   bool operator==(const SceneEngines&) const = default;
 };

@@ -10,7 +10,10 @@
 // that the graph has no cycle. run() then pulls one frame from every source
 // per step (a frame ends when any source ends) and evaluates the graph: nodes
 // whose inputs are ready run concurrently as oneTBB tasks, and the
-// sources read the next frame while the current one is filtered.
+// sources read the next frame while the current one is filtered. A host
+// that ticks the graph instead calls step() (one frame, nodes in order) and
+// feeds "input" sources its own images (setInput: a scene's rendered
+// frames).
 //
 // Images keep OpenCV's memory: a sink hands out a dm::Image wrapping the
 // node's output buffer with shared ownership, so a camera frame reaches a
@@ -152,6 +155,31 @@ class FilterGraph {
   /// Runs until a source ends or options.maxFrames; stops at the first node
   /// error, which names the node, its kind and the frame.
   Result<GraphRunStats> run(const GraphRunOptions& options = {});
+
+  /// Frame by frame, for a host that ticks the graph (a scene's vision
+  /// engine): step() reads one frame from every source and runs every node
+  /// on it, one after another in topological order; false (and nothing
+  /// run) once a source has ended, and on every call after. An error names
+  /// the node, its kind and the frame. finish() closes the sinks (files)
+  /// after the last step. Don't mix with run() on one graph.
+  /// @code
+  ///   (void)graph.setInput("endoscope", renderedFrame);
+  ///   if (auto more = graph.step(); !more) return more.error();
+  /// @endcode
+  Result<bool> step();
+  Status finish();
+  /// Where the sinks' relative paths ("file" patterns, "video_writer" and
+  /// "csv" paths) go, instead of the working directory (a scene run: its
+  /// output folder). Before validate().
+  void setOutputDirectory(std::filesystem::path dir);
+  /// Gives the "input" source `source` the image its reads return from now
+  /// on (8-bit gray, RGB or RGBA; shared, not copied: replace it, never
+  /// write into it). NotFound for another name. Thread-safe; after validate().
+  Status setInput(std::string_view source, const Image& image);
+  /// The names of the "input" sources (after validate()).
+  std::vector<std::string> inputs() const;
+  /// Per-node calls and time so far (step() or run()).
+  std::vector<GraphNodeStats> nodeStats() const;
 
   /// The latest image a "slot" sink received, sharing its memory; nullopt
   /// before the first frame. Thread-safe.
