@@ -203,6 +203,10 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   std::vector<Isometry3> poses_;  // of feed_.movingObjects
   Mesh surface_;                  // the milled object's, as drawn
   std::vector<Mesh> softSurfaces_;  // of feed_.softObjects, as drawn
+  bool hud_ = true;
+  Image overlayImage_;  // the vision overlay's newest image, as uploaded
+  std::int64_t overlayFrame_ = -1;
+  SpriteId overlaySprite_{};
   Error error_;
   TickTime time_;
 
@@ -247,18 +251,31 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
       ctx_->release();
       return false;
     }
-    hud(t, haptics, force);
-    const std::uint64_t index = stats_.frames++;
-    const bool write = writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0;
-    if (write || feed_.frames) {
+    // The camera's view for the engines that stream or filter it, before
+    // anything is drawn over it.
+    if (feed_.frames) {
       auto img = target_.readColor();
       if (!img) {
         error_ = img.error();
         ctx_->release();
         return false;
       }
-      if (feed_.frames) feed_.frames->put(*img, t);  // shares the pixels; never written again
-      if (write) writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(*img));
+      feed_.frames->put(*img, t);  // shares the pixels; never written again
+    }
+    if (auto s = drawOver(t, haptics, force); !s) {
+      error_ = s.error();
+      ctx_->release();
+      return false;
+    }
+    const std::uint64_t index = stats_.frames++;
+    if (writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0) {
+      auto img = target_.readColor();
+      if (!img) {
+        error_ = img.error();
+        ctx_->release();
+        return false;
+      }
+      writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(*img));
     }
     ctx_->release();
     renderMs_.push_back(
@@ -266,8 +283,43 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     return true;
   }
 
+  // What is drawn over the camera's view: the HUD (unless the scene turned
+  // it off) and the vision overlay, 1:1 in the lower-left corner (halved
+  // until it fits in half the view).
+  Status drawOver(double t, bool haptics, const Vec3& force) {
+    if (!hud_ && !feed_.overlay) return ok();
+    overlay_.begin(target_);
+    if (hud_) hudItems(t, haptics, force);
+    if (feed_.overlay) {
+      std::int64_t frame = -1;
+      if (feed_.overlay(overlayImage_, frame) && frame != overlayFrame_) {
+        if (!overlaySprite_.valid()) {
+          auto id = overlay_.createTexture(overlayImage_, {.srgb = true, .linear = false});
+          if (!id) return id.error().within("engines/vision/overlay");
+          overlaySprite_ = *id;
+        } else if (auto s = overlay_.updateTexture(overlaySprite_, overlayImage_); !s) {
+          return s.error().within("engines/vision/overlay");
+        }
+        overlayFrame_ = frame;
+      }
+      if (overlaySprite_.valid()) {
+        float w = static_cast<float>(overlayImage_.width()), h = static_cast<float>(overlayImage_.height());
+        const float maxW = 0.5f * static_cast<float>(target_.width()),
+                    maxH = 0.5f * static_cast<float>(target_.height());
+        while (w > maxW || h > maxH) w *= 0.5f, h *= 0.5f;
+        overlay_.sprite(overlaySprite_, OverlayRect{0, static_cast<float>(target_.height()) - h, w, h});
+      }
+    }
+    return overlay_.end();
+  }
+
   void hud(double t, bool haptics, const Vec3& force) {
     overlay_.begin(target_);
+    hudItems(t, haptics, force);
+    if (auto s = overlay_.end(); !s) log::warn("HUD: %s", s.error().message().c_str());
+  }
+
+  void hudItems(double t, bool haptics, const Vec3& force) {
     const float w = static_cast<float>(target_.width()), h = static_cast<float>(target_.height());
     const float size = std::clamp(h / 32.0f, 10.0f, 24.0f);
     char line[160];
@@ -291,7 +343,6 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
         overlay_.plot(frame, {&series, 1}, opt);
       }
     }
-    if (auto s = overlay_.end(); !s) log::warn("HUD: %s", s.error().message().c_str());
   }
 };
 
@@ -322,6 +373,7 @@ Result<std::shared_ptr<RenderEngineHandle>> makeRenderEngine(const SceneDesc& sc
   e->camera_ = settings.camera;
   if (auto cam = e->view_.camera(e->camera_, 0.0); !cam) return cam.error().within("engines/render/camera");
   if (scene.engines.haptics) e->proxyObject_ = scene.engines.haptics->proxyObject;
+  e->hud_ = settings.hud;
   e->feed_ = std::move(feed);
   e->frameEvery_ = std::max(1, frameEvery);
   if (!framesDir.empty()) {

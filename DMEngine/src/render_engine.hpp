@@ -3,6 +3,7 @@
 // writer thread for the frames. Compiled only when DMRenderer exists.
 #pragma once
 
+#include <dm/core/image.hpp>
 #include <dm/core/mesh.hpp>
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
@@ -43,9 +44,14 @@ struct RenderFeed {
   /// first call; triangles set on the first call, positions every time.
   std::vector<std::string> softObjects;
   std::function<bool(std::size_t i, Mesh& surface)> softSurface;
-  /// Where every frame goes, read back (RGBA), for a streaming engine; null:
-  /// frames are read back only to be written.
+  /// Where every frame goes, read back (RGBA) before the HUD and overlays
+  /// are drawn (the camera's view), for the OpenIGTLink and vision engines;
+  /// null: frames are read back only to be written.
   std::shared_ptr<FrameSlot> frames;
+  /// An image drawn over the frames' lower-left corner (a vision graph's
+  /// "texture" sink): true and the newest image and its frame number once
+  /// there is one. Render thread; the producer never rewrites a handed-out image.
+  std::function<bool(Image& image, std::int64_t& frame)> overlay;
 };
 
 /// Counters of a render engine (control thread, after stop).

@@ -554,6 +554,12 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
         feed.millableSurface = [f = h->boneFeed.get()](Mesh& surface) { return f->update(surface); };
       }
     }
+#ifdef DM_ENGINE_HAVE_VISION
+    if (vision && !scene.engines.vision->overlay.empty())
+      feed.overlay = [v = vision.get()](Image& image, std::int64_t& frame) {
+        return v->overlay(image, frame);
+      };
+#endif
     if ((scene.engines.igtl && !scene.engines.igtl->image.empty()) || visionWantsFrames) {
       frames = std::make_shared<FrameSlot>();
       feed.frames = frames;

@@ -7,6 +7,8 @@
 #include <dm/io/scene_file.hpp>
 #include <dm/vision/filter_graph.hpp>
 
+#include <algorithm>
+
 #include "frame_slot.hpp"
 
 namespace dm {
@@ -15,7 +17,8 @@ namespace {
 
 class VisionEngine final : public Engine, public VisionEngineHandle {
  public:
-  explicit VisionEngine(FilterGraph graph) : graph_(std::move(graph)), inputs_(graph_.inputs()) {}
+  VisionEngine(FilterGraph graph, std::string overlay)
+      : graph_(std::move(graph)), inputs_(graph_.inputs()), overlay_(std::move(overlay)) {}
 
   std::string_view name() const noexcept override { return "vision"; }
 
@@ -37,6 +40,15 @@ class VisionEngine final : public Engine, public VisionEngineHandle {
   std::shared_ptr<Engine> engine() override { return self_.lock(); }
   const std::vector<std::string>& inputs() const override { return inputs_; }
   void setFrames(std::shared_ptr<FrameSlot> frames) override { frames_ = std::move(frames); }
+
+  bool overlay(Image& image, std::int64_t& frame) const override {
+    if (overlay_.empty()) return false;
+    auto t = graph_.texture(overlay_);
+    if (!t) return false;
+    image = t->image;
+    frame = t->frame;
+    return true;
+  }
 
   nlohmann::json summary() const override {
     nlohmann::json nodes = nlohmann::json::array();
@@ -74,6 +86,7 @@ class VisionEngine final : public Engine, public VisionEngineHandle {
 
   FilterGraph graph_;
   std::vector<std::string> inputs_;
+  std::string overlay_;  // the "texture" sink drawn over the rendered frames, or empty
   std::shared_ptr<FrameSlot> frames_;
   std::uint64_t seen_ = 0;
   Image frame_;
@@ -92,7 +105,16 @@ Result<std::shared_ptr<VisionEngineHandle>> makeVisionEngine(const SceneDesc& sc
   if (!graph) return graph.error().within("engines/vision/graph");
   graph->setOutputDirectory(out);  // the sinks write into the run's folder
   if (auto s = graph->validate(); !s) return s.error().within("engines/vision/graph");
-  auto e = std::make_shared<VisionEngine>(std::move(*graph));
+  if (!v.overlay.empty()) {
+    const std::vector<std::string> order = graph->order();
+    const bool found = std::find(order.begin(), order.end(), v.overlay) != order.end();
+    if (!found || graph->nodeKind(v.overlay) != "texture")
+      return fail(
+          ErrorCode::InvalidArgument,
+          "\"" + v.overlay + "\" is " + (found ? "not a \"texture\" sink" : "no node") + " of the graph",
+          "engines/vision/overlay", "name a node {\"kind\": \"texture\", \"input\": ...}");
+  }
+  auto e = std::make_shared<VisionEngine>(std::move(*graph), v.overlay);
   e->self_ = e;
   if (!e->inputs().empty() && !scene.engines.render)
     return fail(ErrorCode::InvalidArgument,

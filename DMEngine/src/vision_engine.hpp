@@ -9,11 +9,13 @@
 // Compiled only when DMVision exists.
 #pragma once
 
+#include <dm/core/image.hpp>
 #include <dm/core/result.hpp>
 #include <dm/engine/engine.hpp>
 
 #include <nlohmann/json.hpp>
 
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <string>
@@ -33,6 +35,10 @@ class VisionEngineHandle {
   /// Where the render engine puts its frames for the inputs (before the
   /// run; not needed without inputs).
   virtual void setFrames(std::shared_ptr<FrameSlot> frames) = 0;
+  /// The newest image of the scene's overlay sink (a "texture" sink) and
+  /// its frame number; false before the first or without an overlay. Any
+  /// thread (the render engine's).
+  virtual bool overlay(Image& image, std::int64_t& frame) const = 0;
   /// Control thread, after the run: frames stepped, whether a source ended,
   /// and per node its calls and time.
   virtual nlohmann::json summary() const = 0;

@@ -956,7 +956,7 @@ class SceneParser {
       scene_.engines.physics = p;
     }
     if (ConfigReader r = sec.child("render"); expectObject(r)) {
-      r.knownKeys({"rate_hz", "camera", "width", "height", "samples"});
+      r.knownKeys({"rate_hz", "camera", "width", "height", "samples", "hud"});
       SceneRenderEngine g;
       g.rateHz = r.number("rate_hz", {.min = 1.0, .max = 240.0}, g.rateHz);
       const std::size_t before = r.errors().size();
@@ -973,6 +973,7 @@ class SceneParser {
       g.samples = static_cast<int>(r.integer("samples", {.min = 1, .max = 16}, g.samples));
       if (r.errors().size() == b && (g.samples & (g.samples - 1)) != 0)
         r.addError("samples is " + std::to_string(g.samples) + ", not 1, 2, 4, 8 or 16", "samples");
+      if (v2Key(r, "hud")) g.hud = r.boolean("hud");
       scene_.engines.render = g;
     }
     if (ConfigReader r = sec.child("monitor"); expectObject(r)) {
@@ -990,7 +991,7 @@ class SceneParser {
   // itself is DMVision's to check, when the engine is built.
   void visionEngine(ConfigReader r) {
     if (!expectObject(r)) return;
-    r.knownKeys({"rate_hz", "graph"});
+    r.knownKeys({"rate_hz", "graph", "overlay"});
     SceneVisionEngine v;
     v.rateHz = r.number("rate_hz", {.min = 1.0, .max = 240.0}, v.rateHz);
     const Json& graph = r.node().contains("graph") ? r.node()["graph"] : Json();
@@ -1002,6 +1003,12 @@ class SceneParser {
       r.addError(graph.is_null() ? "missing required graph"
                                  : std::string("expected a file name or an object, got ") + graph.type_name(),
                  "graph", "a filter graph file (docs/vision.md) or {\"nodes\": [...]}");
+    }
+    if (r.has("overlay")) {
+      v.overlay = r.string("overlay");
+      if (!scene_.engines.render)
+        r.addError("the overlay is drawn over the render engine's frames, and there is none", "overlay",
+                   "add \"render\" under \"engines\" or remove \"overlay\"");
     }
     scene_.engines.vision = std::move(v);
   }
@@ -1346,8 +1353,11 @@ Json toJson(const SceneDesc& scene) {
   if (const auto& p = scene.engines.physics)
     engines["physics"] = {{"rate_hz", p->rateHz}, {"gravity", toJson(p->gravity)}, {"sleep", p->sleep}};
   if (const auto& r = scene.engines.render) {
-    engines["render"] = {
-        {"rate_hz", r->rateHz}, {"width", r->width}, {"height", r->height}, {"samples", r->samples}};
+    engines["render"] = {{"rate_hz", r->rateHz},
+                         {"width", r->width},
+                         {"height", r->height},
+                         {"samples", r->samples},
+                         {"hud", r->hud}};
     if (!r->camera.empty()) engines["render"]["camera"] = r->camera;
   }
   if (const auto& m = scene.engines.monitor) engines["monitor"] = {{"rate_hz", m->rateHz}};
@@ -1355,6 +1365,8 @@ Json toJson(const SceneDesc& scene) {
   if (const auto& v = scene.engines.vision)
     engines["vision"] = {{"rate_hz", v->rateHz},
                          {"graph", v->graphFile.empty() ? v->graph : Json(v->graphFile.string())}};
+  if (scene.engines.vision && !scene.engines.vision->overlay.empty())
+    engines["vision"]["overlay"] = scene.engines.vision->overlay;
   j["engines"] = std::move(engines);
 
   const SceneOutputs& o = scene.outputs;

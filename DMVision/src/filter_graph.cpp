@@ -512,6 +512,12 @@ void FilterGraph::setOutputDirectory(std::filesystem::path dir) {
   impl_->validated = false;
 }
 
+std::string FilterGraph::nodeKind(std::string_view name) const {
+  for (const NodeEntry& e : impl_->nodes)
+    if (e.name == name) return e.kind;
+  return {};
+}
+
 Status FilterGraph::setInput(std::string_view source, const Image& image) {
   auto it = impl_->inputs.find(source);
   if (it == impl_->inputs.end())

@@ -30,6 +30,7 @@ namespace fs = std::filesystem;
 dm::SceneDesc endoscopeBoxPush() {
   dm::SceneDesc scene = scene_run::bundledScene("box_push.json");
   scene.engines.render = dm::SceneRenderEngine{.rateHz = 30, .camera = "side", .width = 160, .height = 120};
+  scene.engines.render->hud = false;  // the written frames are then the camera's view too
   scene.outputs.frames = true;
   scene.outputs.frameEvery = 1;
   scene.outputs.recording = false;
@@ -97,6 +98,52 @@ TEST(SceneVision, TheEndoscopeGraphFiltersTheRenderedFrames) {
     ++rows;
   }
   EXPECT_EQ(rows, frames);
+}
+
+// The graph's result drawn over the view: a half-size edge image in a
+// "texture" sink, shown 1:1 in the lower-left corner of the next frames.
+TEST(SceneVision, TheOverlayShowsTheGraphsNewestImageOverTheView) {
+  dm::SceneDesc scene = endoscopeBoxPush();
+  scene.engines.vision->graph = json::parse(R"({"nodes": [
+    {"name": "endoscope", "kind": "input"},
+    {"name": "small", "kind": "resize", "input": "endoscope", "width": 80, "height": 60},
+    {"name": "gray", "kind": "color", "input": "small", "code": "gray"},
+    {"name": "edges", "kind": "canny", "input": "gray", "low": 40, "high": 120},
+    {"name": "edge_files", "kind": "file", "input": "edges", "pattern": "vision/edges_%03d.png"},
+    {"name": "view", "kind": "texture", "input": "edges"}
+  ]})");
+  scene.engines.vision->overlay = "view";
+  const dm::test::TempDir dir("vision_overlay");
+  const json s = scene_run::runScene(scene, 1.0, dir.path());
+  ASSERT_EQ(s["vision"]["frames"], 10);
+  // Vision frame j is stepped at t = j / 10 s, after render frame 3j; render
+  // frames 3j + 1 and 3j + 2 show it.
+  for (int j = 0; j < 9; ++j) {
+    auto edges = dm::readPng(dir / "vision" / dm::formatString("edges_%03d.png", j));
+    ASSERT_TRUE(edges) << edges.error();
+    int edgePixels = 0;
+    for (int y = 0; y < 60; ++y)
+      for (int x = 0; x < 80; ++x) edgePixels += edges->at<std::uint8_t>(x, y, 0) != 0;
+    EXPECT_GT(edgePixels, 30) << "vision frame " << j << " has edges to show";
+    for (int k : {3 * j + 1, 3 * j + 2}) {
+      auto frame = dm::readPng(dir / "frames" / dm::formatString("frame_%05d.png", k));
+      ASSERT_TRUE(frame) << frame.error();
+      int differ = 0;
+      for (int y = 0; y < 60; ++y)
+        for (int x = 0; x < 80; ++x)
+          for (int c = 0; c < 3; ++c)
+            differ += frame->at<std::uint8_t>(x, 60 + y, c) != edges->at<std::uint8_t>(x, y, 0);
+      EXPECT_EQ(differ, 0) << "render frame " << k << " does not show vision frame " << j;
+    }
+  }
+
+  scene.engines.vision->overlay = "edges";  // a filter, not a texture sink
+  auto rt = dm::SceneRuntime::create(scene);
+  ASSERT_TRUE(rt) << rt.error();
+  const dm::Status bad =
+      (*rt)->prepare({.mode = dm::RunMode::Lockstep, .duration = 1, .outDir = dir / "bad"});
+  ASSERT_FALSE(bad);
+  EXPECT_NE(bad.error().message().find("engines/vision/overlay"), std::string::npos) << bad.error();
 }
 
 TEST(SceneVision, AGraphThatCannotBeBuiltFailsBeforeTheRun) {

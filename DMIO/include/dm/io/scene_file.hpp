@@ -433,6 +433,7 @@ struct SceneRenderEngine {
   int width = 1280;      ///< pixels, 16..16384
   int height = 720;      ///< pixels, 16..16384
   int samples = 1;       ///< MSAA samples: 1, 2, 4, 8 or 16
+  bool hud = true;       ///< v2: time, force and force plot drawn over the written frames
 
   bool operator==(const SceneRenderEngine&) const = default;
 };
@@ -470,6 +471,7 @@ struct SceneVisionEngine {
   double rateHz = 15.0;             ///< 1..240
   std::filesystem::path graphFile;  ///< "graph" as a file (resolved like a resource source), or empty
   Json graph;                       ///< "graph" given inline ({"nodes": [...]}), or null
+  std::string overlay;  ///< a "texture" sink of the graph the render engine draws over its frames, or empty
 
   bool operator==(const SceneVisionEngine&) const = default;
 };

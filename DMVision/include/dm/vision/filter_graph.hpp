@@ -196,6 +196,8 @@ class FilterGraph {
   std::optional<GraphTexture> texture(std::string_view name) const;
   /// Node names in topological order (after validate()).
   std::vector<std::string> order() const;
+  /// The kind of node `name` ("" when there is none).
+  std::string nodeKind(std::string_view name) const;
 
   /// Every node kind the graph knows.
   static const std::vector<GraphNodeKind>& kinds();
