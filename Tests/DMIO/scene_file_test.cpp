@@ -689,11 +689,18 @@ Json fullScene() {
                   "tool_radius": 0.003, "max_force": 5.0, "force_shading": false, "proxy_object": "tip",
                   "device_pose": {"position": [0.1, 0.0, 0.0], "rotation": [0.0, 0.0, 0.0, 1.0]}},
       "physics": {"rate_hz": 500.0, "gravity": [0.0, -9.81, 0.0], "sleep": true},
-      "render": {"rate_hz": 60.0, "camera": "follow", "width": 1920, "height": 1080, "samples": 4},
-      "monitor": {"rate_hz": 10.0}
+      "render": {"rate_hz": 60.0, "camera": "follow", "width": 1920, "height": 1080, "samples": 4,
+                 "hud": false},
+      "monitor": {"rate_hz": 10.0},
+      "igtl": {"rate_hz": 20.0, "listen": "0.0.0.0:18944", "allow": ["10.0.0.0/8"],
+               "publish": {"tool": "Tool", "handle": "Handle", "force": "Force", "bodies": true, "image": "View"},
+               "wait_for_clients": 2, "wait_timeout": 5.0},
+      "vision": {"rate_hz": 12.0, "overlay": "view",
+                 "graph": {"nodes": [{"name": "cam", "kind": "input"},
+                                     {"name": "view", "kind": "texture", "input": "cam"}]}}
     },
     "outputs": {"directory": "results/run1", "frames": true, "frame_every": 5, "forces": true, "plot": false,
-                "summary": false}
+                "summary": false, "recording": true}
   })");
 }
 
