@@ -34,6 +34,7 @@
 #include "vision_engine.hpp"
 #endif
 #include "physics_engine.hpp"
+#include "scene_vps.hpp"
 #include "surgery.hpp"
 #ifdef DM_ENGINE_HAVE_RENDERER
 #include "render_engine.hpp"
@@ -365,12 +366,15 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
       return fail(ErrorCode::InvalidArgument, "the needle renderer has no soft object with layers", where,
                   "name one in \"objects\" and give it \"layers\"");
     e->needleOwner = physics;
+  } else if (h.renderer == SceneHapticsEngine::Renderer::Vps) {
+    auto v = buildSceneVps(scene, resources);
+    if (!v) return v.error();
+    e->renderer = std::move(*v);
   } else {
-    return fail(
-        ErrorCode::Unsupported, "dmplatform run drives the god-object, burr and needle renderers",
-        where + "/renderer",
-        "use \"god-object\", \"burr\" or \"needle\"; the VPS and sphere-tree renderers run through dmtool "
-        "probe and the SDK");
+    return fail(ErrorCode::Unsupported,
+                "dmplatform run drives the god-object, vps, burr and needle renderers", where + "/renderer",
+                "use \"god-object\", \"vps\", \"burr\" or \"needle\"; the sphere-tree renderer runs through "
+                "dmtool probe and the SDK");
   }
   const SceneDevice* dev = scene.device(h.device);
   if (dev == nullptr) return fail(ErrorCode::NotFound, "no device \"" + h.device + "\"", where + "/device");

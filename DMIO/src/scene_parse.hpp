@@ -222,6 +222,12 @@ void writeSoft(const SceneObject& o, Json& object);
 void readNeedle(ConfigReader& haptics, SceneHapticsEngine& h);
 void writeNeedle(const SceneNeedle& n, Json& haptics);
 
+// The VPS renderer (scene_vps.cpp): the haptics engine's "vps" block, its
+// checks against the renderer, the objects and their materials, its JSON.
+void readVps(ConfigReader& haptics, SceneHapticsEngine& h);
+void checkVps(const SceneDesc& scene, ConfigReader root);
+void writeVps(const SceneVps& v, Json& haptics);
+
 // The OpenIGTLink engine (scene_igtl.cpp): "engines"/"igtl", its checks
 // against the other engines and objects once the scene is read, its JSON.
 void readIgtl(ConfigReader& engines, SceneEngines& e);

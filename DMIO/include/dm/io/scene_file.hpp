@@ -395,6 +395,29 @@ struct SceneNeedle {
   bool operator==(const SceneNeedle&) const = default;
 };
 
+/// The VPS renderer's tool and settings (v2 "vps"; dm::VpsRenderer,
+/// dm::VpsOptions): a rigid tool sampled as a point shell, the touched
+/// objects as voxel models, the tool tied to the device by a 6-DOF virtual
+/// coupling.
+struct SceneVps {
+  std::string tool;           ///< a mesh, shape or isosurface resource: the tool, in the device's frame
+  double pointSpacing = 0.0;  ///< m, ≥ 0 (0: the tool's largest extent / 20)
+  double voxelSize = 0.0;     ///< m, ≥ 0 (0: each object's largest extent / 128)
+  double couplingStiffness = 500.0;       ///< N/m, > 0
+  double couplingDamping = 5.0;           ///< N·s/m, ≥ 0
+  double couplingAngularStiffness = 1.0;  ///< N·m/rad, > 0
+  double couplingAngularDamping = 2e-3;   ///< N·m·s/rad, ≥ 0
+  double mass = 0.05;                     ///< kg, > 0: the tool body
+  double referenceContacts = 10.0;        ///< ≥ 1: Nref of the stiffness rule
+  double maxPointDepth = 2e-3;            ///< m, > 0
+  double brakeDistance = 0.5e-3;          ///< m, ≥ 0
+  double brakeDamping = 20.0;             ///< N·s/m, ≥ 0
+  double maxTorque = 1.0;                 ///< N·m, > 0: torque to the hand
+  int substeps = 1;                       ///< 1..64
+
+  bool operator==(const SceneVps&) const = default;
+};
+
 /// The haptic engine: one device rendering contact with objects.
 struct SceneHapticsEngine {
   enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr, Needle };
@@ -410,6 +433,7 @@ struct SceneHapticsEngine {
   std::string proxyObject;        ///< an object whose pose follows the proxy (the tool shown), or empty
   std::optional<SceneBurr> burr;  ///< v2: with renderer "burr" (and only then)
   std::optional<SceneNeedle> needle;  ///< v2: with renderer "needle" (and only then)
+  std::optional<SceneVps> vps;        ///< v2: with renderer "vps" (and only then)
 
   bool operator==(const SceneHapticsEngine& o) const;
 };

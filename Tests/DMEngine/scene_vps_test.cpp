@@ -1,0 +1,121 @@
+// The VPS renderer in a scene (dm::VpsRenderer through "renderer": "vps"):
+// a cube tool pressed flat onto a table by a position-driven device comes to
+// rest where the virtual coupling and the contact balance — two springs in
+// series, F = K·k_c/(K + k_c)·d for a device d below the surface (McNeely's
+// stiffness rule: a face pressed evenly feels K·depth however finely it is
+// sampled) — straight up, without torque. Misuse is refused naming the key.
+#include <dm/engine/scene_runtime.hpp>
+#include <dm/io/scene_file.hpp>
+
+#include <gtest/gtest.h>
+
+#include <sstream>
+
+#include "../common/temp_dir.hpp"
+#include "scene_run_support.hpp"
+
+namespace scene_vps_test {
+
+using nlohmann::json;
+
+// A 1 cm cube tool, its centre driven straight down from 15 mm above a table
+// (top face at z = 0) to 3 mm: its bottom face 2 mm under the surface.
+json pressScene() {
+  return json::parse(R"({
+    "format": "dmplatform-scene", "version": 2, "name": "vps_press",
+    "resources": {
+      "table": {"type": "shape", "shape": "box", "half_extents": [0.05, 0.05, 0.02]},
+      "cube": {"type": "shape", "shape": "box", "half_extents": [0.005, 0.005, 0.005]}
+    },
+    "materials": {"steel": {"haptic": {"stiffness": 2000, "damping": 0}}},
+    "objects": [
+      {"name": "table", "mesh": "table", "material": "steel", "haptic": true,
+       "pose": {"position": [0, 0, -0.02]}},
+      {"name": "shown", "mesh": "cube", "material": "steel"}
+    ],
+    "devices": [{"name": "hand", "driver": "sim-haptic",
+                 "config": {"path": "line", "from": [0, 0, 0.015], "to": [0, 0, 0.003], "period": 2, "loop": 0}}],
+    "engines": {
+      "haptics": {"renderer": "vps", "device": "hand", "objects": ["table"], "proxy_object": "shown",
+                  "vps": {"tool": "cube", "coupling_stiffness": 500, "voxel_size": 0.0005}}
+    },
+    "outputs": {"forces": true, "summary": true}
+  })");
+}
+
+dm::SceneDesc parsed(const json& j) {
+  std::vector<dm::Error> problems;
+  auto s = dm::parseScene(j.dump(), "vps.json", ".", &problems);
+  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+  return s ? *s : dm::SceneDesc{};
+}
+
+TEST(SceneVps, ACubePressedFlatRestsWhereCouplingAndContactBalance) {
+  const dm::test::TempDir dir("vps_press");
+  const json s = scene_run::runScene(parsed(pressScene()), 2.0, dir.path());
+  ASSERT_TRUE(s.contains("haptics")) << s.dump(2);
+  EXPECT_EQ(s["haptics"]["renderer"], "vps");
+  // The last 0.2 s, the device held still for 1 s.
+  std::istringstream csv(scene_run::fileText(dir / "forces.csv"));
+  std::string line;
+  std::getline(csv, line);
+  std::vector<std::array<double, 7>> rows;
+  while (std::getline(csv, line)) {
+    std::array<double, 7> v{};
+    std::istringstream cells(line);
+    std::string cell;
+    for (double& x : v)
+      if (std::getline(cells, cell, ',')) x = std::stod(cell);
+    rows.push_back(v);
+  }
+  ASSERT_GE(rows.size(), 1900u);
+  dm::Vec3 f = dm::Vec3::Zero(), torque = dm::Vec3::Zero();
+  int n = 0;
+  for (const auto& r : rows)
+    if (r[0] >= 1.8) {
+      f += dm::Vec3(r[1], r[2], r[3]);
+      torque += dm::Vec3(r[4], r[5], r[6]);
+      ++n;
+    }
+  ASSERT_GT(n, 150);
+  f /= n;
+  torque /= n;
+  const double K = 2000, kc = 500, d = 0.002;
+  const double expected = K * kc / (K + kc) * d;  // 0.8 N
+  // The side points within the bottom face's depth count at part depth
+  // (the averaged stiffness rule), a percent or two softer.
+  EXPECT_NEAR(f.z(), expected, 0.03 * expected) << "F = " << f.transpose();
+  EXPECT_LT(std::hypot(f.x(), f.y()), 0.01 * expected);
+  EXPECT_LT(torque.norm(), 1e-4) << "a centred flat press has no torque: " << torque.transpose();
+}
+
+TEST(SceneVps, MisuseIsRefusedNamingTheKey) {
+  auto errorsOf = [](const json& j) {
+    std::vector<dm::Error> problems;
+    EXPECT_FALSE(dm::parseScene(j.dump(), "vps.json", ".", &problems));
+    return dm::formatSceneErrors(problems);
+  };
+  json j = pressScene();
+  j["engines"]["haptics"].erase("vps");
+  EXPECT_NE(errorsOf(j).find("engines/haptics/vps"), std::string::npos) << errorsOf(j);
+  j = pressScene();
+  j["engines"]["haptics"]["vps"]["tool"] = "nothing";
+  EXPECT_NE(errorsOf(j).find("engines/haptics/vps/tool"), std::string::npos);
+  j = pressScene();
+  j["materials"]["steel"]["haptic"]["static_friction"] = 0.3;
+  j["materials"]["steel"]["haptic"]["dynamic_friction"] = 0.2;
+  EXPECT_NE(errorsOf(j).find("no friction"), std::string::npos) << errorsOf(j);
+  j = pressScene();
+  j["engines"]["haptics"]["tool_radius"] = 0.002;
+  EXPECT_NE(errorsOf(j).find("engines/haptics/tool_radius"), std::string::npos);
+  j = pressScene();
+  j["engines"]["haptics"]["renderer"] = "god-object";
+  EXPECT_NE(errorsOf(j).find("belongs to the vps renderer"), std::string::npos);
+  // Round trip of every key.
+  const dm::SceneDesc scene = parsed(pressScene());
+  auto back = dm::parseScene(dm::toJson(scene).dump(), "vps.json", ".");
+  ASSERT_TRUE(back) << back.error();
+  EXPECT_EQ(back->engines.haptics, scene.engines.haptics);
+}
+
+}  // namespace scene_vps_test
