@@ -20,9 +20,9 @@
 // interrupted (outputs written).
 #include <dm/core/filesystem.hpp>
 #include <dm/core/log.hpp>
-#include <dm/io/scene_replay.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
+#include <dm/io/scene_replay.hpp>
 
 #include <CLI/CLI.hpp>
 #include <atomic>
@@ -88,6 +88,30 @@ void printSummary(const nlohmann::json& s, const std::filesystem::path& outDir, 
               interrupted ? " (interrupted)" : "");
 }
 
+// Prepares and runs `runtime` with a progress bar and Ctrl-C as its stop,
+// then prints its figures: 0 with `result` set, or the exit code of a
+// failure (2: the scene cannot run, 1: the run failed), reported on stderr.
+int runWithProgress(dm::SceneRuntime& runtime, const std::string& label, dm::SceneRunOptions options,
+                    dm::SceneRunResult& result) {
+  dmtool::ProgressBar bar(label);
+  options.stop = &gStop;
+  options.progress = [&](double f, const std::string&) { bar.update(f); };
+  if (auto s = runtime.prepare(options); !s) {
+    bar.finish();
+    std::cerr << "dmplatform: " << s.error().message() << '\n';
+    return 2;
+  }
+  auto r = runtime.run(options);
+  bar.finish();
+  if (!r) {
+    std::cerr << "dmplatform: " << r.error().message() << '\n';
+    return 1;
+  }
+  result = std::move(*r);
+  printSummary(result.summary, options.outDir, result.interrupted);
+  return 0;
+}
+
 // `dmplatform replay`: the recorded scene with the recorded device stream,
 // in lockstep, its trace compared with the recorded run's forces.csv
 // (beside the recording) tick by tick; replay.json says how they compare.
@@ -111,31 +135,18 @@ int replayRecording(const std::filesystem::path& recording, const std::string& o
     std::cerr << "dmplatform: " << runtime.error().message() << '\n';
     return 2;
   }
-  dmtool::ProgressBar bar("dmplatform replay " + plan->scene.name);
-  dm::SceneRunOptions options;
-  options.mode = dm::RunMode::Lockstep;
-  options.duration = plan->duration;
-  options.outDir = outDir;
-  options.stop = &gStop;
-  options.progress = [&](double f, const std::string&) { bar.update(f); };
-  if (auto s = (*runtime)->prepare(options); !s) {
-    bar.finish();
-    std::cerr << "dmplatform: " << s.error().message() << '\n';
-    return 2;
-  }
-  auto result = (*runtime)->run(options);
-  bar.finish();
-  if (!result) {
-    std::cerr << "dmplatform: " << result.error().message() << '\n';
-    return 1;
-  }
-  printSummary(result->summary, outDir, result->interrupted);
+  dm::SceneRunResult result;
+  if (int code = runWithProgress(
+          **runtime, "dmplatform replay " + plan->scene.name,
+          {.mode = dm::RunMode::Lockstep, .duration = plan->duration, .outDir = outDir}, result);
+      code != 0)
+    return code;
   nlohmann::json report = {{"recording", recording.string()},
                            {"recorded_mode", plan->recordedMode},
                            {"records", plan->records},
                            {"cut", plan->tail}};
-  int code = result->interrupted ? 130 : 0;
-  if (!plan->recordedForces.empty() && !result->interrupted) {
+  int code = result.interrupted ? 130 : 0;
+  if (!plan->recordedForces.empty() && !result.interrupted) {
     auto recorded = dm::readFile(plan->recordedForces);
     auto replayed = dm::readFile(outDir / "forces.csv");
     if (!recorded || !replayed) {
@@ -226,24 +237,13 @@ int main(int argc, char** argv) {
   std::printf("dmplatform: running %s (%s) for %.1f s %s, outputs in %s\n", scene.c_str(), desc.name.c_str(),
               duration, realtime ? "in real time" : "in lockstep", outDir.c_str());
   std::fflush(stdout);
-  dmtool::ProgressBar bar("dmplatform " + desc.name);
-  dm::SceneRunOptions options;
-  options.mode = realtime ? dm::RunMode::RealTime : dm::RunMode::Lockstep;
-  options.duration = duration;
-  options.outDir = outDir;
-  options.stop = &gStop;
-  options.progress = [&](double f, const std::string&) { bar.update(f); };
-  if (auto s = (*runtime)->prepare(options); !s) {
-    bar.finish();
-    std::cerr << "dmplatform: " << s.error().message() << '\n';
-    return 2;
-  }
-  auto result = (*runtime)->run(options);
-  bar.finish();
-  if (!result) {
-    std::cerr << "dmplatform: " << result.error().message() << '\n';
-    return 1;
-  }
-  printSummary(result->summary, outDir, result->interrupted);
-  return result->interrupted ? 130 : 0;
+  dm::SceneRunResult result;
+  if (int code = runWithProgress(**runtime, "dmplatform " + desc.name,
+                                 {.mode = realtime ? dm::RunMode::RealTime : dm::RunMode::Lockstep,
+                                  .duration = duration,
+                                  .outDir = outDir},
+                                 result);
+      code != 0)
+    return code;
+  return result.interrupted ? 130 : 0;
 }
