@@ -430,17 +430,26 @@ TEST(IgtlSession, SubscriptionDeliversLaterPublishesUntilStopped) {
   EXPECT_EQ(in.rawCount("TDATA"), 3u);
 }
 
+// STT_TDATA at a 60 s resolution from p's client, answered (its first query).
+testing::AssertionResult subscribeOncePerMinute(Pair& p) {
+  Inbox& in = p.clientBox;
+  if (!p.client
+           ->send(dmi::encodeQuery({}, {.kind = dmi::QueryKind::Start,
+                                        .dataType = "TDATA",
+                                        .resolutionMs = 60'000,
+                                        .coordinateName = "Patient"})
+                      .value())
+           .ok())
+    return testing::AssertionFailure() << "STT_TDATA not sent";
+  if (!eventually([&] { return in.with([&] { return in.queries.size() == 1; }); }))
+    return testing::AssertionFailure() << "no RTS_TDATA";
+  return testing::AssertionSuccess();
+}
+
 TEST(IgtlSession, SttResolutionSkipsPublishesThatComeTooSoon) {
   Pair p;
   Inbox& in = p.clientBox;
-  ASSERT_TRUE(p.client
-                  ->send(dmi::encodeQuery({}, {.kind = dmi::QueryKind::Start,
-                                               .dataType = "TDATA",
-                                               .resolutionMs = 60'000,
-                                               .coordinateName = "Patient"})
-                             .value())
-                  .ok());
-  ASSERT_TRUE(eventually([&] { return in.with([&] { return in.queries.size() == 1; }); }));
+  ASSERT_TRUE(subscribeOncePerMinute(p));
   const Bytes m = dmi::encodeRaw({.deviceName = "Tracker"}, "TDATA", Bytes(70)).value();
   EXPECT_EQ(p.server->publish(m)->sent, 1u);
   // Within one minute of the first: skipped for this subscriber.
@@ -469,14 +478,7 @@ TEST(IgtlSession, PublishToEveryoneReachesClientsThatNeverSubscribed) {
   ASSERT_TRUE(eventually([&] { return in.with([&] { return in.transforms.size() == 3; }); }));
   ASSERT_TRUE(eventually([&] { return p.server->queuedBytes() == 0; }));
 
-  ASSERT_TRUE(p.client
-                  ->send(dmi::encodeQuery({}, {.kind = dmi::QueryKind::Start,
-                                               .dataType = "TDATA",
-                                               .resolutionMs = 60'000,
-                                               .coordinateName = "Patient"})
-                             .value())
-                  .ok());
-  ASSERT_TRUE(eventually([&] { return in.with([&] { return in.queries.size() == 1; }); }));
+  ASSERT_TRUE(subscribeOncePerMinute(p));
   const Bytes m = dmi::encodeRaw({.deviceName = "Tracker"}, "TDATA", Bytes(70)).value();
   EXPECT_EQ(p.server->publish(m, dm::IgtlPublishTo::Everyone)->sent, 1u);
   EXPECT_EQ(p.server->publish(m, dm::IgtlPublishTo::Everyone)->throttled, 1u);
