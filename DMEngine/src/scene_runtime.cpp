@@ -34,7 +34,7 @@
 #include "vision_engine.hpp"
 #endif
 #include "physics_engine.hpp"
-#include "scene_vps.hpp"
+#include "scene_6dof.hpp"
 #include "surgery.hpp"
 #ifdef DM_ENGINE_HAVE_RENDERER
 #include "render_engine.hpp"
@@ -371,10 +371,9 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
     if (!v) return v.error();
     e->renderer = std::move(*v);
   } else {
-    return fail(ErrorCode::Unsupported,
-                "dmplatform run drives the god-object, vps, burr and needle renderers", where + "/renderer",
-                "use \"god-object\", \"vps\", \"burr\" or \"needle\"; the sphere-tree renderer runs through "
-                "dmtool probe and the SDK");
+    auto t = buildSceneSphereTree(scene, resources);
+    if (!t) return t.error();
+    e->renderer = std::move(*t);
   }
   const SceneDevice* dev = scene.device(h.device);
   if (dev == nullptr) return fail(ErrorCode::NotFound, "no device \"" + h.device + "\"", where + "/device");

@@ -193,7 +193,7 @@ class SceneParser {
     checkSurgery(scene_, root_);
     checkSoft(scene_, root_);
     checkIgtl(scene_, root_);
-    checkVps(scene_, root_);
+    checkTools6Dof(scene_, root_);
   }
 
   bool badVersion() const { return badVersion_; }
@@ -893,7 +893,7 @@ class SceneParser {
   void hapticsEngine(ConfigReader r) {
     if (!expectObject(r)) return;
     r.knownKeys({"rate_hz", "renderer", "device", "object", "objects", "tool_radius", "device_pose",
-                 "max_force", "force_shading", "proxy_object", "burr", "needle", "vps"});
+                 "max_force", "force_shading", "proxy_object", "burr", "needle", "vps", "sphere_tree"});
     SceneHapticsEngine h;
     h.rateHz = r.number("rate_hz", {.min = 100.0, .max = 10000.0}, h.rateHz);
     h.renderer =
@@ -941,6 +941,7 @@ class SceneParser {
     if (v2Key(r, "burr")) readBurr(r, h);
     if (v2Key(r, "needle")) readNeedle(r, h);
     if (v2Key(r, "vps")) readVps(r, h);
+    if (v2Key(r, "sphere_tree")) readSphereTree(r, h);
     scene_.engines.haptics = std::move(h);
   }
 
@@ -1357,6 +1358,11 @@ Json toJson(const SceneDesc& scene) {
     engines["haptics"].erase("tool_radius");
     engines["haptics"].erase("force_shading");
     writeVps(*scene.engines.haptics->vps, engines["haptics"]);
+  }
+  if (scene.engines.haptics && scene.engines.haptics->sphereTree) {
+    engines["haptics"].erase("tool_radius");
+    engines["haptics"].erase("force_shading");
+    writeSphereTree(*scene.engines.haptics->sphereTree, engines["haptics"]);
   }
   if (const auto& p = scene.engines.physics)
     engines["physics"] = {{"rate_hz", p->rateHz}, {"gravity", toJson(p->gravity)}, {"sleep", p->sleep}};

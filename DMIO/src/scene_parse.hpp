@@ -222,11 +222,14 @@ void writeSoft(const SceneObject& o, Json& object);
 void readNeedle(ConfigReader& haptics, SceneHapticsEngine& h);
 void writeNeedle(const SceneNeedle& n, Json& haptics);
 
-// The VPS renderer (scene_vps.cpp): the haptics engine's "vps" block, its
-// checks against the renderer, the objects and their materials, its JSON.
+// The 6-DOF rigid-tool renderers (scene_6dof.cpp): the haptics engine's
+// "vps" and "sphere_tree" blocks, their checks against the renderer, the
+// objects and their materials (scene6Dof), their JSON.
 void readVps(ConfigReader& haptics, SceneHapticsEngine& h);
-void checkVps(const SceneDesc& scene, ConfigReader root);
+void readSphereTree(ConfigReader& haptics, SceneHapticsEngine& h);
+void checkTools6Dof(const SceneDesc& scene, ConfigReader root);
 void writeVps(const SceneVps& v, Json& haptics);
+void writeSphereTree(const SceneSphereTree& t, Json& haptics);
 
 // The OpenIGTLink engine (scene_igtl.cpp): "engines"/"igtl", its checks
 // against the other engines and objects once the scene is read, its JSON.

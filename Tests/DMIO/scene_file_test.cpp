@@ -633,13 +633,14 @@ Json fullScene() {
     "materials": {
       "metal": {"model": "pbr", "color": [0.1, 0.2, 0.3, 0.4], "emissive": [2.0, 0.0, 0.5],
                 "metallic": 0.9, "roughness": 0.1, "texture": "albedo", "normal_map": "normals",
-                "height_map": "relief", "height_scale": 0.002},
+                "height_map": "relief", "height_scale": 0.002,
+                "haptic": {"stiffness": 900.0, "damping": 0.5, "static_friction": 0.0, "dynamic_friction": 0.0}},
       "tissue": {"model": "blinn-phong", "color": [0.9, 0.5, 0.4, 1.0], "emissive": [0.0, 0.0, 0.0],
                  "specular": [0.3, 0.3, 0.3], "shininess": 12.0,
                  "haptic": {"stiffness": 350.0, "damping": 1.5, "static_friction": 0.4, "dynamic_friction": 0.25}}
     },
     "objects": [
-      {"name": "liver", "mesh": "liver", "material": "tissue", "scale": 2.0, "visible": false, "haptic": true,
+      {"name": "liver", "mesh": "liver", "material": "metal", "scale": 2.0, "visible": false, "haptic": true,
        "dynamic": false, "pose": {"position": [0.01, 0.02, 0.03], "rotation": [0.0, 0.6, 0.8, 0.0]},
        "collide": false, "contact": {"friction": 0.7, "restitution": 0.1}},
       {"name": "ball", "mesh": "ball", "material": "metal", "scale": 1.0, "visible": true, "haptic": false,
@@ -686,7 +687,11 @@ Json fullScene() {
     ],
     "engines": {
       "haptics": {"rate_hz": 2000.0, "renderer": "sphere-tree", "device": "stylus", "objects": ["liver"],
-                  "tool_radius": 0.003, "max_force": 5.0, "force_shading": false, "proxy_object": "tip",
+                  "max_force": 5.0, "proxy_object": "tip",
+                  "sphere_tree": {"tool": "ball", "levels": 5, "tool_levels": 4, "tool_level": 3, "stiffness": 800.0,
+                                  "angular_stiffness": 0.5, "mass": 0.2, "inertia": 0.001, "max_constraints": 128,
+                                  "solver_iterations": 40, "linearizations": 2, "margin_epsilon": 0.0002,
+                                  "max_step": 0.01, "surface_tolerance": 0.2},
                   "device_pose": {"position": [0.1, 0.0, 0.0], "rotation": [0.0, 0.0, 0.0, 1.0]}},
       "physics": {"rate_hz": 500.0, "gravity": [0.0, -9.81, 0.0], "sleep": true},
       "render": {"rate_hz": 60.0, "camera": "follow", "width": 1920, "height": 1080, "samples": 4,

@@ -10,8 +10,9 @@
 //     milling the one "millable" object (voxelized bone with its critical
 //     structures; docs/scene-format.md, "Bone surgery"), or the needle
 //     renderer going into the soft object with "layers" (dm::HapticNeedle;
-//     "Needles"), or the VPS renderer (a 6-DOF tool's point shell against
-//     the touched objects voxelized; dm::VpsRenderer) — and
+//     "Needles"), or a 6-DOF rigid tool: the VPS renderer (its point shell
+//     against the touched objects voxelized; dm::VpsRenderer) or the
+//     sphere-tree renderer (dm::SphereTree6DofRenderer) — and
 //     dm::HapticLoop (device servo, safety, fade) at the scene's rate;
 //   - physics: every "dynamic" object a rigid body of one dm::PhysicsWorld,
 //     the other objects static colliders; the god-object feels the moving

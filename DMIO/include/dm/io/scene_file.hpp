@@ -418,6 +418,30 @@ struct SceneVps {
   bool operator==(const SceneVps&) const = default;
 };
 
+/// The sphere-tree renderer's tool and settings (v2 "sphere_tree";
+/// dm::SphereTree6DofRenderer, dm::SphereTree6DofOptions): tool and touched
+/// objects as octree sphere trees with surface patches, the tool's
+/// configuration the constrained minimiser of its distance to the handle,
+/// the force a 6-DOF spring between the two.
+struct SceneSphereTree {
+  std::string tool;               ///< a mesh, shape or isosurface resource: the tool, in the device's frame
+  int levels = 6;                 ///< 2..10: the objects' trees (leaves at levels − 1)
+  int toolLevels = 5;             ///< 2..10: the tool's tree
+  int toolLevel = 4;              ///< 0..toolLevels − 1: the tool level that collides
+  double stiffness = 1000.0;      ///< N/m, > 0: the linear spring to the handle
+  double angularStiffness = 0.0;  ///< N·m/rad, ≥ 0 (0: stiffness · I / m)
+  double mass = 0.1;              ///< kg, > 0
+  double inertia = 0.0;           ///< kg·m², ≥ 0 (0: a solid ball of the tool's root radius)
+  int maxConstraints = 256;       ///< 1..65536
+  int solverIterations = 60;      ///< 1..10000
+  int linearizations = 3;         ///< 1..16
+  double marginEpsilon = 1e-4;    ///< m, ≥ 0
+  double maxStep = 0.02;          ///< m, > 0
+  double surfaceTolerance = 0.1;  ///< ≥ 0: patches within this share of a node's radius (0: spheres only)
+
+  bool operator==(const SceneSphereTree&) const = default;
+};
+
 /// The haptic engine: one device rendering contact with objects.
 struct SceneHapticsEngine {
   enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr, Needle };
@@ -434,6 +458,7 @@ struct SceneHapticsEngine {
   std::optional<SceneBurr> burr;  ///< v2: with renderer "burr" (and only then)
   std::optional<SceneNeedle> needle;  ///< v2: with renderer "needle" (and only then)
   std::optional<SceneVps> vps;        ///< v2: with renderer "vps" (and only then)
+  std::optional<SceneSphereTree> sphereTree;  ///< v2: with renderer "sphere-tree" (and only then)
 
   bool operator==(const SceneHapticsEngine& o) const;
 };
