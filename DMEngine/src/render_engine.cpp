@@ -252,7 +252,10 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
       return false;
     }
     // The camera's view for the engines that stream or filter it, before
-    // anything is drawn over it.
+    // anything is drawn over it; the written frame is read again only when
+    // something was (a frame is never written into once read: both may
+    // share it).
+    Image view;
     if (feed_.frames) {
       auto img = target_.readColor();
       if (!img) {
@@ -260,8 +263,10 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
         ctx_->release();
         return false;
       }
-      feed_.frames->put(*img, t);  // shares the pixels; never written again
+      view = std::move(*img);
+      feed_.frames->put(view, t);
     }
+    const bool drawnOver = hud_ || feed_.overlay;
     if (auto s = drawOver(t, haptics, force); !s) {
       error_ = s.error();
       ctx_->release();
@@ -269,13 +274,16 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     }
     const std::uint64_t index = stats_.frames++;
     if (writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0) {
-      auto img = target_.readColor();
-      if (!img) {
-        error_ = img.error();
-        ctx_->release();
-        return false;
+      if (drawnOver || view.empty()) {
+        auto img = target_.readColor();
+        if (!img) {
+          error_ = img.error();
+          ctx_->release();
+          return false;
+        }
+        view = std::move(*img);
       }
-      writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(*img));
+      writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(view));
     }
     ctx_->release();
     renderMs_.push_back(
@@ -287,7 +295,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   // it off) and the vision overlay, 1:1 in the lower-left corner (halved
   // until it fits in half the view).
   Status drawOver(double t, bool haptics, const Vec3& force) {
-    if (!hud_ && !feed_.overlay) return ok();
+    if (!hud_ && !feed_.overlay) return ok();  // (frame() relies on this to reuse its read-back)
     overlay_.begin(target_);
     if (hud_) hudItems(t, haptics, force);
     if (feed_.overlay) {

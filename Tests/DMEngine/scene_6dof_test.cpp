@@ -13,8 +13,6 @@
 
 #include <gtest/gtest.h>
 
-#include <sstream>
-
 #include "../common/temp_dir.hpp"
 #include "scene_run_support.hpp"
 
@@ -57,25 +55,14 @@ dm::SceneDesc parsed(const json& j) {
 // The mean force and torque of the last 0.2 s of a run's trace (the
 // device held still for the last second).
 std::pair<dm::Vec3, dm::Vec3> restingWrench(const std::filesystem::path& forcesCsv) {
-  std::istringstream csv(scene_run::fileText(forcesCsv));
-  std::string line;
-  std::getline(csv, line);
-  std::vector<std::array<double, 7>> rows;
-  while (std::getline(csv, line)) {
-    std::array<double, 7> v{};
-    std::istringstream cells(line);
-    std::string cell;
-    for (double& x : v)
-      if (std::getline(cells, cell, ',')) x = std::stod(cell);
-    rows.push_back(v);
-  }
+  const std::vector<scene_run::TraceRow> rows = scene_run::forceTrace(forcesCsv);
   EXPECT_GE(rows.size(), 1900u);
   dm::Vec3 f = dm::Vec3::Zero(), torque = dm::Vec3::Zero();
   int n = 0;
-  for (const auto& r : rows)
-    if (r[0] >= 1.8) {
-      f += dm::Vec3(r[1], r[2], r[3]);
-      torque += dm::Vec3(r[4], r[5], r[6]);
+  for (const scene_run::TraceRow& r : rows)
+    if (r.t >= 1.8) {
+      f += r.force;
+      torque += r.torque;
       ++n;
     }
   EXPECT_GT(n, 150);

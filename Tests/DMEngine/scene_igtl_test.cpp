@@ -20,7 +20,6 @@
 #include <igtlTransformMessage.h>
 
 #include <map>
-#include <sstream>
 #include <thread>
 #endif
 
@@ -153,22 +152,6 @@ void receiveAll(igtl::ClientSocket* socket, Received& got) {
   }
 }
 
-// forces.csv rows: t, then fx fy fz, then the proxy position px py pz.
-std::vector<std::array<double, 7>> traceRows(const std::string& csv) {
-  std::vector<std::array<double, 7>> rows;
-  std::istringstream in(csv);
-  std::string line;
-  std::getline(in, line);  // header
-  while (std::getline(in, line)) {
-    std::array<double, 16> v{};
-    std::istringstream cells(line);
-    std::string cell;
-    for (std::size_t i = 0; i < v.size() && std::getline(cells, cell, ','); ++i) v[i] = std::stod(cell);
-    rows.push_back({v[0], v[1], v[2], v[3], v[7], v[8], v[9]});
-  }
-  return rows;
-}
-
 TEST(SceneIgtl, TheReferenceLibraryReceivesTheToolForceBoxAndFrames) {
   const dm::SceneDesc scene = streamedBoxPush(true);
   dm::test::TempDir dir("igtl_stream");
@@ -216,20 +199,20 @@ TEST(SceneIgtl, TheReferenceLibraryReceivesTheToolForceBoxAndFrames) {
 
   // The force and the tool are the haptic tick of the same scene time,
   // bit for bit (SENSOR is float64) and to float32 in mm (TRANSFORM).
-  const auto rows = traceRows(scene_run::fileText(dir.path() / "out" / "forces.csv"));
+  const std::vector<scene_run::TraceRow> rows = scene_run::forceTrace(dir.path() / "out" / "forces.csv");
   ASSERT_GE(rows.size(), 1990u);
   double maxForce = 0;
   for (std::size_t i = 0; i < got.forces.size(); ++i) {
     const auto& [t, f] = got.forces[i];
     const auto row = std::min_element(rows.begin(), rows.end(), [t](const auto& a, const auto& b) {
-      return std::abs(a[0] - t) < std::abs(b[0] - t);
+      return std::abs(a.t - t) < std::abs(b.t - t);
     });
-    ASSERT_NEAR((*row)[0], t, 1e-6);
-    EXPECT_EQ(f, dm::Vec3((*row)[1], (*row)[2], (*row)[3])) << "at t = " << t;
+    ASSERT_NEAR(row->t, t, 1e-6);
+    EXPECT_EQ(f, row->force) << "at t = " << t;
     const igtl::Matrix4x4& m = tool[i].second;
-    EXPECT_NEAR(m[0][3] * 1e-3, (*row)[4], 1e-6);
-    EXPECT_NEAR(m[1][3] * 1e-3, (*row)[5], 1e-6);
-    EXPECT_NEAR(m[2][3] * 1e-3, (*row)[6], 1e-6);
+    EXPECT_NEAR(m[0][3] * 1e-3, row->proxy.x(), 1e-6);
+    EXPECT_NEAR(m[1][3] * 1e-3, row->proxy.y(), 1e-6);
+    EXPECT_NEAR(m[2][3] * 1e-3, row->proxy.z(), 1e-6);
     maxForce = std::max(maxForce, f.norm());
   }
   EXPECT_GT(maxForce, 0.3) << "the tool never pushed the box";

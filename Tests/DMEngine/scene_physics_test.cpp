@@ -131,15 +131,9 @@ TEST(ScenePhysics, ToolPushesTheBoxAndTheHandFeelsWhatTheTableHolds) {
   EXPECT_LE(std::hypot(table.x(), table.y()), 0.3 * table.z() * (1 + 1e-6));
   // Momentum: what the hand felt over the run, Σ F dt from the trace, is
   // what the box received from the tool (opposite sign).
-  std::istringstream csv(fileText(out / "forces.csv"));
-  std::string line;
-  std::getline(csv, line);  // header
   dm::Vec3 handImpulse = dm::Vec3::Zero();
-  while (std::getline(csv, line)) {
-    double t, fx, fy, fz;
-    ASSERT_EQ(std::sscanf(line.c_str(), "%lf,%lf,%lf,%lf", &t, &fx, &fy, &fz), 4);
-    handImpulse += dm::Vec3(fx, fy, fz) * 1e-3;
-  }
+  for (const scene_run::TraceRow& r : scene_run::forceTrace(out / "forces.csv"))
+    handImpulse += r.force * 1e-3;
   const dm::Vec3 toolImpulse = vec(b.at("tool_impulse_Ns"));
   EXPECT_GT(toolImpulse.x(), 0.5);
   EXPECT_LE((toolImpulse + handImpulse).norm(), 1e-9 * toolImpulse.norm())

@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <cstdio>
 #include <filesystem>
 #include <string>
 #include <string_view>
@@ -42,6 +43,31 @@ inline std::string fileText(const fs::path& p) {
   auto bytes = dm::readFile(p);
   EXPECT_TRUE(bytes) << bytes.error();
   return bytes ? std::string(reinterpret_cast<const char*>(bytes->data()), bytes->size()) : std::string();
+}
+
+/// One row of a run's forces.csv (dm::formatProbeCsv): scene time, the
+/// force and torque sent to the hand and the proxy's position (world).
+struct TraceRow {
+  double t = 0;
+  dm::Vec3 force, torque, proxy;
+};
+
+/// Every row of the forces.csv at `file` (its header skipped); a row that
+/// does not parse is a failure.
+inline std::vector<TraceRow> forceTrace(const fs::path& file) {
+  std::vector<TraceRow> rows;
+  const std::string text = fileText(file);
+  std::size_t at = text.find('\n');  // after the header
+  while (at != std::string::npos && at + 1 < text.size()) {
+    double v[10];
+    const int n = std::sscanf(text.c_str() + at + 1, "%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf,%lf", &v[0], &v[1],
+                              &v[2], &v[3], &v[4], &v[5], &v[6], &v[7], &v[8], &v[9]);
+    EXPECT_EQ(n, 10) << file << " row " << rows.size() + 1;
+    if (n != 10) break;
+    rows.push_back({v[0], {v[1], v[2], v[3]}, {v[4], v[5], v[6]}, {v[7], v[8], v[9]}});
+    at = text.find('\n', at + 1);
+  }
+  return rows;
 }
 
 /// Runs `scene` in lockstep for `seconds` into `out` (emptied first); its
