@@ -93,8 +93,10 @@ bool DeviceRecorder::push(std::uint16_t type, std::int64_t timeNs,
 }
 
 bool DeviceRecorder::hasRoom() const noexcept {
-  return !closed_.load(std::memory_order_relaxed) &&
-         tail_.load(std::memory_order_relaxed) - head_.load(std::memory_order_acquire) < kQueueCapacity;
+  // A closed or failed recorder never drains again: no use waiting (push()
+  // drops and counts, close() reports the write error).
+  if (closed_.load(std::memory_order_relaxed) || failed_.load(std::memory_order_acquire)) return true;
+  return tail_.load(std::memory_order_relaxed) - head_.load(std::memory_order_acquire) < kQueueCapacity;
 }
 
 bool DeviceRecorder::pushHapticState(const HapticState& state) noexcept {

@@ -82,7 +82,9 @@ class DeviceRecorder {
   /// (and counts a drop) when the queue is full, the payload is larger than
   /// kMaxQueuedPayload, or the recorder is closed.
   bool push(std::uint16_t type, std::int64_t timeNs, std::span<const std::byte> payload) noexcept;
-  /// True when push() would find a free queue slot (producer thread): a
+  /// True when push() would not have to wait (producer thread): a free
+  /// queue slot, or a closed or failed recorder, which never drains again
+  /// (push() then drops and counts; close() reports the write error). A
   /// producer that may wait (a lockstep run, faster than the disk) yields
   /// until then instead of dropping. Real-time safe.
   bool hasRoom() const noexcept;
