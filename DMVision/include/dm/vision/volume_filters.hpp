@@ -5,7 +5,8 @@
 // anisotropic spacing honoured), central-difference gradients in world units,
 // a 3-D Canny edge detector (smoothed gradient magnitude, non-maximum
 // suppression along the gradient, hysteresis), thresholding, connected
-// components (6/18/26-connectivity, union-find) and binary morphology with a
+// components (dm/math/volume_components.hpp, included: DMIO's scene
+// segments use them too) and binary morphology with a
 // ball or cube structuring element (exact, via separable distance
 // transforms, O(n) whatever the radius). Every filter runs on the oneTBB
 // workers (dm::parallelFor) and returns a new volume; none modifies its
@@ -21,6 +22,7 @@
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
 #include <dm/core/volume.hpp>
+#include <dm/math/volume_components.hpp>  // Connectivity, neighbourOffsets, labelComponents, largestComponent
 
 #include <cstddef>
 #include <cstdint>
@@ -29,15 +31,6 @@
 #include <vector>
 
 namespace dm {
-
-/// Voxel neighbourhoods: faces (6), faces + edges (18), faces + edges +
-/// corners (26).
-enum class Connectivity : std::uint8_t { Six = 6, Eighteen = 18, TwentySix = 26 };
-
-/// The neighbour offsets of `c` (6, 18 or 26 of them, each component in
-/// {-1, 0, 1}, never (0, 0, 0)), in a fixed order (faces first). O(1), no
-/// allocation; the span stays valid for the whole program.
-std::span<const Vec3i> neighbourOffsets(Connectivity c) noexcept;
 
 /// Separable Gaussian smoothing with standard deviation `sigma` in METRES
 /// (world units, as everywhere in the SDK): along index axis a the kernel
@@ -127,31 +120,6 @@ Result<EdgeMap> detectEdges(const Volume& in, const EdgeOptions& options = {});
 ///   auto brain = dm::threshold(mri, 1.0);  // nonzero voxels of a skull-stripped MRI
 /// @endcode
 Result<Volume> threshold(const Volume& in, double lo, double hi = std::numeric_limits<double>::infinity());
-
-/// Connected components of a mask (nonzero = foreground).
-struct Components {
-  /// U32 labels: 0 background, 1..count() foreground, numbered by
-  /// decreasing size (ties: the component whose first voxel in memory order
-  /// comes first gets the smaller label).
-  Volume labels;
-  std::vector<std::size_t> sizes;  ///< sizes[l - 1] = voxels of label l, non-increasing
-  std::size_t count() const { return sizes.size(); }
-};
-
-/// Labels the connected components of `mask` (nonzero voxels) under
-/// connectivity `c` with union-find (path halving, union by index) over the
-/// already-visited half of the neighbourhood. O(n·α(n)); memory 4 bytes per
-/// voxel plus the output. Fails with InvalidArgument on an empty volume.
-/// @code
-///   auto cc = dm::labelComponents(*dm::threshold(ct, 300.0), dm::Connectivity::Six);
-///   if (!cc) return cc.error();
-///   std::size_t biggest = cc->sizes.empty() ? 0 : cc->sizes[0];
-/// @endcode
-Result<Components> labelComponents(const Volume& mask, Connectivity c = Connectivity::TwentySix);
-
-/// U8 mask of the largest component of `mask` under `c` (all zero when the
-/// mask is empty of foreground). Same cost and failures as labelComponents.
-Result<Volume> largestComponent(const Volume& mask, Connectivity c = Connectivity::TwentySix);
 
 /// Structuring elements of the morphology filters, of radius r in voxels.
 enum class StructuringElement : std::uint8_t {
