@@ -158,11 +158,15 @@ Isometry3 BonePlacementRenderer::fragmentPose() const noexcept {
 
 double BonePlacementRenderer::alignmentError(std::span<const Vec3> referencePointsInMovingFrame,
                                              const Isometry3& targetPose) const noexcept {
-  if (referencePointsInMovingFrame.empty()) return 0.0;
-  const Isometry3 current = fragmentPose();
+  return boneAlignmentError(referencePointsInMovingFrame, fragmentPose(), targetPose);
+}
+
+double boneAlignmentError(std::span<const Vec3> points, const Isometry3& pose,
+                          const Isometry3& target) noexcept {
+  if (points.empty()) return 0.0;
   double sum = 0.0;
-  for (const Vec3& p : referencePointsInMovingFrame) sum += (current * p - targetPose * p).squaredNorm();
-  return std::sqrt(sum / static_cast<double>(referencePointsInMovingFrame.size()));
+  for (const Vec3& p : points) sum += (pose * p - target * p).squaredNorm();
+  return std::sqrt(sum / static_cast<double>(points.size()));
 }
 
 void BonePlacementRenderer::offerContact(const Vec3& cFixed, double rFixed, const Vec3& cMoving,
@@ -350,6 +354,29 @@ HapticResponse BonePlacementRenderer::tick(const HapticInput& input) noexcept {
   out.contacts = static_cast<int>(contactCount_);
   out.penetration = contactCount_ > 0 ? (device.translation() - pose.translation()).norm() : 0.0;
   return out;
+}
+
+std::vector<Vec3> boneReferencePoints(const Volume& volume, double threshold) {
+  std::vector<Vec3> voxels;
+  const Vec3i d = volume.dims();
+  for (int k = 0; k < d.z(); ++k)
+    for (int j = 0; j < d.y(); ++j)
+      for (int i = 0; i < d.x(); ++i)
+        if (volume.value(i, j, k) > threshold) voxels.push_back(volume.indexToWorld() * Vec3(i, j, k));
+  std::vector<Vec3> points;
+  if (voxels.empty()) return points;
+  Vec3 centroid = Vec3::Zero();
+  for (const Vec3& p : voxels) centroid += p;
+  centroid /= static_cast<double>(voxels.size());
+  for (int axis = 0; axis < 3; ++axis)
+    for (double sign : {-1.0, 1.0})
+      points.push_back(*std::max_element(voxels.begin(), voxels.end(), [&](const Vec3& a, const Vec3& b) {
+        return sign * a[axis] < sign * b[axis];
+      }));
+  points.push_back(*std::min_element(voxels.begin(), voxels.end(), [&](const Vec3& a, const Vec3& b) {
+    return (a - centroid).squaredNorm() < (b - centroid).squaredNorm();
+  }));
+  return points;
 }
 
 }  // namespace dm

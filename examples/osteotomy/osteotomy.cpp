@@ -182,34 +182,10 @@ dm::Result<Skull> cutSkull(const dm::Volume& head, const dm::Volume& brain) {
   return skull;
 }
 
-// Reference points of the moving fragment (world at the anatomical pose):
-// its extreme voxels along ±x, ±y, ±z and the voxel nearest its centroid.
-std::vector<Vec3> referencePoints(const dm::Volume& moving) {
-  std::vector<Vec3> voxels;
-  for (int k = 0; k < moving.dims().z(); ++k)
-    for (int j = 0; j < moving.dims().y(); ++j)
-      for (int i = 0; i < moving.dims().x(); ++i)
-        if (moving.value(i, j, k) != 0) voxels.push_back(moving.indexToWorld() * Vec3(i, j, k));
-  std::vector<Vec3> points;
-  Vec3 centroid = Vec3::Zero();
-  for (const Vec3& p : voxels) centroid += p;
-  centroid /= static_cast<double>(voxels.size());
-  for (int axis = 0; axis < 3; ++axis)
-    for (double sign : {-1.0, 1.0})
-      points.push_back(*std::max_element(voxels.begin(), voxels.end(), [&](const Vec3& a, const Vec3& b) {
-        return sign * a[axis] < sign * b[axis];
-      }));
-  points.push_back(*std::min_element(voxels.begin(), voxels.end(), [&](const Vec3& a, const Vec3& b) {
-    return (a - centroid).squaredNorm() < (b - centroid).squaredNorm();
-  }));
-  return points;
-}
-
-// RMS distance between `points` moved by `pose` and the points themselves.
+// The RMS distance between the fragment's reference points moved by `pose`
+// and at the anatomical pose (the identity).
 double rmsError(const std::vector<Vec3>& points, const dm::Isometry3& pose) {
-  double sum = 0;
-  for (const Vec3& p : points) sum += (pose * p - p).squaredNorm();
-  return points.empty() ? 0.0 : std::sqrt(sum / static_cast<double>(points.size()));
+  return dm::boneAlignmentError(points, pose, dm::Isometry3::Identity());
 }
 
 // The recorded hand: the anatomical pose is the identity (fragment frame =
@@ -266,7 +242,7 @@ int run(const Options& o) {
   auto renderer =
       dm::BonePlacementRenderer::create(*fixedTree, dm::Isometry3::Identity(), *movingTree, skull->moving, bo);
   if (!renderer) return fail(renderer.error());
-  const std::vector<Vec3> points = referencePoints(skull->moving);
+  const std::vector<Vec3> points = dm::boneReferencePoints(skull->moving, 0.5);
 
   if (auto s = dm_example::makeOutputDir(o.out); !s) return fail(s.error());
   std::vector<std::string> written;

@@ -122,6 +122,23 @@ struct VoxelMassProperties {
 /// @endcode
 Result<VoxelMassProperties> voxelMassProperties(const Volume& volume, double threshold, double density);
 
+/// Reference points of a fragment (its volume's world frame): the centres
+/// of its occupied voxels (value > threshold) that lie furthest along −x,
+/// +x, −y, +y, −z, +z, then the one nearest the occupied voxels' centroid —
+/// seven points that pin down its pose, for
+/// BonePlacementRenderer::alignmentError. Empty without occupied voxels.
+/// O(voxels).
+/// @code
+///   auto points = dm::boneReferencePoints(fragment, 0.5);
+///   double e = renderer->alignmentError(points, dm::Isometry3::Identity());
+/// @endcode
+std::vector<Vec3> boneReferencePoints(const Volume& volume, double threshold);
+
+/// RMS distance (m) between `points` (a fragment's frame) placed by `pose`
+/// and by `target`; 0 for no points. O(points).
+double boneAlignmentError(std::span<const Vec3> points, const Isometry3& pose,
+                          const Isometry3& target) noexcept;
+
 /// One contact pair of the last tick, world frame.
 struct BoneContact {
   Vec3 point = Vec3::Zero();    ///< m, midway in the overlap of the two leaf spheres
