@@ -1,6 +1,7 @@
 // scene_parse.hpp (private) — the readers shared by the scene file's
 // sections (scene_file.cpp), its surgical keys (scene_surgery.cpp), its
-// soft tissue (scene_soft.cpp) and its OpenIGTLink engine (scene_igtl.cpp):
+// soft tissue (scene_soft.cpp), its 6-DOF tools (scene_6dof.cpp), its bone
+// placement (scene_bone.cpp) and its OpenIGTLink engine (scene_igtl.cpp):
 // enums by name, vectors, colours, poses, positive numbers, and their JSON.
 #pragma once
 
@@ -230,6 +231,17 @@ void readSphereTree(ConfigReader& haptics, SceneHapticsEngine& h);
 void checkTools6Dof(const SceneDesc& scene, ConfigReader root);
 void writeVps(const SceneVps& v, Json& haptics);
 void writeSphereTree(const SceneSphereTree& t, Json& haptics);
+
+// Bone placement (scene_bone.cpp): a volume resource's "segment", an
+// object's "voxels", the haptics engine's "bone_placement" block, their
+// checks once the whole scene is read, their JSON.
+void readSegment(ConfigReader& resource, SceneResource& res);
+Json segmentJson(const SceneSegment& g);
+void readVoxels(ConfigReader& object, SceneObject& o);
+void readBonePlacement(ConfigReader& haptics, SceneHapticsEngine& h);
+void checkBonePlacement(const SceneDesc& scene, ConfigReader root);
+void writeVoxels(const SceneObject& o, Json& object);
+void writeBonePlacement(const SceneBonePlacement& b, Json& haptics);
 
 // The OpenIGTLink engine (scene_igtl.cpp): "engines"/"igtl", its checks
 // against the other engines and objects once the scene is read, its JSON.

@@ -8,8 +8,10 @@
 #include <dm/math/mesh_filters.hpp>
 #include <dm/math/phantom.hpp>
 #include <dm/math/primitives.hpp>
+#include <dm/math/volume_components.hpp>
 
 #include <algorithm>
+#include <limits>
 
 namespace dm {
 
@@ -75,6 +77,80 @@ Result<Mesh> makeIsosurface(const SceneResource& r, const Volume& full) {
 
 }  // namespace
 
+Result<Volume> makeSceneSegment(const SceneResource& r, const Volume& source) {
+  if (!r.segment) return fail(ErrorCode::InvalidArgument, "not a segment", where(r));
+  const SceneSegment& g = *r.segment;
+  const std::string at = where(r) + "/segment";
+  if (source.empty()) return fail(ErrorCode::InvalidArgument, "the volume is empty", at + "/volume");
+  // The index range to visit: the box's corners in index space, or the grid.
+  Vec3i lo = Vec3i::Zero(), hi = source.dims() - Vec3i::Ones();
+  if (g.box) {
+    Vec3 a = Vec3::Constant(std::numeric_limits<double>::infinity()), b = -a;
+    for (int c = 0; c < 8; ++c) {
+      const Vec3 corner((c & 1) ? g.box->max.x() : g.box->min.x(), (c & 2) ? g.box->max.y() : g.box->min.y(),
+                        (c & 4) ? g.box->max.z() : g.box->min.z());
+      const Vec3 idx = source.worldToIndex() * corner;
+      a = a.cwiseMin(idx);
+      b = b.cwiseMax(idx);
+    }
+    lo = lo.cwiseMax(a.array().floor().cast<int>().matrix());
+    hi = hi.cwiseMin(b.array().ceil().cast<int>().matrix());
+    if ((hi.array() < lo.array()).any())
+      return fail(ErrorCode::InvalidArgument, "the box misses the volume", at + "/box",
+                  "give world coordinates (m) inside the scan");
+  }
+  const Vec3i dims = hi - lo + Vec3i::Ones();
+  auto mask = Volume::create(dims, VoxelType::U8,
+                             source.indexToWorld() * Affine3(Eigen::Translation3d(lo.cast<double>())));
+  if (!mask) return mask.error().within(at);
+  std::uint8_t* m = mask->data<std::uint8_t>();
+  std::size_t selected = 0, n = 0;
+  for (int k = lo.z(); k <= hi.z(); ++k)
+    for (int j = lo.y(); j <= hi.y(); ++j)
+      for (int i = lo.x(); i <= hi.x(); ++i, ++n) {
+        const double v = source.value(i, j, k);
+        bool keep = g.select == SceneSegment::Select::Above   ? v > g.value
+                    : g.select == SceneSegment::Select::Below ? v < g.value
+                                                              : v == g.value;
+        if (!keep) continue;
+        const Vec3 p = source.indexToWorld() * Vec3(i, j, k);
+        if (g.box) keep = (p.array() >= g.box->min.array()).all() && (p.array() <= g.box->max.array()).all();
+        for (const SceneCut& c : g.cuts) keep = keep && c.normal.dot(p - c.point) > 0.5 * c.kerf;
+        m[n] = keep ? 1 : 0;
+        selected += keep;
+      }
+  if (selected == 0)
+    return fail(ErrorCode::InvalidArgument, "the segment selects no voxel", at,
+                "check the value against the scan's (dmtool info), the box and the cuts' sides");
+  if (g.largestComponent) {
+    auto largest = largestComponent(*mask);
+    if (!largest) return largest.error().within(at);
+    *mask = std::move(*largest);
+    m = mask->data<std::uint8_t>();
+  }
+  // Crop to the kept voxels with one empty voxel around them (a closed
+  // isosurface, a small sphere tree); the voxels keep their world positions.
+  Vec3i a = dims, b = -Vec3i::Ones();
+  n = 0;
+  for (int k = 0; k < dims.z(); ++k)
+    for (int j = 0; j < dims.y(); ++j)
+      for (int i = 0; i < dims.x(); ++i, ++n)
+        if (m[n] != 0) {
+          a = a.cwiseMin(Vec3i(i, j, k));
+          b = b.cwiseMax(Vec3i(i, j, k));
+        }
+  a -= Vec3i::Ones();
+  b += Vec3i::Ones();
+  auto out = Volume::create(b - a + Vec3i::Ones(), VoxelType::U8,
+                            mask->indexToWorld() * Affine3(Eigen::Translation3d(a.cast<double>())));
+  if (!out) return out.error().within(at);
+  for (int k = a.z() + 1; k < b.z(); ++k)
+    for (int j = a.y() + 1; j < b.y(); ++j)
+      for (int i = a.x() + 1; i < b.x(); ++i)
+        if (mask->value(i, j, k) != 0) out->setValue(i - a.x(), j - a.y(), k - a.z(), 1.0);
+  return out;
+}
+
 std::shared_ptr<const Mesh> SceneResources::mesh(std::string_view name) const { return findIn(meshes, name); }
 std::shared_ptr<const Volume> SceneResources::volume(std::string_view name) const {
   return findIn(volumes, name);
@@ -139,6 +215,7 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
   // Volumes first: isosurfaces derive from them.
   for (const SceneResource& r : scene.resources) {
     if (r.type != SceneResource::Type::Volume) continue;
+    if (r.segment) continue;  // made from another volume, below
     report(r);
     if (r.phantom) {
       auto v = makeCalvariumPhantom(*r.phantom);
@@ -150,6 +227,18 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
     auto h = rm->load<Volume>(r.path);
     if (!h) return h.error().within(where(r));
     out.volumes.emplace(r.name, h->get());
+  }
+  // Segments, from the volumes they cut (never another segment: parseScene checks).
+  for (const SceneResource& r : scene.resources) {
+    if (!r.segment) continue;
+    report(r);
+    auto vol = out.volume(r.segment->volume);
+    if (!vol)
+      return fail(ErrorCode::NotFound, "no volume resource \"" + r.segment->volume + "\"",
+                  where(r) + "/segment/volume");
+    auto seg = makeSceneSegment(r, *vol);
+    if (!seg) return seg.error();
+    out.volumes.emplace(r.name, std::make_shared<const Volume>(std::move(*seg)));
   }
   for (const SceneResource& r : scene.resources) {
     switch (r.type) {

@@ -54,6 +54,46 @@ namespace dm {
 /// something else to a new one).
 inline constexpr int kSceneFormatVersion = 2;
 
+/// An axis-aligned box, m: in an object's frame (before its scale), or in
+/// a volume's world frame (a segment's crop).
+struct SceneBox {
+  Vec3 min = Vec3::Zero();
+  Vec3 max = Vec3::Zero();  ///< ≥ min on every axis
+
+  bool operator==(const SceneBox&) const = default;
+};
+
+/// A saw cut of a segment (v2 "cuts"): a plane in the source volume's
+/// world frame. Voxels whose centre lies on the normal's side by more than
+/// kerf / 2 are kept; the slot of width `kerf` the saw removes is not.
+struct SceneCut {
+  Vec3 point = Vec3::Zero();    ///< m, on the plane
+  Vec3 normal = Vec3::UnitZ();  ///< unit: the side kept
+  double kerf = 0.0;            ///< m, ≥ 0, ≤ 0.05
+
+  bool operator==(const SceneCut&) const = default;
+};
+
+/// A volume made from another (v2 "segment"): a bone fragment, an organ —
+/// the voxels of `volume` selected by value, cropped to `box`, cut by saw
+/// planes, optionally reduced to their largest 26-connected part; a U8 0/1
+/// mask on the source's grid (cropped), so its voxels keep their world
+/// positions. Planned osteotomies are segments of the patient's CT.
+struct SceneSegment {
+  enum class Select : std::uint8_t { Above, Below, Label };
+
+  std::string volume;  ///< a volume read from a file or generated (not another segment)
+  Select select =
+      Select::Above;  ///< "above": value > `value`; "below": value < `value`; "label": value == `value`
+  double value = 0.0;
+  std::optional<SceneBox>
+      box;  ///< world, m: only voxels whose centres lie inside; the grid is cropped to them
+  std::vector<SceneCut> cuts;  ///< every cut keeps its normal's side
+  bool largestComponent = false;
+
+  bool operator==(const SceneSegment&) const = default;
+};
+
 /// A named resource: something to load or generate once and share.
 struct SceneResource {
   enum class Type : std::uint8_t { Mesh, Volume, Isosurface, Shape, Image };
@@ -70,6 +110,9 @@ struct SceneResource {
   /// Volume (v2, "phantom"): generated, not read — a CT-like scan of a
   /// calvarium in HU (dm/math/phantom.hpp), instead of a source.
   std::optional<CalvariumPhantom> phantom;
+  /// Volume (v2, "segment"): made from another volume resource — a bone
+  /// fragment cut from a CT — instead of a source.
+  std::optional<SceneSegment> segment;
   std::string unit = "m";  ///< Mesh: length unit of the file (dm::metresPerUnit names)
   double scale = 1.0;      ///< Mesh: extra factor after the unit, > 0
 
@@ -169,14 +212,6 @@ struct SceneSoftLayer {
   bool operator==(const SceneSoftLayer&) const = default;
 };
 
-/// An axis-aligned box in an object's frame (before its scale), m.
-struct SceneBox {
-  Vec3 min = Vec3::Zero();
-  Vec3 max = Vec3::Zero();  ///< ≥ min on every axis
-
-  bool operator==(const SceneBox&) const = default;
-};
-
 /// Soft tissue (v2 "soft"): the object is a deformable body — co-rotational
 /// FEM (dm::FemBody) on tetrahedra made from its mesh — that the physics
 /// engine steps, the god-object presses (felt at the haptic rate through
@@ -228,6 +263,17 @@ struct SceneSoft {
   bool operator==(const SceneSoft&) const = default;
 };
 
+/// An object's voxels (v2 "voxels"): the occupancy a voxel renderer
+/// (bone placement) touches — the voxels of a volume resource with value >
+/// threshold, the volume's world frame placed by the object's pose. The
+/// object's mesh is what is drawn (an isosurface of the same volume).
+struct SceneVoxels {
+  std::string volume;      ///< a volume resource (a segment, a label map)
+  double threshold = 0.5;  ///< a voxel is occupied above this value
+
+  bool operator==(const SceneVoxels&) const = default;
+};
+
 /// A mesh placed in the world.
 struct SceneObject {
   std::string name;
@@ -252,6 +298,7 @@ struct SceneObject {
   std::optional<SceneCritical> critical;  ///< v2: a structure the burr must not reach
   std::optional<SceneInclusion> inclusion;  ///< v2: another material of the millable bone
   std::optional<SceneSoft> soft;            ///< v2: soft tissue the physics engine deforms
+  std::optional<SceneVoxels> voxels;        ///< v2: voxels the bone-placement renderer touches
 
   bool operator==(const SceneObject& o) const;
 };
@@ -442,9 +489,38 @@ struct SceneSphereTree {
   bool operator==(const SceneSphereTree&) const = default;
 };
 
+/// The bone-placement renderer's fragment and settings (v2
+/// "bone_placement"; dm::BonePlacementRenderer, dm::BonePlacementOptions):
+/// a voxel bone fragment, held by the hand through a 6-DOF virtual
+/// coupling, placed against the touched object's voxels with impulses.
+struct SceneBonePlacement {
+  /// A volume resource: the moving fragment's voxels (value > threshold).
+  /// Its world frame is the fragment's frame: at the device pose identity
+  /// the fragment lies where the volume puts it.
+  std::string fragment;
+  double threshold = 0.5;
+  double couplingStiffness = 300.0;       ///< N/m, > 0
+  double couplingDamping = 2.0;           ///< N·s/m, ≥ 0
+  double couplingAngularStiffness = 0.3;  ///< N·m/rad, > 0
+  double couplingAngularDamping = 1e-3;   ///< N·m·s/rad, ≥ 0
+  double mass = 0.0;                      ///< kg, ≥ 0 (0: voxels × voxel volume × density)
+  double density = 1900.0;                ///< kg/m³, > 0 (cortical bone)
+  int maxContacts = 1024;                 ///< 1..4096 deepest voxel pairs kept per tick
+  int iterations = 8;                     ///< 1..100 Gauss–Seidel passes
+  double slop = -1.0;      ///< m, ≥ 0 ("slop"); negative (not given): face-adjacent voxels' resting overlap
+  double baumgarte = 0.2;  ///< 0..1
+  double maxTorque = 1.0;  ///< N·m, > 0: torque to the hand
+  /// The planned pose of the fragment (its frame → world; "target_pose"):
+  /// summary.json reports the alignment error against it. Default: where
+  /// the volume puts it (the anatomy).
+  Pose target;
+
+  bool operator==(const SceneBonePlacement& o) const;
+};
+
 /// The haptic engine: one device rendering contact with objects.
 struct SceneHapticsEngine {
-  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr, Needle };
+  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr, Needle, BonePlacement };
 
   double rateHz = 1000.0;  ///< 100..10000
   Renderer renderer = Renderer::GodObject;
@@ -459,6 +535,7 @@ struct SceneHapticsEngine {
   std::optional<SceneNeedle> needle;  ///< v2: with renderer "needle" (and only then)
   std::optional<SceneVps> vps;        ///< v2: with renderer "vps" (and only then)
   std::optional<SceneSphereTree> sphereTree;  ///< v2: with renderer "sphere-tree" (and only then)
+  std::optional<SceneBonePlacement> bonePlacement;  ///< v2: with renderer "bone-placement" (and only then)
 
   bool operator==(const SceneHapticsEngine& o) const;
 };

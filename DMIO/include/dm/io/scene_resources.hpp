@@ -2,7 +2,8 @@
 // meshes and volumes from files (through the resource manager, so a file
 // used twice is read once), generated volumes (CT-like phantoms,
 // dm/math/phantom.hpp), isosurfaces extracted from volume resources,
-// generated shapes, and images.
+// bone fragments and other segments cut from volumes, generated shapes, and
+// images.
 //
 // The scene file itself is parsed by dm/io/scene_file.hpp; this turns its
 // SceneResource entries into data-model objects shared read-only by every
@@ -66,6 +67,16 @@ struct SceneLoadOptions {
 /// `subdivisions`. A volume with a `phantom` is generated
 /// (dm::makeCalvariumPhantom), not read.
 Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoadOptions& options = {});
+
+/// The volume of a resource with a `segment` made from `source` (the
+/// volume it names): U8, 1 where the voxel's value is selected (above,
+/// below, label), its centre inside the box and on the kept side of every
+/// cut (by more than half the kerf), reduced to the largest 26-connected
+/// component if asked; on the source's grid, cropped to the kept voxels and
+/// one empty voxel around them, so every voxel keeps its world position.
+/// Fails naming "resources/<name>/segment" when the box misses the volume
+/// or nothing is selected. O(voxels of the box).
+Result<Volume> makeSceneSegment(const SceneResource& resource, const Volume& source);
 
 /// The generated mesh of one Shape resource (no file access). InvalidArgument
 /// for a resource that is not a shape or has non-positive sizes.
