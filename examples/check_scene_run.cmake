@@ -6,6 +6,9 @@
 #         -DMOVED_BODY=name -DMIN_DISPLACEMENT=m (scenes with physics)
 #         -DVISION_FRAMES=N (scenes with a "vision" engine): its graph
 #         stepped N frames and wrote vision/edge_pixels.csv with N rows
+#         -DBONE_MAX_ERROR_MM=E -DBONE_MAX_DEPTH_MM=D (the bone-placement
+#         renderer): the fragment started more than 5 mm from its plan and
+#         ended within E mm of it, its voxels never more than D mm deep
 #         -DIGTL_IMAGES=N (scenes with an "igtl" engine): it published at
 #         least N IMAGE messages, and TRANSFORM and SENSOR messages
 # Tele-operation scenes (a device with "serve") run in real time:
@@ -153,4 +156,16 @@ if(DEFINED VISION_FRAMES)
   if(NOT visionFrames EQUAL VISION_FRAMES OR NOT visionRowCount EQUAL VISION_FRAMES)
     message(FATAL_ERROR "vision: ${visionFrames} frames stepped, ${visionRowCount} CSV rows (expected ${VISION_FRAMES})")
   endif()
+endif()
+if(DEFINED BONE_MAX_ERROR_MM)
+  string(JSON e0 GET "${summary}" bone_placement initial_error_m)
+  string(JSON e1 GET "${summary}" bone_placement final_error_m)
+  string(JSON depth GET "${summary}" bone_placement max_contact_depth_m)
+  set(e1Limit "${BONE_MAX_ERROR_MM}e-3")
+  set(depthLimit "${BONE_MAX_DEPTH_MM}e-3")
+  if(e0 LESS 0.005 OR e1 GREATER e1Limit OR depth GREATER depthLimit)
+    message(FATAL_ERROR "bone placement: error ${e0} m -> ${e1} m (expected > 0.005 -> <= ${e1Limit}), "
+                        "contact depth ${depth} m (expected <= ${depthLimit})")
+  endif()
+  message(STATUS "bone placement: ${e0} m -> ${e1} m from the plan, contact depth ${depth} m")
 endif()

@@ -1,5 +1,5 @@
-// scene_6dof.cpp — a scene's 6-DOF rigid-tool renderers from their block
-// and touched objects (scene_6dof.hpp).
+// scene_6dof.cpp — a scene's 6-DOF rigid-tool renderers (VPS, sphere tree,
+// bone placement) from their block and touched objects (scene_6dof.hpp).
 #include "scene_6dof.hpp"
 
 #include <dm/collide/point_shell.hpp>
@@ -119,6 +119,51 @@ Result<std::unique_ptr<SphereTree6DofRenderer>> buildSceneSphereTree(const Scene
   auto r = SphereTree6DofRenderer::create(*toolTree, std::move(objects), o);
   if (!r) return r.error().within(where);
   return std::move(*r);
+}
+
+Result<SceneBonePlacementTool> buildSceneBonePlacement(const SceneDesc& scene,
+                                                       const SceneResources& resources) {
+  const SceneHapticsEngine& h = *scene.engines.haptics;
+  const SceneBonePlacement& b = *h.bonePlacement;
+  const std::string where = "engines/haptics/bone_placement";
+  const std::shared_ptr<const Volume> fragment = resources.volume(b.fragment);
+  if (!fragment)
+    return fail(ErrorCode::NotFound, "resource \"" + b.fragment + "\" was not loaded as a volume",
+                where + "/fragment");
+  auto moving = ImplicitSphereTree::create(*fragment, b.threshold);
+  if (!moving) return moving.error().within(where + "/fragment");
+  const SceneObject* o = h.objects.empty() ? nullptr : scene.object(h.objects.front());
+  const std::shared_ptr<const Volume> fixedVolume =
+      o != nullptr && o->voxels ? resources.volume(o->voxels->volume) : nullptr;
+  if (!fixedVolume)
+    return fail(ErrorCode::NotFound, "the touched object's voxels were not loaded", where + "/objects");
+  auto fixed = ImplicitSphereTree::create(*fixedVolume, o->voxels->threshold);
+  if (!fixed) return fixed.error().within("objects/" + o->name + "/voxels");
+
+  BonePlacementOptions opt;
+  opt.couplingStiffness = b.couplingStiffness;
+  opt.couplingDamping = b.couplingDamping;
+  opt.couplingAngularStiffness = b.couplingAngularStiffness;
+  opt.couplingAngularDamping = b.couplingAngularDamping;
+  opt.mass = b.mass;
+  opt.density = b.density;
+  opt.threshold = b.threshold;
+  opt.maxContacts = b.maxContacts;
+  opt.iterations = b.iterations;
+  opt.slop = b.slop;
+  opt.baumgarte = b.baumgarte;
+  // The engine's max_force clamps here; without one the haptic loop clamps
+  // to the device's limit.
+  opt.maxForce = h.maxForce > 0 ? h.maxForce : std::numeric_limits<double>::infinity();
+  opt.maxTorque = b.maxTorque;
+  auto r = BonePlacementRenderer::create(*fixed, o->pose.isometry(), *moving, *fragment, opt);
+  if (!r) return r.error().within(where);
+  SceneBonePlacementTool tool;
+  tool.renderer = std::move(*r);
+  tool.referencePoints = boneReferencePoints(*fragment, b.threshold);
+  for (std::size_t i = 0; i < fixedVolume->voxelCount(); ++i)
+    tool.fixedVoxels += fixedVolume->valueAt(i) > o->voxels->threshold;
+  return tool;
 }
 
 }  // namespace dm

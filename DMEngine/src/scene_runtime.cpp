@@ -80,6 +80,11 @@ class HapticsEngine final : public Engine {
   bool tick(const TickInfo& info) noexcept override {
     loop->tick(info);
     if (boneFeed) boneFeed->publish(burr->volume());  // the drilled blocks, to the render engine
+    if (placement.renderer) {
+      if (!placementStarted) placementFirstPose = placement.renderer->fragmentPose();
+      placementStarted = true;
+      placementMaxDepth = std::max(placementMaxDepth, placement.renderer->maxContactDepth());
+    }
     const HapticLoopSample& s = loop->lastSample();
     ProbeSample p;
     p.t = time.seconds(info);  // scene time, also in real time
@@ -123,6 +128,16 @@ class HapticsEngine final : public Engine {
   HapticRenderer* active = nullptr;            // what the loop ticks: renderer, or the needle
   GodObjectRenderer* godObject = nullptr;  // = renderer (or inside it), when it is the god-object
   BurrRenderer* burr = nullptr;            // = renderer, when it is the burr
+  // The bone-placement renderer (owned by renderer) and what its summary
+  // measures: the first tick's fragment pose, the deepest contact.
+  struct {
+    BonePlacementRenderer* renderer = nullptr;
+    std::vector<Vec3> referencePoints;
+    std::size_t fixedVoxels = 0;
+  } placement;
+  Isometry3 placementFirstPose = Isometry3::Identity();
+  bool placementStarted = false;
+  double placementMaxDepth = 0.0;
   std::unique_ptr<MillableSurfaceFeed> boneFeed;
   std::string milledObject;
   double boneVolume = 0.0;  // m³ before milling
@@ -370,6 +385,13 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
     auto v = buildSceneVps(scene, resources);
     if (!v) return v.error();
     e->renderer = std::move(*v);
+  } else if (h.renderer == SceneHapticsEngine::Renderer::BonePlacement) {
+    auto b = buildSceneBonePlacement(scene, resources);
+    if (!b) return b.error();
+    e->placement.renderer = b->renderer.get();
+    e->placement.referencePoints = std::move(b->referencePoints);
+    e->placement.fixedVoxels = b->fixedVoxels;
+    e->renderer = std::move(b->renderer);
   } else {
     auto t = buildSceneSphereTree(scene, resources);
     if (!t) return t.error();
@@ -836,6 +858,27 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   }
   if (im.haptics && im.haptics->burr != nullptr)
     summary["burr"] = burrSummary(*im.haptics->burr, im.haptics->boneFeed.get(), im.haptics->boneVolume);
+  if (im.haptics && im.haptics->placement.renderer != nullptr) {
+    const HapticsEngine& e = *im.haptics;
+    const BonePlacementRenderer& b = *e.placement.renderer;
+    const Isometry3 target = scene.engines.haptics->bonePlacement->target.isometry();
+    const auto vec = [](const Vec3& v) { return Json::array({v.x(), v.y(), v.z()}); };
+    const Quat q(b.fragmentPose().linear());
+    summary["bone_placement"] = {
+        {"fragment_voxels", b.massProperties().voxels},
+        {"fixed_voxels", e.placement.fixedVoxels},
+        {"fragment_mass_kg", b.massProperties().mass},
+        {"center_of_mass_m", vec(b.massProperties().centerOfMass)},
+        {"slop_m", b.slop()},
+        {"reference_points", e.placement.referencePoints.size()},
+        {"initial_error_m", boneAlignmentError(e.placement.referencePoints, e.placementFirstPose, target)},
+        {"final_error_m", b.alignmentError(e.placement.referencePoints, target)},
+        {"final_position_m", vec(b.fragmentPose().translation())},
+        {"final_rotation", Json::array({q.w(), q.x(), q.y(), q.z()})},
+        {"final_contacts", b.contacts().size()},
+        {"max_contact_depth_m", e.placementMaxDepth},
+        {"stack_overflows", b.stackOverflows()}};
+  }
   if (im.physics) {
     summary["physics"] = im.physics->summary();
     summary["physics"]["rate_hz"] = scene.engines.physics->rateHz;
