@@ -1112,24 +1112,6 @@ Result<std::shared_ptr<const SphereTree>> buildSphereTreeFitted(const Volume& vo
 
 // -------------------------------------------------- ImplicitSphereTree ---
 
-namespace {
-constexpr int kMortonBits = 18;
-constexpr std::uint64_t kCoordMask = (std::uint64_t{1} << kMortonBits) - 1;
-}  // namespace
-
-SphereHierarchy::NodeId ImplicitSphereTree::nodeId(int level, int i, int j, int k) noexcept {
-  return static_cast<NodeId>(level) << (3 * kMortonBits) |
-         (static_cast<NodeId>(k) & kCoordMask) << (2 * kMortonBits) |
-         (static_cast<NodeId>(j) & kCoordMask) << kMortonBits | (static_cast<NodeId>(i) & kCoordMask);
-}
-
-void ImplicitSphereTree::unpack(NodeId id, int& level, int& i, int& j, int& k) noexcept {
-  level = static_cast<int>(id >> (3 * kMortonBits));
-  k = static_cast<int>((id >> (2 * kMortonBits)) & kCoordMask);
-  j = static_cast<int>((id >> kMortonBits) & kCoordMask);
-  i = static_cast<int>(id & kCoordMask);
-}
-
 Result<std::shared_ptr<const ImplicitSphereTree>> ImplicitSphereTree::create(const Volume& volume,
                                                                              double threshold) {
   const char* where = "dm::ImplicitSphereTree::create";
@@ -1193,21 +1175,6 @@ Result<std::shared_ptr<const ImplicitSphereTree>> ImplicitSphereTree::create(con
     tree->bounds_.extend(w + Vec3::Constant(tree->halfDiagonal_));
   }
   return std::shared_ptr<const ImplicitSphereTree>(std::move(tree));
-}
-
-std::size_t ImplicitSphereTree::bitIndex(int level, int i, int j, int k) const noexcept {
-  const Vec3i& n = levelDims_[static_cast<std::size_t>(level)];
-  return static_cast<std::size_t>(i) +
-         static_cast<std::size_t>(n.x()) *
-             (static_cast<std::size_t>(j) + static_cast<std::size_t>(n.y()) * static_cast<std::size_t>(k));
-}
-
-bool ImplicitSphereTree::occupied(int level, int i, int j, int k) const noexcept {
-  if (level < 0 || level > depth_) return false;
-  const Vec3i& n = levelDims_[static_cast<std::size_t>(level)];
-  if (i < 0 || j < 0 || k < 0 || i >= n.x() || j >= n.y() || k >= n.z()) return false;
-  const std::size_t b = bitIndex(level, i, j, k);
-  return (bits_[static_cast<std::size_t>(level)][b / 64] >> (b % 64)) & 1u;
 }
 
 BoundingSphere ImplicitSphereTree::cellSphere(int level, int i, int j, int k) const noexcept {

@@ -3,6 +3,7 @@
 #include <dm/haptics/safety.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <string>
 
@@ -197,62 +198,119 @@ void BonePlacementRenderer::offerContact(const Vec3& cFixed, double rFixed, cons
   }
 }
 
+namespace {
+
+// The sphere of cell (l, i, j, k) of an implicit tree mapped by a rigid
+// transform, as an affine function of the cell's indices: centre =
+// a·(i, j, k) + b, radius r. One per level, set up once a tick, so the
+// descent computes a sphere with nine multiplications.
+struct LevelMap {
+  Mat3 a;
+  Vec3 b;
+  double r;
+  Vec3 centre(int i, int j, int k) const noexcept { return a * Vec3(i, j, k) + b; }
+};
+using LevelMaps = std::array<LevelMap, ImplicitSphereTree::kMaxDepth + 1>;
+
+void mapLevels(const ImplicitSphereTree& tree, const Isometry3& pose, LevelMaps& out) noexcept {
+  for (int l = 0; l <= tree.depth(); ++l) {
+    const BoundingSphere o = tree.cellSphere(l, 0, 0, 0);
+    LevelMap& m = out[static_cast<std::size_t>(l)];
+    m.b = pose * o.center;
+    m.r = o.radius;
+    m.a.col(0) = pose.linear() * (tree.cellSphere(l, 1, 0, 0).center - o.center);
+    m.a.col(1) = pose.linear() * (tree.cellSphere(l, 0, 1, 0).center - o.center);
+    m.a.col(2) = pose.linear() * (tree.cellSphere(l, 0, 0, 1).center - o.center);
+  }
+}
+
+// The occupied leaf cells under cell (l, i, j, k) of `tree`, l ≥ depth − 1:
+// the cell itself at the leaf level, else its occupied children (≤ 8).
+int leafCells(const ImplicitSphereTree& tree, int l, int i, int j, int k,
+              std::array<Vec3i, 8>& out) noexcept {
+  if (l == tree.depth()) {
+    out[0] = Vec3i(i, j, k);
+    return 1;
+  }
+  int n = 0;
+  for (int q = 0; q < 8; ++q) {
+    const int ci = 2 * i + (q & 1), cj = 2 * j + ((q >> 1) & 1), ck = 2 * k + ((q >> 2) & 1);
+    if (tree.occupied(l + 1, ci, cj, ck)) out[static_cast<std::size_t>(n++)] = Vec3i(ci, cj, ck);
+  }
+  return n;
+}
+
+}  // namespace
+
 void BonePlacementRenderer::findContacts() noexcept {
   contactCount_ = 0;
   maxDepth_ = 0.0;
+  // Both trees' spheres in the fixed fragment's frame.
   movingToFixed_ = fixedPose_.inverse(Eigen::Isometry) * fragmentPose();
   const ImplicitSphereTree& tf = *fixed_;
   const ImplicitSphereTree& tm = *moving_;
   const int depthF = tf.depth();
   const int depthM = tm.depth();
+  LevelMaps mapF, mapM;
+  mapLevels(tf, Isometry3::Identity(), mapF);
+  mapLevels(tm, movingToFixed_, mapM);
   const auto overlap = [](const Vec3& c1, double r1, const Vec3& c2, double r2) {
     const double s = r1 + r2;
     return (c1 - c2).squaredNorm() < s * s;
   };
-  {
-    const BoundingSphere f = tf.cellSphere(0, 0, 0, 0);
-    const BoundingSphere m = tm.cellSphere(0, 0, 0, 0);
-    if (!overlap(f.center, f.radius, movingToFixed_ * m.center, m.radius)) return;
-  }
+  if (!overlap(mapF[0].b, mapF[0].r, mapM[0].b, mapM[0].r)) return;
   std::size_t top = 0;
   stack_[top++] = {tf.root(), tm.root()};
+  std::array<Vec3i, 8> cellsF, cellsM;
+  std::array<Vec3, 8> centresM;
   while (top > 0) {
     const Pair p = stack_[--top];
     int lf = 0, fi = 0, fj = 0, fk = 0, lm = 0, mi = 0, mj = 0, mk = 0;
     ImplicitSphereTree::unpack(p.fixedNode, lf, fi, fj, fk);
     ImplicitSphereTree::unpack(p.movingNode, lm, mi, mj, mk);
-    const BoundingSphere sf = tf.cellSphere(lf, fi, fj, fk);
-    BoundingSphere sm = tm.cellSphere(lm, mi, mj, mk);
-    sm.center = movingToFixed_ * sm.center;
-    if (lf == depthF && lm == depthM) {
-      offerContact(sf.center, sf.radius, sm.center, sm.radius);
+    if (lf >= depthF - 1 && lm >= depthM - 1) {
+      // Near the leaves: every occupied leaf under one against every one
+      // under the other, without going through the stack.
+      const LevelMap& leafF = mapF[static_cast<std::size_t>(depthF)];
+      const LevelMap& leafM = mapM[static_cast<std::size_t>(depthM)];
+      const int nf = leafCells(tf, lf, fi, fj, fk, cellsF);
+      const int nm = leafCells(tm, lm, mi, mj, mk, cellsM);
+      for (int b = 0; b < nm; ++b) {
+        const Vec3i& c = cellsM[static_cast<std::size_t>(b)];
+        centresM[static_cast<std::size_t>(b)] = leafM.centre(c.x(), c.y(), c.z());
+      }
+      for (int a = 0; a < nf; ++a) {
+        const Vec3i& c = cellsF[static_cast<std::size_t>(a)];
+        const Vec3 cf = leafF.centre(c.x(), c.y(), c.z());
+        for (int b = 0; b < nm; ++b)
+          if (overlap(cf, leafF.r, centresM[static_cast<std::size_t>(b)], leafM.r))
+            offerContact(cf, leafF.r, centresM[static_cast<std::size_t>(b)], leafM.r);
+      }
       continue;
     }
+    const LevelMap& mf = mapF[static_cast<std::size_t>(lf)];
+    const LevelMap& mm = mapM[static_cast<std::size_t>(lm)];
     // Split the larger sphere (the only one left with children otherwise);
     // skip a level when it is much larger than the other.
-    const bool splitFixed = lm == depthM || (lf < depthF && sf.radius >= sm.radius);
+    const bool splitFixed = lm == depthM || (lf < depthF && mf.r >= mm.r);
     const ImplicitSphereTree& t = splitFixed ? tf : tm;
     const int level = splitFixed ? lf : lm;
     const int leafLevel = splitFixed ? depthF : depthM;
-    const double big = splitFixed ? sf.radius : sm.radius;
-    const double small = splitFixed ? sm.radius : sf.radius;
+    const double big = splitFixed ? mf.r : mm.r;
+    const double small = splitFixed ? mm.r : mf.r;
+    const Vec3 other = splitFixed ? mm.centre(mi, mj, mk) : mf.centre(fi, fj, fk);
     const int skip = (big > 4.0 * small && leafLevel - level >= 2) ? 2 : 1;
     const int n = 1 << skip;
     const int bi = (splitFixed ? fi : mi) << skip;
     const int bj = (splitFixed ? fj : mj) << skip;
     const int bk = (splitFixed ? fk : mk) << skip;
     const int childLevel = level + skip;
+    const LevelMap& mc = (splitFixed ? mapF : mapM)[static_cast<std::size_t>(childLevel)];
     for (int k = bk; k < bk + n; ++k)
       for (int j = bj; j < bj + n; ++j)
         for (int i = bi; i < bi + n; ++i) {
           if (!t.occupied(childLevel, i, j, k)) continue;
-          BoundingSphere s = t.cellSphere(childLevel, i, j, k);
-          if (splitFixed) {
-            if (!overlap(s.center, s.radius, sm.center, sm.radius)) continue;
-          } else {
-            s.center = movingToFixed_ * s.center;
-            if (!overlap(s.center, s.radius, sf.center, sf.radius)) continue;
-          }
+          if (!overlap(mc.centre(i, j, k), mc.r, other, small)) continue;
           if (top == stack_.size()) {
             ++stackOverflows_;
             continue;

@@ -325,7 +325,13 @@ class ImplicitSphereTree final : public SphereHierarchy {
   int depth() const noexcept { return depth_; }
   /// True when cell (level, i, j, k) contains an occupied voxel (false
   /// outside the padded grid). O(1).
-  bool occupied(int level, int i, int j, int k) const noexcept;
+  bool occupied(int level, int i, int j, int k) const noexcept {
+    if (level < 0 || level > depth_) return false;
+    const Vec3i& n = levelDims_[static_cast<std::size_t>(level)];
+    if (i < 0 || j < 0 || k < 0 || i >= n.x() || j >= n.y() || k >= n.z()) return false;
+    const std::size_t b = bitIndex(level, i, j, k);
+    return (bits_[static_cast<std::size_t>(level)][b / 64] >> (b % 64)) & 1u;
+  }
   /// Sphere of cell (level, i, j, k): the cell spans voxel indices
   /// [i·s − ½, (i+1)·s − ½] (s = 2^(D − level), likewise j, k); centre = the
   /// affine image of the box centre, radius = half the longest of the four
@@ -344,15 +350,32 @@ class ImplicitSphereTree final : public SphereHierarchy {
   BoundingSphere boundingSphere() const noexcept override { return sphere(root()); }
 
   /// Packs/unpacks a node id (level in the top 6 bits, then k, j, i, 18 bits each).
-  static NodeId nodeId(int level, int i, int j, int k) noexcept;
-  static void unpack(NodeId id, int& level, int& i, int& j, int& k) noexcept;
+  /// Inline, like occupied(): the simultaneous descents call them per cell pair.
+  static NodeId nodeId(int level, int i, int j, int k) noexcept {
+    return static_cast<NodeId>(level) << (3 * kMortonBits) |
+           (static_cast<NodeId>(k) & kCoordMask) << (2 * kMortonBits) |
+           (static_cast<NodeId>(j) & kCoordMask) << kMortonBits | (static_cast<NodeId>(i) & kCoordMask);
+  }
+  static void unpack(NodeId id, int& level, int& i, int& j, int& k) noexcept {
+    level = static_cast<int>(id >> (3 * kMortonBits));
+    k = static_cast<int>((id >> (2 * kMortonBits)) & kCoordMask);
+    j = static_cast<int>((id >> kMortonBits) & kCoordMask);
+    i = static_cast<int>(id & kCoordMask);
+  }
 
  private:
   ImplicitSphereTree() noexcept = default;
   int depth_ = 0;
   Affine3 indexToWorld_ = Affine3::Identity();
   double halfDiagonal_ = 0.0;  // max |A·(±1,±1,1)| / 2, per voxel
-  std::size_t bitIndex(int level, int i, int j, int k) const noexcept;
+  static constexpr int kMortonBits = 18;
+  static constexpr std::uint64_t kCoordMask = (std::uint64_t{1} << kMortonBits) - 1;
+  std::size_t bitIndex(int level, int i, int j, int k) const noexcept {
+    const Vec3i& n = levelDims_[static_cast<std::size_t>(level)];
+    return static_cast<std::size_t>(i) +
+           static_cast<std::size_t>(n.x()) *
+               (static_cast<std::size_t>(j) + static_cast<std::size_t>(n.y()) * static_cast<std::size_t>(k));
+  }
   std::vector<Vec3i> levelDims_;                  // per level: ⌈dims / 2^(D−l)⌉ cells
   std::vector<std::vector<std::uint64_t>> bits_;  // per level, one bit per cell, x fastest
   std::vector<std::size_t> occupiedCount_;        // per level
