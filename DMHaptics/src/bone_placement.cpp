@@ -254,9 +254,16 @@ void BonePlacementRenderer::findContacts() noexcept {
   LevelMaps mapF, mapM;
   mapLevels(tf, Isometry3::Identity(), mapF);
   mapLevels(tm, movingToFixed_, mapM);
-  const auto overlap = [](const Vec3& c1, double r1, const Vec3& c2, double r2) {
-    const double s = r1 + r2;
-    return (c1 - c2).squaredNorm() < s * s;
+  // Only leaf pairs deeper than 0.9·slop act (the shallower ones are the
+  // resting overlap of touching voxels), so every test asks for that much
+  // overlap: a leaf lies within (R − r) of its ancestor's centre, so two
+  // cells closer than R1 + R2 − 0.9·slop are the only ones that can hold
+  // such a pair. Most overlapping pairs of a face in contact are shallow
+  // diagonal neighbours: this prunes them, and the cells above them.
+  const double margin = 0.9 * slop_;
+  const auto overlap = [margin](const Vec3& c1, double r1, const Vec3& c2, double r2) {
+    const double s = r1 + r2 - margin;
+    return s > 0.0 && (c1 - c2).squaredNorm() < s * s;
   };
   if (!overlap(mapF[0].b, mapF[0].r, mapM[0].b, mapM[0].r)) return;
   std::size_t top = 0;

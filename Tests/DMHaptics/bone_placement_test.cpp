@@ -187,10 +187,12 @@ TEST(BonePlacement, SplitFragmentIsGuidedBackToTheReferencePose) {
   EXPECT_NEAR((*r)->alignmentError(reference, out.proxyPose), 0.0, 1e-12);
 }
 
-TEST(BonePlacement, TreeDescentFindsExactlyTheOverlappingVoxelSpheres) {
+TEST(BonePlacement, TreeDescentFindsExactlyTheVoxelSpheresOverlappingBeyondTheSlop) {
   // Brute force over all occupied voxel pairs (leaf sphere radius √3/2·h)
   // against the simultaneous descent, for a block of 1 mm voxels and a ball
-  // of 0.4 mm voxels (different depths and sizes exercise the level skip).
+  // of 0.4 mm voxels (different depths and sizes exercise the level skip):
+  // the pairs that act, deeper than 0.9·slop, are found, and only they —
+  // with the automatic slop and with none (every overlapping pair).
   auto fv = Volume::create(Vec3i(12, 12, 12), VoxelType::U8, Affine3(Eigen::Scaling(kVoxel)));
   auto mv = Volume::create(Vec3i(16, 16, 16), VoxelType::U8, Affine3(Eigen::Scaling(0.4 * kVoxel)));
   ASSERT_TRUE(fv.ok() && mv.ok());
@@ -201,35 +203,40 @@ TEST(BonePlacement, TreeDescentFindsExactlyTheOverlappingVoxelSpheres) {
     for (int j = 0; j < 16; ++j)
       for (int i = 0; i < 16; ++i)
         mv->setValue(i, j, k, (Vec3(i, j, k) - Vec3::Constant(7.5)).norm() < 7.0 ? 1 : 0);
-  BonePlacementOptions o = testOptions();
-  auto r = BonePlacementRenderer::create(treeOf(*fv), translation({0.0005, 0.0, 0.0}), treeOf(*mv), *mv, o);
-  ASSERT_TRUE(r.ok()) << r.error();
-  Isometry3 pose = translation({0.006, 0.005, 0.0065});
-  pose.linear() = AngleAxis(0.4, Vec3(1, 2, 3).normalized()).toRotationMatrix();
-  (*r)->reset(pose);
-  (*r)->tick({.dt = 1e-3, .devicePose = pose});  // contacts are found before the pose moves
-  std::size_t pairs = 0;
-  double deepest = 0.0;
-  for (int k = 0; k < 8; ++k)
-    for (int j = 0; j < 9; ++j)
-      for (int i = 0; i < 10; ++i) {
-        const Vec3 a = Vec3(i + 0.5, j, k) * kVoxel;
-        for (int mk = 0; mk < 16; ++mk)
-          for (int mj = 0; mj < 16; ++mj)
-            for (int mi = 0; mi < 16; ++mi) {
-              if (mv->value(mi, mj, mk) <= 0.5) continue;
-              const Vec3 b = pose * (Vec3(mi, mj, mk) * 0.4 * kVoxel);
-              const double depth = 0.5 * std::sqrt(3.0) * 1.4 * kVoxel - (a - b).norm();
-              if (depth <= 0) continue;
-              ++pairs;
-              deepest = std::max(deepest, depth);
-            }
-      }
-  ASSERT_GT(pairs, 10u);
-  ASSERT_LT(pairs, 4096u);
-  EXPECT_EQ((*r)->contacts().size(), pairs);
-  EXPECT_NEAR((*r)->maxContactDepth(), deepest, 1e-12);
-  EXPECT_EQ((*r)->stackOverflows(), 0u);
+  for (const double slop : {-1.0, 0.0}) {
+    BonePlacementOptions o = testOptions();
+    o.slop = slop;
+    auto r = BonePlacementRenderer::create(treeOf(*fv), translation({0.0005, 0.0, 0.0}), treeOf(*mv), *mv, o);
+    ASSERT_TRUE(r.ok()) << r.error();
+    Isometry3 pose = translation({0.006, 0.005, 0.0065});
+    pose.linear() = AngleAxis(0.4, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+    (*r)->reset(pose);
+    (*r)->tick({.dt = 1e-3, .devicePose = pose});  // contacts are found before the pose moves
+    const double margin = 0.9 * (*r)->slop();
+    EXPECT_EQ((*r)->slop() > 0, slop < 0);
+    std::size_t pairs = 0;
+    double deepest = 0.0;
+    for (int k = 0; k < 8; ++k)
+      for (int j = 0; j < 9; ++j)
+        for (int i = 0; i < 10; ++i) {
+          const Vec3 a = Vec3(i + 0.5, j, k) * kVoxel;
+          for (int mk = 0; mk < 16; ++mk)
+            for (int mj = 0; mj < 16; ++mj)
+              for (int mi = 0; mi < 16; ++mi) {
+                if (mv->value(mi, mj, mk) <= 0.5) continue;
+                const Vec3 b = pose * (Vec3(mi, mj, mk) * 0.4 * kVoxel);
+                const double depth = 0.5 * std::sqrt(3.0) * 1.4 * kVoxel - (a - b).norm();
+                if (depth <= margin) continue;
+                ++pairs;
+                deepest = std::max(deepest, depth);
+              }
+        }
+    ASSERT_GT(pairs, 10u);
+    ASSERT_LT(pairs, 4096u);
+    EXPECT_EQ((*r)->contacts().size(), pairs) << "slop " << (*r)->slop();
+    EXPECT_NEAR((*r)->maxContactDepth(), deepest, 1e-12);
+    EXPECT_EQ((*r)->stackOverflows(), 0u);
+  }
 }
 
 TEST(BonePlacement, TickIsAllocationFree) {

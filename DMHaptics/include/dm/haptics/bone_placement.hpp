@@ -5,15 +5,19 @@
 // a dynamic rigid body held by a virtual coupling to the device pose.
 //
 // Collision. The two implicit trees are descended simultaneously (the
-// moving tree mapped into the fixed tree's frame by the relative pose): a
-// pair of cells is kept while their spheres overlap; only occupied cells
-// are visited (ImplicitSphereTree::occupied); the node with the larger
-// sphere is split first, and when it is more than 4× larger than the other
-// it skips a level (its 64 grandchildren are tested at once). The stack is
-// fixed-size. Overlapping leaf (voxel) spheres give contact pairs with
-// normal n = (c_moving − c_fixed)/|…| (world, pointing toward the moving
-// fragment) and depth r1 + r2 − |c_moving − c_fixed|; the deepest
-// `maxContacts` are kept.
+// moving tree mapped into the fixed tree's frame by the relative pose, each
+// level's cell spheres an affine function of the cell index set up once a
+// tick): a pair of cells is kept while their spheres overlap by more than
+// 0.9·slop (below: only leaf pairs that deep act, and a leaf lies within
+// R − r of its ancestor's centre, so shallower cell pairs hold none); only
+// occupied cells are visited (ImplicitSphereTree::occupied); the node with
+// the larger sphere is split first, and when it is more than 4× larger than
+// the other it skips a level (its 64 grandchildren are tested at once); the
+// last two levels are tested leaf block against leaf block. The stack is
+// fixed-size. Leaf (voxel) spheres overlapping by more than 0.9·slop give
+// contact pairs with normal n = (c_moving − c_fixed)/|…| (world, pointing
+// toward the moving fragment) and depth r1 + r2 − |c_moving − c_fixed|; the
+// deepest `maxContacts` are kept.
 //
 // Response, per tick of dt (Guendelman et al. 2003, Mirtich 1996 style):
 //   1. the coupling (linear k_c, b_c on the centre of mass's offset from the
@@ -23,8 +27,8 @@
 //   2. contacts are found at the current pose, and `iterations`
 //      Gauss–Seidel passes of normal impulses (restitution 0, accumulated
 //      impulses clamped ≥ 0) remove the approaching normal velocity
-//      n·(v + ω×r) < 0 of every kept pair deeper than 0.9·slop (shallower
-//      pairs are the resting overlap of touching voxels, below); pairs
+//      n·(v + ω×r) < 0 of every kept pair (all deeper than 0.9·slop:
+//      shallower ones are the resting overlap of touching voxels); pairs
 //      deeper than the slop are also pushed out by split impulses (Catto):
 //      a second Gauss–Seidel solve for a pseudo-velocity with target speed
 //      β·(depth − slop)/dt, used for this tick's pose update only;
@@ -43,7 +47,8 @@
 // Leaf spheres of face-adjacent voxels already overlap (r1 + r2 − h > 0 for
 // voxel spacing h): that overlap is the default slop, so voxel faces that
 // touch are in resting contact, and pairs overlapping less (diagonal
-// neighbours, a gap between the faces) do not resist. The union of leaf
+// neighbours, a gap between the faces) do not resist and are not contacts.
+// The union of leaf
 // spheres is bumpy with period h, so a fragment sliding on a face feels
 // (and rests on) bumps: frictionless, but the normal tilts by up to ~40°.
 // Impulses are only as good as the kept pairs: keep maxContacts above the
@@ -199,9 +204,10 @@ class BonePlacementRenderer final : public HapticRenderer {
   const Vec3& fragmentAngularVelocity() const noexcept { return angularVelocity_; }
   /// Mass properties in use (inertia about the centre of mass, fragment frame).
   const VoxelMassProperties& massProperties() const noexcept { return massProps_; }
-  /// Contact pairs found by the last tick (deepest first is not guaranteed).
+  /// Contact pairs found by the last tick: leaf pairs overlapping by more
+  /// than 0.9·slop(), the ones that act (deepest first is not guaranteed).
   std::span<const BoneContact> contacts() const noexcept { return {contacts_.data(), contactCount_}; }
-  /// Largest depth of the last tick's pairs (m), 0 without contact.
+  /// Largest depth of the last tick's pairs (m), 0 without one.
   double maxContactDepth() const noexcept { return maxDepth_; }
   /// Pairs dropped since create() because the traversal stack was full.
   std::uint64_t stackOverflows() const noexcept { return stackOverflows_; }
