@@ -131,6 +131,7 @@ Result<std::unique_ptr<BonePlacementRenderer>> BonePlacementRenderer::create(
   }
   r->stack_.resize(options.stackCapacity);
   r->contacts_.resize(static_cast<std::size_t>(options.maxContacts));
+  r->rows_.resize(r->contacts_.size());
   r->reset(Isometry3::Identity());
   return r;
 }
@@ -336,7 +337,16 @@ void BonePlacementRenderer::solveContacts(double dt, Vec3& pseudoVelocity, Vec3&
   const Mat3 rot = orientation_.toRotationMatrix();
   const Mat3 inertiaInv = rot * inertiaBodyInverse_ * rot.transpose();
   const double invMass = 1.0 / massProps_.mass;
-  for (std::size_t i = 0; i < contactCount_; ++i) contacts_[i].impulse = contacts_[i].correction = 0.0;
+  // Each pair's lever arm, angular response and effective mass hold for the
+  // whole tick (the pose moves after the solve).
+  for (std::size_t i = 0; i < contactCount_; ++i) {
+    BoneContact& c = contacts_[i];
+    c.impulse = c.correction = 0.0;
+    SolverRow& row = rows_[i];
+    row.r = c.point - position_;
+    row.angular = inertiaInv * row.r.cross(c.normal);
+    row.effMass = 1.0 / (invMass + row.r.cross(c.normal).dot(row.angular));
+  }
   // Pass 0: velocity impulses (restitution 0); pass 1: split impulses that
   // push out the depth beyond the slop through a pseudo-velocity used for
   // this tick's pose update only, so the correction adds no momentum.
@@ -352,15 +362,13 @@ void BonePlacementRenderer::solveContacts(double dt, Vec3& pseudoVelocity, Vec3&
         if (c.depth <= (pass == 0 ? 0.9 * slop_ : slop_)) continue;
         double& accumulated = pass == 0 ? c.impulse : c.correction;
         const double target = pass == 0 ? 0.0 : options_.baumgarte * std::max(0.0, c.depth - slop_) / dt;
-        const Vec3 r = c.point - position_;
-        const Vec3 angular = inertiaInv * r.cross(c.normal);
-        const double effMass = 1.0 / (invMass + r.cross(c.normal).dot(angular));
-        const double vn = c.normal.dot(v + w.cross(r));
-        const double next = std::max(0.0, accumulated + effMass * (target - vn));
+        const SolverRow& row = rows_[i];
+        const double vn = c.normal.dot(v + w.cross(row.r));
+        const double next = std::max(0.0, accumulated + row.effMass * (target - vn));
         const double delta = next - accumulated;
         accumulated = next;
         v += (delta * invMass) * c.normal;
-        w += delta * angular;
+        w += delta * row.angular;
       }
     }
   }

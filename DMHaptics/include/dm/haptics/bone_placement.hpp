@@ -240,6 +240,12 @@ class BonePlacementRenderer final : public HapticRenderer {
   // Per-tick buffers sized by create().
   std::vector<Pair> stack_;
   std::vector<BoneContact> contacts_;
+  struct SolverRow {  // per contact, fixed for a tick's solve
+    Vec3 r;           // lever arm from the centre of mass, world
+    Vec3 angular;     // I⁻¹ (r × n)
+    double effMass;   // 1 / (1/m + (r × n)·I⁻¹(r × n))
+  };
+  std::vector<SolverRow> rows_;  // sized with contacts_
   std::size_t contactCount_ = 0;
   double maxDepth_ = 0.0;
   std::uint64_t stackOverflows_ = 0;
