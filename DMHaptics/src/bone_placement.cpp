@@ -209,7 +209,11 @@ struct LevelMap {
   Mat3 a;
   Vec3 b;
   double r;
-  Vec3 centre(int i, int j, int k) const noexcept { return a * Vec3(i, j, k) + b; }
+  Vec3 centre(int i, int j, int k) const noexcept {
+    const double x = i, y = j, z = k;
+    return {a(0, 0) * x + a(0, 1) * y + a(0, 2) * z + b.x(), a(1, 0) * x + a(1, 1) * y + a(1, 2) * z + b.y(),
+            a(2, 0) * x + a(2, 1) * y + a(2, 2) * z + b.z()};
+  }
 };
 using LevelMaps = std::array<LevelMap, ImplicitSphereTree::kMaxDepth + 1>;
 
@@ -225,18 +229,23 @@ void mapLevels(const ImplicitSphereTree& tree, const Isometry3& pose, LevelMaps&
   }
 }
 
-// The occupied leaf cells under cell (l, i, j, k) of `tree`, l ≥ depth − 1:
-// the cell itself at the leaf level, else its occupied children (≤ 8).
-int leafCells(const ImplicitSphereTree& tree, int l, int i, int j, int k,
-              std::array<Vec3i, 8>& out) noexcept {
+// The occupied leaf cells under cell (l, i, j, k) of `tree` (l ≥ depth − 1)
+// whose spheres come closer than `reach` to `other` (the other block's
+// centre; reach = r_leaf + R_other − margin): the cell itself at the leaf
+// level, else its occupied children (≤ 8). Their centres go to `centres`.
+int leafCells(const ImplicitSphereTree& tree, const LevelMap& leaf, int l, int i, int j, int k,
+              const Vec3& other, double reach, std::array<Vec3, 8>& centres) noexcept {
+  const auto near = [&](const Vec3& c) { return (c - other).squaredNorm() < reach * reach; };
   if (l == tree.depth()) {
-    out[0] = Vec3i(i, j, k);
-    return 1;
+    centres[0] = leaf.centre(i, j, k);
+    return near(centres[0]) ? 1 : 0;
   }
   int n = 0;
-  for (int q = 0; q < 8; ++q) {
-    const int ci = 2 * i + (q & 1), cj = 2 * j + ((q >> 1) & 1), ck = 2 * k + ((q >> 2) & 1);
-    if (tree.occupied(l + 1, ci, cj, ck)) out[static_cast<std::size_t>(n++)] = Vec3i(ci, cj, ck);
+  const unsigned mask = tree.childMask(l, i, j, k);
+  for (unsigned q = 0; q < 8; ++q) {
+    if (!(mask >> q & 1u)) continue;
+    const Vec3 c = leaf.centre(2 * i + int(q & 1u), 2 * j + int(q >> 1 & 1u), 2 * k + int(q >> 2 & 1u));
+    if (near(c)) centres[static_cast<std::size_t>(n++)] = c;
   }
   return n;
 }
@@ -269,35 +278,31 @@ void BonePlacementRenderer::findContacts() noexcept {
   if (!overlap(mapF[0].b, mapF[0].r, mapM[0].b, mapM[0].r)) return;
   std::size_t top = 0;
   stack_[top++] = {tf.root(), tm.root()};
-  std::array<Vec3i, 8> cellsF, cellsM;
-  std::array<Vec3, 8> centresM;
+  std::array<Vec3, 8> centresF, centresM;
   while (top > 0) {
     const Pair p = stack_[--top];
     int lf = 0, fi = 0, fj = 0, fk = 0, lm = 0, mi = 0, mj = 0, mk = 0;
     ImplicitSphereTree::unpack(p.fixedNode, lf, fi, fj, fk);
     ImplicitSphereTree::unpack(p.movingNode, lm, mi, mj, mk);
-    if (lf >= depthF - 1 && lm >= depthM - 1) {
-      // Near the leaves: every occupied leaf under one against every one
-      // under the other, without going through the stack.
-      const LevelMap& leafF = mapF[static_cast<std::size_t>(depthF)];
-      const LevelMap& leafM = mapM[static_cast<std::size_t>(depthM)];
-      const int nf = leafCells(tf, lf, fi, fj, fk, cellsF);
-      const int nm = leafCells(tm, lm, mi, mj, mk, cellsM);
-      for (int b = 0; b < nm; ++b) {
-        const Vec3i& c = cellsM[static_cast<std::size_t>(b)];
-        centresM[static_cast<std::size_t>(b)] = leafM.centre(c.x(), c.y(), c.z());
-      }
-      for (int a = 0; a < nf; ++a) {
-        const Vec3i& c = cellsF[static_cast<std::size_t>(a)];
-        const Vec3 cf = leafF.centre(c.x(), c.y(), c.z());
-        for (int b = 0; b < nm; ++b)
-          if (overlap(cf, leafF.r, centresM[static_cast<std::size_t>(b)], leafM.r))
-            offerContact(cf, leafF.r, centresM[static_cast<std::size_t>(b)], leafM.r);
-      }
-      continue;
-    }
     const LevelMap& mf = mapF[static_cast<std::size_t>(lf)];
     const LevelMap& mm = mapM[static_cast<std::size_t>(lm)];
+    if (lf >= depthF - 1 && lm >= depthM - 1) {
+      // Near the leaves: the occupied leaves under one that come near the
+      // other's sphere against those of the other, without the stack.
+      const LevelMap& leafF = mapF[static_cast<std::size_t>(depthF)];
+      const LevelMap& leafM = mapM[static_cast<std::size_t>(depthM)];
+      const Vec3 cf = mf.centre(fi, fj, fk), cm = mm.centre(mi, mj, mk);
+      const int nf = leafCells(tf, leafF, lf, fi, fj, fk, cm, leafF.r + mm.r - margin, centresF);
+      if (nf == 0) continue;
+      const int nm = leafCells(tm, leafM, lm, mi, mj, mk, cf, leafM.r + mf.r - margin, centresM);
+      for (int a = 0; a < nf; ++a)
+        for (int b = 0; b < nm; ++b)
+          if (overlap(centresF[static_cast<std::size_t>(a)], leafF.r, centresM[static_cast<std::size_t>(b)],
+                      leafM.r))
+            offerContact(centresF[static_cast<std::size_t>(a)], leafF.r,
+                         centresM[static_cast<std::size_t>(b)], leafM.r);
+      continue;
+    }
     // Split the larger sphere (the only one left with children otherwise);
     // skip a level when it is much larger than the other.
     const bool splitFixed = lm == depthM || (lf < depthF && mf.r >= mm.r);
@@ -308,24 +313,32 @@ void BonePlacementRenderer::findContacts() noexcept {
     const double small = splitFixed ? mm.r : mf.r;
     const Vec3 other = splitFixed ? mm.centre(mi, mj, mk) : mf.centre(fi, fj, fk);
     const int skip = (big > 4.0 * small && leafLevel - level >= 2) ? 2 : 1;
-    const int n = 1 << skip;
-    const int bi = (splitFixed ? fi : mi) << skip;
-    const int bj = (splitFixed ? fj : mj) << skip;
-    const int bk = (splitFixed ? fk : mk) << skip;
     const int childLevel = level + skip;
     const LevelMap& mc = (splitFixed ? mapF : mapM)[static_cast<std::size_t>(childLevel)];
-    for (int k = bk; k < bk + n; ++k)
-      for (int j = bj; j < bj + n; ++j)
-        for (int i = bi; i < bi + n; ++i) {
-          if (!t.occupied(childLevel, i, j, k)) continue;
-          if (!overlap(mc.centre(i, j, k), mc.r, other, small)) continue;
-          if (top == stack_.size()) {
-            ++stackOverflows_;
-            continue;
-          }
-          const ImplicitSphereTree::NodeId child = ImplicitSphereTree::nodeId(childLevel, i, j, k);
-          stack_[top++] = splitFixed ? Pair{child, p.movingNode} : Pair{p.fixedNode, child};
-        }
+    const auto visit = [&](int i, int j, int k) {
+      if (!overlap(mc.centre(i, j, k), mc.r, other, small)) return;
+      if (top == stack_.size()) {
+        ++stackOverflows_;
+        return;
+      }
+      const ImplicitSphereTree::NodeId child = ImplicitSphereTree::nodeId(childLevel, i, j, k);
+      stack_[top++] = splitFixed ? Pair{child, p.movingNode} : Pair{p.fixedNode, child};
+    };
+    // The occupied children (or grandchildren) from the tree's child masks.
+    const int pi = splitFixed ? fi : mi, pj = splitFixed ? fj : mj, pk = splitFixed ? fk : mk;
+    const unsigned mask = t.childMask(level, pi, pj, pk);
+    for (unsigned q = 0; q < 8; ++q) {
+      if (!(mask >> q & 1u)) continue;
+      const int ci = 2 * pi + int(q & 1u), cj = 2 * pj + int(q >> 1 & 1u), ck = 2 * pk + int(q >> 2 & 1u);
+      if (skip == 1) {
+        visit(ci, cj, ck);
+        continue;
+      }
+      const unsigned grand = t.childMask(level + 1, ci, cj, ck);
+      for (unsigned g = 0; g < 8; ++g)
+        if (grand >> g & 1u)
+          visit(2 * ci + int(g & 1u), 2 * cj + int(g >> 1 & 1u), 2 * ck + int(g >> 2 & 1u));
+    }
   }
   for (std::size_t i = 0; i < contactCount_; ++i) maxDepth_ = std::max(maxDepth_, contacts_[i].depth);
 }

@@ -332,6 +332,31 @@ class ImplicitSphereTree final : public SphereHierarchy {
     const std::size_t b = bitIndex(level, i, j, k);
     return (bits_[static_cast<std::size_t>(level)][b / 64] >> (b % 64)) & 1u;
   }
+  /// The occupied children of cell (level, i, j, k): bit dx + 2·dy + 4·dz
+  /// is set when cell (2i + dx, 2j + dy, 2k + dz) of level + 1 is occupied;
+  /// 0 at the leaf level and outside the grid. O(1), one call where eight
+  /// occupied() would do (the simultaneous descents' inner loop).
+  std::uint8_t childMask(int level, int i, int j, int k) const noexcept {
+    if (level < 0 || level >= depth_) return 0;
+    const auto l = static_cast<std::size_t>(level + 1);
+    const Vec3i& n = levelDims_[l];
+    const int ci = 2 * i, cj = 2 * j, ck = 2 * k;
+    if (ci < 0 || cj < 0 || ck < 0 || ci >= n.x() || cj >= n.y() || ck >= n.z()) return 0;
+    const std::uint64_t* bits = bits_[l].data();
+    const auto bit = [bits](std::size_t x) { return static_cast<unsigned>((bits[x >> 6] >> (x & 63)) & 1u); };
+    const std::size_t b = bitIndex(level + 1, ci, cj, ck);
+    const std::size_t sy = static_cast<std::size_t>(n.x());
+    const std::size_t sz = sy * static_cast<std::size_t>(n.y());
+    const bool x1 = ci + 1 < n.x(), y1 = cj + 1 < n.y(), z1 = ck + 1 < n.z();
+    unsigned m = bit(b);
+    if (x1) m |= bit(b + 1) << 1;
+    if (y1) m |= bit(b + sy) << 2 | (x1 ? bit(b + sy + 1) << 3 : 0u);
+    if (z1) {
+      m |= bit(b + sz) << 4 | (x1 ? bit(b + sz + 1) << 5 : 0u);
+      if (y1) m |= bit(b + sz + sy) << 6 | (x1 ? bit(b + sz + sy + 1) << 7 : 0u);
+    }
+    return static_cast<std::uint8_t>(m);
+  }
   /// Sphere of cell (level, i, j, k): the cell spans voxel indices
   /// [i·s − ½, (i+1)·s − ½] (s = 2^(D − level), likewise j, k); centre = the
   /// affine image of the box centre, radius = half the longest of the four
