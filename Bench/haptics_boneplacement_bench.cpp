@@ -4,12 +4,14 @@
 // and the collision query of the same poses done with FCL 0.7 on octomap
 // octrees of the same voxels.
 //
-//   haptics_boneplacement_bench [spacing_m] [ticks] [fclStride]
+//   haptics_boneplacement_bench [spacing_m] [ticks] [fclStride] [contactLevel]
 //
 // Defaults: spacing 0.00025 m (fixed fragment 171k voxels, moving 175k;
 // the scene examples/scenes/osteotomy.json uses 0.0005 m, 22k each), 3700
 // ticks (the whole hand path; more ticks hold the final pose), fclStride 1
-// (the FCL row replays every pose; n: every n-th, ending at the last).
+// (the FCL row replays every pose; n: every n-th, ending at the last),
+// contactLevel 0 (BonePlacementOptions::contactLevel: 1 makes cells of 2³
+// voxels the contact elements; FCL's octree query is the same either way).
 // Data: the generated calvarium CT phantom (dm::makeCalvariumPhantom,
 // half width 16 mm, 2 mm above and 9 mm below the apex) segmented as the
 // osteotomy scene does, through dm::makeSceneSegment: value > 300 HU inside
@@ -171,6 +173,7 @@ int main(int argc, char** argv) {
   const double spacing = argc > 1 ? std::atof(argv[1]) : 0.00025;
   const int ticks = argc > 2 ? std::max(100, std::atoi(argv[2])) : 3700;
   const int stride = argc > 3 ? std::max(1, std::atoi(argv[3])) : 1;
+  const int contactLevel = argc > 4 ? std::clamp(std::atoi(argv[4]), 0, 4) : 0;
   if (!(spacing >= 5e-5 && spacing <= 2e-3)) {
     std::fprintf(stderr, "spacing %g m outside [5e-5, 2e-3]\n", spacing);
     return 1;
@@ -201,6 +204,7 @@ int main(int argc, char** argv) {
   }
   dm::BonePlacementOptions options;
   options.maxContacts = 4096;
+  options.contactLevel = contactLevel;
   options.threshold = 0.5;
   auto ren =
       dm::BonePlacementRenderer::create(*fixedTree, Isometry3::Identity(), *movingTree, *movingVol, options);

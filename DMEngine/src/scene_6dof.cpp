@@ -150,6 +150,7 @@ Result<SceneBonePlacementTool> buildSceneBonePlacement(const SceneDesc& scene,
   opt.threshold = b.threshold;
   opt.maxContacts = b.maxContacts;
   opt.iterations = b.iterations;
+  opt.contactLevel = b.contactLevel;
   opt.slop = b.slop;
   opt.baumgarte = b.baumgarte;
   // The engine's max_force clamps here; without one the haptic loop clamps

@@ -28,6 +28,8 @@ Status checkOptions(const BonePlacementOptions& o) {
        "between 1 and 4096"},
       {"iterations", static_cast<double>(o.iterations), o.iterations >= 1 && o.iterations <= 100,
        "between 1 and 100"},
+      {"contactLevel", static_cast<double>(o.contactLevel), o.contactLevel >= 0 && o.contactLevel <= 4,
+       "between 0 (voxels) and 4 (cells of 16^3 voxels)"},
       {"slop", o.slop, finite(o.slop), "finite (negative: automatic)"},
       {"baumgarte", o.baumgarte, finite(o.baumgarte) && o.baumgarte >= 0 && o.baumgarte <= 1, "in [0, 1]"},
       {"maxForce", o.maxForce, !std::isnan(o.maxForce) && o.maxForce > 0, "> 0 N (infinity allowed)"},
@@ -121,12 +123,14 @@ Result<std::unique_ptr<BonePlacementRenderer>> BonePlacementRenderer::create(
     r->massProps_.mass = options.mass;
   }
   r->inertiaBodyInverse_ = r->massProps_.inertia.inverse();
+  r->contactDepthF_ = std::max(0, r->fixed_->depth() - options.contactLevel);
+  r->contactDepthM_ = std::max(0, r->moving_->depth() - options.contactLevel);
   if (options.slop >= 0) {
     r->slop_ = options.slop;
   } else {
-    const double rf = r->fixed_->cellSphere(r->fixed_->depth(), 0, 0, 0).radius;
-    const double rm = r->moving_->cellSphere(r->moving_->depth(), 0, 0, 0).radius;
-    // Cubic voxels: leaf radius = h·√3/2; face neighbours are the smaller h apart.
+    const double rf = r->fixed_->cellSphere(r->contactDepthF_, 0, 0, 0).radius;
+    const double rm = r->moving_->cellSphere(r->contactDepthM_, 0, 0, 0).radius;
+    // Cubic cells: radius = h·√3/2; face neighbours are the smaller h apart.
     r->slop_ = std::max(0.0, rf + rm - 2.0 * std::min(rf, rm) / std::sqrt(3.0));
   }
   r->stack_.resize(options.stackCapacity);
@@ -229,26 +233,42 @@ void mapLevels(const ImplicitSphereTree& tree, const Isometry3& pose, LevelMaps&
   }
 }
 
-// The occupied leaf cells under cell (l, i, j, k) of `tree` (l ≥ depth − 1)
-// whose spheres come closer than `reach` to `other` (the other block's
-// centre; reach = r_leaf + R_other − margin): the cell itself at the leaf
-// level, else its occupied children (≤ 8). Their centres go to `centres`.
-int leafCells(const ImplicitSphereTree& tree, const LevelMap& leaf, int l, int i, int j, int k,
-              const Vec3& other, double reach, std::array<Vec3, 8>& centres) noexcept {
-  const auto near = [&](const Vec3& c) { return (c - other).squaredNorm() < reach * reach; };
-  if (l == tree.depth()) {
-    centres[0] = leaf.centre(i, j, k);
-    return near(centres[0]) ? 1 : 0;
+// The occupied contact cells under one cell of a tree at the contact level
+// or the one above (the cell itself, or its occupied children: ≤ 8), with
+// their centres. The descent meets the same cell with several partners in a
+// row (a split pushes one side's children against the same other node), so
+// the last cell's are kept.
+struct BlockCells {
+  ImplicitSphereTree::NodeId node = ~ImplicitSphereTree::NodeId{0};
+  int count = 0;
+  std::array<Vec3, 8> centres;
+
+  void fill(const ImplicitSphereTree& tree, int contactDepth, const LevelMap& leaf,
+            ImplicitSphereTree::NodeId id, int l, int i, int j, int k) noexcept {
+    if (id == node) return;
+    node = id;
+    count = 0;
+    if (l == contactDepth) {
+      centres[0] = leaf.centre(i, j, k);
+      count = 1;
+      return;
+    }
+    const unsigned mask = tree.childMask(l, i, j, k);
+    for (unsigned q = 0; q < 8; ++q)
+      if (mask >> q & 1u)
+        centres[static_cast<std::size_t>(count++)] =
+            leaf.centre(2 * i + int(q & 1u), 2 * j + int(q >> 1 & 1u), 2 * k + int(q >> 2 & 1u));
   }
-  int n = 0;
-  const unsigned mask = tree.childMask(l, i, j, k);
-  for (unsigned q = 0; q < 8; ++q) {
-    if (!(mask >> q & 1u)) continue;
-    const Vec3 c = leaf.centre(2 * i + int(q & 1u), 2 * j + int(q >> 1 & 1u), 2 * k + int(q >> 2 & 1u));
-    if (near(c)) centres[static_cast<std::size_t>(n++)] = c;
+  // Those closer than `reach` to `other` into `out`; their number.
+  int near(const Vec3& other, double reach, std::array<Vec3, 8>& out) const noexcept {
+    int n = 0;
+    for (int q = 0; q < count; ++q) {
+      const Vec3& c = centres[static_cast<std::size_t>(q)];
+      if ((c - other).squaredNorm() < reach * reach) out[static_cast<std::size_t>(n++)] = c;
+    }
+    return n;
   }
-  return n;
-}
+};
 
 }  // namespace
 
@@ -259,8 +279,9 @@ void BonePlacementRenderer::findContacts() noexcept {
   movingToFixed_ = fixedPose_.inverse(Eigen::Isometry) * fragmentPose();
   const ImplicitSphereTree& tf = *fixed_;
   const ImplicitSphereTree& tm = *moving_;
-  const int depthF = tf.depth();
-  const int depthM = tm.depth();
+  // The contact level: the voxels, or cells `contactLevel` levels above them.
+  const int depthF = contactDepthF_;
+  const int depthM = contactDepthM_;
   LevelMaps mapF, mapM;
   mapLevels(tf, Isometry3::Identity(), mapF);
   mapLevels(tm, movingToFixed_, mapM);
@@ -279,6 +300,7 @@ void BonePlacementRenderer::findContacts() noexcept {
   std::size_t top = 0;
   stack_[top++] = {tf.root(), tm.root()};
   std::array<Vec3, 8> centresF, centresM;
+  BlockCells blockF, blockM;
   while (top > 0) {
     const Pair p = stack_[--top];
     int lf = 0, fi = 0, fj = 0, fk = 0, lm = 0, mi = 0, mj = 0, mk = 0;
@@ -292,9 +314,11 @@ void BonePlacementRenderer::findContacts() noexcept {
       const LevelMap& leafF = mapF[static_cast<std::size_t>(depthF)];
       const LevelMap& leafM = mapM[static_cast<std::size_t>(depthM)];
       const Vec3 cf = mf.centre(fi, fj, fk), cm = mm.centre(mi, mj, mk);
-      const int nf = leafCells(tf, leafF, lf, fi, fj, fk, cm, leafF.r + mm.r - margin, centresF);
+      blockF.fill(tf, depthF, leafF, p.fixedNode, lf, fi, fj, fk);
+      const int nf = blockF.near(cm, leafF.r + mm.r - margin, centresF);
       if (nf == 0) continue;
-      const int nm = leafCells(tm, leafM, lm, mi, mj, mk, cf, leafM.r + mf.r - margin, centresM);
+      blockM.fill(tm, depthM, leafM, p.movingNode, lm, mi, mj, mk);
+      const int nm = blockM.near(cf, leafM.r + mf.r - margin, centresM);
       for (int a = 0; a < nf; ++a)
         for (int b = 0; b < nm; ++b)
           if (overlap(centresF[static_cast<std::size_t>(a)], leafF.r, centresM[static_cast<std::size_t>(b)],

@@ -11,8 +11,8 @@ bool SceneBonePlacement::operator==(const SceneBonePlacement& o) const {
   return fragment == o.fragment && threshold == o.threshold && couplingStiffness == o.couplingStiffness &&
          couplingDamping == o.couplingDamping && couplingAngularStiffness == o.couplingAngularStiffness &&
          couplingAngularDamping == o.couplingAngularDamping && mass == o.mass && density == o.density &&
-         maxContacts == o.maxContacts && iterations == o.iterations && slop == o.slop &&
-         baumgarte == o.baumgarte && maxTorque == o.maxTorque && target.p == o.target.p &&
+         maxContacts == o.maxContacts && iterations == o.iterations && contactLevel == o.contactLevel &&
+         slop == o.slop && baumgarte == o.baumgarte && maxTorque == o.maxTorque && target.p == o.target.p &&
          target.q.coeffs() == o.target.q.coeffs();
 }
 
@@ -133,7 +133,7 @@ void readBonePlacement(ConfigReader& haptics, SceneHapticsEngine& h) {
   if (!expectObject(r)) return;
   r.knownKeys({"fragment", "threshold", "coupling_stiffness", "coupling_damping",
                "coupling_angular_stiffness", "coupling_angular_damping", "mass", "density", "max_contacts",
-               "iterations", "slop", "baumgarte", "max_torque", "target_pose"});
+               "contact_level", "iterations", "slop", "baumgarte", "max_torque", "target_pose"});
   SceneBonePlacement b;
   b.fragment = r.string("fragment");
   b.threshold = r.number("threshold", {}, b.threshold);
@@ -146,6 +146,7 @@ void readBonePlacement(ConfigReader& haptics, SceneHapticsEngine& h) {
   b.density = readPositive(r, "density", b.density, 1e5);
   b.maxContacts = static_cast<int>(r.integer("max_contacts", {.min = 1, .max = 4096}, b.maxContacts));
   b.iterations = static_cast<int>(r.integer("iterations", {.min = 1, .max = 100}, b.iterations));
+  b.contactLevel = static_cast<int>(r.integer("contact_level", {.min = 0, .max = 4}, b.contactLevel));
   if (r.has("slop")) b.slop = r.number("slop", {.min = 0.0, .max = 0.01});
   b.baumgarte = r.number("baumgarte", {.min = 0.0, .max = 1.0}, b.baumgarte);
   b.maxTorque = readPositive(r, "max_torque", b.maxTorque, 100.0);
@@ -239,6 +240,7 @@ void writeBonePlacement(const SceneBonePlacement& b, Json& haptics) {
             {"density", b.density},
             {"max_contacts", b.maxContacts},
             {"iterations", b.iterations},
+            {"contact_level", b.contactLevel},
             {"baumgarte", b.baumgarte},
             {"max_torque", b.maxTorque},
             {"target_pose", toJson(b.target)}};

@@ -239,6 +239,88 @@ TEST(BonePlacement, TreeDescentFindsExactlyTheVoxelSpheresOverlappingBeyondTheSl
   }
 }
 
+TEST(BonePlacement, CoarserContactLevelFindsExactlyTheCellPairsOverlappingBeyondTheSlop) {
+  // contactLevel 1: the contact elements are the trees' cells one level up
+  // (2³ voxels, occupied when any voxel is), brute-forced over the trees'
+  // own cells; the slop is then the resting overlap of face-adjacent cells.
+  auto fv = Volume::create(Vec3i(12, 12, 12), VoxelType::U8, Affine3(Eigen::Scaling(kVoxel)));
+  auto mv = Volume::create(Vec3i(16, 16, 16), VoxelType::U8, Affine3(Eigen::Scaling(0.4 * kVoxel)));
+  ASSERT_TRUE(fv.ok() && mv.ok());
+  for (int k = 0; k < 12; ++k)
+    for (int j = 0; j < 12; ++j)
+      for (int i = 0; i < 12; ++i) fv->setValue(i, j, k, i < 10 && j < 9 && k < 7 ? 1 : 0);
+  for (int k = 0; k < 16; ++k)
+    for (int j = 0; j < 16; ++j)
+      for (int i = 0; i < 16; ++i)
+        mv->setValue(i, j, k, (Vec3(i, j, k) - Vec3::Constant(7.5)).norm() < 7.0 ? 1 : 0);
+  const auto ft = treeOf(*fv), mt = treeOf(*mv);
+  BonePlacementOptions o = testOptions();
+  o.contactLevel = 1;
+  const Isometry3 fixedPose = translation({0.0005, 0.0, 0.0});
+  auto r = BonePlacementRenderer::create(ft, fixedPose, mt, *mv, o);
+  ASSERT_TRUE(r.ok()) << r.error();
+  const int lf = ft->depth() - 1, lm = mt->depth() - 1;
+  const double rf = ft->cellSphere(lf, 0, 0, 0).radius, rm = mt->cellSphere(lm, 0, 0, 0).radius;
+  EXPECT_NEAR(rf, std::sqrt(3.0) * kVoxel, 1e-15);
+  EXPECT_NEAR((*r)->slop(), rf + rm - 2 * std::min(rf, rm) / std::sqrt(3.0), 1e-15);
+  Isometry3 pose = translation({0.006, 0.005, 0.0060});
+  pose.linear() = AngleAxis(0.4, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  (*r)->reset(pose);
+  (*r)->tick({.dt = 1e-3, .devicePose = pose});
+  const double margin = 0.9 * (*r)->slop();
+  std::size_t pairs = 0;
+  double deepest = 0.0;
+  const int nf = 1 << lf, nm = 1 << lm;
+  for (int k = 0; k < nf; ++k)
+    for (int j = 0; j < nf; ++j)
+      for (int i = 0; i < nf; ++i) {
+        if (!ft->occupied(lf, i, j, k)) continue;
+        const Vec3 a = fixedPose * ft->cellSphere(lf, i, j, k).center;
+        for (int mk = 0; mk < nm; ++mk)
+          for (int mj = 0; mj < nm; ++mj)
+            for (int mi = 0; mi < nm; ++mi) {
+              if (!mt->occupied(lm, mi, mj, mk)) continue;
+              const double depth = rf + rm - (a - pose * mt->cellSphere(lm, mi, mj, mk).center).norm();
+              if (depth <= margin) continue;
+              ++pairs;
+              deepest = std::max(deepest, depth);
+            }
+      }
+  ASSERT_GT(pairs, 5u);
+  EXPECT_EQ((*r)->contacts().size(), pairs);
+  EXPECT_NEAR((*r)->maxContactDepth(), deepest, 1e-12);
+}
+
+TEST(BonePlacement, AtACoarserContactLevelThePushedBoxStillStopsAndTheUserFeelsTheCoupling) {
+  // Cells of 2³ voxels: the 20 mm box's faces are whole cells, so it stops
+  // on the face as at the voxel level (within a cell's sphere), and at rest
+  // the user feels −k·offset, which the contact holds. The cell spheres'
+  // bumps are twice the voxels' (2 mm period): the device, 0.3 mm off a
+  // bump's top, lets the fragment slide toward the valley until the
+  // coupling's sideways pull balances the bump's slope, so the force tilts
+  // (here about 33°; at most the ~40° of the bumps' slope).
+  const Boxes boxes;
+  BonePlacementOptions o = testOptions();
+  o.contactLevel = 1;
+  auto r = boxes.make(o);
+  const Isometry3 start = translation({0.0003, -0.0002, 0.025});
+  const Isometry3 pressed = translation({0.0003, -0.0002, 0.018});
+  r->reset(start);
+  double worst = 0.0;
+  const HapticResponse out = drive(*r, start, pressed, 250, 350, [&](const HapticResponse& resp) {
+    worst = std::max(worst, 19.5 * kVoxel - (resp.proxyPose.translation().z() - 0.5 * kVoxel));
+  });
+  EXPECT_LE(worst, std::sqrt(3.0) * kVoxel) << "the fragment sank into the fixed box";
+  EXPECT_GT(out.contacts, 0);
+  const Vec3 offset = pressed.translation() - out.proxyPose.translation();
+  const double k = r->options().couplingStiffness;
+  EXPECT_GT(offset.norm(), 1e-3);
+  EXPECT_LT((out.force + k * offset).norm(), 0.01 * k * offset.norm());
+  EXPECT_GT(out.force.normalized().z(), std::cos(45.0 * std::numbers::pi / 180));
+  EXPECT_GT(out.force.normalized().dot(contactForce(*r).normalized()), 0.999);
+  EXPECT_LT(r->fragmentVelocity().norm(), 1e-3);
+}
+
 TEST(BonePlacement, TickIsAllocationFree) {
   const Boxes boxes;
   auto r = boxes.make();
@@ -325,6 +407,10 @@ TEST(BonePlacement, CreateNamesTheBadField) {
   o = testOptions();
   o.density = std::nan("");
   EXPECT_NE(whereOf(boxes.tree, id, boxes.tree, boxes.box, o).find("options.density"), std::string::npos);
+  o = testOptions();
+  o.contactLevel = 5;
+  EXPECT_NE(whereOf(boxes.tree, id, boxes.tree, boxes.box, o).find("options.contactLevel"),
+            std::string::npos);
 }
 
 }  // namespace

@@ -152,6 +152,7 @@ TEST(SceneBoneFile, TheKeysRoundTrip) {
       {"mass", 0.01},
       {"density", 1800},
       {"max_contacts", 2048},
+      {"contact_level", 1},
       {"iterations", 12},
       {"slop", 0.0002},
       {"baumgarte", 0.3},
@@ -164,6 +165,7 @@ TEST(SceneBoneFile, TheKeysRoundTrip) {
   const dm::SceneBonePlacement& b = *a.engines.haptics->bonePlacement;
   EXPECT_EQ(b.maxContacts, 2048);
   EXPECT_EQ(b.slop, 0.0002);
+  EXPECT_EQ(b.contactLevel, 1);
   EXPECT_EQ(a.resource("c")->segment->select, dm::SceneSegment::Select::Label);
   EXPECT_EQ(a.resource("c")->segment->value, 3.0);
   EXPECT_EQ(a.object("fixed")->voxels->volume, "a");

@@ -336,7 +336,7 @@ class ImplicitSphereTree final : public SphereHierarchy {
   /// is set when cell (2i + dx, 2j + dy, 2k + dz) of level + 1 is occupied;
   /// 0 at the leaf level and outside the grid. O(1), one call where eight
   /// occupied() would do (the simultaneous descents' inner loop).
-  std::uint8_t childMask(int level, int i, int j, int k) const noexcept {
+  [[gnu::always_inline]] std::uint8_t childMask(int level, int i, int j, int k) const noexcept {
     if (level < 0 || level >= depth_) return 0;
     const auto l = static_cast<std::size_t>(level + 1);
     const Vec3i& n = levelDims_[l];

@@ -97,9 +97,16 @@ struct BonePlacementOptions {
   /// truncated set of equally deep pairs leaves directions unconstrained.
   int maxContacts = 1024;
   int iterations = 8;  ///< Gauss–Seidel passes over the contacts, 1..100
+  /// Levels above the voxels whose cells are the contact elements, 0..4:
+  /// 0 the voxels; 1 cells of 2³ voxels (occupied when any voxel is), a
+  /// quarter of the pairs and a coarser, up to a cell fuller surface; the
+  /// mass properties stay the voxels'. For fragments too fine for the
+  /// haptic rate (docs/performance.md, "Bone placement").
+  int contactLevel = 0;
   /// m: overlap of leaf spheres treated as touching: pairs deeper than
   /// 0.9·slop stop approach, the depth beyond it is pushed out; negative =
-  /// the resting overlap of face-adjacent voxels (see the file comment).
+  /// the resting overlap of face-adjacent voxels (of face-adjacent contact
+  /// cells with contactLevel > 0; see the file comment).
   double slop = -1.0;
   double baumgarte = 0.2;            ///< β in [0, 1]: fraction of depth − slop removed per tick
   double maxForce = 20.0;            ///< N, > 0 (∞ allowed): clamp of the force to the user
@@ -232,6 +239,8 @@ class BonePlacementRenderer final : public HapticRenderer {
   VoxelMassProperties massProps_;
   Mat3 inertiaBodyInverse_ = Mat3::Identity();
   double slop_ = 0.0;
+  int contactDepthF_ = 0;  // the trees' contact levels: depth − contactLevel (≥ 0)
+  int contactDepthM_ = 0;
   // State: centre of mass (world), orientation, velocities (world).
   Vec3 position_ = Vec3::Zero();
   Quat orientation_ = Quat::Identity();

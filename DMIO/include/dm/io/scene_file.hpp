@@ -507,6 +507,7 @@ struct SceneBonePlacement {
   double density = 1900.0;                ///< kg/m³, > 0 (cortical bone)
   int maxContacts = 1024;                 ///< 1..4096 deepest voxel pairs kept per tick
   int iterations = 8;                     ///< 1..100 Gauss–Seidel passes
+  int contactLevel = 0;                   ///< 0..4: levels above the voxels whose cells touch (0: voxels)
   double slop = -1.0;      ///< m, ≥ 0 ("slop"); negative (not given): face-adjacent voxels' resting overlap
   double baumgarte = 0.2;  ///< 0..1
   double maxTorque = 1.0;  ///< N·m, > 0: torque to the hand
