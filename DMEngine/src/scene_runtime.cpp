@@ -72,8 +72,9 @@ Status checkDuration(const SceneRunOptions& options) {
 // render engine through a MillableSurfaceFeed); every tick's sample goes to
 // the monitor through an SPSC ring (the haptic thread never allocates,
 // locks or logs). With a physics engine, the loop applies the poses physics
-// published (its local model) and the god-object's reaction goes back as
-// impulses on the touched object.
+// published (its local model) and the tool's reaction goes back as impulses
+// on the touched objects: the god-object's at its contact point, a 6-DOF
+// tool's (VPS, sphere tree) as each object's wrench.
 class HapticsEngine final : public Engine {
  public:
   std::string_view name() const noexcept override { return "haptics"; }
@@ -99,6 +100,15 @@ class HapticsEngine final : public Engine {
         tools->add(c.object, -p.response.force, c.point, info.dt());
         tools->publish();
       }
+    } else if (tools != nullptr && (vps != nullptr || sphereTree != nullptr)) {
+      // A 6-DOF tool touches at many points: each object gets the wrench
+      // the renderer says the tool put on it this tick.
+      for (std::size_t k = 0; k < tools->size(); ++k) {
+        const Vec3 f = vps != nullptr ? vps->objectForce(k) : sphereTree->objectForce(k);
+        const Vec3 t = vps != nullptr ? vps->objectTorque(k) : sphereTree->objectTorque(k);
+        if (f.squaredNorm() > 0.0 || t.squaredNorm() > 0.0) tools->addWrench(k, f, t, info.dt());
+      }
+      tools->publish();
     }
     if (!ring.tryPush(p)) dropped.fetch_add(1, std::memory_order_relaxed);
     if (recorder) {
@@ -128,6 +138,8 @@ class HapticsEngine final : public Engine {
   HapticRenderer* active = nullptr;            // what the loop ticks: renderer, or the needle
   GodObjectRenderer* godObject = nullptr;  // = renderer (or inside it), when it is the god-object
   BurrRenderer* burr = nullptr;            // = renderer, when it is the burr
+  VpsRenderer* vps = nullptr;              // = renderer, when it is VPS
+  SphereTree6DofRenderer* sphereTree = nullptr;  // = renderer, when it is the sphere tree
   // The bone-placement renderer (owned by renderer) and what its summary
   // measures: the first tick's fragment pose, the deepest contact.
   struct {
@@ -384,6 +396,7 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   } else if (h.renderer == SceneHapticsEngine::Renderer::Vps) {
     auto v = buildSceneVps(scene, resources);
     if (!v) return v.error();
+    e->vps = v->get();
     e->renderer = std::move(*v);
   } else if (h.renderer == SceneHapticsEngine::Renderer::BonePlacement) {
     auto b = buildSceneBonePlacement(scene, resources);
@@ -395,6 +408,7 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   } else {
     auto t = buildSceneSphereTree(scene, resources);
     if (!t) return t.error();
+    e->sphereTree = t->get();
     e->renderer = std::move(*t);
   }
   const SceneDevice* dev = scene.device(h.device);
@@ -426,7 +440,9 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   if (!device) return device.error().within("devices/" + dev->name);
 
   e->device = std::move(*device);
-  e->tools = physics && e->godObject != nullptr ? physics->toolImpulses() : nullptr;
+  e->tools = physics && (e->godObject != nullptr || e->vps != nullptr || e->sphereTree != nullptr)
+                 ? physics->toolImpulses()
+                 : nullptr;
   HapticLoopConfig config;
   config.loop = {.rate_hz = h.rateHz, .name = "haptics"};
   config.deviceToWorld = h.devicePose.isometry();

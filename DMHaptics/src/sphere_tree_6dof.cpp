@@ -126,6 +126,7 @@ struct SphereTree6DofRenderer::State {
     double releaseForce = std::numeric_limits<double>::infinity();
     bool released = false;
     Vec3 force = Vec3::Zero();  // on the object in the last tick, world
+    Vec3 torque = Vec3::Zero();  // its moment about the world origin
   };
   std::vector<Object> objects;
 
@@ -505,7 +506,7 @@ struct SphereTree6DofRenderer::State {
   // the constraints' resultant). Soft objects take it on the node touched;
   // a bonded piece whose force exceeds its bond comes off.
   void shareForce(const Vec3& userForce, const Vec3& lambdaN) noexcept {
-    for (Object& o : objects) o.force = Vec3::Zero();
+    for (Object& o : objects) o.force = o.torque = Vec3::Zero();
     const double ln2 = lambdaN.squaredNorm();
     const double c = ln2 > 0.0 ? std::max(0.0, userForce.dot(lambdaN)) / ln2 : 0.0;
     if (c == 0.0) return;
@@ -513,8 +514,12 @@ struct SphereTree6DofRenderer::State {
       if (!rowActive[i] || rowLambda[i] <= 0.0) continue;
       const Pair& pr = pairs[i];
       Object& o = objects[pr.object];
-      const Vec3 f = -(c * rowLambda[i]) * rowContact[i].n;
+      const Contact& ct = rowContact[i];
+      const Vec3 f = -(c * rowLambda[i]) * ct.n;
       o.force += f;
+      // Where it acts: the tool's point (a sphere's surface toward the
+      // object, or a patch's support point) at the final pose.
+      o.torque += (pg + qg * ct.point - ct.radius * ct.n).cross(f);
       if (o.deformation)
         o.deformation->addForce(static_cast<std::uint32_t>(pr.envNode), o.pose.linear().transpose() * f);
     }
@@ -670,7 +675,7 @@ void SphereTree6DofRenderer::reset(const Isometry3& devicePose) noexcept {
   s_->candidates = 0;
   for (State::Object& o : s_->objects) {
     o.moved = 0.0;
-    o.force = Vec3::Zero();
+    o.force = o.torque = Vec3::Zero();
   }
 }
 
@@ -795,6 +800,9 @@ double SphereTree6DofRenderer::environmentLeafMaxRadius() const noexcept { retur
 std::size_t SphereTree6DofRenderer::lastCandidateCount() const noexcept { return s_->candidates; }
 Vec3 SphereTree6DofRenderer::objectForce(std::size_t index) const noexcept {
   return index < s_->objects.size() ? s_->objects[index].force : Vec3::Zero();
+}
+Vec3 SphereTree6DofRenderer::objectTorque(std::size_t index) const noexcept {
+  return index < s_->objects.size() ? s_->objects[index].torque : Vec3::Zero();
 }
 bool SphereTree6DofRenderer::objectReleased(std::size_t index) const noexcept {
   return index < s_->objects.size() && s_->objects[index].released;

@@ -19,6 +19,16 @@ void ToolImpulseChannel::add(std::size_t object, const Vec3& force, const Vec3& 
   r.angular += point.cross(force) * dt;
 }
 
+void ToolImpulseChannel::addWrench(std::size_t object, const Vec3& force, const Vec3& torque,
+                                   double dt) noexcept {
+  if (object >= running_.size() || !(dt > 0.0) || !std::isfinite(dt) || !force.allFinite() ||
+      !torque.allFinite())
+    return;
+  ToolImpulse& r = running_[object];
+  r.linear += force * dt;
+  r.angular += torque * dt;
+}
+
 void ToolImpulseChannel::publish() noexcept {
   // Every buffer was sized by the constructor: this copy never allocates.
   std::copy(running_.begin(), running_.end(), totals_.writeBuffer().begin());

@@ -111,6 +111,7 @@ Vec3 clampNorm(const Vec3& v, double maxNorm) noexcept {
 // damping matrix on the tool's (velocity, angular velocity).
 struct VpsRenderer::ContactSample {
   Vec6 wrench = Vec6::Zero();
+  Vec6* perObject = nullptr;  // each object's share of `wrench` (objects_.size() entries)
   Mat6 stiffness = Mat6::Zero();
   Mat6 damping = Mat6::Zero();
   int contacts = 0;
@@ -136,8 +137,10 @@ Result<std::unique_ptr<VpsRenderer>> VpsRenderer::create(std::shared_ptr<const P
       return fail(ErrorCode::InvalidArgument, "pose is not finite or not a rigid transform", at + ".pose",
                   "pass a rotation (orthonormal, det +1) and a finite translation");
     if (Status s = o.material.validate(at + ".material"); !s) return s.error();
-    r->objects_.push_back({std::move(o.model), o.pose, o.pose.inverse(Eigen::Isometry), o.material});
+    r->objects_.push_back({std::move(o.model), o.pose, o.pose.inverse(Eigen::Isometry), o.material,
+                           Vec3::Zero(), Vec3::Zero()});
   }
+  r->objectWrench_.assign(r->objects_.size(), Vec6::Zero());
   r->tool_ = std::move(tool);
   r->options_ = options;
   r->mass_ = options.mass;
@@ -156,6 +159,7 @@ void VpsRenderer::reset(const Isometry3& devicePose) noexcept {
   lastDevice_ = devicePose;
   contactForce_.setZero();
   contactTorque_.setZero();
+  for (Object& o : objects_) o.force = o.torque = Vec3::Zero();
 }
 
 void VpsRenderer::setObjectPose(std::size_t index, const Isometry3& pose) noexcept {
@@ -188,7 +192,8 @@ void VpsRenderer::sampleContacts(ContactSample& out) const noexcept {
   const double cutoff = wantBrake ? options_.brakeDistance : 0.0;
   const double maxDepth = options_.maxPointDepth;
   const double nRef = options_.referenceContacts;
-  for (const Object& obj : objects_) {
+  for (std::size_t k = 0; k < objects_.size(); ++k) {
+    const Object& obj = objects_[k];
     const VoxelModel& model = *obj.model;
     const Isometry3 toModel = obj.inverse * tool;
     const Mat3 rObj = obj.pose.linear();
@@ -236,6 +241,7 @@ void VpsRenderer::sampleContacts(ContactSample& out) const noexcept {
     if (inContact > 0) {
       const double scale = 1.0 / std::max(static_cast<double>(inContact), nRef);
       out.wrench += obj.material.stiffness * scale * wrench;
+      if (out.perObject != nullptr) out.perObject[k] = obj.material.stiffness * scale * wrench;
       out.stiffness += obj.material.stiffness * scale * symmetricFromLower(stiffness);
       if (wantDamping) out.damping += obj.material.damping * scale * symmetricFromLower(damping);
       out.contacts += inContact;
@@ -311,6 +317,9 @@ HapticResponse VpsRenderer::tick(const HapticInput& input) noexcept {
   const Quat keptOrientation = orientation_;
 
   ContactSample contact;
+  std::fill(objectWrench_.begin(), objectWrench_.end(), Vec6::Zero());
+  contact.perObject = objectWrench_.data();
+  const Vec3 sampledPosition = position_;
   sampleContacts(contact);
   integrate(contact, lastDevice_, input.devicePose, input.linearVelocity, input.angularVelocity, input.dt);
 
@@ -332,6 +341,13 @@ HapticResponse VpsRenderer::tick(const HapticInput& input) noexcept {
   lastDevice_ = input.devicePose;
   contactForce_ = contact.wrench.head<3>();
   contactTorque_ = contact.wrench.tail<3>();
+  // Newton's third law, object by object: what pushes the tool pushes the
+  // object back; the torque moves from the tool's origin to the world's.
+  for (std::size_t k = 0; k < objects_.size(); ++k) {
+    const Vec3 f = objectWrench_[k].head<3>();
+    objects_[k].force = -f;
+    objects_[k].torque = -(objectWrench_[k].tail<3>() + sampledPosition.cross(f));
+  }
 
   out.force = clampNorm(-couplingForce, options_.maxForce);
   out.torque = clampNorm(-couplingTorque, options_.maxTorque);

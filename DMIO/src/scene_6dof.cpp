@@ -101,10 +101,11 @@ void checkTools6Dof(const SceneDesc& scene, ConfigReader root) {
     const SceneObject* o = scene.object(name);
     if (o == nullptr) continue;  // (reported with the objects list)
     ConfigReader at = objects.at(static_cast<std::size_t>(o - scene.objects.data()));
-    if (o->dynamic || o->soft)
-      at.addError("the " + renderer + " renderer touches static objects; " + inQuotes(name) + " is " +
-                      (o->dynamic ? "dynamic" : "soft"),
-                  o->dynamic ? "dynamic" : "soft", "touch it with the god-object, or make it static");
+    // Dynamic objects are pushed: physics moves them and takes each tick's
+    // wrench of the tool (the runtime); soft ones have no voxel model.
+    if (o->soft)
+      at.addError("the " + renderer + " renderer touches rigid objects; " + inQuotes(name) + " is soft", "soft",
+                  "touch it with the god-object or the needle, or make it rigid");
     if (const SceneMaterial* m = scene.material(o->material);
         m != nullptr && m->haptic && (m->haptic->staticFriction > 0 || m->haptic->dynamicFriction > 0))
       at.addError("the " + renderer + " renderer has no friction, and material " + inQuotes(o->material) +

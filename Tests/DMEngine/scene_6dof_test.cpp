@@ -123,6 +123,75 @@ TEST(SceneSphereTree, ACubePressedFlatFeelsTheHandleSpringAlone) {
   EXPECT_LT(torque.norm(), 1e-4) << torque.transpose();
 }
 
+// A 6-DOF tool pushing a rigid box across a table into a wall: a 1 cm ball
+// tool in a position-driven hand moves along x at the box's mid-height,
+// meets the box (4 cm, 0.2 kg, Coulomb 0.3 on the table) after about 0.9 s,
+// pushes it 3 cm against a static wall and presses it there, the hand 5 mm
+// past the touching point. Physics takes each tick's wrench of the tool on
+// the box (dm::ToolImpulseChannel::addWrench), so the box moves; at rest the
+// box is in equilibrium between the tool, its contacts (table and wall) and
+// its weight: the force on the hand equals what the contacts hold plus the
+// weight (1 %).
+json pushScene(const std::string& renderer) {
+  json j = json::parse(R"({
+    "format": "dmplatform-scene", "version": 2, "name": "tool_push",
+    "resources": {
+      "table": {"type": "shape", "shape": "plane", "half_extents": [0.2, 0.2]},
+      "box": {"type": "shape", "shape": "box", "half_extents": [0.02, 0.02, 0.02]},
+      "wall": {"type": "shape", "shape": "box", "half_extents": [0.01, 0.1, 0.05]},
+      "ball": {"type": "shape", "shape": "sphere", "radius": 0.005, "subdivisions": 3}
+    },
+    "materials": {"plastic": {"haptic": {"stiffness": 2000, "damping": 0}}},
+    "objects": [
+      {"name": "table", "mesh": "table", "contact": {"friction": 0.3}},
+      {"name": "box", "mesh": "box", "material": "plastic", "haptic": true, "dynamic": true, "mass": 0.2,
+       "contact": {"friction": 0.3}, "pose": {"position": [0, 0, 0.02]}},
+      {"name": "wall", "mesh": "wall", "contact": {"friction": 0.3}, "pose": {"position": [0.06, 0, 0.05]}},
+      {"name": "shown", "mesh": "ball"}
+    ],
+    "devices": [{"name": "hand", "driver": "sim-haptic",
+                 "config": {"path": "line", "from": [-0.04, 0, 0.02], "to": [0.01, 0, 0.02], "period": 3,
+                            "loop": 0}}],
+    "engines": {
+      "haptics": {"device": "hand", "objects": ["box"], "proxy_object": "shown"},
+      "physics": {"rate_hz": 1000}
+    },
+    "outputs": {"forces": true, "summary": true}
+  })");
+  j["engines"]["haptics"]["renderer"] = renderer;
+  if (renderer == "vps")
+    j["engines"]["haptics"]["vps"] = {{"tool", "ball"}, {"coupling_stiffness", 500}, {"voxel_size", 0.0005}};
+  else
+    j["engines"]["haptics"]["sphere_tree"] = {{"tool", "ball"}, {"stiffness", 500}};
+  return j;
+}
+
+void expectPushedBoxBalancesTheHand(const std::string& renderer) {
+  const dm::test::TempDir dir("tool_push_" + renderer);
+  const json s = scene_run::runScene(parsed(pushScene(renderer)), 4.0, dir.path());
+  ASSERT_TRUE(s.contains("physics")) << s.dump(2);
+  const json& b = scene_run::named(s["physics"]["bodies"], "box");
+  const dm::Vec3 x = scene_run::vec(b["position_m"]);
+  EXPECT_NEAR(x.x(), 0.03, 1e-3) << "the box is not at the wall: " << s.dump(2);
+  EXPECT_NEAR(x.y(), 0.0, 1e-3);
+  EXPECT_LT(scene_run::vec(b["velocity_m_s"]).norm(), 1e-3) << "the box is not at rest";
+  const dm::Vec3 hand = scene_run::vec(s["haptics"]["final_force_N"]);
+  ASSERT_GT(hand.norm(), 1.0) << "the hand no longer presses";
+  const dm::Vec3 expected = scene_run::vec(b["contact_force_N"]) + dm::Vec3(0, 0, -0.2 * 9.80665);
+  EXPECT_LE((hand - expected).norm(), 0.01 * hand.norm())
+      << renderer << ": hand " << hand.transpose() << ", table + weight " << expected.transpose();
+  // The push went into the box: the impulse it received is along +x.
+  EXPECT_GT(scene_run::vec(b["tool_impulse_Ns"]).x(), 0.5);
+}
+
+TEST(SceneVps, TheToolPushesARigidBoxAndTheHandFeelsWhatTheTableHolds) {
+  expectPushedBoxBalancesTheHand("vps");
+}
+
+TEST(SceneSphereTree, TheToolPushesARigidBoxAndTheHandFeelsWhatTheTableHolds) {
+  expectPushedBoxBalancesTheHand("sphere-tree");
+}
+
 TEST(SceneVps, MisuseIsRefusedNamingTheKey) {
   auto errorsOf = [](const json& j) {
     std::vector<dm::Error> problems;

@@ -191,6 +191,12 @@ class SphereTree6DofRenderer final : public HapticRenderer {
   /// (the user's force K (q_h − q_g) shared over the touching constraints
   /// by their multipliers; zero out of range or out of contact).
   Vec3 objectForce(std::size_t index) const noexcept;
+  /// N·m, world: the moment of objectForce(index) about the world origin,
+  /// each row's share acting at its tool point (a sphere's surface point
+  /// toward the object, or a patch's support point) at the final pose. What
+  /// a physics engine applies to a body the tool pushes
+  /// (dm::ToolImpulseChannel::addWrench).
+  Vec3 objectTorque(std::size_t index) const noexcept;
   /// Whether object `index` came off (its releaseForce was exceeded).
   bool objectReleased(std::size_t index) const noexcept;
 

@@ -57,6 +57,11 @@ class ToolImpulseChannel {
   /// (m, world) for `dt` seconds. Out-of-range objects, non-finite values
   /// and dt ≤ 0 are ignored (a NaN must never reach a body). O(1).
   void add(std::size_t object, const Vec3& force, const Vec3& point, double dt) noexcept;
+  /// Haptic thread: object `object` received `force` (N, world) and
+  /// `torque` (N·m, about the world origin) for `dt` seconds — a tool that
+  /// touches it at many points at once (6-DOF renderers). Same rules as
+  /// add(). O(1).
+  void addWrench(std::size_t object, const Vec3& force, const Vec3& torque, double dt) noexcept;
   /// Haptic thread: makes the totals so far visible to take(). O(objects).
   void publish() noexcept;
 

@@ -151,6 +151,18 @@ class VpsRenderer final : public HapticRenderer {
   const Vec3& contactForce() const noexcept { return contactForce_; }
   /// See contactForce().
   const Vec3& contactTorque() const noexcept { return contactTorque_; }
+  /// The penalty force (N, world) the tool put on object `index` in the
+  /// last tick, at the pose it sampled — minus that object's share of
+  /// contactForce() — and its torque about the world origin (N·m); zero out
+  /// of range or out of contact. What a physics engine applies to a body
+  /// the tool pushes (dm::ToolImpulseChannel::addWrench).
+  Vec3 objectForce(std::size_t index) const noexcept {
+    return index < objects_.size() ? objects_[index].force : Vec3::Zero();
+  }
+  /// See objectForce().
+  Vec3 objectTorque(std::size_t index) const noexcept {
+    return index < objects_.size() ? objects_[index].torque : Vec3::Zero();
+  }
   /// Tool mass (kg) and body-frame inertia about its origin (kg·m²) in use.
   double mass() const noexcept { return mass_; }
   /// See mass().
@@ -164,6 +176,8 @@ class VpsRenderer final : public HapticRenderer {
     Isometry3 pose;
     Isometry3 inverse;
     HapticMaterial material;
+    Vec3 force;   // on the object in the last tick, world
+    Vec3 torque;  // about the world origin
   };
   struct ContactSample;
 
@@ -174,6 +188,7 @@ class VpsRenderer final : public HapticRenderer {
 
   std::shared_ptr<const PointShell> tool_;
   std::vector<Object> objects_;
+  std::vector<Vec6> objectWrench_;  // per object, the last tick's (sized by create())
   VpsOptions options_;
   double mass_ = 0.0;
   Mat3 inertiaBody_ = Mat3::Identity();
