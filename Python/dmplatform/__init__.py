@@ -1,0 +1,26 @@
+"""DMPlatform for Python: the surgical simulation SDK's data model as NumPy
+arrays, its readers and writers, isosurfaces, and scene files run in
+lockstep or real time (docs/python.md).
+
+    import dmplatform as dm
+    ct = dm.read_volume("/usr/share/mricron/templates/ch2.nii.gz")
+    skin = dm.isosurface(ct, 40)
+    scene = dm.Scene.load("examples/scenes/head_probe.json")
+    result = dm.run(scene, 1.0, "out")
+    forces = dm.read_forces(result.out_dir / "forces.csv")
+"""
+import numpy as _np
+
+from ._core import (Error, Mesh, RunResult, Scene, Volume, isosurface, read_mesh, read_volume, run,
+                    write_mesh, write_volume)
+
+__all__ = ["Error", "Mesh", "RunResult", "Scene", "Volume", "isosurface", "read_forces", "read_mesh",
+           "read_volume", "run", "write_mesh", "write_volume"]
+
+
+def read_forces(path):
+    """A run's forces.csv as a NumPy structured array, one row per haptic
+    tick: t (s), fx, fy, fz (N, on the hand, world), tx, ty, tz (N·m), px,
+    py, pz (m) and qw, qx, qy, qz (the proxy's pose), contacts,
+    penetration (m)."""
+    return _np.genfromtxt(path, delimiter=",", names=True, dtype=None, encoding="ascii")
