@@ -8,5 +8,9 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
-cmake --build build -j "$(nproc)" --target dmplatform
+# The Python package too (import dmplatform: docs/python.md), when pybind11 is there.
+targets=(dmplatform)
+cmake --build build --target help | grep -q '^dmplatform_core:' && targets+=(dmplatform_core)
+cmake --build build -j "$(nproc)" --target "${targets[@]}"
+bash scripts/link_python.sh build
 exec build/Editors/dmplatform run "$@"

@@ -15,8 +15,8 @@ packages=(
   libcli11-dev libasio-dev libssl-dev libdcmtk-dev libpng-dev zlib1g-dev libfreetype-dev fonts-dejavu-core
   # the editor (dmedit: Dear ImGui on GLFW; its test runs it under Xvfb)
   libglfw3-dev libimgui-dev libstb-dev xvfb
-  # the Python package (Debian's /usr/bin/python3) and its tests
-  pybind11-dev python3-dev python3-numpy python3-pytest
+  # the Python package (Debian's /usr/bin/python3), its sweeps on Dask and its tests
+  pybind11-dev python3-dev python3-numpy python3-distributed python3-pytest
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # peer libraries (benchmarks and interoperability tests only)

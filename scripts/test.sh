@@ -44,6 +44,9 @@ if [ "$label" = "concurrency" ]; then
 else
   cmake --build "$builddir" -j "$jobs"
 fi
+if [ -z "$sanitize" ]; then
+  bash scripts/link_python.sh "$builddir"  # /usr/bin/python3 imports dmplatform (docs/python.md)
+fi
 
 ctest_args=(--test-dir "$builddir" --output-on-failure -j "$jobs" --timeout 600)
 [ -n "$label" ] && ctest_args+=(-L "$label")

@@ -2,6 +2,7 @@
 //
 //   dmplatform run [SCENE.json] [--lockstep | --realtime] [--duration S] [--out DIR]
 //   dmplatform replay RECORDING [--out DIR]
+//   dmplatform sweep SWEEP.json [--scheduler tcp://HOST:8786 | --workers N | --serial]
 //
 // With no SCENE it runs the bundled default scene (examples/scenes/
 // head_probe.json: the Colin27 head from ch2.nii.gz probed through the
@@ -14,6 +15,11 @@
 // (recording.dmrec) in lockstep, with the recorded device stream, into DIR
 // (default: replay/ beside the recording), and compares its forces.csv with
 // the recorded one beside the recording, tick by tick (replay.json).
+// `sweep` runs many lockstep variants of a scene on a Dask cluster
+// (docs/sweeps.md): it is the Python package's `python3 -m
+// dmplatform.sweeps`, run by Debian's /usr/bin/python3 with the package this
+// binary was built with (DM_PYTHON_PACKAGE_DIR) first on its path; its exit
+// code is the sweep's (1 when a variant failed).
 // Exit codes: 0 done (replay: the same force trace, or none to compare), 1
 // the run failed (message on stderr), 2 bad command line, scene or
 // recording, 3 the replay's force trace differs from the recorded one, 130
@@ -24,12 +30,19 @@
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_replay.hpp>
 
+#include <unistd.h>
+
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <cerrno>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <iostream>
+#include <string>
+#include <vector>
 
 #include "progress_bar.hpp"
 
@@ -50,6 +63,33 @@ std::filesystem::path defaultScene() {
       exe.parent_path().parent_path() / "share" / "dmplatform" / "scenes" / "head_probe.json";
   if (std::filesystem::exists(installed, ec)) return installed;
   return (exe.parent_path() / DM_SOURCE_SCENES_DIR / "head_probe.json").lexically_normal();
+}
+
+// `dmplatform sweep`: replaces this process by Debian's Python running the
+// package's sweep command, the package built beside this binary first on
+// PYTHONPATH. Returns only when that cannot start (exit code 1).
+int sweep(const std::vector<std::string>& args) {
+  std::error_code ec;
+  const auto exe = std::filesystem::canonical("/proc/self/exe", ec);
+  if (!ec) {
+    const auto package = (exe.parent_path() / DM_PYTHON_PACKAGE_DIR).lexically_normal();
+    if (std::filesystem::exists(package / "dmplatform" / "__init__.py", ec)) {
+      const char* old = std::getenv("PYTHONPATH");
+      const std::string path = package.string() + (old != nullptr && *old != 0 ? ":" + std::string(old) : "");
+      ::setenv("PYTHONPATH", path.c_str(), 1);
+    }
+  }
+  // argv[0] the full path: Python takes sys.executable (what its worker
+  // processes run) from it, and the `python3` first on PATH may be another one.
+  std::vector<std::string> words = {DM_PYTHON_EXECUTABLE, "-m", "dmplatform.sweeps"};
+  words.insert(words.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& w : words) argv.push_back(w.data());
+  argv.push_back(nullptr);
+  ::execv(DM_PYTHON_EXECUTABLE, argv.data());
+  std::cerr << "dmplatform: cannot start " << DM_PYTHON_EXECUTABLE << ": " << std::strerror(errno)
+            << " (install python3, python3-distributed and the dmplatform package: scripts/setup.sh)\n";
+  return 1;
 }
 
 // The run's figures from its summary, one line per engine and model.
@@ -214,6 +254,18 @@ int main(int argc, char** argv) {
                    "recording.dmrec of a run with \"outputs\": {\"recording\": true}")
       ->required();
   replay->add_option("--out", replayOut, "output folder (default: replay/ beside the recording)");
+  std::string sweepFile, scheduler;
+  int workers = 0;
+  bool serial = false;
+  CLI::App* sweepCmd =
+      app.add_subcommand("sweep", "Run many lockstep variants of a scene on a Dask cluster (docs/sweeps.md)");
+  sweepCmd->add_option("sweep", sweepFile, "SWEEP.json: {scene, duration, parameters, out, [samples, seed]}")
+      ->required();
+  auto* sched = sweepCmd->add_option("--scheduler", scheduler, "a Dask scheduler (tcp://HOST:8786)");
+  sweepCmd->add_option("--workers", workers, "a LocalCluster of N worker processes (default: one per core)")
+      ->check(CLI::Range(1, 1024))
+      ->excludes(sched);
+  sweepCmd->add_flag("--serial", serial, "one variant after the other in this process")->excludes(sched);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -222,6 +274,13 @@ int main(int argc, char** argv) {
   std::signal(SIGINT, onSignal);
   std::signal(SIGTERM, onSignal);
   if (replay->parsed()) return replayRecording(recordingPath, replayOut);
+  if (sweepCmd->parsed()) {
+    std::vector<std::string> args = {sweepFile};
+    if (!scheduler.empty()) args.insert(args.end(), {"--scheduler", scheduler});
+    if (workers > 0) args.insert(args.end(), {"--workers", std::to_string(workers)});
+    if (serial) args.push_back("--serial");
+    return sweep(args);
+  }
   const std::filesystem::path scene = scenePath.empty() ? defaultScene() : std::filesystem::path(scenePath);
 
   // Exit codes: 2 for a scene that cannot be run (invalid, a resource or a

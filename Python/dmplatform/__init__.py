@@ -14,8 +14,10 @@ import numpy as _np
 from ._core import (Error, Mesh, RunResult, Scene, Volume, isosurface, read_mesh, read_volume, run,
                     write_mesh, write_volume)
 
+from .sweeps import sweep
+
 __all__ = ["Error", "Mesh", "RunResult", "Scene", "Volume", "isosurface", "read_forces", "read_mesh",
-           "read_volume", "run", "write_mesh", "write_volume"]
+           "read_volume", "run", "sweep", "write_mesh", "write_volume"]
 
 
 def read_forces(path):
