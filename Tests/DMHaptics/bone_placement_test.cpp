@@ -17,6 +17,7 @@
 #include <functional>
 #include <limits>
 #include <numbers>
+#include <utility>
 #include <vector>
 
 #include "../common/alloc_counter.hpp"
@@ -187,22 +188,31 @@ TEST(BonePlacement, SplitFragmentIsGuidedBackToTheReferencePose) {
   EXPECT_NEAR((*r)->alignmentError(reference, out.proxyPose), 0.0, 1e-12);
 }
 
+// The descent tests' fragments: a block of 1 mm voxels (10 × 9 × `height`
+// of a 12³ grid) and a ball of 0.4 mm voxels (radius 7 voxels in a 16³
+// grid) — different depths and sizes, so the level skip is exercised.
+std::pair<Result<Volume>, Result<Volume>> descentVolumes(int height) {
+  auto fv = Volume::create(Vec3i(12, 12, 12), VoxelType::U8, Affine3(Eigen::Scaling(kVoxel)));
+  auto mv = Volume::create(Vec3i(16, 16, 16), VoxelType::U8, Affine3(Eigen::Scaling(0.4 * kVoxel)));
+  if (!fv.ok() || !mv.ok()) return {std::move(fv), std::move(mv)};
+  for (int k = 0; k < 12; ++k)
+    for (int j = 0; j < 12; ++j)
+      for (int i = 0; i < 12; ++i) fv->setValue(i, j, k, i < 10 && j < 9 && k < height ? 1 : 0);
+  for (int k = 0; k < 16; ++k)
+    for (int j = 0; j < 16; ++j)
+      for (int i = 0; i < 16; ++i)
+        mv->setValue(i, j, k, (Vec3(i, j, k) - Vec3::Constant(7.5)).norm() < 7.0 ? 1 : 0);
+  return {std::move(fv), std::move(mv)};
+}
+
 TEST(BonePlacement, TreeDescentFindsExactlyTheVoxelSpheresOverlappingBeyondTheSlop) {
   // Brute force over all occupied voxel pairs (leaf sphere radius √3/2·h)
   // against the simultaneous descent, for a block of 1 mm voxels and a ball
   // of 0.4 mm voxels (different depths and sizes exercise the level skip):
   // the pairs that act, deeper than 0.9·slop, are found, and only they —
   // with the automatic slop and with none (every overlapping pair).
-  auto fv = Volume::create(Vec3i(12, 12, 12), VoxelType::U8, Affine3(Eigen::Scaling(kVoxel)));
-  auto mv = Volume::create(Vec3i(16, 16, 16), VoxelType::U8, Affine3(Eigen::Scaling(0.4 * kVoxel)));
+  auto [fv, mv] = descentVolumes(8);
   ASSERT_TRUE(fv.ok() && mv.ok());
-  for (int k = 0; k < 12; ++k)
-    for (int j = 0; j < 12; ++j)
-      for (int i = 0; i < 12; ++i) fv->setValue(i, j, k, i < 10 && j < 9 && k < 8 ? 1 : 0);
-  for (int k = 0; k < 16; ++k)
-    for (int j = 0; j < 16; ++j)
-      for (int i = 0; i < 16; ++i)
-        mv->setValue(i, j, k, (Vec3(i, j, k) - Vec3::Constant(7.5)).norm() < 7.0 ? 1 : 0);
   for (const double slop : {-1.0, 0.0}) {
     BonePlacementOptions o = testOptions();
     o.slop = slop;
@@ -243,16 +253,8 @@ TEST(BonePlacement, CoarserContactLevelFindsExactlyTheCellPairsOverlappingBeyond
   // contactLevel 1: the contact elements are the trees' cells one level up
   // (2³ voxels, occupied when any voxel is), brute-forced over the trees'
   // own cells; the slop is then the resting overlap of face-adjacent cells.
-  auto fv = Volume::create(Vec3i(12, 12, 12), VoxelType::U8, Affine3(Eigen::Scaling(kVoxel)));
-  auto mv = Volume::create(Vec3i(16, 16, 16), VoxelType::U8, Affine3(Eigen::Scaling(0.4 * kVoxel)));
+  auto [fv, mv] = descentVolumes(7);
   ASSERT_TRUE(fv.ok() && mv.ok());
-  for (int k = 0; k < 12; ++k)
-    for (int j = 0; j < 12; ++j)
-      for (int i = 0; i < 12; ++i) fv->setValue(i, j, k, i < 10 && j < 9 && k < 7 ? 1 : 0);
-  for (int k = 0; k < 16; ++k)
-    for (int j = 0; j < 16; ++j)
-      for (int i = 0; i < 16; ++i)
-        mv->setValue(i, j, k, (Vec3(i, j, k) - Vec3::Constant(7.5)).norm() < 7.0 ? 1 : 0);
   const auto ft = treeOf(*fv), mt = treeOf(*mv);
   BonePlacementOptions o = testOptions();
   o.contactLevel = 1;
