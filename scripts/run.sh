@@ -10,7 +10,8 @@ bash scripts/setup.sh
 cmake -S . -B build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 # The Python package too (import dmplatform: docs/python.md), when pybind11 is there.
 targets=(dmplatform)
-cmake --build build --target help | grep -q '^dmplatform_core:' && targets+=(dmplatform_core)
+help="$(cmake --build build --target help)"
+[[ "$help" == *$'\n'dmplatform_core:* ]] && targets+=(dmplatform_core)
 cmake --build build -j "$(nproc)" --target "${targets[@]}"
 bash scripts/link_python.sh build
 exec build/Editors/dmplatform run "$@"
