@@ -50,6 +50,11 @@ def _pointer(doc, path):
     return node, (int(parts[-1]) if isinstance(node, list) else parts[-1])
 
 
+def _plain(value):
+    """A JSON value: NumPy scalars and arrays (np.linspace grids) as Python's."""
+    return value.tolist() if hasattr(value, "tolist") else value
+
+
 def variants(parameters, samples=None, seed=0):
     """The variants of `parameters` ({json pointer: [values]} for a grid, or
     {json pointer: (low, high)} with `samples` for uniform random samples),
@@ -57,11 +62,11 @@ def variants(parameters, samples=None, seed=0):
     names = sorted(parameters)
     if samples is None:
         for values in itertools.product(*(parameters[n] for n in names)):
-            yield dict(zip(names, values))
+            yield {n: _plain(v) for n, v in zip(names, values)}
         return
     rng = random.Random(seed)
     for _ in range(samples):
-        yield {n: rng.uniform(*parameters[n]) for n in names}
+        yield {n: rng.uniform(*map(float, parameters[n])) for n in names}
 
 
 def apply(scene_dict, variant):
@@ -74,7 +79,7 @@ def apply(scene_dict, variant):
                 raise IndexError(key)
         except (KeyError, IndexError, ValueError, TypeError) as e:
             raise ValueError(f"parameter {path!r} names no key of the scene ({e})") from None
-        node[key] = value
+        node[key] = _plain(value)
     return doc
 
 

@@ -102,6 +102,10 @@ def test_a_variant_that_cannot_run_is_a_row_with_its_error(scene, tmp_path):
     assert "/objects/1/mass" in rows[1]["error"]
     with pytest.raises(ValueError):
         sweeps.apply(scene.to_dict(), {"/objects/9/mass": 1.0})
+    # NumPy grids work as lists do.
+    import numpy as np
+    assert list(sweeps.variants({"/objects/1/mass": np.array([0.1, 0.15, 0.2])})) == list(
+        sweeps.variants({"/objects/1/mass": [0.1, 0.15, 0.2]}))
 
 
 def test_the_command_line_runs_a_sweep_file(source_dir, tmp_path):
