@@ -136,6 +136,7 @@ Result<std::unique_ptr<BonePlacementRenderer>> BonePlacementRenderer::create(
   r->stack_.resize(options.stackCapacity);
   r->contacts_.resize(static_cast<std::size_t>(options.maxContacts));
   r->rows_.resize(r->contacts_.size());
+  r->active_.resize(r->contacts_.size());
   r->reset(Isometry3::Identity());
   return r;
 }
@@ -297,6 +298,30 @@ void BonePlacementRenderer::findContacts() noexcept {
     return s > 0.0 && (c1 - c2).squaredNorm() < s * s;
   };
   if (!overlap(mapF[0].b, mapF[0].r, mapM[0].b, mapM[0].r)) return;
+  // A second, tighter test where spheres are loose (along the grid axes a
+  // cell's sphere reaches √3 times its half-width): the contact-cell centres
+  // under a cell lie in a box, cell centre ± (n − 1)/2 contact steps along
+  // its tree's axes (n contact cells a side). Projected on the fixed grid's
+  // axes u_k, two such boxes come no closer than |u_k·(c₁ − c₂)| − h₁ − h₂,
+  // and an acting pair is closer than `reach` on every axis.
+  const LevelMap& contactF = mapF[static_cast<std::size_t>(depthF)];
+  const LevelMap& contactM = mapM[static_cast<std::size_t>(depthM)];
+  Mat3 axes;
+  for (int k = 0; k < 3; ++k) axes.row(k) = contactF.a.col(k).normalized().transpose();
+  const Vec3 stepF = (axes * contactF.a).cwiseAbs().rowwise().sum();
+  const Vec3 stepM = (axes * contactM.a).cwiseAbs().rowwise().sum();
+  std::array<Vec3, ImplicitSphereTree::kMaxDepth + 1> boxF, boxM;
+  for (int l = 0; l <= depthF; ++l)
+    boxF[static_cast<std::size_t>(l)] = 0.5 * ((1 << (depthF - l)) - 1) * stepF;
+  for (int l = 0; l <= depthM; ++l)
+    boxM[static_cast<std::size_t>(l)] = 0.5 * ((1 << (depthM - l)) - 1) * stepM;
+  const double reach = contactF.r + contactM.r - margin;
+  const auto boxesMeet = [&](const Vec3& cf, int lf, const Vec3& cm, int lm) {
+    const Vec3 gap = (axes * (cf - cm)).cwiseAbs();
+    return (gap.array() <
+            (boxF[static_cast<std::size_t>(lf)] + boxM[static_cast<std::size_t>(lm)]).array() + reach)
+        .all();
+  };
   std::size_t top = 0;
   stack_[top++] = {tf.root(), tm.root()};
   std::array<Vec3, 8> centresF, centresM;
@@ -339,8 +364,13 @@ void BonePlacementRenderer::findContacts() noexcept {
     const int skip = (big > 4.0 * small && leafLevel - level >= 2) ? 2 : 1;
     const int childLevel = level + skip;
     const LevelMap& mc = (splitFixed ? mapF : mapM)[static_cast<std::size_t>(childLevel)];
+    const int otherLevel = splitFixed ? lm : lf;
     const auto visit = [&](int i, int j, int k) {
-      if (!overlap(mc.centre(i, j, k), mc.r, other, small)) return;
+      const Vec3 c = mc.centre(i, j, k);
+      if (!overlap(c, mc.r, other, small)) return;
+      if (!(splitFixed ? boxesMeet(c, childLevel, other, otherLevel)
+                       : boxesMeet(other, otherLevel, c, childLevel)))
+        return;
       if (top == stack_.size()) {
         ++stackOverflows_;
         return;
@@ -390,13 +420,17 @@ void BonePlacementRenderer::solveContacts(double dt, Vec3& pseudoVelocity, Vec3&
   for (int pass = 0; pass < 2; ++pass) {
     Vec3& v = pass == 0 ? velocity_ : pseudoVelocity;
     Vec3& w = pass == 0 ? angularVelocity_ : pseudoAngular;
+    // Pairs within the resting overlap of touching voxels do not stop motion
+    // (the 0.9 margin keeps a resting contact active) and only the depth
+    // beyond the slop is pushed out: each pass sweeps its own pairs, in order.
+    std::size_t count = 0;
+    for (std::size_t i = 0; i < contactCount_; ++i)
+      if (contacts_[i].depth > (pass == 0 ? 0.9 * slop_ : slop_))
+        active_[count++] = static_cast<std::uint32_t>(i);
     for (int it = 0; it < options_.iterations; ++it) {
-      for (std::size_t i = 0; i < contactCount_; ++i) {
+      for (std::size_t n = 0; n < count; ++n) {
+        const std::uint32_t i = active_[n];
         BoneContact& c = contacts_[i];
-        // Pairs within the resting overlap of touching voxels do not stop
-        // motion (the 0.9 margin keeps a resting contact active) and only
-        // the depth beyond the slop is pushed out.
-        if (c.depth <= (pass == 0 ? 0.9 * slop_ : slop_)) continue;
         double& accumulated = pass == 0 ? c.impulse : c.correction;
         const double target = pass == 0 ? 0.0 : options_.baumgarte * std::max(0.0, c.depth - slop_) / dt;
         const SolverRow& row = rows_[i];

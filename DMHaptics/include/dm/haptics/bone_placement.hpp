@@ -255,6 +255,7 @@ class BonePlacementRenderer final : public HapticRenderer {
     double effMass;   // 1 / (1/m + (r × n)·I⁻¹(r × n))
   };
   std::vector<SolverRow> rows_;  // sized with contacts_
+  std::vector<std::uint32_t> active_;  // a solve pass's pairs, sized with contacts_
   std::size_t contactCount_ = 0;
   double maxDepth_ = 0.0;
   std::uint64_t stackOverflows_ = 0;
