@@ -211,6 +211,8 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   TickTime time_;
 
  private:
+  // One frame with the context current on this thread, released again
+  // whatever happens; a failure is kept in error_ and stops the engine.
   bool frame(const TickInfo& info) {
     const auto t0 = std::chrono::steady_clock::now();
     if (!ctx_->isCurrent()) {
@@ -219,38 +221,29 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
         return false;
       }
     }
-    const double t = time_.seconds(info);  // scene time, also in real time
+    const Status drawn = draw(time_.seconds(info));  // scene time, also in real time
+    ctx_->release();
+    if (!drawn) {
+      error_ = drawn.error();
+      return false;
+    }
+    renderMs_.push_back(
+        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    return true;
+  }
+
+  Status draw(double t) {
     Isometry3 proxy = Isometry3::Identity();
     Vec3 force = Vec3::Zero();
     if (feed_.objectPoses && feed_.objectPoses(poses_))
       for (std::size_t i = 0; i < poses_.size() && i < feed_.movingObjects.size(); ++i)
-        if (auto s = view_.setObjectPose(feed_.movingObjects[i], poses_[i]); !s) {
-          error_ = s.error();
-          return false;
-        }
-    if (auto s = updateMillable(); !s) {
-      error_ = s.error();
-      ctx_->release();
-      return false;
-    }
-    if (auto s = updateSoft(); !s) {
-      error_ = s.error();
-      ctx_->release();
-      return false;
-    }
+        if (auto s = view_.setObjectPose(feed_.movingObjects[i], poses_[i]); !s) return s;
+    if (auto s = updateMillable(); !s) return s;
+    if (auto s = updateSoft(); !s) return s;
     const bool haptics = feed_.haptics && feed_.haptics(proxy, force);
-    if (haptics && !proxyObject_.empty()) {
-      if (auto s = view_.setObjectPose(proxyObject_, proxy); !s) {
-        error_ = s.error();
-        return false;
-      }
-    }
-    auto r = view_.render(target_, camera_, t);
-    if (!r) {
-      error_ = r.error();
-      ctx_->release();
-      return false;
-    }
+    if (haptics && !proxyObject_.empty())
+      if (auto s = view_.setObjectPose(proxyObject_, proxy); !s) return s;
+    if (auto r = view_.render(target_, camera_, t); !r) return r.error();
     // The camera's view for the engines that stream or filter it, before
     // anything is drawn over it; the written frame is read again only when
     // something was (a frame is never written into once read: both may
@@ -258,44 +251,29 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     Image view;
     if (feed_.frames) {
       auto img = target_.readColor();
-      if (!img) {
-        error_ = img.error();
-        ctx_->release();
-        return false;
-      }
+      if (!img) return img.error();
       view = std::move(*img);
       feed_.frames->put(view, t);
     }
     const bool drawnOver = hud_ || feed_.overlay;
-    if (auto s = drawOver(t, haptics, force); !s) {
-      error_ = s.error();
-      ctx_->release();
-      return false;
-    }
+    if (auto s = drawOver(t, haptics, force); !s) return s;
     const std::uint64_t index = stats_.frames++;
     if (writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0) {
       if (drawnOver || view.empty()) {
         auto img = target_.readColor();
-        if (!img) {
-          error_ = img.error();
-          ctx_->release();
-          return false;
-        }
+        if (!img) return img.error();
         view = std::move(*img);
       }
       writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(view));
     }
-    ctx_->release();
-    renderMs_.push_back(
-        std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-    return true;
+    return ok();
   }
 
   // What is drawn over the camera's view: the HUD (unless the scene turned
   // it off) and the vision overlay, 1:1 in the lower-left corner (halved
   // until it fits in half the view).
   Status drawOver(double t, bool haptics, const Vec3& force) {
-    if (!hud_ && !feed_.overlay) return ok();  // (frame() relies on this to reuse its read-back)
+    if (!hud_ && !feed_.overlay) return ok();  // (draw() relies on this to reuse its read-back)
     overlay_.begin(target_);
     if (hud_) hudItems(t, haptics, force);
     if (feed_.overlay) {
