@@ -17,6 +17,7 @@
 #include <numbers>
 
 #include "engine_json.hpp"
+#include "script_engine.hpp"
 #include "soft_tissue.hpp"
 
 namespace dm {
@@ -152,6 +153,11 @@ struct PhysicsEngine::Impl {
   std::vector<Vec3> toolForce, toolTorque;  // per body, applied over this step
   // The moving objects' poses for each reader thread (PoseReader order).
   std::array<std::unique_ptr<TripleBuffer<std::vector<Isometry3>>>, 2> readerPoses;
+  // Scripts: their channels, the forces they hold (per body, summed over
+  // the scripts), and the needle's punctures they last heard of.
+  std::vector<ScriptFeed*> scripts;
+  std::vector<Vec3> scriptForce, scriptTorque;
+  std::size_t punctures = 0;
   std::unique_ptr<SoftTissues> soft;  // the soft objects, stepped after the rigid bodies
   std::uint64_t steps = 0;
   double lastDt = 0.0;
@@ -264,6 +270,22 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
 bool PhysicsEngine::tick(const TickInfo& info) noexcept {
   Impl& m = *impl_;
   const double dt = info.dt();
+  if (!m.scripts.empty()) {
+    std::fill(m.scriptForce.begin(), m.scriptForce.end(), Vec3::Zero());
+    std::fill(m.scriptTorque.begin(), m.scriptTorque.end(), Vec3::Zero());
+    for (ScriptFeed* f : m.scripts) {
+      f->forces.update();  // held: the last value published, until another comes
+      const std::vector<ScriptForce>& held = f->forces.readBuffer();
+      for (std::size_t i = 0; i < m.moving.size(); ++i) {
+        m.scriptForce[m.moving[i]] += held[i].force;
+        m.scriptTorque[m.moving[i]] += held[i].torque;
+        const BodyId id = m.bodies[m.moving[i]].id;
+        if (m.sleep && m.state.asleep(id) && held[i].force.squaredNorm() + held[i].torque.squaredNorm() > 0.0)
+          (void)m.world.setBodyState(m.state, id, m.state.position(id), m.state.orientation(id),
+                                     m.state.linearVelocity(id), m.state.angularVelocity(id));
+      }
+    }
+  }
   if (m.tools) {
     // The impulse each touched body received since the last step, as a
     // constant force and torque (about its centre of mass) over this step.
@@ -304,8 +326,52 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
     for (std::size_t i = 0; i < m.moving.size(); ++i) poses[i] = m.objectPose(m.moving[i]);
     buffer->publish();
   }
+  if (!m.scripts.empty()) {
+    const double t = time_.seconds(info);  // this tick's time (a script at it sees this step)
+    const auto needle = m.soft->needleProgress();
+    for (ScriptFeed* f : m.scripts) {
+      std::vector<ScriptBody>& out = f->bodies.writeBuffer();  // sized at build
+      for (std::size_t i = 0; i < m.moving.size(); ++i) {
+        const BodyId id = m.bodies[m.moving[i]].id;
+        out[i] = {.pose = m.objectPose(m.moving[i]),
+                  .linearVelocity = m.state.linearVelocity(id),
+                  .angularVelocity = m.state.angularVelocity(id),
+                  .centerOfMass = m.state.position(id)};
+      }
+      f->bodies.publish();
+      if (needle && needle->punctures > m.punctures)
+        f->push(f->physicsEvents, {.type = ScriptEvent::Type::Puncture,
+                                   .time = t,
+                                   .source = static_cast<int>(needle->object),
+                                   .layer = needle->tipLayer,
+                                   .value = double(needle->punctures)});
+    }
+    if (needle) m.punctures = needle->punctures;
+  }
   return true;
 }
+
+Status PhysicsEngine::addScriptFeed(ScriptFeed& feed) {
+  Impl& m = *impl_;
+  if (m.scripts.empty()) {
+    m.scriptForce.assign(m.bodies.size(), Vec3::Zero());
+    m.scriptTorque.assign(m.bodies.size(), Vec3::Zero());
+    Impl* raw = impl_.get();
+    if (auto s = m.world.addUserForce("scripts",
+                                      [raw](const BodyStateView&, ForceOutput& out) {
+                                        for (std::size_t b = 0; b < raw->scriptForce.size(); ++b) {
+                                          out.force[b] += raw->scriptForce[b];
+                                          out.torque[b] += raw->scriptTorque[b];
+                                        }
+                                      });
+        !s)
+      return s.error();
+  }
+  m.scripts.push_back(&feed);
+  return ok();
+}
+
+std::string PhysicsEngine::layerName(std::size_t i, int layer) const { return impl_->soft->layerName(i, layer); }
 
 const std::vector<std::string>& PhysicsEngine::softObjects() const noexcept { return impl_->soft->names(); }
 HapticTissue* PhysicsEngine::tissue(std::string_view object) noexcept { return impl_->soft->tissue(object); }

@@ -10,8 +10,9 @@
 //   haptics → ToolImpulseChannel → the impulse the tool gave each touched
 //   body since the last tick, applied as a force and torque over the step;
 //   step; body poses → HapticLocalModel (the god-object's objects move),
-//   → a TripleBuffer the render engine reads (the drawn objects move) and
-//   → one the OpenIGTLink engine reads (the bodies' TRANSFORMs).
+//   → a TripleBuffer the render engine reads (the drawn objects move),
+//   → one the OpenIGTLink engine reads (the bodies' TRANSFORMs) and
+//   → each script's (their states; the scripts' held forces come back).
 // Each channel has one writer and one reader thread, so the engine runs on
 // real-time threads and in lockstep alike; tick() allocates nothing.
 #pragma once
@@ -40,6 +41,7 @@ class HapticRenderer;
 class HapticTissue;
 class ToolImpulseChannel;
 struct Mesh;
+struct ScriptFeed;
 
 /// Who reads the moving objects' poses (each has its own triple buffer).
 enum class PoseReader : std::uint8_t { Render, Network };
@@ -85,6 +87,13 @@ class PhysicsEngine final : public Engine {
   /// finished since this reader's last call; one thread per reader.
   bool latestPoses(PoseReader reader, std::vector<Isometry3>& out);
 
+  /// Control thread, before the run: a script's channels (script_engine.hpp).
+  /// Each tick then applies the forces the script holds on the moving bodies
+  /// and publishes their states and the needle's punctures to it.
+  Status addScriptFeed(ScriptFeed& feed);
+  /// Layer `layer` of soft object i's needle layers ("" when none).
+  std::string layerName(std::size_t i, int layer) const;
+
   /// Control thread, after the run: each body's final state, the forces on
   /// it in the last step (contacts, tool) and the step counters.
   nlohmann::json summary() const;
@@ -94,6 +103,7 @@ class PhysicsEngine final : public Engine {
   explicit PhysicsEngine(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
   std::vector<std::string> movingNames_;
+  TickTime time_;  // scene time of a tick, also in real time
   Error error_;
 };
 

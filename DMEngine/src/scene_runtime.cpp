@@ -34,6 +34,7 @@
 #include "vision_engine.hpp"
 #endif
 #include "physics_engine.hpp"
+#include "script_engine.hpp"
 #include "scene_6dof.hpp"
 #include "surgery.hpp"
 #ifdef DM_ENGINE_HAVE_RENDERER
@@ -111,6 +112,7 @@ class HapticsEngine final : public Engine {
       tools->publish();
     }
     if (!ring.tryPush(p)) dropped.fetch_add(1, std::memory_order_relaxed);
+    if (!scripts.empty()) publishToScripts(p, s);
     if (recorder) {
       // The device's state this tick, stamped with the tick's scene time
       // (what a replay's lockstep tick asks the replay-haptic device for).
@@ -131,6 +133,36 @@ class HapticsEngine final : public Engine {
     }
     return true;
   }
+  // The scripts' view of this tick: the tool's state, and an event when
+  // contact began or ended (with the god-object's touched object).
+  void publishToScripts(const ProbeSample& p, const HapticLoopSample& s) noexcept {
+    const bool touching = p.response.contacts > 0;
+    int source = lastContactObject;
+    if (godObject != nullptr && godObject->contact().active) source = int(godObject->contact().object);
+    if (godObject == nullptr) source = -1;
+    for (ScriptFeed* f : scripts) {
+      ScriptToolSample& out = f->tool.writeBuffer();
+      out.tool = {.time = p.t,
+                  .proxy = s.response.proxyPose,
+                  .handle = s.input.devicePose,
+                  .force = p.response.force,
+                  .contacts = p.response.contacts,
+                  .penetration = p.response.penetration};
+      out.valid = true;
+      f->tool.publish();
+      if (touching != wasTouching)
+        f->push(f->toolEvents,
+                {.type = touching ? ScriptEvent::Type::ContactBegan : ScriptEvent::Type::ContactEnded,
+                 .time = p.t,
+                 .source = source,
+                 .value = touching ? p.response.force.norm() : 0.0});
+    }
+    wasTouching = touching;
+    lastContactObject = source;
+  }
+  std::vector<ScriptFeed*> scripts;  // owned by their script engines
+  bool wasTouching = false;
+  int lastContactObject = -1;
   std::unique_ptr<HapticDevice> device;
   std::unique_ptr<GodObjectRenderer> feltGodObject;  // inside renderer, when it presses soft tissue
   std::unique_ptr<HapticRenderer> renderer;
@@ -326,6 +358,7 @@ struct SceneRuntime::Impl {
   std::shared_ptr<RenderEngineHandle> render;
 #endif
   std::vector<std::pair<std::shared_ptr<Engine>, EngineSchedule>> userEngines;
+  std::vector<std::shared_ptr<ScriptEngine>> scripts;
 #ifdef DM_ENGINE_HAVE_NETWORK
   std::vector<std::unique_ptr<ServedDevice>> served;  // destroyed before the registry and linker
   std::shared_ptr<IgtlEngineHandle> igtl;
@@ -343,7 +376,39 @@ struct SceneRuntime::Impl {
   Status buildEngines(bool lockstep, const SceneRunOptions& options, const std::filesystem::path& out);
   Status buildIgtl(std::shared_ptr<FrameSlot> frames);
   Status startRecording(bool lockstep, const std::filesystem::path& out);
+  Status buildScripts(double monitorRate);
 };
+
+// The scene's scripts, each an engine at the rate of the one it names,
+// added after every other engine: at equal lockstep times a script sees
+// the haptic tick and physics step of its own time.
+Status SceneRuntime::Impl::buildScripts(double monitorRate) {
+  for (const SceneScript& sc : scene.scripts) {
+    auto instance = loadScript(sc);
+    if (!instance) return instance.error();
+    ScriptNames names;
+    if (scene.engines.haptics) names.touched = scene.engines.haptics->objects;
+    if (physics) {
+      names.soft = physics->softObjects();
+      names.layer = [p = physics.get()](std::size_t i, int layer) { return p->layerName(i, layer); };
+    }
+    auto e = std::make_shared<ScriptEngine>(sc, std::move(*instance),
+                                            physics ? physics->movingObjects() : std::vector<std::string>(),
+                                            haptics != nullptr, std::move(names));
+    if (physics)
+      if (auto s = physics->addScriptFeed(e->feed()); !s) return s.error().within("scripts/" + sc.name);
+    if (haptics) haptics->scripts.push_back(&e->feed());
+    const SceneEngines& en = scene.engines;
+    const double rate = sc.engine == "physics" && en.physics ? en.physics->rateHz
+                        : sc.engine == "render" && en.render ? en.render->rateHz
+                        : sc.engine == "vision" && en.vision ? en.vision->rateHz
+                        : sc.engine == "igtl" && en.igtl     ? en.igtl->rateHz
+                                                             : monitorRate;
+    if (auto s = master.addEngine(e, {.rateHz = rate}); !s) return s.error().within("scripts/" + sc.name);
+    scripts.push_back(std::move(e));
+  }
+  return ok();
+}
 
 // The haptic device's stream to out/recording.dmrec, from the first tick:
 // the header holds what a replay needs (dm::sceneRecordingMetadata).
@@ -630,6 +695,7 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
       return s.error();
   }
 #endif
+  if (auto s = buildScripts(monitorRate); !s) return s.error();
   for (auto& [engine, schedule] : userEngines)
     if (auto s = master.addEngine(engine, schedule); !s) return s.error();
 
@@ -926,6 +992,17 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
                             {"dropped", im.haptics->recorder->dropped()}};
     written.push_back(std::string(kSceneRecordingFile));
   }
+  // The scripts' last word, also after an interruption or a failure.
+  Status scriptStatus = ok();
+  if (!im.scripts.empty()) {
+    nlohmann::json scripts = nlohmann::json::object();
+    for (std::size_t i = 0; i < im.scripts.size(); ++i) {
+      auto j = im.scripts[i]->finish(done);
+      if (!j && scriptStatus) scriptStatus = j.error();
+      scripts[scene.scripts[i].name] = j ? *j : nlohmann::json{{"error", j.error().message()}};
+    }
+    summary["scripts"] = std::move(scripts);
+  }
   if (scene.outputs.summary) written.push_back("summary.json");
   summary["outputs"] = written;
   if (scene.outputs.summary) {
@@ -936,6 +1013,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   if (!runStatus)
     return runStatus.error().within(formatString("at t = %.3f s (outputs written to %s)", done, out.c_str()));
   if (!stopStatus) return stopStatus.error();
+  if (!scriptStatus) return scriptStatus.error();
   if (!recordStatus) return recordStatus.error().within("outputs/recording");
   return result;
 }

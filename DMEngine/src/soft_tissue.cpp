@@ -350,6 +350,19 @@ HapticRenderer* SoftTissues::needle() noexcept {
   return nullptr;
 }
 
+std::optional<SoftTissues::NeedleProgress> SoftTissues::needleProgress() const noexcept {
+  for (std::size_t i = 0; i < bodies_.size(); ++i)
+    if (const NeedleInsertion* n = bodies_[i]->needle.get())
+      return NeedleProgress{.punctures = n->punctureCount(), .tipLayer = n->tipLayer(), .object = i};
+  return std::nullopt;
+}
+
+std::string SoftTissues::layerName(std::size_t i, int layer) const {
+  if (i >= bodies_.size() || layer < 0) return {};
+  const std::vector<std::string>& names = bodies_[i]->layerNames;
+  return std::size_t(layer) < names.size() ? names[std::size_t(layer)] : std::string();
+}
+
 HapticTissue* SoftTissues::tissue(std::string_view name) noexcept {
   for (const auto& b : bodies_)
     if (b->name == name) return b->haptic.get();

@@ -31,6 +31,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -66,6 +67,18 @@ class SoftTissues {
   /// "layers", for the haptics engine's loop; nullptr without one. Owned
   /// here: its step() is the physics thread's.
   HapticRenderer* needle() noexcept;
+  /// Physics thread, after step(): the needle's membranes broken so far,
+  /// the layer at its tip (-1 outside) and the soft object it goes into
+  /// (index in names()); nullopt without a needle.
+  struct NeedleProgress {
+    std::size_t punctures = 0;
+    int tipLayer = -1;
+    std::size_t object = 0;
+  };
+  std::optional<NeedleProgress> needleProgress() const noexcept;
+  /// Layer `layer` of soft object i's needle layers by name ("" when there
+  /// is none). Any thread: the names are fixed at build.
+  std::string layerName(std::size_t i, int layer) const;
 
   /// Physics thread: steps every body by h; fails naming the object whose
   /// step failed (a blown-up state).

@@ -179,7 +179,7 @@ class SceneParser {
 
   void body() {
     root_.knownKeys({"format", "version", "name", "resources", "materials", "objects", "volumes", "lights",
-                     "cameras", "devices", "engines", "outputs"});
+                     "cameras", "devices", "engines", "outputs", "scripts"});
     scene_.name = root_.string("name", std::string());
     resources();
     materials();
@@ -190,6 +190,10 @@ class SceneParser {
     cameras();
     engines();
     outputs();
+    if (v2Key(root_, "scripts"))
+      readScripts(root_, scene_, [this](ConfigReader& r, const std::string& source, std::string_view key) {
+        return resolveSource(r, source, key);
+      });
     physicsBodies();
     checkSurgery(scene_, root_);
     checkSoft(scene_, root_);
@@ -1412,6 +1416,7 @@ Json toJson(const SceneDesc& scene) {
   j["outputs"] = {{"directory", o.directory}, {"frames", o.frames}, {"frame_every", o.frameEvery},
                   {"forces", o.forces},       {"plot", o.plot},     {"summary", o.summary},
                   {"recording", o.recording}};
+  if (!scene.scripts.empty()) j["scripts"] = scriptsJson(scene.scripts);
   return j;
 }
 

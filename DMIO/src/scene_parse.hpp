@@ -15,6 +15,8 @@
 #include <array>
 #include <cmath>
 #include <cstddef>
+#include <filesystem>
+#include <functional>
 #include <limits>
 #include <optional>
 #include <string>
@@ -248,5 +250,13 @@ void writeBonePlacement(const SceneBonePlacement& b, Json& haptics);
 void readIgtl(ConfigReader& engines, SceneEngines& e);
 void checkIgtl(const SceneDesc& scene, ConfigReader root);
 void writeIgtl(const SceneIgtlEngine& g, Json& engines);
+
+// Scripts (scene_script.cpp): the "scripts" list with their checks against
+// the engines (read after them), and its JSON. `resolve` turns a source
+// into a confined path (adding its error to the reader when it cannot).
+using SourceResolver =
+    std::function<std::filesystem::path(ConfigReader&, const std::string&, std::string_view)>;
+void readScripts(ConfigReader& root, SceneDesc& scene, const SourceResolver& resolve);
+Json scriptsJson(const std::vector<SceneScript>& scripts);
 
 }  // namespace dm::scene_parse

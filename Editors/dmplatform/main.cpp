@@ -20,6 +20,9 @@
 // dmplatform.sweeps`, run by Debian's /usr/bin/python3 with the package this
 // binary was built with (DM_PYTHON_PACKAGE_DIR) first on its path; its exit
 // code is the sweep's (1 when a variant failed).
+// A scene's Python scripts ("scripts", docs/python.md) run in an interpreter
+// embedded in this program, started on the first one (builds with pybind11
+// and python3-dev; without them such a scene is refused naming the script).
 // Exit codes: 0 done (replay: the same force trace, or none to compare), 1
 // the run failed (message on stderr), 2 bad command line, scene or
 // recording, 3 the replay's force trace differs from the recorded one, 130
@@ -45,6 +48,9 @@
 #include <vector>
 
 #include "progress_bar.hpp"
+#ifdef DM_HAVE_PYTHON_SCRIPTS
+#include "python_script.hpp"
+#endif
 
 namespace {
 
@@ -232,6 +238,9 @@ int replayRecording(const std::filesystem::path& recording, const std::string& o
 }  // namespace
 
 int main(int argc, char** argv) {
+#ifdef DM_HAVE_PYTHON_SCRIPTS
+  dm::python::registerPythonScripts();  // a scene's .py scripts (an interpreter starts on the first)
+#endif
   CLI::App app{"dmplatform — run a surgical simulation scene headless", "dmplatform"};
   app.require_subcommand(1);
   std::string scenePath;

@@ -2,6 +2,8 @@
 // data model (data.cpp) and scenes (scene.cpp).
 #include <pybind11/eval.h>
 
+#include "python_script.hpp"
+
 #include "bindings.hpp"
 
 namespace dm::python {
@@ -42,4 +44,5 @@ PYBIND11_MODULE(_core, m) {
   dm::python::bindErrors(m);
   dm::python::bindData(m);
   dm::python::bindScene(m);
+  dm::python::registerPythonScripts();  // scenes run from Python run their .py scripts here
 }

@@ -615,6 +615,21 @@ struct SceneEngines {
   bool operator==(const SceneEngines&) const = default;
 };
 
+/// A script whose callbacks run during the run (v2 "scripts";
+/// docs/scene-format.md, "Scripts"; dm/engine/script.hpp): its language is
+/// its file's extension (".py": Python), it runs at the rate of the engine
+/// it names on a thread of its own, never the haptic one, and its callbacks
+/// get `args` as written (a sweep's parameters can set them).
+struct SceneScript {
+  std::string name;
+  std::string source;              ///< as written
+  std::filesystem::path path;      ///< resolved and confined like a resource's source
+  std::string engine = "monitor";  ///< whose rate: "physics", "monitor", "render", "vision" or "igtl"
+  Json args = Json::object();      ///< handed to the script as is
+
+  bool operator==(const SceneScript&) const = default;
+};
+
 /// What a run writes.
 struct SceneOutputs {
   std::string directory = "out";  ///< relative to the working directory of the run
@@ -643,6 +658,7 @@ struct SceneDesc {
   std::vector<SceneDevice> devices;
   SceneEngines engines;
   SceneOutputs outputs;
+  std::vector<SceneScript> scripts;  ///< v2, in file order
 
   /// Find by name; nullptr when there is none. O(n).
   const SceneResource* resource(std::string_view name) const;
