@@ -11,13 +11,14 @@ lockstep or real time (docs/python.md).
 """
 import numpy as _np
 
-from ._core import (Error, Mesh, RunResult, Scene, Volume, isosurface, read_mesh, read_volume, run,
-                    write_mesh, write_volume)
+from ._core import (Error, HapticRenderer, HapticResponse, Mesh, MeshTree, RunResult, Scene, Volume,
+                    god_object, isosurface, probe, read_mesh, read_volume, run, write_mesh, write_volume)
 
 from .sweeps import sweep
 
-__all__ = ["Error", "Mesh", "RunResult", "Scene", "Volume", "isosurface", "read_forces", "read_mesh",
-           "read_volume", "run", "sweep", "write_mesh", "write_volume"]
+__all__ = ["Error", "HapticRenderer", "HapticResponse", "Mesh", "MeshTree", "RunResult", "Scene", "Volume",
+           "god_object", "isosurface", "probe", "read_forces", "read_mesh", "read_volume", "run", "sweep",
+           "write_mesh", "write_volume"]
 
 
 def read_forces(path):

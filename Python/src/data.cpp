@@ -16,6 +16,7 @@
 #include <memory>
 #include <string>
 
+#include "arrays.hpp"
 #include "bindings.hpp"
 
 namespace dm::python {
@@ -56,42 +57,6 @@ VoxelType voxelTypeOf(const py::dtype& d) {
              "use uint8, int8, uint16, int16, uint32, int32, float32 or float64"));
 }
 
-// An (n, columns) C-ordered array of T from any array-like; InvalidArgument
-// naming `where` for another shape.
-template <class T>
-py::array_t<T, py::array::c_style | py::array::forcecast> rowsOf(const py::object& o, py::ssize_t columns,
-                                                                 const char* where) {
-  auto a = py::array_t<T, py::array::c_style | py::array::forcecast>::ensure(o);
-  if (!a || a.ndim() != 2 || a.shape(1) != columns)
-    raise(fail(ErrorCode::InvalidArgument, "expected an (n, " + std::to_string(columns) + ") array", where));
-  return a;
-}
-
-Mat4 mat4Of(const py::object& o, const char* where) {
-  const auto a = rowsOf<double>(o, 4, where);
-  if (a.shape(0) != 4) raise(fail(ErrorCode::InvalidArgument, "expected a 4x4 matrix", where));
-  Mat4 m;
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) m(r, c) = a.at(r, c);
-  return m;
-}
-
-py::array_t<double> arrayOf(const Mat4& m) {
-  py::array_t<double> out({4, 4});
-  for (int r = 0; r < 4; ++r)
-    for (int c = 0; c < 4; ++c) out.mutable_at(r, c) = m(r, c);
-  return out;
-}
-
-Affine3 affineOf(const Mat4& m, const char* where) {
-  if (!m.allFinite() || m.row(3) != Vec4(0, 0, 0, 1).transpose())
-    raise(fail(ErrorCode::InvalidArgument, "not a finite affine matrix with last row [0, 0, 0, 1]", where,
-               "pass a 4x4 index-to-world matrix (metres)"));
-  Affine3 a = Affine3::Identity();
-  a.matrix() = m;
-  return a;
-}
-
 // A volume from a C-ordered (z, y, x) array, copied.
 std::shared_ptr<Volume> volumeFromArray(const py::array& array, const py::object& affine) {
   if (array.ndim() != 3)
@@ -105,14 +70,6 @@ std::shared_ptr<Volume> volumeFromArray(const py::array& array, const py::object
   const auto c = py::array::ensure(array, py::array::c_style | py::array::forcecast);
   std::memcpy(v.bytes(), c.data(), v.byteSize());
   return std::make_shared<Volume>(std::move(v));
-}
-
-// Vertex and triangle arrays of a mesh, sharing its memory.
-template <class T, class Vector>
-py::array rowsView(Vector& rows, std::size_t columns, const py::object& owner) {
-  const auto n = static_cast<py::ssize_t>(rows.size()), c = static_cast<py::ssize_t>(columns);
-  const auto item = static_cast<py::ssize_t>(sizeof(T));
-  return py::array_t<T>({n, c}, {c * item, item}, reinterpret_cast<T*>(rows.data()), owner);
 }
 
 }  // namespace

@@ -2,9 +2,8 @@
 // data model (data.cpp) and scenes (scene.cpp).
 #include <pybind11/eval.h>
 
-#include "python_script.hpp"
-
 #include "bindings.hpp"
+#include "python_script.hpp"
 
 namespace dm::python {
 
@@ -44,5 +43,7 @@ PYBIND11_MODULE(_core, m) {
   dm::python::bindErrors(m);
   dm::python::bindData(m);
   dm::python::bindScene(m);
+  dm::python::bindCollide(m);
+  dm::python::bindHaptics(m);
   dm::python::registerPythonScripts();  // scenes run from Python run their .py scripts here
 }

@@ -36,6 +36,12 @@
 //     rate, and answering GET_/STT_ queries; run() can wait for clients;
 //   - vision: a DMVision filter graph stepped one frame per tick, its
 //     "input" sources fed the rendered frames (a simulated endoscope).
+//   - scripts: each of the scene's "scripts" loaded through the loader of
+//     its language (dm/engine/script.hpp; ".py" where the Python package or
+//     the dmplatform program registered it) and ticked as the engine
+//     "script:NAME" at the rate of the engine it names, after the others:
+//     it reads the tool and the moving bodies, hears contacts and
+//     punctures, holds forces on bodies and writes metrics.
 // prepare() builds and loads them (a model that cannot be built fails there,
 // before anything runs); run() starts them in lockstep on a virtual clock (bit-reproducible) or on
 // real-time threads, for a duration or until `stop` is raised (Ctrl-C), then
@@ -48,7 +54,8 @@
 // body's model, solver counters, deformation and the tool's, held and
 // weight forces; with the burr,
 // removed volume per material, closest approach to critical structures and
-// the time within the warning margin).
+// the time within the warning margin; each script's ticks, events and
+// metrics).
 // User code adds engines of its own (addEngine) before run().
 //
 // @code
