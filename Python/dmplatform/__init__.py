@@ -1,6 +1,8 @@
 """DMPlatform for Python: the surgical simulation SDK's data model as NumPy
-arrays, its readers and writers, isosurfaces, and scene files run in
-lockstep or real time (docs/python.md).
+arrays, its readers and writers, isosurfaces, collision queries, rigid-body
+physics, the god-object renderer and device-path replays (dmtool probe), and
+scene files run in lockstep or real time with Python scripts inside them
+(docs/python.md).
 
     import dmplatform as dm
     ct = dm.read_volume("/usr/share/mricron/templates/ch2.nii.gz")
@@ -11,14 +13,15 @@ lockstep or real time (docs/python.md).
 """
 import numpy as _np
 
-from ._core import (Error, HapticRenderer, HapticResponse, Mesh, MeshTree, RunResult, Scene, Volume,
-                    god_object, isosurface, probe, read_mesh, read_volume, run, write_mesh, write_volume)
+from ._core import (Error, HapticRenderer, HapticResponse, Mesh, MeshTree, PhysicsWorld, RunResult, Scene,
+                    Volume, god_object, isosurface, probe, read_mesh, read_volume, run, write_mesh,
+                    write_volume)
 
 from .sweeps import sweep
 
-__all__ = ["Error", "HapticRenderer", "HapticResponse", "Mesh", "MeshTree", "RunResult", "Scene", "Volume",
-           "god_object", "isosurface", "probe", "read_forces", "read_mesh", "read_volume", "run", "sweep",
-           "write_mesh", "write_volume"]
+__all__ = ["Error", "HapticRenderer", "HapticResponse", "Mesh", "MeshTree", "PhysicsWorld", "RunResult",
+           "Scene", "Volume", "god_object", "isosurface", "probe", "read_forces", "read_mesh", "read_volume",
+           "run", "sweep", "write_mesh", "write_volume"]
 
 
 def read_forces(path):

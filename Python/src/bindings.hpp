@@ -39,6 +39,8 @@ void bindErrors(py::module_& m);
 void bindData(py::module_& m);     // Volume, Mesh, readers and writers, isosurfaces
 void bindScene(py::module_& m);    // scenes: load, edit as dicts, run
 void bindCollide(py::module_& m);  // MeshTree: closest points, rays, distances, contacts
-void bindHaptics(py::module_& m);  // renderers ticked from Python, device paths replayed (probe)
+void bindHaptics(py::module_& m);
+void bindPhysics(py::module_& m);  // PhysicsWorld: bodies, steps, states, contacts  // renderers ticked from
+                                   // Python, device paths replayed (probe)
 
 }  // namespace dm::python

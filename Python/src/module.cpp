@@ -45,5 +45,6 @@ PYBIND11_MODULE(_core, m) {
   dm::python::bindScene(m);
   dm::python::bindCollide(m);
   dm::python::bindHaptics(m);
+  dm::python::bindPhysics(m);
   dm::python::registerPythonScripts();  // scenes run from Python run their .py scripts here
 }
