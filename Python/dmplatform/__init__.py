@@ -17,10 +17,11 @@ from ._core import (Error, HapticRenderer, HapticResponse, Mesh, MeshTree, Physi
                     Volume, god_object, isosurface, probe, read_mesh, read_volume, run, write_mesh,
                     write_volume)
 
+from .fit import fit
 from .sweeps import sweep
 
 __all__ = ["Error", "HapticRenderer", "HapticResponse", "Mesh", "MeshTree", "PhysicsWorld", "RunResult",
-           "Scene", "Volume", "god_object", "isosurface", "probe", "read_forces", "read_mesh", "read_volume",
+           "Scene", "Volume", "fit", "god_object", "isosurface", "probe", "read_forces", "read_mesh", "read_volume",
            "run", "sweep", "write_mesh", "write_volume"]
 
 
