@@ -20,7 +20,7 @@ packages=(
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
   # peer libraries (benchmarks and interoperability tests only)
-  libfcl-dev liboctomap-dev libbullet-dev libccd-dev libvtk9-dev libopenigtlink-dev
+  libfcl-dev liboctomap-dev libbullet-dev libccd-dev libvtk9-dev libopenigtlink-dev libnanoflann-dev
   # real data (see shared/DATA.md)
   mricron-data assimp-testmodels opencv-doc opencv-data dcmtk
 )
