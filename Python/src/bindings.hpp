@@ -40,7 +40,9 @@ void bindData(py::module_& m);     // Volume, Mesh, readers and writers, isosurf
 void bindScene(py::module_& m);    // scenes: load, edit as dicts, run
 void bindCollide(py::module_& m);  // MeshTree: closest points, rays, distances, contacts
 void bindHaptics(py::module_& m);
-void bindPhysics(py::module_& m);  // PhysicsWorld: bodies, steps, states, contacts  // renderers ticked from
-                                   // Python, device paths replayed (probe)
+void bindPhysics(py::module_& m);
+void bindFluid(
+    py::module_& m);  // Fluid: DFSPH particles, sources, suction  // PhysicsWorld: bodies, steps, states,
+                      // contacts  // renderers ticked from Python, device paths replayed (probe)
 
 }  // namespace dm::python
