@@ -36,13 +36,12 @@ auto released(Fn&& fn) {
 }
 
 void bindErrors(py::module_& m);
-void bindData(py::module_& m);     // Volume, Mesh, readers and writers, isosurfaces
-void bindScene(py::module_& m);    // scenes: load, edit as dicts, run
-void bindCollide(py::module_& m);  // MeshTree: closest points, rays, distances, contacts
-void bindHaptics(py::module_& m);
-void bindPhysics(py::module_& m);
-void bindFluid(
-    py::module_& m);  // Fluid: DFSPH particles, sources, suction  // PhysicsWorld: bodies, steps, states,
-                      // contacts  // renderers ticked from Python, device paths replayed (probe)
+void bindData(py::module_& m);      // Volume, Mesh, readers and writers, isosurfaces
+void bindScene(py::module_& m);     // scenes: load, edit as dicts, run
+void bindCollide(py::module_& m);   // MeshTree: closest points, rays, distances, contacts
+void bindHaptics(py::module_& m);   // renderers ticked from Python, device paths replayed (probe)
+void bindPhysics(py::module_& m);   // PhysicsWorld: bodies, steps, states, contacts
+void bindFluid(py::module_& m);     // Fluid: DFSPH particles, sources, suction
+void bindGeometry(py::module_& m);  // voxelize, simplify, Hausdorff; Image and PNG
 
 }  // namespace dm::python
