@@ -34,8 +34,8 @@
 #include "vision_engine.hpp"
 #endif
 #include "physics_engine.hpp"
-#include "script_engine.hpp"
 #include "scene_6dof.hpp"
+#include "script_engine.hpp"
 #include "surgery.hpp"
 #ifdef DM_ENGINE_HAVE_RENDERER
 #include "render_engine.hpp"
@@ -166,11 +166,11 @@ class HapticsEngine final : public Engine {
   std::unique_ptr<HapticDevice> device;
   std::unique_ptr<GodObjectRenderer> feltGodObject;  // inside renderer, when it presses soft tissue
   std::unique_ptr<HapticRenderer> renderer;
-  std::shared_ptr<PhysicsEngine> needleOwner;  // owns the needle renderer, when the loop drives that
-  HapticRenderer* active = nullptr;            // what the loop ticks: renderer, or the needle
-  GodObjectRenderer* godObject = nullptr;  // = renderer (or inside it), when it is the god-object
-  BurrRenderer* burr = nullptr;            // = renderer, when it is the burr
-  VpsRenderer* vps = nullptr;              // = renderer, when it is VPS
+  std::shared_ptr<PhysicsEngine> needleOwner;    // owns the needle renderer, when the loop drives that
+  HapticRenderer* active = nullptr;              // what the loop ticks: renderer, or the needle
+  GodObjectRenderer* godObject = nullptr;        // = renderer (or inside it), when it is the god-object
+  BurrRenderer* burr = nullptr;                  // = renderer, when it is the burr
+  VpsRenderer* vps = nullptr;                    // = renderer, when it is VPS
   SphereTree6DofRenderer* sphereTree = nullptr;  // = renderer, when it is the sphere tree
   // The bone-placement renderer (owned by renderer) and what its summary
   // measures: the first tick's fragment pose, the deepest contact.
@@ -366,6 +366,18 @@ struct SceneRuntime::Impl {
 #ifdef DM_ENGINE_HAVE_VISION
   std::shared_ptr<VisionEngineHandle> vision;
 #endif
+  // A run between start() and finish().
+  struct Running {
+    bool started = false;
+    bool finished = false;
+    bool lockstep = true;
+    double duration = 0.0;  // run()'s; 0 for a run stepped by advance()
+    Result<HostCpuTimes> hostBefore = HostCpuTimes{};
+    SteadyClock::time_point wallStart{};
+    double done = 0.0;  // s of the run so far
+    Status status = ok();
+    bool interrupted = false;
+  } running;
   bool prepared = false;
   RunMode preparedMode = RunMode::Lockstep;
   std::filesystem::path preparedOut;
@@ -806,9 +818,9 @@ Status SceneRuntime::prepare(const SceneRunOptions& options) {
   return ok();
 }
 
-Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
+Status SceneRuntime::start(const SceneRunOptions& options) {
   Impl& im = *impl_;
-  if (im.ran) return fail(ErrorCode::InvalidArgument, "a SceneRuntime runs once", "SceneRuntime::run");
+  if (im.ran) return fail(ErrorCode::InvalidArgument, "a SceneRuntime runs once", "SceneRuntime::start");
   if (!im.prepared) {
     if (auto s = prepare(options); !s) {
       im.ran = true;
@@ -822,7 +834,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   if (options.mode != im.preparedMode ||
       (!options.outDir.empty() && std::filesystem::path(options.outDir) != out))
     return fail(ErrorCode::InvalidArgument, "run() was given another mode or output folder than prepare()",
-                "SceneRuntime::run", "pass the same options to both");
+                "SceneRuntime::start", "pass the same options to both");
   if (auto s = checkDuration(options); !s) return s.error();
 
   if (im.haptics) im.haptics->active->reset(im.haptics->loop->config().deviceToWorld);
@@ -837,44 +849,119 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   }
 #endif
   if (auto s = im.master.start(options.mode); !s) return s.error();
-
-  // Run: lockstep in 0.1 s chunks of simulated time, real time polling.
   // The host's CPU accounts bracket the run: steal time says the hypervisor
   // stopped this machine's CPUs, which no thread priority can prevent.
-  const Result<HostCpuTimes> hostBefore = readHostCpuTimes();
-  SceneRunResult result;
-  Status runStatus = ok();
-  const auto wallStart = SteadyClock::now();
-  double done = 0;
+  im.running = {.started = true,
+                .lockstep = lockstep,
+                .hostBefore = readHostCpuTimes(),
+                .wallStart = SteadyClock::now()};
+  return ok();
+}
+
+Status SceneRuntime::advance(double seconds) {
+  Impl& im = *impl_;
+  Impl::Running& r = im.running;
+  if (!r.started || r.finished || !r.lockstep)
+    return fail(ErrorCode::InvalidArgument, "advance() needs a lockstep run started and not finished",
+                "SceneRuntime::advance", "start() it with RunMode::Lockstep first");
+  if (!(seconds >= 0.0) || !std::isfinite(seconds))
+    return fail(ErrorCode::InvalidArgument, formatString("advance by %g s", seconds),
+                "SceneRuntime::advance");
+  if (!r.status) return r.status.error();
+  // 0.1 s chunks of simulated time (the master's, as run() takes them).
+  for (double left = seconds; left > 0.0;) {
+    const double step = std::min(0.1, left);
+    if (auto st = im.master.advance(step); !st) {
+      r.status = st;
+      return st.error();
+    }
+    r.done += step;
+    left -= step;
+  }
+  return ok();
+}
+
+double SceneRuntime::time() const { return impl_->running.done; }
+
+Result<nlohmann::json> SceneRuntime::state() {
+  Impl& im = *impl_;
+  if (!im.running.started || im.running.finished || !im.running.lockstep)
+    return fail(ErrorCode::InvalidArgument, "state() reads a lockstep run between advances",
+                "SceneRuntime::state", "start() it with RunMode::Lockstep and read it after advance()");
+  // Nothing ticks between lockstep advances: the engines' state is read here.
+  nlohmann::json j = {{"time_s", im.running.done}};
+  if (im.physics) j["physics"] = im.physics->summary();
+  im.monitor->drain();
+  if (im.haptics && !im.monitor->trace.empty()) {
+    const ProbeSample& p = im.monitor->trace.back();
+    const Vec3 proxy = p.response.proxyPose.translation();
+    j["haptics"] = {{"time_s", p.t},
+                    {"force_N", {p.response.force.x(), p.response.force.y(), p.response.force.z()}},
+                    {"proxy_m", {proxy.x(), proxy.y(), proxy.z()}},
+                    {"contacts", p.response.contacts}};
+  }
+  if (!im.scripts.empty()) {
+    nlohmann::json scripts = nlohmann::json::object();
+    for (std::size_t i = 0; i < im.scripts.size(); ++i)
+      scripts[im.scene.scripts[i].name] = im.scripts[i]->metrics();
+    j["scripts"] = std::move(scripts);
+  }
+  return j;
+}
+
+Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
+  Impl& im = *impl_;
+  if (auto s = start(options); !s) return s.error();
+  Impl::Running& r = im.running;
+  r.duration = options.duration;
   auto status = [&]() {
-    std::string s = formatString("t = %.1f s", done);
+    std::string s = formatString("t = %.1f s", r.done);
     if (im.haptics && !im.monitor->trace.empty())
       s += formatString("  |F| = %.2f N", im.monitor->trace.back().response.force.norm());
     return s;
   };
-  while (done < options.duration) {
+  // Lockstep in 0.1 s chunks of simulated time, real time polling.
+  while (r.done < options.duration) {
     if (options.stop != nullptr && options.stop->load()) {
-      result.interrupted = true;
+      r.interrupted = true;
       break;
     }
-    if (lockstep) {
-      const double step = std::min(0.1, options.duration - done);
-      if (auto s = im.master.advance(step); !s) {
-        runStatus = s;
-        break;
-      }
-      done += step;
+    if (r.lockstep) {
+      if (!advance(std::min(0.1, options.duration - r.done))) break;  // (kept in r.status)
     } else {
       std::this_thread::sleep_for(std::chrono::milliseconds(50));
-      done =
-          std::min(options.duration, std::chrono::duration<double>(SteadyClock::now() - wallStart).count());
+      r.done =
+          std::min(options.duration, std::chrono::duration<double>(SteadyClock::now() - r.wallStart).count());
       if (auto s = im.master.poll(); !s) {
-        runStatus = s;
+        r.status = s;
         break;
       }
     }
-    if (options.progress) options.progress(done / options.duration, status());
+    if (options.progress) options.progress(r.done / options.duration, status());
   }
+  return finish();
+}
+
+Result<SceneRunResult> SceneRuntime::finish() {
+  Impl& im = *impl_;
+  Impl::Running& r = im.running;
+  if (!r.started || r.finished)
+    return fail(ErrorCode::InvalidArgument, "finish() needs a started run, once", "SceneRuntime::finish");
+  r.finished = true;
+  if (!r.lockstep && r.duration == 0.0)  // started by hand in real time: as long as it ran
+    r.done = std::chrono::duration<double>(SteadyClock::now() - r.wallStart).count();
+  const bool lockstep = r.lockstep;
+  const SceneDesc& scene = im.scene;
+  const std::filesystem::path out = im.preparedOut;
+  const double done = r.done;
+  const Status& runStatus = r.status;
+  const Result<HostCpuTimes>& hostBefore = r.hostBefore;
+  const auto wallStart = r.wallStart;
+  SceneRunResult result;
+  result.interrupted = r.interrupted;
+  // A run stepped by advance() lasted as long as it was advanced.
+  const double duration = r.duration > 0.0 ? r.duration : done;
+
   result.simulatedSeconds = done;
   const std::vector<EngineStats> engineStats = im.master.stats();
   const Result<HostCpuTimes> hostAfter = readHostCpuTimes();
@@ -914,7 +1001,7 @@ Result<SceneRunResult> SceneRuntime::run(const SceneRunOptions& options) {
   const nlohmann::json engines = engineStatsJson(engineStats);
   nlohmann::json summary = {{"scene", scene.name},
                             {"mode", lockstep ? "lockstep" : "realtime"},
-                            {"duration_s", options.duration},
+                            {"duration_s", duration},
                             {"simulated_s", done},
                             {"wall_s", std::chrono::duration<double>(SteadyClock::now() - wallStart).count()},
                             {"interrupted", result.interrupted},

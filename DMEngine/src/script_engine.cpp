@@ -198,6 +198,8 @@ bool ScriptEngine::tick(const TickInfo& info) noexcept {
   }
 }
 
+const nlohmann::json& ScriptEngine::metrics() const noexcept { return context_->metricValues; }
+
 Result<nlohmann::json> ScriptEngine::finish(double time) {
   Context& c = *context_;
   c.now = time;

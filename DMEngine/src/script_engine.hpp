@@ -84,6 +84,8 @@ class ScriptEngine final : public Engine {
   Error error() const override { return error_; }
 
   ScriptFeed& feed() noexcept { return *feed_; }
+  /// The metrics set so far (control thread, between lockstep advances or after the run).
+  const nlohmann::json& metrics() const noexcept;
   /// Control thread, after the run: the script's finish(), then its entry
   /// of summary.json's "scripts" (metrics, ticks, events).
   Result<nlohmann::json> finish(double time);

@@ -90,8 +90,8 @@ def fit(scene, parameters, measured, duration, out_dir, client=None, candidates=
         for p, values in axes.items():
             i = int(_np.argmin(_np.abs(_np.array(values) - best[p])))
             bracket[p] = (values[max(i - 1, 0)], values[min(i + 1, len(values) - 1)])
-    return {"value": _refine(history[-1]["table"], best, parameters, log), "candidate": {p: best[p] for p in parameters},
-            "rms": best["rms"], "rounds": history}
+    return {"value": _refine(history[-1]["table"], best, parameters, log),
+            "candidate": {p: best[p] for p in parameters}, "rms": best["rms"], "rounds": history}
 
 
 def _refine(table, best, parameters, log):

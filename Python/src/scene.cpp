@@ -1,13 +1,15 @@
 // scene.cpp — scene files for Python: load one (or build it from a dict),
 // read and edit it as a dict in the file's own JSON form, and run it with
-// dm::SceneRuntime in lockstep or real time with the GIL released; the run's
-// summary comes back as a dict, its files in the output folder.
+// dm::SceneRuntime in lockstep or real time with the GIL released, or step
+// by step (Simulation: advance, state, finish); the run's summary comes back
+// as a dict, its files in the output folder.
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
 
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
 
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -83,6 +85,60 @@ validated: resources, materials, objects, devices, engines, outputs.)")
       .def_readonly("simulated_seconds", &RunResult::simulatedSeconds)
       .def_readonly("frames", &RunResult::frames, "Frames written.")
       .def_readonly("out_dir", &RunResult::outDir);
+
+  // A run stepped from Python: the runtime lives in the Simulation.
+  struct Simulation {
+    std::unique_ptr<SceneRuntime> runtime;
+    std::filesystem::path outDir;
+  };
+  py::class_<Simulation>(m, "Simulation", R"(A scene run step by step in lockstep: advance(seconds), read state(),
+finish() for the outputs. docs/python.md, "Scenes".)")
+      .def(py::init([](const SceneDesc& scene, const std::filesystem::path& outDir, double durationHint) {
+             auto sim = std::make_unique<Simulation>();
+             std::optional<Error> error;
+             {
+               py::gil_scoped_release release;
+               auto rt = SceneRuntime::create(scene);
+               if (!rt) {
+                 error = rt.error();
+               } else {
+                 sim->runtime = std::move(*rt);
+                 if (auto st = sim->runtime->start(
+                         {.mode = RunMode::Lockstep, .duration = durationHint, .outDir = outDir});
+                     !st)
+                   error = st.error();
+               }
+             }
+             if (error) raise(*error);
+             sim->outDir = outDir.empty() ? std::filesystem::path(scene.outputs.directory) : outDir;
+             return sim;
+           }),
+           py::arg("scene"), py::arg("out_dir") = std::filesystem::path(), py::arg("duration_hint") = 10.0,
+           "Builds and starts the scene's engines in lockstep (duration_hint sizes the force trace).")
+      .def(
+          "advance",
+          [](Simulation& s, double seconds) {
+            unwrap(released([&] { return s.runtime->advance(seconds); }));
+          },
+          py::arg("seconds"), "Runs the virtual clock on by `seconds` (GIL released).")
+      .def_property_readonly("time", [](const Simulation& s) { return s.runtime->time(); })
+      .def(
+          "state", [](Simulation& s) { return jsonToPython(unwrap(s.runtime->state())); },
+          "The engines now: time_s, physics (bodies as in the summary), haptics (force, proxy, contacts), "
+          "scripts (their metrics so far).")
+      .def(
+          "finish",
+          [](Simulation& s) {
+            auto r = unwrap(released([&] { return s.runtime->finish(); }));
+            RunResult out;
+            out.summary = jsonToPython(r.summary);
+            out.interrupted = r.interrupted;
+            out.simulatedSeconds = r.simulatedSeconds;
+            out.frames = r.frames;
+            out.outDir = s.outDir;
+            return out;
+          },
+          "Stops the engines and writes the outputs; returns the RunResult.");
 
   m.def(
       "run",

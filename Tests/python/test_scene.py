@@ -60,3 +60,27 @@ def test_run_refuses_an_unknown_mode(source_dir, tmp_path):
     with pytest.raises(dm.Error) as e:
         dm.run(dm.Scene.from_dict(d, base), 0.1, tmp_path, mode="fast")
     assert e.value.where == "mode"
+
+
+def test_a_run_stepped_from_python_writes_what_one_run_writes(source_dir, tmp_path):
+    d, base = box_push(source_dir)
+    scene = dm.Scene.from_dict(d, base, "box_push.json")
+    sim = dm.Simulation(scene, tmp_path / "stepped", duration_hint=2.0)
+    seen = []
+    while sim.time < 2.0 - 1e-9:
+        sim.advance(0.25)
+        state = sim.state()
+        box = [b for b in state["physics"]["bodies"] if b["name"] == "box"][0]
+        seen.append((state["time_s"], box["position_m"][0], state["haptics"]["force_N"][0]))
+    result = sim.finish()
+    assert [t for t, _, _ in seen] == pytest.approx([0.25 * k for k in range(1, 9)])
+    assert seen[-1][1] > seen[0][1] + 0.005  # the box moved between the steps the hand pushed it
+    assert seen[-1][2] < -0.1                # the box pushes the hand back
+    assert result.summary["duration_s"] == pytest.approx(2.0)
+    whole = dm.run(scene, 2.0, tmp_path / "whole")
+    assert (tmp_path / "stepped/forces.csv").read_bytes() == (tmp_path / "whole/forces.csv").read_bytes()
+    assert result.summary["physics"] == whole.summary["physics"]
+    with pytest.raises(dm.Error):
+        sim.advance(0.1)
+    with pytest.raises(dm.Error):
+        sim.finish()

@@ -145,6 +145,28 @@ class SceneRuntime {
   /// written, or with other mode or output folder than prepare() was given.
   Result<SceneRunResult> run(const SceneRunOptions& options);
 
+  /// Step by step instead of run(): start() prepares (when it was not) and
+  /// starts the engines (options.duration only sizes the force trace and
+  /// `stop` and `progress` are not used); in lockstep advance() runs the
+  /// virtual clock on by `seconds` and state() reads the engines between
+  /// advances; finish() stops them and writes the outputs, as run() does
+  /// after its loop (duration_s: how far it was advanced). In real time the
+  /// engines run on their threads from start() to finish().
+  /// @code
+  ///   rt->start({.mode = dm::RunMode::Lockstep, .duration = 5.0, .outDir = "out"});
+  ///   while (rt->time() < 5.0) { rt->advance(0.5); auto s = rt->state(); ... }
+  ///   auto result = rt->finish();
+  /// @endcode
+  Status start(const SceneRunOptions& options);
+  Status advance(double seconds);
+  /// s the run has been advanced (lockstep) so far.
+  double time() const;
+  /// Between lockstep advances: {"time_s", "physics" (each body's state, as
+  /// the summary's), "haptics" (the newest tick: force, proxy, contacts),
+  /// "scripts" (each script's metrics so far)}.
+  Result<nlohmann::json> state();
+  Result<SceneRunResult> finish();
+
  private:
   SceneRuntime();
   struct Impl;
