@@ -8,6 +8,7 @@
 #include <pybind11/numpy.h>
 
 #include <string>
+#include <vector>
 
 #include "bindings.hpp"
 
@@ -74,6 +75,19 @@ inline Vec3 vec3Of(const py::object& o, const char* where) {
   const Vec3 v(a.data()[0], a.data()[1], a.data()[2]);
   if (!v.allFinite()) raise(fail(ErrorCode::InvalidArgument, "expected 3 finite numbers", where));
   return v;
+}
+
+// (n, 3) finite points as Vec3s, copied (so that work on them can run
+// without the GIL); InvalidArgument naming `where` and the row otherwise.
+inline std::vector<Vec3> pointsOf(const py::object& o, const char* where) {
+  const auto a = rowsOf<double>(o, 3, where);
+  std::vector<Vec3> out(static_cast<std::size_t>(a.shape(0)));
+  for (std::size_t i = 0; i < out.size(); ++i) {
+    out[i] = Vec3(a.at(py::ssize_t(i), 0), a.at(py::ssize_t(i), 1), a.at(py::ssize_t(i), 2));
+    if (!out[i].allFinite())
+      raise(fail(ErrorCode::InvalidArgument, "row " + std::to_string(i) + " is not finite", where));
+  }
+  return out;
 }
 
 inline py::array_t<double> arrayOf(const Vec3& v) {

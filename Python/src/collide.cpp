@@ -28,18 +28,6 @@ py::array_t<double> rows3(std::size_t n) { return py::array_t<double>({py::ssize
 
 std::int64_t triangleOf(std::uint32_t t) { return t == kNoTriangle ? -1 : std::int64_t(t); }
 
-// A query's points as Vec3s (copied: the queries run without the GIL).
-std::vector<Vec3> pointsOf(const py::object& o, const char* where) {
-  const auto a = rowsOf<double>(o, 3, where);
-  std::vector<Vec3> out(static_cast<std::size_t>(a.shape(0)));
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    out[i] = Vec3(a.at(py::ssize_t(i), 0), a.at(py::ssize_t(i), 1), a.at(py::ssize_t(i), 2));
-    if (!out[i].allFinite())
-      raise(fail(ErrorCode::InvalidArgument, "row " + std::to_string(i) + " is not finite", where));
-  }
-  return out;
-}
-
 }  // namespace
 
 void bindCollide(py::module_& m) {

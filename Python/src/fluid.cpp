@@ -30,17 +30,6 @@ py::array_t<double> valuesOf(std::span<const double> v) {
   return out;
 }
 
-std::vector<Vec3> pointsOf(const py::object& o, const char* where) {
-  const auto a = rowsOf<double>(o, 3, where);
-  std::vector<Vec3> out(static_cast<std::size_t>(a.shape(0)));
-  for (std::size_t i = 0; i < out.size(); ++i) {
-    out[i] = Vec3(a.at(py::ssize_t(i), 0), a.at(py::ssize_t(i), 1), a.at(py::ssize_t(i), 2));
-    if (!out[i].allFinite())
-      raise(fail(ErrorCode::InvalidArgument, "row " + std::to_string(i) + " is not finite", where));
-  }
-  return out;
-}
-
 }  // namespace
 
 void bindFluid(py::module_& m) {
