@@ -10,7 +10,7 @@ pointers (docs/scene-format.md's keys, arrays by index), run in lockstep:
 the results do not depend on where or in which order variants run, so a
 sweep on a cluster gives exactly what the same variants give one after the
 other here. Each finished variant is written at once (out_dir/variants/
-NNNNN/: variant.json, summary.json, forces.csv) and the table
+NNNNN/: variant.json, summary.json, forces.csv, log.txt) and the table
 (out_dir/results.csv) is rewritten; a sweep restarted on the same out_dir
 reruns only what is missing. A variant that fails is a row with its error;
 the sweep goes on. Command line: /usr/bin/python3 -m dmplatform.sweeps
@@ -106,19 +106,38 @@ def row_of(summary, forces_bytes):
 
 def run_variant(scene_dict, base_dir, variant, duration):
     """Runs one variant in a temporary folder and returns (summary, the bytes
-    of forces.csv); on the worker that runs it. Raises dmplatform.Error or
-    ValueError for a variant that cannot run."""
-    from . import Scene, run
+    of forces.csv, its log, error): the run's log is what the simulation
+    wrote to standard error meanwhile (its state changes, warnings); a
+    variant that cannot run (dmplatform.Error, ValueError) comes back with
+    summary and forces None and its error, so its log is kept too. On the
+    worker that runs it (single-threaded workers: the redirection of file
+    descriptor 2 catches the C++ side's output)."""
+    from . import Error, Scene, run
 
-    doc = apply(scene_dict, variant)
-    doc.setdefault("outputs", {})
-    doc["outputs"].update({"forces": True, "summary": True, "frames": False, "plot": False, "recording": False})
-    doc.get("engines", {}).pop("render", None)
-    scene = Scene.from_dict(doc, base_dir, "sweep variant")
-    with tempfile.TemporaryDirectory(prefix="dm_sweep_") as tmp:
-        result = run(scene, duration, tmp)
-        forces = (pathlib.Path(tmp) / "forces.csv").read_bytes()
-    return result.summary, forces
+    with tempfile.TemporaryFile() as log:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        os.dup2(log.fileno(), 2)
+        try:
+            doc = apply(scene_dict, variant)
+            doc.setdefault("outputs", {})
+            doc["outputs"].update({"forces": True, "summary": True, "frames": False, "plot": False,
+                                   "recording": False})
+            doc.get("engines", {}).pop("render", None)
+            scene = Scene.from_dict(doc, base_dir, "sweep variant")
+            with tempfile.TemporaryDirectory(prefix="dm_sweep_") as tmp:
+                result = run(scene, duration, tmp)
+                forces = (pathlib.Path(tmp) / "forces.csv").read_bytes()
+            summary, error = result.summary, ""
+        except (Error, ValueError) as e:
+            summary, forces, error = None, None, _error_text(e)
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+        log.seek(0)
+        text = log.read().decode("utf-8", errors="replace")
+    return summary, forces, text, error
 
 
 def _error_text(e):
@@ -170,9 +189,11 @@ def sweep(scene, parameters, out_dir, duration, client=None, samples=None, seed=
     todo = list(variants(parameters, samples, seed))
     rows = [None] * len(todo)
 
-    def record(i, summary=None, forces=None, error=""):
+    def record(i, summary=None, forces=None, error="", log=None):
         folder = out_dir / "variants" / f"{i:05d}"
         folder.mkdir(exist_ok=True)
+        if log is not None:
+            _write_atomic(folder / "log.txt", log.encode())
         row = {"variant": i, **todo[i], "error": error}
         if summary is not None:
             _write_atomic(folder / "summary.json", (json.dumps(summary, indent=2) + "\n").encode())
@@ -204,8 +225,8 @@ def sweep(scene, parameters, out_dir, duration, client=None, samples=None, seed=
         if client == "serial":
             for i in pending:
                 try:
-                    summary, forces = run_variant(scene_dict, base_dir, todo[i], duration)
-                    record(i, summary, forces)
+                    summary, forces, log, error = run_variant(scene_dict, base_dir, todo[i], duration)
+                    record(i, summary, forces, error, log)
                 except Exception as e:  # noqa: BLE001 — a failed variant is a row, the sweep goes on
                     record(i, error=_error_text(e))
                 finished += 1
@@ -220,8 +241,8 @@ def sweep(scene, parameters, out_dir, duration, client=None, samples=None, seed=
             for fut in as_completed(futures):
                 i = futures[fut]
                 try:
-                    summary, forces = fut.result()
-                    record(i, summary, forces)
+                    summary, forces, log, error = fut.result()
+                    record(i, summary, forces, error, log)
                 except Exception as e:  # noqa: BLE001
                     record(i, error=_error_text(e))
                 finished += 1

@@ -64,6 +64,9 @@ def test_a_distributed_sweep_equals_the_serial_one(serial, scene, cluster, tmp_p
         b = (tmp_path / "variants" / f"{i:05d}" / "forces.csv").read_bytes()
         assert a == b
     assert (tmp_path / "results.csv").read_text() == (out / "results.csv").read_text()
+    # Each variant's log, captured where it ran (a worker's standard error).
+    log = (tmp_path / "variants" / "00005" / "log.txt").read_text()
+    assert "simulation: running -> stopping (done)" in log
 
 
 def test_a_worker_killed_mid_sweep_loses_nothing(serial, scene, tmp_path):
@@ -100,6 +103,8 @@ def test_a_variant_that_cannot_run_is_a_row_with_its_error(scene, tmp_path):
     rows = sweeps.sweep(scene, {"/objects/1/mass": [0.2, -1.0]}, tmp_path, 0.1, client="serial")
     assert rows[0]["error"] == "" and rows[0]["haptics.ticks"] == 100
     assert "/objects/1/mass" in rows[1]["error"]
+    assert "simulation: running -> stopping (done)" in (tmp_path / "variants/00000/log.txt").read_text()
+    assert (tmp_path / "variants/00001/log.txt").exists()  # the failed one keeps its (short) log too
     with pytest.raises(ValueError):
         sweeps.apply(scene.to_dict(), {"/objects/9/mass": 1.0})
     # NumPy grids work as lists do.
