@@ -130,6 +130,18 @@ Result<BodyGeometry> meshGeometry(std::shared_ptr<const Mesh> mesh, double scale
   return g;
 }
 
+// A user force adding, each step, the force and torque held per body in
+// `force` and `torque` (body order; their owner outlives the world).
+Status addHeldForces(PhysicsWorld& world, const char* name, const std::vector<Vec3>& force,
+                     const std::vector<Vec3>& torque) {
+  return world.addUserForce(name, [&force, &torque](const BodyStateView&, ForceOutput& out) {
+    for (std::size_t b = 0; b < force.size(); ++b) {
+      out.force[b] += force[b];
+      out.torque[b] += torque[b];
+    }
+  });
+}
+
 }  // namespace
 
 struct PhysicsEngine::Impl {
@@ -247,14 +259,7 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
   m->toolTorque.assign(m->bodies.size(), Vec3::Zero());
   Impl* raw = m.get();
   if (anyTouchedMoves) {
-    if (auto s = m->world.addUserForce("haptic tool",
-                                       [raw](const BodyStateView&, ForceOutput& out) {
-                                         for (std::size_t b = 0; b < raw->toolForce.size(); ++b) {
-                                           out.force[b] += raw->toolForce[b];
-                                           out.torque[b] += raw->toolTorque[b];
-                                         }
-                                       });
-        !s)
+    if (auto s = addHeldForces(m->world, "haptic tool", raw->toolForce, raw->toolTorque); !s)
       return s.error();
   }
   for (auto& buffer : m->readerPoses)
@@ -357,15 +362,7 @@ Status PhysicsEngine::addScriptFeed(ScriptFeed& feed) {
     m.scriptForce.assign(m.bodies.size(), Vec3::Zero());
     m.scriptTorque.assign(m.bodies.size(), Vec3::Zero());
     Impl* raw = impl_.get();
-    if (auto s = m.world.addUserForce("scripts",
-                                      [raw](const BodyStateView&, ForceOutput& out) {
-                                        for (std::size_t b = 0; b < raw->scriptForce.size(); ++b) {
-                                          out.force[b] += raw->scriptForce[b];
-                                          out.torque[b] += raw->scriptTorque[b];
-                                        }
-                                      });
-        !s)
-      return s.error();
+    if (auto s = addHeldForces(m.world, "scripts", raw->scriptForce, raw->scriptTorque); !s) return s.error();
   }
   m.scripts.push_back(&feed);
   return ok();

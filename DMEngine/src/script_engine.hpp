@@ -54,10 +54,9 @@ struct ScriptFeed {
   SpscRing<ScriptEventRecord, 256> physicsEvents;  // physics → script
   TripleBuffer<std::vector<ScriptForce>> forces;   // script → physics
   std::atomic<std::uint64_t> droppedEvents{0};
-  void push(SpscRing<ScriptEventRecord, 1024>& ring, const ScriptEventRecord& e) noexcept {
-    if (!ring.tryPush(e)) droppedEvents.fetch_add(1, std::memory_order_relaxed);
-  }
-  void push(SpscRing<ScriptEventRecord, 256>& ring, const ScriptEventRecord& e) noexcept {
+  // Writer side of either ring: a full ring drops the event and counts it.
+  template <std::size_t N>
+  void push(SpscRing<ScriptEventRecord, N>& ring, const ScriptEventRecord& e) noexcept {
     if (!ring.tryPush(e)) droppedEvents.fetch_add(1, std::memory_order_relaxed);
   }
 };
