@@ -17,6 +17,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <new>
 
@@ -35,6 +36,23 @@
 extern "C" int __sanitizer_install_malloc_and_free_hooks(void (*mallocHook)(const volatile void*, std::size_t),
                                                          void (*freeHook)(const volatile void*));
 extern "C" std::size_t __sanitizer_get_allocated_size(const volatile void* p);
+#endif
+
+#if defined(__SANITIZE_ADDRESS__)
+#define DM_ISOLATE_ASAN 1
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+#define DM_ISOLATE_ASAN 1
+#endif
+#endif
+
+#if defined(DM_ISOLATE_ASAN)
+// AddressSanitizer reports an allocation it cannot serve (one beyond its
+// largest size, or one the kernel refuses to map) and dies before any
+// allocator hook or new-handler sees it; these let the child tell that
+// report from a real memory error of ours.
+extern "C" void __sanitizer_set_death_callback(void (*callback)(void));
+extern "C" const char* __asan_get_report_description();
 #endif
 
 namespace dm::detail {
@@ -111,6 +129,19 @@ void budgetFreeHook(const volatile void* p) {
 }
 #endif
 
+#if defined(DM_ISOLATE_ASAN)
+// An allocation AddressSanitizer could not serve is over any budget (it asked
+// for more than the machine or the allocator has): the child ends as over
+// budget. Every other report (a memory error) still ends it as a crash.
+void budgetDeathCallback() {
+  const char* bug = __asan_get_report_description();
+  if (bug == nullptr) return;
+  for (const char* kind : {"out-of-memory", "allocation-size-too-big", "calloc-overflow", "pvalloc-overflow",
+                           "invalid-allocation-alignment", "rss-limit-exceeded"})
+    if (std::strcmp(bug, kind) == 0) exitOverBudget();
+}
+#endif
+
 // Caps what the child may allocate beyond what it holds now at `budget`:
 // RLIMIT_AS on the address space, or, under the sanitizers (whose shadow
 // memory needs the address space), allocator hooks counting heap bytes. A
@@ -119,6 +150,9 @@ void budgetFreeHook(const volatile void* p) {
 void limitMemory(std::size_t budget) {
   if (budget == 0) return;
   std::set_new_handler(exitOverBudget);
+#if defined(DM_ISOLATE_ASAN)
+  __sanitizer_set_death_callback(budgetDeathCallback);
+#endif
 #if defined(DM_ISOLATE_SANITIZED)
   gHeapBudget = static_cast<long long>(std::min<std::size_t>(budget, std::size_t{1} << 60));
   __sanitizer_install_malloc_and_free_hooks(budgetMallocHook, budgetFreeHook);

@@ -62,6 +62,21 @@ TEST(Isolate, AllocationBeyondBudgetIsAnError) {
   EXPECT_NE(msg.find("budget hint"), std::string::npos) << msg;
 }
 
+// A request far beyond any machine (a file header's element count times the
+// element size): the allocator refuses it before anything is allocated — in
+// plain builds through RLIMIT_AS and the new-handler, under AddressSanitizer
+// through its own report — and either way it is "over budget", not a crash.
+TEST(Isolate, AllocationNoMachineCanServeIsOverBudget) {
+  for (const std::size_t bytes : {std::size_t{1} << 37, std::size_t{1} << 46}) {
+    auto run = runIsolated([bytes](FdWriter& w) { allocateAndReport(w, bytes); },
+                           options(std::size_t{64} << 20), "test.bin");
+    ASSERT_FALSE(run) << bytes;
+    EXPECT_EQ(run.error().code, dm::ErrorCode::Unsupported) << bytes << ": " << run.error();
+    EXPECT_NE(run.error().message().find("needed more than its memory budget"), std::string::npos)
+        << run.error();
+  }
+}
+
 TEST(Isolate, ManySmallAllocationsCountAgainstTheBudget) {
   auto run = runIsolated(
       [](FdWriter& w) {
