@@ -4,6 +4,9 @@
 #         -DMIN_CONTACT_TICKS=N (FRAMES: at least that many frames)
 #         -DMIN_FORCE=F -DMAX_FORCE=F -P check_scene_run.cmake
 #         -DMOVED_BODY=name -DMIN_DISPLACEMENT=m (scenes with physics)
+#         -DFLUID=name -DMIN_SUCTION_PARTICLES=N (scenes with "fluids"):
+#         that fluid's account balanced and its suction tips took at least
+#         N particles in all
 #         -DVISION_FRAMES=N (scenes with a "vision" engine): its graph
 #         stepped N frames and wrote vision/edge_pixels.csv with N rows
 #         -DBONE_MAX_ERROR_MM=E -DBONE_MAX_DEPTH_MM=D (the bone-placement
@@ -117,6 +120,41 @@ if(DEFINED MIN_ROUND_TRIP_MS)
   endif()
   message(STATUS "tele-operation: round trip p50 ${rtt} ms, ${received} forces received")
 endif()
+# Fluids: -DFLUID=name -DMIN_SUCTION_PARTICLES=N.
+if(DEFINED FLUID)
+  string(JSON count LENGTH "${summary}" physics fluids)
+  set(found FALSE)
+  if(count GREATER 0)
+    math(EXPR last "${count} - 1")
+    foreach(i RANGE ${last})
+      string(JSON name GET "${summary}" physics fluids ${i} name)
+      if(name STREQUAL FLUID)
+        set(found TRUE)
+        string(JSON balanced GET "${summary}" physics fluids ${i} balanced)
+        if(NOT balanced)
+          message(FATAL_ERROR "fluid ${FLUID}: its account does not balance")
+        endif()
+        set(taken 0)
+        string(JSON tips LENGTH "${summary}" physics fluids ${i} suction)
+        if(tips GREATER 0)
+          math(EXPR lastTip "${tips} - 1")
+          foreach(k RANGE ${lastTip})
+            string(JSON n GET "${summary}" physics fluids ${i} suction ${k} particles)
+            math(EXPR taken "${taken} + ${n}")
+          endforeach()
+        endif()
+        if(taken LESS MIN_SUCTION_PARTICLES)
+          message(FATAL_ERROR "fluid ${FLUID}: suction took ${taken} particles, fewer than ${MIN_SUCTION_PARTICLES}")
+        endif()
+        message("fluid ${FLUID}: balanced, suction took ${taken} particles")
+      endif()
+    endforeach()
+  endif()
+  if(NOT found)
+    message(FATAL_ERROR "no fluid ${FLUID} in the physics summary")
+  endif()
+endif()
+
 # Physics: -DMOVED_BODY=name -DMIN_DISPLACEMENT=m: that dynamic body's
 # centre of mass ended at least that far from where it started.
 if(DEFINED MOVED_BODY)

@@ -17,6 +17,7 @@
 #include <numbers>
 
 #include "engine_json.hpp"
+#include "scene_fluids.hpp"
 #include "script_engine.hpp"
 #include "soft_tissue.hpp"
 
@@ -170,7 +171,8 @@ struct PhysicsEngine::Impl {
   std::vector<ScriptFeed*> scripts;
   std::vector<Vec3> scriptForce, scriptTorque;
   std::size_t punctures = 0;
-  std::unique_ptr<SoftTissues> soft;  // the soft objects, stepped after the rigid bodies
+  std::unique_ptr<SoftTissues> soft;    // the soft objects, stepped after the rigid bodies
+  std::unique_ptr<SceneFluids> fluids;  // the fluids, stepped after them
   std::uint64_t steps = 0;
   double lastDt = 0.0;
 
@@ -269,6 +271,9 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
   auto soft = SoftTissues::build(scene, resources);
   if (!soft) return soft.error();
   m->soft = std::move(*soft);
+  auto fluids = SceneFluids::build(scene);
+  if (!fluids) return fluids.error();
+  m->fluids = std::move(*fluids);
   return std::shared_ptr<PhysicsEngine>(new PhysicsEngine(std::move(m)));
 }
 
@@ -318,6 +323,11 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
     error_ = s.error().within("physics step " + std::to_string(m.steps));
     return false;
   }
+  if (!m.fluids->empty())
+    if (auto s = m.fluids->step(time_.seconds(info), dt); !s) {
+      error_ = s.error().within("physics step " + std::to_string(m.steps));
+      return false;
+    }
   ++m.steps;
   m.lastDt = dt;
   if (m.model) {
@@ -366,6 +376,10 @@ Status PhysicsEngine::addScriptFeed(ScriptFeed& feed) {
   }
   m.scripts.push_back(&feed);
   return ok();
+}
+
+TripleBuffer<FluidToolSample>* PhysicsEngine::fluidTool() noexcept {
+  return impl_->fluids->empty() ? nullptr : &impl_->fluids->toolFeed();
 }
 
 std::string PhysicsEngine::layerName(std::size_t i, int layer) const { return impl_->soft->layerName(i, layer); }
@@ -419,7 +433,8 @@ nlohmann::json PhysicsEngine::summary() const {
           {"bodies", std::move(bodies)},
           {"static_bodies", m.bodies.size() - m.moving.size()},
           {"contacts", m.state.contacts().size()},
-          {"soft", m.soft->summary()}};
+          {"soft", m.soft->summary()},
+          {"fluids", m.fluids->summary()}};
 }
 
 }  // namespace dm

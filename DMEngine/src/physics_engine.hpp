@@ -4,7 +4,8 @@
 // the haptic tool's impulses applied and the new poses handed on; and its
 // soft objects as FEM bodies (soft_tissue.hpp), stepped after the rigid
 // bodies at the same rate, pressed by the god-object through their
-// HapticTissue and drawn deformed.
+// HapticTissue and drawn deformed; and its fluids (scene_fluids.hpp),
+// stepped last.
 //
 // Data flow per physics tick (docs/architecture.md, "Scene runtime"):
 //   haptics → ToolImpulseChannel → the impulse the tool gave each touched
@@ -14,7 +15,8 @@
 //   → one the OpenIGTLink engine reads (the bodies' TRANSFORMs) and
 //   → each script's (their states; the scripts' held forces come back).
 // Each channel has one writer and one reader thread, so the engine runs on
-// real-time threads and in lockstep alike; tick() allocates nothing.
+// real-time threads and in lockstep alike; tick() allocates nothing but a
+// fluid's growth to its high-water mark (scene_fluids.hpp).
 #pragma once
 
 #include <dm/core/result.hpp>
@@ -42,6 +44,7 @@ class HapticTissue;
 class ToolImpulseChannel;
 struct Mesh;
 struct ScriptFeed;
+struct FluidToolSample;
 
 /// Who reads the moving objects' poses (each has its own triple buffer).
 enum class PoseReader : std::uint8_t { Render, Network };
@@ -91,6 +94,9 @@ class PhysicsEngine final : public Engine {
   /// Each tick then applies the forces the script holds on the moving bodies
   /// and publishes their states and the needle's punctures to it.
   Status addScriptFeed(ScriptFeed& feed);
+  /// Where the haptics engine writes the tool for the fluids' tips and
+  /// inlets each tick (one writer); nullptr when the scene has no fluids.
+  TripleBuffer<FluidToolSample>* fluidTool() noexcept;
   /// Layer `layer` of soft object i's needle layers ("" when none).
   std::string layerName(std::size_t i, int layer) const;
 

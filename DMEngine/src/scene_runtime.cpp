@@ -35,6 +35,7 @@
 #endif
 #include "physics_engine.hpp"
 #include "scene_6dof.hpp"
+#include "scene_fluids.hpp"
 #include "script_engine.hpp"
 #include "surgery.hpp"
 #ifdef DM_ENGINE_HAVE_RENDERER
@@ -113,6 +114,11 @@ class HapticsEngine final : public Engine {
     }
     if (!ring.tryPush(p)) dropped.fetch_add(1, std::memory_order_relaxed);
     if (!scripts.empty()) publishToScripts(p, s);
+    if (fluidTool != nullptr) {
+      FluidToolSample& out = fluidTool->writeBuffer();
+      out = {.proxy = s.response.proxyPose.translation(), .force = p.response.force, .valid = true};
+      fluidTool->publish();
+    }
     if (recorder) {
       // The device's state this tick, stamped with the tick's scene time
       // (what a replay's lockstep tick asks the replay-haptic device for).
@@ -160,7 +166,8 @@ class HapticsEngine final : public Engine {
     wasTouching = touching;
     lastContactObject = source;
   }
-  std::vector<ScriptFeed*> scripts;  // owned by their script engines
+  std::vector<ScriptFeed*> scripts;                    // owned by their script engines
+  TripleBuffer<FluidToolSample>* fluidTool = nullptr;  // owned by the physics engine's fluids
   bool wasTouching = false;
   int lastContactObject = -1;
   std::unique_ptr<HapticDevice> device;
@@ -517,6 +524,7 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   if (!device) return device.error().within("devices/" + dev->name);
 
   e->device = std::move(*device);
+  e->fluidTool = physics ? physics->fluidTool() : nullptr;
   e->tools = physics && (e->godObject != nullptr || e->vps != nullptr || e->sphereTree != nullptr)
                  ? physics->toolImpulses()
                  : nullptr;

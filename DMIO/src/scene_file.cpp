@@ -179,7 +179,7 @@ class SceneParser {
 
   void body() {
     root_.knownKeys({"format", "version", "name", "resources", "materials", "objects", "volumes", "lights",
-                     "cameras", "devices", "engines", "outputs", "scripts"});
+                     "cameras", "devices", "engines", "outputs", "scripts", "fluids"});
     scene_.name = root_.string("name", std::string());
     resources();
     materials();
@@ -194,6 +194,7 @@ class SceneParser {
       readScripts(root_, scene_, [this](ConfigReader& r, const std::string& source, std::string_view key) {
         return resolveSource(r, source, key);
       });
+    if (v2Key(root_, "fluids")) readFluids(root_, scene_);
     physicsBodies();
     checkSurgery(scene_, root_);
     checkSoft(scene_, root_);
@@ -621,10 +622,11 @@ class SceneParser {
                      "use a thin box shape");
       }
     }
-    if (scene_.engines.physics && !anyMoving)
+    if (scene_.engines.physics && !anyMoving && scene_.fluids.empty())
       root_.child("engines").child("physics").addError(
-          "the physics engine has no dynamic or soft object to move", {},
-          "set \"dynamic\": true and a mass on an object, give one a \"soft\" block, or remove the engine");
+          "the physics engine has no dynamic or soft object or fluid to move", {},
+          "set \"dynamic\": true and a mass on an object, give one a \"soft\" block, add a fluid, or remove the "
+          "engine");
   }
 
   void transferFunction(ConfigReader tf, SceneVolume& v) {
@@ -1417,6 +1419,7 @@ Json toJson(const SceneDesc& scene) {
                   {"forces", o.forces},       {"plot", o.plot},     {"summary", o.summary},
                   {"recording", o.recording}};
   if (!scene.scripts.empty()) j["scripts"] = scriptsJson(scene.scripts);
+  if (!scene.fluids.empty()) j["fluids"] = fluidsJson(scene.fluids);
   return j;
 }
 

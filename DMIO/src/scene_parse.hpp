@@ -197,6 +197,25 @@ inline Pose readPose(ConfigReader p) {
 }
 
 inline Json toJson(const Vec3& v) { return Json::array({v.x(), v.y(), v.z()}); }
+
+// {"min": [x, y, z], "max": [x, y, z]}, min ≤ max (min < max on every axis
+// when `solid`: a box that must hold something); nullopt on an error
+// (recorded).
+inline std::optional<SceneBox> readBox(ConfigReader& r, bool solid = false) {
+  if (!expectObject(r)) return std::nullopt;
+  r.knownKeys({"min", "max"});
+  const std::size_t before = r.errors().size();
+  SceneBox box{readVec3(r, "min"), readVec3(r, "max")};
+  if (r.errors().size() != before) return std::nullopt;
+  if ((box.max - box.min).minCoeff() < 0.0 || (solid && !((box.max - box.min).minCoeff() > 0.0))) {
+    r.addError(solid ? "max is not above min on every axis" : "max is below min", "max",
+               "give the box's lowest corner as min, its highest as max");
+    return std::nullopt;
+  }
+  return box;
+}
+
+inline Json boxJson(const SceneBox& b) { return {{"min", toJson(b.min)}, {"max", toJson(b.max)}}; }
 inline Json toJson(const Vec4& v) { return Json::array({v.x(), v.y(), v.z(), v.w()}); }
 inline Json toJson(const Pose& p) {
   return {{"position", toJson(p.p)}, {"rotation", Json::array({p.q.w(), p.q.x(), p.q.y(), p.q.z()})}};
@@ -258,5 +277,8 @@ using SourceResolver =
     std::function<std::filesystem::path(ConfigReader&, const std::string&, std::string_view)>;
 void readScripts(ConfigReader& root, SceneDesc& scene, const SourceResolver& resolve);
 Json scriptsJson(const std::vector<SceneScript>& scripts);
+// "fluids" (v2; scene_fluid.cpp).
+void readFluids(ConfigReader& root, SceneDesc& scene);
+Json fluidsJson(const std::vector<SceneFluid>& fluids);
 
 }  // namespace dm::scene_parse

@@ -14,22 +14,6 @@ namespace {
 // Largest model a scene may ask for (FemBody holds ~0.5 kB a tetrahedron).
 constexpr double kMaxTetsLimit = 4'000'000.0;
 
-// {"min": [x, y, z], "max": [x, y, z]}, min ≤ max; nullopt on an error
-// (recorded).
-std::optional<SceneBox> readBox(ConfigReader& r) {
-  if (!expectObject(r)) return std::nullopt;
-  r.knownKeys({"min", "max"});
-  const std::size_t before = r.errors().size();
-  SceneBox box{readVec3(r, "min"), readVec3(r, "max")};
-  if (r.errors().size() != before) return std::nullopt;
-  if ((box.max - box.min).minCoeff() < 0.0) {
-    r.addError("max is below min", "max", "give the box's lowest corner as min, its highest as max");
-    return std::nullopt;
-  }
-  return box;
-}
-
-Json boxJson(const SceneBox& b) { return {{"min", toJson(b.min)}, {"max", toJson(b.max)}}; }
 
 // Most layers a needle meets (each tetrahedron's layer is a byte).
 constexpr std::size_t kMaxLayers = 255;

@@ -630,6 +630,54 @@ struct SceneScript {
   bool operator==(const SceneScript&) const = default;
 };
 
+/// Where a fluid comes in (v2 "fluids"/"inlets"; dm::FluidInlet): a cut
+/// vessel (pressure > 0: its rate falls with the pressure on it) or a pump
+/// (pressure 0: irrigation), open from `start` to `stop` scene seconds.
+struct SceneFluidInlet {
+  std::string name;
+  Vec3 center = Vec3::Zero();
+  Vec3 normal = Vec3(0, 0, 1);  ///< unit: the direction the fluid leaves in
+  double radius = 0.0;          ///< m, ≥ 0
+  double flowRate = 0.0;        ///< m³/s at zero back pressure
+  double pressure = 0.0;        ///< Pa: the vessel's driving pressure; 0 a pump
+  double start = 0.0;           ///< s
+  std::optional<double> stop;   ///< s; open to the end when absent
+
+  bool operator==(const SceneFluidInlet&) const = default;
+};
+
+/// A suction tip (v2 "fluids"/"suction"; dm::FluidSuction): at a fixed
+/// centre, or at the haptic tool's proxy ("at": "tool").
+struct SceneFluidSuction {
+  std::string name;
+  double radius = 0.0;         ///< m, > 0
+  double flowRate = 0.0;       ///< m³/s, the most it takes
+  bool atTool = false;         ///< follows the tool's proxy instead of `center`
+  Vec3 center = Vec3::Zero();  ///< when not at the tool
+  double start = 0.0;          ///< s
+  std::optional<double> stop;  ///< s
+
+  bool operator==(const SceneFluidSuction&) const = default;
+};
+
+/// A particle fluid of the run (v2 "fluids"; dm::SphFluid), stepped by the
+/// physics engine: blood from cuts, irrigation, suction; docs/scene-format.md,
+/// "Fluids".
+struct SceneFluid {
+  std::string name;
+  double spacing = 0.004;             ///< m: particle spacing
+  double density = 1060.0;            ///< kg/m³ (blood)
+  double viscosity = 3.5e-6;          ///< m²/s, kinematic (blood)
+  double surfaceTension = 0.0;        ///< Akinci's γ
+  std::optional<SceneBox> container;  ///< walls of a box open at the top
+  SceneBox region;                    ///< particles leaving it are recycled
+  std::vector<SceneBox> blocks;       ///< fluid at the start
+  std::vector<SceneFluidInlet> inlets;
+  std::vector<SceneFluidSuction> suction;
+
+  bool operator==(const SceneFluid&) const = default;
+};
+
 /// What a run writes.
 struct SceneOutputs {
   std::string directory = "out";  ///< relative to the working directory of the run
@@ -659,6 +707,7 @@ struct SceneDesc {
   SceneEngines engines;
   SceneOutputs outputs;
   std::vector<SceneScript> scripts;  ///< v2, in file order
+  std::vector<SceneFluid> fluids;    ///< v2, in file order
 
   /// Find by name; nullptr when there is none. O(n).
   const SceneResource* resource(std::string_view name) const;

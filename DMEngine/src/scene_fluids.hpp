@@ -1,0 +1,62 @@
+// scene_fluids.hpp (private) — a scene's particle fluids ("fluids", v2) as
+// the physics engine steps them: each a dm::SphFluid with its container,
+// starting blocks, region of interest (dm::FluidRegion), inlets
+// (dm::FluidInlet: cut vessels and irrigation, open over their time window)
+// and suction tips (dm::FluidSuction: fixed, or at the haptic tool's proxy).
+//
+// Per physics tick, for each fluid in scene order: the inlets whose window
+// holds the tick's time emit (a tool pressing an inlet — its proxy within
+// the inlet's radius plus a spacing of its centre — adds |F|/A to the
+// inlet's back pressure, F the force on the hand, A the outlet's area); the
+// open tips take their share (a tip at the tool moves to the proxy first);
+// the region recycles its leavers; the fluid steps. The summary keeps each
+// fluid's account: its particles are the starting ones plus what the inlets
+// emitted minus what the tips and the region took.
+//
+// Data flow: haptics → toolFeed() (a TripleBuffer of the proxy's position
+// and the force, written each haptic tick) → step() (physics thread).
+// The fluids' arrays grow to their high-water mark (bounded by the region's
+// volume, which the scene check caps) and then stop allocating.
+#pragma once
+
+#include <dm/core/result.hpp>
+#include <dm/core/triple_buffer.hpp>
+#include <dm/core/types.hpp>
+
+#include <nlohmann/json.hpp>
+
+#include <memory>
+
+namespace dm {
+
+struct SceneDesc;
+
+/// The haptic tool as the fluids see it.
+struct FluidToolSample {
+  Vec3 proxy = Vec3::Zero();  ///< world
+  Vec3 force = Vec3::Zero();  ///< on the hand, world
+  bool valid = false;
+};
+
+class SceneFluids {
+ public:
+  /// Fails naming the fluid's entry ("fluids/NAME/...") for an option the
+  /// solver refuses.
+  static Result<std::unique_ptr<SceneFluids>> build(const SceneDesc& scene);
+  ~SceneFluids();
+
+  bool empty() const noexcept;
+  /// Physics thread: one step of dt from scene time t.
+  Status step(double t, double dt);
+  /// Written by the haptics engine each tick (one writer), read here.
+  TripleBuffer<FluidToolSample>& toolFeed() noexcept;
+  /// Control thread, after the run: each fluid's state and account.
+  nlohmann::json summary() const;
+
+ private:
+  struct Impl;
+  explicit SceneFluids(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace dm

@@ -1,0 +1,206 @@
+// scene_fluid.cpp — the scene file's "fluids" (v2): particle fluids the
+// physics engine steps, with their container, region of interest, starting
+// blocks, inlets (cut vessels, irrigation) and suction tips; their checks
+// and JSON (docs/scene-format.md, "Fluids"; the runtime's side is
+// DMEngine/src/scene_fluids.hpp).
+#include <set>
+
+#include "scene_parse.hpp"
+
+namespace dm::scene_parse {
+
+namespace {
+
+// The most particles a region may hold (its volume over the spacing cubed):
+// 4 million particles are about 2 GiB of solver state.
+constexpr double kMaxRegionParticles = 4e6;
+// The largest flow a source or a tip may have: 1 l/s.
+constexpr double kMaxFlowRate = 1e-3;
+
+// A box that must hold something (min < max on every axis) at `key`.
+std::optional<SceneBox> readSolidBox(ConfigReader& parent, std::string_view key, bool required) {
+  ConfigReader r = parent.child(key, required);
+  return readBox(r, true);
+}
+
+bool inside(const SceneBox& outer, const SceneBox& inner) {
+  return (inner.min.array() >= outer.min.array()).all() && (inner.max.array() <= outer.max.array()).all();
+}
+
+bool inside(const SceneBox& box, const Vec3& p) {
+  return (p.array() >= box.min.array()).all() && (p.array() <= box.max.array()).all();
+}
+
+// A unique, non-empty "name" among `names`.
+std::string readName(ConfigReader& r, std::set<std::string, std::less<>>& names, const char* what) {
+  const std::size_t before = r.errors().size();
+  std::string name = r.string("name");
+  if (r.errors().size() != before) return name;
+  if (name.empty())
+    r.addError("name is empty", "name",
+               std::string("give the ") + what + " a unique name; the summary uses it");
+  else if (!names.insert(name).second)
+    r.addError("duplicate " + std::string(what) + " name " + inQuotes(name), "name", "names must be unique");
+  return name;
+}
+
+// "start" and "stop" (seconds of scene time; stop after start).
+void readWindow(ConfigReader& r, double& start, std::optional<double>& stop) {
+  start = r.number("start", {.min = 0.0, .max = 1e7}, 0.0);
+  if (!r.has("stop")) return;
+  const std::size_t before = r.errors().size();
+  const double s = r.number("stop", {.min = 0.0, .max = 1e7});
+  if (r.errors().size() != before) return;
+  if (!(s > start))
+    r.addError(formatString("stop (%g s) is not after start (%g s)", s, start), "stop");
+  else
+    stop = s;
+}
+
+void readInlets(ConfigReader& fr, SceneFluid& f) {
+  ConfigReader list = fr.child("inlets");
+  if (!expectArray(list)) return;
+  std::set<std::string, std::less<>> names;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    ConfigReader r = list.at(i);
+    if (!expectObject(r)) continue;
+    r.knownKeys({"name", "center", "normal", "radius", "flow_rate", "pressure", "start", "stop"});
+    SceneFluidInlet in;
+    in.name = readName(r, names, "inlet");
+    const std::size_t before = r.errors().size();
+    in.center = readVec3(r, "center");
+    if (r.errors().size() == before && !inside(f.region, in.center))
+      r.addError("the inlet lies outside the fluid's region, which would recycle its fluid at once", "center",
+                 "move it inside \"region\" or grow the region");
+    in.normal = readDirection(r, "normal", in.normal);
+    in.radius = r.number("radius", {.min = 0.0, .max = 0.1}, in.radius);
+    in.flowRate = r.number("flow_rate", {.min = 0.0, .max = kMaxFlowRate});
+    in.pressure = r.number("pressure", {.min = 0.0, .max = 1e6}, in.pressure);
+    readWindow(r, in.start, in.stop);
+    f.inlets.push_back(std::move(in));
+  }
+}
+
+void readSuction(ConfigReader& fr, SceneFluid& f, const SceneDesc& scene) {
+  ConfigReader list = fr.child("suction");
+  if (!expectArray(list)) return;
+  std::set<std::string, std::less<>> names;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    ConfigReader r = list.at(i);
+    if (!expectObject(r)) continue;
+    r.knownKeys({"name", "radius", "flow_rate", "at", "center", "start", "stop"});
+    SceneFluidSuction s;
+    s.name = readName(r, names, "suction tip");
+    s.radius = readPositive(r, "radius", {}, 0.1);
+    s.flowRate = r.number("flow_rate", {.min = 0.0, .max = kMaxFlowRate});
+    if (r.has("at") == r.has("center")) {
+      r.addError(
+          r.has("at") ? "both \"at\" and \"center\" are given" : "neither \"at\" nor \"center\" is given", "",
+          "\"at\": \"tool\" (the tip follows the haptic tool) or \"center\": [x, y, z]");
+    } else if (r.has("at")) {
+      const std::size_t before = r.errors().size();
+      r.oneOf("at", {"tool"});
+      s.atTool = r.errors().size() == before;
+      if (s.atTool && !scene.engines.haptics)
+        r.addError("the scene has no haptics engine, so no tool to follow", "at",
+                   "add \"haptics\" under \"engines\" or give the tip a \"center\"");
+    } else {
+      s.center = readVec3(r, "center");
+    }
+    readWindow(r, s.start, s.stop);
+    f.suction.push_back(std::move(s));
+  }
+}
+
+Json windowJson(Json j, double start, const std::optional<double>& stop) {
+  j["start"] = start;
+  if (stop) j["stop"] = *stop;
+  return j;
+}
+
+}  // namespace
+
+void readFluids(ConfigReader& root, SceneDesc& scene) {
+  ConfigReader list = root.child("fluids");
+  if (!expectArray(list)) return;
+  std::set<std::string, std::less<>> names;
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    ConfigReader r = list.at(i);
+    if (!expectObject(r)) continue;
+    r.knownKeys({"name", "spacing", "density", "viscosity", "surface_tension", "container", "region",
+                 "blocks", "inlets", "suction"});
+    SceneFluid f;
+    f.name = readName(r, names, "fluid");
+    if (!scene.engines.physics)
+      r.addError("a fluid needs the physics engine, which steps it", "",
+                 "add \"physics\" under \"engines\" (its rate is the fluid's step)");
+    f.spacing = readPositive(r, "spacing", f.spacing, 0.1);
+    f.density = readPositive(r, "density", f.density, 1e5);
+    f.viscosity = r.number("viscosity", {.min = 0.0, .max = 10.0}, f.viscosity);
+    f.surfaceTension = r.number("surface_tension", {.min = 0.0, .max = 10.0}, f.surfaceTension);
+    if (r.has("container")) f.container = readSolidBox(r, "container", false);
+    if (const auto region = readSolidBox(r, "region", true)) {
+      f.region = *region;
+      const Vec3 size = region->max - region->min;
+      const double particles = size.prod() / (f.spacing * f.spacing * f.spacing);
+      if (particles > kMaxRegionParticles)
+        r.addError(formatString("the region holds up to %.3g particles at spacing %g m; at most %.0f",
+                                particles, f.spacing, kMaxRegionParticles),
+                   "region", "a larger spacing or a smaller region");
+    }
+    ConfigReader blocks = r.child("blocks");
+    if (expectArray(blocks))
+      for (std::size_t k = 0; k < blocks.size(); ++k) {
+        ConfigReader br = blocks.at(k);
+        if (const auto b = readBox(br, true)) {
+          if (!inside(f.region, *b))
+            br.addError("the block reaches outside the fluid's region, which would recycle that part at once",
+                        "", "keep blocks inside \"region\"");
+          f.blocks.push_back(*b);
+        }
+      }
+    readInlets(r, f);
+    readSuction(r, f, scene);
+    scene.fluids.push_back(std::move(f));
+  }
+}
+
+Json fluidsJson(const std::vector<SceneFluid>& fluids) {
+  Json list = Json::array();
+  for (const SceneFluid& f : fluids) {
+    Json j = {{"name", f.name},
+              {"spacing", f.spacing},
+              {"density", f.density},
+              {"viscosity", f.viscosity},
+              {"surface_tension", f.surfaceTension},
+              {"region", boxJson(f.region)}};
+    if (f.container) j["container"] = boxJson(*f.container);
+    Json blocks = Json::array();
+    for (const SceneBox& b : f.blocks) blocks.push_back(boxJson(b));
+    j["blocks"] = std::move(blocks);
+    Json inlets = Json::array();
+    for (const SceneFluidInlet& in : f.inlets)
+      inlets.push_back(windowJson({{"name", in.name},
+                                   {"center", toJson(in.center)},
+                                   {"normal", toJson(in.normal)},
+                                   {"radius", in.radius},
+                                   {"flow_rate", in.flowRate},
+                                   {"pressure", in.pressure}},
+                                  in.start, in.stop));
+    j["inlets"] = std::move(inlets);
+    Json suction = Json::array();
+    for (const SceneFluidSuction& s : f.suction) {
+      Json t = {{"name", s.name}, {"radius", s.radius}, {"flow_rate", s.flowRate}};
+      if (s.atTool)
+        t["at"] = "tool";
+      else
+        t["center"] = toJson(s.center);
+      suction.push_back(windowJson(std::move(t), s.start, s.stop));
+    }
+    j["suction"] = std::move(suction);
+    list.push_back(std::move(j));
+  }
+  return list;
+}
+
+}  // namespace dm::scene_parse

@@ -1,0 +1,132 @@
+// The scene file's "fluids" (v2; docs/scene-format.md, "Fluids"): a fluid
+// with its container, region, blocks, inlets and suction tips reads as
+// written with its defaults (blood), round-trips through its canonical
+// JSON, and each mistake is refused at its JSON pointer — a fluid without
+// the physics engine that steps it, a region too large to hold, a block or
+// an inlet outside the region (their fluid would be recycled at once), a
+// tip with both or neither of "at" and "center", a tip at the tool without
+// a haptics engine, a window that stops before it starts, unknown keys.
+#include <dm/io/scene_file.hpp>
+
+#include <gtest/gtest.h>
+
+#include <string>
+#include <vector>
+
+#include "scene_test_support.hpp"
+
+namespace scene_fluid_io_test {
+
+using dm::Json;
+using dm::Vec3;
+
+Json fluidScene() {
+  return Json::parse(R"({
+    "format": "dmplatform-scene", "version": 2, "name": "bleeding",
+    "engines": {"physics": {"rate_hz": 500}},
+    "fluids": [{
+      "name": "blood", "spacing": 0.005,
+      "container": {"min": [0, 0, 0], "max": [0.1, 0.1, 0.1]},
+      "region": {"min": [-0.05, -0.05, -0.05], "max": [0.15, 0.15, 0.2]},
+      "blocks": [{"min": [0, 0, 0], "max": [0.1, 0.1, 0.01]}],
+      "inlets": [{"name": "cut", "center": [0.05, 0.05, 0.02], "normal": [0, 0, 2], "radius": 0.002,
+                  "flow_rate": 2e-6, "pressure": 2000, "start": 0.5}],
+      "suction": [{"name": "tip", "center": [0.02, 0.02, 0.01], "radius": 0.006, "flow_rate": 5e-6,
+                   "start": 1, "stop": 3}]
+    }]
+  })");
+}
+
+TEST(SceneFluidFile, ReadsTheFluidItsSourcesAndItsDefaults) {
+  std::vector<dm::Error> problems;
+  auto s = dm::parseScene(fluidScene().dump(), "scene.json", "/data/scenes", &problems);
+  ASSERT_TRUE(s) << dm::formatSceneErrors(problems);
+  ASSERT_EQ(s->fluids.size(), 1u);
+  const dm::SceneFluid& f = s->fluids[0];
+  EXPECT_EQ(f.name, "blood");
+  EXPECT_EQ(f.spacing, 0.005);
+  EXPECT_EQ(f.density, 1060.0);  // blood, unless the scene says
+  EXPECT_EQ(f.viscosity, 3.5e-6);
+  ASSERT_TRUE(f.container.has_value());
+  EXPECT_EQ(f.container->max, Vec3(0.1, 0.1, 0.1));
+  EXPECT_EQ(f.region.min, Vec3(-0.05, -0.05, -0.05));
+  ASSERT_EQ(f.blocks.size(), 1u);
+  ASSERT_EQ(f.inlets.size(), 1u);
+  EXPECT_EQ(f.inlets[0].normal, Vec3(0, 0, 1));  // normalised
+  EXPECT_EQ(f.inlets[0].pressure, 2000.0);
+  EXPECT_EQ(f.inlets[0].start, 0.5);
+  EXPECT_FALSE(f.inlets[0].stop.has_value());
+  ASSERT_EQ(f.suction.size(), 1u);
+  EXPECT_FALSE(f.suction[0].atTool);
+  EXPECT_EQ(f.suction[0].stop, 3.0);
+}
+
+TEST(SceneFluidFile, RoundTripsThroughItsCanonicalJson) {
+  std::vector<dm::Error> problems;
+  auto s = dm::parseScene(fluidScene().dump(), "scene.json", "/data/scenes", &problems);
+  ASSERT_TRUE(s) << dm::formatSceneErrors(problems);
+  const Json j = dm::toJson(*s);
+  auto again = dm::parseScene(j.dump(), "scene.json", "/data/scenes", &problems);
+  ASSERT_TRUE(again) << dm::formatSceneErrors(problems);
+  EXPECT_EQ(*again, *s);
+  Json k = j;
+  k["fluids"][0]["inlets"][0]["flow_rate"] = 3e-6;  // a sweep's parameter
+  auto other = dm::parseScene(k.dump(), "scene.json", "/data/scenes", &problems);
+  ASSERT_TRUE(other);
+  EXPECT_FALSE(*other == *s);
+}
+
+void expectAt(const std::vector<dm::Error>& problems, const std::string& pointer, const std::string& words) {
+  const dm::Error* e = scene_test::at(problems, pointer);
+  if (e == nullptr) return;
+  EXPECT_NE(e->what.find(words), std::string::npos) << pointer << ": " << e->what;
+}
+
+TEST(SceneFluidFile, RefusesEachMistakeAtItsPointer) {
+  Json j = fluidScene();
+  Json& f = j["fluids"][0];
+  f["colour"] = "red";
+  f["blocks"].push_back(Json::parse(R"({"min": [0, 0, 0], "max": [0.3, 0.1, 0.01]})"));
+  f["blocks"].push_back(Json::parse(R"({"min": [0.1, 0, 0], "max": [0.05, 0.1, 0.01]})"));
+  f["inlets"].push_back(Json::parse(R"({"name": "far", "center": [1, 0, 0], "flow_rate": 1e-6})"));
+  f["inlets"].push_back(Json::parse(R"({"name": "cut", "center": [0, 0, 0], "flow_rate": 1e-6})"));
+  f["inlets"].push_back(Json::parse(R"({"name": "late", "center": [0, 0, 0], "flow_rate": 1e-6,
+                                        "start": 2, "stop": 1})"));
+  f["suction"].push_back(Json::parse(R"({"name": "both", "at": "tool", "center": [0, 0, 0], "radius": 0.01,
+                                         "flow_rate": 1e-6})"));
+  f["suction"].push_back(Json::parse(R"({"name": "neither", "radius": 0.01, "flow_rate": 1e-6})"));
+  f["suction"].push_back(Json::parse(R"({"name": "hand", "at": "tool", "radius": 0.01, "flow_rate": 1e-6})"));
+  f["suction"].push_back(Json::parse(R"({"name": "big", "center": [0, 0, 0], "radius": 0.01,
+                                         "flow_rate": 5})"));
+  const std::vector<dm::Error> p = scene_test::problemsOf(j);
+  EXPECT_NE(scene_test::at(p, "/fluids/0/colour"), nullptr);
+  expectAt(p, "/fluids/0/blocks/1", "outside the fluid's region");
+  expectAt(p, "/fluids/0/blocks/2/max", "not above min");
+  expectAt(p, "/fluids/0/inlets/1/center", "outside the fluid's region");
+  expectAt(p, "/fluids/0/inlets/2/name", "duplicate");
+  expectAt(p, "/fluids/0/inlets/3/stop", "not after start");
+  expectAt(p, "/fluids/0/suction/1", "both");
+  expectAt(p, "/fluids/0/suction/2", "neither");
+  expectAt(p, "/fluids/0/suction/3/at", "no haptics engine");
+  EXPECT_NE(scene_test::at(p, "/fluids/0/suction/4/flow_rate"), nullptr);
+  EXPECT_EQ(p.size(), 10u) << dm::formatSceneErrors(p);
+}
+
+TEST(SceneFluidFile, NeedsThePhysicsEngineAndARegionItCanHold) {
+  Json j = fluidScene();
+  j["engines"].erase("physics");
+  j["fluids"][0]["spacing"] = 0.0005;  // 0.2 × 0.2 × 0.25 m at 0.5 mm: 8e7 particles
+  const std::vector<dm::Error> p = scene_test::problemsOf(j);
+  expectAt(p, "/fluids/0", "physics engine");
+  expectAt(p, "/fluids/0/region", "particles");
+  EXPECT_EQ(p.size(), 2u) << dm::formatSceneErrors(p);
+}
+
+TEST(SceneFluidFile, IsAVersionTwoKey) {
+  Json j = fluidScene();
+  j["version"] = 1;
+  const std::vector<dm::Error> p = scene_test::problemsOf(j);
+  EXPECT_NE(scene_test::at(p, "/fluids"), nullptr);
+}
+
+}  // namespace scene_fluid_io_test
