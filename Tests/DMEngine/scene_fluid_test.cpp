@@ -1,7 +1,8 @@
 // A scene's fluids in a run (DMEngine/src/scene_fluids.hpp, stepped by the
 // physics engine): an irrigation jet opened half a second into the run
 // delivers its rate over the time it is open, to the particle; a suction
-// tip on the pool's floor takes at most its rate over its window; the
+// tip on the pool's floor takes at most its rate over its window; the tool
+// pressing a cut (the bundled bleeding scene) stops its bleeding; the
 // account in summary.json balances (start + emitted − taken − left = the
 // particles); lockstep reruns give the same summary.
 #include <dm/engine/scene_runtime.hpp>
@@ -63,6 +64,27 @@ TEST(SceneFluid, TheJetDeliversItsRateWhileOpenAndTheAccountBalances) {
   EXPECT_TRUE(fluid["balanced"].get<bool>());
   EXPECT_NEAR(fluid["mass_kg"].get<double>(), double(particles) * vp * 1000.0, 1e-9);
   EXPECT_LT(fluid["max_density_error"].get<double>(), 0.05);
+}
+
+// The bundled bleeding scene: the tool slides along the basin's floor at
+// 2 cm/s from x = -3 cm with the suction tip on it; over the cut (x = 2 cm,
+// reached at 2.5 s) it presses the cut with its 3 N over the outlet's
+// 25 mm² (120 kPa, far over the vessel's 1.5 kPa): the bleeding has
+// stopped there, after more than a millilitre had come (at up to 2 ml/s,
+// as the pool over the cut lets it). The tip takes its 5 ml/s from 1 s.
+TEST(SceneFluid, TheToolPressingTheCutStopsItsBleeding) {
+  dm::test::TempDir dir("scene_fluid_press");
+  const json over =
+      scene_run::runScene(scene_run::bundledScene("bleeding_suction.json"), 2.5, dir.path() / "o");
+  ASSERT_TRUE(over.contains("physics"));
+  const json& fluid = scene_run::named(over["physics"]["fluids"], "blood");
+  const json& cut = scene_run::named(fluid["inlets"], "cut");
+  EXPECT_EQ(cut["last_flow_rate_m3_s"].get<double>(), 0.0);
+  EXPECT_GT(cut["volume_m3"].get<double>(), 1e-6);
+  EXPECT_LE(cut["volume_m3"].get<double>(), 2.5 * 2e-6);
+  const double vp = fluid["particle_volume_m3"].get<double>();
+  EXPECT_NEAR(scene_run::named(fluid["suction"], "tip")["volume_m3"].get<double>(), 1.5 * 5e-6, 2 * vp);
+  EXPECT_TRUE(fluid["balanced"].get<bool>());
 }
 
 TEST(SceneFluid, LockstepRerunsMatch) {
