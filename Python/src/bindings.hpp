@@ -42,6 +42,7 @@ void bindCollide(py::module_& m);   // MeshTree: closest points, rays, distances
 void bindHaptics(py::module_& m);   // renderers ticked from Python, device paths replayed (probe)
 void bindPhysics(py::module_& m);   // PhysicsWorld: bodies, steps, states, contacts
 void bindFluid(py::module_& m);     // Fluid: DFSPH particles, sources, suction
+void bindFluidSources(py::module_& m);  // FluidInlet, FluidSuction, FluidRegion
 void bindGeometry(py::module_& m);  // voxelize, simplify, Hausdorff; Image and PNG
 
 }  // namespace dm::python

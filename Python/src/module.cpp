@@ -47,6 +47,7 @@ PYBIND11_MODULE(_core, m) {
   dm::python::bindHaptics(m);
   dm::python::bindPhysics(m);
   dm::python::bindFluid(m);
+  dm::python::bindFluidSources(m);
   dm::python::bindGeometry(m);
   dm::python::registerPythonScripts();  // scenes run from Python run their .py scripts here
 }

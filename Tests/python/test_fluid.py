@@ -1,7 +1,9 @@
 # The particle fluid from Python: a small column in its container settles
 # with a pressure (averaged over 1 s) that grows as rho0 g with depth (5 %,
 # on a coarse 2 cm lattice) and its density error under the solver's bound; suction by a mask
-# removes exactly the masked particles and their mass; misuse is refused.
+# removes exactly the masked particles and their mass; a pump delivers its
+# rate and inlets, suction and the region keep the mass account; a vessel
+# slows by the linear law; misuse is refused.
 import numpy as np
 import pytest
 
@@ -45,3 +47,36 @@ def test_suction_removes_the_masked_particles_and_their_mass():
         dm.Fluid(spacing=-1.0)
     with pytest.raises(dm.Error):
         f.step(0.0)
+
+
+def test_a_pump_delivers_its_rate_and_suction_and_the_region_keep_the_account():
+    f = dm.Fluid(spacing=0.01, gravity=(0, 0, -9.81))
+    # 10 ml/s out of a point nozzle, sideways, 15 cm over the region's floor
+    nozzle = dm.FluidInlet(f, center=(0, 0, 0.1), normal=(1, 0, 0), flow_rate=1e-5)
+    tip = dm.FluidSuction(center=(0.05, 0, 0.08), radius=0.02, max_flow_rate=2e-6)
+    region = dm.FluidRegion((-0.05, -0.05, -0.05), (0.3, 0.05, 0.2))
+    for _ in range(500):  # 1 s
+        nozzle.emit(f, 0.002)
+        tip.apply(f, 0.002)
+        region.apply(f)
+        f.step(0.002)
+        assert len(f) + tip.removed_particles + region.removed_particles == nozzle.emitted_particles
+    vp = f.particle_mass / 1000.0
+    assert nozzle.emitted_volume == pytest.approx(1e-5, abs=vp)
+    assert nozzle.points_per_layer == 1 and nozzle.outlet_area == pytest.approx(1e-4)
+    assert tip.removed_volume <= 2e-6 + vp
+    assert region.removed_particles > 0
+
+
+def test_a_vessel_slows_with_the_pressure_on_it():
+    f = dm.Fluid(spacing=0.01)
+    cut = dm.FluidInlet(f, center=(0, 0, 0), radius=0.015, flow_rate=1e-5, pressure=2000)
+    assert cut.points_per_layer == 9
+    cut.set_applied_pressure(500)
+    assert cut.back_pressure(f) == pytest.approx(500)
+    assert cut.flow_rate_at(500) == pytest.approx(0.75e-5)
+    assert cut.flow_rate_at(2500) == 0
+    with pytest.raises(dm.Error, match="normal"):
+        dm.FluidInlet(f, center=(0, 0, 0), normal=(0, 0, 0), flow_rate=1e-6)
+    with pytest.raises(dm.Error, match="radius"):
+        dm.FluidSuction(center=(0, 0, 0), radius=0, max_flow_rate=1e-6)
