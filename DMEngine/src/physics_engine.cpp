@@ -382,6 +382,10 @@ TripleBuffer<FluidToolSample>* PhysicsEngine::fluidTool() noexcept {
   return impl_->fluids->empty() ? nullptr : &impl_->fluids->toolFeed();
 }
 
+bool PhysicsEngine::latestFluidParticles(std::size_t i, std::vector<Vec3>& out) {
+  return impl_->fluids->latestParticles(i, out);
+}
+
 std::string PhysicsEngine::layerName(std::size_t i, int layer) const { return impl_->soft->layerName(i, layer); }
 
 const std::vector<std::string>& PhysicsEngine::softObjects() const noexcept { return impl_->soft->names(); }

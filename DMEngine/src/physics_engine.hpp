@@ -97,6 +97,9 @@ class PhysicsEngine final : public Engine {
   /// Where the haptics engine writes the tool for the fluids' tips and
   /// inlets each tick (one writer); nullptr when the scene has no fluids.
   TripleBuffer<FluidToolSample>* fluidTool() noexcept;
+  /// Render thread (one reader): fluid i's particles (scene order) when a
+  /// step finished since the last call, and on the first call.
+  bool latestFluidParticles(std::size_t i, std::vector<Vec3>& out);
   /// Layer `layer` of soft object i's needle layers ("" when none).
   std::string layerName(std::size_t i, int layer) const;
 

@@ -169,6 +169,19 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     return ok();
   }
 
+  // The fluids' particles (the physics engine's newest step), drawn as
+  // spheres half a spacing wide.
+  Status updateFluids() {
+    if (!feed_.fluidParticles) return ok();
+    for (std::size_t i = 0; i < feed_.fluids.size(); ++i)
+      if (feed_.fluidParticles(i, particles_)) {
+        const RenderFeed::FluidLook& f = feed_.fluids[i];
+        if (auto s = view_.setParticles(f.name, particles_, f.radius, f.color); !s)
+          return s.error().within("engines/render");
+      }
+    return ok();
+  }
+
   // A frame while loading, neither counted nor written: the driver compiles
   // the frame's shader variants (llvmpipe JIT-compiles them at the first
   // draw, ~200 ms) and the HUD's atlas and plot here, not in the first
@@ -176,6 +189,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   Status warmUp() {
     if (auto s = updateMillable(); !s) return s;  // the whole bone's surface, meshed once here
     if (auto s = updateSoft(); !s) return s;      // the tissues at rest
+    if (auto s = updateFluids(); !s) return s;    // the fluids at the start
     if (auto r = view_.render(target_, camera_, 0.0); !r) return r.error();
     hud(0.0, false, Vec3::Zero());
     overlay_.begin(target_);
@@ -203,6 +217,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   std::vector<Isometry3> poses_;  // of feed_.movingObjects
   Mesh surface_;                  // the milled object's, as drawn
   std::vector<Mesh> softSurfaces_;  // of feed_.softObjects, as drawn
+  std::vector<Vec3> particles_;     // one fluid's, as read
   bool hud_ = true;
   Image overlayImage_;  // the vision overlay's newest image, as uploaded
   std::int64_t overlayFrame_ = -1;
@@ -240,6 +255,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
         if (auto s = view_.setObjectPose(feed_.movingObjects[i], poses_[i]); !s) return s;
     if (auto s = updateMillable(); !s) return s;
     if (auto s = updateSoft(); !s) return s;
+    if (auto s = updateFluids(); !s) return s;
     const bool haptics = feed_.haptics && feed_.haptics(proxy, force);
     if (haptics && !proxyObject_.empty())
       if (auto s = view_.setObjectPose(proxyObject_, proxy); !s) return s;

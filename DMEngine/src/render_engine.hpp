@@ -44,6 +44,16 @@ struct RenderFeed {
   /// first call; triangles set on the first call, positions every time.
   std::vector<std::string> softObjects;
   std::function<bool(std::size_t i, Mesh& surface)> softSurface;
+  /// The fluids physics steps (their name, drawn radius and colour), and
+  /// fluid i's particles (world): true when a step finished since the last
+  /// call.
+  struct FluidLook {
+    std::string name;
+    double radius = 0.0;
+    Vec4f color = Vec4f(0.35f, 0.01f, 0.01f, 1.0f);
+  };
+  std::vector<FluidLook> fluids;
+  std::function<bool(std::size_t i, std::vector<Vec3>& positions)> fluidParticles;
   /// Where every frame goes, read back (RGBA) before the HUD and overlays
   /// are drawn (the camera's view), for the OpenIGTLink and vision engines;
   /// null: frames are read back only to be written.

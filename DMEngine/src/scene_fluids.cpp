@@ -35,6 +35,8 @@ struct SceneFluids::Impl {
     FluidRegion region;
     std::vector<Inlet> inlets;
     std::vector<Tip> tips;
+    std::unique_ptr<TripleBuffer<std::vector<Vec3>>> drawn;  // positions, physics → render
+    bool firstRead = true;
     std::size_t start = 0;  // particles at the start
     std::uint64_t steps = 0;
     double worstDensityError = 0.0;
@@ -64,6 +66,8 @@ Result<std::unique_ptr<SceneFluids>> SceneFluids::build(const SceneDesc& scene) 
     if (f.container) out.fluid.addBoxBoundary(f.container->min, f.container->max);
     for (const SceneBox& b : f.blocks) out.fluid.addBlock(b.min, b.max);
     out.start = out.fluid.size();
+    const std::vector<Vec3> at0(out.fluid.positions().begin(), out.fluid.positions().end());
+    out.drawn = std::make_unique<TripleBuffer<std::vector<Vec3>>>(at0);
     for (const SceneFluidInlet& in : f.inlets) {
       auto inlet = FluidInlet::create({.center = in.center,
                                        .normal = in.normal,
@@ -112,10 +116,23 @@ Status SceneFluids::step(double t, double dt) {
     }
     f.region.apply(f.fluid);
     if (auto s = f.fluid.step(dt); !s) return s.error().within("fluids/" + f.desc->name);
+    std::vector<Vec3>& drawn = f.drawn->writeBuffer();  // grows to the high-water mark
+    drawn.assign(f.fluid.positions().begin(), f.fluid.positions().end());
+    f.drawn->publish();
     ++f.steps;
     f.worstDensityError = std::max(f.worstDensityError, f.fluid.lastStep().maxDensityError);
   }
   return ok();
+}
+
+std::size_t SceneFluids::size() const noexcept { return impl_->fluids.size(); }
+
+bool SceneFluids::latestParticles(std::size_t i, std::vector<Vec3>& out) {
+  Impl::Fluid& f = impl_->fluids.at(i);
+  const bool fresh = f.drawn->update() || f.firstRead;
+  f.firstRead = false;
+  if (fresh) out = f.drawn->readBuffer();
+  return fresh;
 }
 
 nlohmann::json SceneFluids::summary() const {

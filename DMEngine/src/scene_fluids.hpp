@@ -14,7 +14,9 @@
 // emitted minus what the tips and the region took.
 //
 // Data flow: haptics → toolFeed() (a TripleBuffer of the proxy's position
-// and the force, written each haptic tick) → step() (physics thread).
+// and the force, written each haptic tick) → step() (physics thread) → a
+// TripleBuffer of each fluid's particle positions → latestParticles()
+// (render thread).
 // The fluids' arrays grow to their high-water mark (bounded by the region's
 // volume, which the scene check caps) and then stop allocating.
 #pragma once
@@ -26,6 +28,7 @@
 #include <nlohmann/json.hpp>
 
 #include <memory>
+#include <vector>
 
 namespace dm {
 
@@ -50,6 +53,11 @@ class SceneFluids {
   Status step(double t, double dt);
   /// Written by the haptics engine each tick (one writer), read here.
   TripleBuffer<FluidToolSample>& toolFeed() noexcept;
+  /// The fluids, in scene order.
+  std::size_t size() const noexcept;
+  /// Render thread (one reader): fluid i's particles (world) when a step
+  /// finished since the last call, and on the first call (the start).
+  bool latestParticles(std::size_t i, std::vector<Vec3>& out);
   /// Control thread, after the run: each fluid's state and account.
   nlohmann::json summary() const;
 

@@ -665,6 +665,15 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
       feed.softSurface = [p = physics.get()](std::size_t i, Mesh& surface) {
         return p->latestSurface(i, surface);
       };
+      for (const SceneFluid& f : scene.fluids)
+        feed.fluids.push_back(
+            {.name = f.name,
+             .radius = 0.5 * f.spacing,
+             .color = Vec4f(float(f.color.x()), float(f.color.y()), float(f.color.z()), 1.0f)});
+      if (!feed.fluids.empty())
+        feed.fluidParticles = [p = physics.get()](std::size_t i, std::vector<Vec3>& positions) {
+          return p->latestFluidParticles(i, positions);
+        };
     }
     if (haptics) {
       HapticsEngine* h = haptics.get();

@@ -127,7 +127,7 @@ void readFluids(ConfigReader& root, SceneDesc& scene) {
   for (std::size_t i = 0; i < list.size(); ++i) {
     ConfigReader r = list.at(i);
     if (!expectObject(r)) continue;
-    r.knownKeys({"name", "spacing", "density", "viscosity", "surface_tension", "container", "region",
+    r.knownKeys({"name", "spacing", "density", "viscosity", "surface_tension", "color", "container", "region",
                  "blocks", "inlets", "suction"});
     SceneFluid f;
     f.name = readName(r, names, "fluid");
@@ -138,6 +138,7 @@ void readFluids(ConfigReader& root, SceneDesc& scene) {
     f.density = readPositive(r, "density", f.density, 1e5);
     f.viscosity = r.number("viscosity", {.min = 0.0, .max = 10.0}, f.viscosity);
     f.surfaceTension = r.number("surface_tension", {.min = 0.0, .max = 10.0}, f.surfaceTension);
+    f.color = readColor(r, "color", Vec4(f.color.x(), f.color.y(), f.color.z(), 1.0), false).head<3>();
     if (r.has("container")) f.container = readSolidBox(r, "container", false);
     if (const auto region = readSolidBox(r, "region", true)) {
       f.region = *region;
@@ -173,6 +174,7 @@ Json fluidsJson(const std::vector<SceneFluid>& fluids) {
               {"density", f.density},
               {"viscosity", f.viscosity},
               {"surface_tension", f.surfaceTension},
+              {"color", toJson(f.color)},
               {"region", boxJson(f.region)}};
     if (f.container) j["container"] = boxJson(*f.container);
     Json blocks = Json::array();

@@ -1,4 +1,5 @@
 // scene_view.cpp — scene description → SceneRenderer + VolumeRenderer.
+#include <dm/math/primitives.hpp>
 #include <dm/renderer/scene_view.hpp>
 #include <dm/renderer/transfer_function.hpp>
 
@@ -94,6 +95,15 @@ struct SceneView::Impl {
   std::vector<CameraEntry> cameras;
   Camera framing;               // when the scene has no camera
   std::vector<DrawItem> items;  // per frame, reused
+  struct ParticleSet {
+    std::string name;
+    double radius = 0;
+    MeshId sphere;
+    MaterialId material;
+    Vec4f color = Vec4f::Zero();
+    std::vector<Vec3> positions;
+  };
+  std::vector<ParticleSet> particles;
 
   Object* object(std::string_view name) {
     for (auto& o : objects)
@@ -349,6 +359,12 @@ Result<SceneFrameStats> SceneView::renderImpl(const RenderTarget& target, const 
   Impl& im = *impl_;
   im.items.clear();
   for (const auto& o : im.objects) im.items.push_back(o.item);
+  for (const auto& set : im.particles)
+    for (const Vec3& p : set.positions) {
+      DrawItem item{.mesh = set.sphere, .material = set.material};
+      item.model.translation() = p;
+      im.items.push_back(item);
+    }
   RenderSettings settings;
   settings.background = im.options.background;
   settings.ambient = im.options.ambient;
@@ -377,6 +393,35 @@ Result<SceneFrameStats> SceneView::renderImpl(const RenderTarget& target, const 
     ++stats.volumes;
   }
   return stats;
+}
+
+Status SceneView::setParticles(std::string_view name, std::span<const Vec3> positions, double radius,
+                               const Vec4f& color) {
+  if (!(radius > 0.0) || !std::isfinite(radius))
+    return fail(ErrorCode::InvalidArgument, formatString("particle radius %g m", radius),
+                "particles/" + std::string(name), "a positive radius, e.g. half the particle spacing");
+  Impl& im = *impl_;
+  Impl::ParticleSet* set = nullptr;
+  for (auto& p : im.particles)
+    if (p.name == name) set = &p;
+  if (set == nullptr) set = &im.particles.emplace_back(Impl::ParticleSet{.name = std::string(name)});
+  if (!set->sphere.valid() || set->radius != radius) {
+    if (set->sphere.valid()) (void)im.meshes.removeMesh(set->sphere);
+    auto mesh = im.meshes.addMesh(makeIcosphere(radius, 1));  // 80 triangles: a droplet on screen
+    if (!mesh) return mesh.error().within("particles/" + std::string(name));
+    set->sphere = *mesh;
+    set->radius = radius;
+  }
+  if (!set->material.valid() || set->color != color) {
+    if (set->material.valid()) (void)im.meshes.removeMaterial(set->material);
+    auto material =
+        im.meshes.addMaterial({.baseColor = color, .specular = Vec3f(0.5f, 0.5f, 0.5f), .shininess = 64});
+    if (!material) return material.error().within("particles/" + std::string(name));
+    set->material = *material;
+    set->color = color;
+  }
+  set->positions.assign(positions.begin(), positions.end());
+  return ok();
 }
 
 SceneRenderer& SceneView::meshRenderer() { return impl_->meshes; }

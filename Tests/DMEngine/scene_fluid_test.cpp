@@ -3,9 +3,11 @@
 // delivers its rate over the time it is open, to the particle; a suction
 // tip on the pool's floor takes at most its rate over its window; the tool
 // pressing a cut (the bundled bleeding scene) stops its bleeding; the
+// render engine draws the particles in the fluid's colour; the
 // account in summary.json balances (start + emitted − taken − left = the
 // particles); lockstep reruns give the same summary.
 #include <dm/engine/scene_runtime.hpp>
+#include <dm/io/image_io.hpp>
 #include <dm/io/scene_file.hpp>
 
 #include <gtest/gtest.h>
@@ -18,6 +20,7 @@
 
 namespace scene_fluid_test {
 
+namespace fs = std::filesystem;
 using nlohmann::json;
 
 dm::SceneDesc irrigatedBasin() {
@@ -86,6 +89,48 @@ TEST(SceneFluid, TheToolPressingTheCutStopsItsBleeding) {
   EXPECT_NEAR(scene_run::named(fluid["suction"], "tip")["volume_m3"].get<double>(), 1.5 * 5e-6, 2 * vp);
   EXPECT_TRUE(fluid["balanced"].get<bool>());
 }
+
+#if defined(DM_TEST_WITH_RENDERER)
+// Blood-coloured pixels (red well over green and blue) in a frame.
+double bloodShare(const dm::Image& frame) {
+  std::size_t red = 0;
+  for (int y = 0; y < frame.height(); ++y)
+    for (int x = 0; x < frame.width(); ++x) {
+      const int r = frame.at<std::uint8_t>(x, y, 0), g = frame.at<std::uint8_t>(x, y, 1),
+                b = frame.at<std::uint8_t>(x, y, 2);
+      if (r > 40 && r > 3 * g && r > 3 * b) ++red;
+    }
+  return double(red) / double(frame.width() * frame.height());
+}
+
+// The render engine draws the fluid's particles in its colour: the bundled
+// scene's camera looks down on the pool (an 8 × 8 cm basin under a 1 cm
+// layer of blood) and a quarter of its frame is blood (over 15 %); the same
+// scene with the pool drawn green has none, and without its fluid none.
+TEST(SceneFluid, TheRenderEngineDrawsTheParticlesInTheFluidsColour) {
+  dm::test::TempDir dir("scene_fluid_render");
+  std::vector<dm::Error> problems;
+  auto read = dm::readScene(
+      fs::path(dm::test::besideExecutable(DM_EXAMPLE_SCENES_DIR)) / "bleeding_suction.json", &problems);
+  ASSERT_TRUE(read) << dm::formatSceneErrors(problems);
+  dm::SceneDesc scene = *read;
+  scene.outputs.frameEvery = 1;
+  scene.outputs.plot = false;
+  const auto firstFrame = [&](const dm::SceneDesc& s, const char* name) {
+    (void)scene_run::runScene(s, 0.05, dir.path() / name);
+    auto frame = dm::readPng(dir.path() / name / "frames" / "frame_00000.png");
+    EXPECT_TRUE(frame) << frame.error();
+    return frame ? bloodShare(*frame) : -1.0;
+  };
+  EXPECT_GT(firstFrame(scene, "red"), 0.15);  // 26 % on llvmpipe
+  dm::SceneDesc green = scene;
+  green.fluids[0].color = dm::Vec3(0.02, 0.3, 0.02);
+  EXPECT_LT(firstFrame(green, "green"), 0.001);
+  dm::SceneDesc dry = scene;
+  dry.fluids.clear();
+  EXPECT_LT(firstFrame(dry, "dry"), 0.001);
+}
+#endif
 
 TEST(SceneFluid, LockstepRerunsMatch) {
   dm::test::TempDir dir("scene_fluid_rerun");

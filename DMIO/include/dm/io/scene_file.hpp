@@ -669,6 +669,7 @@ struct SceneFluid {
   double density = 1060.0;            ///< kg/m³ (blood)
   double viscosity = 3.5e-6;          ///< m²/s, kinematic (blood)
   double surfaceTension = 0.0;        ///< Akinci's γ
+  Vec3 color{0.35, 0.01, 0.01};       ///< linear RGB the particles are drawn in (blood)
   std::optional<SceneBox> container;  ///< walls of a box open at the top
   SceneBox region;                    ///< particles leaving it are recycled
   std::vector<SceneBox> blocks;       ///< fluid at the start

@@ -9,7 +9,8 @@
 // depth so a mesh inside a volume occludes what lies behind it; a stereo
 // camera renders side by side. Engines move objects with setObjectPose()
 // (a dynamic object, the haptic tool) and deform them with
-// updateObjectMesh(). dmtool render and the render engine of
+// updateObjectMesh(), and draw particle sets (a fluid) with setParticles().
+// dmtool render and the render engine of
 // `dmplatform run` both draw scenes through this class.
 // All calls need the owning GlContext current on the calling thread.
 //
@@ -33,6 +34,7 @@
 #include <dm/renderer/volume_renderer.hpp>
 
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -78,6 +80,13 @@ class SceneView {
   /// topology is unchanged, as physics deformation does). Objects sharing
   /// that resource change with it.
   Status updateObjectMesh(std::string_view name, const Mesh& mesh);
+  /// Draws the particle set `name` (a fluid) as spheres of `radius` m with
+  /// the Blinn–Phong colour `color` (linear) at `positions` (world),
+  /// replacing what the set drew before; the spheres share one mesh and
+  /// material, so they go out as one instanced draw. Fails on a radius that
+  /// is not positive and finite.
+  Status setParticles(std::string_view name, std::span<const Vec3> positions, double radius,
+                      const Vec4f& color);
   /// World pose of object `name`, NotFound for an unknown name.
   Result<Isometry3> objectPose(std::string_view name) const;
 
