@@ -38,9 +38,8 @@ Json fluidScene() {
 }
 
 TEST(SceneFluidFile, ReadsTheFluidItsSourcesAndItsDefaults) {
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(fluidScene().dump(), "scene.json", "/data/scenes", &problems);
-  ASSERT_TRUE(s) << dm::formatSceneErrors(problems);
+  auto s = scene_test::parsed(fluidScene());
+  ASSERT_TRUE(s);
   ASSERT_EQ(s->fluids.size(), 1u);
   const dm::SceneFluid& f = s->fluids[0];
   EXPECT_EQ(f.name, "blood");
@@ -62,24 +61,13 @@ TEST(SceneFluidFile, ReadsTheFluidItsSourcesAndItsDefaults) {
 }
 
 TEST(SceneFluidFile, RoundTripsThroughItsCanonicalJson) {
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(fluidScene().dump(), "scene.json", "/data/scenes", &problems);
-  ASSERT_TRUE(s) << dm::formatSceneErrors(problems);
-  const Json j = dm::toJson(*s);
-  auto again = dm::parseScene(j.dump(), "scene.json", "/data/scenes", &problems);
-  ASSERT_TRUE(again) << dm::formatSceneErrors(problems);
-  EXPECT_EQ(*again, *s);
+  const Json j = scene_test::expectRoundTrip(fluidScene());
+  ASSERT_TRUE(j.contains("fluids"));
   Json k = j;
   k["fluids"][0]["inlets"][0]["flow_rate"] = 3e-6;  // a sweep's parameter
-  auto other = dm::parseScene(k.dump(), "scene.json", "/data/scenes", &problems);
+  auto other = scene_test::parsed(k);
   ASSERT_TRUE(other);
-  EXPECT_FALSE(*other == *s);
-}
-
-void expectAt(const std::vector<dm::Error>& problems, const std::string& pointer, const std::string& words) {
-  const dm::Error* e = scene_test::at(problems, pointer);
-  if (e == nullptr) return;
-  EXPECT_NE(e->what.find(words), std::string::npos) << pointer << ": " << e->what;
+  EXPECT_FALSE(*other == *scene_test::parsed(j));
 }
 
 TEST(SceneFluidFile, RefusesEachMistakeAtItsPointer) {
@@ -100,14 +88,14 @@ TEST(SceneFluidFile, RefusesEachMistakeAtItsPointer) {
                                          "flow_rate": 5})"));
   const std::vector<dm::Error> p = scene_test::problemsOf(j);
   EXPECT_NE(scene_test::at(p, "/fluids/0/colour"), nullptr);
-  expectAt(p, "/fluids/0/blocks/1", "outside the fluid's region");
-  expectAt(p, "/fluids/0/blocks/2/max", "not above min");
-  expectAt(p, "/fluids/0/inlets/1/center", "outside the fluid's region");
-  expectAt(p, "/fluids/0/inlets/2/name", "duplicate");
-  expectAt(p, "/fluids/0/inlets/3/stop", "not after start");
-  expectAt(p, "/fluids/0/suction/1", "both");
-  expectAt(p, "/fluids/0/suction/2", "neither");
-  expectAt(p, "/fluids/0/suction/3/at", "no haptics engine");
+  scene_test::expectAt(p, "/fluids/0/blocks/1", "outside the fluid's region");
+  scene_test::expectAt(p, "/fluids/0/blocks/2/max", "not above min");
+  scene_test::expectAt(p, "/fluids/0/inlets/1/center", "outside the fluid's region");
+  scene_test::expectAt(p, "/fluids/0/inlets/2/name", "duplicate");
+  scene_test::expectAt(p, "/fluids/0/inlets/3/stop", "not after start");
+  scene_test::expectAt(p, "/fluids/0/suction/1", "both");
+  scene_test::expectAt(p, "/fluids/0/suction/2", "neither");
+  scene_test::expectAt(p, "/fluids/0/suction/3/at", "no haptics engine");
   EXPECT_NE(scene_test::at(p, "/fluids/0/suction/4/flow_rate"), nullptr);
   EXPECT_EQ(p.size(), 10u) << dm::formatSceneErrors(p);
 }
@@ -117,8 +105,8 @@ TEST(SceneFluidFile, NeedsThePhysicsEngineAndARegionItCanHold) {
   j["engines"].erase("physics");
   j["fluids"][0]["spacing"] = 0.0005;  // 0.2 × 0.2 × 0.25 m at 0.5 mm: 8e7 particles
   const std::vector<dm::Error> p = scene_test::problemsOf(j);
-  expectAt(p, "/fluids/0", "physics engine");
-  expectAt(p, "/fluids/0/region", "particles");
+  scene_test::expectAt(p, "/fluids/0", "physics engine");
+  scene_test::expectAt(p, "/fluids/0/region", "particles");
   EXPECT_EQ(p.size(), 2u) << dm::formatSceneErrors(p);
 }
 

@@ -64,15 +64,6 @@ TEST(SceneScriptFile, RoundTripsThroughItsCanonicalJson) {
   EXPECT_FALSE(*other == *s);
 }
 
-// The problem at `pointer` says `words` (in its hint with `inHint`).
-void expectAt(const std::vector<dm::Error>& problems, const std::string& pointer, const std::string& words,
-              bool inHint = false) {
-  const dm::Error* e = scene_test::at(problems, pointer);
-  if (e == nullptr) return;
-  const std::string& text = inHint ? e->hint : e->what;
-  EXPECT_NE(text.find(words), std::string::npos) << pointer << ": " << text;
-}
-
 TEST(SceneScriptFile, RefusesEachMistakeAtItsPointer) {
   Json j = scriptedScene();
   j["scripts"] = Json::parse(R"([
@@ -87,15 +78,15 @@ TEST(SceneScriptFile, RefusesEachMistakeAtItsPointer) {
     {"name": "i", "source": "i.py", "engine": "physic"}
   ])");
   const std::vector<dm::Error> p = scene_test::problemsOf(j);
-  expectAt(p, "/scripts/0/engine", "haptic thread");
-  expectAt(p, "/scripts/1/engine", "no render engine");
-  expectAt(p, "/scripts/2/name", "duplicate");
-  expectAt(p, "/scripts/3/source", "no extension");
-  expectAt(p, "/scripts/4/args", "expected an object");
-  expectAt(p, "/scripts/5/rate_hz", "rate_hz");
+  scene_test::expectAt(p, "/scripts/0/engine", "haptic thread");
+  scene_test::expectAt(p, "/scripts/1/engine", "no render engine");
+  scene_test::expectAt(p, "/scripts/2/name", "duplicate");
+  scene_test::expectAt(p, "/scripts/3/source", "no extension");
+  scene_test::expectAt(p, "/scripts/4/args", "expected an object");
+  scene_test::expectAt(p, "/scripts/5/rate_hz", "rate_hz");
   EXPECT_NE(scene_test::at(p, "/scripts/6/source"), nullptr);
   EXPECT_NE(scene_test::at(p, "/scripts/7/name"), nullptr);
-  expectAt(p, "/scripts/8/engine", "physics", true);
+  scene_test::expectAt(p, "/scripts/8/engine", "physics", true);
   EXPECT_EQ(p.size(), 9u) << dm::formatSceneErrors(p);
 }
 

@@ -34,4 +34,33 @@ inline const dm::Error* at(const std::vector<dm::Error>& problems, const std::st
   return nullptr;
 }
 
+// The problem at `pointer` says `words` (in its hint with `inHint`).
+inline void expectAt(const std::vector<dm::Error>& problems, const std::string& pointer,
+                     const std::string& words, bool inHint = false) {
+  const dm::Error* e = at(problems, pointer);
+  if (e == nullptr) return;
+  const std::string& text = inHint ? e->hint : e->what;
+  EXPECT_NE(text.find(words), std::string::npos) << pointer << ": " << text;
+}
+
+// `scene` parsed as scene.json in /data/scenes (a failure lists its problems).
+inline dm::Result<dm::SceneDesc> parsed(const dm::Json& scene) {
+  std::vector<dm::Error> problems;
+  auto s = dm::parseScene(scene.dump(), "scene.json", "/data/scenes", &problems);
+  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+  return s;
+}
+
+// Parses `scene`, writes it as canonical JSON and parses that again: the
+// two must be equal. Returns the canonical JSON (null after a failure).
+inline dm::Json expectRoundTrip(const dm::Json& scene) {
+  auto s = parsed(scene);
+  if (!s) return {};
+  const dm::Json j = dm::toJson(*s);
+  auto again = parsed(j);
+  if (!again) return {};
+  EXPECT_EQ(*again, *s);
+  return j;
+}
+
 }  // namespace scene_test
