@@ -95,13 +95,26 @@ std::size_t FluidInlet::emit(SphFluid& fluid, double dt) {
     // particles of a wall the disc lies in), and what flowed after it has
     // pushed it further.
     const Vec3 base = o_.center + (0.5 * spacing_ + (inFlight_ - layerVolume) / area_) * o_.normal;
-    layer_.clear();
-    for (const Vec3& offset : points_) {
-      const Vec3 p = base + offset;
+    const auto occupied = [&](const Vec3& p) {
       const auto x = fluid.positions();
-      if (std::none_of(x.begin(), x.end(), [&](const Vec3& q) { return (q - p).squaredNorm() < near2; }))
-        layer_.push_back(p);
+      return std::any_of(x.begin(), x.end(), [&](const Vec3& q) { return (q - p).squaredNorm() < near2; });
+    };
+    if (std::any_of(points_.begin(), points_.end(), [&](const Vec3& o) { return occupied(base + o); })) {
+      // Fluid lies over the mouth: the inflow pushes the column over it up
+      // by the layer it adds, as an incompressible plug (the pressure
+      // solve then spreads it).
+      const double reach = o_.radius + 0.5 * spacing_;
+      fluid.displaceIf(
+          [&](const Vec3& x) {
+            const Vec3 r = x - o_.center;
+            const double s = r.dot(o_.normal);
+            return s >= 0.0 && (r - s * o_.normal).squaredNorm() <= reach * reach;
+          },
+          spacing_ * o_.normal);
     }
+    layer_.clear();
+    for (const Vec3& offset : points_)
+      if (!occupied(base + offset)) layer_.push_back(base + offset);
     if (layer_.empty()) {
       // Fluid covers the mouth: the vessel does not store what it could not
       // deliver (a layer at most stays in flight).

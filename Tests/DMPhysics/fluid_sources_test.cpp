@@ -3,7 +3,9 @@
 // pump delivers its rate and its layers leave a spacing apart along any
 // normal; a tool pressing on a cut slows it by the linear law and stops it
 // at the vessel's pressure, and a pool over it presses with its hydrostatic
-// pressure (no layer is started on top of the pool's particles);
+// pressure (the cut lifts the pool to make room; no layer is started on
+// top of another particle); a vessel bleeding into a tube stops where the
+// pool's pressure balances it (a manometer);
 // suction takes its rate, nearest the tip first, and banks nothing while it
 // draws air; a jet leaving the region of interest is recycled so that the
 // particle count stays within what its residence time allows; and the mass
@@ -131,14 +133,54 @@ TEST(FluidInlet, APoolOverACutPressesOnItWithItsHydrostaticPressure) {
   const double now = inlet->backPressure(fluid);
   inlet->setAppliedPressure(300.0);  // and a tool pressing beside it
   EXPECT_NEAR(inlet->backPressure(fluid), now + 300.0, 1e-9);
-  const std::vector<Vec3> before(fluid.positions().begin(), fluid.positions().end());
-  for (int k = 0; k < 20; ++k) inlet->emit(fluid, 0.005);  // 0.1 s: 5 ml or so, more than a layer
+  const std::size_t start = fluid.size();
+  inlet->emit(fluid, 0.005);
   EXPECT_NEAR(inlet->lastFlowRate(), 1e-4 * (1.0 - (now + 300.0) / pv), 1e-12);
-  for (std::size_t i = before.size(); i < fluid.size(); ++i)
-    for (const Vec3& x : before) EXPECT_GE((fluid.positions()[i] - x).norm(), 0.75 * kD - 1e-12) << i;
-  // The pool covers the mouth: at most a layer's worth could be placed
-  // around it, and what stayed in flight is at most a layer.
-  EXPECT_LE(inlet->emittedParticles(), inlet->pointsPerLayer());
+  for (int k = 1; k < 60; ++k) inlet->emit(fluid, 0.005);  // 0.3 s: 14 ml or so, more than a layer (9 ml)
+  // The cut lifted the column over it to make room: its layers came in, and
+  // no particle was started within 3/4 of a spacing of another.
+  EXPECT_GE(inlet->emittedParticles(), inlet->pointsPerLayer());
+  EXPECT_EQ(fluid.size(), start + inlet->emittedParticles());
+  for (std::size_t i = start; i < fluid.size(); ++i)
+    for (std::size_t j = 0; j < fluid.size(); ++j) {
+      if (j == i) continue;
+      EXPECT_GE((fluid.positions()[i] - fluid.positions()[j]).norm(), 0.75 * kD - 1e-12) << i << " " << j;
+    }
+}
+
+// A manometer: a vessel at the pressure of 8 cm of the fluid bleeds into a
+// 6 × 6 cm tube through the middle of its floor, lifting the pool over the
+// cut as it comes, until the pool's pressure at the cut balances the
+// vessel's and the bleeding stops (without the back pressure it would
+// deliver 3e-4 m³/s × 6 s = 1.8 l, a 50 cm column). It stops past the
+// vessel's pressure by the last layer (2.5 mm of the tube: 25 Pa) and what
+// the pool's settling after a lift adds: the pool's sampled pressure over
+// the last second is p_v to 10 % (842 Pa against 785 here).
+TEST(FluidInlet, AVesselBleedsIntoATubeUntilThePoolsPressureBalancesIt) {
+  dm::SphFluid fluid = fluidWith(Vec3(0, 0, -kG), 1e-3);
+  fluid.addBoxBoundary({0, 0, 0}, {0.06, 0.06, 0.4});
+  const double pv = 1000.0 * kG * 0.08;
+  auto inlet = dm::FluidInlet::create({.center = Vec3(0.03, 0.03, 0),
+                                       .normal = Vec3(0, 0, 1),
+                                       .radius = 0.015,
+                                       .flowRate = 3e-4,
+                                       .drivingPressure = pv},
+                                      fluid);
+  ASSERT_TRUE(inlet);
+  double back = 0.0;
+  std::size_t emittedLate = 0;
+  for (int k = 0; k < 1200; ++k) {  // 6 s
+    const std::size_t before = inlet->emittedParticles();
+    inlet->emit(fluid, 0.005);
+    ASSERT_TRUE(fluid.step(0.005).ok()) << k;
+    if (k >= 1000) {  // the last second
+      back += inlet->backPressure(fluid) / 200.0;
+      emittedLate += inlet->emittedParticles() - before;
+    }
+  }
+  EXPECT_EQ(emittedLate, 0u);  // stopped
+  EXPECT_NEAR(back, pv, 0.1 * pv);
+  EXPECT_LT(double(fluid.size()) * 1e-6, 3e-4 * 6.0 / 3.0);  // far less than the unchecked flow
 }
 
 TEST(FluidSuction, TakesItsRateNearestTheTipFirstAndBanksNothingInAir) {

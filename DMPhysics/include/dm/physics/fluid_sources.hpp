@@ -13,14 +13,17 @@
 // a layer is placed d/2 + V/A out along n, V the volume that has flowed
 // after it (d/2: as a block's first layer lies half a spacing inside its
 // face, clear of the boundary particles of a wall the disc lies in; V/A: so
-// layers emitted within one call do not coincide). A point closer than 3/4 d
-// to a fluid particle is occupied and left out of its layer (particles
-// started on top of each other blow apart under their pressure); its volume
-// stays in flight, and when the whole mouth is covered the flow in flight
-// is capped at one layer: the vessel does not store what it could not
-// deliver. Known limit, for the next slice: the inflow does not push a pool
-// lying over the mouth (an inflow "piston"), so under a standing pool the
-// bleeding waits for the pool to move. The rate:
+// layers emitted within one call do not coincide). Where fluid already
+// lies over the mouth (a pool over a cut), the inflow first pushes the
+// column over the disc (within R + d/2 of its axis, from the disc up) one
+// spacing along n, as an incompressible plug the pressure solve then
+// spreads; a point still closer than 3/4 d to a particle after that is left
+// out of its layer (particles started on top of each other blow apart
+// under their pressure) and its volume waits, a layer at most: the vessel
+// does not store what it could not deliver. (Found: inserting into the
+// covered mouth blew the pool apart; driving the emitted particles through
+// the mouth as a piston made it unstable where released layers met them.)
+// The rate:
 //   - a pump (drivingPressure 0: irrigation, a syringe) delivers its
 //     flowRate whatever the pressure against it;
 //   - a vessel (drivingPressure p_v > 0: a cut artery or vein) delivers

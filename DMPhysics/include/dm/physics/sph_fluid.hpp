@@ -116,6 +116,11 @@ class SphFluid {
   /// leaving the region of interest); returns how many.
   template <class Inside>
   std::size_t removeIf(Inside&& inside);
+  /// Moves the fluid particles for which select(position) is true by
+  /// `offset`, their velocities kept (an inflow lifting the fluid over its
+  /// mouth); returns how many.
+  template <class Select>
+  std::size_t displaceIf(Select&& select, const Vec3& offset);
   /// Static boundary particles (a wall, an organ's surface sampled at about
   /// d); their volumes are computed from their neighbours at the next step.
   void addBoundaryParticles(std::span<const Vec3> positions);
@@ -195,6 +200,18 @@ std::size_t SphFluid::removeIf(Inside&& inside) {
   v_.resize(kept);
   if (removed > 0) rho_.clear();
   return removed;
+}
+
+template <class Select>
+std::size_t SphFluid::displaceIf(Select&& select, const Vec3& offset) {
+  std::size_t moved = 0;
+  for (Vec3& x : x_)
+    if (select(x)) {
+      x += offset;
+      ++moved;
+    }
+  if (moved > 0) rho_.clear();  // stale: refreshed at the next step
+  return moved;
 }
 
 }  // namespace dm
