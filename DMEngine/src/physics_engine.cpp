@@ -284,6 +284,11 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
     std::fill(m.scriptForce.begin(), m.scriptForce.end(), Vec3::Zero());
     std::fill(m.scriptTorque.begin(), m.scriptTorque.end(), Vec3::Zero());
     for (ScriptFeed* f : m.scripts) {
+      if (f->inletRates.update()) {  // the rates a script set, from this step on
+        const std::vector<double>& rates = f->inletRates.readBuffer();
+        for (std::size_t k = 0; k < rates.size(); ++k)
+          if (!std::isnan(rates[k])) m.fluids->setInletFlowRate(k, rates[k]);
+      }
       f->forces.update();  // held: the last value published, until another comes
       const std::vector<ScriptForce>& held = f->forces.readBuffer();
       for (std::size_t i = 0; i < m.moving.size(); ++i) {

@@ -127,6 +127,16 @@ Status SceneFluids::step(double t, double dt) {
 
 std::size_t SceneFluids::size() const noexcept { return impl_->fluids.size(); }
 
+void SceneFluids::setInletFlowRate(std::size_t k, double m3PerSecond) {
+  for (Impl::Fluid& f : impl_->fluids) {
+    if (k < f.inlets.size()) {
+      f.inlets[k].inlet.setFlowRate(m3PerSecond);
+      return;
+    }
+    k -= f.inlets.size();
+  }
+}
+
 bool SceneFluids::latestParticles(std::size_t i, std::vector<Vec3>& out) {
   Impl::Fluid& f = impl_->fluids.at(i);
   const bool fresh = f.drawn->update() || f.firstRead;

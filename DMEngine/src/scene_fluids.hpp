@@ -53,6 +53,9 @@ class SceneFluids {
   Status step(double t, double dt);
   /// Written by the haptics engine each tick (one writer), read here.
   TripleBuffer<FluidToolSample>& toolFeed() noexcept;
+  /// Physics thread: inlet k's flow rate (the fluids' inlets in scene
+  /// order), m³/s.
+  void setInletFlowRate(std::size_t k, double m3PerSecond);
   /// The fluids, in scene order.
   std::size_t size() const noexcept;
   /// Render thread (one reader): fluid i's particles (world) when a step

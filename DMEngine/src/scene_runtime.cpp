@@ -410,6 +410,8 @@ Status SceneRuntime::Impl::buildScripts(double monitorRate) {
     if (physics) {
       names.soft = physics->softObjects();
       names.layer = [p = physics.get()](std::size_t i, int layer) { return p->layerName(i, layer); };
+      for (const SceneFluid& f : scene.fluids)
+        for (const SceneFluidInlet& in : f.inlets) names.inlets.emplace_back(f.name, in.name);
     }
     auto e = std::make_shared<ScriptEngine>(sc, std::move(*instance),
                                             physics ? physics->movingObjects() : std::vector<std::string>(),

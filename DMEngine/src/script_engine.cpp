@@ -74,13 +74,16 @@ Result<std::unique_ptr<ScriptInstance>> loadScript(const SceneScript& script) {
 // The context a script's callbacks get: reads the feed's newest values
 // (one reader: the script's thread), writes its held forces.
 struct ScriptEngine::Context final : ScriptContext {
-  Context(const SceneScript& s, ScriptFeed& f, std::vector<std::string> b, bool tool)
+  Context(const SceneScript& s, ScriptFeed& f, std::vector<std::string> b, bool tool,
+          std::vector<std::pair<std::string, std::string>> in)
       : scriptName(s.name),
         scriptArgs(s.args),
         feed(f),
         moving(std::move(b)),
         withTool(tool),
-        held(moving.size()) {}
+        held(moving.size()),
+        inlets(std::move(in)),
+        rates(inlets.size(), std::numeric_limits<double>::quiet_NaN()) {}
   const std::string& name() const noexcept override { return scriptName; }
   double time() const noexcept override { return now; }
   const nlohmann::json& args() const noexcept override { return scriptArgs; }
@@ -97,6 +100,23 @@ struct ScriptEngine::Context final : ScriptContext {
       return dm::fail(ErrorCode::InvalidArgument, "a force or torque that is not finite",
                       "set_force(\"" + std::string(body) + "\")");
     held[i] = {force, torque};
+    dirty = true;
+    return ok();
+  }
+  Status setInletFlowRate(std::string_view fluid, std::string_view inlet, double rate) override {
+    const std::string where =
+        "set_inlet_flow_rate(\"" + std::string(fluid) + "\", \"" + std::string(inlet) + "\")";
+    std::size_t i = 0;
+    while (i < inlets.size() && (inlets[i].first != fluid || inlets[i].second != inlet)) ++i;
+    if (i == inlets.size())
+      return dm::fail(ErrorCode::NotFound,
+                      "no inlet \"" + std::string(inlet) + "\" of a fluid \"" + std::string(fluid) + "\"",
+                      where,
+                      inlets.empty() ? "the scene has no fluid inlets" : "the scene's \"fluids\" name them");
+    if (!(rate >= 0.0 && rate <= 1e-3))
+      return dm::fail(ErrorCode::InvalidArgument, formatString("flow rate %g m³/s", rate), where,
+                      "0 to 1e-3 m³/s (1 ml/s is 1e-6)");
+    rates[i] = rate;
     dirty = true;
     return ok();
   }
@@ -126,6 +146,10 @@ struct ScriptEngine::Context final : ScriptContext {
     if (!dirty) return;
     feed.forces.writeBuffer() = held;  // same size: no allocation
     feed.forces.publish();
+    if (!rates.empty()) {
+      feed.inletRates.writeBuffer() = rates;  // same size
+      feed.inletRates.publish();
+    }
     dirty = false;
   }
 
@@ -135,6 +159,8 @@ struct ScriptEngine::Context final : ScriptContext {
   std::vector<std::string> moving;
   bool withTool;
   std::vector<ScriptForce> held;
+  std::vector<std::pair<std::string, std::string>> inlets;  // {fluid, inlet}, scene order
+  std::vector<double> rates;                                // per inlet, NaN: not set
   bool dirty = false;
   double now = 0.0;
   nlohmann::json metricValues = nlohmann::json::object();
@@ -143,10 +169,10 @@ struct ScriptEngine::Context final : ScriptContext {
 ScriptEngine::ScriptEngine(const SceneScript& script, std::unique_ptr<ScriptInstance> instance,
                            std::vector<std::string> bodies, bool hasTool, ScriptNames names)
     : engineName_("script:" + script.name),
-      feed_(std::make_unique<ScriptFeed>(bodies.size())),
+      feed_(std::make_unique<ScriptFeed>(bodies.size(), names.inlets.size())),
       instance_(std::move(instance)),
       names_(std::move(names)) {
-  context_ = std::make_unique<Context>(script, *feed_, std::move(bodies), hasTool);
+  context_ = std::make_unique<Context>(script, *feed_, std::move(bodies), hasTool, names_.inlets);
   pending_.reserve(1024 + 256);
 }
 

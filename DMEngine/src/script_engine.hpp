@@ -17,8 +17,10 @@
 
 #include <atomic>
 #include <functional>
+#include <limits>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace dm {
@@ -46,13 +48,16 @@ struct ScriptForce {
 
 /// One script's channels; built before the run, sized for the moving bodies.
 struct ScriptFeed {
-  explicit ScriptFeed(std::size_t movingBodies)
-      : bodies(std::vector<ScriptBody>(movingBodies)), forces(std::vector<ScriptForce>(movingBodies)) {}
+  explicit ScriptFeed(std::size_t movingBodies, std::size_t inlets = 0)
+      : bodies(std::vector<ScriptBody>(movingBodies)),
+        forces(std::vector<ScriptForce>(movingBodies)),
+        inletRates(std::vector<double>(inlets, std::numeric_limits<double>::quiet_NaN())) {}
   TripleBuffer<ScriptToolSample> tool;             // haptics → script
   SpscRing<ScriptEventRecord, 1024> toolEvents;    // haptics → script
   TripleBuffer<std::vector<ScriptBody>> bodies;    // physics → script
   SpscRing<ScriptEventRecord, 256> physicsEvents;  // physics → script
   TripleBuffer<std::vector<ScriptForce>> forces;   // script → physics
+  TripleBuffer<std::vector<double>> inletRates;    // script → physics: per scene inlet, NaN: not set
   std::atomic<std::uint64_t> droppedEvents{0};
   // Writer side of either ring: a full ring drops the event and counts it.
   template <std::size_t N>
@@ -67,6 +72,9 @@ struct ScriptNames {
   std::vector<std::string> touched;                    // haptics engine's objects
   std::vector<std::string> soft;                       // physics engine's soft objects
   std::function<std::string(std::size_t, int)> layer;  // soft object i's layer; may be empty
+  /// The scene's fluid inlets, {fluid, inlet}, fluids and their inlets in
+  /// scene order (the feed's inletRates order).
+  std::vector<std::pair<std::string, std::string>> inlets;
 };
 
 /// The engine "script:NAME": ticks one ScriptInstance over its feed.

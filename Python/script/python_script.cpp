@@ -119,6 +119,15 @@ void bindContext() {
           py::arg("name"), py::arg("force"), py::arg("torque") = py::none(),
           "Holds a force (N, through the centre of mass) and torque (N·m) on a moving body, world frame, "
           "from the next physics step until set again.")
+      .def(
+          "set_inlet_flow_rate",
+          [](ScriptContext& c, const std::string& fluid, const std::string& inlet, double rate) {
+            check(c.setInletFlowRate(fluid, inlet, rate));
+          },
+          py::arg("fluid"), py::arg("inlet"), py::arg("flow_rate"),
+          "Sets a scene fluid inlet's flow rate (m³/s at zero back pressure) from the next physics step: a "
+          "cut "
+          "opening, irrigation on; 0 closes it.")
       .def_property_readonly(
           "tool",
           [](const ScriptContext& c) -> py::object {

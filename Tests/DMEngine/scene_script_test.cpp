@@ -8,7 +8,8 @@
 // hand's force drops after reaching the skin's and the fascia's puncture
 // forces, as many as the needle's summary counts; a script's error stops
 // the run naming it and its time, with the outputs written; a language
-// nobody registered is refused naming the script; lockstep reruns match.
+// nobody registered is refused naming the script; a script opens a fluid
+// inlet, which then delivers its rate; lockstep reruns match.
 #include <dm/core/filesystem.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/engine/script.hpp>
@@ -59,6 +60,15 @@ class ProbeScript final : public dm::ScriptInstance {
     return dm::ok();
   }
   dm::Status tick(dm::ScriptContext& c) override {
+    if (args_.contains("open_at") && c.time() >= args_["open_at"]["time"].get<double>() && !opened_) {
+      const json& o = args_["open_at"];
+      opened_ = true;
+      if (auto s = c.setInletFlowRate(o["fluid"].get<std::string>(), o["inlet"].get<std::string>(),
+                                      o["rate"].get<double>());
+          !s)
+        return s;
+      c.setMetric("opened_at", c.time());
+    }
     if (args_.contains("fail_at") && c.time() >= args_["fail_at"].get<double>())
       return dm::fail(dm::ErrorCode::InvalidArgument, "the probe gave up", "probe");
     if (args_.contains("tool_at") && std::abs(c.time() - args_["tool_at"].get<double>()) < 1e-9) {
@@ -93,6 +103,7 @@ class ProbeScript final : public dm::ScriptInstance {
   json args_;
   json events_ = json::array();
   int ticks_ = 0;
+  bool opened_ = false;
 };
 
 // Registers ".probe" for the test's life.
@@ -128,6 +139,44 @@ dm::SceneDesc freeBall() {
   auto s = dm::parseScene(text, "free_ball.json", ".", &problems);
   EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
   return s ? *s : dm::SceneDesc();
+}
+
+// A script opens a closed irrigation nozzle (flow_rate 0 in the scene) at
+// 0.5 s: over the 1 s that follows it delivers 20 ml/s × 1 s to the
+// particle (the nozzle's jet falls freely, nothing covers its mouth); a
+// script naming an inlet the scene does not have stops the run naming it.
+TEST(SceneScript, AScriptOpensAFluidInlet) {
+  const ProbeLanguage language;
+  const dm::test::TempDir tmp("script_inlet");
+  const std::string text = R"({
+    "format": "dmplatform-scene", "version": 2, "name": "nozzle",
+    "engines": { "physics": { "rate_hz": 500 } },
+    "fluids": [ { "name": "saline", "spacing": 0.01, "density": 1000,
+                  "region": { "min": [-0.1, -0.1, -0.1], "max": [0.3, 0.1, 0.3] },
+                  "inlets": [ { "name": "nozzle", "center": [0, 0, 0.2], "normal": [1, 0, 0], "flow_rate": 0 } ] } ],
+    "outputs": { "directory": "out" } })";
+  std::vector<dm::Error> problems;
+  auto parsed = dm::parseScene(text, "nozzle.json", ".", &problems);
+  ASSERT_TRUE(parsed) << dm::formatSceneErrors(problems);
+  dm::SceneDesc scene = *parsed;
+  scene.scripts.push_back(probe(
+      "physics", {{"open_at", {{"time", 0.5}, {"fluid", "saline"}, {"inlet", "nozzle"}, {"rate", 2e-5}}}}));
+  const json s = scene_run::runScene(scene, 1.5, tmp.path() / "out");
+  ASSERT_TRUE(s.contains("physics")) << s.dump(2);
+  const json& fluid = scene_run::named(s["physics"]["fluids"], "saline");
+  const json& nozzle = scene_run::named(fluid["inlets"], "nozzle");
+  const double vp = fluid["particle_volume_m3"].get<double>();
+  EXPECT_NEAR(nozzle["volume_m3"].get<double>(), 2e-5, vp + 1e-12);
+  EXPECT_DOUBLE_EQ(s["scripts"]["probe"]["metrics"]["opened_at"].get<double>(), 0.5);
+  // An inlet the scene does not have.
+  dm::SceneDesc wrong = scene;
+  wrong.scripts.back().args["open_at"]["inlet"] = "nozle";
+  auto rt = dm::SceneRuntime::create(wrong);
+  ASSERT_TRUE(rt);
+  auto r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 1.0, .outDir = tmp.path() / "wrong"});
+  ASSERT_FALSE(r);
+  EXPECT_NE(r.error().message().find("no inlet \"nozle\" of a fluid \"saline\""), std::string::npos)
+      << r.error();
 }
 
 TEST(SceneScript, HeldForceAndTorqueMoveAFreeBodyAsNewtonSays) {

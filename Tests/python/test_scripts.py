@@ -4,7 +4,8 @@
 # bit for bit; at rest the hand's force balances the tether's and the
 # table's friction (Newton); the script's first contact is the first tick
 # of forces.csv with a force on the hand; args change what it does; a
-# Python error stops the run naming the script's file and line.
+# Python error stops the run naming the script's file and line; a script
+# opens a fluid inlet, which then delivers its rate.
 import json
 import shutil
 import subprocess
@@ -121,3 +122,26 @@ def test_script_context_errors_are_python_exceptions(source_dir, tmp_path):
     assert m["not_json"] is True
     assert m["bodies"] == ["box"]
     assert m["args"] == {"stiffness_N_m": 20.0}
+
+
+def test_a_python_script_opens_a_fluid_inlet(tmp_path):
+    (tmp_path / "open.py").write_text(
+        "def tick(sim):\n"
+        "    if sim.time >= 0.5 and 'opened_s' not in sim.metrics:\n"
+        "        sim.set_inlet_flow_rate('saline', 'nozzle', 2e-5)\n"
+        "        sim.metric('opened_s', sim.time)\n")
+    d = {"format": "dmplatform-scene", "version": 2, "name": "nozzle",
+         "engines": {"physics": {"rate_hz": 500}},
+         "fluids": [{"name": "saline", "spacing": 0.01, "density": 1000,
+                     "region": {"min": [-0.1, -0.1, -0.1], "max": [0.3, 0.1, 0.3]},
+                     "inlets": [{"name": "nozzle", "center": [0, 0, 0.2], "normal": [1, 0, 0], "flow_rate": 0}]}],
+         "scripts": [{"name": "open", "source": "open.py", "engine": "physics"}],
+         "outputs": {"directory": "out"}}
+    s = dm.run(dm.Scene.from_dict(d, tmp_path, "nozzle.json"), 1.5, tmp_path / "out").summary
+    fluid = s["physics"]["fluids"][0]
+    assert s["scripts"]["open"]["metrics"]["opened_s"] == pytest.approx(0.5)
+    assert fluid["inlets"][0]["volume_m3"] == pytest.approx(2e-5, abs=fluid["particle_volume_m3"])
+    d["scripts"][0]["source"] = "wrong.py"
+    (tmp_path / "wrong.py").write_text("def tick(sim):\n    sim.set_inlet_flow_rate('saline', 'nozle', 1e-6)\n")
+    with pytest.raises(dm.Error, match='no inlet "nozle"'):
+        dm.run(dm.Scene.from_dict(d, tmp_path, "nozzle.json"), 0.1, tmp_path / "wrong")

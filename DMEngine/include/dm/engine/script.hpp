@@ -100,6 +100,11 @@ class ScriptContext {
   /// moving body, world frame, from the next physics step until set again;
   /// fails naming the body or a non-finite value.
   virtual Status setBodyForce(std::string_view name, const Vec3& force, const Vec3& torque) = 0;
+  /// Sets the flow rate (m³/s at zero back pressure, 0..1e-3) of inlet
+  /// `inlet` of scene fluid `fluid` from the next physics step on (a cut
+  /// opening, irrigation turned on; 0 closes it); its time window still
+  /// applies. Fails naming an unknown fluid or inlet or a bad rate.
+  virtual Status setInletFlowRate(std::string_view fluid, std::string_view inlet, double m3PerSecond) = 0;
   /// Whether the scene has a haptic tool; tool() is its newest tick (all
   /// zero before the first).
   virtual bool hasTool() const noexcept = 0;
