@@ -119,6 +119,18 @@ void printSummary(const nlohmann::json& s, const std::filesystem::path& outDir, 
                   b["name"].get<std::string>().c_str(), b["displacement_m"].get<double>() * 1e3,
                   b["position_m"][0].get<double>() * 1e3, b["position_m"][1].get<double>() * 1e3,
                   b["position_m"][2].get<double>() * 1e3);
+  if (s.contains("physics") && s["physics"].contains("fluids"))
+    for (const auto& f : s["physics"]["fluids"]) {
+      double in = 0.0, out = 0.0;
+      for (const auto& i : f["inlets"]) in += i["volume_m3"].get<double>();
+      for (const auto& t : f["suction"]) out += t["volume_m3"].get<double>();
+      std::printf(
+          "fluid %s: %llu particles (%.1f g), %.2f ml in, %.2f ml sucked, %llu particles left the region%s\n",
+          f["name"].get<std::string>().c_str(), f["particles"].get<unsigned long long>(),
+          f["mass_kg"].get<double>() * 1e3, in * 1e6, out * 1e6,
+          f["left_region_particles"].get<unsigned long long>(),
+          f["balanced"].get<bool>() ? "" : " (the account does not balance)");
+    }
   if (s.contains("render"))
     std::printf("render: %llu frames (%llu written) on %s, frame p50 %.1f ms\n",
                 s["render"]["frames"].get<unsigned long long>(),
