@@ -31,19 +31,6 @@ bool inside(const SceneBox& box, const Vec3& p) {
   return (p.array() >= box.min.array()).all() && (p.array() <= box.max.array()).all();
 }
 
-// A unique, non-empty "name" among `names`.
-std::string readName(ConfigReader& r, std::set<std::string, std::less<>>& names, const char* what) {
-  const std::size_t before = r.errors().size();
-  std::string name = r.string("name");
-  if (r.errors().size() != before) return name;
-  if (name.empty())
-    r.addError("name is empty", "name",
-               std::string("give the ") + what + " a unique name; the summary uses it");
-  else if (!names.insert(name).second)
-    r.addError("duplicate " + std::string(what) + " name " + inQuotes(name), "name", "names must be unique");
-  return name;
-}
-
 // "start" and "stop" (seconds of scene time; stop after start).
 void readWindow(ConfigReader& r, double& start, std::optional<double>& stop) {
   start = r.number("start", {.min = 0.0, .max = 1e7}, 0.0);
@@ -66,7 +53,7 @@ void readInlets(ConfigReader& fr, SceneFluid& f) {
     if (!expectObject(r)) continue;
     r.knownKeys({"name", "center", "normal", "radius", "flow_rate", "pressure", "start", "stop"});
     SceneFluidInlet in;
-    in.name = readName(r, names, "inlet");
+    in.name = readUniqueName(r, names, "inlet");
     const std::size_t before = r.errors().size();
     in.center = readVec3(r, "center");
     if (r.errors().size() == before && !inside(f.region, in.center))
@@ -90,7 +77,7 @@ void readSuction(ConfigReader& fr, SceneFluid& f, const SceneDesc& scene) {
     if (!expectObject(r)) continue;
     r.knownKeys({"name", "radius", "flow_rate", "at", "center", "start", "stop"});
     SceneFluidSuction s;
-    s.name = readName(r, names, "suction tip");
+    s.name = readUniqueName(r, names, "suction tip");
     s.radius = readPositive(r, "radius", {}, 0.1);
     s.flowRate = r.number("flow_rate", {.min = 0.0, .max = kMaxFlowRate});
     if (r.has("at") == r.has("center")) {
@@ -130,7 +117,7 @@ void readFluids(ConfigReader& root, SceneDesc& scene) {
     r.knownKeys({"name", "spacing", "density", "viscosity", "surface_tension", "color", "container", "region",
                  "blocks", "inlets", "suction"});
     SceneFluid f;
-    f.name = readName(r, names, "fluid");
+    f.name = readUniqueName(r, names, "fluid");
     if (!scene.engines.physics)
       r.addError("a fluid needs the physics engine, which steps it", "",
                  "add \"physics\" under \"engines\" (its rate is the fluid's step)");

@@ -19,6 +19,7 @@
 #include <functional>
 #include <limits>
 #include <optional>
+#include <set>
 #include <string>
 #include <string_view>
 #include <utility>
@@ -213,6 +214,22 @@ inline std::optional<SceneBox> readBox(ConfigReader& r, bool solid = false) {
     return std::nullopt;
   }
   return box;
+}
+
+// A unique, non-empty "name" among `names` (a script, a fluid, an inlet...);
+// an error (recorded) names an empty or repeated one.
+inline std::string readUniqueName(ConfigReader& r, std::set<std::string, std::less<>>& names,
+                                  std::string_view what) {
+  const std::size_t before = r.errors().size();
+  std::string name = r.string("name");
+  if (r.errors().size() != before) return name;
+  if (name.empty())
+    r.addError("name is empty", "name",
+               "give the " + std::string(what) + " a unique name; the summary uses it");
+  else if (!names.insert(name).second)
+    r.addError("duplicate " + std::string(what) + " name " + inQuotes(name), "name",
+               "names must be unique: rename one");
+  return name;
 }
 
 inline Json boxJson(const SceneBox& b) { return {{"min", toJson(b.min)}, {"max", toJson(b.max)}}; }

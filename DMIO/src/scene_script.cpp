@@ -37,15 +37,8 @@ void readScripts(ConfigReader& root, SceneDesc& scene, const SourceResolver& res
     if (!expectObject(r)) continue;
     r.knownKeys({"name", "source", "engine", "args"});
     SceneScript s;
+    s.name = readUniqueName(r, names, "script");
     std::size_t before = r.errors().size();
-    s.name = r.string("name");
-    if (r.errors().size() == before) {
-      if (s.name.empty())
-        r.addError("name is empty", "name", "give it a unique name; the summary's \"scripts\" uses it");
-      else if (!names.insert(s.name).second)
-        r.addError("duplicate script name " + inQuotes(s.name), "name", "names must be unique: rename one");
-    }
-    before = r.errors().size();
     s.source = r.string("source");
     if (r.errors().size() == before) {
       const std::string ext = std::filesystem::path(s.source).extension().string();
