@@ -26,8 +26,9 @@ const char* fboStatusName(GLenum s) {
   }
 }
 
-// GL rows run bottom to top; dm::Image rows top to bottom.
-void flipRows(Image& img) {
+}  // namespace
+
+void gl::flipRows(Image& img) {
   const std::size_t row = img.rowBytes();
   std::vector<std::byte> tmp(row);
   for (int y = 0; y < img.height() / 2; ++y) {
@@ -38,8 +39,6 @@ void flipRows(Image& img) {
     std::memcpy(b, tmp.data(), row);
   }
 }
-
-}  // namespace
 
 Result<RenderTarget> RenderTarget::create(const RenderTargetOptions& options) {
   GLint maxSize = 0, maxSamples = 1;
@@ -165,7 +164,7 @@ Result<Image> RenderTarget::readColor() const {
   glPixelStorei(GL_PACK_ALIGNMENT, 1);
   glReadPixels(0, 0, opt_.width, opt_.height, GL_RGBA, GL_UNSIGNED_BYTE, img->data());
   if (auto s = gl::check("RenderTarget::readColor"); !s) return s.error();
-  flipRows(*img);
+  gl::flipRows(*img);
   return img;
 }
 
@@ -179,7 +178,7 @@ Result<Image> RenderTarget::readDepth() const {
   glPixelStorei(GL_PACK_ALIGNMENT, 4);
   glReadPixels(0, 0, opt_.width, opt_.height, GL_DEPTH_COMPONENT, GL_FLOAT, img->data());
   if (auto s = gl::check("RenderTarget::readDepth"); !s) return s.error();
-  flipRows(*img);
+  gl::flipRows(*img);
   return img;
 }
 

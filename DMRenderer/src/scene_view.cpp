@@ -102,8 +102,17 @@ struct SceneView::Impl {
     MaterialId material;
     Vec4f color = Vec4f::Zero();
     std::vector<Vec3> positions;
+    std::optional<FluidLook> surface;  // drawn by `fluid` when set
+    double drawRadius = 0;
   };
   std::vector<ParticleSet> particles;
+  std::optional<FluidRenderer> fluid;  // created with the first surface
+
+  ParticleSet& particleSet(std::string_view name) {
+    for (auto& p : particles)
+      if (p.name == name) return p;
+    return particles.emplace_back(ParticleSet{.name = std::string(name)});
+  }
 
   Object* object(std::string_view name) {
     for (auto& o : objects)
@@ -360,11 +369,12 @@ Result<SceneFrameStats> SceneView::renderImpl(const RenderTarget& target, const 
   im.items.clear();
   for (const auto& o : im.objects) im.items.push_back(o.item);
   for (const auto& set : im.particles)
-    for (const Vec3& p : set.positions) {
-      DrawItem item{.mesh = set.sphere, .material = set.material};
-      item.model.translation() = p;
-      im.items.push_back(item);
-    }
+    if (!set.surface)
+      for (const Vec3& p : set.positions) {
+        DrawItem item{.mesh = set.sphere, .material = set.material};
+        item.model.translation() = p;
+        im.items.push_back(item);
+      }
   RenderSettings settings;
   settings.background = im.options.background;
   settings.ambient = im.options.ambient;
@@ -374,6 +384,24 @@ Result<SceneFrameStats> SceneView::renderImpl(const RenderTarget& target, const 
                                  : im.meshes.render(target, cam, im.items, im.lights, settings);
   if (!r) return r.error();
   stats.meshes = *r;
+  // Liquid surfaces over the meshes (they refract and are hidden by them).
+  for (const auto& set : im.particles) {
+    if (!set.surface || set.positions.empty()) continue;
+    auto draw = [&](const Camera& eye, const Viewport& vp) -> Status {
+      auto f = im.fluid->render(target, eye, set.positions, set.drawRadius, *set.surface, im.lights,
+                                im.options.ambient, vp);
+      if (!f) return f.error().within("particles/" + set.name);
+      return ok();
+    };
+    if (stereo) {
+      const auto [left, right] = cam.stereoPair(stereo->eyeSeparation, stereo->convergence);
+      const int half = target.width() / 2;
+      if (auto st = draw(left, {0, 0, half, target.height()}); !st) return st.error();
+      if (auto st = draw(right, {half, 0, target.width() - half, target.height()}); !st) return st.error();
+    } else if (auto st = draw(cam, {}); !st) {
+      return st.error();
+    }
+  }
   // Volumes over the meshes: rays stop at the depth the meshes left.
   for (const auto& v : im.volumeEntries) {
     if (!v.visible) continue;
@@ -401,10 +429,7 @@ Status SceneView::setParticles(std::string_view name, std::span<const Vec3> posi
     return fail(ErrorCode::InvalidArgument, formatString("particle radius %g m", radius),
                 "particles/" + std::string(name), "a positive radius, e.g. half the particle spacing");
   Impl& im = *impl_;
-  Impl::ParticleSet* set = nullptr;
-  for (auto& p : im.particles)
-    if (p.name == name) set = &p;
-  if (set == nullptr) set = &im.particles.emplace_back(Impl::ParticleSet{.name = std::string(name)});
+  Impl::ParticleSet* set = &im.particleSet(name);
   if (!set->sphere.valid() || set->radius != radius) {
     if (set->sphere.valid()) (void)im.meshes.removeMesh(set->sphere);
     auto mesh = im.meshes.addMesh(makeIcosphere(radius, 1));  // 80 triangles: a droplet on screen
@@ -421,6 +446,23 @@ Status SceneView::setParticles(std::string_view name, std::span<const Vec3> posi
     set->color = color;
   }
   set->positions.assign(positions.begin(), positions.end());
+  return ok();
+}
+
+Status SceneView::setParticleSurface(std::string_view name, const std::optional<FluidLook>& look,
+                                     double drawRadius) {
+  if (look && (!(drawRadius > 0.0) || !std::isfinite(drawRadius)))
+    return fail(ErrorCode::InvalidArgument, formatString("particle draw radius %g m", drawRadius),
+                "particles/" + std::string(name), "a positive radius, e.g. 3/4 of the particle spacing");
+  Impl& im = *impl_;
+  if (look && !im.fluid) {
+    auto fluid = FluidRenderer::create();
+    if (!fluid) return fluid.error().within("particles/" + std::string(name));
+    im.fluid = std::move(*fluid);
+  }
+  Impl::ParticleSet& set = im.particleSet(name);
+  set.surface = look;
+  set.drawRadius = drawRadius;
   return ok();
 }
 

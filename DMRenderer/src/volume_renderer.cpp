@@ -160,33 +160,6 @@ Vec2f normalisedWindow(const VolumeRenderSettings& s, const GpuVolume& g) {
   return Vec2f(static_cast<float>((lo - g.lo) / w), static_cast<float>((hi - g.lo) / w));
 }
 
-// Restores the GL state the draws change.
-struct StateGuard {
-  GLboolean blend = glIsEnabled(GL_BLEND), cull = glIsEnabled(GL_CULL_FACE),
-            depth = glIsEnabled(GL_DEPTH_TEST);
-  GLint depthFunc = 0, frontFace = 0, cullFace = 0;
-  GLboolean depthMask = GL_TRUE;
-  StateGuard() {
-    glGetIntegerv(GL_DEPTH_FUNC, &depthFunc);
-    glGetIntegerv(GL_FRONT_FACE, &frontFace);
-    glGetIntegerv(GL_CULL_FACE_MODE, &cullFace);
-    glGetBooleanv(GL_DEPTH_WRITEMASK, &depthMask);
-  }
-  StateGuard(const StateGuard&) = delete;
-  StateGuard& operator=(const StateGuard&) = delete;
-  ~StateGuard() {
-    blend ? glEnable(GL_BLEND) : glDisable(GL_BLEND);
-    cull ? glEnable(GL_CULL_FACE) : glDisable(GL_CULL_FACE);
-    depth ? glEnable(GL_DEPTH_TEST) : glDisable(GL_DEPTH_TEST);
-    glDepthFunc(static_cast<GLenum>(depthFunc));
-    glFrontFace(static_cast<GLenum>(frontFace));
-    glCullFace(static_cast<GLenum>(cullFace));
-    glDepthMask(depthMask);
-    glBindVertexArray(0);
-    glUseProgram(0);
-  }
-};
-
 }  // namespace
 
 struct VolumeRenderer::Impl {
@@ -498,7 +471,7 @@ Status VolumeRenderer::render(const RenderTarget& target, const Camera& camera, 
 
   if (rayMode) m.copyDepth(target);
   target.bindViewport(vp.x, vp.y, vp.width, vp.height);
-  StateGuard guard;
+  gl::StateGuard guard;
   glBindVertexArray(m.vao);
   glBindTextureUnit(0, g.volumeTex);
   glBindTextureUnit(1, g.tfTex);

@@ -9,7 +9,8 @@
 // depth so a mesh inside a volume occludes what lies behind it; a stereo
 // camera renders side by side. Engines move objects with setObjectPose()
 // (a dynamic object, the haptic tool) and deform them with
-// updateObjectMesh(), and draw particle sets (a fluid) with setParticles().
+// updateObjectMesh(), and draw particle sets (a fluid) with setParticles():
+// as spheres, or as a screen-space liquid surface (setParticleSurface()).
 // dmtool render and the render engine of
 // `dmplatform run` both draw scenes through this class.
 // All calls need the owning GlContext current on the calling thread.
@@ -29,11 +30,13 @@
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
 #include <dm/renderer/camera.hpp>
+#include <dm/renderer/fluid_renderer.hpp>
 #include <dm/renderer/render_target.hpp>
 #include <dm/renderer/scene_renderer.hpp>
 #include <dm/renderer/volume_renderer.hpp>
 
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -87,6 +90,13 @@ class SceneView {
   /// is not positive and finite.
   Status setParticles(std::string_view name, std::span<const Vec3> positions, double radius,
                       const Vec4f& color);
+  /// Draws particle set `name` as a screen-space fluid surface (see
+  /// dm::FluidRenderer) with `look`, each particle a sphere of `drawRadius`
+  /// m, instead of setParticles()' spheres (the positions still come from
+  /// setParticles()); nullopt draws spheres again. Surfaces are drawn after
+  /// the meshes, before the volumes, so rays stop at the fluid too. Fails
+  /// on a drawRadius that is not positive and finite.
+  Status setParticleSurface(std::string_view name, const std::optional<FluidLook>& look, double drawRadius);
   /// World pose of object `name`, NotFound for an unknown name.
   Result<Isometry3> objectPose(std::string_view name) const;
 
