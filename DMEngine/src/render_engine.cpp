@@ -170,7 +170,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   }
 
   // The fluids' particles (the physics engine's newest step), drawn as
-  // spheres half a spacing wide.
+  // spheres half a spacing wide or as a liquid surface.
   Status updateFluids() {
     if (!feed_.fluidParticles) return ok();
     for (std::size_t i = 0; i < feed_.fluids.size(); ++i)
@@ -182,6 +182,26 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     return ok();
   }
 
+  // Each fluid's surface look, once (the spheres need none).
+  Status setFluidLooks() {
+    for (const RenderFeed::FluidLook& f : feed_.fluids) {
+      if (!f.surface) continue;
+      dm::FluidLook look;
+      look.color = f.color.head<3>();
+      look.absorption = f.absorption;
+      look.fresnelF0 = f.fresnel;
+      look.specular = f.specular;
+      look.shininess = f.shininess;
+      look.refractionPixels = f.refraction;
+      look.smoothingIterations = f.smoothing;
+      const double spacing = 2.0 * f.radius;
+      look.particleVolume = float(spacing * spacing * spacing);
+      if (auto s = view_.setParticleSurface(f.name, look, 0.75 * spacing); !s)
+        return s.error().within("engines/render");
+    }
+    return ok();
+  }
+
   // A frame while loading, neither counted nor written: the driver compiles
   // the frame's shader variants (llvmpipe JIT-compiles them at the first
   // draw, ~200 ms) and the HUD's atlas and plot here, not in the first
@@ -189,6 +209,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   Status warmUp() {
     if (auto s = updateMillable(); !s) return s;  // the whole bone's surface, meshed once here
     if (auto s = updateSoft(); !s) return s;      // the tissues at rest
+    if (auto s = setFluidLooks(); !s) return s;
     if (auto s = updateFluids(); !s) return s;    // the fluids at the start
     if (auto r = view_.render(target_, camera_, 0.0); !r) return r.error();
     hud(0.0, false, Vec3::Zero());

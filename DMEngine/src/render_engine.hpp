@@ -49,8 +49,15 @@ struct RenderFeed {
   /// call.
   struct FluidLook {
     std::string name;
-    double radius = 0.0;
+    double radius = 0.0;  ///< the spheres' (half the spacing)
     Vec4f color = Vec4f(0.35f, 0.01f, 0.01f, 1.0f);
+    /// A liquid surface (dm::FluidLook) instead of spheres: its particles
+    /// drawn 3/4 of a spacing wide (closing a cubic lattice's gaps, √2/2 of
+    /// a spacing), each standing for a spacing cubed of fluid.
+    bool surface = false;
+    Vec3f absorption = Vec3f::Zero();  ///< 1/m per channel
+    float fresnel = 0.02f, specular = 1.0f, shininess = 200.0f, refraction = 12.0f;
+    int smoothing = 3;
   };
   std::vector<FluidLook> fluids;
   std::function<bool(std::size_t i, std::vector<Vec3>& positions)> fluidParticles;

@@ -667,11 +667,23 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
       feed.softSurface = [p = physics.get()](std::size_t i, Mesh& surface) {
         return p->latestSurface(i, surface);
       };
-      for (const SceneFluid& f : scene.fluids)
+      for (const SceneFluid& f : scene.fluids) {
+        const SceneFluidLook& look = f.look;
+        // Unset, the absorption lets a layer 1 mm thick transmit the colour.
+        Vec3 absorption = Vec3::Zero();
+        for (int c = 0; c < 3; ++c) absorption[c] = -std::log(std::clamp(f.color[c], 1e-4, 1.0)) / 1e-3;
         feed.fluids.push_back(
             {.name = f.name,
              .radius = 0.5 * f.spacing,
-             .color = Vec4f(float(f.color.x()), float(f.color.y()), float(f.color.z()), 1.0f)});
+             .color = Vec4f(float(f.color.x()), float(f.color.y()), float(f.color.z()), 1.0f),
+             .surface = look.style == SceneFluidLook::Style::Surface,
+             .absorption = look.absorption.value_or(absorption).cast<float>(),
+             .fresnel = float(look.fresnel),
+             .specular = float(look.specular),
+             .shininess = float(look.shininess),
+             .refraction = float(look.refraction),
+             .smoothing = look.smoothing});
+      }
       if (!feed.fluids.empty())
         feed.fluidParticles = [p = physics.get()](std::size_t i, std::vector<Vec3>& positions) {
           return p->latestFluidParticles(i, positions);

@@ -3,6 +3,7 @@
 // blocks, inlets (cut vessels, irrigation) and suction tips; their checks
 // and JSON (docs/scene-format.md, "Fluids"; the runtime's side is
 // DMEngine/src/scene_fluids.hpp).
+#include <array>
 #include <set>
 
 #include "scene_parse.hpp"
@@ -99,6 +100,47 @@ void readSuction(ConfigReader& fr, SceneFluid& f, const SceneDesc& scene) {
   }
 }
 
+constexpr std::array<std::string_view, 2> kLookStyles = {"surface", "spheres"};
+
+void readLook(ConfigReader& fr, SceneFluid& f) {
+  if (!fr.has("look")) return;
+  ConfigReader r = fr.child("look");
+  if (!expectObject(r)) return;
+  r.knownKeys({"style", "absorption", "fresnel", "specular", "shininess", "refraction", "smoothing"});
+  SceneFluidLook& look = f.look;
+  look.style = readEnum(r, "style", kLookStyles, std::optional(look.style)).value_or(look.style);
+  if (r.has("absorption")) {
+    const Vec3 a = readVec3(r, "absorption");
+    if (!a.allFinite() || (a.array() < 0.0).any() || (a.array() > 1e7).any())
+      r.addError("absorption needs three coefficients in [0, 1e7] 1/m", "absorption",
+                 "e.g. [700, 3900, 3900] for blood: 1 mm transmits half the red");
+    else
+      look.absorption = a;
+  }
+  look.fresnel = r.number("fresnel", {.min = 0.0, .max = 1.0}, look.fresnel);
+  look.specular = r.number("specular", {.min = 0.0, .max = 100.0}, look.specular);
+  look.shininess = r.number("shininess", {.min = 1.0, .max = 1e4}, look.shininess);
+  look.refraction = r.number("refraction", {.min = 0.0, .max = 256.0}, look.refraction);
+  look.smoothing = static_cast<int>(r.integer("smoothing", {.min = 0, .max = 16}, look.smoothing));
+  if (look.style == SceneFluidLook::Style::Spheres)
+    for (const char* key : {"absorption", "fresnel", "specular", "shininess", "refraction", "smoothing"})
+      if (r.has(key))
+        r.addError(std::string(key) + " shapes the surface style, and this fluid is drawn as spheres", key,
+                   "remove it, or use \"style\": \"surface\"");
+}
+
+Json lookJson(const SceneFluidLook& look) {
+  if (look.style == SceneFluidLook::Style::Spheres) return {{"style", enumName(look.style, kLookStyles)}};
+  Json j = {{"style", enumName(look.style, kLookStyles)},
+            {"fresnel", look.fresnel},
+            {"specular", look.specular},
+            {"shininess", look.shininess},
+            {"refraction", look.refraction},
+            {"smoothing", look.smoothing}};
+  if (look.absorption) j["absorption"] = toJson(*look.absorption);
+  return j;
+}
+
 Json windowJson(Json j, double start, const std::optional<double>& stop) {
   j["start"] = start;
   if (stop) j["stop"] = *stop;
@@ -114,8 +156,8 @@ void readFluids(ConfigReader& root, SceneDesc& scene) {
   for (std::size_t i = 0; i < list.size(); ++i) {
     ConfigReader r = list.at(i);
     if (!expectObject(r)) continue;
-    r.knownKeys({"name", "spacing", "density", "viscosity", "surface_tension", "color", "container", "region",
-                 "blocks", "inlets", "suction"});
+    r.knownKeys({"name", "spacing", "density", "viscosity", "surface_tension", "color", "look", "container",
+                 "region", "blocks", "inlets", "suction"});
     SceneFluid f;
     f.name = readUniqueName(r, names, "fluid");
     if (!scene.engines.physics)
@@ -126,6 +168,7 @@ void readFluids(ConfigReader& root, SceneDesc& scene) {
     f.viscosity = r.number("viscosity", {.min = 0.0, .max = 10.0}, f.viscosity);
     f.surfaceTension = r.number("surface_tension", {.min = 0.0, .max = 10.0}, f.surfaceTension);
     f.color = readColor(r, "color", Vec4(f.color.x(), f.color.y(), f.color.z(), 1.0), false).head<3>();
+    readLook(r, f);
     if (r.has("container")) f.container = readSolidBox(r, "container", false);
     if (const auto region = readSolidBox(r, "region", true)) {
       f.region = *region;
@@ -162,6 +205,7 @@ Json fluidsJson(const std::vector<SceneFluid>& fluids) {
               {"viscosity", f.viscosity},
               {"surface_tension", f.surfaceTension},
               {"color", toJson(f.color)},
+              {"look", lookJson(f.look)},
               {"region", boxJson(f.region)}};
     if (f.container) j["container"] = boxJson(*f.container);
     Json blocks = Json::array();

@@ -103,10 +103,11 @@ double bloodShare(const dm::Image& frame) {
   return double(red) / double(frame.width() * frame.height());
 }
 
-// The render engine draws the fluid's particles in its colour: the bundled
-// scene's camera looks down on the pool (an 8 × 8 cm basin under a 1 cm
-// layer of blood) and a quarter of its frame is blood (over 15 %); the same
-// scene with the pool drawn green has none, and without its fluid none.
+// The render engine draws the fluid in its colour: the bundled scene's
+// camera looks down on the pool (an 8 × 8 cm basin under a 1 cm layer of
+// blood) and a quarter of its frame is blood (over 15 %), drawn as a liquid
+// surface (the default) or as spheres; the same scene with the pool drawn
+// green has none, and without its fluid none.
 TEST(SceneFluid, TheRenderEngineDrawsTheParticlesInTheFluidsColour) {
   dm::test::TempDir dir("scene_fluid_render");
   std::vector<dm::Error> problems;
@@ -122,7 +123,10 @@ TEST(SceneFluid, TheRenderEngineDrawsTheParticlesInTheFluidsColour) {
     EXPECT_TRUE(frame) << frame.error();
     return frame ? bloodShare(*frame) : -1.0;
   };
-  EXPECT_GT(firstFrame(scene, "red"), 0.15);  // 26 % on llvmpipe
+  EXPECT_GT(firstFrame(scene, "red"), 0.15);  // a liquid surface
+  dm::SceneDesc spheres = scene;
+  spheres.fluids[0].look.style = dm::SceneFluidLook::Style::Spheres;
+  EXPECT_GT(firstFrame(spheres, "spheres"), 0.15);  // 26 % on llvmpipe
   dm::SceneDesc green = scene;
   green.fluids[0].color = dm::Vec3(0.02, 0.3, 0.02);
   EXPECT_LT(firstFrame(green, "green"), 0.001);

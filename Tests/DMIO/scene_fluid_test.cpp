@@ -1,6 +1,7 @@
 // The scene file's "fluids" (v2; docs/scene-format.md, "Fluids"): a fluid
 // with its container, region, blocks, inlets and suction tips reads as
-// written with its defaults (blood), round-trips through its canonical
+// written with its defaults (blood, drawn as a liquid surface), with its
+// look (surface optics or spheres), round-trips through its canonical
 // JSON, and each mistake is refused at its JSON pointer — a fluid without
 // the physics engine that steps it, a region too large to hold, a block or
 // an inlet outside the region (their fluid would be recycled at once), a
@@ -58,6 +59,50 @@ TEST(SceneFluidFile, ReadsTheFluidItsSourcesAndItsDefaults) {
   ASSERT_EQ(f.suction.size(), 1u);
   EXPECT_FALSE(f.suction[0].atTool);
   EXPECT_EQ(f.suction[0].stop, 3.0);
+  // Drawn as a liquid surface unless the scene says spheres.
+  EXPECT_EQ(f.look.style, dm::SceneFluidLook::Style::Surface);
+  EXPECT_FALSE(f.look.absorption.has_value());
+  EXPECT_EQ(f.look.smoothing, 3);
+}
+
+TEST(SceneFluidFile, ReadsTheLookOfItsSurfaceOrItsSpheres) {
+  Json j = fluidScene();
+  j["fluids"][0]["look"] = Json::parse(R"({"style": "surface", "absorption": [700, 3900, 3900],
+                                           "fresnel": 0.025, "specular": 0.5, "shininess": 80,
+                                           "refraction": 6, "smoothing": 5})");
+  auto s = scene_test::parsed(j);
+  ASSERT_TRUE(s);
+  const dm::SceneFluidLook& look = s->fluids[0].look;
+  EXPECT_EQ(look.absorption, Vec3(700, 3900, 3900));
+  EXPECT_EQ(look.fresnel, 0.025);
+  EXPECT_EQ(look.specular, 0.5);
+  EXPECT_EQ(look.shininess, 80.0);
+  EXPECT_EQ(look.refraction, 6.0);
+  EXPECT_EQ(look.smoothing, 5);
+  scene_test::expectRoundTrip(j);
+  j["fluids"][0]["look"] = Json::parse(R"({"style": "spheres"})");
+  auto spheres = scene_test::parsed(j);
+  ASSERT_TRUE(spheres);
+  EXPECT_EQ(spheres->fluids[0].look.style, dm::SceneFluidLook::Style::Spheres);
+  scene_test::expectRoundTrip(j);
+}
+
+TEST(SceneFluidFile, RefusesALookItCannotDraw) {
+  Json j = fluidScene();
+  j["fluids"][0]["look"] = Json::parse(R"({"style": "blobs", "absorption": [1, -2, 3], "fresnel": 2,
+                                           "smoothing": 40, "gloss": 1})");
+  std::vector<dm::Error> p = scene_test::problemsOf(j);
+  EXPECT_NE(scene_test::at(p, "/fluids/0/look/style"), nullptr);
+  scene_test::expectAt(p, "/fluids/0/look/absorption", "1/m");
+  EXPECT_NE(scene_test::at(p, "/fluids/0/look/fresnel"), nullptr);
+  EXPECT_NE(scene_test::at(p, "/fluids/0/look/smoothing"), nullptr);
+  EXPECT_NE(scene_test::at(p, "/fluids/0/look/gloss"), nullptr);
+  EXPECT_EQ(p.size(), 5u) << dm::formatSceneErrors(p);
+  // The surface's optics mean nothing to spheres: said, not ignored.
+  j["fluids"][0]["look"] = Json::parse(R"({"style": "spheres", "refraction": 4})");
+  p = scene_test::problemsOf(j);
+  scene_test::expectAt(p, "/fluids/0/look/refraction", "drawn as spheres");
+  EXPECT_EQ(p.size(), 1u) << dm::formatSceneErrors(p);
 }
 
 TEST(SceneFluidFile, RoundTripsThroughItsCanonicalJson) {

@@ -663,13 +663,33 @@ struct SceneFluidSuction {
 /// A particle fluid of the run (v2 "fluids"; dm::SphFluid), stepped by the
 /// physics engine: blood from cuts, irrigation, suction; docs/scene-format.md,
 /// "Fluids".
+/// How a fluid is drawn (v2 "fluids"/"look"; dm::FluidLook in DMRenderer).
+struct SceneFluidLook {
+  enum class Style : std::uint8_t {
+    Surface,  ///< screen-space fluid: one smoothed, absorbing, refracting surface
+    Spheres,  ///< one lit sphere half a spacing wide per particle
+  };
+  Style style = Style::Surface;
+  /// Beer–Lambert coefficients, 1/m per channel; unset: a layer 1 mm thick
+  /// transmits the fluid's colour
+  std::optional<Vec3> absorption;
+  double fresnel = 0.02;     ///< reflectance at normal incidence
+  double specular = 1.0;     ///< scale of the lights' highlights
+  double shininess = 200.0;  ///< Blinn–Phong exponent of the highlights
+  double refraction = 12.0;  ///< pixels the scene behind shifts per unit of the normal's screen tilt
+  int smoothing = 3;         ///< bilateral smoothing passes over the surface's depth
+
+  bool operator==(const SceneFluidLook&) const = default;
+};
+
 struct SceneFluid {
   std::string name;
   double spacing = 0.004;             ///< m: particle spacing
   double density = 1060.0;            ///< kg/m³ (blood)
   double viscosity = 3.5e-6;          ///< m²/s, kinematic (blood)
   double surfaceTension = 0.0;        ///< Akinci's γ
-  Vec3 color{0.35, 0.01, 0.01};       ///< linear RGB the particles are drawn in (blood)
+  Vec3 color{0.35, 0.01, 0.01};       ///< linear RGB: the surface's body colour, or the spheres' (blood)
+  SceneFluidLook look;                ///< surface or spheres, and the surface's optics
   std::optional<SceneBox> container;  ///< walls of a box open at the top
   SceneBox region;                    ///< particles leaving it are recycled
   std::vector<SceneBox> blocks;       ///< fluid at the start
