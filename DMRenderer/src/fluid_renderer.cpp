@@ -12,12 +12,13 @@
 
 #include "fluid_shaders.hpp"
 #include "gl.hpp"
+#include "light_uniforms.hpp"
 
 namespace dm {
 
 namespace {
 
-constexpr int kMaxFluidLights = 8;
+constexpr int kMaxFluidLights = gl::LightUniforms::kMax;
 
 Status checkLook(const FluidLook& look, double radius, std::size_t lights) {
   const char* where = "FluidRenderer::render";
@@ -348,29 +349,8 @@ Result<FluidRenderStats> FluidRenderer::render(const RenderTarget& target, const
   m.smoothed = src;
 
   // 4–5. Normals and shading over the target.
-  std::array<int, kMaxFluidLights> type{};
-  std::array<float, 3 * kMaxFluidLights> pos{}, dir{}, color{};
-  std::array<float, kMaxFluidLights> range{};
-  std::array<float, 2 * kMaxFluidLights> cone{};
-  const Mat3f viewRot = view.topLeftCorner<3, 3>();
-  const auto n = int(lights.size());
-  for (int i = 0; i < n; ++i) {
-    const Light& l = lights[std::size_t(i)];
-    const auto u = std::size_t(i);
-    type[u] = int(l.type);
-    const Vec3f p = (view * l.position.cast<float>().homogeneous()).head<3>();
-    const Vec3f d = viewRot * (l.type == Light::Type::Point ? Vec3f(Vec3f::UnitZ())
-                                                            : Vec3f(l.direction.normalized().cast<float>()));
-    const Vec3f c = l.color * l.intensity;
-    for (int k = 0; k < 3; ++k) {
-      pos[3 * u + std::size_t(k)] = p[k];
-      dir[3 * u + std::size_t(k)] = d[k];
-      color[3 * u + std::size_t(k)] = c[k];
-    }
-    range[u] = float(l.range);
-    cone[2 * u] = float(std::cos(l.innerConeDeg * std::numbers::pi / 180));
-    cone[2 * u + 1] = float(std::cos(l.outerConeDeg * std::numbers::pi / 180));
-  }
+  gl::LightUniforms packed;
+  packed.pack(lights, view);  // the composite shades in view space
   ShaderProgram& c = m.composite;
   c.use();
   const GLuint id = c.id();
@@ -385,15 +365,8 @@ Result<FluidRenderStats> FluidRenderer::render(const RenderTarget& target, const
   c.set("u_shininess", look.shininess);
   c.set("u_refraction", look.refractionPixels);
   c.set("u_ambient", ambient);
-  c.set("u_lightCount", n);
-  if (n > 0) {
-    glProgramUniform1iv(id, c.location("u_lightType"), n, type.data());
-    glProgramUniform3fv(id, c.location("u_lightPos"), n, pos.data());
-    glProgramUniform3fv(id, c.location("u_lightDir"), n, dir.data());
-    glProgramUniform3fv(id, c.location("u_lightColor"), n, color.data());
-    glProgramUniform1fv(id, c.location("u_lightRange"), n, range.data());
-    glProgramUniform2fv(id, c.location("u_lightCone"), n, cone.data());
-  }
+  c.set("u_lightCount", packed.count);
+  packed.upload(c);
   glBindTextureUnit(0, m.smoothed);
   glBindTextureUnit(1, m.thick);
   glBindTextureUnit(2, m.sceneColor);

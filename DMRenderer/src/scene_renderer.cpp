@@ -11,6 +11,7 @@
 #include <string>
 
 #include "gl.hpp"
+#include "light_uniforms.hpp"
 #include "scene_shaders.hpp"
 
 namespace dm {
@@ -604,36 +605,16 @@ struct SceneRenderer::Impl {
     const int n = static_cast<int>(lights.size());
     frameAmbient = settings.ambient;
     frameLightCount = n;
-    std::array<int, kMaxLights> type{}, shadow{};
-    std::array<float, 3 * kMaxLights> pos{}, dir{}, color{};
-    std::array<float, kMaxLights> range{};
-    std::array<float, 2 * kMaxLights> cone{};
+    gl::LightUniforms packed;
+    packed.pack(lights);
+    packed.upload(p);
+    std::array<int, kMaxLights> shadow{};
     for (int i = 0; i < n; ++i) {
-      const Light& l = lights[std::size_t(i)];
-      type[std::size_t(i)] = int(l.type);
       shadow[std::size_t(i)] = lightLayer[std::size_t(i)];
-      const Vec3 d = l.type == Light::Type::Point ? Vec3::UnitZ() : Vec3(l.direction.normalized());
-      const Vec3f c = l.color * l.intensity;
-      frameLightColor[std::size_t(i)] = c;
-      for (int k = 0; k < 3; ++k) {
-        pos[std::size_t(3 * i + k)] = float(l.position[k]);
-        dir[std::size_t(3 * i + k)] = float(d[k]);
-        color[std::size_t(3 * i + k)] = c[k];
-      }
-      range[std::size_t(i)] = float(l.range);
-      cone[std::size_t(2 * i)] = float(std::cos(l.innerConeDeg * std::numbers::pi / 180));
-      cone[std::size_t(2 * i + 1)] = float(std::cos(l.outerConeDeg * std::numbers::pi / 180));
+      frameLightColor[std::size_t(i)] = lights[std::size_t(i)].color * lights[std::size_t(i)].intensity;
     }
     const GLuint id = p.id();
-    if (n > 0) {
-      glProgramUniform1iv(id, p.location("u_lightType"), n, type.data());
-      glProgramUniform1iv(id, p.location("u_lightShadow"), n, shadow.data());
-      glProgramUniform3fv(id, p.location("u_lightPos"), n, pos.data());
-      glProgramUniform3fv(id, p.location("u_lightDir"), n, dir.data());
-      glProgramUniform3fv(id, p.location("u_lightColor"), n, color.data());
-      glProgramUniform1fv(id, p.location("u_lightRange"), n, range.data());
-      glProgramUniform2fv(id, p.location("u_lightCone"), n, cone.data());
-    }
+    if (n > 0) glProgramUniform1iv(id, p.location("u_lightShadow"), n, shadow.data());
     const int ns = static_cast<int>(shadowLights.size());
     if (ns > 0) {
       std::array<float, 16 * kMaxShadowMaps> mats{};
