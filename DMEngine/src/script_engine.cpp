@@ -183,6 +183,32 @@ bool ScriptEngine::fail(Error e) noexcept {
   return false;
 }
 
+// The events since the last call from both threads, in time order (each
+// ring is in order already; a stable sort keeps ties in it). False when the
+// script failed on one (error_ holds why).
+bool ScriptEngine::deliverEvents(Context& c) {
+  pending_.clear();
+  ScriptEventRecord r;
+  while (feed_->toolEvents.tryPop(r)) pending_.push_back(r);
+  while (feed_->physicsEvents.tryPop(r)) pending_.push_back(r);
+  std::stable_sort(pending_.begin(), pending_.end(),
+                   [](const ScriptEventRecord& a, const ScriptEventRecord& b) { return a.time < b.time; });
+  for (const ScriptEventRecord& e : pending_) {
+    ScriptEvent ev{.type = e.type, .time = e.time, .value = e.value};
+    if (e.type == ScriptEvent::Type::Puncture) {
+      if (e.source >= 0 && std::size_t(e.source) < names_.soft.size()) {
+        ev.object = names_.soft[std::size_t(e.source)];
+        if (names_.layer) ev.layer = names_.layer(std::size_t(e.source), e.layer);
+      }
+    } else if (e.source >= 0 && std::size_t(e.source) < names_.touched.size()) {
+      ev.object = names_.touched[std::size_t(e.source)];
+    }
+    ++events_;
+    if (auto s = instance_->event(c, ev); !s) return fail(s.error().within(std::string(toString(e.type))));
+  }
+  return true;
+}
+
 bool ScriptEngine::tick(const TickInfo& info) noexcept {
   try {
     Context& c = *context_;
@@ -192,27 +218,7 @@ bool ScriptEngine::tick(const TickInfo& info) noexcept {
       started_ = true;
       if (auto s = instance_->start(c); !s) return fail(s.error().within("start"));
     }
-    // The events since the last tick from both threads, in time order
-    // (each ring is in order already; a stable sort keeps ties in it).
-    pending_.clear();
-    ScriptEventRecord r;
-    while (feed_->toolEvents.tryPop(r)) pending_.push_back(r);
-    while (feed_->physicsEvents.tryPop(r)) pending_.push_back(r);
-    std::stable_sort(pending_.begin(), pending_.end(),
-                     [](const ScriptEventRecord& a, const ScriptEventRecord& b) { return a.time < b.time; });
-    for (const ScriptEventRecord& e : pending_) {
-      ScriptEvent ev{.type = e.type, .time = e.time, .value = e.value};
-      if (e.type == ScriptEvent::Type::Puncture) {
-        if (e.source >= 0 && std::size_t(e.source) < names_.soft.size()) {
-          ev.object = names_.soft[std::size_t(e.source)];
-          if (names_.layer) ev.layer = names_.layer(std::size_t(e.source), e.layer);
-        }
-      } else if (e.source >= 0 && std::size_t(e.source) < names_.touched.size()) {
-        ev.object = names_.touched[std::size_t(e.source)];
-      }
-      ++events_;
-      if (auto s = instance_->event(c, ev); !s) return fail(s.error().within(std::string(toString(e.type))));
-    }
+    if (!deliverEvents(c)) return false;
     if (auto s = instance_->tick(c); !s) return fail(s.error().within(formatString("tick at %.6f s", c.now)));
     c.publish();
     ++ticks_;
@@ -230,6 +236,9 @@ Result<nlohmann::json> ScriptEngine::finish(double time) {
   Context& c = *context_;
   c.now = time;
   c.update();
+  // Events the other threads pushed after this engine's last tick (the
+  // engines stop one by one) reach the script before it finishes.
+  if (started_ && !deliverEvents(c)) return error_;
   if (auto s = instance_->finish(c); !s) return s.error().within(engineName_ + " finish");
   return nlohmann::json{{"ticks", ticks_},
                         {"events", events_},

@@ -94,12 +94,14 @@ class ScriptEngine final : public Engine {
   /// The metrics set so far (control thread, between lockstep advances or after the run).
   const nlohmann::json& metrics() const noexcept;
   /// Control thread, after the run: the script's finish(), then its entry
-  /// of summary.json's "scripts" (metrics, ticks, events).
+  /// of summary.json's "scripts" (metrics, ticks, events). Events the
+  /// other threads pushed after the last tick are delivered first.
   Result<nlohmann::json> finish(double time);
 
  private:
   struct Context;
   bool fail(Error e) noexcept;
+  bool deliverEvents(Context& c);
   std::string engineName_;
   std::unique_ptr<ScriptFeed> feed_;
   std::unique_ptr<Context> context_;

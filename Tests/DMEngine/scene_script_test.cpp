@@ -300,6 +300,37 @@ TEST(SceneScript, PuncturesComeWhereTheNeedlesForceDrops) {
   }
 }
 
+// A run that ends on the physics tick of a puncture: the script engine may
+// have ticked for the last time before physics pushed it, so finish() must
+// still hand it over (the engines stop one by one; in real time the order
+// is the scheduler's, which is how this was first seen under TSan).
+TEST(SceneScript, APunctureOnTheLastPhysicsTickReachesTheScriptBeforeItFinishes) {
+  const ProbeLanguage language;
+  dm::SceneDesc scene = scene_run::bundledScene("needle_insertion.json");
+  scene.scripts.push_back(probe("monitor", json::object()));
+  const dm::test::TempDir tmp("script_last_puncture");
+  const json full = scene_run::runScene(scene, 3.4, tmp.path() / "full");
+  std::vector<double> times, seenAt;
+  for (const json& e : full["scripts"]["probe"]["metrics"]["events"])
+    if (e["type"] == "puncture") {
+      times.push_back(e["time"].get<double>());
+      seenAt.push_back(e["seen_at"].get<double>());
+    }
+  ASSERT_EQ(times.size(), 2u) << full.dump(2);
+  // Stop 1 ms after the physics tick of the second puncture (physics at
+  // 100 Hz; the monitor's script at 30 Hz, whose next tick would have seen
+  // it later than that).
+  const double end = times[1] + 1e-3;
+  ASSERT_GT(seenAt[1], end) << full.dump(2);
+  const json cut = scene_run::runScene(scene, end, tmp.path() / "cut");
+  const json& needle = cut["physics"]["soft"][0]["needle"];
+  ASSERT_EQ(needle["punctures"].get<int>(), 2) << needle.dump(2);
+  int seen = 0;
+  for (const json& e : cut["scripts"]["probe"]["metrics"]["events"])
+    if (e["type"] == "puncture") ++seen;
+  EXPECT_EQ(seen, 2) << cut["scripts"]["probe"].dump(2);
+}
+
 TEST(SceneScript, AFailingScriptStopsTheRunNamingItAndTheOutputsAreWritten) {
   const ProbeLanguage language;
   const dm::test::TempDir tmp("script_fail");
