@@ -58,7 +58,6 @@ bool NeighborGrid::rowRange(std::int64_t x, std::int64_t y, std::int64_t z, std:
 }
 
 void NeighborGrid::build(std::span<const Vec3> points, double radius, std::size_t listed) {
-  points_ = points;
   radius_ = radius > 0.0 && std::isfinite(radius) ? radius : 1.0;
   const std::size_t n = std::min(points.size(), listed);
   offsets_.assign(n + 1, 0);
@@ -113,6 +112,14 @@ void NeighborGrid::build(std::span<const Vec3> points, double radius, std::size_
     keys_ = std::move(distinct);
   }
 
+  // The points in cell order, as plain coordinates: a cell's candidates are
+  // then read from consecutive memory instead of scattered over the cloud.
+  sorted_.resize(3 * order_.size());
+  parallelFor(0, order_.size(), 4096, [&](std::size_t b, std::size_t e) {
+    for (std::size_t k = b; k < e; ++k)
+      for (int a = 0; a < 3; ++a) sorted_[3 * k + std::size_t(a)] = points[order_[k]][a];
+  });
+
   // One pass: each fixed chunk of points lists into its own buffer (its
   // points' lists sorted by index), then the buffers are laid end to end.
   // The chunks do not depend on the thread count, nor do the lists.
@@ -126,12 +133,14 @@ void NeighborGrid::build(std::span<const Vec3> points, double radius, std::size_
       out.clear();
       for (std::size_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) {
         const Vec3& p = points[i];
+        const double px = p.x(), py = p.y(), pz = p.z();
         const std::size_t first = out.size();
         if (p.allFinite())
           visitCells(p, [&](std::uint32_t begin, std::uint32_t end) {
-            for (std::uint32_t k = begin; k < end; ++k) {
-              const std::uint32_t j = order_[k];
-              if (j != i && (points[j] - p).squaredNorm() < r2) out.push_back(j);
+            const double* q = sorted_.data() + 3 * std::size_t(begin);
+            for (std::uint32_t k = begin; k < end; ++k, q += 3) {
+              const double dx = q[0] - px, dy = q[1] - py, dz = q[2] - pz;
+              if (dx * dx + dy * dy + dz * dz < r2 && order_[k] != i) out.push_back(order_[k]);
             }
           });
         std::sort(out.begin() + std::ptrdiff_t(first), out.end());

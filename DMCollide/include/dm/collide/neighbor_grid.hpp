@@ -7,7 +7,9 @@
 // relative to the points' bounding box), orders the points by cell with a
 // stable counting sort when the box holds at most 8 cells per point (a
 // dense table of cell starts), or by sorted 64-bit cell keys and binary
-// search otherwise (sparse clouds), then lists, for each point, every other
+// search otherwise (sparse clouds), keeps a copy of their coordinates in
+// that order (a cell's candidates are consecutive in memory; queries do not
+// read the caller's points again), then lists, for each point, every other
 // point within `radius` in the 27 cells around it, in increasing index
 // order: the lists do not depend on the thread count, so a simulation that
 // walks them in order is bit-reproducible. Counting and filling run on
@@ -65,10 +67,12 @@ class NeighborGrid {
   template <class F>
   void forEachWithin(const Vec3& p, F&& f) const {
     const double r2 = radius_ * radius_;
+    const double px = p.x(), py = p.y(), pz = p.z();
     visitCells(p, [&](std::uint32_t begin, std::uint32_t end) {
-      for (std::uint32_t k = begin; k < end; ++k) {
-        const std::uint32_t j = order_[k];
-        if ((points_[j] - p).squaredNorm() < r2) f(j);
+      const double* q = sorted_.data() + 3 * std::size_t(begin);
+      for (std::uint32_t k = begin; k < end; ++k, q += 3) {
+        const double dx = q[0] - px, dy = q[1] - py, dz = q[2] - pz;
+        if (dx * dx + dy * dy + dz * dz < r2) f(order_[k]);
       }
     });
   }
@@ -86,12 +90,12 @@ class NeighborGrid {
   bool rowRange(std::int64_t x, std::int64_t y, std::int64_t z, std::uint32_t& begin,
                 std::uint32_t& end) const noexcept;
 
-  std::span<const Vec3> points_;
   double radius_ = 0.0;
   Vec3 origin_ = Vec3::Zero();
   std::int64_t dims_[3] = {0, 0, 0};
   bool dense_ = true;
   std::vector<std::uint32_t> order_;      // point indices sorted by cell
+  std::vector<double> sorted_;            // their coordinates (x, y, z), in that order
   std::vector<std::uint32_t> cellStart_;  // dense: per cell + 1; sparse: per distinct key + 1
   std::vector<Key> keys_;                 // per point (build), then the distinct keys (sparse)
   std::vector<std::uint32_t> counts_;     // scratch

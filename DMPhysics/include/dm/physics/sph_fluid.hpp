@@ -161,7 +161,7 @@ class SphFluid {
   explicit SphFluid(const SphFluidOptions& o);
   void neighbours();
   void densitiesAndFactors();
-  Vec3 gradient(const Vec3& r) const noexcept;
+  double gradientScale(double len) const noexcept;  // ∇W(r) = gradientScale(|r|) r
   void nonPressure(double dt);
   int pressureSolve(double dt, bool density);
   double subStep(double dt);  // returns the dt it took
@@ -170,8 +170,8 @@ class SphFluid {
   double h_ = 0.0, mass_ = 0.0, kernelScale_ = 0.0, time_ = 0.0;
   double boundaryScale_ = 1.0;  // Σ_plane W / Σ_lattice W: see the constructor
   std::vector<Vec3> x_, v_, a_, normal_;
-  std::vector<Vec3> grad_;  // ∇W of every listed pair of a fluid particle, in list order
-  std::vector<double> rho_, alpha_, p_, kappa_, kappaSum_, error_;
+  std::vector<double> grad_;  // ∇W (x, y, z) of every listed pair of a fluid particle, in list order
+  std::vector<double> rho_, alpha_, p_, kappa_, kappaOverRho_, kappaSum_, error_;
   std::vector<double> warmDensity_, warmDivergence_;  // κ·dt², κ·dt of the last solves, per particle  // rho_
                                                       // empty: stale (refreshed at the next step)
   std::vector<Vec3> bx_;
