@@ -7,6 +7,7 @@
 #include <cmath>
 #include <numbers>
 #include <set>
+#include <string>
 #include <tuple>
 
 namespace dm {
@@ -147,11 +148,87 @@ std::size_t SphFluid::addBoxBoundary(const Vec3& inner, const Vec3& upper) {
   return points.size();
 }
 
+Result<std::size_t> SphFluid::addRigidBoundary(std::span<const Vec3> bodyPoints, const Isometry3& pose) {
+  const std::string where = "SphFluid::addRigidBoundary";
+  if (bodyPoints.empty())
+    return fail(ErrorCode::InvalidArgument, "no boundary particles", where,
+                "sample the body's surface, e.g. dm::sampleBoundary(mesh, d, d / 2)");
+  for (std::size_t q = 0; q < bodyPoints.size(); ++q)
+    if (!bodyPoints[q].allFinite())
+      return fail(ErrorCode::InvalidArgument, formatString("point %zu is not finite", q), where);
+  if (!pose.matrix().allFinite()) return fail(ErrorCode::InvalidArgument, "the pose is not finite", where);
+  Rigid body;
+  body.local.assign(bodyPoints.begin(), bodyPoints.end());
+  body.first = rx_.size();
+  body.pose = pose;
+  // Ψ from the body's own particles (it keeps its shape, so once).
+  NeighborGrid own;
+  own.build(body.local, h_, 0);
+  for (const Vec3& p : body.local) {
+    double sum = 0.0;
+    own.forEachWithin(p, [&](std::uint32_t k) { sum += kernel((p - body.local[k]).norm()); });
+    rpsi_.push_back(o_.restDensity * boundaryScale_ / sum);
+    rof_.push_back(std::uint32_t(rigid_.size()));
+  }
+  rx_.resize(rx_.size() + bodyPoints.size());
+  rigid_.push_back(std::move(body));
+  boundaryDirty_ = true;
+  rho_.clear();
+  placeRigid(rigid_.size() - 1);
+  return rigid_.size() - 1;
+}
+
+Status SphFluid::setRigidState(std::size_t body, const Isometry3& pose, const Vec3& linearVelocity,
+                               const Vec3& angularVelocity) {
+  const std::string where = "SphFluid::setRigidState";
+  if (body >= rigid_.size())
+    return fail(ErrorCode::InvalidArgument, formatString("body %zu of %zu", body, rigid_.size()), where);
+  if (!pose.matrix().allFinite() || !linearVelocity.allFinite() || !angularVelocity.allFinite())
+    return fail(ErrorCode::InvalidArgument, formatString("body %zu: a non-finite pose or velocity", body),
+                where);
+  Rigid& r = rigid_[body];
+  r.pose = pose;
+  r.v = linearVelocity;
+  r.w = angularVelocity;
+  placeRigid(body);
+  rigidMoved_ = true;  // neighbours and densities again at the next step
+  return ok();
+}
+
+void SphFluid::placeRigid(std::size_t body) {
+  const std::size_t nb = bx_.size();
+  if (bv_.size() != nb + rx_.size()) {  // the boundary changed: lay the velocities out again
+    bv_.assign(nb + rx_.size(), Vec3::Zero());
+    for (std::size_t k = 0; k < rigid_.size(); ++k)
+      if (k != body) placeRigid(k);
+  }
+  const Rigid& r = rigid_[body];
+  const Vec3 origin = r.pose.translation();
+  for (std::size_t q = 0; q < r.local.size(); ++q) {
+    const Vec3 x = r.pose * r.local[q];
+    rx_[r.first + q] = x;
+    bv_[nb + r.first + q] = r.v + r.w.cross(x - origin);
+  }
+}
+
+void SphFluid::moveRigid(double dt) {
+  for (std::size_t k = 0; k < rigid_.size(); ++k) {
+    Rigid& r = rigid_[k];
+    if (r.v.squaredNorm() == 0.0 && r.w.squaredNorm() == 0.0) continue;
+    const double angle = r.w.norm() * dt;
+    if (angle > 0.0) r.pose.linear() = (AngleAxis(angle, r.w.normalized()) * r.pose.linear()).eval();
+    r.pose.translation() += dt * r.v;
+    placeRigid(k);
+  }
+}
+
 void SphFluid::neighbours() {
-  all_.resize(x_.size() + bx_.size());
+  const std::size_t nf = x_.size(), nb = bx_.size();
+  all_.resize(nf + nb + rx_.size());
   std::copy(x_.begin(), x_.end(), all_.begin());
-  std::copy(bx_.begin(), bx_.end(), all_.begin() + std::ptrdiff_t(x_.size()));
-  grid_.build(all_, h_, x_.size());  // lists for the fluid; the boundary is static
+  std::copy(bx_.begin(), bx_.end(), all_.begin() + std::ptrdiff_t(nf));
+  std::copy(rx_.begin(), rx_.end(), all_.begin() + std::ptrdiff_t(nf + nb));
+  grid_.build(all_, h_, nf);  // lists for the fluid; boundary particles have none
 }
 
 void SphFluid::densitiesAndFactors() {
@@ -193,17 +270,25 @@ void SphFluid::densitiesAndFactors() {
 }
 
 void SphFluid::refresh() {
+  rigidMoved_ = false;
   neighbours();
   const std::size_t nf = x_.size();
-  if (boundaryDirty_ || bpsi_.size() != bx_.size()) {
-    // Akinci's boundary volume: 1 / Σ_k W_bk over the boundary particles.
-    bpsi_.resize(bx_.size());
-    for (std::size_t b = 0; b < bx_.size(); ++b) {
+  const std::size_t nb = bx_.size();
+  if (boundaryDirty_ || bpsi_.size() != nb + rx_.size()) {
+    // Akinci's boundary volume: 1 / Σ_k W_bk over the static boundary
+    // particles (a rigid body's come from its own: addRigidBoundary).
+    bpsi_.resize(nb + rx_.size());
+    for (std::size_t b = 0; b < nb; ++b) {
       double sum = 0.0;  // (itself included: it is within the radius)
       grid_.forEachWithin(bx_[b], [&](std::uint32_t k) {
-        if (k >= nf) sum += kernel((bx_[b] - all_[k]).norm());
+        if (k >= nf && k < nf + nb) sum += kernel((bx_[b] - all_[k]).norm());
       });
       bpsi_[b] = o_.restDensity * boundaryScale_ / sum;
+    }
+    std::copy(rpsi_.begin(), rpsi_.end(), bpsi_.begin() + std::ptrdiff_t(nb));
+    if (bv_.size() != nb + rx_.size()) {
+      bv_.assign(nb + rx_.size(), Vec3::Zero());
+      for (std::size_t k = 0; k < rigid_.size(); ++k) placeRigid(k);
     }
     boundaryDirty_ = false;
   }
@@ -244,6 +329,7 @@ void SphFluid::nonPressure(double dt) {
   a_.resize(nf);
   const double* X = coords(all_);
   const double* V = coords(v_);
+  const double* BV = coords(bv_);
   double* A = coords(a_);
   parallelFor(0, nf, kGrain, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
@@ -272,8 +358,9 @@ void SphFluid::nonPressure(double dt) {
             const double* nj = N + 3 * std::size_t(j);
             for (int d = 0; d < 3; ++d) a[d] -= k * (ni[d] - nj[d] + c * r[d]);
           }
-        } else if (nu > 0.0) {  // no-slip walls
-          const double vr = vi[0] * r[0] + vi[1] * r[1] + vi[2] * r[2];
+        } else if (nu > 0.0) {  // no-slip walls, moving with their body
+          const double* vb = BV + 3 * std::size_t(j - nf);
+          const double vr = (vi[0] - vb[0]) * r[0] + (vi[1] - vb[1]) * r[1] + (vi[2] - vb[2]) * r[2];
           const double k = 10.0 * nu * (bpsi_[j - nf] / rho0) * vr / (r2 + 0.01 * h * h);
           for (int c = 0; c < 3; ++c) a[c] += k * g[c];
         }
@@ -281,8 +368,55 @@ void SphFluid::nonPressure(double dt) {
       for (int c = 0; c < 3; ++c) A[3 * i + c] = a[c];
     }
   });
+  if (nu > 0.0 && !rigid_.empty()) rigidViscousReaction(dt);
   double* Vw = coords(v_);
   for (std::size_t k = 0; k < 3 * nf; ++k) Vw[k] += dt * A[k];
+}
+
+// The no-slip viscosity's pairs of fluid and rigid particles once more,
+// serially (a reproducible sum): the body gets what the fluid particle got,
+// opposite.
+void SphFluid::rigidViscousReaction(double dt) {
+  const std::size_t nf = x_.size(), nb = bx_.size();
+  const double nu = o_.viscosity, h = h_;
+  for (std::size_t i = 0; i < nf; ++i) {
+    if (!touchesRigid(i)) continue;
+    const double* g = grad_.data() + 3 * grid_.listOffset(i);
+    for (std::uint32_t j : grid_.neighbors(i)) {
+      if (j >= nf + nb) {
+        const Vec3 r = all_[i] - all_[j];
+        const Vec3 dv = v_[i] - bv_[j - nf];
+        const double k =
+            10.0 * nu * (bpsi_[j - nf] / o_.restDensity) * dv.dot(r) / (r.squaredNorm() + 0.01 * h * h);
+        const Vec3 impulse = -mass_ * dt * k * Vec3(g[0], g[1], g[2]);
+        Rigid& body = rigid_[rof_[j - nf - nb]];
+        body.impulse += impulse;
+        body.angularImpulse += (all_[j] - body.pose.translation()).cross(impulse);
+      }
+      g += 3;
+    }
+  }
+}
+
+// What the solve that just ended gave the fluid through the rigid particles
+// (κ summed over its iterations: the gradients and densities were fixed
+// within it), to the bodies, opposite.
+void SphFluid::rigidPressureReaction(double dt) {
+  const std::size_t nf = x_.size(), nb = bx_.size();
+  for (std::size_t i = 0; i < nf; ++i) {
+    if (!touchesRigid(i)) continue;
+    const double ki = kappaSum_[i] / rho_[i];
+    const double* g = grad_.data() + 3 * grid_.listOffset(i);
+    for (std::uint32_t j : grid_.neighbors(i)) {
+      if (j >= nf + nb) {
+        const Vec3 impulse = dt * mass_ * bpsi_[j - nf] * ki * Vec3(g[0], g[1], g[2]);
+        Rigid& body = rigid_[rof_[j - nf - nb]];
+        body.impulse += impulse;
+        body.angularImpulse += (all_[j] - body.pose.translation()).cross(impulse);
+      }
+      g += 3;
+    }
+  }
 }
 
 // One pressure solve (see the file comment): the density solve drives the
@@ -304,6 +438,7 @@ int SphFluid::pressureSolve(double dt, bool density) {
   // Δv_i = −dt Σ_j m (κ_i/ρ_i + κ_j/ρ_j) ∇W_ij (a boundary: κ_i/ρ_i alone).
   double* V = coords(v_);
   double* A = coords(a_);
+  const double* BV = coords(bv_);
   const auto apply = [&] {
     // κ/ρ per particle first: the pairs then read one array.
     for (std::size_t i = 0; i < nf; ++i) kappaOverRho_[i] = kappa_[i] / rho_[i];
@@ -343,7 +478,8 @@ int SphFluid::pressureSolve(double dt, bool density) {
             const double* vj = V + 3 * std::size_t(j);
             drho += mass_ * ((vi0 - vj[0]) * g[0] + (vi1 - vj[1]) * g[1] + (vi2 - vj[2]) * g[2]);
           } else {
-            drho += bpsi_[j - nf] * (vi0 * g[0] + vi1 * g[1] + vi2 * g[2]);
+            const double* vb = BV + 3 * std::size_t(j - nf);
+            drho += bpsi_[j - nf] * ((vi0 - vb[0]) * g[0] + (vi1 - vb[1]) * g[1] + (vi2 - vb[2]) * g[2]);
           }
           g += 3;
         }
@@ -368,6 +504,7 @@ int SphFluid::pressureSolve(double dt, bool density) {
     ++it;
   }
   (density ? stats_.densityError : stats_.divergenceError) = err;
+  if (!rigid_.empty()) rigidPressureReaction(dt);
   for (std::size_t i = 0; i < nf; ++i) {
     warm[i] = kappaSum_[i] * keep;
     p_[i] += kappaSum_[i];
@@ -381,6 +518,7 @@ double SphFluid::subStep(double dt) {
   nonPressure(dt);
   stats_.densityIterations += pressureSolve(dt, true);
   for (std::size_t i = 0; i < nf; ++i) x_[i] += dt * v_[i];
+  moveRigid(dt);
   neighbours();
   densitiesAndFactors();
   stats_.divergenceIterations += pressureSolve(dt, false);
@@ -395,16 +533,24 @@ Status SphFluid::step(double dt) {
     return fail(ErrorCode::InvalidArgument, formatString("dt %g s", dt), "SphFluid::step",
                 "a positive time step");
   stats_ = {};
+  for (Rigid& r : rigid_) r.impulse = r.angularImpulse = Vec3::Zero();
+  const auto loads = [&] {
+    for (Rigid& r : rigid_) r.load = {.force = r.impulse / dt, .torque = r.angularImpulse / dt};
+  };
   if (x_.empty()) {
+    moveRigid(dt);
     time_ += dt;
+    loads();
     return ok();
   }
-  if (rho_.size() != x_.size() || boundaryDirty_) refresh();
+  if (rho_.size() != x_.size() || boundaryDirty_ || rigidMoved_) refresh();
   double left = dt;
   const double d = o_.particleSpacing;
   while (left > 1e-12 * dt) {
     double vmax = 0.0;
     for (const Vec3& v : v_) vmax = std::max(vmax, v.squaredNorm());
+    for (std::size_t b = bx_.size(); b < bv_.size(); ++b)
+      vmax = std::max(vmax, bv_[b].squaredNorm());  // bodies
     // The speed bound adds 4 sqrt(|g| d) (8 times what a particle falling
     // from rest reaches over half a spacing): a column at rest still takes
     // sub-steps of at most 0.1 sqrt(d / |g|), past which the hydrostatic
@@ -427,6 +573,7 @@ Status SphFluid::step(double dt) {
   double worst = 0.0;
   for (double r : rho_) worst = std::max(worst, (r - o_.restDensity) / o_.restDensity);
   stats_.maxDensityError = worst;
+  loads();
   return ok();
 }
 

@@ -37,7 +37,21 @@
 // ratio of a lattice plane's kernel sum to the full lattice's, so a wall
 // sampled at spacing d completes the fluid's neighbourhood exactly; walls of a
 // box container come from addBoxBoundary(), any surface from
-// addBoundaryParticles().
+// addBoundaryParticles() (dm::sampleBoundary() samples a mesh).
+//
+// Rigid bodies (two-way coupling, Akinci et al. 2012): addRigidBoundary()
+// gives a body's surface as boundary particles in its own frame, with their
+// Ψ from the body's own particles. The caller integrates the body (a
+// PhysicsWorld body, a test's own integrator) and hands its pose and
+// velocities in with setRigidState(); within step() the body moves on at
+// them, its surface velocity enters the density and divergence solves
+// (Dρ/Dt sees v_i − v_b) and the no-slip viscosity, and the fluid's
+// reaction — every boundary pair's pressure impulse dt m_i Ψ_b κ_i/ρ_i ∇W_ib
+// and viscous one, opposite to what the fluid particle got — is summed per
+// body into rigidLoad(): force and torque, averaged over the step. The
+// exchange is explicit (the caller's state holds for a step): a sphere of
+// half the fluid's density, whose mass equals its added mass, floats
+// steadily at 2 ms steps; much lighter bodies need shorter steps.
 //
 // Every per-particle sum runs over its neighbour list in index order and
 // reductions are serial, so a run is bit-reproducible on any thread count.
@@ -100,6 +114,12 @@ struct SphStepStats {
   bool converged = true;         ///< every solve met its bound within maxIterations
 };
 
+/// What the fluid did to a rigid body over the last step (SphFluid::rigidLoad).
+struct SphRigidLoad {
+  Vec3 force = Vec3::Zero();   ///< N, pressure and viscosity, averaged over the step
+  Vec3 torque = Vec3::Zero();  ///< N·m, about the body frame's origin
+};
+
 /// See the file comment. Not thread-safe; copyable (a snapshot).
 class SphFluid {
  public:
@@ -129,6 +149,28 @@ class SphFluid {
   /// each face (a fluid particle's centre lies half a spacing inside it, see
   /// addBlock); the fluid stays inside.
   std::size_t addBoxBoundary(const Vec3& lo, const Vec3& hi);
+
+  // --- rigid bodies (two-way) ----------------------------------------------
+  /// A rigid body the fluid flows around and pushes: its surface as boundary
+  /// particles in the body's frame, about d apart and a third of a spacing
+  /// inside its surface (dm::sampleBoundary(mesh, d, d / 3)), placed by
+  /// `pose`.
+  /// Returns the body's index (0, 1, ...); fails (InvalidArgument) on no
+  /// points, a non-finite point or a non-finite pose.
+  Result<std::size_t> addRigidBoundary(std::span<const Vec3> bodyPoints,
+                                       const Isometry3& pose = Isometry3::Identity());
+  /// The body's pose and its frame origin's linear and angular velocity (the
+  /// caller integrates the body); within the next step() it moves on at
+  /// them. Fails (InvalidArgument) on an unknown body or a non-finite state.
+  Status setRigidState(std::size_t body, const Isometry3& pose, const Vec3& linearVelocity,
+                       const Vec3& angularVelocity);
+  std::size_t rigidBodyCount() const noexcept { return rigid_.size(); }
+  /// Where the last step() left the body (its pose moved on at its velocities).
+  Isometry3 rigidPose(std::size_t body) const { return rigid_.at(body).pose; }
+  /// What the fluid exerted on the body over the last step (see SphRigidLoad).
+  SphRigidLoad rigidLoad(std::size_t body) const { return rigid_.at(body).load; }
+  /// Every rigid body's boundary particles in the world, body after body.
+  std::span<const Vec3> rigidBoundaryPositions() const noexcept { return rx_; }
 
   // --- stepping ------------------------------------------------------------
   /// Advances dt (> 0, finite) in CFL sub-steps. Fails (InvalidArgument) on a
@@ -165,6 +207,23 @@ class SphFluid {
   void nonPressure(double dt);
   int pressureSolve(double dt, bool density);
   double subStep(double dt);  // returns the dt it took
+  void placeRigid(std::size_t body);      // its particles' positions and velocities from its state
+  void moveRigid(double dt);              // every body on at its velocities
+  void rigidViscousReaction(double dt);   // what the no-slip viscosity of this sub-step did to them
+  void rigidPressureReaction(double dt);  // what the solve that just ended did to them
+  bool touchesRigid(std::size_t i) const noexcept {  // fluid particle i has a rigid particle in its list
+    const auto nb = grid_.neighbors(i);
+    return !nb.empty() && nb.back() >= x_.size() + bx_.size();  // lists are in index order
+  }
+
+  struct Rigid {
+    std::vector<Vec3> local;  // its boundary particles in its frame
+    std::size_t first = 0;    // its first particle in rx_
+    Isometry3 pose = Isometry3::Identity();
+    Vec3 v = Vec3::Zero(), w = Vec3::Zero();
+    Vec3 impulse = Vec3::Zero(), angularImpulse = Vec3::Zero();  // summed over this step's sub-steps
+    SphRigidLoad load;
+  };
 
   SphFluidOptions o_;
   double h_ = 0.0, mass_ = 0.0, kernelScale_ = 0.0, time_ = 0.0;
@@ -175,9 +234,15 @@ class SphFluid {
   std::vector<double> warmDensity_, warmDivergence_;  // κ·dt², κ·dt of the last solves, per particle  // rho_
                                                       // empty: stale (refreshed at the next step)
   std::vector<Vec3> bx_;
-  std::vector<double> bpsi_;  // ρ0 V_b
+  std::vector<Vec3> rx_;            // rigid bodies' boundary particles, in the world
+  std::vector<double> rpsi_;        // their Ψ, from their own body's particles
+  std::vector<std::uint32_t> rof_;  // their body
+  std::vector<Rigid> rigid_;
+  std::vector<Vec3> bv_;      // every boundary particle's velocity (static, then rigid)
+  std::vector<double> bpsi_;  // ρ0 V_b: static, then rigid
   bool boundaryDirty_ = false;
-  std::vector<Vec3> all_;  // fluid then boundary positions, for the grid
+  bool rigidMoved_ = false;  // setRigidState since the last refresh
+  std::vector<Vec3> all_;    // fluid, static boundary, rigid boundary positions, for the grid
   NeighborGrid grid_;
   SphStepStats stats_;
 };
