@@ -58,6 +58,34 @@ Result<std::vector<Vec3>> sampleBoundary(const Mesh& mesh, double spacing, doubl
                              kMaxBoundarySamples, spacing),
                 where, "a larger spacing, or a smaller surface");
 
+  // Outward normals: per triangle; per vertex weighted by the corners'
+  // angles (Thürmer and Wüthrich's pseudo-normal); per edge the sum of its
+  // triangles'. A sample on an edge or a vertex goes in along theirs, so
+  // that it ends up `inset` from every face plane through it (a box's edge
+  // or corner moves diagonally), not from one face's alone.
+  const std::size_t f = mesh.triangles.size();
+  std::vector<Vec3> faceNormal(f, Vec3::Zero()), vertexNormal(n, Vec3::Zero());
+  std::unordered_map<std::uint64_t, Vec3> edgeNormal;
+  const auto edgeKey = [](std::uint32_t u, std::uint32_t v) {
+    return u < v ? (std::uint64_t(u) << 32) | v : (std::uint64_t(v) << 32) | u;
+  };
+  for (std::size_t t = 0; t < f; ++t) {
+    const Triangle& tri = mesh.triangles[t];
+    const Vec3 cross = (mesh.positions[tri[1]] - mesh.positions[tri[0]])
+                           .cross(mesh.positions[tri[2]] - mesh.positions[tri[0]]);
+    if (!(cross.norm() > 0.0)) continue;
+    faceNormal[t] = cross.normalized();
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t v = tri[std::size_t(k)], u = tri[std::size_t((k + 1) % 3)],
+                          w = tri[std::size_t((k + 2) % 3)];
+      const Vec3 e1 = mesh.positions[u] - mesh.positions[v], e2 = mesh.positions[w] - mesh.positions[v];
+      const double angle = std::atan2(e1.cross(e2).norm(), e1.dot(e2));
+      vertexNormal[v] += angle * faceNormal[t];
+      auto [it, inserted] = edgeNormal.try_emplace(edgeKey(v, u), Vec3::Zero());
+      it->second += faceNormal[t];
+    }
+  }
+
   const double cell = 0.5 * spacing, r2 = cell * cell;
   std::unordered_map<SampleCell, std::vector<std::uint32_t>, SampleCellHash> cells;
   std::vector<Vec3> out;
@@ -66,12 +94,11 @@ Result<std::vector<Vec3>> sampleBoundary(const Mesh& mesh, double spacing, doubl
     return SampleCell{std::int64_t(std::floor(p.x() / cell)), std::int64_t(std::floor(p.y() / cell)),
                       std::int64_t(std::floor(p.z() / cell))};
   };
-  for (const Triangle& tri : mesh.triangles) {
+  for (std::size_t t = 0; t < f; ++t) {
+    const Triangle& tri = mesh.triangles[t];
     const Vec3 &a = mesh.positions[tri[0]], &b = mesh.positions[tri[1]], &c = mesh.positions[tri[2]];
-    const Vec3 cross = (b - a).cross(c - a);
-    const double area2 = cross.norm();
-    if (!(area2 > 0.0)) continue;  // a degenerate triangle has no inside to point to
-    const Vec3 inward = -cross / area2;
+    if (faceNormal[t].isZero()) continue;  // a degenerate triangle has no inside to point to
+    const Vec3& outward = faceNormal[t];
     const double longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
     const int steps = int(std::max(1.0, std::ceil(longest / spacing - 1e-9)));
     for (int i = 0; i <= steps; ++i)
@@ -93,7 +120,24 @@ Result<std::vector<Vec3>> sampleBoundary(const Mesh& mesh, double spacing, doubl
         if (near) continue;
         cells[k].push_back(std::uint32_t(onSurface.size()));
         onSurface.push_back(p);
-        out.push_back(p + inset * inward);
+        // Which vertex or edge of the triangle the sample is on, if any.
+        Vec3 along = outward;
+        if (i == 0 && j == 0)
+          along = vertexNormal[tri[0]];
+        else if (i == steps)
+          along = vertexNormal[tri[1]];
+        else if (j == steps)
+          along = vertexNormal[tri[2]];
+        else if (j == 0)
+          along = edgeNormal[edgeKey(tri[0], tri[1])];
+        else if (i == 0)
+          along = edgeNormal[edgeKey(tri[0], tri[2])];
+        else if (i + j == steps)
+          along = edgeNormal[edgeKey(tri[1], tri[2])];
+        along = along.norm() > 0.0 ? along.normalized() : outward;
+        // `inset` from this face's plane (and from the others' through an
+        // edge or corner of a symmetric solid), at most five insets deep.
+        out.push_back(p - inset / std::max(along.dot(outward), 0.2) * along);
       }
   }
   return out;

@@ -2,7 +2,10 @@
 // it, add a container, blocks and sources, remove by a mask (suction), step
 // it with the GIL released, and read positions, velocities, densities and
 // pressures as NumPy arrays (copies: the particle arrays move as particles
-// come and go).
+// come and go); rigid bodies in it (two-way: Python integrates the body,
+// the fluid gives back its force and torque) and sample_boundary() for
+// their surfaces.
+#include <dm/physics/sph_boundary.hpp>
 #include <dm/physics/sph_fluid.hpp>
 
 #include <pybind11/numpy.h>
@@ -99,6 +102,50 @@ void bindFluid(py::module_& m) {
           "pressures", [](const SphFluid& f) { return valuesOf(f.pressures()); }, "Pa, of the last sub-step.")
       .def_property_readonly("boundary_positions",
                              [](const SphFluid& f) { return rowsOfVec3(f.boundaryPositions()); })
+      .def(
+          "add_rigid_body",
+          [](SphFluid& f, const py::object& points, const py::object& pose) {
+            const std::vector<Vec3> p = pointsOf(points, "points");
+            return unwrap(f.addRigidBoundary(p, poseOf(pose, "pose")));
+          },
+          py::arg("points"), py::arg("pose") = py::none(),
+          "A rigid body the fluid pushes: its surface samples (n, 3) in its own frame, e.g.\n"
+          "sample_boundary(mesh, spacing, spacing / 3); pose: 4x4. Returns the body's index.")
+      .def(
+          "set_rigid_state",
+          [](SphFluid& f, std::size_t body, const py::object& pose, const py::object& linear,
+             const py::object& angular) {
+            unwrap(f.setRigidState(body, poseOf(pose, "pose"), vec3Of(linear, "linear_velocity"),
+                                   vec3Of(angular, "angular_velocity")));
+          },
+          py::arg("body"), py::arg("pose"), py::arg("linear_velocity") = py::make_tuple(0.0, 0.0, 0.0),
+          py::arg("angular_velocity") = py::make_tuple(0.0, 0.0, 0.0),
+          "The body's pose (4x4) and its frame origin's velocities (m/s, rad/s); within the next step it\n"
+          "moves on at them.")
+      .def(
+          "rigid_load",
+          [](const SphFluid& f, std::size_t body) {
+            if (body >= f.rigidBodyCount())
+              raise(fail(ErrorCode::InvalidArgument,
+                         "body " + std::to_string(body) + " of " + std::to_string(f.rigidBodyCount()),
+                         "body"));
+            const SphRigidLoad l = f.rigidLoad(body);
+            return py::make_tuple(arrayOf(l.force), arrayOf(l.torque));
+          },
+          py::arg("body"),
+          "(force N, torque N·m about the body frame's origin) the fluid exerted over the last step.")
+      .def(
+          "rigid_pose",
+          [](const SphFluid& f, std::size_t body) {
+            if (body >= f.rigidBodyCount())
+              raise(fail(ErrorCode::InvalidArgument,
+                         "body " + std::to_string(body) + " of " + std::to_string(f.rigidBodyCount()),
+                         "body"));
+            return arrayOf(Mat4(f.rigidPose(body).matrix()));
+          },
+          py::arg("body"), "Where the last step left the body (4x4).")
+      .def_property_readonly("rigid_boundary_positions",
+                             [](const SphFluid& f) { return rowsOfVec3(f.rigidBoundaryPositions()); })
       .def_property_readonly("time", &SphFluid::time)
       .def_property_readonly("mass", &SphFluid::mass, "kg of fluid.")
       .def_property_readonly("particle_mass", &SphFluid::particleMass)
@@ -118,6 +165,14 @@ void bindFluid(py::module_& m) {
             return d;
           },
           "What the last step did: sub-steps, iterations, errors.");
+  m.def(
+      "sample_boundary",
+      [](const Mesh& mesh, double spacing, double inset) {
+        return rowsOfVec3(unwrap(sampleBoundary(mesh, spacing, inset)));
+      },
+      py::arg("mesh"), py::arg("spacing"), py::arg("inset"),
+      "Boundary particles on a mesh's surface about `spacing` apart, moved `inset` inwards (spacing / 3\n"
+      "puts the fluid's edge on the surface): (n, 3).");
 }
 
 }  // namespace dm::python

@@ -80,3 +80,43 @@ def test_a_vessel_slows_with_the_pressure_on_it():
         dm.FluidInlet(f, center=(0, 0, 0), normal=(0, 0, 0), flow_rate=1e-6)
     with pytest.raises(dm.Error, match="radius"):
         dm.FluidSuction(center=(0, 0, 0), radius=0, max_flow_rate=1e-6)
+
+
+def _cube(a):
+    """A cube of half-side a, triangles counter-clockwise from outside."""
+    p = np.array([[x, y, z] for z in (-a, a) for y in (-a, a) for x in (-a, a)], float)  # x + 2y + 4z
+    t = np.array([[0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4],
+                  [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5]], np.uint32)
+    return dm.Mesh(p, t)
+
+
+def test_a_cube_held_under_water_feels_archimedes_buoyancy_and_its_corners_stay_inset():
+    # A 6 cm cube at 1 cm spacing held 7 cm deep in a 15 cm tank: once the
+    # waves of the start died out (0.6 s) the fluid holds it up with rho0 g V
+    # (0.99 measured) and pushes it nowhere sideways. The boundary samples
+    # lie a third of a spacing inside every face, corners and edges included.
+    a, d = 0.03, 0.01
+    pts = dm.sample_boundary(_cube(a), d, d / 3)
+    assert np.abs(pts).max() == pytest.approx(a - d / 3, abs=1e-12)
+    f = dm.Fluid(spacing=d, viscosity=1e-3)
+    f.add_box_boundary((0, 0, 0), (0.12, 0.12, 0.3))
+    f.add_block((0, 0, 0), (0.12, 0.12, 0.15))
+    c = np.array([0.06, 0.06, 0.07])
+    f.remove(np.all(np.abs(f.positions - c) < a, axis=1))
+    pose = np.eye(4)
+    pose[:3, 3] = c
+    assert f.add_rigid_body(pts, pose) == 0
+    force = np.zeros(3)
+    for _ in range(500):
+        f.step(0.002)
+        if f.time > 0.6:
+            force += f.rigid_load(0)[0] / 200
+    buoyancy = 1000 * 9.81 * (2 * a) ** 3
+    assert force[2] == pytest.approx(buoyancy, rel=0.05)
+    assert np.linalg.norm(force[:2]) < 0.02 * buoyancy
+    assert np.allclose(f.rigid_pose(0), pose)
+    assert len(f.rigid_boundary_positions) == len(pts)
+    with pytest.raises(dm.Error, match="body 1 of 1"):
+        f.rigid_load(1)
+    with pytest.raises(dm.Error, match="inset"):
+        dm.sample_boundary(_cube(a), d, d)

@@ -13,11 +13,13 @@
 // particles under pressure settle into the hollows between boundary
 // particles, so the fluid's edge (half a spacing outside its outer
 // particles' centres) lies about d/3 outside the boundary particles, not
-// the d/2 of the lattice at rest. With d/3 a 3-spacing sphere held under
-// water feels ρ0 g V within 5 % and floating spheres take Archimedes'
-// drafts (Tests/DMPhysics/sph_rigid_test.cpp); with d/2 it felt 8-17 %
-// less. The mesh's triangles must face outwards (counter-clockwise seen from
-// outside) for the inset to go in.
+// the d/2 of the lattice at rest. With d/3 a sphere of 3 spacings' radius
+// held under water feels 0.94-0.99 of ρ0 g V (by how its icosphere is
+// sampled), a cube of 6 spacings 0.99, and floating spheres take
+// Archimedes' drafts (Tests/DMPhysics/sph_rigid_test.cpp); with d/2 the
+// sphere felt 8-17 % less. A sample on an edge or vertex of the mesh moves
+// along its edge's or vertex's normal, to the inset of every face there. The mesh's triangles must face
+// outwards (counter-clockwise seen from outside) for the inset to go in.
 //
 // Deterministic: the samples come in triangle order. Cost O(samples) with a
 // hash of cells half a spacing wide.
