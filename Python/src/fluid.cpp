@@ -33,6 +33,13 @@ py::array_t<double> valuesOf(std::span<const double> v) {
   return out;
 }
 
+// InvalidArgument naming the body when the fluid has no such rigid body.
+void checkBody(const SphFluid& f, std::size_t body) {
+  if (body >= f.rigidBodyCount())
+    raise(fail(ErrorCode::InvalidArgument,
+               "body " + std::to_string(body) + " of " + std::to_string(f.rigidBodyCount()), "body"));
+}
+
 }  // namespace
 
 void bindFluid(py::module_& m) {
@@ -125,10 +132,7 @@ void bindFluid(py::module_& m) {
       .def(
           "rigid_load",
           [](const SphFluid& f, std::size_t body) {
-            if (body >= f.rigidBodyCount())
-              raise(fail(ErrorCode::InvalidArgument,
-                         "body " + std::to_string(body) + " of " + std::to_string(f.rigidBodyCount()),
-                         "body"));
+            checkBody(f, body);
             const SphRigidLoad l = f.rigidLoad(body);
             return py::make_tuple(arrayOf(l.force), arrayOf(l.torque));
           },
@@ -137,10 +141,7 @@ void bindFluid(py::module_& m) {
       .def(
           "rigid_pose",
           [](const SphFluid& f, std::size_t body) {
-            if (body >= f.rigidBodyCount())
-              raise(fail(ErrorCode::InvalidArgument,
-                         "body " + std::to_string(body) + " of " + std::to_string(f.rigidBodyCount()),
-                         "body"));
+            checkBody(f, body);
             return arrayOf(Mat4(f.rigidPose(body).matrix()));
           },
           py::arg("body"), "Where the last step left the body (4x4).")
