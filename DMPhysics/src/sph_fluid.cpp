@@ -152,7 +152,7 @@ Result<std::size_t> SphFluid::addRigidBoundary(std::span<const Vec3> bodyPoints,
   const std::string where = "SphFluid::addRigidBoundary";
   if (bodyPoints.empty())
     return fail(ErrorCode::InvalidArgument, "no boundary particles", where,
-                "sample the body's surface, e.g. dm::sampleBoundary(mesh, d, d / 2)");
+                "sample the body's surface, e.g. dm::sampleBoundary(mesh, d, d / 3)");
   for (std::size_t q = 0; q < bodyPoints.size(); ++q)
     if (!bodyPoints[q].allFinite())
       return fail(ErrorCode::InvalidArgument, formatString("point %zu is not finite", q), where);
