@@ -1,4 +1,5 @@
 // mesh_topology.cpp — edge grouping, fans, components, volume; vertex welding.
+#include <dm/math/grid_cell.hpp>
 #include <dm/math/mesh_topology.hpp>
 
 #include <algorithm>
@@ -162,23 +163,6 @@ MeshTopology analyzeTopology(const Mesh& mesh) {
   return out;
 }
 
-namespace {
-
-struct CellKey {
-  std::int64_t x, y, z;
-  bool operator==(const CellKey&) const = default;
-};
-struct CellHash {
-  std::size_t operator()(const CellKey& k) const {
-    std::uint64_t h = static_cast<std::uint64_t>(k.x) * 0x9E3779B97F4A7C15ull;
-    h ^= static_cast<std::uint64_t>(k.y) * 0xC2B2AE3D27D4EB4Full + (h << 6) + (h >> 2);
-    h ^= static_cast<std::uint64_t>(k.z) * 0x165667B19E3779F9ull + (h << 6) + (h >> 2);
-    return static_cast<std::size_t>(h);
-  }
-};
-
-}  // namespace
-
 Result<WeldReport> weldVertices(Mesh& mesh, double tolerance) {
   if (!std::isfinite(tolerance) || tolerance < 0)
     return fail(ErrorCode::InvalidArgument, "weld tolerance is " + std::to_string(tolerance), "weldVertices",
@@ -210,7 +194,7 @@ Result<WeldReport> weldVertices(Mesh& mesh, double tolerance) {
   // Cells of size `tolerance` (exact coordinates when 0): a vertex within
   // `tolerance` of p is in p's cell or one of its 26 neighbours.
   const double inv = tolerance > 0 ? 1.0 / tolerance : 0.0;
-  const auto cellOf = [&](const Vec3& p, CellKey& key) {
+  const auto cellOf = [&](const Vec3& p, GridCell& key) {
     if (tolerance == 0) {
       // +0.0 turns -0 into +0 so both hash alike.
       key = {std::bit_cast<std::int64_t>(p.x() + 0.0), std::bit_cast<std::int64_t>(p.y() + 0.0),
@@ -224,7 +208,7 @@ Result<WeldReport> weldVertices(Mesh& mesh, double tolerance) {
     return true;
   };
 
-  std::unordered_map<CellKey, std::uint32_t, CellHash> head;  // first kept vertex of a cell
+  std::unordered_map<GridCell, std::uint32_t, GridCellHash> head;  // first kept vertex of a cell
   head.reserve(n);
   std::vector<std::uint32_t> nextInCell;  // per kept vertex, in order of keeping
   std::vector<std::uint32_t> kept;        // kept vertex → original index
@@ -233,7 +217,7 @@ Result<WeldReport> weldVertices(Mesh& mesh, double tolerance) {
   constexpr std::uint32_t kNoVertex = ~std::uint32_t{0};
   for (std::size_t v = 0; v < n; ++v) {
     const Vec3& p = mesh.positions[v];
-    CellKey key{};
+    GridCell key{};
     if (!cellOf(p, key))
       return fail(ErrorCode::InvalidArgument,
                   "weld tolerance " + std::to_string(tolerance) +
@@ -244,7 +228,7 @@ Result<WeldReport> weldVertices(Mesh& mesh, double tolerance) {
     for (int dz = -reach; dz <= reach; ++dz)
       for (int dy = -reach; dy <= reach; ++dy)
         for (int dx = -reach; dx <= reach; ++dx) {
-          const auto it = head.find(CellKey{key.x + dx, key.y + dy, key.z + dz});
+          const auto it = head.find(GridCell{key.x + dx, key.y + dy, key.z + dz});
           if (it == head.end()) continue;
           for (std::uint32_t k = it->second; k != kNoVertex; k = nextInCell[k])
             if (k < best && (mesh.positions[kept[k]] - p).squaredNorm() <= tol2) best = k;

@@ -30,6 +30,15 @@ constexpr double kWarmShare = 0.5;
 static_assert(sizeof(Vec3) == 3 * sizeof(double));
 double* coords(std::vector<Vec3>& v) noexcept { return reinterpret_cast<double*>(v.data()); }
 
+// Monaghan's (2005) viscous acceleration of particle i from j (a fluid
+// particle of volume V_j, or a wall particle of Ψ_j/ρ0 moving with its
+// body) is this factor times ∇W_ij, with c = 10 ν V_j; eps2 = 0.01 h² keeps
+// it finite for close pairs.
+inline double viscousFactor(double c, const double* r, const double* vi, const double* vj, double eps2) {
+  const double vr = (vi[0] - vj[0]) * r[0] + (vi[1] - vj[1]) * r[1] + (vi[2] - vj[2]) * r[2];
+  return c * vr / (r[0] * r[0] + r[1] * r[1] + r[2] * r[2] + eps2);
+}
+
 double serialMean(const std::vector<double>& values, std::size_t n) {
   double sum = 0.0;
   for (std::size_t i = 0; i < n; ++i) sum += values[i];
@@ -123,6 +132,7 @@ void SphFluid::addBoundaryParticles(std::span<const Vec3> positions) {
   bx_.insert(bx_.end(), positions.begin(), positions.end());
   boundaryDirty_ = true;
   rho_.clear();
+  layOutBoundaryVelocities();  // the moving particles' velocities come after the static ones
 }
 
 std::size_t SphFluid::addBoxBoundary(const Vec3& inner, const Vec3& upper) {
@@ -161,21 +171,68 @@ Result<std::size_t> SphFluid::addRigidBoundary(std::span<const Vec3> bodyPoints,
   body.local.assign(bodyPoints.begin(), bodyPoints.end());
   body.first = rx_.size();
   body.pose = pose;
-  // Ψ from the body's own particles (it keeps its shape, so once).
-  NeighborGrid own;
-  own.build(body.local, h_, 0);
-  for (const Vec3& p : body.local) {
-    double sum = 0.0;
-    own.forEachWithin(p, [&](std::uint32_t k) { sum += kernel((p - body.local[k]).norm()); });
-    rpsi_.push_back(o_.restDensity * boundaryScale_ / sum);
-    rof_.push_back(std::uint32_t(rigid_.size()));
-  }
   rx_.resize(rx_.size() + bodyPoints.size());
+  rpsi_.resize(rx_.size());
+  rimp_.resize(rx_.size(), Vec3::Zero());
   rigid_.push_back(std::move(body));
   boundaryDirty_ = true;
   rho_.clear();
-  placeRigid(rigid_.size() - 1);
+  layOutBoundaryVelocities();
+  // Ψ from the body's own particles (it keeps its shape, so once).
+  ownVolumes(rigid_.back().first, bodyPoints.size());
   return rigid_.size() - 1;
+}
+
+Result<std::size_t> SphFluid::addSurfaceBoundary(BoundarySurface samples, std::span<const Vec3> vertices) {
+  const std::string where = "SphFluid::addSurfaceBoundary";
+  if (samples.size() == 0)
+    return fail(ErrorCode::InvalidArgument, "the surface has no samples", where,
+                "dm::BoundarySurface::create(mesh, d, d / 3) of a mesh with triangles");
+  if (vertices.size() != samples.vertexCount())
+    return fail(ErrorCode::InvalidArgument,
+                formatString("%zu vertices for a surface of %zu", vertices.size(), samples.vertexCount()),
+                where);
+  for (std::size_t v = 0; v < vertices.size(); ++v)
+    if (!vertices[v].allFinite())
+      return fail(ErrorCode::InvalidArgument, formatString("vertex %zu is not finite", v), where);
+  Surface surface{.samples = std::move(samples), .first = rx_.size()};
+  const std::size_t n = surface.samples.vertexCount();
+  surface.vertices.assign(vertices.begin(), vertices.end());
+  surface.velocities.assign(n, Vec3::Zero());
+  surface.impulse.assign(n, Vec3::Zero());
+  surface.load.assign(n, Vec3::Zero());
+  rx_.resize(rx_.size() + surface.samples.size());
+  rpsi_.resize(rx_.size());
+  rimp_.resize(rx_.size(), Vec3::Zero());
+  surfaces_.push_back(std::move(surface));
+  boundaryDirty_ = true;
+  rho_.clear();
+  layOutBoundaryVelocities();
+  return surfaces_.size() - 1;
+}
+
+Status SphFluid::setSurfaceState(std::size_t surface, std::span<const Vec3> vertices,
+                                 std::span<const Vec3> velocities) {
+  const std::string where = "SphFluid::setSurfaceState";
+  if (surface >= surfaces_.size())
+    return fail(ErrorCode::InvalidArgument, formatString("surface %zu of %zu", surface, surfaces_.size()),
+                where);
+  Surface& sf = surfaces_[surface];
+  const std::size_t n = sf.vertices.size();
+  if (vertices.size() != n || velocities.size() != n)
+    return fail(ErrorCode::InvalidArgument,
+                formatString("surface %zu: %zu vertices and %zu velocities for its %zu vertices", surface,
+                             vertices.size(), velocities.size(), n),
+                where);
+  for (std::size_t v = 0; v < n; ++v)
+    if (!vertices[v].allFinite() || !velocities[v].allFinite())
+      return fail(ErrorCode::InvalidArgument,
+                  formatString("surface %zu: vertex %zu is not finite", surface, v), where);
+  std::copy(vertices.begin(), vertices.end(), sf.vertices.begin());
+  std::copy(velocities.begin(), velocities.end(), sf.velocities.begin());
+  placeSurface(surface);
+  boundaryMoved_ = true;  // neighbours and densities again at the next step
+  return ok();
 }
 
 Status SphFluid::setRigidState(std::size_t body, const Isometry3& pose, const Vec3& linearVelocity,
@@ -191,17 +248,36 @@ Status SphFluid::setRigidState(std::size_t body, const Isometry3& pose, const Ve
   r.v = linearVelocity;
   r.w = angularVelocity;
   placeRigid(body);
-  rigidMoved_ = true;  // neighbours and densities again at the next step
+  boundaryMoved_ = true;  // neighbours and densities again at the next step
   return ok();
+}
+
+void SphFluid::layOutBoundaryVelocities() {
+  bv_.assign(bx_.size() + rx_.size(), Vec3::Zero());
+  for (std::size_t k = 0; k < rigid_.size(); ++k) placeRigid(k);
+  for (std::size_t k = 0; k < surfaces_.size(); ++k) placeSurface(k);
+}
+
+void SphFluid::ownVolumes(std::size_t first, std::size_t count) {
+  const std::span<const Vec3> own(rx_.data() + first, count);
+  ownGrid_.build(own, h_, 0);
+  for (std::size_t q = 0; q < count; ++q) {
+    double sum = 0.0;  // (itself included: it is within the radius)
+    ownGrid_.forEachWithin(own[q], [&](std::uint32_t k) { sum += kernel((own[q] - own[k]).norm()); });
+    rpsi_[first + q] = o_.restDensity * boundaryScale_ / sum;
+  }
+}
+
+void SphFluid::placeSurface(std::size_t surface) {
+  Surface& sf = surfaces_[surface];
+  const std::size_t count = sf.samples.size();
+  sf.samples.place(sf.vertices, std::span<Vec3>(rx_.data() + sf.first, count));
+  sf.samples.interpolate(sf.velocities, std::span<Vec3>(bv_.data() + bx_.size() + sf.first, count));
+  ownVolumes(sf.first, count);
 }
 
 void SphFluid::placeRigid(std::size_t body) {
   const std::size_t nb = bx_.size();
-  if (bv_.size() != nb + rx_.size()) {  // the boundary changed: lay the velocities out again
-    bv_.assign(nb + rx_.size(), Vec3::Zero());
-    for (std::size_t k = 0; k < rigid_.size(); ++k)
-      if (k != body) placeRigid(k);
-  }
   const Rigid& r = rigid_[body];
   const Vec3 origin = r.pose.translation();
   for (std::size_t q = 0; q < r.local.size(); ++q) {
@@ -211,7 +287,7 @@ void SphFluid::placeRigid(std::size_t body) {
   }
 }
 
-void SphFluid::moveRigid(double dt) {
+void SphFluid::moveBoundaries(double dt) {
   for (std::size_t k = 0; k < rigid_.size(); ++k) {
     Rigid& r = rigid_[k];
     if (r.v.squaredNorm() == 0.0 && r.w.squaredNorm() == 0.0) continue;
@@ -220,6 +296,11 @@ void SphFluid::moveRigid(double dt) {
     r.pose.translation() += dt * r.v;
     placeRigid(k);
   }
+  // A surface's samples on at their velocities (the next setSurfaceState
+  // places them on the vertices again); their Ψ stay.
+  const std::size_t nb = bx_.size();
+  for (const Surface& sf : surfaces_)
+    for (std::size_t q = sf.first; q < sf.first + sf.samples.size(); ++q) rx_[q] += dt * bv_[nb + q];
 }
 
 void SphFluid::neighbours() {
@@ -270,13 +351,13 @@ void SphFluid::densitiesAndFactors() {
 }
 
 void SphFluid::refresh() {
-  rigidMoved_ = false;
+  boundaryMoved_ = false;
   neighbours();
   const std::size_t nf = x_.size();
   const std::size_t nb = bx_.size();
   if (boundaryDirty_ || bpsi_.size() != nb + rx_.size()) {
     // Akinci's boundary volume: 1 / Σ_k W_bk over the static boundary
-    // particles (a rigid body's come from its own: addRigidBoundary).
+    // particles (a moving body's or surface's come from its own: ownVolumes).
     bpsi_.resize(nb + rx_.size());
     for (std::size_t b = 0; b < nb; ++b) {
       double sum = 0.0;  // (itself included: it is within the radius)
@@ -285,13 +366,11 @@ void SphFluid::refresh() {
       });
       bpsi_[b] = o_.restDensity * boundaryScale_ / sum;
     }
-    std::copy(rpsi_.begin(), rpsi_.end(), bpsi_.begin() + std::ptrdiff_t(nb));
-    if (bv_.size() != nb + rx_.size()) {
-      bv_.assign(nb + rx_.size(), Vec3::Zero());
-      for (std::size_t k = 0; k < rigid_.size(); ++k) placeRigid(k);
-    }
+    if (bv_.size() != nb + rx_.size()) layOutBoundaryVelocities();
     boundaryDirty_ = false;
   }
+  std::copy(rpsi_.begin(), rpsi_.end(),
+            bpsi_.begin() + std::ptrdiff_t(nb));  // a surface's change as it moves
   densitiesAndFactors();
 }
 
@@ -346,8 +425,7 @@ void SphFluid::nonPressure(double dt) {
         if (j < nf) {
           const double* vj = V + 3 * std::size_t(j);
           if (nu > 0.0) {
-            const double vr = (vi[0] - vj[0]) * r[0] + (vi[1] - vj[1]) * r[1] + (vi[2] - vj[2]) * r[2];
-            const double k = 10.0 * nu * (mass_ / rho_[j]) * vr / (r2 + 0.01 * h * h);
+            const double k = viscousFactor(10.0 * nu * (mass_ / rho_[j]), r, vi, vj, 0.01 * h * h);
             for (int c = 0; c < 3; ++c) a[c] += k * g[c];
           }
           if (gamma > 0.0) {
@@ -360,63 +438,75 @@ void SphFluid::nonPressure(double dt) {
           }
         } else if (nu > 0.0) {  // no-slip walls, moving with their body
           const double* vb = BV + 3 * std::size_t(j - nf);
-          const double vr = (vi[0] - vb[0]) * r[0] + (vi[1] - vb[1]) * r[1] + (vi[2] - vb[2]) * r[2];
-          const double k = 10.0 * nu * (bpsi_[j - nf] / rho0) * vr / (r2 + 0.01 * h * h);
+          const double k = viscousFactor(10.0 * nu * (bpsi_[j - nf] / rho0), r, vi, vb, 0.01 * h * h);
           for (int c = 0; c < 3; ++c) a[c] += k * g[c];
         }
       }
       for (int c = 0; c < 3; ++c) A[3 * i + c] = a[c];
     }
   });
-  if (nu > 0.0 && !rigid_.empty()) rigidViscousReaction(dt);
+  if (nu > 0.0 && !rx_.empty()) viscousReaction(dt);
   double* Vw = coords(v_);
   for (std::size_t k = 0; k < 3 * nf; ++k) Vw[k] += dt * A[k];
 }
 
-// The no-slip viscosity's pairs of fluid and rigid particles once more,
-// serially (a reproducible sum): the body gets what the fluid particle got,
-// opposite.
-void SphFluid::rigidViscousReaction(double dt) {
-  const std::size_t nf = x_.size(), nb = bx_.size();
-  const double nu = o_.viscosity, h = h_;
+// Every pair of a fluid particle and a moving boundary particle, serially
+// (a reproducible sum): rimp_[q] of moving particle q gets impulse(i, j, g),
+// g the pair's ∇W_ij.
+template <class PairImpulse>
+void SphFluid::reactionWalk(PairImpulse&& impulse) {
+  const std::size_t nf = x_.size(), first = nf + bx_.size();
   for (std::size_t i = 0; i < nf; ++i) {
-    if (!touchesRigid(i)) continue;
+    if (!touchesMoving(i)) continue;
     const double* g = grad_.data() + 3 * grid_.listOffset(i);
     for (std::uint32_t j : grid_.neighbors(i)) {
-      if (j >= nf + nb) {
-        const Vec3 r = all_[i] - all_[j];
-        const Vec3 dv = v_[i] - bv_[j - nf];
-        const double k =
-            10.0 * nu * (bpsi_[j - nf] / o_.restDensity) * dv.dot(r) / (r.squaredNorm() + 0.01 * h * h);
-        const Vec3 impulse = -mass_ * dt * k * Vec3(g[0], g[1], g[2]);
-        Rigid& body = rigid_[rof_[j - nf - nb]];
-        body.impulse += impulse;
-        body.angularImpulse += (all_[j] - body.pose.translation()).cross(impulse);
-      }
+      if (j >= first) rimp_[j - first] += impulse(i, j, g);
       g += 3;
     }
   }
+  collectReactions();
 }
 
-// What the solve that just ended gave the fluid through the rigid particles
-// (κ summed over its iterations: the gradients and densities were fixed
-// within it), to the bodies, opposite.
-void SphFluid::rigidPressureReaction(double dt) {
-  const std::size_t nf = x_.size(), nb = bx_.size();
-  for (std::size_t i = 0; i < nf; ++i) {
-    if (!touchesRigid(i)) continue;
-    const double ki = kappaSum_[i] / rho_[i];
-    const double* g = grad_.data() + 3 * grid_.listOffset(i);
-    for (std::uint32_t j : grid_.neighbors(i)) {
-      if (j >= nf + nb) {
-        const Vec3 impulse = dt * mass_ * bpsi_[j - nf] * ki * Vec3(g[0], g[1], g[2]);
-        Rigid& body = rigid_[rof_[j - nf - nb]];
-        body.impulse += impulse;
-        body.angularImpulse += (all_[j] - body.pose.translation()).cross(impulse);
-      }
-      g += 3;
+// The walk's impulses to their owners: a body's sum and moment about its
+// frame's origin, a surface's spread onto its vertices.
+void SphFluid::collectReactions() {
+  for (Rigid& body : rigid_) {
+    const Vec3 origin = body.pose.translation();
+    for (std::size_t q = body.first; q < body.first + body.local.size(); ++q) {
+      body.impulse += rimp_[q];
+      body.angularImpulse += (rx_[q] - origin).cross(rimp_[q]);
     }
   }
+  for (Surface& sf : surfaces_)
+    sf.samples.spread(std::span<const Vec3>(rimp_.data() + sf.first, sf.samples.size()), sf.impulse);
+  std::fill(rimp_.begin(), rimp_.end(), Vec3::Zero());
+}
+
+// The no-slip viscosity's pairs once more: the moving particle gets what
+// the fluid particle got, opposite.
+void SphFluid::viscousReaction(double dt) {
+  const std::size_t nf = x_.size();
+  const double c = 10.0 * o_.viscosity / o_.restDensity, eps2 = 0.01 * h_ * h_;
+  const double* X = coords(all_);
+  const double* V = coords(v_);
+  const double* BV = coords(bv_);
+  reactionWalk([&](std::size_t i, std::uint32_t j, const double* g) {
+    const double* xi = X + 3 * i;
+    const double* xj = X + 3 * std::size_t(j);
+    const double r[3] = {xi[0] - xj[0], xi[1] - xj[1], xi[2] - xj[2]};
+    const double k = viscousFactor(c * bpsi_[j - nf], r, V + 3 * i, BV + 3 * std::size_t(j - nf), eps2);
+    return Vec3(-mass_ * dt * k * Vec3(g[0], g[1], g[2]));
+  });
+}
+
+// What the solve that just ended gave the fluid through the moving
+// particles (κ summed over its iterations: the gradients and densities were
+// fixed within it), to them, opposite.
+void SphFluid::pressureReaction(double dt) {
+  const std::size_t nf = x_.size();
+  reactionWalk([&](std::size_t i, std::uint32_t j, const double* g) {
+    return Vec3(dt * mass_ * bpsi_[j - nf] * (kappaSum_[i] / rho_[i]) * Vec3(g[0], g[1], g[2]));
+  });
 }
 
 // One pressure solve (see the file comment): the density solve drives the
@@ -504,7 +594,7 @@ int SphFluid::pressureSolve(double dt, bool density) {
     ++it;
   }
   (density ? stats_.densityError : stats_.divergenceError) = err;
-  if (!rigid_.empty()) rigidPressureReaction(dt);
+  if (!rx_.empty()) pressureReaction(dt);
   for (std::size_t i = 0; i < nf; ++i) {
     warm[i] = kappaSum_[i] * keep;
     p_[i] += kappaSum_[i];
@@ -518,7 +608,7 @@ double SphFluid::subStep(double dt) {
   nonPressure(dt);
   stats_.densityIterations += pressureSolve(dt, true);
   for (std::size_t i = 0; i < nf; ++i) x_[i] += dt * v_[i];
-  moveRigid(dt);
+  moveBoundaries(dt);
   neighbours();
   densitiesAndFactors();
   stats_.divergenceIterations += pressureSolve(dt, false);
@@ -534,23 +624,26 @@ Status SphFluid::step(double dt) {
                 "a positive time step");
   stats_ = {};
   for (Rigid& r : rigid_) r.impulse = r.angularImpulse = Vec3::Zero();
+  for (Surface& sf : surfaces_) std::fill(sf.impulse.begin(), sf.impulse.end(), Vec3::Zero());
   const auto loads = [&] {
     for (Rigid& r : rigid_) r.load = {.force = r.impulse / dt, .torque = r.angularImpulse / dt};
+    for (Surface& sf : surfaces_)
+      for (std::size_t v = 0; v < sf.impulse.size(); ++v) sf.load[v] = sf.impulse[v] / dt;
   };
   if (x_.empty()) {
-    moveRigid(dt);
+    moveBoundaries(dt);
     time_ += dt;
     loads();
     return ok();
   }
-  if (rho_.size() != x_.size() || boundaryDirty_ || rigidMoved_) refresh();
+  if (rho_.size() != x_.size() || boundaryDirty_ || boundaryMoved_) refresh();
   double left = dt;
   const double d = o_.particleSpacing;
   while (left > 1e-12 * dt) {
     double vmax = 0.0;
     for (const Vec3& v : v_) vmax = std::max(vmax, v.squaredNorm());
     for (std::size_t b = bx_.size(); b < bv_.size(); ++b)
-      vmax = std::max(vmax, bv_[b].squaredNorm());  // bodies
+      vmax = std::max(vmax, bv_[b].squaredNorm());  // bodies and surfaces
     // The speed bound adds 4 sqrt(|g| d) (8 times what a particle falling
     // from rest reaches over half a spacing): a column at rest still takes
     // sub-steps of at most 0.1 sqrt(d / |g|), past which the hydrostatic

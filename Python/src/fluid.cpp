@@ -40,6 +40,12 @@ void checkBody(const SphFluid& f, std::size_t body) {
                "body " + std::to_string(body) + " of " + std::to_string(f.rigidBodyCount()), "body"));
 }
 
+void checkSurface(const SphFluid& f, std::size_t surface) {
+  if (surface >= f.surfaceCount())
+    raise(fail(ErrorCode::InvalidArgument,
+               "surface " + std::to_string(surface) + " of " + std::to_string(f.surfaceCount()), "surface"));
+}
+
 }  // namespace
 
 void bindFluid(py::module_& m) {
@@ -145,8 +151,40 @@ void bindFluid(py::module_& m) {
             return arrayOf(Mat4(f.rigidPose(body).matrix()));
           },
           py::arg("body"), "Where the last step left the body (4x4).")
-      .def_property_readonly("rigid_boundary_positions",
-                             [](const SphFluid& f) { return rowsOfVec3(f.rigidBoundaryPositions()); })
+      .def(
+          "add_surface",
+          [](SphFluid& f, const Mesh& mesh, double inset) {
+            auto samples = unwrap(BoundarySurface::create(mesh, f.options().particleSpacing, inset));
+            return unwrap(f.addSurfaceBoundary(std::move(samples), mesh.positions));
+          },
+          py::arg("mesh"), py::arg("inset"),
+          "A deforming surface (tissue) the fluid flows around: the mesh's surface sampled at the fluid's\n"
+          "spacing, `inset` inwards (spacing / 3 puts the fluid's edge on it), placed on the mesh's\n"
+          "vertices as they are. Returns the surface's index.")
+      .def(
+          "set_surface_state",
+          [](SphFluid& f, std::size_t surface, const py::object& vertices, const py::object& velocities) {
+            checkSurface(f, surface);
+            const std::vector<Vec3> x = pointsOf(vertices, "vertices");
+            const std::vector<Vec3> v = velocities.is_none() ? std::vector<Vec3>(x.size(), Vec3::Zero())
+                                                             : pointsOf(velocities, "velocities");
+            unwrap(f.setSurfaceState(surface, x, v));
+          },
+          py::arg("surface"), py::arg("vertices"), py::arg("velocities") = py::none(),
+          "The surface's vertices (n, 3) where they are now and their velocities (n, 3; none: at rest);\n"
+          "within the next step its samples move on at them.")
+      .def(
+          "surface_loads",
+          [](const SphFluid& f, std::size_t surface) {
+            checkSurface(f, surface);
+            return rowsOfVec3(f.surfaceLoads(surface));
+          },
+          py::arg("surface"),
+          "Per vertex, the force (N) the fluid exerted on the surface over the last step: (n, 3).")
+      .def_property_readonly(
+          "moving_boundary_positions",
+          [](const SphFluid& f) { return rowsOfVec3(f.movingBoundaryPositions()); },
+          "Every rigid body's and surface's boundary particles in the world, in the order they were added.")
       .def_property_readonly("time", &SphFluid::time)
       .def_property_readonly("mass", &SphFluid::mass, "kg of fluid.")
       .def_property_readonly("particle_mass", &SphFluid::particleMass)

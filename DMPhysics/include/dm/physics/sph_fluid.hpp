@@ -53,6 +53,17 @@
 // half the fluid's density, whose mass equals its added mass, floats
 // steadily at 2 ms steps; much lighter bodies need shorter steps.
 //
+// Deforming surfaces (tissue; one-way, and loads for two-way):
+// addSurfaceBoundary() takes a dm::BoundarySurface (samples that follow a
+// mesh's triangles), setSurfaceState() the mesh's vertices and velocities
+// as its owner (an FEM body) has them each step. The samples are placed on
+// the deformed triangles, move on at the interpolated velocities within the
+// step, and get their Ψ again from their own neighbours (a stretched
+// surface's samples stand for more area); surfaceLoads() spreads the
+// fluid's reactions on them onto the vertices. Sample a surface that
+// stretches by s at d / s or finer: samples more than a spacing apart let
+// the fluid through (Tests/DMPhysics/sph_surface_test.cpp).
+//
 // Every per-particle sum runs over its neighbour list in index order and
 // reductions are serial, so a run is bit-reproducible on any thread count.
 // The step runs on oneTBB (dm::parallelFor): a physics thread's work, not
@@ -75,6 +86,7 @@
 #include <dm/collide/neighbor_grid.hpp>
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
+#include <dm/physics/sph_boundary.hpp>
 
 #include <cstddef>
 #include <cstdint>
@@ -169,8 +181,35 @@ class SphFluid {
   Isometry3 rigidPose(std::size_t body) const { return rigid_.at(body).pose; }
   /// What the fluid exerted on the body over the last step (see SphRigidLoad).
   SphRigidLoad rigidLoad(std::size_t body) const { return rigid_.at(body).load; }
-  /// Every rigid body's boundary particles in the world, body after body.
-  std::span<const Vec3> rigidBoundaryPositions() const noexcept { return rx_; }
+
+  // --- deforming surfaces (tissue) -------------------------------------------
+  /// A deforming surface the fluid flows around and is pushed by (tissue
+  /// under a tool): `surface`'s samples (dm::BoundarySurface::create(mesh,
+  /// d, d / 3)) placed on its mesh's vertices at `vertices`, at rest.
+  /// Their Ψ come from the surface's own samples, again at every placement
+  /// (a stretched surface's samples stand for more area each). Returns the
+  /// surface's index (0, 1, ...); fails (InvalidArgument) on a surface
+  /// without samples, a vertex count other than the surface's, or a
+  /// non-finite vertex.
+  Result<std::size_t> addSurfaceBoundary(BoundarySurface surface, std::span<const Vec3> vertices);
+  /// The surface's vertices where its owner (an FEM body) has them now and
+  /// their velocities; within the next step() the samples move on at the
+  /// velocities interpolated. Allocation-free. Fails (InvalidArgument) on
+  /// an unknown surface, counts other than its vertices' or a non-finite
+  /// value.
+  Status setSurfaceState(std::size_t surface, std::span<const Vec3> vertices,
+                         std::span<const Vec3> velocities);
+  std::size_t surfaceCount() const noexcept { return surfaces_.size(); }
+  /// Per vertex of the surface, the force the fluid exerted on it over the
+  /// last step (N, averaged over the step): every boundary pair's pressure
+  /// and viscous reaction on a sample, spread onto its triangle's vertices
+  /// by its barycentric weights. The fluid does not move the surface: its
+  /// owner may apply these (two-way) or not (one-way).
+  std::span<const Vec3> surfaceLoads(std::size_t surface) const { return surfaces_.at(surface).load; }
+
+  /// Every moving boundary particle in the world (rigid bodies' and
+  /// surfaces', in the order they were added).
+  std::span<const Vec3> movingBoundaryPositions() const noexcept { return rx_; }
 
   // --- stepping ------------------------------------------------------------
   /// Advances dt (> 0, finite) in CFL sub-steps. Fails (InvalidArgument) on a
@@ -207,11 +246,17 @@ class SphFluid {
   void nonPressure(double dt);
   int pressureSolve(double dt, bool density);
   double subStep(double dt);  // returns the dt it took
-  void placeRigid(std::size_t body);      // its particles' positions and velocities from its state
-  void moveRigid(double dt);              // every body on at its velocities
-  void rigidViscousReaction(double dt);   // what the no-slip viscosity of this sub-step did to them
-  void rigidPressureReaction(double dt);  // what the solve that just ended did to them
-  bool touchesRigid(std::size_t i) const noexcept {  // fluid particle i has a rigid particle in its list
+  void layOutBoundaryVelocities();         // bv_ for the boundary as it is now
+  void placeRigid(std::size_t body);       // its particles' positions and velocities from its state
+  void placeSurface(std::size_t surface);  // its samples' positions, velocities and Ψ from its vertices
+  void ownVolumes(std::size_t first, std::size_t count);  // rpsi_ of moving particles from themselves
+  void moveBoundaries(double dt);                         // every body and surface on at its velocities
+  template <class PairImpulse>
+  void reactionWalk(PairImpulse&& impulse);  // rimp_ += impulse(i, j, ∇W) over fluid–moving pairs
+  void collectReactions();                   // rimp_ into the bodies' and surfaces' impulses
+  void viscousReaction(double dt);           // what the no-slip viscosity of this sub-step did to them
+  void pressureReaction(double dt);          // what the solve that just ended did to them
+  bool touchesMoving(std::size_t i) const noexcept {  // fluid particle i has a moving particle in its list
     const auto nb = grid_.neighbors(i);
     return !nb.empty() && nb.back() >= x_.size() + bx_.size();  // lists are in index order
   }
@@ -224,6 +269,12 @@ class SphFluid {
     Vec3 impulse = Vec3::Zero(), angularImpulse = Vec3::Zero();  // summed over this step's sub-steps
     SphRigidLoad load;
   };
+  struct Surface {
+    BoundarySurface samples;
+    std::size_t first = 0;  // its first particle in rx_
+    std::vector<Vec3> vertices, velocities;
+    std::vector<Vec3> impulse, load;  // per vertex: summed over this step's sub-steps; averaged
+  };
 
   SphFluidOptions o_;
   double h_ = 0.0, mass_ = 0.0, kernelScale_ = 0.0, time_ = 0.0;
@@ -234,16 +285,18 @@ class SphFluid {
   std::vector<double> warmDensity_, warmDivergence_;  // κ·dt², κ·dt of the last solves, per particle  // rho_
                                                       // empty: stale (refreshed at the next step)
   std::vector<Vec3> bx_;
-  std::vector<Vec3> rx_;            // rigid bodies' boundary particles, in the world
-  std::vector<double> rpsi_;        // their Ψ, from their own body's particles
-  std::vector<std::uint32_t> rof_;  // their body
+  std::vector<Vec3> rx_;      // moving boundary particles (bodies', surfaces'), in the world
+  std::vector<double> rpsi_;  // their Ψ, from their own body's or surface's particles
+  std::vector<Vec3> rimp_;    // their reaction impulses (scratch of the reaction walks)
   std::vector<Rigid> rigid_;
-  std::vector<Vec3> bv_;      // every boundary particle's velocity (static, then rigid)
-  std::vector<double> bpsi_;  // ρ0 V_b: static, then rigid
+  std::vector<Surface> surfaces_;
+  std::vector<Vec3> bv_;      // every boundary particle's velocity (static, then moving)
+  std::vector<double> bpsi_;  // ρ0 V_b: static, then moving
   bool boundaryDirty_ = false;
-  bool rigidMoved_ = false;  // setRigidState since the last refresh
-  std::vector<Vec3> all_;    // fluid, static boundary, rigid boundary positions, for the grid
+  bool boundaryMoved_ = false;  // setRigidState or setSurfaceState since the last refresh
+  std::vector<Vec3> all_;       // fluid, static boundary, moving boundary positions, for the grid
   NeighborGrid grid_;
+  NeighborGrid ownGrid_;  // a moving body's or surface's own particles (ownVolumes)
   SphStepStats stats_;
 };
 
