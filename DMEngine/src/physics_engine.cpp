@@ -271,7 +271,7 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
   auto soft = SoftTissues::build(scene, resources);
   if (!soft) return soft.error();
   m->soft = std::move(*soft);
-  auto fluids = SceneFluids::build(scene);
+  auto fluids = SceneFluids::build(scene, resources, *m->soft);
   if (!fluids) return fluids.error();
   m->fluids = std::move(*fluids);
   return std::shared_ptr<PhysicsEngine>(new PhysicsEngine(std::move(m)));

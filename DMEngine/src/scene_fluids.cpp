@@ -3,12 +3,16 @@
 #include "scene_fluids.hpp"
 
 #include <dm/io/scene_file.hpp>
+#include <dm/io/scene_resources.hpp>
 #include <dm/physics/fluid_sources.hpp>
+#include <dm/physics/sph_boundary.hpp>
 #include <dm/physics/sph_fluid.hpp>
 
 #include <algorithm>
 #include <string>
 #include <vector>
+
+#include "soft_tissue.hpp"
 
 namespace dm {
 
@@ -29,12 +33,18 @@ struct SceneFluids::Impl {
     const SceneFluidSuction* desc;
     FluidSuction suction;
   };
+  struct Tissue {             // a soft object the fluid flows around
+    std::size_t soft = 0;     // in SoftTissues
+    std::size_t surface = 0;  // in the fluid
+    std::vector<Vec3> x, v;   // its nodes in the world, this tick
+  };
   struct Fluid {
     const SceneFluid* desc;
     SphFluid fluid;
     FluidRegion region;
     std::vector<Inlet> inlets;
     std::vector<Tip> tips;
+    std::vector<Tissue> tissues;
     std::unique_ptr<TripleBuffer<std::vector<Vec3>>> drawn;  // positions, physics → render
     bool firstRead = true;
     std::size_t start = 0;  // particles at the start
@@ -43,13 +53,59 @@ struct SceneFluids::Impl {
   };
   std::vector<Fluid> fluids;
   TripleBuffer<FluidToolSample> tool;
+  const SoftTissues* soft = nullptr;
+
+  static Status addObjects(Fluid& out, const SceneDesc& scene, const SceneResources& resources,
+                           const SoftTissues& soft);
 };
+
+// A fluid's "objects" as its boundaries (scene_fluids.hpp).
+Status SceneFluids::Impl::addObjects(Fluid& out, const SceneDesc& scene, const SceneResources& resources,
+                                     const SoftTissues& soft) {
+  const double d = out.desc->spacing;
+  for (std::size_t k = 0; k < out.desc->objects.size(); ++k) {
+    const std::string& name = out.desc->objects[k];
+    const std::string where = "fluids/" + out.desc->name + "/objects/" + std::to_string(k);
+    const SceneObject* o = scene.object(name);
+    if (o == nullptr) return fail(ErrorCode::NotFound, "no object \"" + name + "\"", where);
+    if (o->soft) {
+      const auto& names = soft.names();
+      const auto it = std::find(names.begin(), names.end(), name);
+      if (it == names.end())
+        return fail(ErrorCode::NotFound, "soft object \"" + name + "\" was not built", where);
+      Tissue t{.soft = std::size_t(it - names.begin())};
+      soft.worldNodes(t.soft, t.x, t.v);
+      Mesh mesh;
+      mesh.positions = t.x;
+      mesh.triangles = soft.boundaryTriangles(t.soft);
+      auto samples = BoundarySurface::create(mesh, 0.5 * d, d / 3.0);
+      if (!samples) return samples.error().within(where);
+      auto id = out.fluid.addSurfaceBoundary(std::move(*samples), t.x);
+      if (!id) return id.error().within(where);
+      t.surface = *id;
+      out.tissues.push_back(std::move(t));
+      continue;
+    }
+    auto resource = resources.mesh(o->mesh);
+    if (!resource) return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", where);
+    Mesh mesh = *resource;
+    const Isometry3 pose = o->pose.isometry();
+    for (Vec3& p : mesh.positions) p = pose * (o->scale * p);
+    auto samples = sampleBoundary(mesh, d, d / 3.0);
+    if (!samples) return samples.error().within(where);
+    out.fluid.addBoundaryParticles(*samples);
+  }
+  return ok();
+}
 
 SceneFluids::SceneFluids(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 SceneFluids::~SceneFluids() = default;
 
-Result<std::unique_ptr<SceneFluids>> SceneFluids::build(const SceneDesc& scene) {
+Result<std::unique_ptr<SceneFluids>> SceneFluids::build(const SceneDesc& scene,
+                                                        const SceneResources& resources,
+                                                        const SoftTissues& soft) {
   auto m = std::make_unique<Impl>();
+  m->soft = &soft;
   const Vec3 gravity = scene.engines.physics ? scene.engines.physics->gravity : Vec3(0, 0, -9.81);
   m->fluids.reserve(scene.fluids.size());
   for (const SceneFluid& f : scene.fluids) {
@@ -64,6 +120,7 @@ Result<std::unique_ptr<SceneFluids>> SceneFluids::build(const SceneDesc& scene) 
     if (!region) return region.error().within(where + "/region");
     Impl::Fluid out{&f, std::move(*fluid), *region, {}, {}};
     if (f.container) out.fluid.addBoxBoundary(f.container->min, f.container->max);
+    if (auto s = Impl::addObjects(out, scene, resources, soft); !s) return s.error();
     for (const SceneBox& b : f.blocks) out.fluid.addBlock(b.min, b.max);
     out.start = out.fluid.size();
     const std::vector<Vec3> at0(out.fluid.positions().begin(), out.fluid.positions().end());
@@ -115,6 +172,11 @@ Status SceneFluids::step(double t, double dt) {
       tip.suction.apply(f.fluid, dt);
     }
     f.region.apply(f.fluid);
+    for (Impl::Tissue& tissue : f.tissues) {  // where the FEM step left them
+      m.soft->worldNodes(tissue.soft, tissue.x, tissue.v);
+      if (auto s = f.fluid.setSurfaceState(tissue.surface, tissue.x, tissue.v); !s)
+        return s.error().within("fluids/" + f.desc->name);
+    }
     if (auto s = f.fluid.step(dt); !s) return s.error().within("fluids/" + f.desc->name);
     std::vector<Vec3>& drawn = f.drawn->writeBuffer();  // grows to the high-water mark
     drawn.assign(f.fluid.positions().begin(), f.fluid.positions().end());
@@ -165,6 +227,9 @@ nlohmann::json SceneFluids::summary() const {
                       {"volume_m3", double(tip.suction.removedParticles()) * volume}});
     }
     const std::size_t left = f.region.removedParticles();
+    Vec3 centre = Vec3::Zero();
+    for (const Vec3& x : f.fluid.positions()) centre += x;
+    if (f.fluid.size() > 0) centre /= double(f.fluid.size());
     list.push_back({{"name", f.desc->name},
                     {"steps", f.steps},
                     {"particles", f.fluid.size()},
@@ -175,6 +240,8 @@ nlohmann::json SceneFluids::summary() const {
                     {"inlets", std::move(inlets)},
                     {"suction", std::move(tips)},
                     {"max_density_error", f.worstDensityError},
+                    {"center_of_mass_m", {centre.x(), centre.y(), centre.z()}},
+                    {"boundary_objects", f.desc->objects},
                     // start + emitted − taken − left = particles, always
                     {"balanced", f.start + emitted == f.fluid.size() + taken + left}});
   }

@@ -4,6 +4,15 @@
 // (dm::FluidInlet: cut vessels and irrigation, open over their time window)
 // and suction tips (dm::FluidSuction: fixed, or at the haptic tool's proxy).
 //
+// A fluid's "objects" are boundaries: a static object's surface (its mesh
+// at its pose and scale) sampled once as walls (dm::sampleBoundary, a
+// spacing apart, d/3 in); a soft object's FEM boundary as a deforming
+// surface (dm::BoundarySurface at half a spacing, so that it can stretch to
+// twice its area without letting the fluid through), handed the FEM nodes
+// in the world and their velocities every tick before the fluid steps:
+// the tissue pushes the fluid (one-way; the fluid's loads on it are not
+// applied to the FEM body).
+//
 // Per physics tick, for each fluid in scene order: the inlets whose window
 // holds the tick's time emit (a tool pressing an inlet — its proxy within
 // the inlet's radius plus a spacing of its centre — adds |F|/A to the
@@ -33,6 +42,8 @@
 namespace dm {
 
 struct SceneDesc;
+struct SceneResources;
+class SoftTissues;
 
 /// The haptic tool as the fluids see it.
 struct FluidToolSample {
@@ -45,7 +56,11 @@ class SceneFluids {
  public:
   /// Fails naming the fluid's entry ("fluids/NAME/...") for an option the
   /// solver refuses.
-  static Result<std::unique_ptr<SceneFluids>> build(const SceneDesc& scene);
+  /// `soft` (the physics engine's, outliving these fluids) gives the soft
+  /// objects a fluid names under "objects"; `resources` the static ones'
+  /// meshes.
+  static Result<std::unique_ptr<SceneFluids>> build(const SceneDesc& scene, const SceneResources& resources,
+                                                    const SoftTissues& soft);
   ~SceneFluids();
 
   bool empty() const noexcept;

@@ -369,6 +369,22 @@ HapticTissue* SoftTissues::tissue(std::string_view name) noexcept {
   return nullptr;
 }
 
+void SoftTissues::worldNodes(std::size_t i, std::vector<Vec3>& x, std::vector<Vec3>& v) const {
+  const Body& b = *bodies_.at(i);
+  const std::vector<Vec3>& px = b.fem->positions();
+  const std::vector<Vec3>& pv = b.fem->velocities();
+  x.resize(px.size());
+  v.resize(pv.size());
+  for (std::size_t k = 0; k < px.size(); ++k) {
+    x[k] = b.pose * px[k];
+    v[k] = b.pose.linear() * pv[k];
+  }
+}
+
+const std::vector<Triangle>& SoftTissues::boundaryTriangles(std::size_t i) const {
+  return bodies_.at(i)->fem->surfaceTriangles();
+}
+
 Status SoftTissues::step(double h) {
   for (const auto& bp : bodies_) {
     Body& b = *bp;

@@ -84,6 +84,14 @@ class SoftTissues {
   /// step failed (a blown-up state).
   Status step(double h);
 
+  /// Physics thread: soft object i's FEM nodes in the world, positions into
+  /// `x` and velocities into `v` (resized to its nodes: no allocation once
+  /// sized), for a fluid that flows around it.
+  void worldNodes(std::size_t i, std::vector<Vec3>& x, std::vector<Vec3>& v) const;
+  /// Soft object i's boundary triangles over its FEM nodes (CCW from
+  /// outside); fixed at build.
+  const std::vector<Triangle>& boundaryTriangles(std::size_t i) const;
+
   /// Render thread (one reader): soft object i's surface (object frame,
   /// before the object's scale) when a step finished since the last call,
   /// and on the first call; its triangles are set on the first call and

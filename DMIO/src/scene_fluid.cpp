@@ -3,6 +3,7 @@
 // blocks, inlets (cut vessels, irrigation) and suction tips; their checks
 // and JSON (docs/scene-format.md, "Fluids"; the runtime's side is
 // DMEngine/src/scene_fluids.hpp).
+#include <algorithm>
 #include <array>
 #include <set>
 
@@ -100,6 +101,39 @@ void readSuction(ConfigReader& fr, SceneFluid& f, const SceneDesc& scene) {
   }
 }
 
+// "objects": scene objects the fluid flows around. A static object's
+// surface becomes a wall, a soft object's a deforming boundary; a dynamic
+// rigid body is refused (the fluid does not move scene bodies yet), as is
+// the haptic proxy (it has no surface in the world of the fluid).
+void readObjects(ConfigReader& fr, SceneFluid& f, const SceneDesc& scene) {
+  if (!fr.has("objects")) return;
+  ConfigReader list = fr.child("objects");
+  if (!expectArray(list)) return;
+  const std::string proxy = scene.engines.haptics ? scene.engines.haptics->proxyObject : std::string();
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    const Json& e = list.node()[i];
+    const std::string key = std::to_string(i);
+    if (!e.is_string()) {
+      list.addError(std::string("expected an object name, got ") + e.type_name(), key);
+      continue;
+    }
+    const std::string name = e.get<std::string>();
+    const SceneObject* o = scene.object(name);
+    if (o == nullptr)
+      list.addError("no object \"" + name + "\"", key, "name an object under \"objects\"");
+    else if (std::find(f.objects.begin(), f.objects.end(), name) != f.objects.end())
+      list.addError("object \"" + name + "\" is listed twice", key);
+    else if (o->dynamic)
+      list.addError("object \"" + name + "\" is a dynamic rigid body, which the fluid cannot move", key,
+                    "list static or soft objects");
+    else if (!proxy.empty() && name == proxy)
+      list.addError("object \"" + name + "\" is the haptic proxy", key,
+                    "the fluid meets the tool through suction tips (\"at\": \"tool\")");
+    else
+      f.objects.push_back(name);
+  }
+}
+
 constexpr std::array<std::string_view, 2> kLookStyles = {"surface", "spheres"};
 
 void readLook(ConfigReader& fr, SceneFluid& f) {
@@ -157,7 +191,7 @@ void readFluids(ConfigReader& root, SceneDesc& scene) {
     ConfigReader r = list.at(i);
     if (!expectObject(r)) continue;
     r.knownKeys({"name", "spacing", "density", "viscosity", "surface_tension", "color", "look", "container",
-                 "region", "blocks", "inlets", "suction"});
+                 "region", "blocks", "inlets", "suction", "objects"});
     SceneFluid f;
     f.name = readUniqueName(r, names, "fluid");
     if (!scene.engines.physics)
@@ -192,6 +226,7 @@ void readFluids(ConfigReader& root, SceneDesc& scene) {
       }
     readInlets(r, f);
     readSuction(r, f, scene);
+    readObjects(r, f, scene);
     scene.fluids.push_back(std::move(f));
   }
 }
@@ -231,6 +266,7 @@ Json fluidsJson(const std::vector<SceneFluid>& fluids) {
       suction.push_back(windowJson(std::move(t), s.start, s.stop));
     }
     j["suction"] = std::move(suction);
+    if (!f.objects.empty()) j["objects"] = f.objects;
     list.push_back(std::move(j));
   }
   return list;

@@ -153,14 +153,16 @@ void bindFluid(py::module_& m) {
           py::arg("body"), "Where the last step left the body (4x4).")
       .def(
           "add_surface",
-          [](SphFluid& f, const Mesh& mesh, double inset) {
-            auto samples = unwrap(BoundarySurface::create(mesh, f.options().particleSpacing, inset));
+          [](SphFluid& f, const Mesh& mesh, double inset, const py::object& spacing) {
+            auto samples = unwrap(BoundarySurface::create(
+                mesh, spacing.is_none() ? f.options().particleSpacing : spacing.cast<double>(), inset));
             return unwrap(f.addSurfaceBoundary(std::move(samples), mesh.positions));
           },
-          py::arg("mesh"), py::arg("inset"),
-          "A deforming surface (tissue) the fluid flows around: the mesh's surface sampled at the fluid's\n"
-          "spacing, `inset` inwards (spacing / 3 puts the fluid's edge on it), placed on the mesh's\n"
-          "vertices as they are. Returns the surface's index.")
+          py::arg("mesh"), py::arg("inset"), py::arg("spacing") = py::none(),
+          "A deforming surface (tissue) the fluid flows around: the mesh's surface sampled at `spacing`\n"
+          "(default the fluid's; a surface that stretches by s needs spacing / s), `inset` inwards\n"
+          "(the fluid's spacing / 3 puts its edge on it), placed on the mesh's vertices as they are.\n"
+          "Returns the surface's index.")
       .def(
           "set_surface_state",
           [](SphFluid& f, std::size_t surface, const py::object& vertices, const py::object& velocities) {

@@ -144,4 +144,76 @@ TEST(SceneFluid, LockstepRerunsMatch) {
   EXPECT_EQ(a["physics"]["fluids"], b["physics"]["fluids"]);
 }
 
+// A pool over a soft slab (FEM tissue fixed at its bottom) in a 10 cm
+// container, or over a static table with no container: the fluid's
+// "objects" hold it. Listed, the tissue's surface keeps the fluid above
+// its top (2 cm) and the table keeps the fluid on it; unlisted, the fluid
+// falls through them (to the container's floor, or out of the region).
+dm::SceneDesc poolOn(bool soft, bool listed) {
+  json scene = json::parse(R"({
+    "format": "dmplatform-scene", "version": 2, "name": "pool on an object",
+    "resources": {"slab": {"type": "shape", "shape": "box", "half_extents": [0.05, 0.05, 0.01]}},
+    "objects": [{"name": "floor", "mesh": "slab", "pose": {"position": [0.05, 0.05, 0.01]}}],
+    "engines": {"physics": {"rate_hz": 500}},
+    "outputs": {"summary": true},
+    "fluids": [{
+      "name": "water", "spacing": 0.005, "density": 1000, "viscosity": 1e-3,
+      "region": {"min": [-0.2, -0.2, -0.5], "max": [0.3, 0.3, 0.3]},
+      "blocks": [{"min": [0.02, 0.02, 0.02083], "max": [0.08, 0.08, 0.04083]}]
+    }]
+  })");
+  // (The block's bottom layer starts a spacing above the floor's samples,
+  // d/3 under its top.)
+  if (soft) {
+    scene["objects"][0]["soft"] = {{"youngs_modulus", 30000},
+                                   {"poisson_ratio", 0.45},
+                                   {"density", 1000},
+                                   {"voxel_size", 0.005},
+                                   {"fixed", {"-z"}}};
+    scene["fluids"][0]["container"] = {{"min", {0, 0, 0}}, {"max", {0.1, 0.1, 0.3}}};
+    scene["fluids"][0]["blocks"][0] = {{"min", {0, 0, 0.02083}}, {"max", {0.1, 0.1, 0.04083}}};
+  } else {  // a table 40 cm wide: the syrup does not reach its edges
+    scene["resources"]["slab"]["half_extents"] = {0.2, 0.2, 0.01};
+  }
+  if (listed) scene["fluids"][0]["objects"] = {"floor"};
+  std::vector<dm::Error> problems;
+  auto s = dm::parseScene(scene.dump(), "pool.json", ".", &problems);
+  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+  return s ? *s : dm::SceneDesc{};
+}
+
+double centreHeight(const json& summary) {
+  const json& fluid = scene_run::named(summary["physics"]["fluids"], "water");
+  return fluid["center_of_mass_m"][2].get<double>();
+}
+
+TEST(SceneFluid, ASoftObjectsSurfaceHoldsThePoolAboveIt) {
+  dm::test::TempDir dir("scene_fluid_soft");
+  const json held = scene_run::runScene(poolOn(true, true), 0.3, dir.path() / "held");
+  ASSERT_TRUE(held.contains("physics")) << held.dump(2);
+  // A 2 cm pool (10 × 10 cm) over the slab's top at 2 cm: its centre 1 cm
+  // above the top (the slab sags under its own weight by a fraction of a
+  // millimetre; the fluid does not load it).
+  EXPECT_NEAR(centreHeight(held), 0.03, 0.001);
+  EXPECT_TRUE(scene_run::named(held["physics"]["fluids"], "water")["balanced"].get<bool>());
+  const json through = scene_run::runScene(poolOn(true, false), 0.3, dir.path() / "through");
+  EXPECT_LT(centreHeight(through), 0.02);  // through the tissue, toward the container's floor
+}
+
+TEST(SceneFluid, AStaticObjectIsAWallTheFluidRestsOn) {
+  dm::test::TempDir dir("scene_fluid_table");
+  const json held = scene_run::runScene(poolOn(false, true), 0.4, dir.path() / "held");
+  ASSERT_TRUE(held.contains("physics")) << held.dump(2);
+  const json& fluid = scene_run::named(held["physics"]["fluids"], "water");
+  EXPECT_EQ(fluid["left_region_particles"], 0);
+  // A syrup block 6 × 6 × 2 cm spreading on the 40 cm table: its centre
+  // between the table's top (2 cm) and where it started (3 cm).
+  EXPECT_GT(centreHeight(held), 0.02);
+  EXPECT_LT(centreHeight(held), 0.0301);
+  EXPECT_EQ(fluid["boundary_objects"], json({"floor"}));
+  const json fell = scene_run::runScene(poolOn(false, false), 0.4, dir.path() / "fell");
+  // Falling through the table, out of the region: every particle recycled.
+  EXPECT_EQ(scene_run::named(fell["physics"]["fluids"], "water")["particles"], 0);
+}
+
 }  // namespace scene_fluid_test

@@ -124,3 +124,44 @@ def test_a_cube_held_under_water_feels_archimedes_buoyancy_and_its_corners_stay_
         f.rigid_load(1)
     with pytest.raises(dm.Error, match="inset"):
         dm.sample_boundary(_cube(a), d, d)
+
+
+def _floor(side, cells):
+    """A square floor [0, side]² at z = 0 facing up."""
+    n = cells + 1
+    p = np.array([[side * i / cells, side * j / cells, 0.0] for j in range(n) for i in range(n)], float)
+    t = []
+    for j in range(cells):
+        for i in range(cells):
+            a = j * n + i
+            t += [[a, a + 1, a + n + 1], [a, a + n + 1, a + n]]
+    return dm.Mesh(p, np.array(t, np.uint32))
+
+
+def test_a_pool_rests_on_a_deforming_surface_with_its_weight():
+    # A 12 cm square pool 8 cm deep on a floor that is a surface (tissue)
+    # sampled at half a spacing: the loads on its vertices sum to the pool's
+    # weight once settled. Its vertices handed back unchanged keep it so;
+    # a wrong count is refused naming it.
+    d, side = 0.01, 0.12
+    floor = _floor(side, 12)
+    f = dm.Fluid(spacing=d, viscosity=1e-4)
+    f.add_box_boundary((0, 0, -0.03), (side, side, 0.3))
+    lift = d - d / 3 - d / 2  # the bottom layer a spacing above the samples
+    f.add_block((0, 0, lift), (side, side, 0.08 + lift))
+    s = f.add_surface(floor, d / 3, spacing=d / 2)
+    assert s == 0
+    load = np.zeros(3)
+    for k in range(400):
+        f.set_surface_state(s, floor.positions)
+        f.step(0.002)
+        if k >= 300:
+            load += f.surface_loads(s).sum(axis=0) / 100
+    weight = f.mass * 9.81
+    assert load[2] == pytest.approx(-weight, rel=0.03)
+    assert np.linalg.norm(load[:2]) < 0.01 * weight
+    assert len(f.moving_boundary_positions) > len(floor.positions)
+    with pytest.raises(dm.Error, match="3 vertices and 3 velocities for its 169"):
+        f.set_surface_state(s, np.zeros((3, 3)))
+    with pytest.raises(dm.Error, match="surface 1 of 1"):
+        f.surface_loads(1)

@@ -695,6 +695,9 @@ struct SceneFluid {
   std::vector<SceneBox> blocks;       ///< fluid at the start
   std::vector<SceneFluidInlet> inlets;
   std::vector<SceneFluidSuction> suction;
+  /// Objects the fluid flows around, by name: a static one's surface is a
+  /// wall, a soft one's (tissue) deforms and pushes the fluid (one-way).
+  std::vector<std::string> objects;
 
   bool operator==(const SceneFluid&) const = default;
 };
