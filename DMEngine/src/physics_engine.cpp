@@ -173,15 +173,18 @@ struct PhysicsEngine::Impl {
   std::size_t punctures = 0;
   std::unique_ptr<SoftTissues> soft;    // the soft objects, stepped after the rigid bodies
   std::unique_ptr<SceneFluids> fluids;  // the fluids, stepped after them
+  std::vector<FluidBody> fluidBodies;   // the dynamic bodies as the fluids see them (moving order)
+  std::vector<Vec3> fluidForce, fluidTorque;  // per body: what the fluids did over the last step, held
   std::uint64_t steps = 0;
   double lastDt = 0.0;
 
-  Isometry3 objectPose(std::uint32_t b) const {
+  Isometry3 bodyPose(std::uint32_t b) const {  // body frame (origin at the centre of mass) → world
     Isometry3 body = Isometry3::Identity();
     body.translate(state.position(bodies[b].id));
     body.rotate(state.orientation(bodies[b].id));
-    return body * bodies[b].objectInBody;
+    return body;
   }
+  Isometry3 objectPose(std::uint32_t b) const { return bodyPose(b) * bodies[b].objectInBody; }
 };
 
 PhysicsEngine::PhysicsEngine(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {
@@ -271,9 +274,20 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
   auto soft = SoftTissues::build(scene, resources);
   if (!soft) return soft.error();
   m->soft = std::move(*soft);
-  auto fluids = SceneFluids::build(scene, resources, *m->soft);
+  for (std::uint32_t b : m->moving) {
+    FluidBody link{.object = m->bodies[b].object, .objectInBody = m->bodies[b].objectInBody};
+    link.pose = m->bodyPose(b);
+    link.linearVelocity = m->state.linearVelocity(m->bodies[b].id);
+    link.angularVelocity = m->state.angularVelocity(m->bodies[b].id);
+    m->fluidBodies.push_back(link);
+  }
+  auto fluids = SceneFluids::build(scene, resources, *m->soft, m->fluidBodies);
   if (!fluids) return fluids.error();
   m->fluids = std::move(*fluids);
+  m->fluidForce.assign(m->bodies.size(), Vec3::Zero());
+  m->fluidTorque.assign(m->bodies.size(), Vec3::Zero());
+  if (!m->fluids->empty() && !m->moving.empty())
+    if (auto s = addHeldForces(m->world, "fluids", raw->fluidForce, raw->fluidTorque); !s) return s.error();
   return std::shared_ptr<PhysicsEngine>(new PhysicsEngine(std::move(m)));
 }
 
@@ -328,11 +342,23 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
     error_ = s.error().within("physics step " + std::to_string(m.steps));
     return false;
   }
-  if (!m.fluids->empty())
+  if (!m.fluids->empty()) {
+    for (std::size_t i = 0; i < m.moving.size(); ++i) {  // where the world's step left them
+      FluidBody& link = m.fluidBodies[i];
+      const BodyId id = m.bodies[m.moving[i]].id;
+      link.pose = m.bodyPose(m.moving[i]);
+      link.linearVelocity = m.state.linearVelocity(id);
+      link.angularVelocity = m.state.angularVelocity(id);
+    }
     if (auto s = m.fluids->step(time_.seconds(info), dt); !s) {
       error_ = s.error().within("physics step " + std::to_string(m.steps));
       return false;
     }
+    for (std::size_t i = 0; i < m.moving.size(); ++i) {  // held on the bodies over the next step
+      m.fluidForce[m.moving[i]] = m.fluidBodies[i].force;
+      m.fluidTorque[m.moving[i]] = m.fluidBodies[i].torque;
+    }
+  }
   ++m.steps;
   m.lastDt = dt;
   if (m.model) {
@@ -432,7 +458,8 @@ nlohmann::json PhysicsEngine::summary() const {
               {"angular_velocity_rad_s", engine_json::vec3(m.state.angularVelocity(body.id))},
               {"asleep", m.state.asleep(body.id)},
               {"contact_force_N", engine_json::vec3(contactForce[b])},
-              {"tool_force_N", engine_json::vec3(m.toolForce[b])}};
+              {"tool_force_N", engine_json::vec3(m.toolForce[b])},
+              {"fluid_force_N", engine_json::vec3(m.fluidForce[b])}};
     for (std::size_t k = 0; k < m.touchedBody.size(); ++k)
       if (m.touchedBody[k] == static_cast<int>(b) && m.tools)
         j["tool_impulse_Ns"] = engine_json::vec3(m.tools->taken(k).linear);

@@ -4,6 +4,7 @@
 
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
+#include <dm/math/mesh_topology.hpp>
 #include <dm/physics/fluid_sources.hpp>
 #include <dm/physics/sph_boundary.hpp>
 #include <dm/physics/sph_fluid.hpp>
@@ -33,6 +34,10 @@ struct SceneFluids::Impl {
     const SceneFluidSuction* desc;
     FluidSuction suction;
   };
+  struct Body {             // a dynamic body the fluid pushes and is pushed by
+    std::size_t link = 0;   // in the physics engine's FluidBody list
+    std::size_t rigid = 0;  // in the fluid
+  };
   struct Tissue {             // a soft object the fluid flows around
     std::size_t soft = 0;     // in SoftTissues
     std::size_t surface = 0;  // in the fluid
@@ -45,6 +50,7 @@ struct SceneFluids::Impl {
     std::vector<Inlet> inlets;
     std::vector<Tip> tips;
     std::vector<Tissue> tissues;
+    std::vector<Body> bodies;
     std::unique_ptr<TripleBuffer<std::vector<Vec3>>> drawn;  // positions, physics → render
     bool firstRead = true;
     std::size_t start = 0;  // particles at the start
@@ -54,14 +60,17 @@ struct SceneFluids::Impl {
   std::vector<Fluid> fluids;
   TripleBuffer<FluidToolSample> tool;
   const SoftTissues* soft = nullptr;
+  std::vector<FluidBody>* links = nullptr;
 
   static Status addObjects(Fluid& out, const SceneDesc& scene, const SceneResources& resources,
-                           const SoftTissues& soft);
+                           const SoftTissues& soft, std::vector<FluidBody>& links, std::vector<Mesh>& solids);
 };
 
 // A fluid's "objects" as its boundaries (scene_fluids.hpp).
+// `solids` gets each object's surface in the world (what blocks leave out).
 Status SceneFluids::Impl::addObjects(Fluid& out, const SceneDesc& scene, const SceneResources& resources,
-                                     const SoftTissues& soft) {
+                                     const SoftTissues& soft, std::vector<FluidBody>& links,
+                                     std::vector<Mesh>& solids) {
   const double d = out.desc->spacing;
   for (std::size_t k = 0; k < out.desc->objects.size(); ++k) {
     const std::string& name = out.desc->objects[k];
@@ -84,16 +93,33 @@ Status SceneFluids::Impl::addObjects(Fluid& out, const SceneDesc& scene, const S
       if (!id) return id.error().within(where);
       t.surface = *id;
       out.tissues.push_back(std::move(t));
+      solids.push_back(std::move(mesh));
       continue;
     }
     auto resource = resources.mesh(o->mesh);
     if (!resource) return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", where);
     Mesh mesh = *resource;
-    const Isometry3 pose = o->pose.isometry();
-    for (Vec3& p : mesh.positions) p = pose * (o->scale * p);
-    auto samples = sampleBoundary(mesh, d, d / 3.0);
-    if (!samples) return samples.error().within(where);
-    out.fluid.addBoundaryParticles(*samples);
+    for (Vec3& p : mesh.positions) p *= o->scale;
+    if (o->dynamic) {
+      const auto link =
+          std::find_if(links.begin(), links.end(), [&](const FluidBody& b) { return b.object == name; });
+      if (link == links.end())
+        return fail(ErrorCode::NotFound, "dynamic object \"" + name + "\" has no body", where);
+      for (Vec3& p : mesh.positions) p = link->objectInBody * p;  // into the body frame
+      auto samples = sampleBoundary(mesh, d, d / 3.0);
+      if (!samples) return samples.error().within(where);
+      auto rigid = out.fluid.addRigidBoundary(*samples, link->pose);
+      if (!rigid) return rigid.error().within(where);
+      out.bodies.push_back({std::size_t(link - links.begin()), *rigid});
+      for (Vec3& p : mesh.positions) p = link->pose * p;
+    } else {
+      const Isometry3 pose = o->pose.isometry();
+      for (Vec3& p : mesh.positions) p = pose * p;
+      auto samples = sampleBoundary(mesh, d, d / 3.0);
+      if (!samples) return samples.error().within(where);
+      out.fluid.addBoundaryParticles(*samples);
+    }
+    solids.push_back(std::move(mesh));
   }
   return ok();
 }
@@ -103,9 +129,11 @@ SceneFluids::~SceneFluids() = default;
 
 Result<std::unique_ptr<SceneFluids>> SceneFluids::build(const SceneDesc& scene,
                                                         const SceneResources& resources,
-                                                        const SoftTissues& soft) {
+                                                        const SoftTissues& soft,
+                                                        std::vector<FluidBody>& bodies) {
   auto m = std::make_unique<Impl>();
   m->soft = &soft;
+  m->links = &bodies;
   const Vec3 gravity = scene.engines.physics ? scene.engines.physics->gravity : Vec3(0, 0, -9.81);
   m->fluids.reserve(scene.fluids.size());
   for (const SceneFluid& f : scene.fluids) {
@@ -120,8 +148,21 @@ Result<std::unique_ptr<SceneFluids>> SceneFluids::build(const SceneDesc& scene,
     if (!region) return region.error().within(where + "/region");
     Impl::Fluid out{&f, std::move(*fluid), *region, {}, {}};
     if (f.container) out.fluid.addBoxBoundary(f.container->min, f.container->max);
-    if (auto s = Impl::addObjects(out, scene, resources, soft); !s) return s.error();
+    std::vector<Mesh> solids;
+    if (auto s = Impl::addObjects(out, scene, resources, soft, bodies, solids); !s) return s.error();
     for (const SceneBox& b : f.blocks) out.fluid.addBlock(b.min, b.max);
+    if (!solids.empty()) {  // no fluid inside the objects it flows around (bounds first)
+      std::vector<Aabb> bounds;
+      for (const Mesh& solid : solids) {
+        Aabb& box = bounds.emplace_back();
+        for (const Vec3& p : solid.positions) box.extend(p);
+      }
+      out.fluid.removeIf([&](const Vec3& x) {
+        for (std::size_t k = 0; k < solids.size(); ++k)
+          if (bounds[k].contains(x) && windingNumber(solids[k], x) > 0.5) return true;
+        return false;
+      });
+    }
     out.start = out.fluid.size();
     const std::vector<Vec3> at0(out.fluid.positions().begin(), out.fluid.positions().end());
     out.drawn = std::make_unique<TripleBuffer<std::vector<Vec3>>>(at0);
@@ -151,6 +192,7 @@ TripleBuffer<FluidToolSample>& SceneFluids::toolFeed() noexcept { return impl_->
 
 Status SceneFluids::step(double t, double dt) {
   Impl& m = *impl_;
+  for (FluidBody& b : *m.links) b.force = b.torque = Vec3::Zero();
   m.tool.update();
   const FluidToolSample& tool = m.tool.readBuffer();
   for (Impl::Fluid& f : m.fluids) {
@@ -177,7 +219,17 @@ Status SceneFluids::step(double t, double dt) {
       if (auto s = f.fluid.setSurfaceState(tissue.surface, tissue.x, tissue.v); !s)
         return s.error().within("fluids/" + f.desc->name);
     }
+    for (const Impl::Body& b : f.bodies) {  // where the world's step left them
+      const FluidBody& link = (*m.links)[b.link];
+      if (auto s = f.fluid.setRigidState(b.rigid, link.pose, link.linearVelocity, link.angularVelocity); !s)
+        return s.error().within("fluids/" + f.desc->name);
+    }
     if (auto s = f.fluid.step(dt); !s) return s.error().within("fluids/" + f.desc->name);
+    for (const Impl::Body& b : f.bodies) {
+      FluidBody& link = (*m.links)[b.link];
+      link.force += f.fluid.rigidLoad(b.rigid).force;
+      link.torque += f.fluid.rigidLoad(b.rigid).torque;
+    }
     std::vector<Vec3>& drawn = f.drawn->writeBuffer();  // grows to the high-water mark
     drawn.assign(f.fluid.positions().begin(), f.fluid.positions().end());
     f.drawn->publish();

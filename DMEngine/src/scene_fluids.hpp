@@ -11,7 +11,13 @@
 // twice its area without letting the fluid through), handed the FEM nodes
 // in the world and their velocities every tick before the fluid steps:
 // the tissue pushes the fluid (one-way; the fluid's loads on it are not
-// applied to the FEM body).
+// applied to the FEM body); a dynamic body's surface (sampled a spacing
+// apart, d/3 in, in its body frame) as a rigid body of the fluid, two-way:
+// its pose and velocities from the physics world before each fluid step,
+// the fluid's force and torque on it back (FluidBody), which the physics
+// engine holds on the body over its next step (explicit coupling). Block
+// particles inside a listed object (winding number over one half) are left
+// out.
 //
 // Per physics tick, for each fluid in scene order: the inlets whose window
 // holds the tick's time emit (a tool pressing an inlet — its proxy within
@@ -37,6 +43,7 @@
 #include <nlohmann/json.hpp>
 
 #include <memory>
+#include <string>
 #include <vector>
 
 namespace dm {
@@ -44,6 +51,17 @@ namespace dm {
 struct SceneDesc;
 struct SceneResources;
 class SoftTissues;
+
+/// A dynamic rigid body of the scene as the fluids see it: the physics
+/// engine writes its state before each fluid step, the fluids add what they
+/// did to it (summed over the fluids that name it).
+struct FluidBody {
+  std::string object;
+  Isometry3 objectInBody = Isometry3::Identity();  // the object's mesh frame in the body frame
+  Isometry3 pose = Isometry3::Identity();          // body frame (origin at the centre of mass) → world
+  Vec3 linearVelocity = Vec3::Zero(), angularVelocity = Vec3::Zero();
+  Vec3 force = Vec3::Zero(), torque = Vec3::Zero();  // N, N·m about the centre of mass, last step
+};
 
 /// The haptic tool as the fluids see it.
 struct FluidToolSample {
@@ -56,11 +74,11 @@ class SceneFluids {
  public:
   /// Fails naming the fluid's entry ("fluids/NAME/...") for an option the
   /// solver refuses.
-  /// `soft` (the physics engine's, outliving these fluids) gives the soft
-  /// objects a fluid names under "objects"; `resources` the static ones'
-  /// meshes.
+  /// `soft` and `bodies` (the physics engine's, outliving these fluids)
+  /// give the soft objects and dynamic bodies a fluid names under
+  /// "objects"; `resources` the static and dynamic ones' meshes.
   static Result<std::unique_ptr<SceneFluids>> build(const SceneDesc& scene, const SceneResources& resources,
-                                                    const SoftTissues& soft);
+                                                    const SoftTissues& soft, std::vector<FluidBody>& bodies);
   ~SceneFluids();
 
   bool empty() const noexcept;

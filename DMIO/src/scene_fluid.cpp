@@ -102,9 +102,9 @@ void readSuction(ConfigReader& fr, SceneFluid& f, const SceneDesc& scene) {
 }
 
 // "objects": scene objects the fluid flows around. A static object's
-// surface becomes a wall, a soft object's a deforming boundary; a dynamic
-// rigid body is refused (the fluid does not move scene bodies yet), as is
-// the haptic proxy (it has no surface in the world of the fluid).
+// surface becomes a wall, a soft object's a deforming boundary, a dynamic
+// body's a rigid body of the fluid (two-way); the haptic proxy is refused
+// (the fluid meets the tool through suction tips).
 void readObjects(ConfigReader& fr, SceneFluid& f, const SceneDesc& scene) {
   if (!fr.has("objects")) return;
   ConfigReader list = fr.child("objects");
@@ -123,9 +123,6 @@ void readObjects(ConfigReader& fr, SceneFluid& f, const SceneDesc& scene) {
       list.addError("no object \"" + name + "\"", key, "name an object under \"objects\"");
     else if (std::find(f.objects.begin(), f.objects.end(), name) != f.objects.end())
       list.addError("object \"" + name + "\" is listed twice", key);
-    else if (o->dynamic)
-      list.addError("object \"" + name + "\" is a dynamic rigid body, which the fluid cannot move", key,
-                    "list static or soft objects");
     else if (!proxy.empty() && name == proxy)
       list.addError("object \"" + name + "\" is the haptic proxy", key,
                     "the fluid meets the tool through suction tips (\"at\": \"tool\")");

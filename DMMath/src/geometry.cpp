@@ -2,6 +2,7 @@
 #include <dm/math/geometry.hpp>
 
 #include <algorithm>
+#include <cmath>
 
 namespace dm {
 
@@ -112,6 +113,14 @@ Vec3 planeBarycentric(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c
   l[i2] = (d00 * d21 - d01 * d20) / den;
   l[o] = 1.0 - l[i1] - l[i2];
   return {l[0], l[1], l[2]};
+}
+
+double solidAngle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) noexcept {
+  const Vec3 ra = a - p, rb = b - p, rc = c - p;
+  const double la = ra.norm(), lb = rb.norm(), lc = rc.norm();
+  const double numerator = ra.dot(rb.cross(rc));
+  const double denominator = la * lb * lc + ra.dot(rb) * lc + rb.dot(rc) * la + rc.dot(ra) * lb;
+  return 2.0 * std::atan2(numerator, denominator);
 }
 
 }  // namespace dm

@@ -1,4 +1,5 @@
 // mesh_topology.cpp — edge grouping, fans, components, volume; vertex welding.
+#include <dm/math/geometry.hpp>
 #include <dm/math/grid_cell.hpp>
 #include <dm/math/mesh_topology.hpp>
 
@@ -7,6 +8,7 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <numbers>
 #include <numeric>
 #include <string>
 #include <unordered_map>
@@ -285,6 +287,13 @@ Result<WeldReport> weldVertices(Mesh& mesh, double tolerance) {
   }
   mesh.triangles.resize(w);
   return report;
+}
+
+double windingNumber(const Mesh& mesh, const Vec3& p) {
+  double sum = 0.0;
+  for (const Triangle& t : mesh.triangles)
+    sum += solidAngle(p, mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]);
+  return sum / (4.0 * std::numbers::pi);
 }
 
 }  // namespace dm

@@ -145,26 +145,33 @@ TEST(SceneFluidFile, RefusesEachMistakeAtItsPointer) {
   EXPECT_EQ(p.size(), 10u) << dm::formatSceneErrors(p);
 }
 
-// "objects": static and soft objects the fluid flows around, by name; a
-// name that is no object, a name twice, a dynamic body (the fluid does not
-// move scene bodies) and a non-string are refused at their entries.
-TEST(SceneFluidFile, ObjectsItFlowsAroundAreNamedOnceAndNotDynamic) {
+// "objects": static, soft and dynamic objects the fluid flows around, by
+// name; a name that is no object, a name twice, the haptic proxy and a
+// non-string are refused at their entries.
+TEST(SceneFluidFile, ObjectsItFlowsAroundAreNamedOnceAndNotTheProxy) {
   Json j = fluidScene();
   j["resources"] = Json::parse(R"({"ball": {"type": "shape", "shape": "sphere", "radius": 0.01}})");
   j["objects"] = Json::parse(R"([{"name": "organ", "mesh": "ball"},
                                   {"name": "marble", "mesh": "ball", "dynamic": true, "mass": 0.01}])");
-  j["fluids"][0]["objects"] = {"organ"};
+  j["fluids"][0]["objects"] = {"organ", "marble"};
   const Json round = scene_test::expectRoundTrip(j);
-  EXPECT_EQ(round["fluids"][0]["objects"], Json({"organ"}));
+  EXPECT_EQ(round["fluids"][0]["objects"], Json({"organ", "marble"}));
   auto scene = scene_test::parsed(j);
   ASSERT_TRUE(scene);
-  EXPECT_EQ(scene->fluids[0].objects, std::vector<std::string>({"organ"}));
+  EXPECT_EQ(scene->fluids[0].objects, std::vector<std::string>({"organ", "marble"}));
 
-  j["fluids"][0]["objects"] = Json::parse(R"(["organ", "organ", "kidney", "marble", 3])");
+  j["objects"].push_back(Json::parse(R"({"name": "probe", "mesh": "ball"})"));
+  j["materials"] = Json::parse(R"({"tissue": {"haptic": {"stiffness": 500}}})");
+  j["objects"][0]["material"] = "tissue";
+  j["objects"][0]["haptic"] = true;
+  j["engines"]["haptics"] =
+      Json::parse(R"({"device": "hand", "objects": ["organ"], "proxy_object": "probe"})");
+  j["devices"] = Json::parse(R"([{"name": "hand", "driver": "sim-haptic"}])");
+  j["fluids"][0]["objects"] = Json::parse(R"(["organ", "organ", "kidney", "probe", 3])");
   const std::vector<dm::Error> p = scene_test::problemsOf(j);
   scene_test::expectAt(p, "/fluids/0/objects/1", "listed twice");
   scene_test::expectAt(p, "/fluids/0/objects/2", "no object \"kidney\"");
-  scene_test::expectAt(p, "/fluids/0/objects/3", "dynamic rigid body");
+  scene_test::expectAt(p, "/fluids/0/objects/3", "haptic proxy");
   scene_test::expectAt(p, "/fluids/0/objects/4", "expected an object name");
   EXPECT_EQ(p.size(), 4u) << dm::formatSceneErrors(p);
 }

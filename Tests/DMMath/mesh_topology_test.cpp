@@ -1,3 +1,4 @@
+#include <dm/math/geometry.hpp>
 #include <dm/math/mesh_topology.hpp>
 #include <dm/math/primitives.hpp>
 
@@ -258,3 +259,37 @@ TEST(WeldVertices, RejectsBadInputAndLeavesTheMeshAlone) {
 }
 
 }  // namespace
+
+namespace winding_test {
+
+// The winding number against solid angles: 1 anywhere inside a closed,
+// outward mesh (a curved one: an icosphere, at its centre and just under
+// its surface), 0 outside, −1 inside it turned inside out; a cube missing
+// one face, seen from its centre, winds 5/6 (the open face's solid angle is
+// 4π/6), and a point on the plane of a face far from it sees nothing of it.
+TEST(WindingNumber, IsOneInsideZeroOutsideAndTheSolidAngleOfWhatIsThere) {
+  const dm::Mesh ball = dm::makeIcosphere(0.05, 3);
+  EXPECT_NEAR(dm::windingNumber(ball, dm::Vec3::Zero()), 1.0, 1e-12);
+  EXPECT_NEAR(dm::windingNumber(ball, dm::Vec3(0.0, 0.0, 0.049)), 1.0, 1e-9);
+  EXPECT_NEAR(dm::windingNumber(ball, dm::Vec3(0.03, 0.02, 0.045)), 0.0, 1e-9);
+  EXPECT_NEAR(dm::windingNumber(ball, dm::Vec3(1.0, 2.0, 3.0)), 0.0, 1e-12);
+  dm::Mesh inverted = ball;
+  for (dm::Triangle& t : inverted.triangles) std::swap(t[1], t[2]);
+  EXPECT_NEAR(dm::windingNumber(inverted, dm::Vec3::Zero()), -1.0, 1e-12);
+
+  dm::Mesh cube = dm::makeBox(dm::Vec3(0.5, 0.5, 0.5));
+  dm::Mesh open = cube;
+  open.triangles.clear();
+  for (const dm::Triangle& t : cube.triangles) {  // drop the two triangles of the +z face
+    bool top = true;
+    for (std::uint32_t v : t) top = top && cube.positions[v].z() > 0.4;
+    if (!top) open.triangles.push_back(t);
+  }
+  ASSERT_EQ(open.triangles.size(), cube.triangles.size() - 2);
+  EXPECT_NEAR(dm::windingNumber(cube, dm::Vec3(0.1, -0.2, 0.3)), 1.0, 1e-12);
+  EXPECT_NEAR(dm::windingNumber(open, dm::Vec3::Zero()), 5.0 / 6.0, 1e-12);
+  EXPECT_NEAR(dm::solidAngle(dm::Vec3(5, 0, 0), dm::Vec3(0, 0, 0), dm::Vec3(1, 0, 0), dm::Vec3(0, 1, 0)), 0.0,
+              1e-15);
+}
+
+}  // namespace winding_test

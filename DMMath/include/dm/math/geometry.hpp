@@ -1,5 +1,7 @@
 // dm/math/geometry.hpp — exact point/triangle primitives shared by
-// voxelization, simplification error measures and collision detection.
+// voxelization, simplification error measures, collision detection and
+// inside tests (a closed mesh's winding number at p is the sum of its
+// triangles' solid angles over 4π: dm::windingNumber in mesh_topology.hpp).
 //
 // @code
 //   dm::TriangleClosest c = dm::closestPointOnTriangle(p, a, b, c3);
@@ -43,5 +45,10 @@ TriangleClosest closestPointOnTriangle(const Vec3& p, const Vec3& a, const Vec3&
 /// The point of segment [a, b] closest to p, and its parameter t in [0, 1].
 /// A zero-length segment gives a with t = 0.
 Vec3 closestPointOnSegment(const Vec3& p, const Vec3& a, const Vec3& b, double* t = nullptr) noexcept;
+
+/// The solid angle (steradians, signed) that triangle (a, b, c) subtends
+/// at p: positive when p sees its counter-clockwise side (Van Oosterom and
+/// Strackee 1983). 0 when p lies on the triangle's plane.
+double solidAngle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c) noexcept;
 
 }  // namespace dm

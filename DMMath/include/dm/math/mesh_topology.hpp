@@ -82,4 +82,11 @@ struct WeldReport {
 /// @endcode
 Result<WeldReport> weldVertices(Mesh& mesh, double tolerance);
 
+/// The generalized winding number of `mesh` at p: the sum of its triangles'
+/// solid angles over 4π (Jacobson et al. 2013). 1 inside and 0 outside a
+/// closed mesh whose triangles face outwards (−1 inside one facing in),
+/// fractional where holes let the outside in; > 0.5 is the robust inside
+/// test. O(triangles); indices must be in range (Mesh::validate()).
+double windingNumber(const Mesh& mesh, const Vec3& p);
+
 }  // namespace dm
