@@ -59,7 +59,7 @@ struct SceneFluids::Impl {
   };
   std::vector<Fluid> fluids;
   TripleBuffer<FluidToolSample> tool;
-  const SoftTissues* soft = nullptr;
+  SoftTissues* soft = nullptr;
   std::vector<FluidBody>* links = nullptr;
 
   static Status addObjects(Fluid& out, const SceneDesc& scene, const SceneResources& resources,
@@ -128,8 +128,7 @@ SceneFluids::SceneFluids(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 SceneFluids::~SceneFluids() = default;
 
 Result<std::unique_ptr<SceneFluids>> SceneFluids::build(const SceneDesc& scene,
-                                                        const SceneResources& resources,
-                                                        const SoftTissues& soft,
+                                                        const SceneResources& resources, SoftTissues& soft,
                                                         std::vector<FluidBody>& bodies) {
   auto m = std::make_unique<Impl>();
   m->soft = &soft;
@@ -225,6 +224,8 @@ Status SceneFluids::step(double t, double dt) {
         return s.error().within("fluids/" + f.desc->name);
     }
     if (auto s = f.fluid.step(dt); !s) return s.error().within("fluids/" + f.desc->name);
+    for (const Impl::Tissue& tissue : f.tissues)  // held on the FEM nodes over the next steps
+      m.soft->setFluidLoads(tissue.soft, f.fluid.surfaceLoads(tissue.surface));
     for (const Impl::Body& b : f.bodies) {
       FluidBody& link = (*m.links)[b.link];
       link.force += f.fluid.rigidLoad(b.rigid).force;

@@ -10,8 +10,9 @@
 // surface (dm::BoundarySurface at half a spacing, so that it can stretch to
 // twice its area without letting the fluid through), handed the FEM nodes
 // in the world and their velocities every tick before the fluid steps:
-// the tissue pushes the fluid (one-way; the fluid's loads on it are not
-// applied to the FEM body); a dynamic body's surface (sampled a spacing
+// the tissue pushes the fluid and the fluid's loads on its vertices (the
+// FEM nodes) are held on the FEM body over its next step (two-way,
+// explicit); a dynamic body's surface (sampled a spacing
 // apart, d/3 in, in its body frame) as a rigid body of the fluid, two-way:
 // its pose and velocities from the physics world before each fluid step,
 // the fluid's force and torque on it back (FluidBody), which the physics
@@ -78,7 +79,7 @@ class SceneFluids {
   /// give the soft objects and dynamic bodies a fluid names under
   /// "objects"; `resources` the static and dynamic ones' meshes.
   static Result<std::unique_ptr<SceneFluids>> build(const SceneDesc& scene, const SceneResources& resources,
-                                                    const SoftTissues& soft, std::vector<FluidBody>& bodies);
+                                                    SoftTissues& soft, std::vector<FluidBody>& bodies);
   ~SceneFluids();
 
   bool empty() const noexcept;

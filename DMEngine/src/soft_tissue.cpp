@@ -175,6 +175,7 @@ struct SoftTissues::Body {
   int cgMax = 0;
   double maxToolForce = 0.0;
   Vec3 restCenterOfMass = Vec3::Zero();  // object frame
+  Vec3 fluidForce = Vec3::Zero();        // world: the sum of the last fluid loads set
 };
 
 SoftTissues::~SoftTissues() = default;
@@ -381,6 +382,16 @@ void SoftTissues::worldNodes(std::size_t i, std::vector<Vec3>& x, std::vector<Ve
   }
 }
 
+void SoftTissues::setFluidLoads(std::size_t i, std::span<const Vec3> world) {
+  Body& b = *bodies_.at(i);
+  const Mat3 toObject = b.pose.linear().transpose();
+  b.fluidForce = Vec3::Zero();
+  for (std::size_t k = 0; k < world.size(); ++k) {
+    b.fem->setExternalForce(k, toObject * world[k]);
+    b.fluidForce += world[k];
+  }
+}
+
 const std::vector<Triangle>& SoftTissues::boundaryTriangles(std::size_t i) const {
   return bodies_.at(i)->fem->surfaceTriangles();
 }
@@ -451,6 +462,7 @@ nlohmann::json SoftTissues::summary() const {
          {"tool_force_N", engine_json::vec3(R * toolForce(b))},
          {"max_tool_force_N", b.maxToolForce},
          {"held_force_N", engine_json::vec3(R * heldForce)},
+         {"fluid_force_N", engine_json::vec3(b.fluidForce)},
          {"weight_N", engine_json::vec3(f.totalMass() * (R * f.gravity()))}});
     if (!obstacles_.empty()) {
       Json touching = Json::array();

@@ -1,6 +1,6 @@
 // soft_tissue.hpp (private) — a scene's soft objects ("soft" blocks) as FEM
-// bodies the physics engine steps, the god-object presses and the render
-// engine draws deformed.
+// bodies the physics engine steps, the god-object presses, fluids flow
+// around and load (scene_fluids.hpp), and the render engine draws deformed.
 //
 // Per soft object: tetrahedra from its mesh (a box shape split into cubes
 // of about voxel_size, its faces kept; any other closed mesh voxelized at
@@ -88,6 +88,10 @@ class SoftTissues {
   /// `x` and velocities into `v` (resized to its nodes: no allocation once
   /// sized), for a fluid that flows around it.
   void worldNodes(std::size_t i, std::vector<Vec3>& x, std::vector<Vec3>& v) const;
+  /// Physics thread: forces on soft object i's FEM nodes (world frame, one
+  /// per node: a fluid's loads), held over its following steps until set
+  /// again. Allocation-free.
+  void setFluidLoads(std::size_t i, std::span<const Vec3> world);
   /// Soft object i's boundary triangles over its FEM nodes (CCW from
   /// outside); fixed at build.
   const std::vector<Triangle>& boundaryTriangles(std::size_t i) const;

@@ -146,11 +146,10 @@ TEST(SceneFluid, LockstepRerunsMatch) {
   EXPECT_EQ(a["physics"]["fluids"], b["physics"]["fluids"]);
 }
 
-// A pool over a soft slab (FEM tissue fixed at its bottom) in a 10 cm
-// container, or over a static table with no container: the fluid's
-// "objects" hold it. Listed, the tissue's surface keeps the fluid above
-// its top (2 cm) and the table keeps the fluid on it; unlisted, the fluid
-// falls through them (to the container's floor, or out of the region).
+// A block of syrup (6 × 6 × 2 cm) over a soft slab (FEM tissue fixed at its
+// bottom) or a static table: the fluid's "objects" hold it. Listed, the
+// tissue's surface and the table keep the fluid on them; unlisted, the
+// fluid falls through them, out of the region.
 dm::SceneDesc poolOn(bool soft, bool listed) {
   json scene = json::parse(R"({
     "format": "dmplatform-scene", "version": 2, "name": "pool on an object",
@@ -167,13 +166,15 @@ dm::SceneDesc poolOn(bool soft, bool listed) {
   // (The block's bottom layer starts a spacing above the floor's samples,
   // d/3 under its top.)
   if (soft) {
+    // A slab 16 cm wide: the syrup does not reach its edges. (In a
+    // container, the walls' particles beside the slab's top would carry the
+    // fluid within a kernel's reach of them: a third of this pool's weight.)
+    scene["resources"]["slab"]["half_extents"] = {0.08, 0.08, 0.01};
     scene["objects"][0]["soft"] = {{"youngs_modulus", 30000},
                                    {"poisson_ratio", 0.45},
                                    {"density", 1000},
-                                   {"voxel_size", 0.005},
+                                   {"voxel_size", 0.01},
                                    {"fixed", {"-z"}}};
-    scene["fluids"][0]["container"] = {{"min", {0, 0, 0}}, {"max", {0.1, 0.1, 0.3}}};
-    scene["fluids"][0]["blocks"][0] = {{"min", {0, 0, 0.02083}}, {"max", {0.1, 0.1, 0.04083}}};
   } else {  // a table 40 cm wide: the syrup does not reach its edges
     scene["resources"]["slab"]["half_extents"] = {0.2, 0.2, 0.01};
   }
@@ -189,17 +190,27 @@ double centreHeight(const json& summary) {
   return fluid["center_of_mass_m"][2].get<double>();
 }
 
-TEST(SceneFluid, ASoftObjectsSurfaceHoldsThePoolAboveIt) {
+TEST(SceneFluid, ASoftObjectHoldsThePoolAndCarriesItsWeight) {
   dm::test::TempDir dir("scene_fluid_soft");
-  const json held = scene_run::runScene(poolOn(true, true), 0.3, dir.path() / "held");
+  const json held = scene_run::runScene(poolOn(true, true), 0.4, dir.path() / "held");
   ASSERT_TRUE(held.contains("physics")) << held.dump(2);
-  // A 2 cm pool (10 × 10 cm) over the slab's top at 2 cm: its centre 1 cm
-  // above the top (the slab sags under its own weight by a fraction of a
-  // millimetre; the fluid does not load it).
-  EXPECT_NEAR(centreHeight(held), 0.03, 0.001);
-  EXPECT_TRUE(scene_run::named(held["physics"]["fluids"], "water")["balanced"].get<bool>());
-  const json through = scene_run::runScene(poolOn(true, false), 0.3, dir.path() / "through");
-  EXPECT_LT(centreHeight(through), 0.02);  // through the tissue, toward the container's floor
+  // The syrup spreading on the slab's top at 2 cm (which sags under its own
+  // and the pool's weight by a fraction of a millimetre): its centre
+  // between the top and where it started (3 cm); none left the region.
+  EXPECT_GT(centreHeight(held), 0.02);
+  EXPECT_LT(centreHeight(held), 0.0301);
+  const json& fluid = scene_run::named(held["physics"]["fluids"], "water");
+  EXPECT_EQ(fluid["left_region_particles"], 0);
+  EXPECT_TRUE(fluid["balanced"].get<bool>());
+  // Two-way: the pool's weight rests on the tissue (its loads on the FEM
+  // nodes), so what holds the slab's fixed bottom carries both weights.
+  const json& slab = scene_run::named(held["physics"]["soft"], "floor");
+  const double pool = fluid["mass_kg"].get<double>() * 9.81, own = -slab["weight_N"][2].get<double>();
+  EXPECT_NEAR(slab["fluid_force_N"][2].get<double>(), -pool, 0.03 * pool);
+  EXPECT_NEAR(slab["held_force_N"][2].get<double>(), own + pool, 0.05 * pool) << slab.dump(2);
+  const json through = scene_run::runScene(poolOn(true, false), 0.4, dir.path() / "through");
+  // Through the tissue, out of the region: every particle recycled.
+  EXPECT_EQ(scene_run::named(through["physics"]["fluids"], "water")["particles"], 0);
 }
 
 TEST(SceneFluid, AStaticObjectIsAWallTheFluidRestsOn) {

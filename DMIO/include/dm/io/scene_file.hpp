@@ -696,8 +696,8 @@ struct SceneFluid {
   std::vector<SceneFluidInlet> inlets;
   std::vector<SceneFluidSuction> suction;
   /// Objects the fluid flows around, by name: a static one's surface is a
-  /// wall, a soft one's (tissue) deforms and pushes the fluid (one-way), a
-  /// dynamic one floats, sinks and is carried (two-way).
+  /// wall, a soft one's (tissue) deforms, pushes the fluid and bears its
+  /// loads, a dynamic one floats, sinks and is carried (both two-way).
   std::vector<std::string> objects;
 
   bool operator==(const SceneFluid&) const = default;
