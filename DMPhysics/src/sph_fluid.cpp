@@ -171,13 +171,8 @@ Result<std::size_t> SphFluid::addRigidBoundary(std::span<const Vec3> bodyPoints,
   body.local.assign(bodyPoints.begin(), bodyPoints.end());
   body.first = rx_.size();
   body.pose = pose;
-  rx_.resize(rx_.size() + bodyPoints.size());
-  rpsi_.resize(rx_.size());
-  rimp_.resize(rx_.size(), Vec3::Zero());
   rigid_.push_back(std::move(body));
-  boundaryDirty_ = true;
-  rho_.clear();
-  layOutBoundaryVelocities();
+  addMoving(bodyPoints.size());
   // Ψ from the body's own particles (it keeps its shape, so once).
   ownVolumes(rigid_.back().first, bodyPoints.size());
   return rigid_.size() - 1;
@@ -201,13 +196,9 @@ Result<std::size_t> SphFluid::addSurfaceBoundary(BoundarySurface samples, std::s
   surface.velocities.assign(n, Vec3::Zero());
   surface.impulse.assign(n, Vec3::Zero());
   surface.load.assign(n, Vec3::Zero());
-  rx_.resize(rx_.size() + surface.samples.size());
-  rpsi_.resize(rx_.size());
-  rimp_.resize(rx_.size(), Vec3::Zero());
+  const std::size_t count = surface.samples.size();
   surfaces_.push_back(std::move(surface));
-  boundaryDirty_ = true;
-  rho_.clear();
-  layOutBoundaryVelocities();
+  addMoving(count);
   return surfaces_.size() - 1;
 }
 
@@ -250,6 +241,15 @@ Status SphFluid::setRigidState(std::size_t body, const Isometry3& pose, const Ve
   placeRigid(body);
   boundaryMoved_ = true;  // neighbours and densities again at the next step
   return ok();
+}
+
+void SphFluid::addMoving(std::size_t count) {
+  rx_.resize(rx_.size() + count);
+  rpsi_.resize(rx_.size());
+  rimp_.resize(rx_.size(), Vec3::Zero());
+  boundaryDirty_ = true;
+  rho_.clear();
+  layOutBoundaryVelocities();  // places the new owner's particles too
 }
 
 void SphFluid::layOutBoundaryVelocities() {

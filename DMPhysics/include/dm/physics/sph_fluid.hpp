@@ -246,6 +246,7 @@ class SphFluid {
   void nonPressure(double dt);
   int pressureSolve(double dt, bool density);
   double subStep(double dt);  // returns the dt it took
+  void addMoving(std::size_t count);       // room for the last added body's or surface's particles
   void layOutBoundaryVelocities();         // bv_ for the boundary as it is now
   void placeRigid(std::size_t body);       // its particles' positions and velocities from its state
   void placeSurface(std::size_t surface);  // its samples' positions, velocities and Ψ from its vertices
