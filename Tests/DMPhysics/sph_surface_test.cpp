@@ -29,15 +29,8 @@ constexpr int kCells = 12;  // the floor's grid (a spacing per cell)
 
 // A square floor [0, L]² at z = 0 facing up (the fluid above it).
 dm::Mesh floorMesh() {
-  dm::Mesh m;
-  for (int j = 0; j <= kCells; ++j)
-    for (int i = 0; i <= kCells; ++i) m.positions.emplace_back(kL * i / kCells, kL * j / kCells, 0.0);
-  const auto at = [](int i, int j) { return std::uint32_t(j * (kCells + 1) + i); };
-  for (int j = 0; j < kCells; ++j)
-    for (int i = 0; i < kCells; ++i) {
-      m.triangles.push_back({at(i, j), at(i + 1, j), at(i + 1, j + 1)});
-      m.triangles.push_back({at(i, j), at(i + 1, j + 1), at(i, j + 1)});
-    }
+  dm::Mesh m = dm::makePlane(0.5 * kL, 0.5 * kL, kCells);
+  for (Vec3& p : m.positions) p += Vec3(0.5 * kL, 0.5 * kL, 0.0);
   return m;
 }
 
