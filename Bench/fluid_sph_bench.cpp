@@ -1,7 +1,10 @@
 // fluid_sph_bench — the particle fluid (dm::SphFluid, DFSPH) and its
 // neighbour search (dm::NeighborGrid) against nanoflann's k-d tree.
 //
-//   fluid_sph_bench [steps]
+//   fluid_sph_bench [steps [particles ...]]
+//
+// With particle counts, only the step rows for those counts (a quicker
+// measure of one size while tuning).
 //
 // Neighbour rows: a settled-looking fluid block (a lattice of spacing d with
 // a ±0.2 d jitter, seed 1) of 10k, 50k and 200k particles; all pairs within
@@ -118,10 +121,10 @@ void neighbourRows() {
   }
 }
 
-void stepRows(int steps) {
+void stepRows(int steps, const std::vector<std::size_t>& targets) {
   std::printf("\n%-28s %10s %8s %12s %10s %12s\n", "DFSPH dam break, 2 ms steps", "particles", "threads",
               "steps/s", "sub-steps", "iterations");
-  for (std::size_t target : {10000u, 50000u, 200000u}) {
+  for (std::size_t target : targets) {
     for (int threads : {1, 2}) {
       const double d = 0.005;
       auto made = dm::SphFluid::create({.particleSpacing = d, .viscosity = 1e-6});
@@ -164,7 +167,19 @@ void stepRows(int steps) {
 
 int main(int argc, char** argv) {
   const int steps = argc > 1 ? std::max(1, std::atoi(argv[1])) : 20;
-  neighbourRows();
-  stepRows(steps);
+  std::vector<std::size_t> targets;
+  for (int a = 2; a < argc; ++a) {
+    const long n = std::atol(argv[a]);
+    if (n < 100) {
+      std::fprintf(stderr, "fluid_sph_bench: particle count '%s' is not a number of 100 or more\n", argv[a]);
+      return 2;
+    }
+    targets.push_back(std::size_t(n));
+  }
+  if (targets.empty()) {
+    neighbourRows();
+    targets = {10000, 50000, 200000};
+  }
+  stepRows(steps, targets);
   return 0;
 }

@@ -446,8 +446,9 @@ void SphFluid::nonPressure(double dt) {
     }
   });
   if (nu > 0.0 && !rx_.empty()) viscousReaction(dt);
-  double* Vw = coords(v_);
-  for (std::size_t k = 0; k < 3 * nf; ++k) Vw[k] += dt * A[k];
+  parallelFor(0, nf, kGrain, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) v_[i] += dt * a_[i];
+  });
 }
 
 // Every pair of a fluid particle and a moving boundary particle, serially
@@ -526,12 +527,11 @@ int SphFluid::pressureSolve(double dt, bool density) {
   error_.resize(nf);
   kappaSum_.assign(nf, 0.0);
   // Δv_i = −dt Σ_j m (κ_i/ρ_i + κ_j/ρ_j) ∇W_ij (a boundary: κ_i/ρ_i alone).
+  // The passes read κ/ρ of the neighbours (set with κ, one array) and write
+  // only their own particle's entries, so each runs in one parallel loop.
   double* V = coords(v_);
-  double* A = coords(a_);
   const double* BV = coords(bv_);
   const auto apply = [&] {
-    // κ/ρ per particle first: the pairs then read one array.
-    for (std::size_t i = 0; i < nf; ++i) kappaOverRho_[i] = kappa_[i] / rho_[i];
     parallelFor(0, nf, kGrain, [&](std::size_t b, std::size_t e) {
       for (std::size_t i = b; i < e; ++i) {
         const double ki = kappaOverRho_[i];
@@ -544,15 +544,19 @@ int SphFluid::pressureSolve(double dt, bool density) {
           dz += k * g[2];
           g += 3;
         }
-        A[3 * i] = -dt * dx;
-        A[3 * i + 1] = -dt * dy;
-        A[3 * i + 2] = -dt * dz;
+        V[3 * i] += -dt * dx;
+        V[3 * i + 1] += -dt * dy;
+        V[3 * i + 2] += -dt * dz;
+        kappaSum_[i] += kappa_[i];
       }
     });
-    for (std::size_t k = 0; k < 3 * nf; ++k) V[k] += A[k];
-    for (std::size_t i = 0; i < nf; ++i) kappaSum_[i] += kappa_[i];
   };
-  for (std::size_t i = 0; i < nf; ++i) kappa_[i] = kWarmShare * warm[i] / keep;
+  parallelFor(0, nf, kGrain, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) {
+      kappa_[i] = kWarmShare * warm[i] / keep;
+      kappaOverRho_[i] = kappa_[i] / rho_[i];
+    }
+  });
   apply();
   int it = 0;
   double err = 0.0;
@@ -582,6 +586,7 @@ int SphFluid::pressureSolve(double dt, bool density) {
           error_[i] = dt * drho / rho0;
           kappa_[i] = o_.relaxation * drho * alpha_[i] / dt;
         }
+        kappaOverRho_[i] = kappa_[i] / rho_[i];
       }
     });
     err = serialMean(error_, nf);
@@ -607,7 +612,9 @@ double SphFluid::subStep(double dt) {
   p_.assign(nf, 0.0);
   nonPressure(dt);
   stats_.densityIterations += pressureSolve(dt, true);
-  for (std::size_t i = 0; i < nf; ++i) x_[i] += dt * v_[i];
+  parallelFor(0, nf, kGrain, [&](std::size_t b, std::size_t e) {
+    for (std::size_t i = b; i < e; ++i) x_[i] += dt * v_[i];
+  });
   moveBoundaries(dt);
   neighbours();
   densitiesAndFactors();
