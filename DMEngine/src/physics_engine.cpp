@@ -157,6 +157,7 @@ struct PhysicsEngine::Impl {
   WorldState state;
   bool sleep = false;
   std::vector<Body> bodies;             // by body index
+  std::vector<std::string> joints;      // the scene's joint names, by joint index
   std::vector<std::uint32_t> moving;    // dynamic bodies, scene order
   std::vector<int> touchedBody;         // per touched object: body index, or -1 (never moves)
   std::vector<Isometry3> touchedPoses;  // published to the haptic loop
@@ -241,6 +242,37 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
       return s.error().within(where + "/contact");
     if (o.dynamic) m->moving.push_back(id->index);
     m->bodies.push_back({o.name, *id, o.dynamic, g->objectInBody, d.position});
+  }
+
+  // Joints ("joints"), between the bodies just added or to the world, from
+  // their initial poses.
+  for (const SceneJoint& j : cfg.joints) {
+    const std::string where = "engines/physics/joints/" + j.name;
+    const auto bodyOf = [&](const std::string& name) -> Result<BodyId> {
+      for (const Impl::Body& b : m->bodies)
+        if (b.object == name) return b.id;
+      return fail(ErrorCode::NotFound, "object \"" + name + "\" is not a body of the physics world", where);
+    };
+    JointDesc d;
+    d.type = j.type == SceneJoint::Type::Ball     ? JointType::Ball
+             : j.type == SceneJoint::Type::Hinge  ? JointType::Hinge
+             : j.type == SceneJoint::Type::Slider ? JointType::Slider
+                                                  : JointType::Fixed;
+    auto a = bodyOf(j.a);
+    if (!a) return a.error();
+    d.a = *a;
+    if (!j.b.empty()) {
+      auto b = bodyOf(j.b);
+      if (!b) return b.error();
+      d.b = *b;
+    }
+    d.anchor = j.anchor;
+    d.axis = j.axis;
+    d.limitEnabled = j.limited;
+    d.lower = j.lower;
+    d.upper = j.upper;
+    if (auto id = m->world.addJoint(d); !id) return id.error().within(where);
+    m->joints.push_back(j.name);
   }
 
   // The haptic side: touched objects that move get their poses from here
@@ -465,8 +497,32 @@ nlohmann::json PhysicsEngine::summary() const {
         j["tool_impulse_Ns"] = engine_json::vec3(m.tools->taken(k).linear);
     bodies.push_back(std::move(j));
   }
+  // Each joint's anchors on its two bodies, apart by what the solver left
+  // (a slider's by its travel along the axis too, reported apart).
+  const auto rotationOf = [&](int body) -> Quat {
+    return body == kWorldBody ? Quat::Identity() : m.state.orientation(m.bodies[std::size_t(body)].id);
+  };
+  const auto anchorInWorld = [&](int body, const Vec3& anchor) -> Vec3 {
+    return body == kWorldBody
+               ? anchor
+               : Vec3(m.state.position(m.bodies[std::size_t(body)].id) + rotationOf(body) * anchor);
+  };
+  Json joints = Json::array();
+  for (std::size_t k = 0; k < m.joints.size(); ++k) {
+    const Joint& jt = m.state.joints()[k];
+    Vec3 gap = anchorInWorld(jt.bodyB, jt.anchorB) - anchorInWorld(jt.bodyA, jt.anchorA);
+    Json j = {{"name", m.joints[k]}};
+    if (jt.type == JointType::Slider) {
+      const Vec3 axis = rotationOf(jt.bodyA) * jt.axisA;
+      j["travel_m"] = axis.dot(gap);
+      gap -= axis.dot(gap) * axis;
+    }
+    j["anchor_gap_m"] = gap.norm();
+    joints.push_back(std::move(j));
+  }
   return {{"steps", m.steps},
           {"bodies", std::move(bodies)},
+          {"joints", std::move(joints)},
           {"static_bodies", m.bodies.size() - m.moving.size()},
           {"contacts", m.state.contacts().size()},
           {"soft", m.soft->summary()},

@@ -973,11 +973,12 @@ class SceneParser {
     sec.knownKeys({"haptics", "physics", "render", "monitor", "igtl", "vision"});
     hapticsEngine(sec.child("haptics"));
     if (ConfigReader r = sec.child("physics"); expectObject(r)) {
-      r.knownKeys({"rate_hz", "gravity", "sleep"});
+      r.knownKeys({"rate_hz", "gravity", "sleep", "joints"});
       ScenePhysicsEngine p;
       p.rateHz = r.number("rate_hz", {.min = 10.0, .max = 10000.0}, p.rateHz);
       p.gravity = readVec3(r, "gravity", p.gravity);
       if (v2Key(r, "sleep")) p.sleep = r.boolean("sleep");
+      if (v2Key(r, "joints")) readJoints(r, p, scene_);
       scene_.engines.physics = p;
     }
     if (ConfigReader r = sec.child("render"); expectObject(r)) {
@@ -1395,8 +1396,10 @@ Json toJson(const SceneDesc& scene) {
     engines["haptics"].erase("force_shading");
     writeBonePlacement(*scene.engines.haptics->bonePlacement, engines["haptics"]);
   }
-  if (const auto& p = scene.engines.physics)
+  if (const auto& p = scene.engines.physics) {
     engines["physics"] = {{"rate_hz", p->rateHz}, {"gravity", toJson(p->gravity)}, {"sleep", p->sleep}};
+    if (!p->joints.empty()) engines["physics"]["joints"] = jointsJson(p->joints);
+  }
   if (const auto& r = scene.engines.render) {
     engines["render"] = {{"rate_hz", r->rateHz},
                          {"width", r->width},

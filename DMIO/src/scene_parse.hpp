@@ -294,6 +294,10 @@ using SourceResolver =
     std::function<std::filesystem::path(ConfigReader&, const std::string&, std::string_view)>;
 void readScripts(ConfigReader& root, SceneDesc& scene, const SourceResolver& resolve);
 Json scriptsJson(const std::vector<SceneScript>& scripts);
+// The physics engine's "joints" (v2; scene_joints.cpp): read after the
+// objects, whose names they take.
+void readJoints(ConfigReader& physics, ScenePhysicsEngine& p, const SceneDesc& scene);
+Json jointsJson(const std::vector<SceneJoint>& joints);
 // "fluids" (v2; scene_fluid.cpp).
 void readFluids(ConfigReader& root, SceneDesc& scene);
 Json fluidsJson(const std::vector<SceneFluid>& fluids);

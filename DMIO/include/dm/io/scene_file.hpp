@@ -544,11 +544,31 @@ struct SceneHapticsEngine {
 /// The scene file's name of a haptic renderer ("god-object", "burr", …).
 std::string_view rendererName(SceneHapticsEngine::Renderer renderer) noexcept;
 
+/// A joint of the physics engine's world (v2 "joints"; docs/scene-format.md,
+/// "Joints"; dm::JointDesc): object `a` held to object `b` (the world when
+/// `b` is empty) at `anchor`, built from the objects' initial poses. Both are
+/// rigid bodies of the world (dynamic, or static and colliding), one at
+/// least dynamic.
+struct SceneJoint {
+  enum class Type { Ball, Hinge, Slider, Fixed };
+  std::string name;
+  Type type = Type::Ball;
+  std::string a;               ///< an object's name
+  std::string b;               ///< an object's name, or empty: the world
+  Vec3 anchor = Vec3::Zero();  ///< m, world, at the initial poses
+  Vec3 axis = Vec3::UnitX();   ///< hinge and slider: unit, world
+  bool limited = false;        ///< hinge (rad) and slider (m): "limits" given
+  double lower = 0.0, upper = 0.0;
+
+  bool operator==(const SceneJoint&) const = default;
+};
+
 /// The physics engine.
 struct ScenePhysicsEngine {
   double rateHz = 1000.0;            ///< 10..10000
   Vec3 gravity{0.0, 0.0, -9.80665};  ///< m/s², world
   bool sleep = false;                ///< v2: bodies at rest fall asleep (dm::ContactSettings::sleep)
+  std::vector<SceneJoint> joints;    ///< v2
 
   bool operator==(const ScenePhysicsEngine&) const = default;
 };
