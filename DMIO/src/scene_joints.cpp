@@ -103,9 +103,9 @@ void readJoints(ConfigReader& physics, ScenePhysicsEngine& p, const SceneDesc& s
         r.addError("a joint holds two different bodies; \"a\" and \"b\" are both " + inQuotes(j.a), "b",
                    "leave \"b\" out to hold \"a\" to the world");
     }
-    const std::size_t before = r.errors().size();
-    if (scene.object(j.a) != nullptr && (j.b.empty() || scene.object(j.b) != nullptr) && !aMoves && !bMoves &&
-        before == typeErrors)
+    // Both bodies read without a problem (a missing or wrong one was named
+    // above), and neither moves.
+    if (r.errors().size() == typeErrors && !aMoves && !bMoves)
       r.addError("neither body moves: " + inQuotes(j.a) +
                      (j.b.empty() ? " and the world" : " and " + inQuotes(j.b)) + " are static",
                  "a", "join a dynamic object");
