@@ -1,6 +1,7 @@
-// physics_engine.cpp — the scene's rigid bodies on one dm::PhysicsWorld,
-// coupled to the haptic tool by impulses and poses, and its soft objects
-// (soft_tissue.hpp) (physics_engine.hpp).
+// physics_engine.cpp — the scene's rigid bodies on one dm::PhysicsWorld
+// (stepped by the built-in solver or by ODE, dm::OdeWorld, as the scene's
+// "backend" says), coupled to the haptic tool by impulses and poses, and its
+// soft objects (soft_tissue.hpp) (physics_engine.hpp).
 #include "physics_engine.hpp"
 
 #include <dm/collide/shapes.hpp>
@@ -9,12 +10,14 @@
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
 #include <dm/math/mass_properties.hpp>
+#include <dm/physics/ode_backend.hpp>
 #include <dm/physics/world.hpp>
 
 #include <algorithm>
 #include <array>
 #include <cmath>
 #include <numbers>
+#include <optional>
 
 #include "engine_json.hpp"
 #include "scene_fluids.hpp"
@@ -155,6 +158,7 @@ struct PhysicsEngine::Impl {
   };
   PhysicsWorld world;
   WorldState state;
+  std::optional<OdeWorld> ode;  // the "ode" backend: steps `state` instead of world.step
   bool sleep = false;
   std::vector<Body> bodies;             // by body index
   std::vector<std::string> joints;      // the scene's joint names, by joint index
@@ -303,6 +307,25 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
     buffer = std::make_unique<TripleBuffer<std::vector<Isometry3>>>(
         std::vector<Isometry3>(m->moving.size(), Isometry3::Identity()));
   m->state = m->world.makeState();
+  if (cfg.backend == ScenePhysicsEngine::Backend::Ode) {
+    // Bodies and joints are all in the world now; forces added later (the
+    // scripts') are evaluated from it at every step.
+    OdeOptions options{.iterations = cfg.ode.iterations,
+                       .erp = cfg.ode.erp,
+                       .cfm = cfg.ode.cfm,
+                       .maxContactsPerPair = cfg.ode.contactsPerPair,
+                       .surfaceLayer = cfg.ode.surfaceLayer};
+    auto ode = OdeWorld::create(m->world, options);
+    if (!ode) {
+      // Name the scene's object (the world names its body "bodies[i] 'name'").
+      Error e = ode.error();
+      e.where = "engines/physics/backend";
+      for (const Impl::Body& b : m->bodies)
+        if (ode.error().where.ends_with("'" + b.object + "'")) e.where = "objects/" + b.object;
+      return e;
+    }
+    m->ode = std::move(*ode);
+  }
   auto soft = SoftTissues::build(scene, resources);
   if (!soft) return soft.error();
   m->soft = std::move(*soft);
@@ -366,7 +389,7 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
     }
   }
   if (!m.moving.empty())  // (static bodies alone never move)
-    if (auto s = m.world.step(m.state, dt); !s) {
+    if (auto s = m.ode ? m.ode->step(m.state, dt) : m.world.step(m.state, dt); !s) {
       error_ = s.error().within("physics step " + std::to_string(m.steps));
       return false;
     }
@@ -466,9 +489,12 @@ bool PhysicsEngine::latestPoses(PoseReader reader, std::vector<Isometry3>& out) 
 nlohmann::json PhysicsEngine::summary() const {
   const Impl& m = *impl_;
   // Contact forces of the last step on each body: the solver's accumulated
-  // impulses over the step length (the normal pushes body B along +n).
+  // impulses over the step length (the normal pushes body B along +n), or
+  // ODE's joint feedback.
   std::vector<Vec3> contactForce(m.bodies.size(), Vec3::Zero());
-  if (m.lastDt > 0.0)
+  if (m.ode)
+    std::copy_n(m.ode->lastContactForces().begin(), contactForce.size(), contactForce.begin());
+  else if (m.lastDt > 0.0)
     for (const ContactConstraint& c : m.state.contacts()) {
       const Vec3 onB = (c.normalImpulse * c.point.normal + c.frictionImpulse) / m.lastDt;
       if (c.bodyB >= 0 && static_cast<std::size_t>(c.bodyB) < contactForce.size())
@@ -521,10 +547,11 @@ nlohmann::json PhysicsEngine::summary() const {
     joints.push_back(std::move(j));
   }
   return {{"steps", m.steps},
+          {"backend", m.ode ? "ode" : "builtin"},
           {"bodies", std::move(bodies)},
           {"joints", std::move(joints)},
           {"static_bodies", m.bodies.size() - m.moving.size()},
-          {"contacts", m.state.contacts().size()},
+          {"contacts", m.ode ? m.ode->lastContactCount() : m.state.contacts().size()},
           {"soft", m.soft->summary()},
           {"fluids", m.fluids->summary()}};
 }

@@ -973,12 +973,14 @@ class SceneParser {
     sec.knownKeys({"haptics", "physics", "render", "monitor", "igtl", "vision"});
     hapticsEngine(sec.child("haptics"));
     if (ConfigReader r = sec.child("physics"); expectObject(r)) {
-      r.knownKeys({"rate_hz", "gravity", "sleep", "joints"});
+      r.knownKeys({"rate_hz", "gravity", "sleep", "joints", "backend", "ode"});
       ScenePhysicsEngine p;
       p.rateHz = r.number("rate_hz", {.min = 10.0, .max = 10000.0}, p.rateHz);
       p.gravity = readVec3(r, "gravity", p.gravity);
       if (v2Key(r, "sleep")) p.sleep = r.boolean("sleep");
       if (v2Key(r, "joints")) readJoints(r, p, scene_);
+      const bool backendKey = v2Key(r, "backend"), odeKey = v2Key(r, "ode");
+      if (backendKey || odeKey) readPhysicsBackend(r, p);
       scene_.engines.physics = p;
     }
     if (ConfigReader r = sec.child("render"); expectObject(r)) {
@@ -1399,6 +1401,7 @@ Json toJson(const SceneDesc& scene) {
   if (const auto& p = scene.engines.physics) {
     engines["physics"] = {{"rate_hz", p->rateHz}, {"gravity", toJson(p->gravity)}, {"sleep", p->sleep}};
     if (!p->joints.empty()) engines["physics"]["joints"] = jointsJson(p->joints);
+    writePhysicsBackend(*p, engines["physics"]);
   }
   if (const auto& r = scene.engines.render) {
     engines["render"] = {{"rate_hz", r->rateHz},

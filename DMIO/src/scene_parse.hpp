@@ -298,6 +298,10 @@ Json scriptsJson(const std::vector<SceneScript>& scripts);
 // objects, whose names they take.
 void readJoints(ConfigReader& physics, ScenePhysicsEngine& p, const SceneDesc& scene);
 Json jointsJson(const std::vector<SceneJoint>& joints);
+// The physics engine's "backend" and "ode" settings (v2; scene_physics_backend.cpp),
+// read after "sleep", which the ODE backend refuses; written only when not the default.
+void readPhysicsBackend(ConfigReader& physics, ScenePhysicsEngine& p);
+void writePhysicsBackend(const ScenePhysicsEngine& p, Json& physics);
 // "fluids" (v2; scene_fluid.cpp).
 void readFluids(ConfigReader& root, SceneDesc& scene);
 Json fluidsJson(const std::vector<SceneFluid>& fluids);

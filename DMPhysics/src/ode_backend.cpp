@@ -6,8 +6,10 @@
 #include <ode/ode.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -32,6 +34,44 @@ Quat fromOde(const dReal* q) { return Quat(q[0], q[1], q[2], q[3]).normalized();
 
 Vec3 vec(const dReal* v) { return {v[0], v[1], v[2]}; }
 
+bool supported(ShapeType t, BodyKind kind) {
+  switch (t) {
+    case ShapeType::Sphere:
+    case ShapeType::Box:
+    case ShapeType::Capsule:
+    case ShapeType::Cylinder:
+    case ShapeType::ConvexHull:
+      return true;
+    case ShapeType::Plane:
+    case ShapeType::TriangleMesh:
+      return kind == BodyKind::Static;
+    default:
+      return false;
+  }
+}
+
+// A convex hull as ODE's dConvex takes it: one plane (n, n·v0) and one
+// polygon (3, i, j, k) per hull triangle, CCW from outside as dm::Mesh.
+// ODE keeps pointers into these arrays: they live as long as the geom.
+struct OdeConvex {
+  std::vector<dReal> planes, points;
+  std::vector<unsigned> polygons;
+};
+
+std::unique_ptr<OdeConvex> odeConvex(const ConvexHull& hull) {
+  auto c = std::make_unique<OdeConvex>();
+  const Mesh& m = hull.mesh();
+  for (const Vec3& p : m.positions) c->points.insert(c->points.end(), {p.x(), p.y(), p.z()});
+  for (std::size_t t = 0; t < m.triangles.size(); ++t) {
+    const Vec3 n = m.faceNormal(t);
+    if (n.isZero()) continue;  // a sliver of the hull's triangulation: its neighbours bound it
+    const Triangle& tri = m.triangles[t];
+    c->planes.insert(c->planes.end(), {n.x(), n.y(), n.z(), n.dot(m.positions[tri[0]])});
+    c->polygons.insert(c->polygons.end(), {3u, tri[0], tri[1], tri[2]});
+  }
+  return c;
+}
+
 }  // namespace
 
 struct OdeWorld::Impl {
@@ -44,6 +84,14 @@ struct OdeWorld::Impl {
   std::vector<double> masses;
   std::vector<Vec3> force, torque;
   std::vector<dContact> contacts;  // dCollide scratch, maxContactsPerPair entries
+  std::vector<std::unique_ptr<OdeConvex>> convexes;  // the hulls' arrays ODE points into
+  std::vector<dTriMeshDataID> meshData;              // the triangle meshes' (vertices: the world's meshes)
+  // Each contact joint's feedback, in blocks that never move (ODE keeps a
+  // pointer to each until the step is done); reused from step to step.
+  static constexpr std::size_t kFeedbackBlock = 64;
+  std::vector<std::unique_ptr<std::array<dJointFeedback, kFeedbackBlock>>> feedback;
+  std::vector<dJointID> contactJoints;  // this step's, in creation order
+  std::vector<Vec3> contactForce;       // per world body, the last step's contact force on it
   double restitutionThreshold = 0.2;
   std::size_t lastContacts = 0;
   bool initialised = false;
@@ -51,8 +99,21 @@ struct OdeWorld::Impl {
   ~Impl() {
     if (contactGroup) dJointGroupDestroy(contactGroup);
     if (space) dSpaceDestroy(space);  // destroys its geoms (cleanup mode on)
+    for (dTriMeshDataID d : meshData) dGeomTriMeshDataDestroy(d);
     if (odeWorld) dWorldDestroy(odeWorld);
     if (initialised) dCloseODE();
+  }
+
+  dJointFeedback* nextFeedback() {
+    const std::size_t k = contactJoints.size();
+    if (k / kFeedbackBlock >= feedback.size())
+      feedback.push_back(std::make_unique<std::array<dJointFeedback, kFeedbackBlock>>());
+    return &(*feedback[k / kFeedbackBlock])[k % kFeedbackBlock];
+  }
+
+  // The world-body index of an ODE body (its user data), or -1 for none.
+  static std::ptrdiff_t indexOf(dBodyID b) {
+    return b ? static_cast<std::ptrdiff_t>(reinterpret_cast<std::uintptr_t>(dBodyGetData(b))) : -1;
   }
 
   static void nearCallback(void* data, dGeomID g1, dGeomID g2) {
@@ -77,6 +138,8 @@ struct OdeWorld::Impl {
       c.surface.bounce_vel = self->restitutionThreshold;
       dJointID j = dJointCreateContact(self->odeWorld, self->contactGroup, &c);
       dJointAttach(j, b1, b2);
+      dJointSetFeedback(j, self->nextFeedback());
+      self->contactJoints.push_back(j);
       ++self->lastContacts;
     }
   }
@@ -88,6 +151,7 @@ OdeWorld& OdeWorld::operator=(OdeWorld&&) noexcept = default;
 OdeWorld::~OdeWorld() = default;
 
 std::size_t OdeWorld::lastContactCount() const noexcept { return impl_->lastContacts; }
+std::span<const Vec3> OdeWorld::lastContactForces() const noexcept { return impl_->contactForce; }
 const OdeOptions& OdeWorld::options() const noexcept { return impl_->options; }
 
 Result<OdeWorld> OdeWorld::create(const PhysicsWorld& world, const OdeOptions& options) {
@@ -103,19 +167,31 @@ Result<OdeWorld> OdeWorld::create(const PhysicsWorld& world, const OdeOptions& o
                 "OdeOptions::maxContactsPerPair", "give a value in [1, 64]");
   const std::span<const BodyDesc> bodies = world.bodies();
   // Check every shape first so that nothing is built for an unsupported scene.
+  std::ptrdiff_t hull = -1, triangles = -1;  // a body of each kind, if any
   for (std::size_t i = 0; i < bodies.size(); ++i) {
     const BodyDesc& d = bodies[i];
     if (!d.shape || !world.material(BodyId{static_cast<std::uint32_t>(i)}).collides) continue;
     const ShapeType t = d.shape->type();
-    const bool ok = t == ShapeType::Sphere || t == ShapeType::Box || t == ShapeType::Capsule ||
-                    (t == ShapeType::Plane && d.kind == BodyKind::Static);
-    if (!ok)
+    if (!supported(t, d.kind))
       return fail(ErrorCode::Unsupported,
                   "the ODE backend cannot take a " + std::string(shapeTypeName(t)) + " shape" +
-                      (t == ShapeType::Plane ? " on a moving body" : ""),
+                      (t == ShapeType::Plane || t == ShapeType::TriangleMesh ? " on a moving body" : ""),
                   bodyName(i, d.name),
-                  "use sphere, box or capsule shapes (planes on static bodies), or the built-in solver");
+                  "use sphere, box, capsule, cylinder or convex hull shapes (planes and triangle meshes on "
+                  "static bodies), or the built-in solver");
+    if (t == ShapeType::ConvexHull && hull < 0) hull = static_cast<std::ptrdiff_t>(i);
+    if (t == ShapeType::TriangleMesh && triangles < 0) triangles = static_cast<std::ptrdiff_t>(i);
   }
+  // ODE 0.16 as Debian builds it (without libccd) has no convex–triangle-mesh
+  // collider: dCollide on such a pair crashes in OPCODE. Refuse the world.
+  if (hull >= 0 && triangles >= 0)
+    return fail(ErrorCode::Unsupported,
+                "the ODE backend cannot collide a convex hull with a triangle mesh (" +
+                    bodyName(std::size_t(hull), bodies[std::size_t(hull)].name) + " and " +
+                    bodyName(std::size_t(triangles), bodies[std::size_t(triangles)].name) + ")",
+                bodyName(std::size_t(hull), bodies[std::size_t(hull)].name),
+                "give the moving body a primitive shape, turn off one body's collisions, or use the built-in "
+                "solver");
 
   auto impl = std::make_unique<Impl>();
   dInitODE2(0);
@@ -141,6 +217,7 @@ Result<OdeWorld> OdeWorld::create(const PhysicsWorld& world, const OdeOptions& o
   impl->masses.resize(n);
   impl->force.assign(n, Vec3::Zero());
   impl->torque.assign(n, Vec3::Zero());
+  impl->contactForce.assign(n, Vec3::Zero());
   for (std::size_t i = 0; i < n; ++i) {
     const BodyDesc& d = bodies[i];
     impl->masses[i] = d.mass;
@@ -158,6 +235,7 @@ Result<OdeWorld> OdeWorld::create(const PhysicsWorld& world, const OdeOptions& o
       dBodySetPosition(b, d.position.x(), d.position.y(), d.position.z());
       dBodySetQuaternion(b, q);
       dBodySetGyroscopicMode(b, 1);
+      dBodySetData(b, reinterpret_cast<void*>(static_cast<std::uintptr_t>(i)));
       impl->body[i] = b;
     }
     if (!d.shape || !world.material(BodyId{static_cast<std::uint32_t>(i)}).collides) continue;
@@ -175,6 +253,29 @@ Result<OdeWorld> OdeWorld::create(const PhysicsWorld& world, const OdeOptions& o
       case ShapeType::Capsule: {
         const auto& c = static_cast<const Capsule&>(s);
         g = dCreateCapsule(impl->space, c.radius(), 2.0 * c.halfLength());
+        break;
+      }
+      case ShapeType::Cylinder: {  // both along local z
+        const auto& c = static_cast<const Cylinder&>(s);
+        g = dCreateCylinder(impl->space, c.radius(), 2.0 * c.halfLength());
+        break;
+      }
+      case ShapeType::ConvexHull: {
+        auto c = odeConvex(static_cast<const ConvexHull&>(s));
+        g = dCreateConvex(impl->space, c->planes.data(), static_cast<unsigned>(c->planes.size() / 4),
+                          c->points.data(), static_cast<unsigned>(c->points.size() / 3), c->polygons.data());
+        impl->convexes.push_back(std::move(c));
+        break;
+      }
+      case ShapeType::TriangleMesh: {  // static (checked above); the world keeps the mesh alive
+        const Mesh& m = *static_cast<const TriangleMesh&>(s).mesh();
+        static_assert(sizeof(Triangle) == 3 * sizeof(dTriIndex) && sizeof(Vec3) == 3 * sizeof(double));
+        dTriMeshDataID data = dGeomTriMeshDataCreate();
+        impl->meshData.push_back(data);
+        dGeomTriMeshDataBuildDouble(data, m.positions.data(), sizeof(Vec3),
+                                    static_cast<int>(m.positions.size()), m.triangles.data(),
+                                    static_cast<int>(3 * m.triangles.size()), sizeof(Triangle));
+        g = dCreateTriMesh(impl->space, data, nullptr, nullptr, nullptr);
         break;
       }
       default: {  // a plane on a static body (checked above): world-frame a·x = d
@@ -296,8 +397,24 @@ Status OdeWorld::step(WorldState& state, double dt) {
   }
 
   im.lastContacts = 0;
+  im.contactJoints.clear();
   dSpaceCollide(im.space, &im, &Impl::nearCallback);
+  // dWorldQuickStep orders its constraints at random from ODE's one global
+  // generator: seeded from the step count, a step depends on the state
+  // alone (reruns and restored snapshots are bit-identical).
+  dRandSetSeed(0x9E3779B97F4A7C15ull * (s.stepCount + 1) >> 32);
   dWorldQuickStep(im.odeWorld, dt);
+  // Each contact's force on its two bodies (ODE's feedback: f1 on the
+  // joint's first body, f2 on its second; a static side has none).
+  std::fill(im.contactForce.begin(), im.contactForce.end(), Vec3::Zero());
+  for (std::size_t k = 0; k < im.contactJoints.size(); ++k) {
+    const dJointFeedback& f = (*im.feedback[k / Impl::kFeedbackBlock])[k % Impl::kFeedbackBlock];
+    const dJointID j = im.contactJoints[k];
+    if (const std::ptrdiff_t a = Impl::indexOf(dJointGetBody(j, 0)); a >= 0)
+      im.contactForce[std::size_t(a)] += vec(f.f1);
+    if (const std::ptrdiff_t b = Impl::indexOf(dJointGetBody(j, 1)); b >= 0)
+      im.contactForce[std::size_t(b)] += vec(f.f2);
+  }
   dJointGroupEmpty(im.contactGroup);
 
   for (std::size_t i = 0; i < n; ++i) {

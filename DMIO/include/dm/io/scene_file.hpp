@@ -565,10 +565,27 @@ struct SceneJoint {
 
 /// The physics engine.
 struct ScenePhysicsEngine {
+  /// v2 "backend": what steps the rigid bodies and joints — the built-in
+  /// contact solver ("builtin") or the Open Dynamics Engine ("ode",
+  /// dm::OdeWorld). Soft objects and fluids are stepped as they are either way.
+  enum class Backend { BuiltIn, Ode };
+  /// v2 "ode": ODE's settings (dm::OdeOptions), with the "ode" backend only.
+  struct Ode {
+    int iterations = 20;        ///< dWorldQuickStep iterations, 1..1000
+    double erp = 0.2;           ///< error reduction, (0, 1]
+    double cfm = 1e-9;          ///< constraint force mixing, 0..1
+    int contactsPerPair = 4;    ///< 1..64
+    double surfaceLayer = 0.0;  ///< m, 0..0.01: contacts sink this deep uncorrected (ODE's default 0)
+
+    bool operator==(const Ode&) const = default;
+  };
+
   double rateHz = 1000.0;            ///< 10..10000
   Vec3 gravity{0.0, 0.0, -9.80665};  ///< m/s², world
-  bool sleep = false;                ///< v2: bodies at rest fall asleep (dm::ContactSettings::sleep)
+  bool sleep = false;  ///< v2: bodies at rest fall asleep (dm::ContactSettings::sleep); built-in only
   std::vector<SceneJoint> joints;    ///< v2
+  Backend backend = Backend::BuiltIn;  ///< v2
+  Ode ode;                             ///< v2
 
   bool operator==(const ScenePhysicsEngine&) const = default;
 };

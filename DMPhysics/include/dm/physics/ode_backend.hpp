@@ -5,9 +5,12 @@
 // An OdeWorld mirrors a PhysicsWorld model when it is created: every
 // particle and rigid body becomes an ODE body (mass, body-frame inertia about
 // the centre of mass), every shape an ODE geom at the body's shapeOffset
-// (sphere, box, capsule; planes on static bodies only), static bodies become
-// body-less geoms, joints (ball, hinge, slider, fixed, with limits) ODE
-// joints, and the contact materials ODE contact surfaces (friction √(μa·μb)
+// (sphere, box, capsule, cylinder, convex hull as dConvex; planes and
+// triangle meshes (OPCODE) on static bodies only; a convex hull and a
+// triangle mesh in one world are refused: ODE 0.16 as Debian builds it has
+// no collider for that pair), static bodies become body-less geoms, joints
+// (ball, hinge, slider, fixed, with limits) ODE joints, and the contact
+// materials ODE contact surfaces (friction √(μa·μb)
 // with the friction pyramid scaled by the normal force, dContactApprox1;
 // restitution max(ea, eb) above the solver's restitution threshold), exactly
 // as the built-in pipeline combines them. Forces — gravity and every other
@@ -21,10 +24,16 @@
 // every step copies its poses and velocities into ODE, steps, and copies the
 // result back (time, stepCount, bounds updated), so snapshots, stateHash
 // and setBodyState work the same. ODE keeps no state between steps that
-// the WorldState does not hold (ODE has no warm starting across steps).
+// the WorldState does not hold (ODE has no warm starting across steps), and
+// the random order of dWorldQuickStep's constraints is seeded from the
+// state's step count: the same state steps to the same bits (ODE's
+// generator is global: step one OdeWorld at a time).
+// The contact forces of the last step come from ODE's joint feedback
+// (lastContactForces); WorldState::contacts() stays empty on this backend.
 //
 // ODE headers never appear here; the library is linked privately. Not
-// real-time code: ODE's contact joints allocate from its joint group.
+// real-time code: ODE's contact joints allocate from its joint group (the
+// group and the feedback blocks keep their memory from step to step).
 //
 // @code
 //   auto ode = dm::OdeWorld::create(world, {.iterations = 20});
@@ -38,6 +47,7 @@
 #include <dm/physics/world.hpp>
 
 #include <memory>
+#include <span>
 
 namespace dm {
 
@@ -54,12 +64,15 @@ struct OdeOptions {
 
 /// A PhysicsWorld's rigid-body scene on ODE (see the file comment).
 /// Movable, not copyable; the PhysicsWorld must outlive it and must not get
-/// new bodies, joints or forces afterwards (create a new OdeWorld then).
+/// new bodies or joints afterwards (create a new OdeWorld then). Forces may
+/// be added later: they are evaluated from the world at every step.
 class OdeWorld {
  public:
   /// Builds the ODE mirror of `world`. Fails with Unsupported, naming the
   /// body ("bodies[2] 'tube'") and the shape type, for shapes ODE cannot
-  /// take (anything but sphere, box, capsule, and plane on static bodies),
+  /// take (anything but sphere, box, capsule, cylinder, convex hull, and
+  /// plane or triangle mesh on static bodies) and for a world with both a
+  /// convex hull and a triangle mesh,
   /// with InvalidArgument for bad options (naming the field). O(bodies +
   /// joints).
   /// @code
@@ -87,6 +100,10 @@ class OdeWorld {
 
   /// Contact joints ODE created in the last step.
   std::size_t lastContactCount() const noexcept;
+  /// Per world body: the sum of the last step's contact forces on it (N,
+  /// world; ODE's joint feedback), zero for static bodies and before the
+  /// first step.
+  std::span<const Vec3> lastContactForces() const noexcept;
   /// The options in effect.
   const OdeOptions& options() const noexcept;
 
