@@ -12,6 +12,7 @@
 #include <dm/math/mass_properties.hpp>
 #include <dm/physics/ode_backend.hpp>
 #include <dm/physics/world.hpp>
+#include <dm/physics/world_report.hpp>
 
 #include <algorithm>
 #include <array>
@@ -494,14 +495,8 @@ nlohmann::json PhysicsEngine::summary() const {
   std::vector<Vec3> contactForce(m.bodies.size(), Vec3::Zero());
   if (m.ode)
     std::copy_n(m.ode->lastContactForces().begin(), contactForce.size(), contactForce.begin());
-  else if (m.lastDt > 0.0)
-    for (const ContactConstraint& c : m.state.contacts()) {
-      const Vec3 onB = (c.normalImpulse * c.point.normal + c.frictionImpulse) / m.lastDt;
-      if (c.bodyB >= 0 && static_cast<std::size_t>(c.bodyB) < contactForce.size())
-        contactForce[c.bodyB] += onB;
-      if (c.bodyA >= 0 && static_cast<std::size_t>(c.bodyA) < contactForce.size())
-        contactForce[c.bodyA] -= onB;
-    }
+  else
+    addContactForces(m.state, m.lastDt, contactForce);
   Json bodies = Json::array();
   for (std::size_t b = 0; b < m.bodies.size(); ++b) {
     const Impl::Body& body = m.bodies[b];
@@ -525,25 +520,12 @@ nlohmann::json PhysicsEngine::summary() const {
   }
   // Each joint's anchors on its two bodies, apart by what the solver left
   // (a slider's by its travel along the axis too, reported apart).
-  const auto rotationOf = [&](int body) -> Quat {
-    return body == kWorldBody ? Quat::Identity() : m.state.orientation(m.bodies[std::size_t(body)].id);
-  };
-  const auto anchorInWorld = [&](int body, const Vec3& anchor) -> Vec3 {
-    return body == kWorldBody
-               ? anchor
-               : Vec3(m.state.position(m.bodies[std::size_t(body)].id) + rotationOf(body) * anchor);
-  };
   Json joints = Json::array();
   for (std::size_t k = 0; k < m.joints.size(); ++k) {
-    const Joint& jt = m.state.joints()[k];
-    Vec3 gap = anchorInWorld(jt.bodyB, jt.anchorB) - anchorInWorld(jt.bodyA, jt.anchorA);
+    const JointGap g = jointGap(m.state, k);
     Json j = {{"name", m.joints[k]}};
-    if (jt.type == JointType::Slider) {
-      const Vec3 axis = rotationOf(jt.bodyA) * jt.axisA;
-      j["travel_m"] = axis.dot(gap);
-      gap -= axis.dot(gap) * axis;
-    }
-    j["anchor_gap_m"] = gap.norm();
+    if (m.state.joints()[k].type == JointType::Slider) j["travel_m"] = g.travel;
+    j["anchor_gap_m"] = g.gap;
     joints.push_back(std::move(j));
   }
   return {{"steps", m.steps},
