@@ -22,6 +22,7 @@
 
 #include "engine_json.hpp"
 #include "scene_fluids.hpp"
+#include "scene_membranes.hpp"
 #include "script_engine.hpp"
 #include "soft_tissue.hpp"
 
@@ -178,6 +179,8 @@ struct PhysicsEngine::Impl {
   std::vector<Vec3> scriptForce, scriptTorque;
   std::size_t punctures = 0;
   std::unique_ptr<SoftTissues> soft;    // the soft objects, stepped after the rigid bodies
+  std::unique_ptr<SceneMembranes> membranes;  // then the membranes
+  std::vector<std::string> drawnDeformed;     // soft objects, then membranes
   std::unique_ptr<SceneFluids> fluids;  // the fluids, stepped after them
   std::vector<FluidBody> fluidBodies;   // the dynamic bodies as the fluids see them (moving order)
   std::vector<Vec3> fluidForce, fluidTorque;  // per body: what the fluids did over the last step, held
@@ -330,6 +333,11 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
   auto soft = SoftTissues::build(scene, resources);
   if (!soft) return soft.error();
   m->soft = std::move(*soft);
+  auto membranes = SceneMembranes::build(scene, resources);
+  if (!membranes) return membranes.error();
+  m->membranes = std::move(*membranes);
+  m->drawnDeformed = m->soft->names();
+  m->drawnDeformed.insert(m->drawnDeformed.end(), m->membranes->names().begin(), m->membranes->names().end());
   for (std::uint32_t b : m->moving) {
     FluidBody link{.object = m->bodies[b].object, .objectInBody = m->bodies[b].objectInBody};
     link.pose = m->bodyPose(b);
@@ -395,6 +403,10 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
       return false;
     }
   if (auto s = m.soft->step(dt); !s) {
+    error_ = s.error().within("physics step " + std::to_string(m.steps));
+    return false;
+  }
+  if (auto s = m.membranes->step(dt); !s) {
     error_ = s.error().within("physics step " + std::to_string(m.steps));
     return false;
   }
@@ -473,12 +485,17 @@ bool PhysicsEngine::latestFluidParticles(std::size_t i, std::vector<Vec3>& out) 
   return impl_->fluids->latestParticles(i, out);
 }
 
-std::string PhysicsEngine::layerName(std::size_t i, int layer) const { return impl_->soft->layerName(i, layer); }
+std::string PhysicsEngine::layerName(std::size_t i, int layer) const {
+  return i < impl_->soft->names().size() ? impl_->soft->layerName(i, layer) : std::string();
+}
 
-const std::vector<std::string>& PhysicsEngine::softObjects() const noexcept { return impl_->soft->names(); }
+const std::vector<std::string>& PhysicsEngine::softObjects() const noexcept { return impl_->drawnDeformed; }
 HapticTissue* PhysicsEngine::tissue(std::string_view object) noexcept { return impl_->soft->tissue(object); }
 HapticRenderer* PhysicsEngine::needleRenderer() noexcept { return impl_->soft->needle(); }
-bool PhysicsEngine::latestSurface(std::size_t i, Mesh& out) { return impl_->soft->latestSurface(i, out); }
+bool PhysicsEngine::latestSurface(std::size_t i, Mesh& out) {
+  const std::size_t soft = impl_->soft->names().size();
+  return i < soft ? impl_->soft->latestSurface(i, out) : impl_->membranes->latestSurface(i - soft, out);
+}
 
 bool PhysicsEngine::latestPoses(PoseReader reader, std::vector<Isometry3>& out) {
   TripleBuffer<std::vector<Isometry3>>& buffer = *impl_->readerPoses[static_cast<std::size_t>(reader)];
@@ -535,6 +552,7 @@ nlohmann::json PhysicsEngine::summary() const {
           {"static_bodies", m.bodies.size() - m.moving.size()},
           {"contacts", m.ode ? m.ode->lastContactCount() : m.state.contacts().size()},
           {"soft", m.soft->summary()},
+          {"membranes", m.membranes->summary()},
           {"fluids", m.fluids->summary()}};
 }
 

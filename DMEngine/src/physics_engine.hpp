@@ -1,11 +1,12 @@
 // physics_engine.hpp (private) — the physics engine of a scene run: the
 // scene's objects as rigid bodies of one dm::PhysicsWorld (dynamic objects
-// move, the others are static colliders), stepped at the engine's rate, with
-// the haptic tool's impulses applied and the new poses handed on; and its
-// soft objects as FEM bodies (soft_tissue.hpp), stepped after the rigid
-// bodies at the same rate, pressed by the god-object through their
-// HapticTissue and drawn deformed; and its fluids (scene_fluids.hpp),
-// stepped last.
+// move, the others are static colliders), stepped at the engine's rate by
+// the built-in solver or by ODE (dm::OdeWorld), with the haptic tool's
+// impulses applied and the new poses handed on; and its soft objects as FEM
+// bodies (soft_tissue.hpp), stepped after the rigid bodies at the same rate,
+// pressed by the god-object through their HapticTissue and drawn deformed;
+// its membranes as mass–spring bodies (scene_membranes.hpp), stepped next
+// and drawn deformed; and its fluids (scene_fluids.hpp), stepped last.
 //
 // Data flow per physics tick (docs/architecture.md, "Scene runtime"):
 //   haptics → ToolImpulseChannel → the impulse the tool gave each touched
@@ -75,16 +76,17 @@ class PhysicsEngine final : public Engine {
 
   /// The objects physics moves (dynamic ones), in scene order.
   const std::vector<std::string>& movingObjects() const noexcept { return movingNames_; }
-  /// The soft objects, in scene order; tissue(name) is the haptic side of
-  /// one (for a TissueGodObject), nullptr for any other name.
+  /// The objects drawn deformed: the soft objects, then the membranes, each
+  /// in scene order; tissue(name) is the haptic side of a soft object (for
+  /// a TissueGodObject), nullptr for any other name.
   const std::vector<std::string>& softObjects() const noexcept;
   HapticTissue* tissue(std::string_view object) noexcept;
   /// The needle renderer going into the soft object with "layers" (the
   /// haptics engine's renderer; stepped here), nullptr without one.
   HapticRenderer* needleRenderer() noexcept;
-  /// Render thread (one reader): soft object i's deformed surface (object
-  /// frame, before its scale) when a step finished since the last call,
-  /// and on the first call (SoftTissues::latestSurface).
+  /// Render thread (one reader): softObjects()[i]'s deformed surface
+  /// (object frame, before its scale) when a step finished since the last
+  /// call, and on the first call (SoftTissues / SceneMembranes::latestSurface).
   bool latestSurface(std::size_t i, Mesh& out);
   /// The newest poses of movingObjects() (object frame → world) when a step
   /// finished since this reader's last call; one thread per reader.

@@ -198,6 +198,7 @@ class SceneParser {
     physicsBodies();
     checkSurgery(scene_, root_);
     checkSoft(scene_, root_);
+    checkMembranes(scene_, root_);
     checkIgtl(scene_, root_);
     checkTools6Dof(scene_, root_);
     checkBonePlacement(scene_, root_);
@@ -508,7 +509,8 @@ class SceneParser {
       r.knownKeys({"name",     "mesh",     "render_mesh",      "material", "pose",
                    "scale",    "visible",  "haptic",           "dynamic",  "mass",
                    "density",  "velocity", "angular_velocity", "collide",  "contact",
-                   "millable", "critical", "inclusion",        "soft",     "voxels"});
+                   "millable", "critical", "inclusion",        "soft",     "voxels",
+                   "membrane"});
       SceneObject o;
       o.name = uniqueName(r, objectIndex_, scene_.objects.size());
       std::size_t before = r.errors().size();
@@ -534,6 +536,7 @@ class SceneParser {
       if (v2Key(r, "critical")) readCritical(r, o);
       if (v2Key(r, "inclusion")) readInclusion(r, o);
       if (v2Key(r, "soft")) readSoft(r, o);
+      if (v2Key(r, "membrane")) readMembrane(r, o);
       if (v2Key(r, "voxels")) readVoxels(r, o);
       if (r.has("material") && !o.material.empty() &&
           checkName(r, "material", o.material, materialIndex_, "material", "materials")) {
@@ -609,7 +612,7 @@ class SceneParser {
                        " is the tool's picture and collides with nothing",
                    "collide", "remove \"collide\"");
       if (proxy) scene_.objects[i].collide = false;  // what toJson writes back
-      if (o.soft) anyMoving = true;
+      if (o.soft || o.membrane) anyMoving = true;
       if (!o.dynamic) continue;
       anyMoving = true;  // a dynamic proxy is reported above, not as "nothing to move" too
       if (proxy) continue;
@@ -624,9 +627,9 @@ class SceneParser {
     }
     if (scene_.engines.physics && !anyMoving && scene_.fluids.empty())
       root_.child("engines").child("physics").addError(
-          "the physics engine has no dynamic or soft object or fluid to move", {},
-          "set \"dynamic\": true and a mass on an object, give one a \"soft\" block, add a fluid, or remove the "
-          "engine");
+          "the physics engine has no dynamic or soft object, membrane or fluid to move", {},
+          "set \"dynamic\": true and a mass on an object, give one a \"soft\" or \"membrane\" block, add a "
+          "fluid, or remove the engine");
   }
 
   void transferFunction(ConfigReader tf, SceneVolume& v) {
@@ -1099,7 +1102,7 @@ bool SceneObject::operator==(const SceneObject& o) const {
          density == o.density && velocity == o.velocity && angularVelocity == o.angularVelocity &&
          collide == o.collide && friction == o.friction && restitution == o.restitution &&
          millable == o.millable && critical == o.critical && inclusion == o.inclusion && soft == o.soft &&
-         voxels == o.voxels;
+         voxels == o.voxels && membrane == o.membrane;
 }
 
 std::string_view rendererName(SceneHapticsEngine::Renderer renderer) noexcept {
@@ -1278,12 +1281,13 @@ Json toJson(const SceneDesc& scene) {
       e["velocity"] = toJson(o.velocity);
       e["angular_velocity"] = toJson(o.angularVelocity);
     }
-    if (!o.soft) {  // soft objects take part in no rigid contact
+    if (!o.soft && !o.membrane) {  // soft objects and membranes take part in no rigid contact
       e["collide"] = o.collide;
       e["contact"] = {{"friction", o.friction}, {"restitution", o.restitution}};
     }
     writeSurgery(o, e);
     writeSoft(o, e);
+    writeMembrane(o, e);
     writeVoxels(o, e);
     objects.push_back(std::move(e));
   }

@@ -37,6 +37,9 @@ bool readBody(ConfigReader& r, std::string_view key, const SceneDesc& scene, std
   } else if (!proxy.empty() && name == proxy) {
     r.addError("object " + inQuotes(name) + " is the haptic proxy, which the tool moves", key,
                "join the bodies the tool touches, not the tool's picture");
+  } else if (o->membrane) {
+    r.addError("object " + inQuotes(name) + " is a membrane (mass–spring), not a rigid body", key,
+               "hold a membrane with its \"pinned\" vertices");
   } else if (o->soft) {
     r.addError("object " + inQuotes(name) + " is soft tissue (FEM), not a rigid body", key,
                "hold tissue with \"fixed\" regions in its \"soft\" block");

@@ -257,6 +257,11 @@ void writeBurr(const SceneBurr& b, Json& haptics);
 void readSoft(ConfigReader& object, SceneObject& o);
 void checkSoft(const SceneDesc& scene, ConfigReader root);
 void writeSoft(const SceneObject& o, Json& object);
+// Membranes (scene_membrane.cpp): an object's "membrane" block, its checks
+// against the engines and the other objects once the scene is read, its JSON.
+void readMembrane(ConfigReader& object, SceneObject& o);
+void checkMembranes(const SceneDesc& scene, ConfigReader root);
+void writeMembrane(const SceneObject& o, Json& object);
 // The haptics engine's "needle" block (the needle renderer's needle).
 void readNeedle(ConfigReader& haptics, SceneHapticsEngine& h);
 void writeNeedle(const SceneNeedle& n, Json& haptics);

@@ -93,18 +93,6 @@ TEST(SceneFluid, TheToolPressingTheCutStopsItsBleeding) {
 }
 
 #if defined(DM_TEST_WITH_RENDERER)
-// Blood-coloured pixels (red well over green and blue) in a frame.
-double bloodShare(const dm::Image& frame) {
-  std::size_t red = 0;
-  for (int y = 0; y < frame.height(); ++y)
-    for (int x = 0; x < frame.width(); ++x) {
-      const int r = frame.at<std::uint8_t>(x, y, 0), g = frame.at<std::uint8_t>(x, y, 1),
-                b = frame.at<std::uint8_t>(x, y, 2);
-      if (r > 40 && r > 3 * g && r > 3 * b) ++red;
-    }
-  return double(red) / double(frame.width() * frame.height());
-}
-
 // The render engine draws the fluid in its colour: the bundled scene's
 // camera looks down on the pool (an 8 × 8 cm basin under a 1 cm layer of
 // blood) and a quarter of its frame is blood (over 15 %), drawn as a liquid
@@ -123,7 +111,7 @@ TEST(SceneFluid, TheRenderEngineDrawsTheParticlesInTheFluidsColour) {
     (void)scene_run::runScene(s, 0.05, dir.path() / name);
     auto frame = dm::readPng(dir.path() / name / "frames" / "frame_00000.png");
     EXPECT_TRUE(frame) << frame.error();
-    return frame ? bloodShare(*frame) : -1.0;
+    return frame ? scene_run::redShare(*frame) : -1.0;
   };
   EXPECT_GT(firstFrame(scene, "red"), 0.15);  // a liquid surface
   dm::SceneDesc spheres = scene;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <dm/core/filesystem.hpp>
+#include <dm/core/image.hpp>
 #include <dm/core/types.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
@@ -22,6 +23,19 @@
 namespace scene_run {
 
 namespace fs = std::filesystem;
+
+/// The share of a frame's pixels that are red (red well over green and
+/// blue: blood, or anything drawn in a red material).
+inline double redShare(const dm::Image& frame) {
+  std::size_t red = 0;
+  for (int y = 0; y < frame.height(); ++y)
+    for (int x = 0; x < frame.width(); ++x) {
+      const int r = frame.at<std::uint8_t>(x, y, 0), g = frame.at<std::uint8_t>(x, y, 1),
+                b = frame.at<std::uint8_t>(x, y, 2);
+      if (r > 40 && r > 3 * g && r > 3 * b) ++red;
+    }
+  return double(red) / double(frame.width() * frame.height());
+}
 
 /// [x, y, z] of a summary.
 inline dm::Vec3 vec(const nlohmann::json& j) {

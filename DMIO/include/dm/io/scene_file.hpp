@@ -274,6 +274,28 @@ struct SceneVoxels {
   bool operator==(const SceneVoxels&) const = default;
 };
 
+/// v2 "membrane": the object's triangle mesh (at its pose and scale) as a
+/// viscoelastic mass–spring membrane (dm::MassSpringBody::fromMesh: a
+/// particle per vertex, an element per edge, bend elements across interior
+/// edges), stepped implicitly by the physics engine under its gravity and
+/// drawn deformed (docs/scene-format.md, "Membranes").
+struct SceneMembrane {
+  enum class Model { KelvinVoigt, Maxwell };
+  double mass = 0.0;       ///< kg, > 0: the whole membrane (each vertex its lumped area's share)
+  double stiffness = 0.0;  ///< N/m per edge element, > 0
+  double damping = 0.0;    ///< N·s/m per edge element, ≥ 0 (> 0 for Maxwell)
+  Model model = Model::KelvinVoigt;
+  double bendStiffness = 0.0;  ///< N/m across each interior edge; 0: no bend elements
+  double bendDamping = 0.0;    ///< N·s/m, ≥ 0
+  double drag = 0.0;           ///< 1/s, ≥ 0: f = −drag·m·v on every particle (the medium)
+  bool pinBoundary = false;    ///< the mesh's boundary vertices are held ("pinned": "boundary")
+  /// Boxes whose vertices are held ("pinned_boxes"; the object's frame
+  /// before its scale, as a soft object's fixed_boxes).
+  std::vector<SceneBox> pinnedBoxes;
+
+  bool operator==(const SceneMembrane&) const = default;
+};
+
 /// A mesh placed in the world.
 struct SceneObject {
   std::string name;
@@ -298,6 +320,7 @@ struct SceneObject {
   std::optional<SceneCritical> critical;  ///< v2: a structure the burr must not reach
   std::optional<SceneInclusion> inclusion;  ///< v2: another material of the millable bone
   std::optional<SceneSoft> soft;            ///< v2: soft tissue the physics engine deforms
+  std::optional<SceneMembrane> membrane;    ///< v2: a mass–spring membrane the physics engine deforms
   std::optional<SceneVoxels> voxels;        ///< v2: voxels the bone-placement renderer touches
 
   bool operator==(const SceneObject& o) const;
