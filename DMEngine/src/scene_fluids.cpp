@@ -115,7 +115,7 @@ Status SceneFluids::Impl::addObjects(Fluid& out, const SceneDesc& scene, const S
     } else {
       const Isometry3 pose = o->pose.isometry();
       for (Vec3& p : mesh.positions) p = pose * p;
-      auto samples = sampleBoundary(mesh, d, d / 3.0);
+      auto samples = sampleBoundary(mesh, 0.5 * d, d / 3.0);
       if (!samples) return samples.error().within(where);
       out.fluid.addBoundaryParticles(*samples);
     }
