@@ -11,6 +11,7 @@
 #include <map>
 #include <utility>
 
+#include "deformed_surface.hpp"
 #include "engine_json.hpp"
 
 namespace dm {
@@ -120,11 +121,7 @@ Status SceneMembranes::step(double h) {
 bool SceneMembranes::latestSurface(std::size_t i, Mesh& out) {
   if (i >= bodies_.size()) return false;
   Body& b = *bodies_[i];
-  if (!b.surface->update() && !out.triangles.empty()) return false;
-  if (out.triangles.empty()) out.triangles = b.triangles;
-  out.positions = b.surface->readBuffer();
-  out.normals.clear();  // recomputed by the renderer
-  return true;
+  return latestDeformedSurface(*b.surface, b.triangles, out);
 }
 
 nlohmann::json SceneMembranes::summary() const {

@@ -18,6 +18,7 @@
 #include <cmath>
 #include <limits>
 
+#include "deformed_surface.hpp"
 #include "engine_json.hpp"
 
 namespace dm {
@@ -417,11 +418,7 @@ Status SoftTissues::step(double h) {
 bool SoftTissues::latestSurface(std::size_t i, Mesh& out) {
   if (i >= bodies_.size()) return false;
   Body& b = *bodies_[i];
-  if (!b.surface->update() && !out.triangles.empty()) return false;
-  if (out.triangles.empty()) out.triangles = b.surfaceTriangles;
-  out.positions = b.surface->readBuffer();
-  out.normals.clear();  // recomputed by the renderer
-  return true;
+  return latestDeformedSurface(*b.surface, b.surfaceTriangles, out);
 }
 
 // The tool's force on the tissue (body frame): the god-object's spring, or
