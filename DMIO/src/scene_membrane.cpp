@@ -69,21 +69,8 @@ void checkMembranes(const SceneDesc& scene, ConfigReader root) {
     const SceneObject& o = scene.objects[i];
     if (!o.membrane) continue;
     ConfigReader r = objects.at(i);
-    if (!scene.engines.physics)
-      r.addError("membrane " + inQuotes(o.name) + " but no physics engine deforms it", "membrane",
-                 "add \"physics\": {\"rate_hz\": 200} to \"engines\", or remove \"membrane\"");
-    if (o.dynamic)
-      r.addError("a membrane is deformed, not moved as a rigid body", "dynamic", "remove \"dynamic\"");
+    checkDeforming(scene, r, o, "membrane", "membrane", 200);
     if (o.soft) r.addError("an object is a membrane or soft tissue, not both", "soft", "remove one of them");
-    for (const char* key : {"millable", "critical", "inclusion", "voxels"}) {
-      const bool set = std::string_view(key) == "millable"    ? o.millable.has_value()
-                       : std::string_view(key) == "critical"  ? o.critical.has_value()
-                       : std::string_view(key) == "inclusion" ? o.inclusion.has_value()
-                                                              : o.voxels.has_value();
-      if (set) r.addError("a membrane is not bone", key, "remove \"" + std::string(key) + "\"");
-    }
-    if (!o.renderMesh.empty())
-      r.addError("a membrane is drawn as its deformed mesh", "render_mesh", "remove \"render_mesh\"");
     if (h && h->proxyObject == o.name)
       r.addError("the haptic proxy object " + inQuotes(o.name) + " is the tool's picture, not a membrane",
                  "membrane", "remove \"membrane\", or show the tool with another object");
@@ -93,13 +80,6 @@ void checkMembranes(const SceneDesc& scene, ConfigReader root) {
               " cannot be touched: the haptic renderers touch rigid objects, "
               "soft tissue and bone",
           "objects", "remove " + inQuotes(o.name) + " from the haptics engine's \"objects\"");
-    for (const SceneObject& other : scene.objects)
-      if (&other != &o && (other.mesh == o.mesh || other.renderMesh == o.mesh)) {
-        r.addError("resource " + inQuotes(o.mesh) + " is also drawn by object " + inQuotes(other.name) +
-                       ", which would deform with this membrane",
-                   "mesh", "give the membrane a resource of its own");
-        break;
-      }
     for (std::size_t f = 0; f < scene.fluids.size(); ++f) {
       const auto& names = scene.fluids[f].objects;
       const auto it = std::find(names.begin(), names.end(), o.name);

@@ -256,6 +256,13 @@ void writeBurr(const SceneBurr& b, Json& haptics);
 // the whole scene is read, and its JSON.
 void readSoft(ConfigReader& object, SceneObject& o);
 void checkSoft(const SceneDesc& scene, ConfigReader root);
+// What every deforming object (soft tissue, a membrane) needs of the rest of
+// the scene: a physics engine to deform it, no rigid-body or bone keys, no
+// render mesh of its own (it is drawn as its deformed surface), a mesh
+// resource no other object draws. `kind` names it in messages ("soft
+// object"), `block` is its key ("soft"), `rateHz` the engine rate to hint.
+void checkDeforming(const SceneDesc& scene, ConfigReader& r, const SceneObject& o, std::string_view kind,
+                    std::string_view block, int rateHz);
 void writeSoft(const SceneObject& o, Json& object);
 // Membranes (scene_membrane.cpp): an object's "membrane" block, its checks
 // against the engines and the other objects once the scene is read, its JSON.

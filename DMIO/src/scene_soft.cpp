@@ -225,6 +225,33 @@ void readSoft(ConfigReader& object, SceneObject& o) {
   o.soft = s;
 }
 
+void checkDeforming(const SceneDesc& scene, ConfigReader& r, const SceneObject& o, std::string_view kind,
+                    std::string_view block, int rateHz) {
+  const std::string what = std::string(kind) + " " + inQuotes(o.name);
+  if (!scene.engines.physics)
+    r.addError(what + " but no physics engine deforms it", std::string(block),
+               formatString("add \"physics\": {\"rate_hz\": %d} to \"engines\", or remove \"", rateHz) +
+                   std::string(block) + "\"");
+  if (o.dynamic)
+    r.addError(what + " is deformed, not moved as a rigid body", "dynamic", "remove \"dynamic\"");
+  for (const auto& [key, set] : {std::pair<const char*, bool>{"millable", o.millable.has_value()},
+                                 {"critical", o.critical.has_value()},
+                                 {"inclusion", o.inclusion.has_value()},
+                                 {"voxels", o.voxels.has_value()}})
+    if (set)
+      r.addError(what + " is deformed, not milled or placed as bone", key,
+                 "remove \"" + std::string(key) + "\"");
+  if (!o.renderMesh.empty())
+    r.addError(what + " is drawn as its deformed surface", "render_mesh", "remove \"render_mesh\"");
+  for (const SceneObject& other : scene.objects)
+    if (&other != &o && (other.mesh == o.mesh || other.renderMesh == o.mesh)) {
+      r.addError("resource " + inQuotes(o.mesh) + " is also drawn by object " + inQuotes(other.name) +
+                     ", which would deform with " + what,
+                 "mesh", "give the " + std::string(kind) + " a resource of its own");
+      break;
+    }
+}
+
 void checkSoft(const SceneDesc& scene, ConfigReader root) {
   ConfigReader objects = root.child("objects");
   ConfigReader haptics = root.child("engines").child("haptics");
@@ -267,36 +294,14 @@ void checkSoft(const SceneDesc& scene, ConfigReader root) {
     const SceneObject& o = scene.objects[i];
     if (!o.soft) continue;
     ConfigReader r = objects.at(i);
-    if (!scene.engines.physics)
-      r.addError("soft object " + inQuotes(o.name) + " but no physics engine deforms it", "soft",
-                 "add \"physics\": {\"rate_hz\": 100} to \"engines\", or remove \"soft\"");
-    for (const char* key : {"dynamic", "millable", "critical", "inclusion"}) {
-      const bool set = std::string_view(key) == "dynamic"    ? o.dynamic
-                       : std::string_view(key) == "millable" ? o.millable.has_value()
-                       : std::string_view(key) == "critical" ? o.critical.has_value()
-                                                             : o.inclusion.has_value();
-      if (set)
-        r.addError("a soft object is deformed by its FEM model, not " +
-                       std::string(std::string_view(key) == "dynamic" ? "moved as a rigid body" : "milled"),
-                   key, "remove \"" + std::string(key) + "\"");
-    }
+    checkDeforming(scene, r, o, "soft object", "soft", 100);
     if (h && h->proxyObject == o.name)
       r.addError("the haptic proxy object " + inQuotes(o.name) + " is the tool's picture, not tissue", "soft",
                  "remove \"soft\", or show the tool with another object");
-    if (!o.renderMesh.empty())
-      r.addError("a soft object is drawn as its deformed tetrahedra's surface", "render_mesh",
-                 "remove \"render_mesh\"");
     if (const SceneResource* m = scene.resource(o.mesh);
         m != nullptr && m->type == SceneResource::Type::Shape && m->shape == SceneResource::Shape::Plane)
       r.addError("a plane (a flat rectangle) has no volume to fill with tetrahedra", "mesh",
                  "use a box shape or a closed mesh");
-    for (const SceneObject& other : scene.objects)
-      if (&other != &o && (other.mesh == o.mesh || other.renderMesh == o.mesh)) {
-        r.addError("resource " + inQuotes(o.mesh) + " is also drawn by object " + inQuotes(other.name) +
-                       ", which would deform with this soft object",
-                   "mesh", "give the soft object a resource of its own");
-        break;
-      }
     if (!dynamicBody.empty())
       r.addError("dynamic body " + inQuotes(dynamicBody) + " would pass through soft object " +
                      inQuotes(o.name) + ": soft tissue meets static objects only in scene runs",
