@@ -330,7 +330,7 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
     }
     m->ode = std::move(*ode);
   }
-  auto soft = SoftTissues::build(scene, resources);
+  auto soft = SoftTissues::build(scene, resources, m->world);
   if (!soft) return soft.error();
   m->soft = std::move(*soft);
   auto membranes = SceneMembranes::build(scene, resources);
@@ -397,15 +397,18 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
                                    m.state.linearVelocity(id), m.state.angularVelocity(id));
     }
   }
+  // The tissue first: it leaves the bodies it touches the velocity its
+  // contact gave them, and the world's step goes on from there
+  // (dm::SoftRigidCoupling).
+  if (auto s = m.soft->step(dt, m.state); !s) {
+    error_ = s.error().within("physics step " + std::to_string(m.steps));
+    return false;
+  }
   if (!m.moving.empty())  // (static bodies alone never move)
     if (auto s = m.ode ? m.ode->step(m.state, dt) : m.world.step(m.state, dt); !s) {
       error_ = s.error().within("physics step " + std::to_string(m.steps));
       return false;
     }
-  if (auto s = m.soft->step(dt); !s) {
-    error_ = s.error().within("physics step " + std::to_string(m.steps));
-    return false;
-  }
   if (auto s = m.membranes->step(dt); !s) {
     error_ = s.error().within("physics step " + std::to_string(m.steps));
     return false;

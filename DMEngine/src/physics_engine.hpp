@@ -3,8 +3,10 @@
 // move, the others are static colliders), stepped at the engine's rate by
 // the built-in solver or by ODE (dm::OdeWorld), with the haptic tool's
 // impulses applied and the new poses handed on; and its soft objects as FEM
-// bodies (soft_tissue.hpp), stepped after the rigid bodies at the same rate,
-// pressed by the god-object through their HapticTissue and drawn deformed;
+// bodies (soft_tissue.hpp), stepped before the rigid bodies at the same rate
+// with the world's bodies as their obstacles (two-way: the tissue carries
+// and pushes a dynamic body, dm::SoftRigidCoupling), pressed by the
+// god-object through their HapticTissue and drawn deformed;
 // its membranes as mass–spring bodies (scene_membranes.hpp), stepped next
 // and drawn deformed; and its fluids (scene_fluids.hpp), stepped last.
 //

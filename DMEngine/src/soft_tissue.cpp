@@ -13,6 +13,8 @@
 #include <dm/math/voxelize.hpp>
 #include <dm/physics/fem.hpp>
 #include <dm/physics/needle.hpp>
+#include <dm/physics/soft_rigid.hpp>
+#include <dm/physics/world.hpp>
 
 #include <algorithm>
 #include <cmath>
@@ -96,10 +98,12 @@ std::vector<std::uint8_t> tetLayersBySlab(const TetMesh& mesh, double top,
   return out;
 }
 
-// The closed mesh (object frame, at its scale) a static object is to the
-// tissue: its own mesh welded (shapes keep separate rim vertices for sharp
+// The closed mesh a body of the physics world is to the tissue, in the
+// body's shape frame (`objectToShape` from the object's frame at its
+// scale): its own mesh welded (shapes keep separate rim vertices for sharp
 // normals), or for a plane the slab below it that the rigid world uses.
-Result<MeshBvh> obstacleTree(const SceneObject& o, const SceneResource& res, const Mesh& mesh) {
+Result<MeshBvh> obstacleTree(const SceneObject& o, const SceneResource& res, const Mesh& mesh,
+                             const Isometry3& objectToShape) {
   Mesh m;
   if (res.type == SceneResource::Type::Shape && res.shape == SceneResource::Shape::Plane) {
     const double depth = 0.5 * std::min(res.halfExtents.x(), res.halfExtents.y());
@@ -109,6 +113,7 @@ Result<MeshBvh> obstacleTree(const SceneObject& o, const SceneResource& res, con
     m = mesh;
   }
   if (o.scale != 1.0) m.transform(Affine3(Eigen::Scaling(o.scale)));
+  m.transform(Affine3(objectToShape.matrix()));
   if (auto w = weldVertices(m, 1e-9); !w) return w.error();
   auto tree = MeshBvh::build(m);
   if (!tree) return tree.error();
@@ -153,8 +158,9 @@ Result<std::vector<std::uint8_t>> tetLayers(const SceneObject& o, const TetMesh&
 
 struct SoftTissues::Obstacle {
   std::string name;
-  Isometry3 pose = Isometry3::Identity();  // object → world
-  std::unique_ptr<MeshBvh> tree;
+  BodyId body;                    // in the physics world
+  bool dynamic = false;           // a rigid body the tissue moves
+  std::unique_ptr<MeshBvh> tree;  // the body's shape frame
 };
 
 struct SoftTissues::Body {
@@ -162,6 +168,7 @@ struct SoftTissues::Body {
   Isometry3 pose = Isometry3::Identity();  // object → world
   double scale = 1.0;
   std::unique_ptr<FemBody> fem;
+  std::optional<SoftRigidCoupling> coupling;  // the world's bodies as its obstacles
   std::unique_ptr<HapticTissue> haptic;     // pressed by the god-object, or
   std::unique_ptr<NeedleInsertion> needle;  // a needle goes into it,
   std::unique_ptr<HapticNeedle> felt;       // felt through this renderer
@@ -213,20 +220,28 @@ void SoftTissues::drawnSurface(const FemBody& fem, bool creases, Body& b) {
 }
 
 Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
-                                                        const SceneResources& resources) {
+                                                        const SceneResources& resources,
+                                                        const PhysicsWorld& world) {
   std::unique_ptr<SoftTissues> out(new SoftTissues());
-  // The static objects that collide: obstacles every soft object meets.
-  const std::string proxy = scene.engines.haptics ? scene.engines.haptics->proxyObject : std::string();
+  // The world's bodies that collide, static and dynamic: obstacles every
+  // soft object meets (a dynamic one moved by it in turn).
   if (std::any_of(scene.objects.begin(), scene.objects.end(), [](const SceneObject& o) { return o.soft; }))
-    for (const SceneObject& o : scene.objects) {
-      if (o.soft || o.dynamic || !o.collide || o.name == proxy) continue;
-      const SceneResource* res = scene.resource(o.mesh);
-      auto mesh = resources.mesh(o.mesh);
+    for (std::size_t i = 0; i < world.bodyCount(); ++i) {
+      const BodyDesc& d = world.bodies()[i];
+      const SceneObject* o = scene.object(d.name);
+      if (o == nullptr || !o->collide) continue;
+      const SceneResource* res = scene.resource(o->mesh);
+      auto mesh = resources.mesh(o->mesh);
       if (res == nullptr || !mesh)
-        return fail(ErrorCode::NotFound, "mesh \"" + o.mesh + "\" was not loaded", "objects/" + o.name);
-      auto tree = obstacleTree(o, *res, *mesh);
-      if (!tree) return tree.error().within("objects/" + o.name);
-      out->obstacles_.push_back({o.name, o.pose.isometry(), std::make_unique<MeshBvh>(std::move(*tree))});
+        return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", "objects/" + o->name);
+      Isometry3 shape = Isometry3::Identity();  // shape frame → world, at the start
+      shape.translate(d.position);
+      shape.rotate(d.orientation.normalized());
+      shape = shape * d.shapeOffset;
+      auto tree = obstacleTree(*o, *res, *mesh, shape.inverse() * o->pose.isometry());
+      if (!tree) return tree.error().within("objects/" + o->name);
+      out->obstacles_.push_back({o->name, BodyId{static_cast<std::uint32_t>(i)}, d.kind == BodyKind::Rigid,
+                                 std::make_unique<MeshBvh>(std::move(*tree))});
     }
   const auto& haptics = scene.engines.haptics;
   const Vec3 gravity = scene.engines.physics ? scene.engines.physics->gravity : Vec3::Zero();
@@ -260,14 +275,15 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     b->scale = o.scale;
     b->fem = std::make_unique<FemBody>(std::move(*fem));
     b->fem->setGravity(b->pose.linear().transpose() * gravity);
-    // The static objects, in the body's frame, each node held out of them
-    // by a penalty spring.
-    std::vector<FemObstacle> obstacles;
+    // The world's bodies, each node held out of them by a penalty spring
+    // (implicit; a dynamic body's velocity solved with the tissue's).
+    std::vector<SoftRigidContact> contacts;
     const double contactStiffness = s.contactStiffness > 0 ? s.contactStiffness : 20.0 * s.youngsModulus * h;
     for (const Obstacle& ob : out->obstacles_)
-      obstacles.push_back(
-          {.tree = ob.tree.get(), .pose = b->pose.inverse() * ob.pose, .stiffness = contactStiffness});
-    if (auto st = b->fem->setObstacles(obstacles); !st) return st.error().within(where + "/soft");
+      contacts.push_back({.body = ob.body, .tree = ob.tree.get(), .stiffness = contactStiffness});
+    auto coupling = SoftRigidCoupling::create(world, *b->fem, contacts, b->pose);
+    if (!coupling) return coupling.error().within(where + "/soft");
+    b->coupling = std::move(*coupling);
     b->restCenterOfMass = b->fem->centerOfMass();
     // The held faces: nodes within a quarter of a tetrahedron's size of a
     // face of the rest bounding box.
@@ -397,11 +413,14 @@ const std::vector<Triangle>& SoftTissues::boundaryTriangles(std::size_t i) const
   return bodies_.at(i)->fem->surfaceTriangles();
 }
 
-Status SoftTissues::step(double h) {
+Status SoftTissues::step(double h, WorldState& state) {
   for (const auto& bp : bodies_) {
     Body& b = *bp;
+    if (auto st = b.coupling->beforeTissueStep(state, h); !st)
+      return st.error().within("soft object \"" + b.name + "\"");
     auto report = b.felt ? b.felt->step(h) : b.haptic->step(h);
     if (!report) return report.error().within("soft object \"" + b.name + "\"");
+    b.coupling->afterTissueStep(state, h);
     ++b.steps;
     b.unconverged += !report->converged;
     b.cgIterations += static_cast<std::uint64_t>(report->cgIterations);
@@ -464,8 +483,9 @@ nlohmann::json SoftTissues::summary() const {
     if (!obstacles_.empty()) {
       Json touching = Json::array();
       for (std::size_t i = 0; i < obstacles_.size(); ++i)
-        touching.push_back(
-            {{"name", obstacles_[i].name}, {"force_N", engine_json::vec3(R * f.obstacleForce(i))}});
+        touching.push_back({{"name", obstacles_[i].name},
+                            {"dynamic", obstacles_[i].dynamic},
+                            {"force_N", engine_json::vec3(b.coupling->wrench(i).force)}});
       list.back()["obstacles"] = std::move(touching);
       list.back()["obstacle_contacts"] = f.obstacleContactCount();
     }

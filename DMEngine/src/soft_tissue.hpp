@@ -6,8 +6,10 @@
 // of about voxel_size, its faces kept; any other closed mesh voxelized at
 // voxel_size), a dm::FemBody in the object's frame (the scene's scale baked
 // in) with the held faces fixed, gravity turned into that frame and every
-// static object that collides an obstacle it cannot enter (dm::FemObstacle:
-// a penalty spring per boundary node, implicit), and a
+// body of the physics world that collides an obstacle it cannot enter
+// (dm::SoftRigidCoupling: a penalty spring per boundary node, implicit; a
+// dynamic body's velocity solved with the tissue's, so the tissue carries
+// and pushes it and it dents the tissue), and a
 // dm::HapticTissue joining it to the god-object (stiffness of the object's
 // haptic material, tip radius of the haptics engine's tool) — or, for the
 // object with needle "layers", a dm::NeedleInsertion (each tetrahedron's
@@ -15,8 +17,10 @@
 // the haptics engine's renderer, whose step() runs here.
 //
 // Data flow (docs/architecture.md, "Scene runtime"):
-//   haptics → HapticTissue grip → step() (physics thread): the touched
-//   point pulled toward the device point, implicitly; FEM step;
+//   haptics → HapticTissue grip → step() (physics thread): the world's
+//   bodies' poses and velocities in, the touched point pulled toward the
+//   device point, implicitly; FEM step; the bodies' new velocities out,
+//   before the world's step;
 //   step() → HapticTissue surface → the god-object (haptic thread);
 //   step() → a TripleBuffer of surface positions → latestSurface()
 //   (render thread).
@@ -44,6 +48,8 @@ struct SceneResources;
 class FemBody;
 class HapticRenderer;
 class HapticTissue;
+class PhysicsWorld;
+class WorldState;
 struct SceneHapticsEngine;
 struct SceneSoftLayer;
 struct TetMesh;
@@ -53,7 +59,10 @@ class SoftTissues {
   /// Every soft object of `scene` (which has engines.physics), in scene
   /// order. Fails naming the object (a mesh that cannot be filled, more
   /// tetrahedra than its max_tets, a bad material) before anything runs.
-  static Result<std::unique_ptr<SoftTissues>> build(const SceneDesc& scene, const SceneResources& resources);
+  /// `world` holds the scene's rigid and static bodies (the physics
+  /// engine's; it outlives this).
+  static Result<std::unique_ptr<SoftTissues>> build(const SceneDesc& scene, const SceneResources& resources,
+                                                    const PhysicsWorld& world);
   ~SoftTissues();
   SoftTissues(const SoftTissues&) = delete;
   SoftTissues& operator=(const SoftTissues&) = delete;
@@ -80,9 +89,11 @@ class SoftTissues {
   /// is none). Any thread: the names are fixed at build.
   std::string layerName(std::size_t i, int layer) const;
 
-  /// Physics thread: steps every body by h; fails naming the object whose
-  /// step failed (a blown-up state).
-  Status step(double h);
+  /// Physics thread: steps every body by h against the bodies' poses and
+  /// velocities in `state`, leaving each dynamic body the velocity the
+  /// tissue gave it (the world's step comes next); fails naming the object
+  /// whose step failed (a blown-up state).
+  Status step(double h, WorldState& state);
 
   /// Physics thread: soft object i's FEM nodes in the world, positions into
   /// `x` and velocities into `v` (resized to its nodes: no allocation once

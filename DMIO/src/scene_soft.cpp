@@ -287,9 +287,6 @@ void checkSoft(const SceneDesc& scene, ConfigReader root) {
     haptics.addError("a \"needle\" block without the needle renderer", "needle",
                      "set \"renderer\": \"needle\", or remove \"needle\"");
   }
-  std::string dynamicBody;  // a rigid body the soft objects would not stop
-  for (const SceneObject& o : scene.objects)
-    if (o.dynamic && dynamicBody.empty()) dynamicBody = o.name;
   for (std::size_t i = 0; i < scene.objects.size() && objects.isArray() && i < objects.size(); ++i) {
     const SceneObject& o = scene.objects[i];
     if (!o.soft) continue;
@@ -302,10 +299,6 @@ void checkSoft(const SceneDesc& scene, ConfigReader root) {
         m != nullptr && m->type == SceneResource::Type::Shape && m->shape == SceneResource::Shape::Plane)
       r.addError("a plane (a flat rectangle) has no volume to fill with tetrahedra", "mesh",
                  "use a box shape or a closed mesh");
-    if (!dynamicBody.empty())
-      r.addError("dynamic body " + inQuotes(dynamicBody) + " would pass through soft object " +
-                     inQuotes(o.name) + ": soft tissue meets static objects only in scene runs",
-                 "soft", "run the rigid bodies and the tissue in separate scenes, or make the body static");
     if (h && std::find(h->objects.begin(), h->objects.end(), o.name) != h->objects.end() &&
         h->renderer != SceneHapticsEngine::Renderer::GodObject && !needle)
       r.addError("soft object " + inQuotes(o.name) + " is touched by the god-object or the needle only",

@@ -1,6 +1,7 @@
 // Two-way soft–rigid contact (dm/physics/soft_rigid.hpp) against physics: a
 // rigid box settles on clamped tissue with the tissue carrying exactly its
-// weight; a gram-light body on stiff contact at a 10 ms step stays stable
+// weight, at the same depth at a 10 ms and a 1 ms step, and on the same
+// tissue placed in a frame of its own; a gram-light body on stiff contact at a 10 ms step stays stable
 // (explicit force exchange at that step diverges, which the test shows);
 // a free ball hitting a free tissue block conserves the total linear
 // momentum; bad couplings are refused by index.
@@ -12,6 +13,8 @@
 
 #include <cmath>
 #include <cstdio>
+#include <numbers>
+#include <utility>
 
 #include "../common/alloc_counter.hpp"
 #include "physics_test_support.hpp"
@@ -61,8 +64,9 @@ TEST(SoftRigid, BoxSettlesOnTissueThatCarriesItsWeight) {
   const double weight = world.bodies()[box.index].mass * kG;
   for (int i = 0; i < 300; ++i) ASSERT_TRUE(coupling->step(state, 0.01).ok()) << "step " << i;
   const Wrench w = coupling->wrench(0);
-  std::printf("box: tissue carries %.5f N of its weight %.5f N; sank %.3f mm; |v| = %.2e m/s\n", w.force.z(), weight,
-              (0.02 + half.z() + 0.0005 - state.position(box).z()) * 1e3, state.linearVelocity(box).norm());
+  std::printf("box: tissue carries %.5f N of its weight %.5f N; sank %.3f mm; |v| = %.2e m/s\n", w.force.z(),
+              weight, (0.02 + half.z() + 0.0005 - state.position(box).z()) * 1e3,
+              state.linearVelocity(box).norm());
   EXPECT_NEAR(w.force.z(), weight, 0.01 * weight);
   EXPECT_LT(w.force.head<2>().norm(), 1e-3 * weight);
   EXPECT_LT(w.torque.norm(), 1e-3 * weight * half.x());
@@ -80,6 +84,80 @@ TEST(SoftRigid, BoxSettlesOnTissueThatCarriesItsWeight) {
     ASSERT_TRUE(stepped);
   }
   EXPECT_EQ(test::countedAllocations(), before);
+}
+
+// The split step solves the tissue's contact for the velocity the body will
+// have after the world's gravity (gravity, contact, positions). The box's
+// rest depth is then the same at a 10 ms and a 1 ms step, to a micrometre;
+// solving contact before gravity let the world push it g·h² (1 mm at 10 ms)
+// deeper each step.
+TEST(SoftRigid, ABoxRestsAtTheSameDepthAtAnyStep) {
+  const Vec3 half(0.01, 0.01, 0.005);
+  const MeshBvh tree = treeOf(makeBox(half));
+  auto restHeight = [&](double h) {
+    FemBody tissue = slab(false);
+    tissue.setGravity({0, 0, -kG});
+    PhysicsWorld world;
+    EXPECT_TRUE(world.setGravity({0, 0, -kG}));
+    const BodyId box = addBox(world, half, 1000, 0.0005);
+    const SoftRigidContact contact{.body = box, .tree = &tree, .stiffness = 1e4};
+    auto coupling = SoftRigidCoupling::create(world, tissue, {&contact, 1});
+    EXPECT_TRUE(coupling.ok());
+    WorldState state = world.makeState();
+    for (int i = 0; i < static_cast<int>(std::lround(1.5 / h)); ++i)
+      EXPECT_TRUE(coupling->step(state, h).ok());
+    EXPECT_LT(state.linearVelocity(box).norm(), 1e-4) << "h = " << h;
+    EXPECT_NEAR(coupling->wrench(0).force.z(), world.bodies()[box.index].mass * kG,
+                0.002 * world.bodies()[box.index].mass * kG);
+    return state.position(box).z();
+  };
+  const double coarse = restHeight(0.01), fine = restHeight(0.001);
+  std::printf("box rests at %.4f mm (10 ms) and %.4f mm (1 ms)\n", coarse * 1e3, fine * 1e3);
+  EXPECT_NEAR(coarse, fine, 1e-6);
+  EXPECT_LT(fine, 0.02 + half.z());  // it sank into the tissue
+}
+
+// The tissue in a frame of its own (rotated 90° about x and moved: its
+// local y is the world's up), carrying the box: the coupling carries poses
+// and velocities across, so the box rests where it rests on the same tissue
+// built in the world frame, and the wrench comes back in the world.
+TEST(SoftRigid, ATissueInAFrameOfItsOwnCarriesTheBoxAsInTheWorldFrame) {
+  const Vec3 half(0.01, 0.01, 0.005);
+  const MeshBvh tree = treeOf(makeBox(half));
+  Isometry3 place = Isometry3::Identity();  // tissue frame → world
+  place.translate(Vec3(0.1, 0.2, 0.3));
+  place.rotate(Eigen::AngleAxisd(std::numbers::pi / 2, Vec3::UnitX()));
+  auto settle = [&](bool posed) {
+    auto mesh = tetMeshBox({8, 8, 4}, Vec3(0.04, 0.04, 0.02));
+    EXPECT_TRUE(mesh.ok());
+    const Isometry3 toTissue = posed ? Isometry3(place.inverse()) : Isometry3::Identity();
+    const Vec3 offset = posed ? Vec3(0.1, 0.2, 0.3) : Vec3::Zero();  // where the slab is in the world
+    for (Vec3& p : mesh->nodes) p = toTissue * (p + offset);
+    auto tissue = FemBody::create(*mesh, {.youngsModulus = 1e4, .poissonRatio = 0.45, .density = 1000},
+                                  {.alpha = 5.0, .beta = 0.01}, {.tolerance = 1e-8, .maxIterations = 1000});
+    EXPECT_TRUE(tissue.ok());
+    const Isometry3 toWorld = toTissue.inverse();
+    tissue->fixNodesWhere([&](const Vec3& p) { return (toWorld * p).z() < offset.z() + 1e-9; });
+    tissue->setGravity(toWorld.linear().transpose() * Vec3(0, 0, -kG));
+    PhysicsWorld world;
+    EXPECT_TRUE(world.setGravity({0, 0, -kG}));
+    const BodyId box = addBox(world, half, 1000, 0.0005);
+    WorldState state = world.makeState();
+    // Off the slab's diagonal: on it the box's yaw is a mirror-symmetric
+    // choice that round-off makes either way.
+    EXPECT_TRUE(world.setBodyState(state, box, state.position(box) + offset + Vec3(-0.003, 0.002, 0),
+                                   Quat::Identity(), Vec3::Zero(), Vec3::Zero()));
+    const SoftRigidContact contact{.body = box, .tree = &tree, .stiffness = 1e4};
+    auto coupling = SoftRigidCoupling::create(world, *tissue, {&contact, 1}, toWorld);
+    EXPECT_TRUE(coupling.ok());
+    for (int i = 0; i < 300; ++i) EXPECT_TRUE(coupling->step(state, 0.01).ok());
+    return std::pair{Vec3(state.position(box) - offset), coupling->wrench(0)};
+  };
+  const auto [atOrigin, w0] = settle(false);
+  const auto [placed, w1] = settle(true);
+  EXPECT_LT((placed - atOrigin).norm(), 1e-7) << placed.transpose() << " vs " << atOrigin.transpose();
+  EXPECT_LT((w1.force - w0.force).norm(), 1e-4 * w0.force.norm()) << w1.force.transpose();
+  EXPECT_GT(w1.force.z(), 0.0);
 }
 
 // A 1 g cube on contact springs of 1e5 N/m per node (25 nodes: ω ≈ 5e4
