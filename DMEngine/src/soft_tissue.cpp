@@ -280,7 +280,10 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     std::vector<SoftRigidContact> contacts;
     const double contactStiffness = s.contactStiffness > 0 ? s.contactStiffness : 20.0 * s.youngsModulus * h;
     for (const Obstacle& ob : out->obstacles_)
-      contacts.push_back({.body = ob.body, .tree = ob.tree.get(), .stiffness = contactStiffness});
+      contacts.push_back({.body = ob.body,
+                          .tree = ob.tree.get(),
+                          .stiffness = contactStiffness,
+                          .friction = s.contactFriction});
     auto coupling = SoftRigidCoupling::create(world, *b->fem, contacts, b->pose);
     if (!coupling) return coupling.error().within(where + "/soft");
     b->coupling = std::move(*coupling);

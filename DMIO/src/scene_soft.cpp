@@ -119,8 +119,8 @@ void readSoft(ConfigReader& object, SceneObject& o) {
   ConfigReader r = object.child("soft");
   if (!expectObject(r)) return;
   r.knownKeys({"youngs_modulus", "poisson_ratio", "density", "damping", "voxel_size", "fixed", "max_tets",
-               "layers", "labels", "contact_stiffness", "fixed_boxes", "levels", "fine_region", "volume",
-               "threshold"});
+               "layers", "labels", "contact_stiffness", "contact_friction", "fixed_boxes", "levels",
+               "fine_region", "volume", "threshold"});
   SceneSoft s;
   s.youngsModulus = readPositive(r, "youngs_modulus", {}, 1e12);
   std::size_t before = r.errors().size();
@@ -152,6 +152,7 @@ void readSoft(ConfigReader& object, SceneObject& o) {
     s.voxelSize = readPositive(r, "voxel_size", {}, 0.05);
   }
   if (r.has("contact_stiffness")) s.contactStiffness = readPositive(r, "contact_stiffness", {}, 1e9);
+  s.contactFriction = r.number("contact_friction", {.min = 0.0, .max = 1e6}, s.contactFriction);
   if (r.has("fixed")) {
     ConfigReader f = r.child("fixed");
     if (expectArray(f)) {
@@ -220,7 +221,8 @@ void readSoft(ConfigReader& object, SceneObject& o) {
           "a soft object meets the static objects that collide; its own rigid-contact keys do not apply", key,
           "remove \"" + std::string(key) +
               "\" (set \"collide\": false on an object it should pass through, "
-              "\"contact_stiffness\" in \"soft\" for the contact's spring)");
+              "\"contact_stiffness\" and \"contact_friction\" in \"soft\" for the contact's spring and "
+              "friction)");
   o.collide = false;
   o.soft = s;
 }
@@ -341,6 +343,7 @@ void writeSoft(const SceneObject& o, Json& object) {
                     {"fixed", std::move(fixed)},
                     {"max_tets", s.maxTets}};
   if (s.contactStiffness > 0) object["soft"]["contact_stiffness"] = s.contactStiffness;
+  if (s.contactFriction > 0) object["soft"]["contact_friction"] = s.contactFriction;
   if (!s.volume.empty()) {
     object["soft"].erase("voxel_size");
     object["soft"]["volume"] = s.volume;

@@ -350,6 +350,9 @@ Status FemBody::setObstacles(std::span<const FemObstacle> obstacles) {
       return femimpl::invalid("the pose is not rigid and finite", where, "give a rotation and a translation");
     if (!std::isfinite(o.stiffness) || !(o.stiffness > 0))
       return femimpl::invalid("stiffness " + femimpl::num(o.stiffness) + " N/m is not positive", where, "e.g. 1e4 N/m");
+    if (!std::isfinite(o.friction) || o.friction < 0)
+      return femimpl::invalid("friction " + femimpl::num(o.friction) + " N·s/m is negative or not finite",
+                              where, "0 = frictionless");
     if (!std::isfinite(o.mass) || o.mass < 0)
       return femimpl::invalid("mass " + femimpl::num(o.mass) + " kg is negative or not finite", where, "0 = kinematic, > 0 = dynamic");
     if (!o.centerOfMass.allFinite()) return femimpl::invalid("centerOfMass is not finite", where);
@@ -423,8 +426,13 @@ void FemBody::findObstacleContacts() {
       if (!o.tree->bounds().contains(obstacleInverse_[j] * x_[i])) continue;
       const MeshPointQuery q = closestPointOnMesh(*o.tree, o.pose, x_[i]);
       if (!(q.distance < 0.0) || !(-q.distance > best.depth) || !q.normal.allFinite()) continue;
-      best = {.node = i, .obstacle = std::uint32_t(j), .normal = q.normal, .depth = -q.distance,
-              .stiffness = o.stiffness, .arm = x_[i] - obstacleCenter_[j]};
+      best = {.node = i,
+              .obstacle = std::uint32_t(j),
+              .normal = q.normal,
+              .depth = -q.distance,
+              .stiffness = o.stiffness,
+              .friction = o.friction,
+              .arm = x_[i] - obstacleCenter_[j]};
     }
     if (best.depth > 0.0) {
       contactOf_[i] = std::int32_t(contacts_.size());
@@ -444,6 +452,15 @@ double FemBody::contactRate(const NodeContact& c) const noexcept {
 // velocities: k·depth·n less the damping-like term h·k·(n·(v − u))·n.
 Vec3 FemBody::contactForce(const NodeContact& c, double h) const noexcept {
   return (c.stiffness * c.depth - h * contactRate(c)) * c.normal;
+}
+
+// The tangential damper on contact c's node at the current velocities:
+// −c_t·(I − n nᵀ)(v_node − u).
+Vec3 FemBody::contactFriction(const NodeContact& c) const noexcept {
+  if (c.friction == 0.0) return Vec3::Zero();
+  const Twist& u = obstacleVelocity_[c.obstacle];
+  const Vec3 slip = v_[c.node] - u.linear - u.angular.cross(c.arm);
+  return -c.friction * (slip - c.normal.dot(slip) * c.normal);
 }
 
 Vec3 FemBody::springPoint(const FemPointSpring& s) const noexcept {
@@ -684,16 +701,19 @@ void FemBody::applySystem(const VecX& input, VecX& out, double massScale, double
   // Obstacle contacts: h²·k·g·n with g = n·(Δv_node − Δu), Δu the dynamic
   // obstacle's velocity change at the contact (ΔV + ΔΩ × arm); the obstacle
   // takes −h²·k·g·(n, arm × n).
+  // Friction adds h·c_t·(I − n nᵀ)(Δv_node − Δu) the same way.
   for (const NodeContact& c : contacts_) {
     const Eigen::Index o = Eigen::Index(3 * c.node);
     const Eigen::Index r = obstacleRow_[c.obstacle];
-    double g = c.normal.dot(in.segment<3>(o));
-    if (r >= 0) g -= c.normal.dot(in.segment<3>(r) + Vec3(in.segment<3>(r + 3)).cross(c.arm));
-    const double kg = sysContactScale_ * c.stiffness * g;
-    out.segment<3>(o) += kg * c.normal;
+    Vec3 rel = in.segment<3>(o);
+    if (r >= 0) rel -= in.segment<3>(r) + Vec3(in.segment<3>(r + 3)).cross(c.arm);
+    const double g = c.normal.dot(rel);
+    Vec3 f = (sysContactScale_ * c.stiffness * g) * c.normal;
+    if (c.friction > 0.0) f += (sysDampScale_ * c.friction) * (rel - g * c.normal);
+    out.segment<3>(o) += f;
     if (r >= 0) {
-      out.segment<3>(r) -= kg * c.normal;
-      out.segment<3>(r + 3) -= kg * c.arm.cross(c.normal);
+      out.segment<3>(r) -= f;
+      out.segment<3>(r + 3) -= c.arm.cross(f);
     }
   }
   // The springs: h²·w wᵀ ⊗ K over their nodes' free rows and columns.
@@ -815,6 +835,7 @@ Result<FemStepReport> FemBody::step(double h) {
   }
   findObstacleContacts();
   sysContactScale_ = h * h;
+  sysDampScale_ = h;
   forRange(n, 512, [&](std::size_t b, std::size_t e) {
     for (std::size_t i = b; i < e; ++i) {
       const Eigen::Index o = Eigen::Index(3 * i);
@@ -831,8 +852,9 @@ Result<FemStepReport> FemBody::step(double h) {
       d.diagonal().array() += massScale * mass_[i];
       if (contactOf_[i] >= 0) {
         const NodeContact& c = contacts_[std::size_t(contactOf_[i])];
-        f += contactForce(c, h);
-        d += (h * h * c.stiffness) * (c.normal * c.normal.transpose());
+        const Mat3 nnt = c.normal * c.normal.transpose();
+        f += contactForce(c, h) + contactFriction(c);
+        d += (h * h * c.stiffness) * nnt + (h * c.friction) * (Mat3::Identity() - nnt);
       }
       rhs_.segment<3>(o) = h * f;
       invBlockDiag_[i] = d;
@@ -889,12 +911,21 @@ Result<FemStepReport> FemBody::step(double h) {
     for (const NodeContact& c : contacts_) {
       const Eigen::Index r = obstacleRow_[c.obstacle];
       if (r < 0) continue;
-      const Vec3 f = contactForce(c, h);
+      const Vec3 f = contactForce(c, h) + contactFriction(c);
       rhs_.segment<3>(r) -= h * f;
       rhs_.segment<3>(r + 3) -= h * c.arm.cross(f);
       Eigen::Matrix<double, 6, 1> jn;
       jn << c.normal, c.arm.cross(c.normal);
-      obstaclePre_[std::size_t(r - Eigen::Index(3 * n)) / 6] += (h * h * c.stiffness) * jn * jn.transpose();
+      auto& pre = obstaclePre_[std::size_t(r - Eigen::Index(3 * n)) / 6];
+      pre += (h * h * c.stiffness) * jn * jn.transpose();
+      if (c.friction > 0.0) {
+        // The contact point's velocity G·(ΔV, ΔΩ) = ΔV − arm × ΔΩ, across n.
+        Eigen::Matrix<double, 3, 6> g;
+        g.leftCols<3>().setIdentity();
+        g.rightCols<3>() << 0.0, c.arm.z(), -c.arm.y(), -c.arm.z(), 0.0, c.arm.x(), c.arm.y(), -c.arm.x(),
+            0.0;
+        pre += (h * c.friction) * g.transpose() * (Mat3::Identity() - c.normal * c.normal.transpose()) * g;
+      }
     }
     for (auto& p : obstaclePre_) p = p.inverse().eval();
   }
@@ -960,7 +991,9 @@ Result<FemStepReport> FemBody::step(double h) {
   std::fill(obstacleWrench_.begin(), obstacleWrench_.end(), Wrench{});
   for (const NodeContact& c : contacts_) {
     const double push = c.stiffness * c.depth - h * contactRate(c);
-    if (push > 0.0) obstacleWrench_[c.obstacle] += Wrench{-push * c.normal, -push * c.arm.cross(c.normal)};
+    if (push <= 0.0) continue;
+    const Vec3 f = push * c.normal + contactFriction(c);  // on the node
+    obstacleWrench_[c.obstacle] += Wrench{-f, -c.arm.cross(f)};
   }
   return report_;
 }

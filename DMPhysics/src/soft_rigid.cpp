@@ -45,6 +45,7 @@ Result<SoftRigidCoupling> SoftRigidCoupling::create(const PhysicsWorld& world, F
     obstacles.push_back({.tree = k.tree,
                          .pose = worldToTissue * shapePose(d.position, d.orientation, d),
                          .stiffness = k.stiffness,
+                         .friction = k.friction,
                          .mass = dynamic ? d.mass : 0.0,
                          .inertia = dynamic ? Mat3(rs.transpose() * d.inertia * rs) : Mat3::Identity(),
                          .centerOfMass = d.shapeOffset.inverse().translation()});

@@ -5,7 +5,9 @@
 // tissue (the tissue's force on it is its weight; the held bottom carries
 // the pad's weight and the ball's) at Hertz's indentation of an elastic
 // half-space by a rigid sphere; on the ODE backend it rests at the same
-// depth; lockstep reruns are bit-identical.
+// depth; lockstep reruns are bit-identical; the bundled fragment-on-tissue
+// example ends with the fragment carried where it landed and the pad in
+// equilibrium.
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
 
@@ -113,6 +115,34 @@ TEST(SceneSoftRigid, LockstepRunsAreBitIdentical) {
   ASSERT_TRUE(a.contains("physics") && b.contains("physics"));
   EXPECT_EQ(a.at("physics").at("bodies"), b.at("physics").at("bodies"));
   EXPECT_EQ(a.at("physics").at("soft"), b.at("physics").at("soft"));
+}
+
+// The bundled example: a 6.1 g bone fragment dropped on a pad, the pad
+// pressed beside it through the god-object, friction across the contact.
+// At rest (3 s) the fragment stays where it landed, level, carried by the
+// tissue (its weight, 1 %), and the pad is in equilibrium: its held bottom
+// carries its weight, the fragment's and the hand's push (1 %).
+TEST(SceneSoftRigid, TheFragmentOnTissueExampleEndsInEquilibrium) {
+  const json s = runScene(scene_run::bundledScene("fragment_on_tissue.json"), 3.0,
+                          dm::test::TempDir("fragment_on_tissue").path());
+  ASSERT_TRUE(s.contains("physics")) << s.dump(2);
+  const json& fragment = scene_run::named(s.at("physics").at("bodies"), "fragment");
+  const json& pad = scene_run::named(s.at("physics").at("soft"), "pad");
+  const double weight = fragment.at("mass_kg").get<double>() * kG;
+  EXPECT_NEAR(weight, 0.02 * 0.016 * 0.01 * 1900 * kG, 1e-12);
+  EXPECT_LT(vec(fragment.at("velocity_m_s")).norm(), 1e-3);
+  EXPECT_LT(vec(fragment.at("angular_velocity_rad_s")).norm(), 0.01);
+  const dm::Vec3 at = vec(fragment.at("position_m"));
+  EXPECT_LT((at.head<2>() - dm::Vec2(-0.012, 0)).norm(), 0.002) << at.transpose();
+  EXPECT_GT(std::abs(fragment.at("orientation_wxyz")[0].get<double>()), 0.999);  // level, not spun
+  const dm::Vec3 onFragment = vec(scene_run::named(pad.at("obstacles"), "fragment").at("force_N"));
+  EXPECT_NEAR(onFragment.z(), weight, 0.01 * weight);
+  // The pad: held + weight + the tool's push + the fragment's = 0.
+  const dm::Vec3 held = vec(pad.at("held_force_N"));
+  const dm::Vec3 tool = vec(pad.at("tool_force_N"));
+  EXPECT_GT(-tool.z(), 0.8) << "the hand presses the pad";
+  const dm::Vec3 residual = held + vec(pad.at("weight_N")) + tool - onFragment;
+  EXPECT_LT(residual.norm(), 0.01 * held.norm()) << residual.transpose();
 }
 
 }  // namespace scene_soft_rigid_test

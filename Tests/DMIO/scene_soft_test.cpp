@@ -28,7 +28,7 @@ Json padScene() {
       {"name": "pad", "mesh": "pad", "material": "tissue", "haptic": true,
        "soft": {"youngs_modulus": 2e4, "poisson_ratio": 0.4, "density": 1050,
                 "damping": {"alpha": 2, "beta": 0.01}, "voxel_size": 0.004, "fixed": ["-z", "+x"],
-                "max_tets": 50000, "contact_stiffness": 3000}},
+                "max_tets": 50000, "contact_stiffness": 3000, "contact_friction": 0.4}},
       {"name": "tool", "mesh": "tip"}
     ],
     "devices": [{"name": "hand", "driver": "sim-haptic", "config": {"path": "point"}}],
@@ -53,6 +53,7 @@ TEST(SceneSoft, KeysReadAndWriteBackEqual) {
   EXPECT_EQ(pad.soft->fixedFaces, (1u << 4) | (1u << 1));  // "-z" and "+x"
   EXPECT_EQ(pad.soft->maxTets, 50000u);
   EXPECT_EQ(pad.soft->contactStiffness, 3000);
+  EXPECT_EQ(pad.soft->contactFriction, 0.4);
   EXPECT_FALSE(pad.collide) << "soft objects take part in no rigid contact";
   const Json back = dm::toJson(*s);
   EXPECT_FALSE(back["objects"][1].contains("contact"));
@@ -73,6 +74,7 @@ TEST(SceneSoft, KeysReadAndWriteBackEqual) {
   EXPECT_EQ(soft.fixedFaces, 0);
   EXPECT_EQ(soft.maxTets, 100000u);
   EXPECT_EQ(soft.contactStiffness, 0) << "not given: from E and the voxel size";
+  EXPECT_EQ(soft.contactFriction, 0) << "not given: frictionless";
 }
 
 TEST(SceneSoft, BadValuesAreErrorsAtTheirKeys) {
@@ -86,6 +88,7 @@ TEST(SceneSoft, BadValuesAreErrorsAtTheirKeys) {
   soft["max_tets"] = 10.5;
   soft["stiffness"] = 1;
   soft["contact_stiffness"] = -5;
+  soft["contact_friction"] = -0.1;
   const auto problems = problemsOf(j);
   const std::string p = "/objects/1/soft";
   EXPECT_TRUE(at(problems, p + "/youngs_modulus"));
@@ -105,6 +108,7 @@ TEST(SceneSoft, BadValuesAreErrorsAtTheirKeys) {
   EXPECT_TRUE(at(problems, p + "/max_tets"));
   EXPECT_TRUE(at(problems, p + "/stiffness"));
   EXPECT_TRUE(at(problems, p + "/contact_stiffness"));
+  EXPECT_TRUE(at(problems, p + "/contact_friction"));
   // A version-1 file has no soft tissue.
   Json v1 = padScene();
   v1["version"] = 1;

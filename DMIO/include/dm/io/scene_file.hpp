@@ -240,6 +240,9 @@ struct SceneSoft {
   /// out of the static objects that collide ("contact_stiffness"); 0 (not
   /// given): 20·E·voxel_size, a node's own stiffness times 20.
   double contactStiffness = 0.0;
+  /// N·s/m per boundary node in contact, ≥ 0: viscous friction across the
+  /// contact with the other objects ("contact_friction"; 0: frictionless).
+  double contactFriction = 0.0;
   std::uint8_t fixedFaces = 0;
   /// Boxes whose nodes are held too ("fixed_boxes"): where the tissue is
   /// attached (to bone, to a clamp).

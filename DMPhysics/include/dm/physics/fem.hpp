@@ -121,7 +121,9 @@ struct FemPointSpring {
 /// A rigid obstacle the tissue rests on or is pushed by (a bone, an
 /// instrument, a table): a closed mesh's tree (MeshBvh::isClosed(), so
 /// distances are signed) at a pose, moved by the caller between steps.
-/// Contact is frictionless.
+/// Along the normal a penalty spring; across it viscous friction
+/// (`friction`, a damper on the sliding velocity, implicit; no static
+/// friction: a body on a slope creeps), 0 = frictionless.
 ///
 /// Kinematic (mass 0): the caller moves it (setObstaclePose, and
 /// setObstacleVelocity for the contact's damping term); the tissue does not
@@ -137,6 +139,11 @@ struct FemObstacle {
   /// N/m per boundary node in contact, > 0: the implicit penalty spring
   /// along the obstacle's normal. A node sinks about (its load) / stiffness.
   double stiffness = 1e4;
+  /// N·s/m per boundary node in contact, ≥ 0: the tangential damper −c·(v −
+  /// u) on the node's velocity across the normal relative to the obstacle's
+  /// surface (and its reaction on a dynamic obstacle), integrated implicitly
+  /// with the spring. It stops sliding and spinning on the tissue.
+  double friction = 0.0;
   double mass = 0.0;                  ///< kg, ≥ 0; 0 = kinematic
   Mat3 inertia = Mat3::Identity();    ///< kg·m², about the centre of mass, local frame (dynamic only; SPD)
   Vec3 centerOfMass = Vec3::Zero();   ///< m, local frame: where velocities and torques refer to
@@ -642,6 +649,7 @@ class FemBody {
     Vec3 normal = Vec3::Zero();  // unit, out of the obstacle
     double depth = 0.0;          // m, > 0
     double stiffness = 0.0;      // N/m
+    double friction = 0.0;       // N·s/m, tangential
     Vec3 arm = Vec3::Zero();     // m, node − obstacle's centre of mass, at the step's start
   };
   std::vector<FemObstacle> obstacles_;
@@ -657,9 +665,11 @@ class FemBody {
   std::vector<NodeContact> contacts_;     // this step's (capacity: surface nodes)
   std::vector<std::int32_t> contactOf_;   // per node: index into contacts_, or -1
   double sysContactScale_ = 0.0;          // h² of the current step: contact's share of the operator
+  double sysDampScale_ = 0.0;             // h of the current step: the contact friction's share
   void findObstacleContacts();
   double contactRate(const NodeContact& c) const noexcept;
   Vec3 contactForce(const NodeContact& c, double h) const noexcept;
+  Vec3 contactFriction(const NodeContact& c) const noexcept;
   VecX rhs_, dv_, tmp_;
   VecX full_;  // applySystem's input with hanging rows filled in (P·in)
   double sysMassScale_ = 1.0, sysStiffScale_ = 0.0;  // operator scales of the current step

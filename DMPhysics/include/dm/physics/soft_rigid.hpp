@@ -62,6 +62,7 @@ struct SoftRigidContact {
   BodyId body;                    ///< a rigid or static body of the world
   const MeshBvh* tree = nullptr;  ///< closed, in the body's shape frame (BodyDesc::shapeOffset); outlives the coupling
   double stiffness = 1e4;         ///< N/m per tissue node in contact (FemObstacle::stiffness)
+  double friction = 0.0;          ///< N·s/m per node in contact, across the normal (FemObstacle::friction)
 };
 
 /// Steps a FemBody and a PhysicsWorld together (see the file comment).
