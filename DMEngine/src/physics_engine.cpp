@@ -88,6 +88,42 @@ Result<BodyGeometry> primitiveGeometry(const SceneResource& r, double scale, boo
       g.inertiaPerKg = diag(side, side, axial);
       break;
     }
+    case S::Compound: {
+      // The parts as one rigid body of uniform density: its centre of mass
+      // the parts' volume-weighted centres, its inertia theirs moved there
+      // (parallel axes; overlaps counted twice).
+      std::vector<CompoundChild> children;
+      std::vector<std::pair<BodyGeometry, Isometry3>> parts;
+      Vec3 center = Vec3::Zero();
+      for (const SceneResource::Part& part : r.parts) {
+        SceneResource one;
+        one.type = SceneResource::Type::Shape;
+        one.shape = part.shape;
+        one.radius = part.radius;
+        one.height = part.height;
+        one.halfExtents = part.halfExtents;
+        auto pg = primitiveGeometry(one, scale, dynamic, where);
+        if (!pg) return pg.error();
+        Isometry3 pose = part.pose.isometry();
+        pose.translation() *= scale;
+        g.volume += pg->volume;
+        center += pg->volume * pose.translation();
+        parts.emplace_back(std::move(*pg), pose);
+      }
+      if (g.volume > 0) center /= g.volume;
+      for (auto& [pg, pose] : parts) {
+        const Mat3 rot = pose.linear();
+        const Vec3 d = pose.translation() - center;
+        g.inertiaPerKg += pg.volume / g.volume *
+                          (rot * pg.inertiaPerKg * rot.transpose() +
+                           (d.squaredNorm() * Mat3::Identity() - d * d.transpose()));
+        children.push_back({pg.shape, pose});
+      }
+      g.shape = std::make_shared<Compound>(std::move(children));
+      g.shapeOffset = Isometry3(Eigen::Translation3d(-center));
+      g.objectInBody = g.shapeOffset;
+      break;
+    }
     case S::Plane: {
       // A finite rectangle in z = 0, solid below: a slab as deep as its
       // shorter side, so nothing that lands on it can tunnel through.

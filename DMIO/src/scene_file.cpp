@@ -32,7 +32,10 @@ constexpr std::size_t kMaxSceneBytes = std::size_t{16} << 20;
 constexpr std::size_t kMaxSuggestions = 200;
 
 constexpr std::array<std::string_view, 5> kResourceTypes{"mesh", "volume", "isosurface", "shape", "image"};
-constexpr std::array<std::string_view, 5> kShapes{"sphere", "box", "capsule", "cylinder", "plane"};
+constexpr std::array<std::string_view, 6> kShapes{"sphere",   "box",   "capsule",
+                                                  "cylinder", "plane", "compound"};
+// A compound's parts: the first four of kShapes, in the same order.
+constexpr std::array<std::string_view, 4> kPartShapes{"sphere", "box", "capsule", "cylinder"};
 constexpr std::array<std::string_view, 2> kMaterialModels{"blinn-phong", "pbr"};
 constexpr std::array<std::string_view, 3> kVolumeModes{"composite", "mip", "slice"};
 constexpr std::array<std::string_view, 3> kAxes{"axial", "coronal", "sagittal"};
@@ -246,6 +249,25 @@ class SceneParser {
     res.path = resolveSource(r, res.source);
   }
 
+  // A primitive's size keys for `shape` (sphere, box, capsule, cylinder,
+  // plane) into radius, height and half extents.
+  static void shapeSize(ConfigReader& r, SceneResource::Shape s, double& radius, double& height, Vec3& half) {
+    using S = SceneResource::Shape;
+    if (s == S::Sphere || s == S::Capsule || s == S::Cylinder) radius = readPositive(r, "radius", {});
+    if (s == S::Capsule || s == S::Cylinder) height = readPositive(r, "height", {});
+    if (s == S::Box || s == S::Plane) {
+      const std::size_t n = s == S::Box ? 3 : 2;
+      const std::size_t before = r.errors().size();
+      const std::vector<double> h = r.numbers("half_extents", n);
+      if (r.errors().size() == before) {
+        for (std::size_t i = 0; i < n; ++i) half[static_cast<Eigen::Index>(i)] = h[i];
+        if (!(half.head(n).minCoeff() > 0.0))
+          r.addError("half extents must be greater than 0", "half_extents",
+                     n == 3 ? "give [hx, hy, hz] in metres" : "a plane takes [hx, hy] in metres");
+      }
+    }
+  }
+
   void shape(ConfigReader& r, SceneResource& res) {
     const auto s = readEnum<SceneResource::Shape>(r, "shape", kShapes);
     if (!s) return;
@@ -263,21 +285,51 @@ class SceneParser {
       case S::Cylinder:
         r.knownKeys({"type", "shape", "radius", "height", "subdivisions"});
         break;
+      case S::Compound:
+        r.knownKeys({"type", "shape", "parts", "subdivisions"});
+        if (!r.has("parts"))
+          r.addError("a compound shape needs its parts", "parts",
+                     "give \"parts\": [{\"shape\": \"box\", \"half_extents\": [...], \"pose\": {...}}, ...]");
+        else if (v2Key(r, "parts"))
+          compoundParts(r, res);
+        break;
     }
-    if (*s == S::Sphere || *s == S::Capsule || *s == S::Cylinder) res.radius = readPositive(r, "radius", {});
-    if (*s == S::Capsule || *s == S::Cylinder) res.height = readPositive(r, "height", {});
-    if (*s == S::Box || *s == S::Plane) {
-      const std::size_t n = *s == S::Box ? 3 : 2;
-      const std::size_t before = r.errors().size();
-      const std::vector<double> h = r.numbers("half_extents", n);
-      if (r.errors().size() == before) {
-        for (std::size_t i = 0; i < n; ++i) res.halfExtents[static_cast<Eigen::Index>(i)] = h[i];
-        if (!(res.halfExtents.head(n).minCoeff() > 0.0))
-          r.addError("half extents must be greater than 0", "half_extents",
-                     n == 3 ? "give [hx, hy, hz] in metres" : "a plane takes [hx, hy] in metres");
-      }
-    }
+    shapeSize(r, *s, res.radius, res.height, res.halfExtents);
     res.subdivisions = static_cast<int>(r.integer("subdivisions", {.min = 0, .max = 8}, 3));
+  }
+
+  // A compound's "parts": 1..64 primitives, each placed by its pose.
+  void compoundParts(ConfigReader& r, SceneResource& res) {
+    ConfigReader list = r.child("parts");
+    if (!expectArray(list)) return;
+    if (list.size() == 0 || list.size() > 64) {
+      r.addError(formatString("%zu parts: a compound has 1 to 64", list.size()), "parts",
+                 "give at least one part (a single part is that shape, placed)");
+      return;
+    }
+    for (std::size_t i = 0; i < list.size(); ++i) {
+      ConfigReader p = list.at(i);
+      if (!expectObject(p)) continue;
+      p.knownKeys({"shape", "radius", "height", "half_extents", "pose"});
+      SceneResource::Part part;
+      const auto s = readEnum<SceneResource::Shape>(p, "shape", kPartShapes);
+      if (!s) continue;
+      part.shape = *s;
+      for (const char* key : {"radius", "height", "half_extents"}) {
+        const bool wanted =
+            std::string_view(key) == "half_extents" ? part.shape == SceneResource::Shape::Box
+            : std::string_view(key) == "radius"
+                ? part.shape != SceneResource::Shape::Box
+                : part.shape == SceneResource::Shape::Capsule || part.shape == SceneResource::Shape::Cylinder;
+        if (!wanted && p.has(key))
+          p.addError("a " + std::string(kPartShapes[static_cast<std::size_t>(part.shape)]) +
+                         " part has no \"" + key + "\"",
+                     key, "remove it");
+      }
+      shapeSize(p, part.shape, part.radius, part.height, part.halfExtents);
+      if (p.has("pose")) part.pose = readPose(p.child("pose"));
+      res.parts.push_back(part);
+    }
   }
 
   void resources() {
@@ -1235,6 +1287,17 @@ Json toJson(const SceneDesc& scene) {
         if (r.shape == S::Capsule || r.shape == S::Cylinder) o["height"] = r.height;
         if (r.shape == S::Box) o["half_extents"] = toJson(r.halfExtents);
         if (r.shape == S::Plane) o["half_extents"] = Json::array({r.halfExtents.x(), r.halfExtents.y()});
+        if (r.shape == S::Compound) {
+          Json parts = Json::array();
+          for (const SceneResource::Part& p : r.parts) {
+            Json part = {{"shape", enumName(p.shape, kShapes)}, {"pose", toJson(p.pose)}};
+            if (p.shape != S::Box) part["radius"] = p.radius;
+            if (p.shape == S::Capsule || p.shape == S::Cylinder) part["height"] = p.height;
+            if (p.shape == S::Box) part["half_extents"] = toJson(p.halfExtents);
+            parts.push_back(std::move(part));
+          }
+          o["parts"] = std::move(parts);
+        }
         o["subdivisions"] = r.subdivisions;
         break;
     }

@@ -186,6 +186,22 @@ Result<Mesh> makeSceneShape(const SceneResource& r) {
       if (!(r.halfExtents.x() > 0) || !(r.halfExtents.y() > 0)) break;
       m = makePlane(r.halfExtents.x(), r.halfExtents.y(), std::max(1, 1 << std::min(sub, 8)));
       break;
+    case SceneResource::Shape::Compound:
+      // Each part's own closed mesh, placed: their union drawn and touched
+      // as one mesh (overlapping parts keep their inner faces).
+      for (const SceneResource::Part& part : r.parts) {
+        SceneResource one = r;
+        one.shape = part.shape;
+        one.radius = part.radius;
+        one.height = part.height;
+        one.halfExtents = part.halfExtents;
+        one.parts.clear();
+        auto pm = makeSceneShape(one);
+        if (!pm) return pm.error();
+        pm->transform(Affine3(part.pose.isometry().matrix()));
+        m.append(*pm);
+      }
+      break;
   }
   if (m.empty())
     return fail(ErrorCode::InvalidArgument, "shape with a non-positive size", where(r),

@@ -622,6 +622,14 @@ Json fullScene() {
       "cyl": {"type": "shape", "shape": "cylinder", "radius": 0.02, "height": 0.04, "subdivisions": 4},
       "floor": {"type": "shape", "shape": "plane", "half_extents": [1.0, 2.0], "subdivisions": 0},
       "ball": {"type": "shape", "shape": "sphere", "radius": 0.005, "subdivisions": 5},
+      "hammer": {"type": "shape", "shape": "compound", "subdivisions": 2, "parts": [
+        {"shape": "box", "half_extents": [0.1, 0.005, 0.005],
+         "pose": {"position": [0.0, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]}},
+        {"shape": "cylinder", "radius": 0.015, "height": 0.04,
+         "pose": {"position": [0.11, 0.0, 0.0], "rotation": [0.0, 0.6, 0.8, 0.0]}},
+        {"shape": "sphere", "radius": 0.004, "pose": {"position": [-0.1, 0.0, 0.0], "rotation": [1.0, 0.0, 0.0, 0.0]}},
+        {"shape": "capsule", "radius": 0.003, "height": 0.01,
+         "pose": {"position": [0.0, 0.0, 0.01], "rotation": [1.0, 0.0, 0.0, 0.0]}}]},
       "liver": {"type": "mesh", "source": "meshes/liver.stl", "unit": "mm", "scale": 1.5},
       "ct": {"type": "volume", "source": "/data/scenes/ct/ct.nii.gz"},
       "iso": {"type": "isosurface", "volume": "ct", "level": 300.5, "largest_component": true, "smooth": 4,
@@ -846,6 +854,38 @@ TEST(SceneFile, SourcesResolveAgainstTheSceneDirectory) {
   auto missing = dm::readScene(dir / "nothing.json");
   ASSERT_FALSE(missing);
   EXPECT_EQ(missing.error().code, dm::ErrorCode::NotFound);
+}
+
+// A compound shape's parts: 1 to 64 primitives (no plane, no compound),
+// each with its own size keys and no other's, and a version-2 key.
+TEST(SceneFile, CompoundShapePartsAreCheckedAtTheirPaths) {
+  Json j = Json::parse(R"({
+    "format": "dmplatform-scene", "version": 2, "name": "c",
+    "resources": {"c": {"type": "shape", "shape": "compound", "parts": [
+      {"shape": "plane", "half_extents": [1, 1]},
+      {"shape": "box", "radius": 0.1, "half_extents": [0.1, 0.1, 0.1]},
+      {"shape": "cylinder", "radius": 0.1},
+      {"shape": "sphere", "radius": 0.1, "pose": {"position": [0, 0]}},
+      {"shape": "sphere", "radius": 0.1, "color": 3}
+    ]}},
+    "objects": [{"name": "c", "mesh": "c"}]
+  })");
+  const auto p = problemsOf(j);
+  expectAt(p, "/resources/c/parts/0/shape", "\"plane\"");
+  expectAt(p, "/resources/c/parts/1/radius", "no \"radius\"");
+  EXPECT_TRUE(at(p, "/resources/c/parts/2/height"));
+  EXPECT_TRUE(at(p, "/resources/c/parts/3/pose/position"));
+  EXPECT_TRUE(at(p, "/resources/c/parts/4/color"));
+  Json none = j;
+  none["resources"]["c"]["parts"] = Json::array();
+  expectAt(problemsOf(none), "/resources/c/parts", "1 to 64");
+  Json missing = j;
+  missing["resources"]["c"].erase("parts");
+  expectAt(problemsOf(missing), "/resources/c/parts", "needs its parts");
+  Json v1 = j;
+  v1["version"] = 1;
+  v1["resources"]["c"]["parts"] = Json::array({{{"shape", "sphere"}, {"radius", 0.1}}});
+  expectAt(problemsOf(v1), "/resources/c/parts", "version-2");
 }
 
 }  // namespace

@@ -97,7 +97,21 @@ struct SceneSegment {
 /// A named resource: something to load or generate once and share.
 struct SceneResource {
   enum class Type : std::uint8_t { Mesh, Volume, Isosurface, Shape, Image };
-  enum class Shape : std::uint8_t { Sphere, Box, Capsule, Cylinder, Plane };
+  enum class Shape : std::uint8_t { Sphere, Box, Capsule, Cylinder, Plane, Compound };
+  /// One part of a compound shape (v2, "parts"): a sphere, box, capsule or
+  /// cylinder of its own size placed by `pose` in the compound's frame.
+  struct Part {
+    Shape shape = Shape::Sphere;
+    double radius = 0.0;              ///< sphere, capsule, cylinder: m, > 0
+    Vec3 halfExtents = Vec3::Zero();  ///< box: m, > 0
+    double height = 0.0;              ///< capsule, cylinder: m, > 0
+    Pose pose;                        ///< part frame → compound frame
+
+    bool operator==(const Part& o) const {
+      return shape == o.shape && radius == o.radius && halfExtents == o.halfExtents && height == o.height &&
+             pose.p == o.pose.p && pose.q.coeffs() == o.pose.q.coeffs();
+    }
+  };
 
   std::string name;
   Type type = Type::Mesh;
@@ -129,6 +143,9 @@ struct SceneResource {
   double radius = 0.0;              ///< Sphere, capsule, cylinder: m, > 0
   Vec3 halfExtents = Vec3::Zero();  ///< Box: m, > 0; plane: x, y > 0 and z = 0
   double height = 0.0;              ///< Capsule (between the cap centres), cylinder: m, > 0
+  /// Compound (v2): its parts, 1..64; a rigid union (mass from the parts'
+  /// volumes, overlaps counted twice).
+  std::vector<Part> parts;
   int subdivisions = 3;             ///< Shape tessellation level, 0..8
 
   bool operator==(const SceneResource&) const = default;
