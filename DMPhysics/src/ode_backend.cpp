@@ -34,8 +34,8 @@ Quat fromOde(const dReal* q) { return Quat(q[0], q[1], q[2], q[3]).normalized();
 
 Vec3 vec(const dReal* v) { return {v[0], v[1], v[2]}; }
 
-bool supported(ShapeType t, BodyKind kind) {
-  switch (t) {
+bool supported(const Shape& s, BodyKind kind) {
+  switch (s.type()) {
     case ShapeType::Sphere:
     case ShapeType::Box:
     case ShapeType::Capsule:
@@ -45,6 +45,12 @@ bool supported(ShapeType t, BodyKind kind) {
     case ShapeType::Plane:
     case ShapeType::TriangleMesh:
       return kind == BodyKind::Static;
+    case ShapeType::Compound:  // one geom per part on the body: primitives and hulls
+      for (const CompoundChild& c : static_cast<const Compound&>(s).children())
+        if (c.shape->type() == ShapeType::Compound || c.shape->type() == ShapeType::Plane ||
+            c.shape->type() == ShapeType::TriangleMesh || !supported(*c.shape, kind))
+          return false;
+      return true;
     default:
       return false;
   }
@@ -111,6 +117,77 @@ struct OdeWorld::Impl {
     return &(*feedback[k / kFeedbackBlock])[k % kFeedbackBlock];
   }
 
+  // One geom of world body i (ODE body b, null for a static one) for shape
+  // s at `offset` in the body frame; a static body's geom at its world pose
+  // (bodyPose · offset). Planes are world-frame half-spaces.
+  void addGeom(const Shape& s, std::size_t i, dBodyID b, const Isometry3& bodyPose, const Isometry3& offset) {
+    dGeomID g = nullptr;
+    switch (s.type()) {
+      case ShapeType::Sphere:
+        g = dCreateSphere(space, static_cast<const Sphere&>(s).radius());
+        break;
+      case ShapeType::Box: {
+        const Vec3 full = 2.0 * static_cast<const Box&>(s).halfExtents();
+        g = dCreateBox(space, full.x(), full.y(), full.z());
+        break;
+      }
+      case ShapeType::Capsule: {
+        const auto& c = static_cast<const Capsule&>(s);
+        g = dCreateCapsule(space, c.radius(), 2.0 * c.halfLength());
+        break;
+      }
+      case ShapeType::Cylinder: {  // both along local z
+        const auto& c = static_cast<const Cylinder&>(s);
+        g = dCreateCylinder(space, c.radius(), 2.0 * c.halfLength());
+        break;
+      }
+      case ShapeType::ConvexHull: {
+        auto c = odeConvex(static_cast<const ConvexHull&>(s));
+        g = dCreateConvex(space, c->planes.data(), static_cast<unsigned>(c->planes.size() / 4),
+                          c->points.data(), static_cast<unsigned>(c->points.size() / 3), c->polygons.data());
+        convexes.push_back(std::move(c));
+        break;
+      }
+      case ShapeType::TriangleMesh: {  // static (checked in create); the world keeps the mesh alive
+        const Mesh& m = *static_cast<const TriangleMesh&>(s).mesh();
+        static_assert(sizeof(Triangle) == 3 * sizeof(dTriIndex) && sizeof(Vec3) == 3 * sizeof(double));
+        dTriMeshDataID data = dGeomTriMeshDataCreate();
+        meshData.push_back(data);
+        dGeomTriMeshDataBuildDouble(data, m.positions.data(), sizeof(Vec3),
+                                    static_cast<int>(m.positions.size()), m.triangles.data(),
+                                    static_cast<int>(3 * m.triangles.size()), sizeof(Triangle));
+        g = dCreateTriMesh(space, data, nullptr, nullptr, nullptr);
+        break;
+      }
+      default: {  // a plane on a static body (checked in create): world-frame a·x = d
+        const auto& p = static_cast<const Plane&>(s);
+        const Isometry3 pose = bodyPose * offset;
+        const Vec3 nw = pose.linear() * p.normal();
+        g = dCreatePlane(space, nw.x(), nw.y(), nw.z(), p.offset() + nw.dot(pose.translation()));
+        dGeomSetData(g, reinterpret_cast<void*>(static_cast<std::uintptr_t>(i)));
+        return;
+      }
+    }
+    dGeomSetData(g, reinterpret_cast<void*>(static_cast<std::uintptr_t>(i)));
+    if (b) {
+      dGeomSetBody(g, b);
+      if (!offset.isApprox(Isometry3::Identity(), 0.0)) {
+        const Vec3 off = offset.translation();
+        dQuaternion oq;
+        toOde(Quat(offset.rotation()), oq);
+        dGeomSetOffsetPosition(g, off.x(), off.y(), off.z());
+        dGeomSetOffsetQuaternion(g, oq);
+      }
+    } else {
+      const Isometry3 pose = bodyPose * offset;
+      const Vec3 x = pose.translation();
+      dQuaternion gq;
+      toOde(Quat(pose.rotation()), gq);
+      dGeomSetPosition(g, x.x(), x.y(), x.z());
+      dGeomSetQuaternion(g, gq);
+    }
+  }
+
   // The world-body index of an ODE body (its user data), or -1 for none.
   static std::ptrdiff_t indexOf(dBodyID b) {
     return b ? static_cast<std::ptrdiff_t>(reinterpret_cast<std::uintptr_t>(dBodyGetData(b))) : -1;
@@ -172,14 +249,19 @@ Result<OdeWorld> OdeWorld::create(const PhysicsWorld& world, const OdeOptions& o
     const BodyDesc& d = bodies[i];
     if (!d.shape || !world.material(BodyId{static_cast<std::uint32_t>(i)}).collides) continue;
     const ShapeType t = d.shape->type();
-    if (!supported(t, d.kind))
-      return fail(ErrorCode::Unsupported,
-                  "the ODE backend cannot take a " + std::string(shapeTypeName(t)) + " shape" +
-                      (t == ShapeType::Plane || t == ShapeType::TriangleMesh ? " on a moving body" : ""),
-                  bodyName(i, d.name),
-                  "use sphere, box, capsule, cylinder or convex hull shapes (planes and triangle meshes on "
-                  "static bodies), or the built-in solver");
-    if (t == ShapeType::ConvexHull && hull < 0) hull = static_cast<std::ptrdiff_t>(i);
+    if (!supported(*d.shape, d.kind))
+      return fail(
+          ErrorCode::Unsupported,
+          "the ODE backend cannot take a " + std::string(shapeTypeName(t)) + " shape" +
+              (t == ShapeType::Plane || t == ShapeType::TriangleMesh ? " on a moving body" : ""),
+          bodyName(i, d.name),
+          "use sphere, box, capsule, cylinder or convex hull shapes, or compounds of them (planes and "
+          "triangle meshes on static bodies), or the built-in solver");
+    bool hasHull = t == ShapeType::ConvexHull;
+    if (t == ShapeType::Compound)
+      for (const CompoundChild& c : static_cast<const Compound&>(*d.shape).children())
+        hasHull = hasHull || c.shape->type() == ShapeType::ConvexHull;
+    if (hasHull && hull < 0) hull = static_cast<std::ptrdiff_t>(i);
     if (t == ShapeType::TriangleMesh && triangles < 0) triangles = static_cast<std::ptrdiff_t>(i);
   }
   // ODE 0.16 as Debian builds it (without libccd) has no convex–triangle-mesh
@@ -239,71 +321,14 @@ Result<OdeWorld> OdeWorld::create(const PhysicsWorld& world, const OdeOptions& o
       impl->body[i] = b;
     }
     if (!d.shape || !world.material(BodyId{static_cast<std::uint32_t>(i)}).collides) continue;
-    const Shape& s = *d.shape;
-    dGeomID g = nullptr;
-    switch (s.type()) {
-      case ShapeType::Sphere:
-        g = dCreateSphere(impl->space, static_cast<const Sphere&>(s).radius());
-        break;
-      case ShapeType::Box: {
-        const Vec3 full = 2.0 * static_cast<const Box&>(s).halfExtents();
-        g = dCreateBox(impl->space, full.x(), full.y(), full.z());
-        break;
-      }
-      case ShapeType::Capsule: {
-        const auto& c = static_cast<const Capsule&>(s);
-        g = dCreateCapsule(impl->space, c.radius(), 2.0 * c.halfLength());
-        break;
-      }
-      case ShapeType::Cylinder: {  // both along local z
-        const auto& c = static_cast<const Cylinder&>(s);
-        g = dCreateCylinder(impl->space, c.radius(), 2.0 * c.halfLength());
-        break;
-      }
-      case ShapeType::ConvexHull: {
-        auto c = odeConvex(static_cast<const ConvexHull&>(s));
-        g = dCreateConvex(impl->space, c->planes.data(), static_cast<unsigned>(c->planes.size() / 4),
-                          c->points.data(), static_cast<unsigned>(c->points.size() / 3), c->polygons.data());
-        impl->convexes.push_back(std::move(c));
-        break;
-      }
-      case ShapeType::TriangleMesh: {  // static (checked above); the world keeps the mesh alive
-        const Mesh& m = *static_cast<const TriangleMesh&>(s).mesh();
-        static_assert(sizeof(Triangle) == 3 * sizeof(dTriIndex) && sizeof(Vec3) == 3 * sizeof(double));
-        dTriMeshDataID data = dGeomTriMeshDataCreate();
-        impl->meshData.push_back(data);
-        dGeomTriMeshDataBuildDouble(data, m.positions.data(), sizeof(Vec3),
-                                    static_cast<int>(m.positions.size()), m.triangles.data(),
-                                    static_cast<int>(3 * m.triangles.size()), sizeof(Triangle));
-        g = dCreateTriMesh(impl->space, data, nullptr, nullptr, nullptr);
-        break;
-      }
-      default: {  // a plane on a static body (checked above): world-frame a·x = d
-        const auto& p = static_cast<const Plane&>(s);
-        const Isometry3 pose = Eigen::Translation3d(d.position) * d.orientation.normalized() * d.shapeOffset;
-        const Vec3 nw = pose.linear() * p.normal();
-        g = dCreatePlane(impl->space, nw.x(), nw.y(), nw.z(), p.offset() + nw.dot(pose.translation()));
-        break;
-      }
-    }
-    dGeomSetData(g, reinterpret_cast<void*>(static_cast<std::uintptr_t>(i)));
-    if (s.type() == ShapeType::Plane) continue;
-    const Vec3 off = d.shapeOffset.translation();
-    dQuaternion oq;
-    toOde(Quat(d.shapeOffset.rotation()), oq);
-    if (b) {
-      dGeomSetBody(g, b);
-      if (!d.shapeOffset.isApprox(Isometry3::Identity(), 0.0)) {
-        dGeomSetOffsetPosition(g, off.x(), off.y(), off.z());
-        dGeomSetOffsetQuaternion(g, oq);
-      }
+    const Isometry3 bodyPose = Eigen::Translation3d(d.position) * d.orientation.normalized();
+    if (d.shape->type() == ShapeType::Compound) {
+      // One geom per part, each on the body at shapeOffset · its pose (ODE
+      // never collides two geoms of one body).
+      for (const CompoundChild& c : static_cast<const Compound&>(*d.shape).children())
+        impl->addGeom(*c.shape, i, b, bodyPose, d.shapeOffset * c.pose);
     } else {
-      const Isometry3 pose = Eigen::Translation3d(d.position) * d.orientation.normalized() * d.shapeOffset;
-      const Vec3 x = pose.translation();
-      dQuaternion gq;
-      toOde(Quat(pose.rotation()), gq);
-      dGeomSetPosition(g, x.x(), x.y(), x.z());
-      dGeomSetQuaternion(g, gq);
+      impl->addGeom(*d.shape, i, b, bodyPose, d.shapeOffset);
     }
   }
 

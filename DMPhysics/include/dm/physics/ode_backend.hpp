@@ -5,7 +5,8 @@
 // An OdeWorld mirrors a PhysicsWorld model when it is created: every
 // particle and rigid body becomes an ODE body (mass, body-frame inertia about
 // the centre of mass), every shape an ODE geom at the body's shapeOffset
-// (sphere, box, capsule, cylinder, convex hull as dConvex; planes and
+// (sphere, box, capsule, cylinder, convex hull as dConvex, a compound of
+// them as one geom per part at shapeOffset · the part's pose; planes and
 // triangle meshes (OPCODE) on static bodies only; a convex hull and a
 // triangle mesh in one world are refused: ODE 0.16 as Debian builds it has
 // no collider for that pair), static bodies become body-less geoms, joints
