@@ -553,6 +553,8 @@ nlohmann::json PhysicsEngine::summary() const {
     std::copy_n(m.ode->lastContactForces().begin(), contactForce.size(), contactForce.begin());
   else
     addContactForces(m.state, m.lastDt, contactForce);
+  std::vector<Vec3> softForce(m.world.bodyCount(), Vec3::Zero());  // the tissue's contact, by world body
+  m.soft->addBodyForces(softForce);
   Json bodies = Json::array();
   for (std::size_t b = 0; b < m.bodies.size(); ++b) {
     const Impl::Body& body = m.bodies[b];
@@ -567,6 +569,7 @@ nlohmann::json PhysicsEngine::summary() const {
               {"angular_velocity_rad_s", engine_json::vec3(m.state.angularVelocity(body.id))},
               {"asleep", m.state.asleep(body.id)},
               {"contact_force_N", engine_json::vec3(contactForce[b])},
+              {"soft_force_N", engine_json::vec3(softForce[body.id.index])},
               {"tool_force_N", engine_json::vec3(m.toolForce[b])},
               {"fluid_force_N", engine_json::vec3(m.fluidForce[b])}};
     for (std::size_t k = 0; k < m.touchedBody.size(); ++k)

@@ -449,6 +449,13 @@ Vec3 SoftTissues::toolForce(const Body& b) noexcept {
   return b.needle ? Vec3(-b.needle->force()) : b.haptic->toolForce();
 }
 
+void SoftTissues::addBodyForces(std::span<Vec3> force) const {
+  for (const auto& b : bodies_)
+    for (std::size_t i = 0; i < obstacles_.size(); ++i)
+      if (obstacles_[i].body.index < force.size())
+        force[obstacles_[i].body.index] += b->coupling->wrench(i).force;
+}
+
 nlohmann::json SoftTissues::summary() const {
   Json list = Json::array();
   std::vector<Vec3> held;

@@ -113,6 +113,10 @@ class SoftTissues {
   /// stay, its positions are overwritten.
   bool latestSurface(std::size_t i, Mesh& out);
 
+  /// Control thread, after the run: adds the force (N, world) each soft
+  /// object's contact put on each body of the physics world in the last
+  /// step to `force` (indexed by the world's body index).
+  void addBodyForces(std::span<Vec3> force) const;
   /// Control thread, after the run: each body's model, solver counters,
   /// deformation and the forces on it (world frame).
   nlohmann::json summary() const;

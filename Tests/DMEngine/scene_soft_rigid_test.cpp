@@ -82,6 +82,9 @@ TEST(SceneSoftRigid, ABallDroppedOnTissueRestsAtHertzsDepthCarriedByIt) {
   const dm::Vec3 onBall = vec(obstacle.at("force_N"));
   EXPECT_NEAR(onBall.z(), weight, 0.002 * weight);
   EXPECT_LT(onBall.head<2>().norm(), 0.01 * weight);
+  // The body's own summary says the same: the tissue's force, no rigid contact.
+  EXPECT_EQ(vec(ball.at("soft_force_N")), onBall);
+  EXPECT_EQ(vec(ball.at("contact_force_N")).norm(), 0.0);
   // The held bottom carries the pad's weight and the ball's.
   const dm::Vec3 held = vec(pad.at("held_force_N")), padWeight = vec(pad.at("weight_N"));
   EXPECT_NEAR(held.z(), weight - padWeight.z(), 0.01 * (weight - padWeight.z()));
