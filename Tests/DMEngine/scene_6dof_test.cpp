@@ -45,12 +45,7 @@ json pressScene() {
   })");
 }
 
-dm::SceneDesc parsed(const json& j) {
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(j.dump(), "vps.json", ".", &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
-}
+dm::SceneDesc parsed(const json& j) { return scene_run::parsedScene(j.dump(), "vps.json", "."); }
 
 // The mean force and torque of the last 0.2 s of a run's trace (the
 // device held still for the last second).

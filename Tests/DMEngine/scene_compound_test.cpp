@@ -29,12 +29,7 @@ using nlohmann::json;
 
 constexpr double kG = 9.80665;
 
-dm::SceneDesc parse(const std::string& text) {
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(text, "compound.json", fs::temp_directory_path(), &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
-}
+dm::SceneDesc parse(const std::string& text) { return scene_run::parsedScene(text, "compound.json"); }
 
 // The hammer: a handle (half extents 0.1 × 0.005 × 0.005 m) at the
 // compound's origin and a head (0.01 × 0.02 × 0.015 m) at x = 0.11, steel

@@ -43,10 +43,7 @@ dm::SceneDesc irrigatedBasin() {
                    "start": 1.0, "stop": 1.3}]
     }]
   })";
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(text, "basin.json", ".", &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
+  return scene_run::parsedScene(text, "basin.json", ".");
 }
 
 TEST(SceneFluid, TheJetDeliversItsRateWhileOpenAndTheAccountBalances) {
@@ -169,10 +166,7 @@ dm::SceneDesc poolOn(bool soft, bool listed) {
     scene["resources"]["slab"]["half_extents"] = {0.2, 0.2, 0.01};
   }
   if (listed) scene["fluids"][0]["objects"] = {"floor"};
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(scene.dump(), "pool.json", ".", &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
+  return scene_run::parsedScene(scene.dump(), "pool.json", ".");
 }
 
 double centreHeight(const json& summary) {

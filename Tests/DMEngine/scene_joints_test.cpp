@@ -44,10 +44,7 @@ dm::SceneDesc sceneWith(const std::string& objects, const std::string& joints,
                            R"("joints": [)" + joints + R"(]}},
     "outputs": {"summary": true}
   })";
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(text, "joints.json", fs::temp_directory_path(), &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
+  return scene_run::parsedScene(text, "joints.json");
 }
 
 const json& bodyOf(const json& summary, const std::string& name) {

@@ -41,10 +41,7 @@ dm::SceneDesc sheetScene(const std::string& membrane, const std::string& pose,
                            extra + R"(},
     "outputs": {"summary": true}
   })";
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(text, "membrane.json", fs::temp_directory_path(), &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
+  return scene_run::parsedScene(text, "membrane.json");
 }
 
 const json& membraneOf(const json& summary) { return summary.at("physics").at("membranes").at(0); }

@@ -41,10 +41,7 @@ dm::SceneDesc onOde(dm::SceneDesc scene) {
 }
 
 dm::SceneDesc parse(const std::string& text, const fs::path& dir) {
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(text, "ode.json", dir, &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
+  return scene_run::parsedScene(text, "ode.json", dir);
 }
 
 TEST(SceneOde, ToolPushesTheBoxAndTheHandFeelsWhatTheTableHolds) {

@@ -57,10 +57,7 @@ dm::SceneDesc tableScene(const std::string& bodyResource, const std::string& bod
     "engines": {"physics": {"rate_hz": 1000}},
     "outputs": {"summary": true}
   })";
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(text, "table.json", fs::temp_directory_path(), &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
+  return scene_run::parsedScene(text, "table.json");
 }
 
 }  // namespace

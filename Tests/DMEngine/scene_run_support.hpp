@@ -96,6 +96,16 @@ inline nlohmann::json runScene(const dm::SceneDesc& scene, double seconds, const
   return r ? r->summary : nlohmann::json();
 }
 
+/// `text` parsed as scene file `file` in `dir` (a failure lists its
+/// problems); an empty scene after a failure.
+inline dm::SceneDesc parsedScene(const std::string& text, const std::string& file,
+                                 const fs::path& dir = fs::temp_directory_path()) {
+  std::vector<dm::Error> problems;
+  auto s = dm::parseScene(text, file, dir, &problems);
+  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
+  return s ? *s : dm::SceneDesc{};
+}
+
 /// examples/scenes/`file`, without its render engine, frames and plot.
 inline dm::SceneDesc bundledScene(std::string_view file) {
   std::vector<dm::Error> problems;

@@ -51,10 +51,7 @@ dm::SceneDesc ballOnPad(int rateHz, const std::string& backend) {
                            std::to_string(rateHz) + R"(, "backend": ")" + backend + R"("}},
     "outputs": {"summary": true}
   })";
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(text, "ball_on_pad.json", fs::temp_directory_path(), &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
+  return scene_run::parsedScene(text, "ball_on_pad.json");
 }
 
 // Hertz: a rigid sphere of radius R pressed by F into an elastic

@@ -63,10 +63,7 @@ dm::SceneDesc cantilever() {
     "engines": {"physics": {"rate_hz": 100}},
     "outputs": {"summary": true}
   })";
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(text, "cantilever.json", fs::temp_directory_path(), &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
+  return scene_run::parsedScene(text, "cantilever.json");
 }
 
 TEST(SceneSoft, CantileverSagsInTheWorldLikeTheSameModelBuiltByHand) {
@@ -282,10 +279,7 @@ dm::SceneDesc padOn(const std::string& support, const std::string& supportPose, 
     "engines": {"physics": {"rate_hz": 100}},
     "outputs": {"summary": true}
   })";
-  std::vector<dm::Error> problems;
-  auto s = dm::parseScene(text, "pad_on.json", fs::temp_directory_path(), &problems);
-  EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
-  return s ? *s : dm::SceneDesc{};
+  return scene_run::parsedScene(text, "pad_on.json");
 }
 
 TEST(SceneSoft, TissueRestsOnATableThatCarriesItsWeight) {

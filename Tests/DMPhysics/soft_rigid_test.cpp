@@ -212,6 +212,18 @@ TEST(SoftRigid, LightBodyOnStiffContactStaysStableWhereExplicitExchangeDiverges)
   }
 }
 
+// A steel ball (7.8 g at 6 mm) of `mesh` at `position` moving at `velocity`.
+BodyId addSteelBall(PhysicsWorld& world, const Mesh& mesh, const Vec3& position, const Vec3& velocity) {
+  auto d = rigidBodyFromMesh(mesh, 7800);
+  EXPECT_TRUE(d.ok());
+  d->kind = BodyKind::Rigid;
+  d->position = position;
+  d->linearVelocity = velocity;
+  auto id = world.addBody(*d);
+  EXPECT_TRUE(id.ok());
+  return *id;
+}
+
 // A 7.8 g steel ball at 0.5 m/s hits a free tissue slab off-centre, no
 // gravity: linear momentum passes between them and its total is conserved
 // to the solver's tolerance.
@@ -219,34 +231,28 @@ TEST(SoftRigid, BallHittingFreeTissueConservesMomentum) {
   FemBody tissue = slab(true, 0.0);
   PhysicsWorld world;
   const Mesh ball = makeIcosphere(0.006, 3);
-  auto d = rigidBodyFromMesh(ball, 7800);
-  ASSERT_TRUE(d.ok());
-  d->kind = BodyKind::Rigid;
-  d->position = Vec3(0.026, 0.018, 0.02 + 0.0062);
-  d->linearVelocity = Vec3(0, 0, -0.5);
-  auto id = world.addBody(*d);
-  ASSERT_TRUE(id.ok());
+  const BodyId id = addSteelBall(world, ball, Vec3(0.026, 0.018, 0.02 + 0.0062), Vec3(0, 0, -0.5));
   const MeshBvh tree = treeOf(ball);
-  const SoftRigidContact contact{.body = *id, .tree = &tree, .stiffness = 2e4};
+  const SoftRigidContact contact{.body = id, .tree = &tree, .stiffness = 2e4};
   auto coupling = SoftRigidCoupling::create(world, tissue, {&contact, 1});
   ASSERT_TRUE(coupling.ok());
   WorldState state = world.makeState();
-  const double m = world.bodies()[id->index].mass;
-  const Vec3 p0 = tissue.linearMomentum() + m * state.linearVelocity(*id);
+  const double m = world.bodies()[id.index].mass;
+  const Vec3 p0 = tissue.linearMomentum() + m * state.linearVelocity(id);
   std::size_t touched = 0;
   for (int i = 0; i < 60; ++i) {
     ASSERT_TRUE(coupling->step(state, 0.001).ok());
     touched = std::max(touched, tissue.obstacleContactCount());
-    const Vec3 p = tissue.linearMomentum() + m * state.linearVelocity(*id);
+    const Vec3 p = tissue.linearMomentum() + m * state.linearVelocity(id);
     ASSERT_LT((p - p0).norm(), 1e-6 * p0.norm()) << "step " << i;
   }
   EXPECT_GT(touched, 0u);
   // The ball gave the tissue most of its momentum (it is 2.5 times lighter
   // than the slab's 32 g, so it bounces back less than it came in).
   EXPECT_LT(tissue.linearMomentum().z(), -0.5 * m * 0.5);
-  EXPECT_GT(state.linearVelocity(*id).z(), -0.25);
+  EXPECT_GT(state.linearVelocity(id).z(), -0.25);
   std::printf("ball: %zu nodes touched; ball v_z %.3f m/s, tissue p_z %.5f of %.5f kg m/s\n", touched,
-              state.linearVelocity(*id).z(), tissue.linearMomentum().z(), -m * 0.5);
+              state.linearVelocity(id).z(), tissue.linearMomentum().z(), -m * 0.5);
 }
 
 // The same ball hitting the free slab at an angle (0.3 m/s along x), no
@@ -267,22 +273,17 @@ TEST(SoftRigid, FrictionSpinsABallHittingTissueAtAnAngleAndConservesMomenta) {
   auto hit = [&](double friction) {
     FemBody tissue = slab(true, 0.0);
     PhysicsWorld world;
-    auto d = rigidBodyFromMesh(ballMesh, 7800);
-    EXPECT_TRUE(d.ok());
-    d->kind = BodyKind::Rigid;
-    d->position = Vec3(0.016, 0.018, 0.02 + 0.0062);
-    d->linearVelocity = Vec3(0.3, 0, -0.5);
-    auto id = world.addBody(*d);
-    EXPECT_TRUE(id.ok());
-    const SoftRigidContact contact{.body = *id, .tree = &tree, .stiffness = 2e4, .friction = friction};
+    const Vec3 v0(0.3, 0, -0.5);
+    const BodyId id = addSteelBall(world, ballMesh, Vec3(0.016, 0.018, 0.02 + 0.0062), v0);
+    const SoftRigidContact contact{.body = id, .tree = &tree, .stiffness = 2e4, .friction = friction};
     auto coupling = SoftRigidCoupling::create(world, tissue, {&contact, 1});
     EXPECT_TRUE(coupling.ok());
     WorldState state = world.makeState();
-    const double m = world.bodies()[id->index].mass;
-    const Mat3 inertia = world.bodies()[id->index].inertia;  // a ball: the same in any frame
+    const double m = world.bodies()[id.index].mass;
+    const Mat3 inertia = world.bodies()[id.index].inertia;  // a ball: the same in any frame
     auto momenta = [&](Vec3& p, Vec3& l) {
-      p = tissue.linearMomentum() + m * state.linearVelocity(*id);
-      l = state.position(*id).cross(m * state.linearVelocity(*id)) + inertia * state.angularVelocity(*id);
+      p = tissue.linearMomentum() + m * state.linearVelocity(id);
+      l = state.position(id).cross(m * state.linearVelocity(id)) + inertia * state.angularVelocity(id);
       for (std::size_t k = 0; k < tissue.nodeCount(); ++k)
         l += tissue.positions()[k].cross(tissue.masses()[k] * tissue.velocities()[k]);
     };
@@ -296,8 +297,8 @@ TEST(SoftRigid, FrictionSpinsABallHittingTissueAtAnAngleAndConservesMomenta) {
       worst = std::max(worst, (l - l0).norm());
     }
     // The scale: the ball's momentum times its radius.
-    EXPECT_LT(worst, 0.01 * m * d->linearVelocity.norm() * 0.006) << "friction " << friction;
-    return Outcome{state.angularVelocity(*id), tissue.linearMomentum(), worst};
+    EXPECT_LT(worst, 0.01 * m * v0.norm() * 0.006) << "friction " << friction;
+    return Outcome{state.angularVelocity(id), tissue.linearMomentum(), worst};
   };
   const Outcome rough = hit(0.5), smooth = hit(0.0);
   std::printf(
