@@ -96,13 +96,7 @@ Result<BodyGeometry> primitiveGeometry(const SceneResource& r, double scale, boo
       std::vector<std::pair<BodyGeometry, Isometry3>> parts;
       Vec3 center = Vec3::Zero();
       for (const SceneResource::Part& part : r.parts) {
-        SceneResource one;
-        one.type = SceneResource::Type::Shape;
-        one.shape = part.shape;
-        one.radius = part.radius;
-        one.height = part.height;
-        one.halfExtents = part.halfExtents;
-        auto pg = primitiveGeometry(one, scale, dynamic, where);
+        auto pg = primitiveGeometry(scenePartShape(r, part), scale, dynamic, where);
         if (!pg) return pg.error();
         Isometry3 pose = part.pose.isometry();
         pose.translation() *= scale;

@@ -159,6 +159,17 @@ std::shared_ptr<const Image> SceneResources::image(std::string_view name) const 
   return findIn(images, name);
 }
 
+SceneResource scenePartShape(const SceneResource& compound, const SceneResource::Part& part) {
+  SceneResource one = compound;
+  one.type = SceneResource::Type::Shape;
+  one.shape = part.shape;
+  one.radius = part.radius;
+  one.height = part.height;
+  one.halfExtents = part.halfExtents;
+  one.parts.clear();
+  return one;
+}
+
 Result<Mesh> makeSceneShape(const SceneResource& r) {
   if (r.type != SceneResource::Type::Shape)
     return fail(ErrorCode::InvalidArgument, "not a shape resource", where(r));
@@ -190,13 +201,7 @@ Result<Mesh> makeSceneShape(const SceneResource& r) {
       // Each part's own closed mesh, placed: their union drawn and touched
       // as one mesh (overlapping parts keep their inner faces).
       for (const SceneResource::Part& part : r.parts) {
-        SceneResource one = r;
-        one.shape = part.shape;
-        one.radius = part.radius;
-        one.height = part.height;
-        one.halfExtents = part.halfExtents;
-        one.parts.clear();
-        auto pm = makeSceneShape(one);
+        auto pm = makeSceneShape(scenePartShape(r, part));
         if (!pm) return pm.error();
         pm->transform(Affine3(part.pose.isometry().matrix()));
         m.append(*pm);

@@ -78,6 +78,11 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
 /// or nothing is selected. O(voxels of the box).
 Result<Volume> makeSceneSegment(const SceneResource& resource, const Volume& source);
 
+/// One part of a compound Shape resource as a Shape resource of its own (in
+/// the part's frame, not yet placed by its pose): the compound's name,
+/// subdivisions and source location (for errors), the part's shape and sizes.
+SceneResource scenePartShape(const SceneResource& compound, const SceneResource::Part& part);
+
 /// The generated mesh of one Shape resource (no file access). InvalidArgument
 /// for a resource that is not a shape or has non-positive sizes.
 Result<Mesh> makeSceneShape(const SceneResource& shape);
