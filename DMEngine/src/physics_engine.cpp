@@ -363,7 +363,7 @@ Result<std::shared_ptr<PhysicsEngine>> PhysicsEngine::build(const SceneDesc& sce
   auto soft = SoftTissues::build(scene, resources, m->world);
   if (!soft) return soft.error();
   m->soft = std::move(*soft);
-  auto membranes = SceneMembranes::build(scene, resources);
+  auto membranes = SceneMembranes::build(scene, resources, m->world);
   if (!membranes) return membranes.error();
   m->membranes = std::move(*membranes);
   m->drawnDeformed = m->soft->names();

@@ -6,13 +6,17 @@
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
 #include <dm/physics/mass_spring.hpp>
+#include <dm/physics/particle_obstacles.hpp>
+#include <dm/physics/world.hpp>
 
 #include <algorithm>
 #include <map>
+#include <optional>
 #include <utility>
 
 #include "deformed_surface.hpp"
 #include "engine_json.hpp"
+#include "scene_obstacles.hpp"
 
 namespace dm {
 
@@ -21,6 +25,7 @@ struct SceneMembranes::Body {
   Isometry3 pose = Isometry3::Identity();  // object → world
   double scale = 1.0;
   MassSpringBody springs;
+  std::optional<ParticleObstacles> contacts;  // the world's static colliding objects
   std::vector<Vec3> rest;             // world, the particles at the start
   std::vector<std::uint32_t> pinned;  // particle indices
   std::vector<Triangle> triangles;    // the drawn mesh's (= the particles')
@@ -51,8 +56,22 @@ std::vector<bool> boundaryVertices(const Mesh& mesh) {
 }  // namespace
 
 Result<std::unique_ptr<SceneMembranes>> SceneMembranes::build(const SceneDesc& scene,
-                                                              const SceneResources& resources) {
+                                                              const SceneResources& resources,
+                                                              const PhysicsWorld& world) {
   std::unique_ptr<SceneMembranes> out(new SceneMembranes());
+  if (std::none_of(scene.objects.begin(), scene.objects.end(),
+                   [](const SceneObject& o) { return o.membrane; }))
+    return out;
+  auto obstacles = sceneObstacles(scene, resources, world);
+  if (!obstacles) return obstacles.error();
+  for (SceneObstacle& ob : *obstacles) {
+    if (ob.dynamic)  // (the scene parser says so first)
+      return fail(
+          ErrorCode::InvalidArgument,
+          "a membrane meets static objects only: dynamic body \"" + ob.name + "\" would pass through it",
+          "objects/" + ob.name, "set \"collide\": false on it, or make it static");
+    out->obstacles_.push_back(std::move(ob));
+  }
   for (const SceneObject& o : scene.objects) {
     if (!o.membrane) continue;
     const SceneMembrane& m = *o.membrane;
@@ -63,17 +82,17 @@ Result<std::unique_ptr<SceneMembranes>> SceneMembranes::build(const SceneDesc& s
     b->name = o.name;
     b->pose = o.pose.isometry();
     b->scale = o.scale;
-    Mesh world;
-    world.triangles = mesh->triangles;
-    world.positions.reserve(mesh->positions.size());
-    for (const Vec3& p : mesh->positions) world.positions.push_back(b->pose * (o.scale * p));
+    Mesh placed;  // in the world
+    placed.triangles = mesh->triangles;
+    placed.positions.reserve(mesh->positions.size());
+    for (const Vec3& p : mesh->positions) placed.positions.push_back(b->pose * (o.scale * p));
     const auto model =
         m.model == SceneMembrane::Model::Maxwell ? SpringModel::Maxwell : SpringModel::KelvinVoigt;
     MassSpringMeshOptions options{
         .mass = m.mass,
         .structural = {true, m.stiffness, m.damping, model},
         .bend = {m.bendStiffness > 0.0, m.bendStiffness, m.bendDamping, SpringModel::KelvinVoigt}};
-    auto springs = MassSpringBody::fromMesh(world, options);
+    auto springs = MassSpringBody::fromMesh(placed, options);
     if (!springs) return springs.error().within(where);
     b->springs = std::move(*springs);
     b->springs.setGravity(scene.engines.physics->gravity);
@@ -91,7 +110,13 @@ Result<std::unique_ptr<SceneMembranes>> SceneMembranes::build(const SceneDesc& s
       b->springs.setPinned(i, true);
       b->pinned.push_back(i);
     }
-    b->rest = world.positions;
+    std::vector<ParticleObstacle> touching;
+    for (const SceneObstacle& ob : out->obstacles_)
+      touching.push_back({.tree = ob.tree.get(), .pose = ob.start, .friction = m.friction});
+    auto contacts = ParticleObstacles::create(touching, m.thickness);
+    if (!contacts) return contacts.error().within(where);
+    b->contacts = std::move(*contacts);
+    b->rest = placed.positions;
     b->triangles = mesh->triangles;
     b->surface = std::make_unique<TripleBuffer<std::vector<Vec3>>>(mesh->positions);
     out->names_.push_back(o.name);
@@ -105,6 +130,7 @@ Status SceneMembranes::step(double h) {
     Body& b = *bp;
     auto report = b.springs.stepImplicit(h);
     if (!report) return report.error().within("membrane \"" + b.name + "\"");
+    b.contacts->resolve(b.springs, h);
     ++b.steps;
     b.unconverged += !report->converged;
     b.cgIterations += static_cast<std::uint64_t>(report->cgIterations);
@@ -139,6 +165,10 @@ nlohmann::json SceneMembranes::summary() const {
     // those vertices' own weight (at rest, the membrane's weight).
     Vec3 pinLoad = Vec3::Zero();
     for (std::uint32_t i : b.pinned) pinLoad += s.elementForceOn(i) + s.mass(i) * s.gravity();
+    nlohmann::json touching = nlohmann::json::array();
+    for (std::size_t i = 0; i < obstacles_.size(); ++i)
+      touching.push_back(
+          {{"name", obstacles_[i].name}, {"force_N", engine_json::vec3(b.contacts->force(i))}});
     list.push_back({{"name", b.name},
                     {"particles", s.particleCount()},
                     {"elements", s.elementCount()},
@@ -152,7 +182,9 @@ nlohmann::json SceneMembranes::summary() const {
                     {"steps", b.steps},
                     {"cg_iterations_mean", b.steps ? double(b.cgIterations) / double(b.steps) : 0.0},
                     {"cg_iterations_max", b.cgMax},
-                    {"unconverged_steps", b.unconverged}});
+                    {"unconverged_steps", b.unconverged},
+                    {"contacts", b.contacts->contacts()},
+                    {"obstacles", std::move(touching)}});
   }
   return list;
 }

@@ -8,9 +8,11 @@
 // element per edge, optional bend elements across interior edges), the
 // scene's gravity, a drag, and its boundary vertices and the vertices in
 // its pinned boxes held; stepped by the linearly implicit Euler step
-// (stable at the physics rate for any stiffness). A membrane meets nothing:
-// no contact with the tool, bodies, tissue or fluids in this build (the
-// scene parser refuses each of those).
+// (stable at the physics rate for any stiffness), then kept out of the
+// world's static colliding objects (dm::ParticleObstacles: Coulomb friction,
+// the membrane's thickness, no passing through thin ones). A membrane does
+// not meet the tool, dynamic bodies, soft tissue or fluids in this build
+// (the scene parser refuses each of those).
 //
 // Data flow: step() (physics thread) → a TripleBuffer of vertex positions
 // (object frame, before the scale) → latestSurface() (render thread, one
@@ -31,14 +33,19 @@ namespace dm {
 
 struct SceneDesc;
 struct SceneResources;
+struct SceneObstacle;
+class PhysicsWorld;
 
 class SceneMembranes {
  public:
-  /// Every membrane of `scene` (which has engines.physics), in scene order.
-  /// Fails naming the object (a mesh the mass–spring builder refuses: an
-  /// unused vertex, no triangle) before anything runs.
+  /// Every membrane of `scene` (which has engines.physics), in scene order,
+  /// each meeting the static colliding bodies of `world` (which outlives
+  /// this). Fails naming the object (a mesh the mass–spring builder
+  /// refuses: an unused vertex, no triangle; a dynamic colliding body, an
+  /// open obstacle mesh) before anything runs.
   static Result<std::unique_ptr<SceneMembranes>> build(const SceneDesc& scene,
-                                                       const SceneResources& resources);
+                                                       const SceneResources& resources,
+                                                       const PhysicsWorld& world);
   ~SceneMembranes();
   SceneMembranes(const SceneMembranes&) = delete;
   SceneMembranes& operator=(const SceneMembranes&) = delete;
@@ -53,12 +60,14 @@ class SceneMembranes {
   /// the first call; its triangles are set on the first call and stay.
   bool latestSurface(std::size_t i, Mesh& out);
   /// Control thread, after the run: each membrane's size, what its pins
-  /// carry, its deformation and its solver counters.
+  /// and the objects it rests on carry, its deformation and its solver
+  /// counters.
   nlohmann::json summary() const;
 
  private:
   struct Body;
   SceneMembranes() = default;
+  std::vector<SceneObstacle> obstacles_;  // the static ones; their trees outlive bodies_' contacts
   std::vector<std::unique_ptr<Body>> bodies_;
   std::vector<std::string> names_;
 };

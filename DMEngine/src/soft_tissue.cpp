@@ -8,8 +8,6 @@
 #include <dm/haptics/tissue.hpp>
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
-#include <dm/math/mesh_topology.hpp>
-#include <dm/math/primitives.hpp>
 #include <dm/math/voxelize.hpp>
 #include <dm/physics/fem.hpp>
 #include <dm/physics/needle.hpp>
@@ -22,6 +20,7 @@
 
 #include "deformed_surface.hpp"
 #include "engine_json.hpp"
+#include "scene_obstacles.hpp"
 
 namespace dm {
 
@@ -98,32 +97,6 @@ std::vector<std::uint8_t> tetLayersBySlab(const TetMesh& mesh, double top,
   return out;
 }
 
-// The closed mesh a body of the physics world is to the tissue, in the
-// body's shape frame (`objectToShape` from the object's frame at its
-// scale): its own mesh welded (shapes keep separate rim vertices for sharp
-// normals), or for a plane the slab below it that the rigid world uses.
-Result<MeshBvh> obstacleTree(const SceneObject& o, const SceneResource& res, const Mesh& mesh,
-                             const Isometry3& objectToShape) {
-  Mesh m;
-  if (res.type == SceneResource::Type::Shape && res.shape == SceneResource::Shape::Plane) {
-    const double depth = 0.5 * std::min(res.halfExtents.x(), res.halfExtents.y());
-    m = makeBox(Vec3(res.halfExtents.x(), res.halfExtents.y(), depth));
-    m.transform(Affine3(Eigen::Translation3d(0, 0, -depth)));
-  } else {
-    m = mesh;
-  }
-  if (o.scale != 1.0) m.transform(Affine3(Eigen::Scaling(o.scale)));
-  m.transform(Affine3(objectToShape.matrix()));
-  if (auto w = weldVertices(m, 1e-9); !w) return w.error();
-  auto tree = MeshBvh::build(m);
-  if (!tree) return tree.error();
-  if (!tree->isClosed())
-    return fail(ErrorCode::InvalidArgument,
-                "its mesh is not closed, so soft tissue cannot tell inside from outside", "mesh",
-                "close it (an isosurface's \"close_borders\"), or set \"collide\": false on it");
-  return tree;
-}
-
 // Each tetrahedron's needle layer: by slabs, or by the label of the voxel
 // of a label volume its centroid is in (the tissue placed in the world by
 // the object's pose, where the volume is).
@@ -155,13 +128,6 @@ Result<std::vector<std::uint8_t>> tetLayers(const SceneObject& o, const TetMesh&
 }
 
 }  // namespace
-
-struct SoftTissues::Obstacle {
-  std::string name;
-  BodyId body;                    // in the physics world
-  bool dynamic = false;           // a rigid body the tissue moves
-  std::unique_ptr<MeshBvh> tree;  // the body's shape frame
-};
 
 struct SoftTissues::Body {
   std::string name;
@@ -225,24 +191,11 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
   std::unique_ptr<SoftTissues> out(new SoftTissues());
   // The world's bodies that collide, static and dynamic: obstacles every
   // soft object meets (a dynamic one moved by it in turn).
-  if (std::any_of(scene.objects.begin(), scene.objects.end(), [](const SceneObject& o) { return o.soft; }))
-    for (std::size_t i = 0; i < world.bodyCount(); ++i) {
-      const BodyDesc& d = world.bodies()[i];
-      const SceneObject* o = scene.object(d.name);
-      if (o == nullptr || !o->collide) continue;
-      const SceneResource* res = scene.resource(o->mesh);
-      auto mesh = resources.mesh(o->mesh);
-      if (res == nullptr || !mesh)
-        return fail(ErrorCode::NotFound, "mesh \"" + o->mesh + "\" was not loaded", "objects/" + o->name);
-      Isometry3 shape = Isometry3::Identity();  // shape frame → world, at the start
-      shape.translate(d.position);
-      shape.rotate(d.orientation.normalized());
-      shape = shape * d.shapeOffset;
-      auto tree = obstacleTree(*o, *res, *mesh, shape.inverse() * o->pose.isometry());
-      if (!tree) return tree.error().within("objects/" + o->name);
-      out->obstacles_.push_back({o->name, BodyId{static_cast<std::uint32_t>(i)}, d.kind == BodyKind::Rigid,
-                                 std::make_unique<MeshBvh>(std::move(*tree))});
-    }
+  if (std::any_of(scene.objects.begin(), scene.objects.end(), [](const SceneObject& o) { return o.soft; })) {
+    auto obstacles = sceneObstacles(scene, resources, world);
+    if (!obstacles) return obstacles.error();
+    out->obstacles_ = std::move(*obstacles);
+  }
   const auto& haptics = scene.engines.haptics;
   const Vec3 gravity = scene.engines.physics ? scene.engines.physics->gravity : Vec3::Zero();
   for (const SceneObject& o : scene.objects) {
@@ -279,7 +232,7 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     // (implicit; a dynamic body's velocity solved with the tissue's).
     std::vector<SoftRigidContact> contacts;
     const double contactStiffness = s.contactStiffness > 0 ? s.contactStiffness : 20.0 * s.youngsModulus * h;
-    for (const Obstacle& ob : out->obstacles_)
+    for (const SceneObstacle& ob : out->obstacles_)
       contacts.push_back({.body = ob.body,
                           .tree = ob.tree.get(),
                           .stiffness = contactStiffness,

@@ -45,6 +45,7 @@ namespace dm {
 
 struct SceneDesc;
 struct SceneResources;
+struct SceneObstacle;
 class FemBody;
 class HapticRenderer;
 class HapticTissue;
@@ -123,14 +124,13 @@ class SoftTissues {
 
  private:
   struct Body;
-  struct Obstacle;
   SoftTissues() = default;
   static void drawnSurface(const FemBody& fem, bool creases, Body& b);
   Status attachNeedle(Body& b, std::span<const std::uint8_t> layerOfTet,
                       const std::vector<SceneSoftLayer>& layers, const SceneHapticsEngine& h,
                       double tipStiffness);
   static Vec3 toolForce(const Body& b) noexcept;
-  std::vector<Obstacle> obstacles_;  // before bodies_: their FemObstacles point into it
+  std::vector<SceneObstacle> obstacles_;  // before bodies_: their FemObstacles point into it
   std::vector<std::unique_ptr<Body>> bodies_;
   std::vector<std::string> names_;
 };

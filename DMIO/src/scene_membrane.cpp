@@ -21,7 +21,7 @@ void readMembrane(ConfigReader& object, SceneObject& o) {
   ConfigReader r = object.child("membrane");
   if (!expectObject(r)) return;
   r.knownKeys({"mass", "stiffness", "damping", "model", "bend_stiffness", "bend_damping", "drag", "pinned",
-               "pinned_boxes"});
+               "pinned_boxes", "friction", "thickness"});
   SceneMembrane m;
   m.mass = readPositive(r, "mass", {}, 1e3);
   m.stiffness = readPositive(r, "stiffness", {}, 1e9);
@@ -40,6 +40,8 @@ void readMembrane(ConfigReader& object, SceneObject& o) {
     r.addError("bend damping without bend elements", "bend_damping",
                "give \"bend_stiffness\" > 0, or remove \"bend_damping\"");
   m.drag = r.number("drag", {.min = 0.0, .max = 1e4}, m.drag);
+  m.friction = r.number("friction", {.min = 0.0, .max = 10.0}, m.friction);
+  m.thickness = r.number("thickness", {.min = 0.0, .max = 0.1}, m.thickness);
   if (r.has("pinned")) {
     const std::size_t b = r.errors().size();
     r.oneOf("pinned", {"boundary"});
@@ -53,11 +55,14 @@ void readMembrane(ConfigReader& object, SceneObject& o) {
         if (auto box = readBox(b)) m.pinnedBoxes.push_back(*box);
       }
   }
-  // A membrane meets nothing in this build: no rigid-contact keys.
+  // A membrane meets the static objects that collide through its own
+  // particles (its "friction" and "thickness"), not as a rigid collider.
   for (const char* key : {"collide", "contact"})
     if (object.has(key))
-      object.addError("a membrane takes part in no rigid contact", key,
-                      "remove \"" + std::string(key) + "\"");
+      object.addError("a membrane is not a rigid collider: it meets static objects by its particles", key,
+                      "remove \"" + std::string(key) +
+                          "\" (the membrane's \"friction\" and \"thickness\" set its "
+                          "contact)");
   o.collide = false;
   o.membrane = m;
 }
@@ -80,6 +85,22 @@ void checkMembranes(const SceneDesc& scene, ConfigReader root) {
               " cannot be touched: the haptic renderers touch rigid objects, "
               "soft tissue and bone",
           "objects", "remove " + inQuotes(o.name) + " from the haptics engine's \"objects\"");
+    // It meets static objects only: a dynamic body or soft tissue would
+    // pass through it (or it through them).
+    for (const SceneObject& other : scene.objects) {
+      if (&other == &o) continue;
+      if (other.dynamic && other.collide)
+        r.addError("membrane " + inQuotes(o.name) + " meets static objects only: dynamic body " +
+                       inQuotes(other.name) + ", which collides, would pass through it",
+                   "membrane", "set \"collide\": false on " + inQuotes(other.name) + ", or make it static");
+      else if (other.soft)
+        r.addError("membrane " + inQuotes(o.name) + " and soft object " + inQuotes(other.name) +
+                       " do not meet: each would pass through the other",
+                   "membrane", "remove one of them");
+      else
+        continue;
+      break;
+    }
     for (std::size_t f = 0; f < scene.fluids.size(); ++f) {
       const auto& names = scene.fluids[f].objects;
       const auto it = std::find(names.begin(), names.end(), o.name);
@@ -99,7 +120,9 @@ void writeMembrane(const SceneObject& o, Json& object) {
             {"damping", m.damping},
             {"model", std::string(kModels[m.model == Model::Maxwell ? 1 : 0])},
             {"bend_stiffness", m.bendStiffness},
-            {"drag", m.drag}};
+            {"drag", m.drag},
+            {"friction", m.friction},
+            {"thickness", m.thickness}};
   if (m.bendStiffness > 0.0) j["bend_damping"] = m.bendDamping;
   if (m.pinBoundary) j["pinned"] = "boundary";
   if (!m.pinnedBoxes.empty()) {

@@ -2,9 +2,11 @@
 // read as written, round-tripped through the canonical JSON, and each
 // mistake refused at its JSON pointer — a missing mass, a zero stiffness,
 // a Maxwell element without damping, bend damping without bend elements,
-// an unknown pinning, a pinned box upside down, rigid-contact keys, a
-// membrane that is also dynamic or soft, touched by the tool, listed as a
-// fluid's object or joined, no physics engine, the key in a version-1 file.
+// an unknown pinning, a pinned box upside down, a negative friction, a
+// thickness past 10 cm, rigid-contact keys, a membrane that is also
+// dynamic or soft, touched by the tool, listed as a fluid's object or
+// joined, in a scene with a colliding dynamic body or soft tissue (which
+// it does not meet), no physics engine, the key in a version-1 file.
 #include <dm/io/scene_file.hpp>
 
 #include <gtest/gtest.h>
@@ -31,7 +33,8 @@ Json membraneScene() {
       {"name": "drum", "mesh": "sheet", "pose": {"position": [0, 0, 0.1]},
        "membrane": {"mass": 0.01, "stiffness": 20, "damping": 0.5, "model": "maxwell", "bend_stiffness": 2,
                     "bend_damping": 0.01, "drag": 5, "pinned": "boundary",
-                    "pinned_boxes": [{"min": [-1, 0.049, -1], "max": [1, 1, 1]}]}},
+                    "pinned_boxes": [{"min": [-1, 0.049, -1], "max": [1, 1, 1]}], "friction": 0.4,
+                    "thickness": 0.0005}},
       {"name": "flap", "mesh": "skin", "membrane": {"mass": 0.002, "stiffness": 5}}
     ],
     "engines": {"physics": {"rate_hz": 500}}
@@ -53,11 +56,15 @@ TEST(SceneMembraneFile, ReadsEachMembraneAsWritten) {
   EXPECT_TRUE(m.pinBoundary);
   ASSERT_EQ(m.pinnedBoxes.size(), 1u);
   EXPECT_EQ(m.pinnedBoxes[0].min.y(), 0.049);
-  EXPECT_FALSE(s->objects[0].collide);                  // in no rigid contact
+  EXPECT_EQ(m.friction, 0.4);
+  EXPECT_EQ(m.thickness, 0.0005);
+  EXPECT_FALSE(s->objects[0].collide);                  // not a rigid collider
   const SceneMembrane& flap = *s->objects[1].membrane;  // the defaults
   EXPECT_EQ(flap.model, SceneMembrane::Model::KelvinVoigt);
   EXPECT_EQ(flap.damping, 0.0);
   EXPECT_FALSE(flap.pinBoundary);
+  EXPECT_EQ(flap.friction, 0.0);
+  EXPECT_EQ(flap.thickness, 0.0);
   EXPECT_TRUE(flap.pinnedBoxes.empty());
   scene_test::expectRoundTrip(membraneScene());
 }
@@ -72,6 +79,8 @@ TEST(SceneMembraneFile, RefusesEachMistakeInTheBlockAtItsPointer) {
   m["pinned"] = "rim";
   m["pinned_boxes"][0]["max"] = Json::array({1, 0, 1});
   m["tension"] = 3;
+  m["friction"] = -0.1;
+  m["thickness"] = 0.5;
   j["objects"][0]["collide"] = true;
   const std::vector<dm::Error> p = scene_test::problemsOf(j);
   const std::string at = "/objects/0/membrane/";
@@ -82,8 +91,10 @@ TEST(SceneMembraneFile, RefusesEachMistakeInTheBlockAtItsPointer) {
   EXPECT_NE(scene_test::at(p, at + "pinned"), nullptr);
   scene_test::expectAt(p, at + "pinned_boxes/0/max", "below min");
   EXPECT_NE(scene_test::at(p, at + "tension"), nullptr);
-  scene_test::expectAt(p, "/objects/0/collide", "no rigid contact");
-  EXPECT_EQ(p.size(), 8u) << dm::formatSceneErrors(p);
+  EXPECT_NE(scene_test::at(p, at + "friction"), nullptr);
+  EXPECT_NE(scene_test::at(p, at + "thickness"), nullptr);
+  scene_test::expectAt(p, "/objects/0/collide", "not a rigid collider");
+  EXPECT_EQ(p.size(), 10u) << dm::formatSceneErrors(p);
 }
 
 TEST(SceneMembraneFile, RefusesWhatAMembraneCannotBeOrMeet) {
@@ -107,6 +118,15 @@ TEST(SceneMembraneFile, RefusesWhatAMembraneCannotBeOrMeet) {
   scene_test::expectAt(p, "/engines/haptics/objects", "cannot be touched");
   scene_test::expectAt(p, "/engines/physics/joints/0/b", "membrane");
   scene_test::expectAt(p, "/fluids/0/objects/0", "does not meet fluids");
+  scene_test::expectAt(p, "/objects/0/membrane",
+                       "dynamic body \"ball\", which collides, would pass through it");
+
+  // A dynamic body that does not collide is no obstacle; a static one is.
+  Json aside = membraneScene();
+  aside["objects"].push_back(Json::parse(R"({"name": "ball", "mesh": "ball", "dynamic": true, "mass": 0.01,
+                                              "collide": false, "pose": {"position": [0, 0, 0.3]}})"));
+  aside["objects"].push_back(Json::parse(R"({"name": "organ", "mesh": "ball"})"));
+  EXPECT_TRUE(scene_test::parsed(aside));
 
   Json alone = membraneScene();
   alone["engines"].erase("physics");
@@ -116,6 +136,8 @@ TEST(SceneMembraneFile, RefusesWhatAMembraneCannotBeOrMeet) {
   both["objects"][1]["soft"] =
       Json::parse(R"({"youngs_modulus": 5000, "poisson_ratio": 0.45, "density": 1000, "voxel_size": 0.004})");
   scene_test::expectAt(scene_test::problemsOf(both), "/objects/1/soft", "not both");
+  scene_test::expectAt(scene_test::problemsOf(both), "/objects/0/membrane",
+                       "and soft object \"flap\" do not meet");
 
   Json v1 = membraneScene();
   v1["version"] = 1;
