@@ -82,7 +82,13 @@ std::size_t ParticleObstacles::resolve(MassSpringBody& body, double h, ParticleS
       end.min().array() -= th;
       end.max().array() += th;
       if (!end.intersects(o.tree->bounds())) continue;
-      const MeshPointQuery q = closestPointOnMesh(*o.tree, o.pose, x);
+      // Within reach of the surface: a particle deeper inside got there by
+      // a crossing (above), or started there (the first call looks at any
+      // depth). The bound keeps the query local: far from the surface it
+      // ends at the tree's top.
+      const double reach = started_ ? th + (x - x0).norm() + 1e-9 : HUGE_VAL;
+      const MeshPointQuery q = closestPointOnMesh(*o.tree, o.pose, x, reach);
+      if (!std::isfinite(q.distance)) continue;
       const double depth = th - q.distance;
       if (!(depth > deepest) || !q.normal.allFinite() || !(q.normal.squaredNorm() > 0.5)) continue;
       deepest = depth;
@@ -110,6 +116,7 @@ std::size_t ParticleObstacles::resolve(MassSpringBody& body, double h, ParticleS
     body.setPosition(i, xAfter);
     body.setVelocity(i, vAfter);
   }
+  started_ = true;
   return contacts_;
 }
 

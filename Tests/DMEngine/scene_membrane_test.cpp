@@ -174,6 +174,24 @@ TEST(SceneMembrane, ADrumTentedOverASphereSharesItsWeightBetweenRimAndSphere) {
   EXPECT_GT(onSphereShare[2], 1.0);  // measured 0.60, 1.60, 3.88 of the weight
 }
 
+// The bundled example: a 50 g drape dropped on the Colin27 head's skin
+// from MRI (a curved, closed isosurface of 330k triangles). At rest (2 s)
+// the head carries its weight (1 %), straight down, and it lies draped:
+// its mass below the crown, hundreds of its particles on the skin.
+TEST(SceneMembrane, TheHeadDrapeExampleRestsOnTheHeadFromMri) {
+  const dm::test::TempDir dir("head_drape");
+  const json s = scene_run::runScene(scene_run::bundledScene("head_drape.json"), 2.0, dir.path());
+  const json& m = membraneOf(s);
+  const double weight = m.at("mass_kg").get<double>() * kG;
+  EXPECT_NEAR(weight, 0.05 * kG, 1e-9);
+  const Vec3 carried = vec(scene_run::named(m.at("obstacles"), "head_skin").at("force_N"));
+  EXPECT_NEAR(carried.z(), -weight, 0.01 * weight) << m.dump(2);
+  EXPECT_LT(std::hypot(carried.x(), carried.y()), 1e-3 * weight);
+  EXPECT_GT(m.at("contacts").get<int>(), 200);
+  EXPECT_LT(vec(m.at("center_of_mass_m")).z(), 0.1027 - 0.03);  // the crown is at z = 102.7 mm
+  EXPECT_LT(m.at("kinetic_energy_J").get<double>(), 1e-8);
+}
+
 #if defined(DM_TEST_WITH_RENDERER)
 // The render engine draws the membrane as it deforms: a camera level with
 // the drum's rim sees the sheet edge-on at the start (a line: almost no

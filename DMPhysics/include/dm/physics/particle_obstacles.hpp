@@ -13,7 +13,10 @@
 //     an obstacle's surface (a ray cast: thin obstacles, a plate thinner than
 //     one step's travel, are not passed through), or its end x lies inside
 //     the obstacle or within `thickness` of it (closest point: resting and
-//     sliding contact); the first crossing, else the deepest overlap, wins;
+//     sliding contact; searched within thickness plus the step's travel, as
+//     a particle deeper inside crossed the surface to get there, except in
+//     the first call, which also pushes out particles that start inside at
+//     any depth); the first crossing, else the deepest overlap, wins;
 //   - velocity: the normal component into the obstacle is removed (Δvₙ, a
 //     perfectly inelastic contact), and the tangential slip is reduced by
 //     μ·Δvₙ — Coulomb's law over the step: it stops (static friction) when
@@ -103,6 +106,7 @@ class ParticleObstacles {
   std::vector<Vec3> force_;
   double thickness_ = 0.0;
   std::size_t contacts_ = 0;
+  bool started_ = false;  // resolve() ran: every particle is outside (by thickness)
 };
 
 }  // namespace dm
