@@ -385,6 +385,7 @@ struct SceneRuntime::Impl {
     Status status = ok();
     bool interrupted = false;
   } running;
+  std::shared_ptr<FrameSlot> frames;  // the render engine's newest frame (SceneRunOptions::liveFrames)
   bool prepared = false;
   RunMode preparedMode = RunMode::Lockstep;
   std::filesystem::path preparedOut;
@@ -393,7 +394,7 @@ struct SceneRuntime::Impl {
   Status buildHaptics(bool lockstep);
   Result<std::unique_ptr<GodObjectRenderer>> buildGodObject();
   Status buildEngines(bool lockstep, const SceneRunOptions& options, const std::filesystem::path& out);
-  Status buildIgtl(std::shared_ptr<FrameSlot> frames);
+  Status buildIgtl(std::shared_ptr<FrameSlot> slot);
   Status startRecording(bool lockstep, const std::filesystem::path& out);
   Status buildScripts(double monitorRate);
 };
@@ -654,7 +655,7 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
                 "engines/vision", "build with DMVision (libopencv-dev) or remove it");
 #endif
   }
-  std::shared_ptr<FrameSlot> frames;  // render → OpenIGTLink and vision
+  // (frames: render → OpenIGTLink, vision and a live view)
   if (scene.engines.render) {
 #ifdef DM_ENGINE_HAVE_RENDERER
     RenderFeed feed;
@@ -709,7 +710,8 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
         return v->overlay(image, frame);
       };
 #endif
-    if ((scene.engines.igtl && !scene.engines.igtl->image.empty()) || visionWantsFrames) {
+    if ((scene.engines.igtl && !scene.engines.igtl->image.empty()) || visionWantsFrames ||
+        options.liveFrames) {
       frames = std::make_shared<FrameSlot>();
       feed.frames = frames;
     }
@@ -747,11 +749,11 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
 
 // The OpenIGTLink engine, after the render engine (in lockstep it then
 // streams the frame of the same time); listening from here on.
-Status SceneRuntime::Impl::buildIgtl(std::shared_ptr<FrameSlot> frames) {
+Status SceneRuntime::Impl::buildIgtl(std::shared_ptr<FrameSlot> slot) {
 #ifdef DM_ENGINE_HAVE_NETWORK
   const SceneIgtlEngine& g = *scene.engines.igtl;
   IgtlFeed feed;
-  feed.frames = std::move(frames);
+  feed.frames = std::move(slot);
   if (haptics && (!g.tool.empty() || !g.handle.empty() || !g.force.empty())) {
     haptics->streamed = std::make_unique<TripleBuffer<HapticsEngine::StreamedSample>>();
     feed.haptics = [b = haptics->streamed.get()](Isometry3& tool, Isometry3& handle, Vec3& force, double& t) {
@@ -777,7 +779,7 @@ Status SceneRuntime::Impl::buildIgtl(std::shared_ptr<FrameSlot> frames) {
   igtl = *made;
   return master.addEngine(igtl->engine(), {.rateHz = g.rateHz});
 #else
-  (void)frames;
+  (void)slot;
   return fail(ErrorCode::Unsupported, "this build has no DMNetwork, which the OpenIGTLink engine needs",
               "engines/igtl", "build with DMNetwork (libasio-dev) or remove it");
 #endif
@@ -814,6 +816,10 @@ Status SceneRuntime::addEngine(std::shared_ptr<Engine> engine, const EngineSched
 
 MasterEngine& SceneRuntime::master() { return impl_->master; }
 
+bool SceneRuntime::latestFrame(std::uint64_t& seen, Image& out, double& sceneTime) const {
+  return impl_->frames && impl_->frames->takeIfNewer(seen, out, sceneTime);
+}
+
 std::uint16_t SceneRuntime::igtlPort() const {
 #ifdef DM_ENGINE_HAVE_NETWORK
   return impl_->igtl ? impl_->igtl->port() : 0;
@@ -829,6 +835,10 @@ Status SceneRuntime::prepare(const SceneRunOptions& options) {
     return fail(ErrorCode::InvalidArgument, "a SceneRuntime is prepared once", "SceneRuntime::prepare");
   if (auto s = checkDuration(options); !s) return s.error();
   const SceneDesc& scene = im.scene;
+  if (options.liveFrames && !scene.engines.render)
+    return fail(ErrorCode::InvalidArgument,
+                "a live view shows the render engine's frames, and the scene has none", "engines/render",
+                "add \"render\": {\"rate_hz\": 30} to the scene's \"engines\"");
   const std::filesystem::path out =
       options.outDir.empty() ? std::filesystem::path(scene.outputs.directory) : options.outDir;
   // A scene that cannot be built leaves no output folder behind: it is

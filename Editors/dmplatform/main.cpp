@@ -48,6 +48,9 @@
 #include <vector>
 
 #include "progress_bar.hpp"
+#ifdef DM_HAVE_LIVE_VIEW
+#include "live_view.hpp"
+#endif
 #ifdef DM_HAVE_PYTHON_SCRIPTS
 #include "python_script.hpp"
 #endif
@@ -267,6 +270,12 @@ int main(int argc, char** argv) {
   run->add_option("--duration", duration, "seconds to run (simulated in lockstep, wall clock in real time)")
       ->check(CLI::Range(1e-3, 1e7));
   run->add_option("--out", out, "output folder (default: the scene's outputs.directory)");
+  bool viewFlag = false;
+  std::string screenshot;
+  run->add_flag("--view", viewFlag,
+                "show the run in a window (Space: pause, N: step, Esc: end; needs a display and the scene's "
+                "render engine)");
+  run->add_option("--screenshot", screenshot, "with --view: write the window's last picture to this PNG");
   std::string recordingPath, replayOut;
   CLI::App* replay = app.add_subcommand(
       "replay", "Re-run a recorded scene run in lockstep and compare its force trace with the recording's");
@@ -317,13 +326,38 @@ int main(int argc, char** argv) {
   std::printf("dmplatform: running %s (%s) for %.1f s %s, outputs in %s\n", scene.c_str(), desc.name.c_str(),
               duration, realtime ? "in real time" : "in lockstep", outDir.c_str());
   std::fflush(stdout);
+  const dm::SceneRunOptions options{.mode = realtime ? dm::RunMode::RealTime : dm::RunMode::Lockstep,
+                                    .duration = duration,
+                                    .outDir = outDir};
+  if (!screenshot.empty() && !viewFlag) {
+    std::cerr << "dmplatform: --screenshot is the window's picture: it needs --view\n";
+    return 2;
+  }
   dm::SceneRunResult result;
-  if (int code = runWithProgress(**runtime, "dmplatform " + desc.name,
-                                 {.mode = realtime ? dm::RunMode::RealTime : dm::RunMode::Lockstep,
-                                  .duration = duration,
-                                  .outDir = outDir},
-                                 result);
-      code != 0)
+  if (viewFlag) {
+#ifdef DM_HAVE_LIVE_VIEW
+    dm::SceneRunOptions viewed = options;
+    viewed.stop = &gStop;
+    if (auto s = (*runtime)->prepare(
+            {.mode = options.mode, .duration = duration, .outDir = outDir, .liveFrames = true});
+        !s) {
+      std::cerr << "dmplatform: " << s.error().message() << '\n';
+      return 2;
+    }
+    auto r = dmplatform::runWithView(**runtime, viewed, {.screenshot = screenshot});
+    if (!r) {
+      std::cerr << "dmplatform: " << r.error().message() << '\n';
+      return 1;
+    }
+    result = std::move(*r);
+    printSummary(result.summary, outDir, result.interrupted);
+#else
+    std::cerr
+        << "dmplatform: --view: this build has no live view (it needs GLFW: apt install libglfw3-dev)\n";
+    return 2;
+#endif
+  } else if (int code = runWithProgress(**runtime, "dmplatform " + desc.name, options, result); code != 0) {
     return code;
+  }
   return result.interrupted ? 130 : 0;
 }

@@ -1,14 +1,20 @@
 // `dmplatform run` on scenes that cannot run: exit code 2, the JSON path or
 // the object named on stderr, and no output folder left behind — whether
-// the file is invalid or a model in it cannot be built.
+// the file is invalid or a model in it cannot be built; and `run --view`
+// on a virtual X display: the window shows, pixel for pixel, the frame the
+// headless run writes, and --view refuses what it cannot show.
+#include <dm/io/image_io.hpp>
+
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <string>
 
 #include "../common/temp_dir.hpp"
 #include "dmtool_run.hpp"
+#include "virtual_display.hpp"
 
 namespace {
 
@@ -79,4 +85,86 @@ TEST(Dmplatform, AModelThatCannotBeBuiltExitsWithTwoBeforeRunning) {
   EXPECT_NE(r.err.find("objects/box"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("closed"), std::string::npos) << r.err;
   EXPECT_FALSE(fs::exists(out));
+}
+
+// A red ball dropped on a table, watched by a 320 x 240 camera at 30 Hz
+// (no HUD), every frame written.
+constexpr const char* kViewScene = R"({"format": "dmplatform-scene", "version": 2, "name": "look",
+  "resources": {"ball": {"type": "shape", "shape": "sphere", "radius": 0.03, "subdivisions": 3},
+                "table": {"type": "shape", "shape": "plane", "half_extents": [0.2, 0.2]}},
+  "materials": {"red": {"model": "blinn-phong", "color": [0.8, 0.05, 0.05]}},
+  "objects": [{"name": "table", "mesh": "table"},
+              {"name": "ball", "mesh": "ball", "material": "red", "dynamic": true, "mass": 0.1,
+               "pose": {"position": [0, 0, 0.2]}}],
+  "lights": [{"type": "directional", "direction": [0.3, 0.5, -0.8], "intensity": 1.2}],
+  "cameras": [{"name": "side", "position": [0, -0.6, 0.15], "target": [0, 0, 0.08], "up": [0, 0, 1],
+               "near": 0.01, "far": 5}],
+  "engines": {"physics": {"rate_hz": 500}, "render": {"rate_hz": 30, "width": 320, "height": 240, "hud": false}},
+  "outputs": {"summary": true, "frames": true, "frame_every": 1}})";
+
+TEST(Dmplatform, TheLiveViewShowsTheFramesTheHeadlessRunWrites) {
+  dm::test::VirtualDisplay x;
+  if (x.display().empty()) GTEST_SKIP() << "no Xvfb (apt install xvfb)";
+  const dm::test::TempDir dir("dmplatform_view");
+  const fs::path file = dir / "look.json", out = dir / "out", shot = dir / "shot.png";
+  std::ofstream(file) << kViewScene;
+  setenv("DISPLAY", x.display().c_str(), 1);
+  const dmtool_test::ToolRun r =
+      dmtool_test::runProgram(dm::test::besideExecutable(DMPLATFORM_PATH),
+                              {"run", file.string(), "--view", "--screenshot", shot.string(), "--duration",
+                               "0.5", "--out", out.string()},
+                              300);
+  unsetenv("DISPLAY");
+  ASSERT_EQ(r.exitCode, 0) << dmtool_test::describe(r);
+  // The window's last picture is the last frame written (the newest the
+  // render engine made), pixel for pixel.
+  fs::path last;
+  for (const auto& e : fs::directory_iterator(out / "frames"))
+    if (last.empty() || e.path().filename() > last.filename()) last = e.path();
+  ASSERT_FALSE(last.empty());
+  auto window = dm::readPng(shot);
+  auto frame = dm::readPng(last);
+  ASSERT_TRUE(window) << window.error();
+  ASSERT_TRUE(frame) << frame.error();
+  ASSERT_EQ(window->width(), 320);
+  ASSERT_EQ(window->height(), 240);
+  ASSERT_EQ(frame->width(), 320);
+  ASSERT_EQ(frame->height(), 240);
+  std::size_t differ = 0, red = 0;
+  for (int y = 0; y < 240; ++y)
+    for (int x2 = 0; x2 < 320; ++x2) {
+      for (int c = 0; c < 3; ++c)
+        differ += window->at<std::uint8_t>(x2, y, c) != frame->at<std::uint8_t>(x2, y, c);
+      red += window->at<std::uint8_t>(x2, y, 0) > 100 && window->at<std::uint8_t>(x2, y, 1) < 60;
+    }
+  EXPECT_EQ(differ, 0u) << last;
+  EXPECT_GT(red, 200u);  // the ball is in the picture
+}
+
+TEST(Dmplatform, TheLiveViewRefusesWhatItCannotShow) {
+  const dm::test::TempDir dir("dmplatform_noview");
+  const fs::path file = dir / "look.json";
+  std::ofstream(file) << kViewScene;
+  const std::string platform = dm::test::besideExecutable(DMPLATFORM_PATH);
+  // No display.
+  const char* display = std::getenv("DISPLAY");
+  const std::string saved = display ? display : "";
+  unsetenv("DISPLAY");
+  const auto noDisplay = dmtool_test::runProgram(
+      platform, {"run", file.string(), "--view", "--duration", "0.1", "--out", (dir / "a").string()});
+  if (!saved.empty()) setenv("DISPLAY", saved.c_str(), 1);
+  EXPECT_EQ(noDisplay.exitCode, 1) << dmtool_test::describe(noDisplay);
+  EXPECT_NE(noDisplay.err.find("--view"), std::string::npos) << noDisplay.err;
+  // A screenshot without the window.
+  const auto shotOnly = dmtool_test::runProgram(
+      platform, {"run", file.string(), "--screenshot", (dir / "s.png").string(), "--duration", "0.1"});
+  EXPECT_EQ(shotOnly.exitCode, 2) << dmtool_test::describe(shotOnly);
+  EXPECT_NE(shotOnly.err.find("--view"), std::string::npos) << shotOnly.err;
+  // A scene without a render engine.
+  std::ofstream(dir / "sheet.obj") << "v 0 0 0\nv 0.05 0 0\nv 0 0.05 0\nf 1 2 3\n";
+  std::ofstream(dir / "blind.json") << scene(R"("physics": {})", R"(, "dynamic": true, "mass": 0.1)");
+  const auto blind = dmtool_test::runProgram(platform, {"run", (dir / "blind.json").string(), "--view",
+                                                        "--duration", "0.1", "--out", (dir / "b").string()});
+  EXPECT_EQ(blind.exitCode, 2) << dmtool_test::describe(blind);
+  EXPECT_NE(blind.err.find("engines/render"), std::string::npos) << blind.err;
 }

@@ -65,6 +65,7 @@
 // @endcode
 #pragma once
 
+#include <dm/core/image.hpp>
 #include <dm/core/result.hpp>
 #include <dm/engine/master_engine.hpp>
 
@@ -93,6 +94,9 @@ struct SceneRunOptions {
   /// Raised (by a signal handler, another thread) to stop early; the outputs
   /// are still written. May be null.
   const std::atomic<bool>* stop = nullptr;
+  /// Keep the render engine's newest frame for latestFrame() (a live view
+  /// of the run); needs the scene's render engine.
+  bool liveFrames = false;
 };
 
 /// What a run did.
@@ -129,6 +133,12 @@ class SceneRuntime {
   /// The port the OpenIGTLink engine listens on once prepare() built it
   /// (the free one picked for port 0); 0 without that engine.
   std::uint16_t igtlPort() const;
+  /// The render engine's newest frame (its camera's view, before the HUD;
+  /// top row first) and its scene time, when it is newer than the one
+  /// `seen` numbers (then `seen` is updated); false otherwise, and always
+  /// without SceneRunOptions::liveFrames. Any thread; the pixels are shared,
+  /// not copied.
+  bool latestFrame(std::uint64_t& seen, Image& out, double& sceneTime) const;
   const SceneDesc& scene() const;
 
   /// Builds the engines for a run with `options` (mode, output folder) and

@@ -1,0 +1,162 @@
+// live_view.cpp — `dmplatform run --view` (live_view.hpp).
+#include "live_view.hpp"
+
+#include <dm/io/image_io.hpp>
+#include <dm/io/scene_file.hpp>
+
+#include <GLFW/glfw3.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdint>
+#include <string>
+#include <thread>
+
+namespace dmplatform {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// What the keys asked for (GLFW's key callback, on the calling thread).
+struct Keys {
+  bool paused = false;
+  int steps = 0;  // render frames to step while paused
+  bool quit = false;
+};
+
+void onKey(GLFWwindow* window, int key, int, int action, int) {
+  if (action != GLFW_PRESS && action != GLFW_REPEAT) return;
+  Keys& k = *static_cast<Keys*>(glfwGetWindowUserPointer(window));
+  if (key == GLFW_KEY_ESCAPE) k.quit = true;
+  if (key == GLFW_KEY_SPACE && action == GLFW_PRESS) k.paused = !k.paused;
+  if ((key == GLFW_KEY_N || key == GLFW_KEY_RIGHT) && k.paused) ++k.steps;
+}
+
+// The frame 1:1 from the window's top-left corner (an image's first row is
+// its top; GL's raster goes up, hence the flip).
+void draw(GLFWwindow* window, const dm::Image& frame) {
+  int w = 0, h = 0;
+  glfwGetFramebufferSize(window, &w, &h);
+  glViewport(0, 0, w, h);
+  glClearColor(0.f, 0.f, 0.f, 1.f);
+  glClear(GL_COLOR_BUFFER_BIT);
+  if (frame.empty() || frame.type() != dm::PixelType::U8) return;
+  glMatrixMode(GL_PROJECTION);
+  glLoadIdentity();
+  glOrtho(0, w, 0, h, -1, 1);
+  glMatrixMode(GL_MODELVIEW);
+  glLoadIdentity();
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, static_cast<GLint>(frame.strideBytes() / frame.pixelBytes()));
+  glRasterPos2i(0, h);
+  glPixelZoom(1.f, -1.f);
+  const GLenum format = frame.channels() == 4 ? GL_RGBA : frame.channels() == 3 ? GL_RGB : GL_LUMINANCE;
+  glDrawPixels(frame.width(), frame.height(), format, GL_UNSIGNED_BYTE, frame.data());
+  glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+}
+
+// The window's back buffer as an RGB image, top row first.
+dm::Result<dm::Image> readWindow(GLFWwindow* window) {
+  int w = 0, h = 0;
+  glfwGetFramebufferSize(window, &w, &h);
+  auto image = dm::Image::create(w, h, 3, dm::PixelType::U8);
+  if (!image) return image.error();
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glPixelStorei(GL_PACK_ROW_LENGTH, static_cast<GLint>(image->strideBytes() / 3));
+  glReadBuffer(GL_BACK);
+  for (int y = 0; y < h; ++y)  // GL's row 0 is the bottom
+    glReadPixels(0, h - 1 - y, w, 1, GL_RGB, GL_UNSIGNED_BYTE, image->row(y));
+  glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+  return image;
+}
+
+}  // namespace
+
+dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneRunOptions options,
+                                           const LiveViewOptions& view) {
+  const dm::SceneDesc& scene = runtime.scene();
+  if (!scene.engines.render)
+    return dm::fail(dm::ErrorCode::InvalidArgument, "the scene has no render engine to show", "--view",
+                    "add \"render\": {\"rate_hz\": 30} to the scene's \"engines\", or leave out --view");
+  if (glfwInit() != GLFW_TRUE)
+    return dm::fail(dm::ErrorCode::InvalidArgument, "no window system to open a window on", "--view",
+                    "run on a desktop (DISPLAY set), under xvfb-run, or leave out --view (headless)");
+  struct Terminate {
+    ~Terminate() { glfwTerminate(); }
+  } terminate;
+  glfwWindowHint(GLFW_RESIZABLE, GLFW_FALSE);
+  glfwWindowHint(GLFW_DOUBLEBUFFER, GLFW_TRUE);
+  const int width = scene.engines.render->width, height = scene.engines.render->height;
+  GLFWwindow* window =
+      glfwCreateWindow(width, height, ("dmplatform — " + scene.name).c_str(), nullptr, nullptr);
+  if (window == nullptr)
+    return dm::fail(dm::ErrorCode::InvalidArgument,
+                    "the window system refused a " + std::to_string(width) + "x" + std::to_string(height) +
+                        " OpenGL window",
+                    "--view", "check the display's OpenGL (glxinfo), or leave out --view");
+  Keys keys;
+  glfwSetWindowUserPointer(window, &keys);
+  glfwSetKeyCallback(window, onKey);
+
+  options.liveFrames = true;
+  const bool lockstep = options.mode == dm::RunMode::Lockstep;
+  const double frameSeconds = 1.0 / scene.engines.render->rateHz;
+  if (auto s = runtime.start(options); !s) {
+    glfwDestroyWindow(window);
+    return s.error();
+  }
+  std::uint64_t seen = 0;
+  dm::Image frame;
+  double frameTime = 0.0;
+  const Clock::time_point start = Clock::now();
+  Clock::time_point last = start;
+  dm::Status failed = dm::ok();
+  const auto stopped = [&] {
+    return keys.quit || glfwWindowShouldClose(window) || (options.stop && options.stop->load());
+  };
+  while (!stopped()) {
+    glfwPollEvents();
+    const Clock::time_point now = Clock::now();
+    if (lockstep) {
+      const double left = options.duration - runtime.time();
+      if (left <= 1e-12) break;
+      double step = 0.0;
+      if (!keys.paused)
+        step = std::min(std::chrono::duration<double>(now - last).count(), 0.1);
+      else if (keys.steps > 0)
+        step = frameSeconds, --keys.steps;
+      last = now;
+      if (step > 0.0) {
+        glfwMakeContextCurrent(nullptr);  // the render engine's EGL context ticks here
+        if (failed = runtime.advance(std::min(step, left)); !failed) break;
+      }
+    } else if (std::chrono::duration<double>(now - start).count() >= options.duration) {
+      break;
+    }
+    glfwMakeContextCurrent(window);
+    if (runtime.latestFrame(seen, frame, frameTime)) {
+      draw(window, frame);
+      glfwSwapBuffers(window);
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(lockstep && !keys.paused ? 1 : 10));
+  }
+  // The last frame once more: into the back buffer for the screenshot.
+  glfwMakeContextCurrent(window);
+  (void)runtime.latestFrame(seen, frame, frameTime);
+  draw(window, frame);
+  dm::Status shot = dm::ok();
+  if (!view.screenshot.empty()) {
+    auto picture = readWindow(window);
+    shot = picture ? dm::writePng(*picture, view.screenshot) : dm::Status(picture.error());
+  }
+  glfwMakeContextCurrent(nullptr);
+  glfwDestroyWindow(window);
+  auto result = runtime.finish();
+  if (!failed) return failed.error();
+  if (!shot) return shot.error().within("--screenshot");
+  if (result && (keys.quit || (options.stop && options.stop->load()))) result->interrupted = true;
+  return result;
+}
+
+}  // namespace dmplatform

@@ -1,0 +1,39 @@
+// live_view.hpp — `dmplatform run --view`: a window that shows a running
+// scene's rendered frames as they come (GLFW; the frames are the render
+// engine's, drawn 1:1, so the window shows exactly what a headless run
+// writes for its camera, before the HUD: the HUD is not drawn in the
+// window yet).
+//
+// Keys: Space pauses and resumes the simulation, N (or →) steps it one
+// render frame while paused (both lockstep only: a real-time run's
+// engines keep their own clocks), Esc or closing the window ends the run
+// (its outputs are still written). In lockstep the virtual clock follows
+// the wall clock while the machine keeps up (at most 0.1 s per shown
+// frame); in real time the engines run on their threads and the window
+// polls the newest frame.
+//
+// Threads: the window, its GL context and the lockstep engines all on the
+// calling thread; the window's context is released while the engines
+// tick (the render engine makes its own EGL context current per frame).
+#pragma once
+
+#include <dm/core/result.hpp>
+#include <dm/engine/scene_runtime.hpp>
+
+#include <filesystem>
+
+namespace dmplatform {
+
+struct LiveViewOptions {
+  /// When set: the window's last picture, written as PNG when the view
+  /// closes (a screenshot; tests compare it with the headless frame).
+  std::filesystem::path screenshot;
+};
+
+/// Runs `runtime` (prepared here with `options` and liveFrames) with a
+/// window showing its frames, then finishes it: the run's result, or an
+/// error (no window system: InvalidArgument naming --view).
+dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneRunOptions options,
+                                           const LiveViewOptions& view);
+
+}  // namespace dmplatform
