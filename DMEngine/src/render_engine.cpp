@@ -2,6 +2,7 @@
 #include "render_engine.hpp"
 
 #include <dm/core/log.hpp>
+#include <dm/engine/scene_runtime.hpp>
 #include <dm/io/image_io.hpp>
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
@@ -12,6 +13,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <deque>
 #include <mutex>
@@ -22,6 +24,26 @@
 namespace dm {
 
 namespace {
+
+// `camera` turned by a live view's orbit (dm::ViewOrbit): the eye about the
+// target by yaw about the camera's up and pitch about its right axis (kept
+// 5° off the up axis), the distance scaled, eye and target panned.
+Camera orbited(Camera camera, const ViewOrbit& o) {
+  const Vec3 up = camera.up.normalized();
+  Vec3 offset = camera.position - camera.target;
+  const double distance = offset.norm();
+  offset = Eigen::AngleAxisd(o.yaw, up) * offset;
+  const Vec3 right = up.cross(offset).normalized();  // = forward × up, as the camera's
+  const double elevation = std::acos(std::clamp(offset.normalized().dot(up), -1.0, 1.0));  // from up
+  constexpr double kMargin = 5.0 * 3.14159265358979323846 / 180.0;
+  const double turned = std::clamp(elevation - o.pitch, kMargin, 3.14159265358979323846 - kMargin);
+  offset = Eigen::AngleAxisd(turned - elevation, right) * offset;  // a positive turn leans it off up
+  const Vec3 pan = distance * (o.panRight * right + o.panUp * offset.cross(right).normalized());
+  camera.target += pan;
+  camera.position = camera.target + o.zoom * offset;
+  camera.orthoHeight *= o.zoom;
+  return camera;
+}
 
 // Writes frames on its own thread so PNG encoding does not hold the render
 // rate. Bounded: `block` waits for room, otherwise a full queue drops.
@@ -230,6 +252,8 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   std::unique_ptr<FrameWriter> writer_;
   RenderFeed feed_;
   std::string camera_;
+  ViewOrbit orbit_;       // a live view's turn of camera_
+  bool orbited_ = false;  // orbit_ is not the identity: draw camera_ turned (mono)
   std::string proxyObject_;
   int frameEvery_ = 1;
   RenderEngineStats stats_;
@@ -280,7 +304,14 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     const bool haptics = feed_.haptics && feed_.haptics(proxy, force);
     if (haptics && !proxyObject_.empty())
       if (auto s = view_.setObjectPose(proxyObject_, proxy); !s) return s;
-    if (auto r = view_.render(target_, camera_, t); !r) return r.error();
+    if (feed_.viewOrbit && feed_.viewOrbit(orbit_)) orbited_ = !(orbit_ == ViewOrbit{});
+    if (orbited_) {
+      auto cam = view_.camera(camera_, t);
+      if (!cam) return cam.error();
+      if (auto r = view_.render(target_, orbited(*cam, orbit_)); !r) return r.error();
+    } else if (auto r = view_.render(target_, camera_, t); !r) {
+      return r.error();
+    }
     // The camera's view for the engines that stream or filter it, before
     // anything is drawn over it; the written frame is read again only when
     // something was (a frame is never written into once read: both may

@@ -19,6 +19,7 @@
 namespace dm {
 
 class FrameSlot;
+struct ViewOrbit;
 struct SceneDesc;
 struct SceneResources;
 
@@ -65,6 +66,9 @@ struct RenderFeed {
   /// are drawn (the camera's view), for the OpenIGTLink and vision engines;
   /// null: frames are read back only to be written.
   std::shared_ptr<FrameSlot> frames;
+  /// A live view's turn of the camera (dm::ViewOrbit): true and the newest
+  /// when it changed since the last call; may be empty.
+  std::function<bool(ViewOrbit& orbit)> viewOrbit;
   /// An image drawn over the frames' lower-left corner (a vision graph's
   /// "texture" sink): true and the newest image and its frame number once
   /// there is one. Render thread; the producer never rewrites a handed-out image.

@@ -386,6 +386,7 @@ struct SceneRuntime::Impl {
     bool interrupted = false;
   } running;
   std::shared_ptr<FrameSlot> frames;  // the render engine's newest frame (SceneRunOptions::liveFrames)
+  std::shared_ptr<TripleBuffer<ViewOrbit>> orbit;  // a live view's turn of the camera → render
   bool prepared = false;
   RunMode preparedMode = RunMode::Lockstep;
   std::filesystem::path preparedOut;
@@ -715,6 +716,14 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
       frames = std::make_shared<FrameSlot>();
       feed.frames = frames;
     }
+    if (options.liveFrames) {
+      orbit = std::make_shared<TripleBuffer<ViewOrbit>>();
+      feed.viewOrbit = [o = orbit](ViewOrbit& newest) {
+        if (!o->update()) return false;
+        newest = o->readBuffer();
+        return true;
+      };
+    }
     auto made = makeRenderEngine(scene, resources, std::move(feed),
                                  scene.outputs.frames ? out / "frames" : std::filesystem::path(),
                                  scene.outputs.frameEvery, lockstep);
@@ -818,6 +827,10 @@ MasterEngine& SceneRuntime::master() { return impl_->master; }
 
 bool SceneRuntime::latestFrame(std::uint64_t& seen, Image& out, double& sceneTime) const {
   return impl_->frames && impl_->frames->takeIfNewer(seen, out, sceneTime);
+}
+
+void SceneRuntime::setViewOrbit(const ViewOrbit& orbit) {
+  if (impl_->orbit) impl_->orbit->write(orbit);
 }
 
 std::uint16_t SceneRuntime::igtlPort() const {

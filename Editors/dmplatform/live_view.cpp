@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdint>
 #include <string>
 #include <thread>
@@ -18,19 +19,64 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-// What the keys asked for (GLFW's key callback, on the calling thread).
-struct Keys {
+// What the keys and the mouse asked for (GLFW's callbacks, on the calling
+// thread).
+struct Input {
+  dm::SceneRuntime* runtime = nullptr;
   bool paused = false;
   int steps = 0;  // render frames to step while paused
   bool quit = false;
+  dm::ViewOrbit orbit;
+  int dragging = -1;  // the mouse button held, or -1
+  double x = 0.0, y = 0.0;
 };
+
+Input& inputOf(GLFWwindow* window) { return *static_cast<Input*>(glfwGetWindowUserPointer(window)); }
 
 void onKey(GLFWwindow* window, int key, int, int action, int) {
   if (action != GLFW_PRESS && action != GLFW_REPEAT) return;
-  Keys& k = *static_cast<Keys*>(glfwGetWindowUserPointer(window));
-  if (key == GLFW_KEY_ESCAPE) k.quit = true;
-  if (key == GLFW_KEY_SPACE && action == GLFW_PRESS) k.paused = !k.paused;
-  if ((key == GLFW_KEY_N || key == GLFW_KEY_RIGHT) && k.paused) ++k.steps;
+  Input& in = inputOf(window);
+  if (key == GLFW_KEY_ESCAPE) in.quit = true;
+  if (key == GLFW_KEY_SPACE && action == GLFW_PRESS) in.paused = !in.paused;
+  if ((key == GLFW_KEY_N || key == GLFW_KEY_RIGHT) && in.paused) ++in.steps;
+  if (key == GLFW_KEY_R) {
+    in.orbit = {};
+    in.runtime->setViewOrbit(in.orbit);
+  }
+}
+
+void onButton(GLFWwindow* window, int button, int action, int) {
+  Input& in = inputOf(window);
+  if (action == GLFW_PRESS && in.dragging < 0) {
+    in.dragging = button;
+    glfwGetCursorPos(window, &in.x, &in.y);
+  } else if (action == GLFW_RELEASE && button == in.dragging) {
+    in.dragging = -1;
+  }
+}
+
+// Left drag turns the camera about its target (8 mrad a pixel), any other
+// button pans it (2 ‰ of the distance a pixel).
+void onCursor(GLFWwindow* window, double x, double y) {
+  Input& in = inputOf(window);
+  if (in.dragging < 0) return;
+  const double dx = x - in.x, dy = y - in.y;
+  in.x = x, in.y = y;
+  if (in.dragging == GLFW_MOUSE_BUTTON_LEFT) {
+    in.orbit.yaw -= 0.008 * dx;
+    in.orbit.pitch += 0.008 * dy;
+  } else {
+    in.orbit.panRight -= 0.002 * dx * in.orbit.zoom;
+    in.orbit.panUp += 0.002 * dy * in.orbit.zoom;
+  }
+  in.runtime->setViewOrbit(in.orbit);
+}
+
+// The wheel zooms: 10 % nearer a notch.
+void onScroll(GLFWwindow* window, double, double dy) {
+  Input& in = inputOf(window);
+  in.orbit.zoom = std::clamp(in.orbit.zoom * std::pow(0.9, dy), 1e-3, 1e3);
+  in.runtime->setViewOrbit(in.orbit);
 }
 
 // The frame 1:1 from the window's top-left corner (an image's first row is
@@ -95,9 +141,13 @@ dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneR
                     "the window system refused a " + std::to_string(width) + "x" + std::to_string(height) +
                         " OpenGL window",
                     "--view", "check the display's OpenGL (glxinfo), or leave out --view");
-  Keys keys;
+  Input keys;
+  keys.runtime = &runtime;
   glfwSetWindowUserPointer(window, &keys);
   glfwSetKeyCallback(window, onKey);
+  glfwSetMouseButtonCallback(window, onButton);
+  glfwSetCursorPosCallback(window, onCursor);
+  glfwSetScrollCallback(window, onScroll);
 
   options.liveFrames = true;
   const bool lockstep = options.mode == dm::RunMode::Lockstep;

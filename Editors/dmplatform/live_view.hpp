@@ -7,7 +7,10 @@
 // Keys: Space pauses and resumes the simulation, N (or →) steps it one
 // render frame while paused (both lockstep only: a real-time run's
 // engines keep their own clocks), Esc or closing the window ends the run
-// (its outputs are still written). In lockstep the virtual clock follows
+// (its outputs are still written). Mouse: a left drag turns the camera
+// about its target, another button's drag pans it, the wheel zooms, R
+// puts it back (dm::ViewOrbit; the frames written turn with it; a paused
+// run shows a turn at its next step). In lockstep the virtual clock follows
 // the wall clock while the machine keeps up (at most 0.1 s per shown
 // frame); in real time the engines run on their threads and the window
 // polls the newest frame.

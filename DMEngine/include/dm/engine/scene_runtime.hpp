@@ -99,6 +99,18 @@ struct SceneRunOptions {
   bool liveFrames = false;
 };
 
+/// A live view's turn of the render engine's camera (dmplatform run
+/// --view's mouse), applied to the scene camera at every frame: the eye
+/// turned about the target by `yaw` (rad, about the camera's up) and
+/// `pitch` (rad, about its right axis; kept 5° off the up axis), its
+/// distance times `zoom` (an orthographic camera's height too), and eye and
+/// target moved along the camera's right and up axes by `panRight` and
+/// `panUp` times that distance.
+struct ViewOrbit {
+  double yaw = 0.0, pitch = 0.0, zoom = 1.0, panRight = 0.0, panUp = 0.0;
+  bool operator==(const ViewOrbit&) const = default;
+};
+
 /// What a run did.
 struct SceneRunResult {
   nlohmann::json summary;       ///< what summary.json holds
@@ -139,6 +151,11 @@ class SceneRuntime {
   /// without SceneRunOptions::liveFrames. Any thread; the pixels are shared,
   /// not copied.
   bool latestFrame(std::uint64_t& seen, Image& out, double& sceneTime) const;
+  /// Turns the render engine's camera from the next frame on (see
+  /// ViewOrbit; the frames written show it too). One thread at a time, any
+  /// thread, after prepare() with SceneRunOptions::liveFrames; ignored
+  /// otherwise. Never blocks the render engine.
+  void setViewOrbit(const ViewOrbit& orbit);
   const SceneDesc& scene() const;
 
   /// Builds the engines for a run with `options` (mode, output folder) and

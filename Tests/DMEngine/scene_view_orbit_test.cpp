@@ -1,0 +1,109 @@
+// A live view's camera turn (dm::ViewOrbit, dmplatform run --view's mouse)
+// against geometry: the render engine's frame with the scene camera turned
+// by yaw, pitch and zoom is the frame of a scene whose camera stands where
+// spherical coordinates about the target put it; frames reach
+// SceneRuntime::latestFrame only with SceneRunOptions::liveFrames.
+#include <dm/engine/scene_runtime.hpp>
+#include <dm/io/scene_file.hpp>
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <numbers>
+#include <string>
+
+#include "../common/temp_dir.hpp"
+#include "scene_run_support.hpp"
+
+namespace scene_view_orbit_test {
+
+#if defined(DM_TEST_WITH_RENDERER)
+using dm::Vec3;
+
+// A red ball on a grey table seen by a 160 x 120 camera at `eye` looking at
+// (0, 0, 0.05), up +z.
+dm::SceneDesc ballScene(const Vec3& eye) {
+  const std::string at =
+      "[" + std::to_string(eye.x()) + ", " + std::to_string(eye.y()) + ", " + std::to_string(eye.z()) + "]";
+  return scene_run::parsedScene(R"({"format": "dmplatform-scene", "version": 2, "name": "orbit",
+    "resources": {"ball": {"type": "shape", "shape": "sphere", "radius": 0.04, "subdivisions": 4},
+                  "table": {"type": "shape", "shape": "box", "half_extents": [0.2, 0.1, 0.01]}},
+    "materials": {"red": {"model": "blinn-phong", "color": [0.8, 0.05, 0.05]}},
+    "objects": [{"name": "table", "mesh": "table", "pose": {"position": [0, 0, -0.01]}},
+                {"name": "ball", "mesh": "ball", "material": "red", "pose": {"position": [0.05, 0, 0.04]}}],
+    "lights": [{"type": "directional", "direction": [0.3, 0.5, -0.8], "intensity": 1.2}],
+    "cameras": [{"name": "eye", "position": )" +
+                                    at + R"(, "target": [0, 0, 0.05], "up": [0, 0, 1],
+                 "near": 0.01, "far": 5}],
+    "engines": {"render": {"rate_hz": 20, "width": 160, "height": 120, "hud": false}}})",
+                                "orbit.json");
+}
+
+// The newest frame after 0.1 s, the camera turned by `orbit` when given.
+dm::Image frameOf(const dm::SceneDesc& scene, const dm::ViewOrbit* orbit, bool live = true) {
+  const dm::test::TempDir dir("view_orbit");
+  auto rt = dm::SceneRuntime::create(scene);
+  EXPECT_TRUE(rt) << rt.error();
+  if (!rt) return {};
+  const dm::SceneRunOptions options{.duration = 0.1, .outDir = dir.path(), .liveFrames = live};
+  EXPECT_TRUE((*rt)->prepare(options));
+  if (orbit) (*rt)->setViewOrbit(*orbit);
+  EXPECT_TRUE((*rt)->start(options));
+  EXPECT_TRUE((*rt)->advance(0.1));
+  std::uint64_t seen = 0;
+  dm::Image frame;
+  double t = -1.0;
+  const bool got = (*rt)->latestFrame(seen, frame, t);
+  EXPECT_TRUE((*rt)->finish());
+  EXPECT_EQ(got, live);
+  if (got) {
+    EXPECT_NEAR(t, 0.05, 1e-9);  // the 20 Hz render's last tick in [0, 0.1)
+  }
+  return frame;
+}
+
+// Pixels whose colour differs by more than 3 levels in a channel.
+double differing(const dm::Image& a, const dm::Image& b) {
+  std::size_t n = 0;
+  for (int y = 0; y < a.height(); ++y)
+    for (int x = 0; x < a.width(); ++x)
+      for (int c = 0; c < 3; ++c)
+        if (std::abs(int(a.at<std::uint8_t>(x, y, c)) - int(b.at<std::uint8_t>(x, y, c))) > 3) {
+          ++n;
+          break;
+        }
+  return double(n) / double(a.width() * a.height());
+}
+
+TEST(SceneViewOrbit, ATurnedCameraSeesWhatACameraPlacedThereSees) {
+  const Vec3 eye(0, -0.6, 0.15), target(0, 0, 0.05);
+  const dm::ViewOrbit orbit{.yaw = std::numbers::pi / 2, .pitch = 0.3, .zoom = 0.8};
+  // Spherical coordinates about the target, up +z: the azimuth turned by
+  // the yaw, the angle from +z made smaller by the pitch, the distance
+  // scaled by the zoom.
+  const Vec3 offset = eye - target;
+  const double r = offset.norm(), polar = std::acos(offset.z() / r) - orbit.pitch;
+  const double azimuth = std::atan2(offset.y(), offset.x()) + orbit.yaw;
+  const Vec3 there = target + orbit.zoom * r *
+                                  Vec3(std::sin(polar) * std::cos(azimuth),
+                                       std::sin(polar) * std::sin(azimuth), std::cos(polar));
+  const dm::Image turned = frameOf(ballScene(eye), &orbit), placed = frameOf(ballScene(there), nullptr);
+  const dm::Image unturned = frameOf(ballScene(eye), nullptr);
+  ASSERT_FALSE(turned.empty());
+  ASSERT_FALSE(placed.empty());
+  ASSERT_FALSE(unturned.empty());
+  EXPECT_LT(differing(turned, placed), 0.005);   // the same picture, up to rounding at edges
+  EXPECT_GT(differing(turned, unturned), 0.05);  // and not the one it started from
+  EXPECT_GT(scene_run::redShare(turned), 0.02);
+  // Put back (the identity turn), it is the scene camera's picture again.
+  const dm::ViewOrbit none;
+  EXPECT_LT(differing(frameOf(ballScene(eye), &none), unturned), 0.005);
+}
+
+TEST(SceneViewOrbit, FramesReachALiveViewOnlyWhenAsked) {
+  (void)frameOf(ballScene(Vec3(0, -0.6, 0.15)), nullptr, false);  // latestFrame false (checked inside)
+}
+#endif
+
+}  // namespace scene_view_orbit_test
