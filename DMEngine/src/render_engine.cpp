@@ -326,14 +326,14 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     const bool drawnOver = hud_ || feed_.overlay;
     if (auto s = drawOver(t, haptics, force); !s) return s;
     const std::uint64_t index = stats_.frames++;
-    if (writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0) {
-      if (drawnOver || view.empty()) {
-        auto img = target_.readColor();
-        if (!img) return img.error();
-        view = std::move(*img);
-      }
-      writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(view));
+    const bool written = writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0;
+    if ((written || feed_.shown) && (drawnOver || view.empty())) {  // the frame as drawn over
+      auto img = target_.readColor();
+      if (!img) return img.error();
+      view = std::move(*img);
     }
+    if (feed_.shown) feed_.shown->put(view, t);
+    if (written) writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(view));
     return ok();
   }
 

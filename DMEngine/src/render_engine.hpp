@@ -66,6 +66,9 @@ struct RenderFeed {
   /// are drawn (the camera's view), for the OpenIGTLink and vision engines;
   /// null: frames are read back only to be written.
   std::shared_ptr<FrameSlot> frames;
+  /// Where every frame goes as written (the HUD and overlays drawn), for a
+  /// live view; null: none.
+  std::shared_ptr<FrameSlot> shown;
   /// A live view's turn of the camera (dm::ViewOrbit): true and the newest
   /// when it changed since the last call; may be empty.
   std::function<bool(ViewOrbit& orbit)> viewOrbit;

@@ -385,7 +385,8 @@ struct SceneRuntime::Impl {
     Status status = ok();
     bool interrupted = false;
   } running;
-  std::shared_ptr<FrameSlot> frames;  // the render engine's newest frame (SceneRunOptions::liveFrames)
+  std::shared_ptr<FrameSlot> frames;  // the render engine's newest view, before the HUD (OpenIGTLink, vision)
+  std::shared_ptr<FrameSlot> shown;   // its newest frame as written (SceneRunOptions::liveFrames)
   std::shared_ptr<TripleBuffer<ViewOrbit>> orbit;  // a live view's turn of the camera → render
   bool prepared = false;
   RunMode preparedMode = RunMode::Lockstep;
@@ -656,7 +657,7 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
                 "engines/vision", "build with DMVision (libopencv-dev) or remove it");
 #endif
   }
-  // (frames: render → OpenIGTLink, vision and a live view)
+  // (frames: render → OpenIGTLink and vision)
   if (scene.engines.render) {
 #ifdef DM_ENGINE_HAVE_RENDERER
     RenderFeed feed;
@@ -711,12 +712,13 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
         return v->overlay(image, frame);
       };
 #endif
-    if ((scene.engines.igtl && !scene.engines.igtl->image.empty()) || visionWantsFrames ||
-        options.liveFrames) {
+    if ((scene.engines.igtl && !scene.engines.igtl->image.empty()) || visionWantsFrames) {
       frames = std::make_shared<FrameSlot>();
       feed.frames = frames;
     }
     if (options.liveFrames) {
+      shown = std::make_shared<FrameSlot>();
+      feed.shown = shown;
       orbit = std::make_shared<TripleBuffer<ViewOrbit>>();
       feed.viewOrbit = [o = orbit](ViewOrbit& newest) {
         if (!o->update()) return false;
@@ -826,7 +828,7 @@ Status SceneRuntime::addEngine(std::shared_ptr<Engine> engine, const EngineSched
 MasterEngine& SceneRuntime::master() { return impl_->master; }
 
 bool SceneRuntime::latestFrame(std::uint64_t& seen, Image& out, double& sceneTime) const {
-  return impl_->frames && impl_->frames->takeIfNewer(seen, out, sceneTime);
+  return impl_->shown && impl_->shown->takeIfNewer(seen, out, sceneTime);
 }
 
 void SceneRuntime::setViewOrbit(const ViewOrbit& orbit) {

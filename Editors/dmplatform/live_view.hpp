@@ -1,8 +1,7 @@
 // live_view.hpp — `dmplatform run --view`: a window that shows a running
 // scene's rendered frames as they come (GLFW; the frames are the render
 // engine's, drawn 1:1, so the window shows exactly what a headless run
-// writes for its camera, before the HUD: the HUD is not drawn in the
-// window yet).
+// writes, HUD included).
 //
 // Keys: Space pauses and resumes the simulation, N (or →) steps it one
 // render frame while paused (both lockstep only: a real-time run's

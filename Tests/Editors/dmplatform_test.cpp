@@ -88,7 +88,7 @@ TEST(Dmplatform, AModelThatCannotBeBuiltExitsWithTwoBeforeRunning) {
 }
 
 // A red ball dropped on a table, watched by a 320 x 240 camera at 30 Hz
-// (no HUD), every frame written.
+// with the HUD, every frame written.
 constexpr const char* kViewScene = R"({"format": "dmplatform-scene", "version": 2, "name": "look",
   "resources": {"ball": {"type": "shape", "shape": "sphere", "radius": 0.03, "subdivisions": 3},
                 "table": {"type": "shape", "shape": "plane", "half_extents": [0.2, 0.2]}},
@@ -99,7 +99,7 @@ constexpr const char* kViewScene = R"({"format": "dmplatform-scene", "version": 
   "lights": [{"type": "directional", "direction": [0.3, 0.5, -0.8], "intensity": 1.2}],
   "cameras": [{"name": "side", "position": [0, -0.6, 0.15], "target": [0, 0, 0.08], "up": [0, 0, 1],
                "near": 0.01, "far": 5}],
-  "engines": {"physics": {"rate_hz": 500}, "render": {"rate_hz": 30, "width": 320, "height": 240, "hud": false}},
+  "engines": {"physics": {"rate_hz": 500}, "render": {"rate_hz": 30, "width": 320, "height": 240, "hud": true}},
   "outputs": {"summary": true, "frames": true, "frame_every": 1}})";
 
 TEST(Dmplatform, TheLiveViewShowsTheFramesTheHeadlessRunWrites) {
@@ -117,7 +117,7 @@ TEST(Dmplatform, TheLiveViewShowsTheFramesTheHeadlessRunWrites) {
   unsetenv("DISPLAY");
   ASSERT_EQ(r.exitCode, 0) << dmtool_test::describe(r);
   // The window's last picture is the last frame written (the newest the
-  // render engine made), pixel for pixel.
+  // render engine made, the HUD drawn over it), pixel for pixel.
   fs::path last;
   for (const auto& e : fs::directory_iterator(out / "frames"))
     if (last.empty() || e.path().filename() > last.filename()) last = e.path();

@@ -145,8 +145,8 @@ class SceneRuntime {
   /// The port the OpenIGTLink engine listens on once prepare() built it
   /// (the free one picked for port 0); 0 without that engine.
   std::uint16_t igtlPort() const;
-  /// The render engine's newest frame (its camera's view, before the HUD;
-  /// top row first) and its scene time, when it is newer than the one
+  /// The render engine's newest frame as it writes frames (the HUD and a
+  /// vision overlay drawn; top row first) and its scene time, when it is newer than the one
   /// `seen` numbers (then `seen` is updated); false otherwise, and always
   /// without SceneRunOptions::liveFrames. Any thread; the pixels are shared,
   /// not copied.
