@@ -143,6 +143,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     if (ctx_ && ctx_->makeCurrent()) {
       overlay_ = Overlay();
       target_ = RenderTarget();
+      insetTarget_ = RenderTarget();
       view_ = SceneView();
       ctx_->release();
     }
@@ -252,6 +253,9 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   std::unique_ptr<FrameWriter> writer_;
   RenderFeed feed_;
   std::string camera_;
+  std::string insetCamera_;  // a second camera drawn in the upper-right corner, or empty
+  RenderTarget insetTarget_;
+  SpriteId insetSprite_{};
   ViewOrbit orbit_;       // a live view's turn of camera_
   bool orbited_ = false;  // orbit_ is not the identity: draw camera_ turned (mono)
   std::string proxyObject_;
@@ -323,7 +327,8 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
       view = std::move(*img);
       feed_.frames->put(view, t);
     }
-    const bool drawnOver = hud_ || feed_.overlay;
+    const bool drawnOver = hud_ || feed_.overlay || !insetCamera_.empty();
+    if (auto s = drawInset(t); !s) return s;
     if (auto s = drawOver(t, haptics, force); !s) return s;
     const std::uint64_t index = stats_.frames++;
     const bool written = writer_ && index % static_cast<std::uint64_t>(frameEvery_) == 0;
@@ -341,8 +346,13 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
   // it off) and the vision overlay, 1:1 in the lower-left corner (halved
   // until it fits in half the view).
   Status drawOver(double t, bool haptics, const Vec3& force) {
-    if (!hud_ && !feed_.overlay) return ok();  // (draw() relies on this to reuse its read-back)
+    if (!hud_ && !feed_.overlay && insetCamera_.empty())
+      return ok();  // (draw() relies on this to reuse its read-back)
     overlay_.begin(target_);
+    if (insetSprite_.valid()) {
+      const float w = static_cast<float>(insetTarget_.width()), h = static_cast<float>(insetTarget_.height());
+      overlay_.sprite(insetSprite_, OverlayRect{static_cast<float>(target_.width()) - w, 0, w, h});
+    }
     if (hud_) hudItems(t, haptics, force);
     if (feed_.overlay) {
       std::int64_t frame = -1;
@@ -365,6 +375,23 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
       }
     }
     return overlay_.end();
+  }
+
+  // The inset camera's picture at scene time t, into its sprite (drawn in
+  // the upper-right corner by drawOver).
+  Status drawInset(double t) {
+    if (insetCamera_.empty()) return ok();
+    if (auto r = view_.render(insetTarget_, insetCamera_, t); !r)
+      return r.error().within("engines/render/inset");
+    auto img = insetTarget_.readColor();
+    if (!img) return img.error();
+    if (!insetSprite_.valid()) {
+      auto id = overlay_.createTexture(*img, {.srgb = true, .linear = false});
+      if (!id) return id.error().within("engines/render/inset");
+      insetSprite_ = *id;
+      return ok();
+    }
+    return overlay_.updateTexture(insetSprite_, *img);
   }
 
   void hud(double t, bool haptics, const Vec3& force) {
@@ -425,6 +452,15 @@ Result<std::shared_ptr<RenderEngineHandle>> makeRenderEngine(const SceneDesc& sc
   if (!overlay) return overlay.error().within("engines/render");
   e->overlay_ = std::move(*overlay);
   e->camera_ = settings.camera;
+  if (!settings.insetCamera.empty()) {
+    auto inset = RenderTarget::create(
+        {.width = std::max(16, static_cast<int>(std::lround(settings.insetSize * settings.width))),
+         .height = std::max(16, static_cast<int>(std::lround(settings.insetSize * settings.height))),
+         .samples = settings.samples});
+    if (!inset) return inset.error().within("engines/render/inset");
+    e->insetTarget_ = std::move(*inset);
+    e->insetCamera_ = settings.insetCamera;
+  }
   if (auto cam = e->view_.camera(e->camera_, 0.0); !cam) return cam.error().within("engines/render/camera");
   if (scene.engines.haptics) e->proxyObject_ = scene.engines.haptics->proxyObject;
   e->hud_ = settings.hud;

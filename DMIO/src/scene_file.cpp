@@ -1039,7 +1039,7 @@ class SceneParser {
       scene_.engines.physics = p;
     }
     if (ConfigReader r = sec.child("render"); expectObject(r)) {
-      r.knownKeys({"rate_hz", "camera", "width", "height", "samples", "hud"});
+      r.knownKeys({"rate_hz", "camera", "width", "height", "samples", "hud", "inset"});
       SceneRenderEngine g;
       g.rateHz = r.number("rate_hz", {.min = 1.0, .max = 240.0}, g.rateHz);
       const std::size_t before = r.errors().size();
@@ -1057,6 +1057,17 @@ class SceneParser {
       if (r.errors().size() == b && (g.samples & (g.samples - 1)) != 0)
         r.addError("samples is " + std::to_string(g.samples) + ", not 1, 2, 4, 8 or 16", "samples");
       if (v2Key(r, "hud")) g.hud = r.boolean("hud");
+      if (v2Key(r, "inset")) {
+        ConfigReader in = r.child("inset");
+        if (expectObject(in)) {
+          in.knownKeys({"camera", "size"});
+          const std::size_t c = in.errors().size();
+          g.insetCamera = in.string("camera");
+          if (in.errors().size() == c)
+            checkName(in, "camera", g.insetCamera, cameraIndex_, "camera", "cameras");
+          g.insetSize = in.number("size", {.min = 0.1, .max = 0.9}, g.insetSize);
+        }
+      }
       scene_.engines.render = g;
     }
     if (ConfigReader r = sec.child("monitor"); expectObject(r)) {
@@ -1477,6 +1488,8 @@ Json toJson(const SceneDesc& scene) {
                          {"samples", r->samples},
                          {"hud", r->hud}};
     if (!r->camera.empty()) engines["render"]["camera"] = r->camera;
+    if (!r->insetCamera.empty())
+      engines["render"]["inset"] = {{"camera", r->insetCamera}, {"size", r->insetSize}};
   }
   if (const auto& m = scene.engines.monitor) engines["monitor"] = {{"rate_hz", m->rateHz}};
   if (const auto& g = scene.engines.igtl) writeIgtl(*g, engines);

@@ -2,12 +2,15 @@
 // against geometry: the render engine's frame with the scene camera turned
 // by yaw, pitch and zoom is the frame of a scene whose camera stands where
 // spherical coordinates about the target put it; frames reach
-// SceneRuntime::latestFrame only with SceneRunOptions::liveFrames.
+// SceneRuntime::latestFrame only with SceneRunOptions::liveFrames; a
+// render engine's "inset" draws a second camera's picture in the frame's
+// upper-right corner, the picture that camera renders at that size.
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <numbers>
@@ -99,6 +102,54 @@ TEST(SceneViewOrbit, ATurnedCameraSeesWhatACameraPlacedThereSees) {
   // Put back (the identity turn), it is the scene camera's picture again.
   const dm::ViewOrbit none;
   EXPECT_LT(differing(frameOf(ballScene(eye), &none), unturned), 0.005);
+}
+
+// The ball seen from the front ("eye") at `width` x `height`, with `render`
+// keys; a second camera "top" looks straight down on it.
+dm::SceneDesc twoCameras(int width, int height, const std::string& render) {
+  return scene_run::parsedScene(R"({"format": "dmplatform-scene", "version": 2, "name": "inset",
+    "resources": {"ball": {"type": "shape", "shape": "sphere", "radius": 0.04, "subdivisions": 4},
+                  "table": {"type": "shape", "shape": "box", "half_extents": [0.2, 0.1, 0.01]}},
+    "materials": {"red": {"model": "blinn-phong", "color": [0.8, 0.05, 0.05]}},
+    "objects": [{"name": "table", "mesh": "table", "pose": {"position": [0, 0, -0.01]}},
+                {"name": "ball", "mesh": "ball", "material": "red", "pose": {"position": [0.05, 0, 0.04]}}],
+    "lights": [{"type": "directional", "direction": [0.3, 0.5, -0.8], "intensity": 1.2}],
+    "cameras": [{"name": "eye", "position": [0, -0.6, 0.15], "target": [0, 0, 0.05], "up": [0, 0, 1],
+                 "near": 0.01, "far": 5},
+                {"name": "top", "position": [0.05, 0, 0.5], "target": [0.05, 0, 0], "up": [0, 1, 0],
+                 "near": 0.01, "far": 5}],
+    "engines": {"render": {"rate_hz": 20, "width": )" +
+                                    std::to_string(width) + R"(, "height": )" + std::to_string(height) +
+                                    R"(, "hud": false)" + render + R"(}}})",
+                                "inset.json");
+}
+
+TEST(SceneViewOrbit, TheInsetIsTheSecondCamerasPictureInTheUpperRightCorner) {
+  const dm::Image framed =
+      frameOf(twoCameras(160, 120, R"(, "inset": {"camera": "top", "size": 0.25})"), nullptr);
+  const dm::Image top = frameOf(twoCameras(40, 30, R"(, "camera": "top")"), nullptr);
+  const dm::Image plain = frameOf(twoCameras(160, 120, ""), nullptr);
+  ASSERT_EQ(framed.width(), 160);
+  ASSERT_EQ(top.width(), 40);
+  ASSERT_EQ(top.height(), 30);
+  std::size_t insetDiffer = 0, restDiffer = 0;
+  for (int y = 0; y < 120; ++y)
+    for (int x = 0; x < 160; ++x) {
+      const bool inInset = x >= 120 && y < 30;
+      int worst = 0;
+      for (int c = 0; c < 3; ++c) {
+        const int want = inInset ? top.at<std::uint8_t>(x - 120, y, c) : plain.at<std::uint8_t>(x, y, c);
+        worst = std::max(worst, std::abs(int(framed.at<std::uint8_t>(x, y, c)) - want));
+      }
+      (inInset ? insetDiffer : restDiffer) += worst > 3;
+    }
+  EXPECT_LE(insetDiffer, 40u * 30u / 100u);  // the top camera's picture (1 %: rounding)
+  EXPECT_EQ(restDiffer, 0u);                 // and elsewhere the front camera's
+  // The ball seen from above: its 4 cm disk in the 0.35 x 0.46 m the camera
+  // sees at the ball's top (45°, 0.42 m away), 3.1 % of the picture, less
+  // its darkest rim.
+  EXPECT_GT(scene_run::redShare(top), 0.015);
+  EXPECT_LT(scene_run::redShare(top), 0.035);
 }
 
 TEST(SceneViewOrbit, FramesReachALiveViewOnlyWhenAsked) {

@@ -703,7 +703,7 @@ Json fullScene() {
                   "device_pose": {"position": [0.1, 0.0, 0.0], "rotation": [0.0, 0.0, 0.0, 1.0]}},
       "physics": {"rate_hz": 500.0, "gravity": [0.0, -9.81, 0.0], "sleep": true},
       "render": {"rate_hz": 60.0, "camera": "follow", "width": 1920, "height": 1080, "samples": 4,
-                 "hud": false},
+                 "hud": false, "inset": {"camera": "fly", "size": 0.25}},
       "monitor": {"rate_hz": 10.0},
       "igtl": {"rate_hz": 20.0, "listen": "0.0.0.0:18944", "allow": ["10.0.0.0/8"],
                "publish": {"tool": "Tool", "handle": "Handle", "force": "Force", "bodies": true, "image": "View"},
@@ -715,6 +715,29 @@ Json fullScene() {
     "outputs": {"directory": "results/run1", "frames": true, "frame_every": 5, "forces": true, "plot": false,
                 "summary": false, "recording": true}
   })");
+}
+
+TEST(SceneFile, TheRenderEnginesInsetNamesACameraAndASize) {
+  Json j = baseScene();
+  j["version"] = 2;
+  j["engines"]["render"]["inset"] = {{"camera", "main"}};
+  auto s = dm::parseScene(j.dump(), "scene.json", "/data/scenes");
+  ASSERT_TRUE(s) << s.error();
+  EXPECT_EQ(s->engines.render->insetCamera, "main");
+  EXPECT_EQ(s->engines.render->insetSize, 0.3);  // the default
+  j["engines"]["render"]["inset"] = {{"camera", "mian"}, {"size", 0.95}, {"corner", "left"}};
+  const std::vector<dm::Error> p = problemsOf(j);
+  const dm::Error* e = at(p, "/engines/render/inset/camera");
+  ASSERT_TRUE(e);
+  EXPECT_EQ(e->hint, "did you mean \"main\"?");
+  EXPECT_TRUE(at(p, "/engines/render/inset/size"));
+  EXPECT_TRUE(at(p, "/engines/render/inset/corner"));
+  EXPECT_EQ(p.size(), 3u) << dm::formatSceneErrors(p);
+  j["version"] = 1;
+  j["engines"]["render"]["inset"] = {{"camera", "main"}};
+  e = at(problemsOf(j), "/engines/render/inset");
+  ASSERT_TRUE(e);
+  EXPECT_NE(e->what.find("version-2"), std::string::npos) << e->what;
 }
 
 TEST(SceneFile, ToJsonWritesEveryKeyAndReadsBackEqual) {

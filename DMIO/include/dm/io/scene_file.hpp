@@ -645,6 +645,10 @@ struct SceneRenderEngine {
   int height = 720;      ///< pixels, 16..16384
   int samples = 1;       ///< MSAA samples: 1, 2, 4, 8 or 16
   bool hud = true;       ///< v2: time, force and force plot drawn over the written frames
+  /// v2 "inset": a second camera's picture in the frame's upper-right
+  /// corner (e.g. the endoscope's), or empty for none.
+  std::string insetCamera;
+  double insetSize = 0.3;  ///< the inset's width and height as fractions of the frame's, 0.1..0.9
 
   bool operator==(const SceneRenderEngine&) const = default;
 };
