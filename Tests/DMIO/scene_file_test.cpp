@@ -735,7 +735,8 @@ TEST(SceneFile, TheRenderEnginesInsetNamesACameraAndASize) {
   EXPECT_EQ(p.size(), 3u) << dm::formatSceneErrors(p);
   j["version"] = 1;
   j["engines"]["render"]["inset"] = {{"camera", "main"}};
-  e = at(problemsOf(j), "/engines/render/inset");
+  const std::vector<dm::Error> v1 = problemsOf(j);
+  e = at(v1, "/engines/render/inset");
   ASSERT_TRUE(e);
   EXPECT_NE(e->what.find("version-2"), std::string::npos) << e->what;
 }
