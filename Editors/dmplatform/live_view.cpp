@@ -191,6 +191,10 @@ dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneR
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(lockstep && !keys.paused ? 1 : 10));
   }
+  // Ended before its duration (Esc, the window closed, a signal).
+  const bool early = lockstep
+                         ? runtime.time() < options.duration - 1e-9
+                         : std::chrono::duration<double>(Clock::now() - start).count() < options.duration;
   // The last frame once more: into the back buffer for the screenshot.
   glfwMakeContextCurrent(window);
   (void)runtime.latestFrame(seen, frame, frameTime);
@@ -205,7 +209,7 @@ dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneR
   auto result = runtime.finish();
   if (!failed) return failed.error();
   if (!shot) return shot.error().within("--screenshot");
-  if (result && (keys.quit || (options.stop && options.stop->load()))) result->interrupted = true;
+  if (result && early && failed) result->interrupted = true;
   return result;
 }
 
