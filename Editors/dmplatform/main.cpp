@@ -1,6 +1,8 @@
-// dmplatform — the main job: runs a simulation scene file headless.
+// dmplatform — the main job: runs a simulation scene file, headless or in a
+// live window.
 //
 //   dmplatform run [SCENE.json] [--lockstep | --realtime] [--duration S] [--out DIR]
+//                  [--view [--screenshot PNG]]
 //   dmplatform replay RECORDING [--out DIR]
 //   dmplatform sweep SWEEP.json [--scheduler tcp://HOST:8786 | --workers N | --serial]
 //
@@ -10,7 +12,9 @@
 // the scene's "outputs" ask for into DIR (default: the scene's
 // outputs.directory): frames/frame_NNNNN.png, forces.csv, forces.png and
 // summary.json. A progress bar shows on a terminal; Ctrl-C stops the run
-// cleanly and the outputs are still written.
+// cleanly and the outputs are still written. `--view` shows the run in a
+// window as it goes (live_view.hpp: the frames as written, Space pauses, N
+// steps, Esc ends, the mouse turns the camera; builds with GLFW).
 // `replay` re-runs a run recorded with "outputs": {"recording": true}
 // (recording.dmrec) in lockstep, with the recorded device stream, into DIR
 // (default: replay/ beside the recording), and compares its forces.csv with

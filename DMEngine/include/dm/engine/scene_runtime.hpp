@@ -22,13 +22,18 @@
 //     body (dm::FemBody on tetrahedra from its mesh, held faces, gravity)
 //     that the god-object presses through dm::HapticTissue — felt on its
 //     newest surface at the haptic rate, deformed at the physics rate;
+//     every "membrane" a mass–spring body kept out of the static colliding
+//     objects (dm::ParticleObstacles);
 //   - render: a headless EGL context on the render engine's own thread,
 //     dm::SceneView drawing the render camera with the tool object following
 //     the haptic proxy, a HUD (time, force, force plot) from dm::Overlay,
 //     frames read back and written as PNG by a writer thread; a milled
 //     object is drawn as its volume's surface, each frame remeshing only
 //     the blocks the burr changed (dm::MillableSurfaceFeed); a soft object
-//     as its deformed boundary;
+//     or a membrane as its deformed surface; a second camera's "inset" in
+//     the upper-right corner; with SceneRunOptions::liveFrames each frame
+//     as written also to latestFrame() (a live window, dmplatform run
+//     --view) and the camera turned by setViewOrbit();
 //   - monitor: drains the haptic samples into the force trace;
 //   - igtl: an OpenIGTLink server (dm::IgtlServer) publishing the tool and
 //     handle poses (TRANSFORM), the force (SENSOR), the dynamic bodies
