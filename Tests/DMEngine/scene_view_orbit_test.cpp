@@ -24,9 +24,10 @@ namespace scene_view_orbit_test {
 #if defined(DM_TEST_WITH_RENDERER)
 using dm::Vec3;
 
-// A red ball on a grey table seen by a 160 x 120 camera at `eye` looking at
-// (0, 0, 0.05), up +z.
-dm::SceneDesc ballScene(const Vec3& eye) {
+// A red ball on a grey table seen by the camera "eye" at `eye` looking at
+// (0, 0, 0.05), up +z, rendered at `width` x `height` with `render` keys
+// added; a second camera "top" looks straight down on the ball.
+dm::SceneDesc ballScene(const Vec3& eye, int width = 160, int height = 120, const std::string& render = "") {
   const std::string at =
       "[" + std::to_string(eye.x()) + ", " + std::to_string(eye.y()) + ", " + std::to_string(eye.z()) + "]";
   return scene_run::parsedScene(R"({"format": "dmplatform-scene", "version": 2, "name": "orbit",
@@ -37,9 +38,13 @@ dm::SceneDesc ballScene(const Vec3& eye) {
                 {"name": "ball", "mesh": "ball", "material": "red", "pose": {"position": [0.05, 0, 0.04]}}],
     "lights": [{"type": "directional", "direction": [0.3, 0.5, -0.8], "intensity": 1.2}],
     "cameras": [{"name": "eye", "position": )" +
-                                    at + R"(, "target": [0, 0, 0.05], "up": [0, 0, 1],
+                                    at +
+                                    R"(, "target": [0, 0, 0.05], "up": [0, 0, 1], "near": 0.01, "far": 5},
+                {"name": "top", "position": [0.05, 0, 0.5], "target": [0.05, 0, 0], "up": [0, 1, 0],
                  "near": 0.01, "far": 5}],
-    "engines": {"render": {"rate_hz": 20, "width": 160, "height": 120, "hud": false}}})",
+    "engines": {"render": {"rate_hz": 20, "width": )" +
+                                    std::to_string(width) + R"(, "height": )" + std::to_string(height) +
+                                    R"(, "hud": false)" + render + R"(}}})",
                                 "orbit.json");
 }
 
@@ -104,24 +109,9 @@ TEST(SceneViewOrbit, ATurnedCameraSeesWhatACameraPlacedThereSees) {
   EXPECT_LT(differing(frameOf(ballScene(eye), &none), unturned), 0.005);
 }
 
-// The ball seen from the front ("eye") at `width` x `height`, with `render`
-// keys; a second camera "top" looks straight down on it.
+// The ball seen from the front at `width` x `height`, with `render` keys.
 dm::SceneDesc twoCameras(int width, int height, const std::string& render) {
-  return scene_run::parsedScene(R"({"format": "dmplatform-scene", "version": 2, "name": "inset",
-    "resources": {"ball": {"type": "shape", "shape": "sphere", "radius": 0.04, "subdivisions": 4},
-                  "table": {"type": "shape", "shape": "box", "half_extents": [0.2, 0.1, 0.01]}},
-    "materials": {"red": {"model": "blinn-phong", "color": [0.8, 0.05, 0.05]}},
-    "objects": [{"name": "table", "mesh": "table", "pose": {"position": [0, 0, -0.01]}},
-                {"name": "ball", "mesh": "ball", "material": "red", "pose": {"position": [0.05, 0, 0.04]}}],
-    "lights": [{"type": "directional", "direction": [0.3, 0.5, -0.8], "intensity": 1.2}],
-    "cameras": [{"name": "eye", "position": [0, -0.6, 0.15], "target": [0, 0, 0.05], "up": [0, 0, 1],
-                 "near": 0.01, "far": 5},
-                {"name": "top", "position": [0.05, 0, 0.5], "target": [0.05, 0, 0], "up": [0, 1, 0],
-                 "near": 0.01, "far": 5}],
-    "engines": {"render": {"rate_hz": 20, "width": )" +
-                                    std::to_string(width) + R"(, "height": )" + std::to_string(height) +
-                                    R"(, "hud": false)" + render + R"(}}})",
-                                "inset.json");
+  return ballScene(Vec3(0, -0.6, 0.15), width, height, render);
 }
 
 TEST(SceneViewOrbit, TheInsetIsTheSecondCamerasPictureInTheUpperRightCorner) {
