@@ -174,7 +174,8 @@ Result<std::size_t> SphFluid::addRigidBoundary(std::span<const Vec3> bodyPoints,
   rigid_.push_back(std::move(body));
   addMoving(bodyPoints.size());
   // Ψ from the body's own particles (it keeps its shape, so once).
-  ownVolumes(rigid_.back().first, bodyPoints.size());
+  OwnPairs own;
+  ownVolumes(rigid_.back().first, bodyPoints.size(), own);
   return rigid_.size() - 1;
 }
 
@@ -258,14 +259,49 @@ void SphFluid::layOutBoundaryVelocities() {
   for (std::size_t k = 0; k < surfaces_.size(); ++k) placeSurface(k);
 }
 
-void SphFluid::ownVolumes(std::size_t first, std::size_t count) {
-  const std::span<const Vec3> own(rx_.data() + first, count);
-  ownGrid_.build(own, h_, 0);
-  for (std::size_t q = 0; q < count; ++q) {
-    double sum = 0.0;  // (itself included: it is within the radius)
-    ownGrid_.forEachWithin(own[q], [&](std::uint32_t k) { sum += kernel((own[q] - own[k]).norm()); });
-    rpsi_[first + q] = o_.restDensity * boundaryScale_ / sum;
+void SphFluid::ownVolumes(std::size_t first, std::size_t count, OwnPairs& own) {
+  const std::span<const Vec3> x(rx_.data() + first, count);
+  // The list holds every pair within h + skin. With c any common motion
+  // (the mean), a pair at ≥ h + skin when listed is now at least
+  // h + skin − |Δx_i − c| − |Δx_j − c| apart: beyond the kernel's support
+  // while every particle's |Δx − c| < skin / 2. A surface that moves or
+  // strains slowly is listed again every few dozen steps.
+  const double skin = 0.25 * h_;
+  bool fresh = own.listedAt.size() == count;
+  if (fresh) {
+    Vec3 c = Vec3::Zero();
+    for (std::size_t q = 0; q < count; ++q) c += x[q] - own.listedAt[q];
+    c /= double(count);
+    double worst = 0.0;
+    for (std::size_t q = 0; q < count; ++q)
+      worst = std::max(worst, (x[q] - own.listedAt[q] - c).squaredNorm());
+    fresh = 4.0 * worst < skin * skin;
   }
+  if (!fresh) {
+    ownGrid_.build(x, h_ + skin);
+    own.pairs.clear();
+    for (std::size_t i = 0; i < count; ++i)
+      for (const std::uint32_t j : ownGrid_.neighbors(i))
+        if (j > i) {
+          own.pairs.push_back(static_cast<std::uint32_t>(i));
+          own.pairs.push_back(j);
+        }
+    own.listedAt.assign(x.begin(), x.end());
+  }
+  // Σ_k W(x_b − x_k), b itself included, each pair's W once for both.
+  // (Most of a step's time when a surface is densely sampled: a pair out of
+  // reach costs a squared distance only.)
+  ownSum_.assign(count, kernel(0.0));
+  const double h2 = h_ * h_;
+  for (std::size_t p = 0; p < own.pairs.size(); p += 2) {
+    const std::uint32_t i = own.pairs[p], j = own.pairs[p + 1];
+    const double r2 = (x[i] - x[j]).squaredNorm();
+    if (r2 >= h2) continue;
+    const double w = kernel(std::sqrt(r2));
+    ownSum_[i] += w;
+    ownSum_[j] += w;
+  }
+  for (std::size_t q = 0; q < count; ++q) rpsi_[first + q] = o_.restDensity * boundaryScale_ / ownSum_[q];
 }
 
 void SphFluid::placeSurface(std::size_t surface) {
@@ -273,7 +309,7 @@ void SphFluid::placeSurface(std::size_t surface) {
   const std::size_t count = sf.samples.size();
   sf.samples.place(sf.vertices, std::span<Vec3>(rx_.data() + sf.first, count));
   sf.samples.interpolate(sf.velocities, std::span<Vec3>(bv_.data() + bx_.size() + sf.first, count));
-  ownVolumes(sf.first, count);
+  ownVolumes(sf.first, count, sf.own);
 }
 
 void SphFluid::placeRigid(std::size_t body) {

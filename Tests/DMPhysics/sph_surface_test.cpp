@@ -55,7 +55,8 @@ struct Pool {
   std::size_t surface = 0;
 };
 
-Pool pool() {
+// (The floor's samples placed on `floorAt` when given, else on the flat floor.)
+Pool pool(const std::vector<Vec3>& floorAt = {}) {
   auto f = dm::SphFluid::create({.particleSpacing = kD, .viscosity = 1e-4});
   EXPECT_TRUE(f) << f.error();
   Pool p{*f, floorMesh()};
@@ -63,7 +64,7 @@ Pool pool() {
   p.fluid.addBlock({0, 0, kLift}, {kL, kL, kH0 + kLift});
   auto samples = dm::BoundarySurface::create(p.floor, kSampling, kD / 3.0);
   EXPECT_TRUE(samples) << samples.error();
-  auto id = p.fluid.addSurfaceBoundary(std::move(*samples), p.floor.positions);
+  auto id = p.fluid.addSurfaceBoundary(std::move(*samples), floorAt.empty() ? p.floor.positions : floorAt);
   EXPECT_TRUE(id) << id.error();
   return p;
 }
@@ -188,6 +189,47 @@ TEST(SphSurface, AFloorBulgingIntoADomeLiftsThePoolAsItsGeometrySays) {
   for (const Vec3& q : p.fluid.positions())
     EXPECT_GT(q.z(), kAmplitude * dome(q) - 0.1 * kD) << q.transpose();
   EXPECT_LT(p.fluid.lastStep().densityError, 2e-3);
+}
+
+// A surface's Ψ come from its samples' pairs, kept as a Verlet list between
+// strains: the floor bulged into the dome, squeezed to 60 % across and
+// moved sideways in 80 small steps (most of them reuse the list, some list
+// it again) gives the fluid the same densities as the same floor placed at
+// its final shape from the start (its pairs listed there), to rounding. Squeezed,
+// samples come within reach of others that were out of it when listed: a
+// pair the list missed would leave a sample's Ψ off by its whole term.
+TEST(SphSurface, AFloorStrainedInSmallStepsHasTheVolumesOfOnePlacedThere) {
+  constexpr double kAmplitude = 0.04, kSqueeze = 0.6;
+  const Vec3 shift(0.3 * kD, -0.2 * kD, 0.0);  // a common motion: the list holds
+  std::vector<Vec3> final(floorMesh().positions);
+  for (Vec3& q : final)
+    q = Vec3(0.5 * kL + kSqueeze * (q.x() - 0.5 * kL), q.y(), kAmplitude * dome(q)) + shift;
+  const std::vector<Vec3> still(final.size(), Vec3::Zero());
+
+  Pool gradual = pool();
+  std::vector<Vec3> x(gradual.floor.positions);
+  constexpr int kSteps = 80;
+  for (int k = 1; k <= kSteps; ++k) {
+    const double s = double(k) / kSteps;
+    for (std::size_t i = 0; i < x.size(); ++i)
+      x[i] = gradual.floor.positions[i] + s * (final[i] - gradual.floor.positions[i]);
+    ASSERT_TRUE(gradual.fluid.setSurfaceState(gradual.surface, x, still));
+  }
+  gradual.fluid.refresh();
+
+  Pool direct = pool(final);  // its samples' pairs first listed there
+  direct.fluid.refresh();
+
+  ASSERT_EQ(gradual.fluid.size(), direct.fluid.size());
+  const auto a = gradual.fluid.densities(), b = direct.fluid.densities();
+  std::size_t touched = 0;
+  double worst = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    worst = std::max(worst, std::abs(a[i] - b[i]));
+    if (a[i] > 0.0) ++touched;
+  }
+  EXPECT_EQ(touched, a.size());
+  EXPECT_LT(worst, 1e-9 * kRho0);
 }
 
 TEST(SphSurface, BadSurfacesAndStatesAreRefusedNamingThem) {

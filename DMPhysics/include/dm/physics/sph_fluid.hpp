@@ -59,7 +59,9 @@
 // as its owner (an FEM body) has them each step. The samples are placed on
 // the deformed triangles, move on at the interpolated velocities within the
 // step, and get their Ψ again from their own neighbours (a stretched
-// surface's samples stand for more area); surfaceLoads() spreads the
+// surface's samples stand for more area; their pairs within h + h/4 are
+// kept as a Verlet list, listed again only once the samples have moved
+// apart by h/8 relative to their mean motion); surfaceLoads() spreads the
 // fluid's reactions on them onto the vertices. Sample a surface that
 // stretches by s at d / s or finer: samples more than a spacing apart let
 // the fluid through (Tests/DMPhysics/sph_surface_test.cpp).
@@ -250,7 +252,14 @@ class SphFluid {
   void layOutBoundaryVelocities();         // bv_ for the boundary as it is now
   void placeRigid(std::size_t body);       // its particles' positions and velocities from its state
   void placeSurface(std::size_t surface);  // its samples' positions, velocities and Ψ from its vertices
-  void ownVolumes(std::size_t first, std::size_t count);  // rpsi_ of moving particles from themselves
+  // A moving owner's pairs of its own particles within h + skin (a Verlet
+  // list): listed again only when the particles have moved, relative to
+  // their mean motion, far enough that an unlisted pair could come within h.
+  struct OwnPairs {
+    std::vector<std::uint32_t> pairs;  // (i, j), i < j, flat
+    std::vector<Vec3> listedAt;        // the particles where they were when listed
+  };
+  void ownVolumes(std::size_t first, std::size_t count, OwnPairs& own);  // rpsi_ of its particles
   void moveBoundaries(double dt);                         // every body and surface on at its velocities
   template <class PairImpulse>
   void reactionWalk(PairImpulse&& impulse);  // rimp_ += impulse(i, j, ∇W) over fluid–moving pairs
@@ -275,6 +284,7 @@ class SphFluid {
     std::size_t first = 0;  // its first particle in rx_
     std::vector<Vec3> vertices, velocities;
     std::vector<Vec3> impulse, load;  // per vertex: summed over this step's sub-steps; averaged
+    OwnPairs own;                     // its samples' pairs, for their Ψ (ownVolumes)
   };
 
   SphFluidOptions o_;
@@ -297,7 +307,8 @@ class SphFluid {
   bool boundaryMoved_ = false;  // setRigidState or setSurfaceState since the last refresh
   std::vector<Vec3> all_;       // fluid, static boundary, moving boundary positions, for the grid
   NeighborGrid grid_;
-  NeighborGrid ownGrid_;  // a moving body's or surface's own particles (ownVolumes)
+  NeighborGrid ownGrid_;        // a moving body's or surface's own particles (ownVolumes)
+  std::vector<double> ownSum_;  // their kernel sums (ownVolumes' scratch)
   SphStepStats stats_;
 };
 
