@@ -2,7 +2,12 @@
 // DM::IO (see dm/io/drivers.hpp).
 #include <dm/io/drivers.hpp>
 
+#include <dlfcn.h>
+
+#include "../drivers/vendor_library.hpp"
+
 extern "C" const DmPluginInfo* dm_builtin_entry_evdev_controller(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_openhaptics_hd(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_serial_posix(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_sim_controller(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_sim_daq(void);
@@ -22,6 +27,7 @@ struct BuiltinDriver {
 };
 constexpr BuiltinDriver kDrivers[] = {
     {"evdev-controller", &dm_builtin_entry_evdev_controller},
+    {"openhaptics-hd", &dm_builtin_entry_openhaptics_hd},
     {"replay-controller", &dm_builtin_entry_replay_controller},
     {"replay-daq", &dm_builtin_entry_replay_daq},
     {"replay-haptic", &dm_builtin_entry_replay_haptic},
@@ -44,6 +50,23 @@ Status registerBuiltinDrivers(PluginLinker& linker) {
   for (const BuiltinDriver& d : kDrivers)
     if (auto r = linker.addStatic(d.entry); !r) return std::move(r).error();
   return ok();
+}
+
+std::vector<VendorDriverStatus> vendorDriverStatus() {
+  std::vector<VendorDriverStatus> out;
+  for (const driver::VendorLibrary* lib : driver::kVendorLibraries) {
+    VendorDriverStatus st{lib->driver, lib->api, false, {}, {}};
+    if (void* h = driver::openVendorLibrary(*lib, nullptr, st.reason)) {
+      st.available = true;
+      Dl_info where{};
+      // The path it came from: the address of any symbol it defines, or its soname.
+      if (void* sym = ::dlsym(h, "hdGetError"); sym && ::dladdr(sym, &where) && where.dli_fname)
+        st.library = where.dli_fname;
+      ::dlclose(h);
+    }
+    out.push_back(std::move(st));
+  }
+  return out;
 }
 
 }  // namespace dm

@@ -4,8 +4,11 @@
 // dmtool, a build tree's plugins/, and each --plugin-dir) — with each
 // plugin's status: loaded, built-in, or refused with the reason (wrong ABI,
 // crash or hang in init: plugins are probed in a child process first).
-// With --open, each haptic-device driver is also opened with its default
-// parameters and reports its identity and limits, or why it needs more.
+// A driver of a vendor's library (openhaptics-hd) says whether this machine
+// has that library: available (and the file), or unavailable with every
+// name tried and what to install. With --open, each haptic-device driver is
+// also opened with its default parameters and reports its identity and
+// limits, or why it needs more.
 #include <dm/core/log.hpp>
 #include <dm/core/plugin.hpp>
 #include <dm/io/device_abi.h>
@@ -120,6 +123,8 @@ int runDevices(const DevicesCliOptions& o) {
     }
   }
 
+  // Drivers of a vendor's library (loaded at run time): whether this machine has it.
+  const std::vector<dm::VendorDriverStatus> vendors = dm::vendorDriverStatus();
   nlohmann::json drivers = nlohmann::json::array();
   for (const dm::Factory& f : registry.list()) {
     if (!isDeviceKind(f.key.kind) || (!o.only.empty() && f.key.name != o.only)) continue;
@@ -127,6 +132,12 @@ int runDevices(const DevicesCliOptions& o) {
                         {"name", f.key.name},
                         {"provider", f.provider},
                         {"path", f.providerPath.string()}};
+    for (const dm::VendorDriverStatus& v : vendors)
+      if (v.driver == f.key.name) {
+        d["vendor_library"] = v.api;
+        d["available"] = v.available;
+        d[v.available ? "library" : "unavailable_reason"] = v.available ? v.library : v.reason;
+      }
     if (o.open && f.key.kind == DM_HAPTIC_DEVICE_KIND) {
       auto dev = dm::HapticDevice::open(registry, f.key.name);
       if (dev) {
@@ -174,6 +185,12 @@ int runDevices(const DevicesCliOptions& o) {
   for (const auto& d : drivers) {
     std::cout << "  " << d["kind"].get<std::string>() << " / " << d["name"].get<std::string>() << "  (from "
               << d["provider"].get<std::string>() << ")";
+    if (d.contains("available")) {
+      if (d["available"].get<bool>())
+        std::cout << "  available: " << d["library"].get<std::string>();
+      else
+        std::cout << "  unavailable: " << d["unavailable_reason"].get<std::string>();
+    }
     if (d.contains("open")) {
       const auto& op = d["open"];
       if (op["status"] == "ok")

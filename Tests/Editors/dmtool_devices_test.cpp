@@ -1,13 +1,16 @@
 // dmtool devices: lists built-in drivers and plugins with their status,
-// refuses a crashing and a wrong-ABI plugin without going down, and opens a
-// driver with --open / --only.
+// refuses a crashing and a wrong-ABI plugin without going down, opens a
+// driver with --open / --only, and lists a vendor driver whose library is
+// missing as unavailable with the reason.
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <dlfcn.h>
+
 #include <string>
 
-#include "dmtool_run.hpp"
 #include "../common/build_paths.hpp"
+#include "dmtool_run.hpp"
 
 namespace {
 
@@ -48,6 +51,29 @@ TEST(DmtoolDevices, OpensOneDriverAndFailsForAMissingOne) {
   const auto replay = runTool({"devices", "--only", "replay-haptic", "--open"});
   EXPECT_EQ(replay.exitCode, 1) << describe(replay);
   EXPECT_NE(replay.out.find("'file' is required"), std::string::npos) << replay.out;
+}
+
+// A vendor driver without its vendor's library (none is installed here; the
+// test says so if one is): listed, unavailable with the reason, and
+// opening it fails saying what to install, without a crash.
+TEST(DmtoolDevices, AVendorDriverWithoutItsLibraryIsListedAsUnavailable) {
+  if (void* real = ::dlopen("libHD.so", RTLD_NOW | RTLD_LOCAL)) {
+    ::dlclose(real);
+    GTEST_SKIP() << "OpenHaptics is installed on this machine";
+  }
+  const auto r = runTool({"devices", "--json"});
+  ASSERT_EQ(r.exitCode, 0) << describe(r);
+  const json j = parseJson(r);
+  const json* hd = findBy(j["drivers"], "name", "openhaptics-hd");
+  ASSERT_NE(hd, nullptr) << r.out;
+  EXPECT_EQ((*hd)["kind"], "haptic-device");
+  EXPECT_EQ((*hd)["available"], false);
+  EXPECT_NE((*hd)["unavailable_reason"].get<std::string>().find("install OpenHaptics"), std::string::npos);
+  const auto text = runTool({"devices", "--only", "openhaptics-hd", "--open"});
+  EXPECT_EQ(text.exitCode, 1) << describe(text);
+  EXPECT_NE(text.out.find("unavailable: cannot load the OpenHaptics HD library"), std::string::npos)
+      << text.out;
+  EXPECT_NE(text.out.find("cannot open with defaults"), std::string::npos) << text.out;
 }
 
 TEST(DmtoolDevices, RefusesCrashingAndWrongAbiPluginsAndCarriesOn) {

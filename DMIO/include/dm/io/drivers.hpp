@@ -26,7 +26,12 @@
 //    with seeded noise and a device FIFO that overflows;
 //  * "sim-sensor" (kind "sensor", dm/io/sensor.hpp): scalar, force,
 //    orientation or tracker readings with noise;
-//  * "serial-posix" (kind "serial", dm/io/serial.hpp): termios serial lines.
+//  * "serial-posix" (kind "serial", dm/io/serial.hpp): termios serial lines;
+//  * "openhaptics-hd" (kind "haptic-device"): 3D Systems Touch, Touch X and
+//    Phantom devices through the OpenHaptics HD library, loaded at run time
+//    (DMIO/drivers/openhaptics_hd.cpp; docs/devices.md). Registered always;
+//    opening it where the library is missing fails saying what to install,
+//    and vendorDriverStatus() tells before anything is opened.
 // Each driver's parameters are listed at the top of its source file.
 //
 // @code
@@ -47,6 +52,19 @@ namespace dm {
 
 /// Names of the built-in drivers, as plugin names (sorted).
 std::vector<std::string> builtinDriverNames();
+
+/// A driver that needs a vendor's library, and whether this machine has it.
+struct VendorDriverStatus {
+  std::string driver;  ///< factory name, e.g. "openhaptics-hd"
+  std::string api;     ///< e.g. "OpenHaptics HD"
+  bool available = false;
+  std::string reason;   ///< when unavailable: every name tried and what to install
+  std::string library;  ///< when available: the file it loads
+};
+
+/// Looks for each vendor driver's library (dlopen, then dlclose) as the
+/// driver would with its default parameters. Opens no device.
+std::vector<VendorDriverStatus> vendorDriverStatus();
 
 /// Registers every built-in driver with `linker` (addStatic). Fails like
 /// PluginLinker::addStatic, e.g. when a plugin of the same name is loaded.

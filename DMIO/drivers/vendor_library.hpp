@@ -1,0 +1,55 @@
+// Vendor libraries of the commercial haptic device drivers, loaded at run
+// time (dlopen) so that DMPlatform builds, ships and runs without them:
+// which library each driver needs, where it is looked for, and what to
+// install when it is missing. Header-only, so that a driver built as a
+// plugin needs no DMPlatform library; dm::vendorDriverStatus()
+// (dm/io/drivers.hpp) reports the same search for `dmtool devices`.
+#pragma once
+
+#include <dlfcn.h>
+
+#include <cstddef>
+#include <string>
+
+namespace dm::driver {
+
+struct VendorLibrary {
+  const char* driver;        // factory name
+  const char* api;           // the vendor API, for messages
+  const char* const* names;  // sonames and paths tried in order (nullptr-terminated)
+  const char* install;       // what to install when none loads
+};
+
+inline constexpr const char* kOpenHapticsNames[] = {"libHD.so", "libHD.so.3.4", "libHD.so.3",
+                                                    "/usr/lib/libHD.so", nullptr};
+inline constexpr VendorLibrary kOpenHapticsHd = {
+    "openhaptics-hd", "OpenHaptics HD", kOpenHapticsNames,
+    "install OpenHaptics for Linux (3D Systems) and the Touch device driver, or give the library's path "
+    "as parameter 'library'"};
+
+inline constexpr const VendorLibrary* kVendorLibraries[] = {&kOpenHapticsHd};
+
+/// dlopen()s `explicitPath` when given, else the library's names in order.
+/// On failure returns nullptr and sets `why` to every name tried with
+/// dlerror()'s reason and the install hint.
+inline void* openVendorLibrary(const VendorLibrary& lib, const char* explicitPath, std::string& why) {
+  why.clear();
+  auto attempt = [&](const char* name) -> void* {
+    void* handle = ::dlopen(name, RTLD_NOW | RTLD_LOCAL);
+    if (!handle) {
+      const char* e = ::dlerror();
+      why += (why.empty() ? "" : "; ") + std::string(e ? e : name);
+    }
+    return handle;
+  };
+  if (explicitPath && *explicitPath) {
+    if (void* h = attempt(explicitPath)) return h;
+  } else {
+    for (const char* const* n = lib.names; *n; ++n)
+      if (void* h = attempt(*n)) return h;
+  }
+  why = std::string("cannot load the ") + lib.api + " library (" + why + "): " + lib.install;
+  return nullptr;
+}
+
+}  // namespace dm::driver
