@@ -53,6 +53,7 @@
 #include <vector>
 
 #include "driver_params.hpp"
+#include "rotation.hpp"
 #include "vendor_library.hpp"
 
 namespace {
@@ -230,39 +231,6 @@ struct HdDevice {
 
 HdDevice* asHd(DmDevice* d) { return reinterpret_cast<HdDevice*>(d); }
 
-// Shepperd's method: the unit quaternion (w, x, y, z) of rotation matrix r
-// (row-major 3×3).
-void quaternionOf(const double r[9], double q[4]) {
-  const double tr = r[0] + r[4] + r[8];
-  if (tr > 0.0) {
-    const double s = 2.0 * std::sqrt(tr + 1.0);
-    q[0] = 0.25 * s;
-    q[1] = (r[7] - r[5]) / s;
-    q[2] = (r[2] - r[6]) / s;
-    q[3] = (r[3] - r[1]) / s;
-  } else if (r[0] > r[4] && r[0] > r[8]) {
-    const double s = 2.0 * std::sqrt(1.0 + r[0] - r[4] - r[8]);
-    q[0] = (r[7] - r[5]) / s;
-    q[1] = 0.25 * s;
-    q[2] = (r[1] + r[3]) / s;
-    q[3] = (r[2] + r[6]) / s;
-  } else if (r[4] > r[8]) {
-    const double s = 2.0 * std::sqrt(1.0 + r[4] - r[0] - r[8]);
-    q[0] = (r[2] - r[6]) / s;
-    q[1] = (r[1] + r[3]) / s;
-    q[2] = 0.25 * s;
-    q[3] = (r[5] + r[7]) / s;
-  } else {
-    const double s = 2.0 * std::sqrt(1.0 + r[8] - r[0] - r[4]);
-    q[0] = (r[3] - r[1]) / s;
-    q[1] = (r[2] + r[6]) / s;
-    q[2] = (r[5] + r[7]) / s;
-    q[3] = 0.25 * s;
-  }
-  const double n = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
-  for (int i = 0; i < 4; ++i) q[i] = n > 0.0 ? q[i] / n : (i == 0 ? 1.0 : 0.0);
-}
-
 // One HD scheduler tick (the scheduler's thread): calibration, one frame.
 HDCallbackCode servoTick(void* data) {
   HdDevice* d = static_cast<HdDevice*>(data);
@@ -277,7 +245,7 @@ HDCallbackCode servoTick(void* data) {
   double m[16] = {};
   hd.getDoublev(HD_CURRENT_TRANSFORM, m);
   const double r[9] = {m[0], m[4], m[8], m[1], m[5], m[9], m[2], m[6], m[10]};  // column-major → row-major
-  quaternionOf(r, s.orientation);
+  dm::driver::quaternionOfRotation(r, s.orientation);
   double v[3] = {}, w[3] = {};
   hd.getDoublev(HD_CURRENT_VELOCITY, v);
   hd.getDoublev(HD_CURRENT_ANGULAR_VELOCITY, w);

@@ -18,6 +18,7 @@ struct VendorLibrary {
   const char* api;           // the vendor API, for messages
   const char* const* names;  // sonames and paths tried in order (nullptr-terminated)
   const char* install;       // what to install when none loads
+  const char* probeSymbol;   // a call every version defines (to find the file loaded)
 };
 
 inline constexpr const char* kOpenHapticsNames[] = {"libHD.so", "libHD.so.3.4", "libHD.so.3",
@@ -25,9 +26,17 @@ inline constexpr const char* kOpenHapticsNames[] = {"libHD.so", "libHD.so.3.4", 
 inline constexpr VendorLibrary kOpenHapticsHd = {
     "openhaptics-hd", "OpenHaptics HD", kOpenHapticsNames,
     "install OpenHaptics for Linux (3D Systems) and the Touch device driver, or give the library's path "
-    "as parameter 'library'"};
+    "as parameter 'library'",
+    "hdGetError"};
 
-inline constexpr const VendorLibrary* kVendorLibraries[] = {&kOpenHapticsHd};
+inline constexpr const char* kForceDimensionNames[] = {"libdhd.so", "libdhd.so.3", nullptr};
+inline constexpr VendorLibrary kForceDimensionDhd = {
+    "force-dimension-dhd", "Force Dimension DHD", kForceDimensionNames,
+    "install the Force Dimension SDK for Linux (its lib/ on the library path) and the device's USB rules, "
+    "or give the library's path as parameter 'library'",
+    "dhdGetDeviceCount"};
+
+inline constexpr const VendorLibrary* kVendorLibraries[] = {&kOpenHapticsHd, &kForceDimensionDhd};
 
 /// dlopen()s `explicitPath` when given, else the library's names in order.
 /// On failure returns nullptr and sets `why` to every name tried with

@@ -8,6 +8,7 @@
 
 extern "C" const DmPluginInfo* dm_builtin_entry_evdev_controller(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_openhaptics_hd(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_force_dimension_dhd(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_serial_posix(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_sim_controller(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_sim_daq(void);
@@ -27,6 +28,7 @@ struct BuiltinDriver {
 };
 constexpr BuiltinDriver kDrivers[] = {
     {"evdev-controller", &dm_builtin_entry_evdev_controller},
+    {"force-dimension-dhd", &dm_builtin_entry_force_dimension_dhd},
     {"openhaptics-hd", &dm_builtin_entry_openhaptics_hd},
     {"replay-controller", &dm_builtin_entry_replay_controller},
     {"replay-daq", &dm_builtin_entry_replay_daq},
@@ -59,8 +61,8 @@ std::vector<VendorDriverStatus> vendorDriverStatus() {
     if (void* h = driver::openVendorLibrary(*lib, nullptr, st.reason)) {
       st.available = true;
       Dl_info where{};
-      // The path it came from: the address of any symbol it defines, or its soname.
-      if (void* sym = ::dlsym(h, "hdGetError"); sym && ::dladdr(sym, &where) && where.dli_fname)
+      // The file it came from: where a call it must define lives.
+      if (void* sym = ::dlsym(h, lib->probeSymbol); sym && ::dladdr(sym, &where) && where.dli_fname)
         st.library = where.dli_fname;
       ::dlclose(h);
     }

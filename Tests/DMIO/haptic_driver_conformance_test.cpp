@@ -30,7 +30,12 @@ struct DriverCase {
 
 std::ostream& operator<<(std::ostream& os, const DriverCase& c) { return os << c.label; }
 
-std::string standIn() { return dm::test::besideExecutable(DM_TEST_HD_STAND_IN); }
+// The stand-in vendor library a driver of a vendor's library loads here.
+std::string standInFor(const std::string& driver) {
+  if (driver == "openhaptics-hd") return dm::test::besideExecutable(DM_TEST_HD_STAND_IN);
+  if (driver == "force-dimension-dhd") return dm::test::besideExecutable(DM_TEST_DHD_STAND_IN);
+  return {};
+}
 
 class HapticDriverConformance : public ::testing::TestWithParam<DriverCase> {
  protected:
@@ -44,7 +49,8 @@ class HapticDriverConformance : public ::testing::TestWithParam<DriverCase> {
     }
   }
   dm::Result<std::unique_ptr<dm::HapticDevice>> open(dm::DeviceParams params) {
-    if (std::string(GetParam().driver) == "openhaptics-hd") params.emplace_back("library", standIn());
+    if (const std::string lib = standInFor(GetParam().driver); !lib.empty())
+      params.emplace_back("library", lib);
     return dm::HapticDevice::open(registry_, GetParam().driver, params);
   }
   static std::int64_t now() {

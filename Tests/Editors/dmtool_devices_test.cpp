@@ -69,6 +69,14 @@ TEST(DmtoolDevices, AVendorDriverWithoutItsLibraryIsListedAsUnavailable) {
   EXPECT_EQ((*hd)["kind"], "haptic-device");
   EXPECT_EQ((*hd)["available"], false);
   EXPECT_NE((*hd)["unavailable_reason"].get<std::string>().find("install OpenHaptics"), std::string::npos);
+  if (void* dhd = ::dlopen("libdhd.so", RTLD_NOW | RTLD_LOCAL)) {
+    ::dlclose(dhd);
+  } else {
+    const json* fd = findBy(j["drivers"], "name", "force-dimension-dhd");
+    ASSERT_NE(fd, nullptr) << r.out;
+    EXPECT_EQ((*fd)["available"], false);
+    EXPECT_NE((*fd)["unavailable_reason"].get<std::string>().find("Force Dimension SDK"), std::string::npos);
+  }
   const auto text = runTool({"devices", "--only", "openhaptics-hd", "--open"});
   EXPECT_EQ(text.exitCode, 1) << describe(text);
   EXPECT_NE(text.out.find("unavailable: cannot load the OpenHaptics HD library"), std::string::npos)

@@ -29,9 +29,13 @@
 //  * "serial-posix" (kind "serial", dm/io/serial.hpp): termios serial lines;
 //  * "openhaptics-hd" (kind "haptic-device"): 3D Systems Touch, Touch X and
 //    Phantom devices through the OpenHaptics HD library, loaded at run time
-//    (DMIO/drivers/openhaptics_hd.cpp; docs/devices.md). Registered always;
-//    opening it where the library is missing fails saying what to install,
-//    and vendorDriverStatus() tells before anything is opened.
+//    (DMIO/drivers/openhaptics_hd.cpp; docs/devices.md);
+//  * "force-dimension-dhd" (kind "haptic-device"): Force Dimension omega,
+//    delta and other models and the Novint Falcon through the DHD library,
+//    loaded at run time (DMIO/drivers/force_dimension_dhd.cpp).
+//    The vendor drivers are registered always; opening one where its library
+//    is missing fails saying what to install, and vendorDriverStatus() tells
+//    before anything is opened.
 // Each driver's parameters are listed at the top of its source file.
 //
 // @code
