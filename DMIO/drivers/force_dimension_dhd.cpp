@@ -84,39 +84,30 @@ struct DhdApi {
   const char* (*errorGetStr)(int);
   double (*getMaxTorque)(char);  // optional
 
+  // Resolves every call (some only newer SDKs have); on a missing one returns its name.
   const char* load(void* lib) {
-    struct Entry {
-      const char* name;
-      void** slot;
-      bool required;
-    };
-    const Entry entries[] = {
-        {"dhdGetDeviceCount", reinterpret_cast<void**>(&getDeviceCount), true},
-        {"dhdOpen", reinterpret_cast<void**>(&open), true},
-        {"dhdOpenID", reinterpret_cast<void**>(&openID), true},
-        {"dhdClose", reinterpret_cast<void**>(&close), true},
-        {"dhdGetSystemType", reinterpret_cast<void**>(&getSystemType), true},
-        {"dhdGetSystemName", reinterpret_cast<void**>(&getSystemName), false},
-        {"dhdGetSerialNumber", reinterpret_cast<void**>(&getSerialNumber), true},
-        {"dhdGetStatus", reinterpret_cast<void**>(&getStatus), true},
-        {"dhdGetPositionAndOrientationFrame", reinterpret_cast<void**>(&getPositionAndOrientationFrame),
-         true},
-        {"dhdConfigLinearVelocity", reinterpret_cast<void**>(&configLinearVelocity), true},
-        {"dhdGetLinearVelocity", reinterpret_cast<void**>(&getLinearVelocity), true},
-        {"dhdGetAngularVelocityRad", reinterpret_cast<void**>(&getAngularVelocityRad), false},
-        {"dhdGetButton", reinterpret_cast<void**>(&getButton), true},
-        {"dhdSetForce", reinterpret_cast<void**>(&setForce), true},
-        {"dhdSetForceAndTorque", reinterpret_cast<void**>(&setForceAndTorque), true},
-        {"dhdEnableForce", reinterpret_cast<void**>(&enableForce), true},
-        {"dhdErrorGetLast", reinterpret_cast<void**>(&errorGetLast), false},
-        {"dhdErrnoLocation", reinterpret_cast<void**>(&errnoLocation), false},
-        {"dhdErrorGetStr", reinterpret_cast<void**>(&errorGetStr), true},
-        {"dhdGetMaxTorque", reinterpret_cast<void**>(&getMaxTorque), false},
-    };
-    for (const Entry& e : entries) {
-      *e.slot = ::dlsym(lib, e.name);
-      if (!*e.slot && e.required) return e.name;
-    }
+    if (const char* missing = dm::driver::resolveVendorCalls(
+            lib, {{"dhdGetDeviceCount", getDeviceCount},
+                  {"dhdOpen", open},
+                  {"dhdOpenID", openID},
+                  {"dhdClose", close},
+                  {"dhdGetSystemType", getSystemType},
+                  {"dhdGetSystemName", getSystemName, false},
+                  {"dhdGetSerialNumber", getSerialNumber},
+                  {"dhdGetStatus", getStatus},
+                  {"dhdGetPositionAndOrientationFrame", getPositionAndOrientationFrame},
+                  {"dhdConfigLinearVelocity", configLinearVelocity},
+                  {"dhdGetLinearVelocity", getLinearVelocity},
+                  {"dhdGetAngularVelocityRad", getAngularVelocityRad, false},
+                  {"dhdGetButton", getButton},
+                  {"dhdSetForce", setForce},
+                  {"dhdSetForceAndTorque", setForceAndTorque},
+                  {"dhdEnableForce", enableForce},
+                  {"dhdErrorGetLast", errorGetLast, false},
+                  {"dhdErrnoLocation", errnoLocation, false},
+                  {"dhdErrorGetStr", errorGetStr},
+                  {"dhdGetMaxTorque", getMaxTorque, false}}))
+      return missing;
     if (!errorGetLast && !errnoLocation) return "dhdErrorGetLast (or dhdErrnoLocation)";
     return nullptr;
   }

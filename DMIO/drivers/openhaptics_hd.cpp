@@ -117,35 +117,24 @@ struct HdApi {
 
   // Resolves every call; on a missing one returns its name.
   const char* load(void* lib) {
-    struct Entry {
-      const char* name;
-      void** slot;
-    };
-    const Entry entries[] = {
-        {"hdInitDevice", reinterpret_cast<void**>(&initDevice)},
-        {"hdDisableDevice", reinterpret_cast<void**>(&disableDevice)},
-        {"hdMakeCurrentDevice", reinterpret_cast<void**>(&makeCurrentDevice)},
-        {"hdBeginFrame", reinterpret_cast<void**>(&beginFrame)},
-        {"hdEndFrame", reinterpret_cast<void**>(&endFrame)},
-        {"hdGetError", reinterpret_cast<void**>(&getError)},
-        {"hdGetErrorString", reinterpret_cast<void**>(&getErrorString)},
-        {"hdEnable", reinterpret_cast<void**>(&enable)},
-        {"hdGetDoublev", reinterpret_cast<void**>(&getDoublev)},
-        {"hdGetIntegerv", reinterpret_cast<void**>(&getIntegerv)},
-        {"hdGetString", reinterpret_cast<void**>(&getString)},
-        {"hdSetDoublev", reinterpret_cast<void**>(&setDoublev)},
-        {"hdCheckCalibration", reinterpret_cast<void**>(&checkCalibration)},
-        {"hdUpdateCalibration", reinterpret_cast<void**>(&updateCalibration)},
-        {"hdStartScheduler", reinterpret_cast<void**>(&startScheduler)},
-        {"hdStopScheduler", reinterpret_cast<void**>(&stopScheduler)},
-        {"hdScheduleAsynchronous", reinterpret_cast<void**>(&scheduleAsynchronous)},
-        {"hdUnschedule", reinterpret_cast<void**>(&unschedule)},
-    };
-    for (const Entry& e : entries) {
-      *e.slot = ::dlsym(lib, e.name);
-      if (!*e.slot) return e.name;
-    }
-    return nullptr;
+    return dm::driver::resolveVendorCalls(lib, {{"hdInitDevice", initDevice},
+                                                {"hdDisableDevice", disableDevice},
+                                                {"hdMakeCurrentDevice", makeCurrentDevice},
+                                                {"hdBeginFrame", beginFrame},
+                                                {"hdEndFrame", endFrame},
+                                                {"hdGetError", getError},
+                                                {"hdGetErrorString", getErrorString},
+                                                {"hdEnable", enable},
+                                                {"hdGetDoublev", getDoublev},
+                                                {"hdGetIntegerv", getIntegerv},
+                                                {"hdGetString", getString},
+                                                {"hdSetDoublev", setDoublev},
+                                                {"hdCheckCalibration", checkCalibration},
+                                                {"hdUpdateCalibration", updateCalibration},
+                                                {"hdStartScheduler", startScheduler},
+                                                {"hdStopScheduler", stopScheduler},
+                                                {"hdScheduleAsynchronous", scheduleAsynchronous},
+                                                {"hdUnschedule", unschedule}});
   }
 };
 

@@ -9,6 +9,7 @@
 #include <dlfcn.h>
 
 #include <cstddef>
+#include <initializer_list>
 #include <string>
 
 namespace dm::driver {
@@ -59,6 +60,27 @@ inline void* openVendorLibrary(const VendorLibrary& lib, const char* explicitPat
   }
   why = std::string("cannot load the ") + lib.api + " library (" + why + "): " + lib.install;
   return nullptr;
+}
+
+/// A call of a vendor library and the function pointer it is resolved into.
+struct VendorCall {
+  template <class F>
+  VendorCall(const char* n, F*& fn, bool isRequired = true) noexcept
+      : name(n), slot(reinterpret_cast<void**>(&fn)), required(isRequired) {}
+  const char* name;
+  void** slot;
+  bool required;
+};
+
+/// Resolves every call with dlsym (an optional one missing stays nullptr);
+/// returns the name of the first required call missing, or nullptr.
+inline const char* resolveVendorCalls(void* lib, std::initializer_list<VendorCall> calls) {
+  const char* missing = nullptr;
+  for (const VendorCall& c : calls) {
+    *c.slot = ::dlsym(lib, c.name);
+    if (!*c.slot && c.required && !missing) missing = c.name;
+  }
+  return missing;
 }
 
 }  // namespace dm::driver

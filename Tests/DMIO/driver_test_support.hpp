@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include <dlfcn.h>
+
 #include <cmath>
 #include <cstdint>
 #include <string>
@@ -43,6 +45,25 @@ struct PluginDriver {
     EXPECT_EQ(r->status, PluginStatus::Loaded);
     loaded = true;
   }
+};
+
+/// A stand-in vendor library (Tests/DMIO/plugins/*_stand_in.cpp) opened by
+/// the test beside the driver that loads it: dlopen of one path gives one
+/// copy, so the test's calls move, unplug or decalibrate the driver's
+/// simulated device.
+struct StandInLibrary {
+  explicit StandInLibrary(const std::string& path) : lib(::dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL)) {}
+  ~StandInLibrary() {
+    if (lib) ::dlclose(lib);
+  }
+  StandInLibrary(const StandInLibrary&) = delete;
+  StandInLibrary& operator=(const StandInLibrary&) = delete;
+  /// Its call `name` as a function pointer of type F.
+  template <class F>
+  F fn(const char* name) const {
+    return reinterpret_cast<F>(::dlsym(lib, name));
+  }
+  void* lib;
 };
 
 }  // namespace dm::test

@@ -27,12 +27,8 @@ using dm::test::kMs;
 
 std::string standInPath() { return dm::test::besideExecutable(DM_TEST_DHD_STAND_IN); }
 
-struct StandIn {
-  void* lib = ::dlopen(standInPath().c_str(), RTLD_NOW | RTLD_LOCAL);
-  template <class F>
-  F fn(const char* name) const {
-    return reinterpret_cast<F>(::dlsym(lib, name));
-  }
+struct StandIn : dm::test::StandInLibrary {
+  StandIn() : StandInLibrary(standInPath()) {}
   void type(int t, int devices = 1) const { fn<void (*)(int, int)>("dmDhdStandInSetType")(t, devices); }
   void pose(const Vec3& p, const dm::Mat3& r) const {
     double rr[9];
@@ -49,9 +45,6 @@ struct StandIn {
     Vec3 f, t;
     fn<void (*)(double*, double*)>("dmDhdStandInApplied")(f.data(), t.data());
     return {f, t};
-  }
-  ~StandIn() {
-    if (lib) ::dlclose(lib);
   }
 };
 

@@ -36,12 +36,8 @@ std::string standInPath() { return dm::test::besideExecutable(DM_TEST_HD_STAND_I
 
 // The test's hand on the stand-in device (the same library instance the
 // driver loads: dlopen of one path gives one copy).
-struct StandIn {
-  void* lib = ::dlopen(standInPath().c_str(), RTLD_NOW | RTLD_LOCAL);
-  template <class F>
-  F fn(const char* name) const {
-    return reinterpret_cast<F>(::dlsym(lib, name));
-  }
+struct StandIn : dm::test::StandInLibrary {
+  StandIn() : StandInLibrary(standInPath()) {}
   void pose(const Vec3& mm, const dm::Mat3& r) const {
     double rr[9];
     for (int i = 0; i < 9; ++i) rr[i] = r(i / 3, i % 3);
@@ -59,9 +55,6 @@ struct StandIn {
     Vec3 f;
     fn<void (*)(double*)>("dmHdStandInAppliedForce")(f.data());
     return f;
-  }
-  ~StandIn() {
-    if (lib) ::dlclose(lib);
   }
 };
 
