@@ -8,6 +8,7 @@
 
 extern "C" const DmPluginInfo* dm_builtin_entry_evdev_controller(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_openhaptics_hd(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_pointer(void);  // src/pointer_device.cpp
 extern "C" const DmPluginInfo* dm_builtin_entry_force_dimension_dhd(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_serial_posix(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_sim_controller(void);
@@ -30,6 +31,7 @@ constexpr BuiltinDriver kDrivers[] = {
     {"evdev-controller", &dm_builtin_entry_evdev_controller},
     {"force-dimension-dhd", &dm_builtin_entry_force_dimension_dhd},
     {"openhaptics-hd", &dm_builtin_entry_openhaptics_hd},
+    {"pointer", &dm_builtin_entry_pointer},
     {"replay-controller", &dm_builtin_entry_replay_controller},
     {"replay-daq", &dm_builtin_entry_replay_daq},
     {"replay-haptic", &dm_builtin_entry_replay_haptic},

@@ -139,11 +139,15 @@ TEST_P(HapticDriverConformance, AnUnknownParameterIsRefusedNamingIt) {
 
 INSTANTIATE_TEST_SUITE_P(
     Drivers, HapticDriverConformance,
-    ::testing::Values(DriverCase{"sim_haptic", "sim-haptic", nullptr, {{"path", "circle"}}},
-                      DriverCase{"sim_haptic_plugin", "sim-haptic", "libdm_driver_sim_haptic.so", {}},
-                      DriverCase{"openhaptics_hd", "openhaptics-hd", nullptr, {}},
-                      DriverCase{
-                          "openhaptics_hd_plugin", "openhaptics-hd", "libdm_driver_openhaptics_hd.so", {}}),
+    ::testing::Values(
+        DriverCase{"sim_haptic", "sim-haptic", nullptr, {{"path", "circle"}}},
+        DriverCase{"sim_haptic_plugin", "sim-haptic", "libdm_driver_sim_haptic.so", {}},
+        DriverCase{"openhaptics_hd", "openhaptics-hd", nullptr, {}},
+        DriverCase{"openhaptics_hd_plugin", "openhaptics-hd", "libdm_driver_openhaptics_hd.so", {}},
+        DriverCase{"force_dimension_dhd", "force-dimension-dhd", nullptr, {}},
+        DriverCase{
+            "force_dimension_dhd_plugin", "force-dimension-dhd", "libdm_driver_force_dimension_dhd.so", {}},
+        DriverCase{"pointer", "pointer", nullptr, {{"channel", "conformance"}}}),
     [](const ::testing::TestParamInfo<DriverCase>& i) { return std::string(i.param.label); });
 
 }  // namespace haptic_conformance_test

@@ -33,6 +33,9 @@
 //  * "force-dimension-dhd" (kind "haptic-device"): Force Dimension omega,
 //    delta and other models and the Novint Falcon through the DHD library,
 //    loaded at run time (DMIO/drivers/force_dimension_dhd.cpp).
+//  * "pointer" (kind "haptic-device", dm/io/pointer_device.hpp): a
+//    kinematic stand-in the program moves (a live view's mouse); built in
+//    only, no plugin module (its channels live in the program).
 //    The vendor drivers are registered always; opening one where its library
 //    is missing fails saying what to install, and vendorDriverStatus() tells
 //    before anything is opened.
