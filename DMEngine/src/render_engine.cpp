@@ -45,6 +45,19 @@ Camera orbited(Camera camera, const ViewOrbit& o) {
   return camera;
 }
 
+// What a live view needs of the camera a frame was drawn with.
+FrameCamera frameCamera(const Camera& c) {
+  FrameCamera f;
+  f.eye = c.position;
+  f.forward = c.forward();
+  f.right = c.right();
+  f.up = f.right.cross(f.forward);
+  f.orthographic = c.projection == Camera::Projection::Orthographic;
+  f.tanHalfFovY = std::tan(0.5 * c.fovYDeg * 3.14159265358979323846 / 180.0);
+  f.orthoHeight = c.orthoHeight;
+  return f;
+}
+
 // Writes frames on its own thread so PNG encoding does not hold the render
 // rate. Bounded: `block` waits for room, otherwise a full queue drops.
 class FrameWriter {
@@ -309,10 +322,14 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
     if (haptics && !proxyObject_.empty())
       if (auto s = view_.setObjectPose(proxyObject_, proxy); !s) return s;
     if (feed_.viewOrbit && feed_.viewOrbit(orbit_)) orbited_ = !(orbit_ == ViewOrbit{});
-    if (orbited_) {
+    Camera drawnWith;  // for a live view (the mono camera of a stereo pair)
+    if (orbited_ || feed_.shown) {
       auto cam = view_.camera(camera_, t);
       if (!cam) return cam.error();
-      if (auto r = view_.render(target_, orbited(*cam, orbit_)); !r) return r.error();
+      drawnWith = orbited_ ? orbited(*cam, orbit_) : *cam;
+    }
+    if (orbited_) {
+      if (auto r = view_.render(target_, drawnWith); !r) return r.error();
     } else if (auto r = view_.render(target_, camera_, t); !r) {
       return r.error();
     }
@@ -337,7 +354,7 @@ class RenderEngine final : public Engine, public RenderEngineHandle {
       if (!img) return img.error();
       view = std::move(*img);
     }
-    if (feed_.shown) feed_.shown->put(view, t);
+    if (feed_.shown) feed_.shown->put(view, t, frameCamera(drawnWith));
     if (written) writer_->push(index / static_cast<std::uint64_t>(frameEvery_), std::move(view));
     return ok();
   }

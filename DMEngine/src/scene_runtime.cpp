@@ -827,8 +827,9 @@ Status SceneRuntime::addEngine(std::shared_ptr<Engine> engine, const EngineSched
 
 MasterEngine& SceneRuntime::master() { return impl_->master; }
 
-bool SceneRuntime::latestFrame(std::uint64_t& seen, Image& out, double& sceneTime) const {
-  return impl_->shown && impl_->shown->takeIfNewer(seen, out, sceneTime);
+bool SceneRuntime::latestFrame(std::uint64_t& seen, Image& out, double& sceneTime,
+                               FrameCamera* camera) const {
+  return impl_->shown && impl_->shown->takeIfNewer(seen, out, sceneTime, camera);
 }
 
 void SceneRuntime::setViewOrbit(const ViewOrbit& orbit) {

@@ -2,6 +2,7 @@
 #include "live_view.hpp"
 
 #include <dm/io/image_io.hpp>
+#include <dm/io/pointer_device.hpp>
 #include <dm/io/scene_file.hpp>
 
 #include <GLFW/glfw3.h>
@@ -29,7 +30,27 @@ struct Input {
   dm::ViewOrbit orbit;
   int dragging = -1;  // the mouse button held, or -1
   double x = 0.0, y = 0.0;
+  // The mouse as the tool (a scene whose haptic device is a "pointer").
+  dm::PointerChannel* pointer = nullptr;
+  bool toolMode = false;  // T toggles it with the camera mode
+  dm::Isometry3 deviceToWorld = dm::Isometry3::Identity();
+  dm::Vec3 tool = dm::Vec3::Zero();  // world
+  std::uint32_t buttons = 0;
+  dm::FrameCamera camera;  // of the frame shown
+  int width = 1, height = 1;
 };
+
+// The tool to the device point the pointer reports.
+void sendTool(Input& in) { in.pointer->set(in.deviceToWorld.inverse() * in.tool, in.buttons); }
+
+// The tool under the cursor, in the plane through it that faces the view.
+void toolToCursor(Input& in, double x, double y) {
+  const auto [origin, direction] = in.camera.ray(x, y, in.width, in.height);
+  const double facing = direction.dot(in.camera.forward);
+  if (facing < 1e-6) return;
+  in.tool = origin + ((in.tool - origin).dot(in.camera.forward) / facing) * direction;
+  sendTool(in);
+}
 
 Input& inputOf(GLFWwindow* window) { return *static_cast<Input*>(glfwGetWindowUserPointer(window)); }
 
@@ -39,6 +60,7 @@ void onKey(GLFWwindow* window, int key, int, int action, int) {
   if (key == GLFW_KEY_ESCAPE) in.quit = true;
   if (key == GLFW_KEY_SPACE && action == GLFW_PRESS) in.paused = !in.paused;
   if ((key == GLFW_KEY_N || key == GLFW_KEY_RIGHT) && in.paused) ++in.steps;
+  if (key == GLFW_KEY_T && action == GLFW_PRESS && in.pointer) in.toolMode = !in.toolMode;
   if (key == GLFW_KEY_R) {
     in.orbit = {};
     in.runtime->setViewOrbit(in.orbit);
@@ -47,6 +69,12 @@ void onKey(GLFWwindow* window, int key, int, int action, int) {
 
 void onButton(GLFWwindow* window, int button, int action, int) {
   Input& in = inputOf(window);
+  if (in.toolMode) {  // the mouse's buttons are the device's
+    const std::uint32_t bit = 1u << std::clamp(button, 0, 31);
+    in.buttons = action == GLFW_PRESS ? in.buttons | bit : in.buttons & ~bit;
+    sendTool(in);
+    return;
+  }
   if (action == GLFW_PRESS && in.dragging < 0) {
     in.dragging = button;
     glfwGetCursorPos(window, &in.x, &in.y);
@@ -59,6 +87,7 @@ void onButton(GLFWwindow* window, int button, int action, int) {
 // button pans it (2 ‰ of the distance a pixel).
 void onCursor(GLFWwindow* window, double x, double y) {
   Input& in = inputOf(window);
+  if (in.toolMode) return toolToCursor(in, x, y);
   if (in.dragging < 0) return;
   const double dx = x - in.x, dy = y - in.y;
   in.x = x, in.y = y;
@@ -72,9 +101,14 @@ void onCursor(GLFWwindow* window, double x, double y) {
   in.runtime->setViewOrbit(in.orbit);
 }
 
-// The wheel zooms: 10 % nearer a notch.
+// The wheel zooms: 10 % nearer a notch (in tool mode it moves the tool).
 void onScroll(GLFWwindow* window, double, double dy) {
   Input& in = inputOf(window);
+  if (in.toolMode) {  // the tool 2 mm into the view (away from the eye) a notch
+    in.tool += 0.002 * dy * in.camera.forward;
+    sendTool(in);
+    return;
+  }
   in.orbit.zoom = std::clamp(in.orbit.zoom * std::pow(0.9, dy), 1e-3, 1e3);
   in.runtime->setViewOrbit(in.orbit);
 }
@@ -143,6 +177,21 @@ dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneR
                     "--view", "check the display's OpenGL (glxinfo), or leave out --view");
   Input keys;
   keys.runtime = &runtime;
+  keys.width = width;
+  keys.height = height;
+  // A scene whose haptic device is a pointer: the mouse moves its tool.
+  if (scene.engines.haptics)
+    if (const dm::SceneDevice* dev = scene.device(scene.engines.haptics->device);
+        dev && dev->driver == "pointer") {
+      std::string channel = "mouse";
+      for (const auto& [key, value] : dm::deviceParams(*dev))
+        if (key == "channel") channel = value;
+      keys.pointer = &dm::pointerChannel(channel);
+      keys.toolMode = true;
+      keys.deviceToWorld = scene.engines.haptics->devicePose.isometry();
+      keys.tool = keys.deviceToWorld.translation();
+      keys.pointer->set(dm::Vec3::Zero(), 0);
+    }
   glfwSetWindowUserPointer(window, &keys);
   glfwSetKeyCallback(window, onKey);
   glfwSetMouseButtonCallback(window, onButton);
@@ -185,7 +234,7 @@ dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneR
       break;
     }
     glfwMakeContextCurrent(window);
-    if (runtime.latestFrame(seen, frame, frameTime)) {
+    if (runtime.latestFrame(seen, frame, frameTime, &keys.camera)) {
       draw(window, frame);
       glfwSwapBuffers(window);
     }

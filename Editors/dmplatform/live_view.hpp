@@ -9,7 +9,13 @@
 // (its outputs are still written). Mouse: a left drag turns the camera
 // about its target, another button's drag pans it, the wheel zooms, R
 // puts it back (dm::ViewOrbit; the frames written turn with it; a paused
-// run shows a turn at its next step). In lockstep the virtual clock follows
+// run shows a turn at its next step). When the scene's haptic device is a
+// "pointer" (dm/io/pointer_device.hpp) the mouse is the tool: the tool
+// follows the cursor in the plane through it that faces the view, the wheel
+// moves it into the view and back (2 mm a notch), the mouse's buttons are
+// the device's; T switches between this tool mode (the start) and the
+// camera mode above. The HUD shows the force it renders (its magnitude and
+// recent plot). In lockstep the virtual clock follows
 // the wall clock while the machine keeps up (at most 0.1 s per shown
 // frame); in real time the engines run on their threads and the window
 // polls the newest frame.

@@ -2,19 +2,28 @@
 // the object named on stderr, and no output folder left behind — whether
 // the file is invalid or a model in it cannot be built; and `run --view`
 // on a virtual X display: the window shows, pixel for pixel, the frame the
-// headless run writes, and --view refuses what it cannot show.
+// headless run writes, the mouse moved over the window moves a pointer
+// device's tool to where the camera's rays put it, and --view refuses what
+// it cannot show.
+#include <dm/core/types.hpp>
 #include <dm/io/image_io.hpp>
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include "../common/temp_dir.hpp"
 #include "dmtool_run.hpp"
 #include "virtual_display.hpp"
+#include "x_pointer.hpp"
 
 namespace {
 
@@ -139,6 +148,70 @@ TEST(Dmplatform, TheLiveViewShowsTheFramesTheHeadlessRunWrites) {
     }
   EXPECT_EQ(differ, 0u) << last;
   EXPECT_GT(red, 200u);  // the ball is in the picture
+}
+
+// A pointer device (the mouse as the tool) over a block far below, seen
+// from above by a 320 x 240 camera with a 40° field of view; the forces
+// written (the proxy's position: the tool, in free space).
+constexpr const char* kMouseScene = R"({"format": "dmplatform-scene", "version": 2, "name": "mouse",
+  "resources": {"block": {"type": "shape", "shape": "box", "half_extents": [0.02, 0.02, 0.02]}},
+  "materials": {"felt": {"model": "blinn-phong", "color": [0.6, 0.6, 0.6], "haptic": {"stiffness": 800}}},
+  "objects": [{"name": "block", "mesh": "block", "material": "felt", "haptic": true,
+               "pose": {"position": [0, 0, -0.3]}}],
+  "lights": [{"type": "directional", "direction": [0.3, 0.5, -0.8], "intensity": 1.2}],
+  "devices": [{"name": "mouse", "driver": "pointer", "config": {"workspace": 0.2}}],
+  "cameras": [{"name": "top", "position": [0, 0, 0.5], "target": [0, 0, 0], "up": [0, 1, 0], "fov_y_deg": 40}],
+  "engines": {"haptics": {"device": "mouse", "object": "block"},
+              "render": {"rate_hz": 30, "width": 320, "height": 240}},
+  "outputs": {"forces": true}})";
+
+TEST(Dmplatform, TheMouseOverTheLiveViewMovesAPointerDevicesTool) {
+  dm::test::VirtualDisplay x;
+  if (x.display().empty()) GTEST_SKIP() << "no Xvfb (apt install xvfb)";
+  const dm::test::TempDir dir("dmplatform_mouse");
+  const fs::path file = dir / "mouse.json", out = dir / "out";
+  std::ofstream(file) << kMouseScene;
+  setenv("DISPLAY", x.display().c_str(), 1);
+  dmtool_test::ToolRun r;
+  std::thread run([&] {
+    r = dmtool_test::runProgram(dm::test::besideExecutable(DMPLATFORM_PATH),
+                                {"run", file.string(), "--view", "--duration", "4", "--out", out.string()},
+                                300);
+  });
+  dm::test::XPointer pointer(x.display());
+  const bool window = pointer.waitForWindow("dmplatform", 30.0);  // once the scene is loaded
+  // The pointer over two points of the window, a second on each (the
+  // frames, and the camera with them, arrive meanwhile).
+  std::this_thread::sleep_for(std::chrono::milliseconds(700));
+  pointer.warp(240, 60);
+  std::this_thread::sleep_for(std::chrono::milliseconds(1000));
+  pointer.warp(80, 180);
+  run.join();
+  unsetenv("DISPLAY");
+  ASSERT_TRUE(window) << "no window: " << dmtool_test::describe(r);
+  ASSERT_EQ(r.exitCode, 0) << dmtool_test::describe(r);
+
+  // The camera's ray through (x, y) meets the plane z = 0 (through the tool,
+  // facing the view) at ±(0.5 h tan 20° · 4/3, 0.5 h tan 20°) for h = 0.5 m.
+  const double s = 0.5 * 0.5 * std::tan(20.0 * 3.14159265358979323846 / 180.0);
+  const dm::Vec3 first(s * 4.0 / 3.0, s, 0.0), second = -first;
+  std::ifstream csv(out / "forces.csv");
+  std::string line;
+  std::getline(csv, line);  // t,fx,fy,fz,tx,ty,tz,px,py,pz,...
+  bool sawFirst = false, sawSecond = false;
+  dm::Vec3 last = dm::Vec3::Constant(1e9);
+  while (std::getline(csv, line)) {
+    std::vector<double> v;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
+    ASSERT_GE(v.size(), 10u);
+    last = dm::Vec3(v[7], v[8], v[9]);
+    sawFirst = sawFirst || (last - first).norm() < 1e-9;
+    sawSecond = sawSecond || (last - second).norm() < 1e-9;
+  }
+  EXPECT_TRUE(sawFirst) << "the tool never went to " << first.transpose();
+  EXPECT_TRUE(sawSecond) << "the tool never went to " << second.transpose();
+  EXPECT_LT((last - second).norm(), 1e-9) << last.transpose();
 }
 
 TEST(Dmplatform, TheLiveViewRefusesWhatItCannotShow) {

@@ -72,6 +72,7 @@
 
 #include <dm/core/image.hpp>
 #include <dm/core/result.hpp>
+#include <dm/engine/frame_camera.hpp>
 #include <dm/engine/master_engine.hpp>
 
 #include <nlohmann/json.hpp>
@@ -155,7 +156,9 @@ class SceneRuntime {
   /// `seen` numbers (then `seen` is updated); false otherwise, and always
   /// without SceneRunOptions::liveFrames. Any thread; the pixels are shared,
   /// not copied.
-  bool latestFrame(std::uint64_t& seen, Image& out, double& sceneTime) const;
+  /// With `camera`, also the camera it was drawn with (FrameCamera: a
+  /// pixel of it as a ray in the world).
+  bool latestFrame(std::uint64_t& seen, Image& out, double& sceneTime, FrameCamera* camera = nullptr) const;
   /// Turns the render engine's camera from the next frame on (see
   /// ViewOrbit; the frames written show it too). One thread at a time, any
   /// thread, after prepare() with SceneRunOptions::liveFrames; ignored
