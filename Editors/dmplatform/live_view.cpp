@@ -61,6 +61,20 @@ void onKey(GLFWwindow* window, int key, int, int action, int) {
   if (key == GLFW_KEY_SPACE && action == GLFW_PRESS) in.paused = !in.paused;
   if ((key == GLFW_KEY_N || key == GLFW_KEY_RIGHT) && in.paused) ++in.steps;
   if (key == GLFW_KEY_T && action == GLFW_PRESS && in.pointer) in.toolMode = !in.toolMode;
+  if (in.toolMode) {  // the keyboard moves the tool 2 mm a press: W A S D in the view, Q E along it
+    const dm::FrameCamera& c = in.camera;
+    dm::Vec3 step = dm::Vec3::Zero();
+    if (key == GLFW_KEY_W) step = c.up;
+    if (key == GLFW_KEY_S) step = -c.up;
+    if (key == GLFW_KEY_D) step = c.right;
+    if (key == GLFW_KEY_A) step = -c.right;
+    if (key == GLFW_KEY_Q) step = c.forward;
+    if (key == GLFW_KEY_E) step = -c.forward;
+    if (!step.isZero()) {
+      in.tool += 0.002 * step;
+      sendTool(in);
+    }
+  }
   if (key == GLFW_KEY_R) {
     in.orbit = {};
     in.runtime->setViewOrbit(in.orbit);

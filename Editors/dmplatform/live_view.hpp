@@ -13,7 +13,8 @@
 // "pointer" (dm/io/pointer_device.hpp) the mouse is the tool: the tool
 // follows the cursor in the plane through it that faces the view, the wheel
 // moves it into the view and back (2 mm a notch), the mouse's buttons are
-// the device's; T switches between this tool mode (the start) and the
+// the device's, and W A S D move it 2 mm a press up, left, down and right in
+// the view, Q and E into the view and back; T switches between this tool mode (the start) and the
 // camera mode above. The HUD shows the force it renders (its magnitude and
 // recent plot). In lockstep the virtual clock follows
 // the wall clock while the machine keeps up (at most 0.1 s per shown

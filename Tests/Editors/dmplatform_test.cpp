@@ -214,6 +214,40 @@ TEST(Dmplatform, TheMouseOverTheLiveViewMovesAPointerDevicesTool) {
   EXPECT_LT((last - second).norm(), 1e-9) << last.transpose();
 }
 
+// The keyboard moves the same tool: five presses of D, 2 mm each along the
+// camera's right (+x here), three of W along its up (+y).
+TEST(Dmplatform, TheKeysOfTheLiveViewMoveAPointerDevicesTool) {
+  dm::test::VirtualDisplay x;
+  if (x.display().empty()) GTEST_SKIP() << "no Xvfb (apt install xvfb)";
+  const dm::test::TempDir dir("dmplatform_keys");
+  const fs::path file = dir / "mouse.json", out = dir / "out";
+  std::ofstream(file) << kMouseScene;
+  setenv("DISPLAY", x.display().c_str(), 1);
+  dmtool_test::ToolRun r;
+  std::thread run([&] {
+    r = dmtool_test::runProgram(dm::test::besideExecutable(DMPLATFORM_PATH),
+                                {"run", file.string(), "--view", "--duration", "3", "--out", out.string()},
+                                300);
+  });
+  dm::test::XPointer pointer(x.display());
+  const bool window = pointer.waitForWindow("dmplatform", 30.0);
+  std::this_thread::sleep_for(std::chrono::milliseconds(700));  // a frame and its camera
+  for (int i = 0; i < 5; ++i) pointer.key('d');
+  for (int i = 0; i < 3; ++i) pointer.key('w');
+  run.join();
+  unsetenv("DISPLAY");
+  ASSERT_TRUE(window) << "no window: " << dmtool_test::describe(r);
+  ASSERT_EQ(r.exitCode, 0) << dmtool_test::describe(r);
+  std::ifstream csv(out / "forces.csv");
+  std::string line, lastLine;
+  while (std::getline(csv, line)) lastLine = line;
+  std::vector<double> v;
+  std::stringstream ss(lastLine);
+  for (std::string cell; std::getline(ss, cell, ',');) v.push_back(std::stod(cell));
+  ASSERT_GE(v.size(), 10u) << lastLine;
+  EXPECT_LT((dm::Vec3(v[7], v[8], v[9]) - dm::Vec3(0.010, 0.006, 0.0)).norm(), 1e-12) << lastLine;
+}
+
 TEST(Dmplatform, TheLiveViewRefusesWhatItCannotShow) {
   const dm::test::TempDir dir("dmplatform_noview");
   const fs::path file = dir / "look.json";

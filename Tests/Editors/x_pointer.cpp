@@ -3,6 +3,7 @@
 
 #include <X11/Xlib.h>
 #include <X11/Xutil.h>
+#include <X11/keysym.h>
 
 #include <chrono>
 #include <thread>
@@ -53,6 +54,24 @@ void XPointer::warp(int x, int y) {
   if (!display_ || !window_) return;
   XWarpPointer(static_cast<Display*>(display_), None, window_, 0, 0, 0, 0, x, y);
   XFlush(static_cast<Display*>(display_));
+}
+
+void XPointer::key(char letter) {
+  if (!display_ || !window_) return;
+  Display* d = static_cast<Display*>(display_);
+  XKeyEvent e{};
+  e.display = d;
+  e.window = window_;
+  e.root = DefaultRootWindow(d);
+  e.subwindow = None;
+  e.time = CurrentTime;
+  e.same_screen = True;
+  e.keycode = XKeysymToKeycode(d, XK_a + (letter - 'a'));
+  e.type = KeyPress;
+  XSendEvent(d, window_, True, KeyPressMask, reinterpret_cast<XEvent*>(&e));
+  e.type = KeyRelease;
+  XSendEvent(d, window_, True, KeyReleaseMask, reinterpret_cast<XEvent*>(&e));
+  XFlush(d);
 }
 
 }  // namespace dm::test

@@ -1,5 +1,5 @@
-// x_pointer.hpp — the X pointer of a test's virtual display moved over a
-// program's window (the live view's mouse tests), with Xlib kept in its own
+// x_pointer.hpp — the X pointer (and keys) of a test's virtual display
+// moved over (sent to) a program's window (the live view's mouse tests), with Xlib kept in its own
 // file (x_pointer.cpp: its macros would break the other sources of a batch).
 #pragma once
 
@@ -18,6 +18,8 @@ class XPointer {
   bool waitForWindow(const std::string& prefix, double seconds);
   /// The pointer to (x, y) of that window (pixels from its top-left corner).
   void warp(int x, int y);
+  /// A press and release of the key of `letter` ('a'..'z') sent to that window.
+  void key(char letter);
 
  private:
   void* display_ = nullptr;
