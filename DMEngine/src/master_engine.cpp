@@ -261,6 +261,7 @@ std::vector<EngineStats> MasterEngine::stats() const {
         const RealTimeLoopStats st = slot->loop->stats();
         if (st.running) s.ticks += st.ticks, s.deadlineMisses += st.deadline_misses;
         s.execution = st.execution;
+        s.wakeup = st.wakeup;
       }
       s.achievedHz = realSeconds > 0 ? static_cast<double>(s.ticks) / realSeconds : 0.0;
     }

@@ -6,6 +6,7 @@
 #include <dm/core/log.hpp>
 #include <dm/core/plugin.hpp>
 #include <dm/core/ring.hpp>
+#include <dm/core/rt_memory.hpp>
 #include <dm/core/triple_buffer.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/haptics/force_plot.hpp>
@@ -380,6 +381,8 @@ struct SceneRuntime::Impl {
     bool lockstep = true;
     double duration = 0.0;  // run()'s; 0 for a run stepped by advance()
     Result<HostCpuTimes> hostBefore = HostCpuTimes{};
+    PageFaults faultsBefore{};
+    bool lockedMemory = false;  // this run locked the process's memory (and unlocks it)
     SteadyClock::time_point wallStart{};
     double done = 0.0;  // s of the run so far
     Status status = ok();
@@ -602,7 +605,12 @@ nlohmann::json engineStatsJson(const std::vector<EngineStats>& stats) {
                         {{"p50", e.execution.p50_us},
                          {"p99", e.execution.p99_us},
                          {"p999", e.execution.p999_us},
-                         {"max", e.execution.max_us}}}});
+                         {"max", e.execution.max_us}}},
+                       {"wakeup_us",
+                        {{"p50", e.wakeup.p50_us},
+                         {"p99", e.wakeup.p99_us},
+                         {"p999", e.wakeup.p999_us},
+                         {"max", e.wakeup.max_us}}}});
   return engines;
 }
 
@@ -610,6 +618,7 @@ SceneRuntime::SceneRuntime() : impl_(std::make_unique<Impl>()) {}
 SceneRuntime::~SceneRuntime() {
   if (impl_ && impl_->master.state() != SimState::Stopped && impl_->master.state() != SimState::Created)
     (void)impl_->master.stop("runtime destroyed");
+  if (impl_ && impl_->running.lockedMemory && !impl_->running.finished) unlockProcessMemory();
 }
 
 Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& options,
@@ -905,12 +914,27 @@ Status SceneRuntime::start(const SceneRunOptions& options) {
     }
   }
 #endif
-  if (auto s = im.master.start(options.mode); !s) return s.error();
+  // In real time the process's pages stay in RAM (a page read back from
+  // disk in a tick is a missed deadline); a process that cannot lock runs
+  // unlocked and says why.
+  bool lockedMemory = false;
+  if (!lockstep && !processMemoryLocked()) {
+    if (Status s = lockProcessMemory(); s)
+      lockedMemory = true;
+    else
+      log::warn("running with the memory unlocked: %s", s.error().message().c_str());
+  }
+  if (auto s = im.master.start(options.mode); !s) {
+    if (lockedMemory) unlockProcessMemory();
+    return s.error();
+  }
   // The host's CPU accounts bracket the run: steal time says the hypervisor
   // stopped this machine's CPUs, which no thread priority can prevent.
   im.running = {.started = true,
                 .lockstep = lockstep,
                 .hostBefore = readHostCpuTimes(),
+                .faultsBefore = readPageFaults(),
+                .lockedMemory = lockedMemory,
                 .wallStart = SteadyClock::now()};
   return ok();
 }
@@ -1022,7 +1046,10 @@ Result<SceneRunResult> SceneRuntime::finish() {
   result.simulatedSeconds = done;
   const std::vector<EngineStats> engineStats = im.master.stats();
   const Result<HostCpuTimes> hostAfter = readHostCpuTimes();
+  const PageFaults faultsAfter = readPageFaults();
+  const bool memoryLocked = processMemoryLocked();
   Status stopStatus = im.master.stop(result.interrupted ? "interrupted" : "done");
+  if (r.lockedMemory) unlockProcessMemory();
   im.monitor->drain();
   Status recordStatus = ok();
   if (im.haptics && im.haptics->recorder) recordStatus = im.haptics->recorder->close();
@@ -1066,7 +1093,10 @@ Result<SceneRunResult> SceneRuntime::finish() {
   if (hostBefore && hostAfter)
     summary["host"] = {{"cpus", hostAfter->cpus},
                        {"cpu_busy_s", hostAfter->busy_s - hostBefore->busy_s},
-                       {"cpu_steal_s", hostAfter->steal_s - hostBefore->steal_s}};
+                       {"cpu_steal_s", hostAfter->steal_s - hostBefore->steal_s},
+                       {"memory_locked", memoryLocked},
+                       {"page_faults_minor", faultsAfter.minor - r.faultsBefore.minor},
+                       {"page_faults_major", faultsAfter.major - r.faultsBefore.major}};
   if (im.haptics) {
     const HapticLoopStats hs = im.haptics->loop->stats();
     summary["haptics"] = {{"renderer", std::string(rendererName(scene.engines.haptics->renderer))},

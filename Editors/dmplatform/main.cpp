@@ -110,11 +110,17 @@ void printSummary(const nlohmann::json& s, const std::filesystem::path& outDir, 
   for (const auto& e : s["engines"])
     std::printf(
         "engine %-8s %8llu ticks at %7.1f Hz (scheduled %6.0f Hz), tick p50 %8.1f us, p99.9 %8.1f us, "
-        "max %8.1f us, deadline misses %llu\n",
+        "max %8.1f us, deadline misses %llu%s\n",
         e["name"].get<std::string>().c_str(), e["ticks"].get<unsigned long long>(),
         e["achieved_hz"].get<double>(), e["rate_hz"].get<double>(), e["execution_us"]["p50"].get<double>(),
         e["execution_us"]["p999"].get<double>(), e["execution_us"]["max"].get<double>(),
-        e["deadline_misses"].get<unsigned long long>());
+        e["deadline_misses"].get<unsigned long long>(),
+        s["mode"] == "realtime"
+            ? dm::formatString("; woke p50 %.1f us, p99.9 %.1f us, max %.1f us late",
+                               e["wakeup_us"]["p50"].get<double>(), e["wakeup_us"]["p999"].get<double>(),
+                               e["wakeup_us"]["max"].get<double>())
+                  .c_str()
+            : "");
   if (s.contains("haptics"))
     std::printf("haptics: %llu of %llu ticks in contact, max force %.2f N, max depth %.1f mm\n",
                 s["haptics"]["contact_ticks"].get<unsigned long long>(),
@@ -145,10 +151,15 @@ void printSummary(const nlohmann::json& s, const std::filesystem::path& outDir, 
                 s["render"]["gl_renderer"].get<std::string>().c_str(),
                 s["render"]["frame_ms_p50"].get<double>());
   if (s.contains("host") && s["mode"] == "realtime")
-    std::printf("host: %d CPUs, %.2f CPU-s busy, %.3f s stolen by the hypervisor%s\n",
-                s["host"]["cpus"].get<int>(), s["host"]["cpu_busy_s"].get<double>(),
-                s["host"]["cpu_steal_s"].get<double>(),
-                s["host"]["cpu_steal_s"].get<double>() > 0 ? " (deadline misses may be the host's)" : "");
+    std::printf(
+        "host: %d CPUs, %.2f CPU-s busy, %.3f s stolen by the hypervisor%s; memory %s, %llu major and "
+        "%llu minor page faults\n",
+        s["host"]["cpus"].get<int>(), s["host"]["cpu_busy_s"].get<double>(),
+        s["host"]["cpu_steal_s"].get<double>(),
+        s["host"]["cpu_steal_s"].get<double>() > 0 ? " (deadline misses may be the host's)" : "",
+        s["host"]["memory_locked"].get<bool>() ? "locked" : "not locked",
+        s["host"]["page_faults_major"].get<unsigned long long>(),
+        s["host"]["page_faults_minor"].get<unsigned long long>());
   std::printf("wrote %s in %s%s\n", s["outputs"].dump().c_str(), outDir.c_str(),
               interrupted ? " (interrupted)" : "");
 }

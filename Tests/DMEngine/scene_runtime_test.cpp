@@ -2,6 +2,7 @@
 // device, run in lockstep; forces against Hooke's law on the god-object,
 // outputs on disk, bit-identical reruns, and Ctrl-C style interruption.
 #include <dm/core/filesystem.hpp>
+#include <dm/core/rt_memory.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/image_io.hpp>
 #include <dm/io/scene_file.hpp>
@@ -159,6 +160,30 @@ TEST(SceneRuntime, ErrorsNameTheSceneEntry) {
   r = (*rt)->run({.duration = 0.1, .outDir = fs::temp_directory_path() / "dm_scene_runtime_test" / "bad"});
   ASSERT_FALSE(r);
   EXPECT_EQ(r.error().where, "objects/block/material");
+}
+
+// A real-time run holds the process's memory in RAM while it runs (where
+// the process may lock it: as it may after the run) and lets go after; the
+// summary says so, with the page faults the run took. Lockstep locks nothing.
+TEST(SceneRuntime, ARealTimeRunLocksTheMemoryWhileItRuns) {
+  const fs::path out = fs::temp_directory_path() / "dm_scene_runtime_test" / "locked";
+  auto rt = dm::SceneRuntime::create(parse(false));
+  ASSERT_TRUE(rt) << rt.error();
+  auto r = (*rt)->run({.mode = dm::RunMode::RealTime, .duration = 0.3, .outDir = out});
+  ASSERT_TRUE(r) << r.error();
+  EXPECT_FALSE(dm::processMemoryLocked()) << "unlocked after the run";
+  const dm::Status canLock = dm::lockProcessMemory();
+  dm::unlockProcessMemory();
+  const nlohmann::json& host = r->summary["host"];
+  EXPECT_EQ(host["memory_locked"].get<bool>(), static_cast<bool>(canLock)) << host.dump();
+  EXPECT_GE(host["page_faults_minor"].get<std::int64_t>(), 0);
+  EXPECT_GE(host["page_faults_major"].get<std::int64_t>(), 0);
+
+  rt = dm::SceneRuntime::create(parse(false));
+  ASSERT_TRUE(rt) << rt.error();
+  r = (*rt)->run({.mode = dm::RunMode::Lockstep, .duration = 0.1, .outDir = out});
+  ASSERT_TRUE(r) << r.error();
+  EXPECT_FALSE(r->summary["host"]["memory_locked"].get<bool>());
 }
 
 #ifdef DM_TEST_WITH_NETWORK

@@ -64,6 +64,9 @@ struct EngineStats {
   std::uint64_t deadlineMisses = 0;     ///< ticks that ran longer than a period (or started late, real time)
   double achievedHz = 0.0;              ///< ticks / simulated (lockstep) or elapsed (real time) seconds
   LatencyHistogram::Summary execution;  ///< tick durations, µs
+  /// Real time: how late each tick started after its deadline, µs (the
+  /// scheduler's wake-up latency); lockstep ticks start on time (zeros).
+  LatencyHistogram::Summary wakeup;
 };
 
 /// The master engine; see the file comment. Control methods from one thread.
