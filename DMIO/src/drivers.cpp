@@ -7,6 +7,7 @@
 #include "../drivers/vendor_library.hpp"
 
 extern "C" const DmPluginInfo* dm_builtin_entry_evdev_controller(void);
+extern "C" const DmPluginInfo* dm_builtin_entry_haply_2diy(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_openhaptics_hd(void);
 extern "C" const DmPluginInfo* dm_builtin_entry_pointer(void);  // src/pointer_device.cpp
 extern "C" const DmPluginInfo* dm_builtin_entry_force_dimension_dhd(void);
@@ -30,6 +31,7 @@ struct BuiltinDriver {
 constexpr BuiltinDriver kDrivers[] = {
     {"evdev-controller", &dm_builtin_entry_evdev_controller},
     {"force-dimension-dhd", &dm_builtin_entry_force_dimension_dhd},
+    {"haply-2diy", &dm_builtin_entry_haply_2diy},
     {"openhaptics-hd", &dm_builtin_entry_openhaptics_hd},
     {"pointer", &dm_builtin_entry_pointer},
     {"replay-controller", &dm_builtin_entry_replay_controller},

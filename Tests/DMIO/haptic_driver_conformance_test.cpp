@@ -6,7 +6,9 @@
 // its limit reaches it unchanged and a NaN never does; it opens and closes
 // again and again; an unknown parameter is refused naming it. Drivers of
 // vendor libraries run against the stand-in libraries built with the tests
-// (Tests/DMIO/plugins).
+// (Tests/DMIO/plugins), the serial Haply driver against a stand-in board on
+// a pseudo-terminal (haply_board_stand_in.hpp). A planar device's workspace
+// is flat along z, and its samples lie in that plane.
 #include <dm/io/haptic_device.hpp>
 
 #include <gtest/gtest.h>
@@ -18,6 +20,7 @@
 #include <thread>
 
 #include "driver_test_support.hpp"
+#include "haply_board_stand_in.hpp"
 
 namespace haptic_conformance_test {
 
@@ -26,6 +29,7 @@ struct DriverCase {
   const char* driver;
   const char* pluginFile;  // nullptr: built in
   dm::DeviceParams params;
+  bool planar = false;  // moves in the plane z = workspace z
 };
 
 std::ostream& operator<<(std::ostream& os, const DriverCase& c) { return os << c.label; }
@@ -51,6 +55,15 @@ class HapticDriverConformance : public ::testing::TestWithParam<DriverCase> {
   dm::Result<std::unique_ptr<dm::HapticDevice>> open(dm::DeviceParams params) {
     if (const std::string lib = standInFor(GetParam().driver); !lib.empty())
       params.emplace_back("library", lib);
+    if (std::string(GetParam().driver) == "haply-2diy") {
+      // A board on a pseudo-terminal, its arms at a pose mid-workspace.
+      if (!board_)
+        board_ = std::make_unique<dm::test::HaplyBoardStandIn>(
+            std::filesystem::temp_directory_path() / ("dm_conformance_board_" + std::to_string(::getpid())));
+      board_->setCounts(1, -1536);  // arm 1 at 180° − 40°
+      board_->setCounts(2, 1536);   // arm 2 at 40°
+      params.emplace_back("path", board_->path());
+    }
     return dm::HapticDevice::open(registry_, GetParam().driver, params);
   }
   static std::int64_t now() {
@@ -69,6 +82,7 @@ class HapticDriverConformance : public ::testing::TestWithParam<DriverCase> {
   }
   dm::FactoryRegistry registry_;
   dm::PluginLinker linker_{registry_};
+  std::unique_ptr<dm::test::HaplyBoardStandIn> board_;
 };
 
 TEST_P(HapticDriverConformance, ReportsUsableIdentityAndLimits) {
@@ -78,7 +92,11 @@ TEST_P(HapticDriverConformance, ReportsUsableIdentityAndLimits) {
   EXPECT_EQ(i.driver, GetParam().driver);
   EXPECT_GT(i.maxForce, 0.0);
   EXPECT_GT(i.servoRateHz, 0.0);
-  for (int a = 0; a < 3; ++a) EXPECT_LT(i.workspace.min()[a], i.workspace.max()[a]) << a;
+  for (int a = 0; a < (GetParam().planar ? 2 : 3); ++a)
+    EXPECT_LT(i.workspace.min()[a], i.workspace.max()[a]) << a;
+  if (GetParam().planar) {
+    EXPECT_EQ(i.workspace.min().z(), i.workspace.max().z());
+  }
   EXPECT_TRUE(i.capabilities & DM_HAPTIC_CAP_POSITION);
   EXPECT_TRUE(i.capabilities & DM_HAPTIC_CAP_FORCE);
   EXPECT_LE(i.buttonCount, 32u);
@@ -99,6 +117,9 @@ TEST_P(HapticDriverConformance, StreamsFiniteStampedSamples) {
     EXPECT_TRUE(st.position.allFinite());
     EXPECT_TRUE(st.linearVelocity.allFinite());
     EXPECT_NEAR(st.orientation.norm(), 1.0, 1e-12);
+    if (GetParam().planar) {
+      EXPECT_EQ(st.position.z(), dev.info().workspace.min().z());
+    }
     ++good;
     std::this_thread::sleep_for(std::chrono::microseconds(500));
   }
@@ -147,6 +168,9 @@ INSTANTIATE_TEST_SUITE_P(
         DriverCase{"force_dimension_dhd", "force-dimension-dhd", nullptr, {}},
         DriverCase{
             "force_dimension_dhd_plugin", "force-dimension-dhd", "libdm_driver_force_dimension_dhd.so", {}},
+        DriverCase{"haply_2diy", "haply-2diy", nullptr, {{"max_force", "2"}}, true},
+        DriverCase{
+            "haply_2diy_plugin", "haply-2diy", "libdm_driver_haply_2diy.so", {{"max_force", "2"}}, true},
         DriverCase{"pointer", "pointer", nullptr, {{"channel", "conformance"}}}),
     [](const ::testing::TestParamInfo<DriverCase>& i) { return std::string(i.param.label); });
 

@@ -32,7 +32,10 @@
 //    (DMIO/drivers/openhaptics_hd.cpp; docs/devices.md);
 //  * "force-dimension-dhd" (kind "haptic-device"): Force Dimension omega,
 //    delta and other models and the Novint Falcon through the DHD library,
-//    loaded at run time (DMIO/drivers/force_dimension_dhd.cpp).
+//    loaded at run time (DMIO/drivers/force_dimension_dhd.cpp);
+//  * "haply-2diy" (kind "haptic-device"): the Haply 2DIY pantograph on a
+//    Haply board over USB serial, through the board's open hAPI 2 protocol
+//    on the serial-posix driver's line code (DMIO/drivers/haply_2diy.cpp);
 //  * "pointer" (kind "haptic-device", dm/io/pointer_device.hpp): a
 //    kinematic stand-in the program moves (a live view's mouse); built in
 //    only, no plugin module (its channels live in the program).
