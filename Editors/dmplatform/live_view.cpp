@@ -14,6 +14,8 @@
 #include <string>
 #include <thread>
 
+#include "gamepad.hpp"
+
 namespace dmplatform {
 
 namespace {
@@ -35,13 +37,30 @@ struct Input {
   bool toolMode = false;  // T toggles it with the camera mode
   dm::Isometry3 deviceToWorld = dm::Isometry3::Identity();
   dm::Vec3 tool = dm::Vec3::Zero();  // world
-  std::uint32_t buttons = 0;
-  dm::FrameCamera camera;  // of the frame shown
+  std::uint32_t buttons = 0;         // the mouse's
+  std::uint32_t padButtons = 0;      // the gamepad's
+  dm::FrameCamera camera;            // of the frame shown
   int width = 1, height = 1;
 };
 
 // The tool to the device point the pointer reports.
-void sendTool(Input& in) { in.pointer->set(in.deviceToWorld.inverse() * in.tool, in.buttons); }
+void sendTool(Input& in) {
+  in.pointer->set(in.deviceToWorld.inverse() * in.tool, in.buttons | in.padButtons);
+}
+
+// The gamepad's sticks move the tool for the `seconds` since its last poll.
+void padTool(Input& in, dm::Controller& pad, double seconds) {
+  const std::int64_t now =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count();
+  if (pad.poll(now) != dm::DeviceStatus::Ok) return;
+  const dm::ControllerState& state = pad.state();
+  const dm::Vec3 velocity = gamepadVelocity(state, in.camera);
+  const std::uint32_t buttons = gamepadButtons(state);
+  if (!in.toolMode || (velocity.isZero() && buttons == in.padButtons)) return;
+  in.tool += seconds * velocity;
+  in.padButtons = buttons;
+  sendTool(in);
+}
 
 // The tool under the cursor, in the plane through it that faces the view.
 void toolToCursor(Input& in, double x, double y) {
@@ -206,6 +225,11 @@ dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneR
       keys.tool = keys.deviceToWorld.translation();
       keys.pointer->set(dm::Vec3::Zero(), 0);
     }
+  if (view.gamepad && !keys.pointer) {
+    glfwDestroyWindow(window);
+    return dm::fail(dm::ErrorCode::InvalidArgument, "a gamepad moves a pointer device's tool", "--gamepad",
+                    "give the scene's haptic engine a device with \"driver\": \"pointer\"");
+  }
   glfwSetWindowUserPointer(window, &keys);
   glfwSetKeyCallback(window, onKey);
   glfwSetMouseButtonCallback(window, onButton);
@@ -223,7 +247,7 @@ dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneR
   dm::Image frame;
   double frameTime = 0.0;
   const Clock::time_point start = Clock::now();
-  Clock::time_point last = start;
+  Clock::time_point last = start, lastPad = start;
   dm::Status failed = dm::ok();
   const auto stopped = [&] {
     return keys.quit || glfwWindowShouldClose(window) || (options.stop && options.stop->load());
@@ -231,6 +255,10 @@ dm::Result<dm::SceneRunResult> runWithView(dm::SceneRuntime& runtime, dm::SceneR
   while (!stopped()) {
     glfwPollEvents();
     const Clock::time_point now = Clock::now();
+    if (view.gamepad) {
+      padTool(keys, *view.gamepad, std::min(std::chrono::duration<double>(now - lastPad).count(), 0.1));
+      lastPad = now;
+    }
     if (lockstep) {
       const double left = options.duration - runtime.time();
       if (left <= 1e-12) break;

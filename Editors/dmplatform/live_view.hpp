@@ -15,7 +15,9 @@
 // moves it into the view and back (2 mm a notch), the mouse's buttons are
 // the device's, and W A S D move it 2 mm a press up, left, down and right in
 // the view, Q and E into the view and back; T switches between this tool mode (the start) and the
-// camera mode above. The HUD shows the force it renders (its magnitude and
+// camera mode above. A gamepad given (--gamepad, gamepad.hpp) moves the
+// same tool: its sticks give it a velocity in the view, its first two
+// buttons are the device's. The HUD shows the force it renders (its magnitude and
 // recent plot). In lockstep the virtual clock follows
 // the wall clock while the machine keeps up (at most 0.1 s per shown
 // frame); in real time the engines run on their threads and the window
@@ -28,6 +30,7 @@
 
 #include <dm/core/result.hpp>
 #include <dm/engine/scene_runtime.hpp>
+#include <dm/io/controller.hpp>
 
 #include <filesystem>
 
@@ -37,6 +40,10 @@ struct LiveViewOptions {
   /// When set: the window's last picture, written as PNG when the view
   /// closes (a screenshot; tests compare it with the headless frame).
   std::filesystem::path screenshot;
+  /// When set: a controller (an evdev gamepad) that moves the pointer
+  /// device's tool; polled at every shown frame. The scene's haptic device
+  /// must be a pointer.
+  dm::Controller* gamepad = nullptr;
 };
 
 /// Runs `runtime` (prepared here with `options` and liveFrames) with a

@@ -2,7 +2,7 @@
 // live window.
 //
 //   dmplatform run [SCENE.json] [--lockstep | --realtime] [--duration S] [--out DIR]
-//                  [--view [--screenshot PNG]]
+//                  [--view [--screenshot PNG] [--gamepad DEVICE]]
 //   dmplatform replay RECORDING [--out DIR]
 //   dmplatform sweep SWEEP.json [--scheduler tcp://HOST:8786 | --workers N | --serial]
 //
@@ -14,7 +14,10 @@
 // summary.json. A progress bar shows on a terminal; Ctrl-C stops the run
 // cleanly and the outputs are still written. `--view` shows the run in a
 // window as it goes (live_view.hpp: the frames as written, Space pauses, N
-// steps, Esc ends, the mouse turns the camera; builds with GLFW).
+// steps, Esc ends, the mouse turns the camera; builds with GLFW); with a
+// scene whose haptic device is a "pointer" the mouse, the keys and
+// `--gamepad` (an evdev device: /dev/input/eventN or a part of its name)
+// move the tool.
 // `replay` re-runs a run recorded with "outputs": {"recording": true}
 // (recording.dmrec) in lockstep, with the recorded device stream, into DIR
 // (default: replay/ beside the recording), and compares its forces.csv with
@@ -34,6 +37,8 @@
 #include <dm/core/filesystem.hpp>
 #include <dm/core/log.hpp>
 #include <dm/engine/scene_runtime.hpp>
+#include <dm/io/controller.hpp>
+#include <dm/io/drivers.hpp>
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_replay.hpp>
 
@@ -291,6 +296,11 @@ int main(int argc, char** argv) {
                 "show the run in a window (Space: pause, N: step, Esc: end; needs a display and the scene's "
                 "render engine)");
   run->add_option("--screenshot", screenshot, "with --view: write the window's last picture to this PNG");
+  std::string gamepad;
+  run->add_option(
+      "--gamepad", gamepad,
+      "with --view: an evdev gamepad (/dev/input/eventN, or a part of its name) moves the tool of "
+      "the scene's pointer device");
   std::string recordingPath, replayOut;
   CLI::App* replay = app.add_subcommand(
       "replay", "Re-run a recorded scene run in lockstep and compare its force trace with the recording's");
@@ -348,18 +358,45 @@ int main(int argc, char** argv) {
     std::cerr << "dmplatform: --screenshot is the window's picture: it needs --view\n";
     return 2;
   }
+  if (!gamepad.empty() && !viewFlag) {
+    std::cerr << "dmplatform: --gamepad moves the tool in the live view: it needs --view\n";
+    return 2;
+  }
   dm::SceneRunResult result;
   if (viewFlag) {
 #ifdef DM_HAVE_LIVE_VIEW
     dm::SceneRunOptions viewed = options;
     viewed.stop = &gStop;
+    // The gamepad: a scene whose haptic device is a pointer, an evdev device.
+    dm::FactoryRegistry padRegistry;
+    dm::PluginLinker padLinker(padRegistry);
+    std::unique_ptr<dm::Controller> pad;
+    if (!gamepad.empty()) {
+      const dm::SceneDevice* dev = desc.engines.haptics ? desc.device(desc.engines.haptics->device) : nullptr;
+      if (!dev || dev->driver != "pointer") {
+        std::cerr << "dmplatform: --gamepad moves a pointer device's tool, and the scene's haptic device is "
+                  << (dev ? "'" + dev->name + "' (" + dev->driver + ")" : std::string("missing"))
+                  << ": give the haptic engine a device with \"driver\": \"pointer\"\n";
+        return 2;
+      }
+      auto opened = dm::registerBuiltinDrivers(padLinker).ok()
+                        ? dm::Controller::open(padRegistry, "evdev-controller",
+                                               {{gamepad.front() == '/' ? "path" : "name", gamepad}})
+                        : dm::Result<std::unique_ptr<dm::Controller>>(dm::fail(
+                              dm::ErrorCode::Internal, "the built-in drivers did not register", "--gamepad"));
+      if (!opened) {
+        std::cerr << "dmplatform: --gamepad: " << opened.error().message() << '\n';
+        return 2;
+      }
+      pad = std::move(*opened);
+    }
     if (auto s = (*runtime)->prepare(
             {.mode = options.mode, .duration = duration, .outDir = outDir, .liveFrames = true});
         !s) {
       std::cerr << "dmplatform: " << s.error().message() << '\n';
       return 2;
     }
-    auto r = dmplatform::runWithView(**runtime, viewed, {.screenshot = screenshot});
+    auto r = dmplatform::runWithView(**runtime, viewed, {.screenshot = screenshot, .gamepad = pad.get()});
     if (!r) {
       std::cerr << "dmplatform: " << r.error().message() << '\n';
       return 1;

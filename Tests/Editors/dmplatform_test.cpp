@@ -24,6 +24,7 @@
 
 #include "../common/temp_dir.hpp"
 #include "dmtool_run.hpp"
+#include "gamepad.hpp"
 #include "virtual_display.hpp"
 #include "x_pointer.hpp"
 
@@ -263,4 +264,57 @@ TEST(Dmplatform, TheLiveViewRefusesWhatItCannotShow) {
                                                         "--duration", "0.1", "--out", (dir / "b").string()});
   EXPECT_EQ(blind.exitCode, 2) << dmtool_test::describe(blind);
   EXPECT_NE(blind.err.find("engines/render"), std::string::npos) << blind.err;
+}
+
+// The gamepad's mapping: the left stick moves the tool in the view's plane
+// (right, and up for a stick pushed up: evdev's negative y), the right
+// stick's vertical into the view; within the dead zone nothing moves, past
+// it the speed grows linearly to kGamepadSpeed at full deflection.
+TEST(DmplatformGamepad, TheSticksMoveTheToolInTheView) {
+  dm::FrameCamera camera;
+  camera.right = dm::Vec3(0, 1, 0);
+  camera.up = dm::Vec3(0, 0, 1);
+  camera.forward = dm::Vec3(1, 0, 0);
+  dm::ControllerState pad;
+  EXPECT_TRUE(dmplatform::gamepadVelocity(pad, camera).isZero());
+  pad.axes[0] = 1.0;   // full right
+  pad.axes[1] = -1.0;  // full up
+  pad.axes[4] = -1.0;  // right stick pushed away
+  const dm::Vec3 v = dmplatform::gamepadVelocity(pad, camera);
+  EXPECT_LT((v - dmplatform::kGamepadSpeed * dm::Vec3(1, 1, 1)).norm(), 1e-15) << v.transpose();
+  pad = {};
+  pad.axes[0] = 0.1;  // resting off-centre: inside the dead zone
+  pad.axes[1] = -0.15;
+  EXPECT_TRUE(dmplatform::gamepadVelocity(pad, camera).isZero());
+  pad.axes[0] = -(0.15 + 0.85 / 2);  // halfway from the dead zone to full left
+  EXPECT_NEAR(dmplatform::gamepadVelocity(pad, camera).y(), -0.5 * dmplatform::kGamepadSpeed, 1e-15);
+  pad.axes[0] = -3.0;  // out of range: full
+  EXPECT_NEAR(dmplatform::gamepadVelocity(pad, camera).y(), -dmplatform::kGamepadSpeed, 1e-15);
+  pad = {};
+  pad.buttons.set(1);
+  pad.buttons.set(5);
+  EXPECT_EQ(dmplatform::gamepadButtons(pad), 2u);
+}
+
+// --gamepad needs the live view, a pointer device and an evdev device;
+// each missing is refused (exit 2) before anything runs, naming it.
+TEST(Dmplatform, AGamepadIsRefusedWhereItCannotMoveTheTool) {
+  const dm::test::TempDir dir("dmplatform_gamepad");
+  const fs::path mouse = dir / "mouse.json", look = dir / "look.json";
+  std::ofstream(mouse) << kMouseScene;
+  std::ofstream(look) << kViewScene;
+  const std::string platform = dm::test::besideExecutable(DMPLATFORM_PATH);
+  const auto noView = dmtool_test::runProgram(
+      platform, {"run", mouse.string(), "--gamepad", "/dev/null", "--duration", "0.1"});
+  EXPECT_EQ(noView.exitCode, 2) << dmtool_test::describe(noView);
+  EXPECT_NE(noView.err.find("--gamepad"), std::string::npos) << noView.err;
+  EXPECT_NE(noView.err.find("--view"), std::string::npos) << noView.err;
+  const auto notEvdev = dmtool_test::runProgram(
+      platform, {"run", mouse.string(), "--view", "--gamepad", "/dev/null", "--duration", "0.1"});
+  EXPECT_EQ(notEvdev.exitCode, 2) << dmtool_test::describe(notEvdev);
+  EXPECT_NE(notEvdev.err.find("'/dev/null' is not an evdev input device"), std::string::npos) << notEvdev.err;
+  const auto noPointer = dmtool_test::runProgram(
+      platform, {"run", look.string(), "--view", "--gamepad", "/dev/null", "--duration", "0.1"});
+  EXPECT_EQ(noPointer.exitCode, 2) << dmtool_test::describe(noPointer);
+  EXPECT_NE(noPointer.err.find("pointer"), std::string::npos) << noPointer.err;
 }
