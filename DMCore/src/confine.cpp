@@ -1,6 +1,7 @@
 // FileSystem::confine: a file named inside another file leads only into the
 // allowed roots (dm/core/filesystem.hpp, "Confinement").
 
+#include <dm/core/confine.hpp>
 #include <dm/core/filesystem.hpp>
 
 #include <algorithm>
@@ -53,18 +54,18 @@ std::vector<fs::path> FileSystem::allowedRoots(const fs::path& folder) const {
   return roots;
 }
 
-Result<fs::path> FileSystem::confine(const fs::path& folder, std::string_view reference,
-                                     std::string_view field) const {
+Result<fs::path> confineToRoots(std::span<const fs::path> roots, const fs::path& folder,
+                                std::string_view reference, std::string_view field) {
   const std::string where(field);
   const std::string shownRef = "\"" + shownText(reference, 200) + "\"";
   const std::string allowHint =
       "keep the file in the referring file's folder or a data root, or allow its folder with "
       "DM_ALLOW_PATH=<folder> in the environment (dm::FileSystem::global().allowRoot() in code)";
   if (reference.empty()) return fail(ErrorCode::InvalidArgument, "the file name is empty", where);
-  if (reference.size() > kMaxReferenceBytes)
+  if (reference.size() > FileSystem::kMaxReferenceBytes)
     return fail(ErrorCode::Denied,
                 "the file name is " + std::to_string(reference.size()) + " bytes long; the limit is " +
-                    std::to_string(kMaxReferenceBytes),
+                    std::to_string(FileSystem::kMaxReferenceBytes),
                 where, "name a file with a shorter path");
   if (reference.find('\0') != std::string_view::npos)
     return fail(ErrorCode::Denied, "the file name " + shownRef + " contains a NUL byte", where);
@@ -75,7 +76,6 @@ Result<fs::path> FileSystem::confine(const fs::path& folder, std::string_view re
   if (ec)
     return fail(ErrorCode::Denied, "cannot resolve " + shownRef + ": " + ec.message(), where,
                 "check the path (a symlink loop, or a folder name that is too long)");
-  const std::vector<fs::path> roots = allowedRoots(folder);
   for (const fs::path& root : roots)
     if (isWithin(real, root)) return real;
   std::string listed;
@@ -84,6 +84,12 @@ Result<fs::path> FileSystem::confine(const fs::path& folder, std::string_view re
               shownRef + " resolves to " + shownText(real.string(), 200) + ", outside the allowed folders (" +
                   listed + "); nothing was read from it",
               where, allowHint);
+}
+
+Result<fs::path> FileSystem::confine(const fs::path& folder, std::string_view reference,
+                                     std::string_view field) const {
+  const std::vector<fs::path> roots = allowedRoots(folder);
+  return confineToRoots(roots, folder, reference, field);
 }
 
 }  // namespace dm

@@ -7,6 +7,7 @@
 // Assimp validates the scene and triangulates, joins identical vertices and
 // splits meshes by primitive type. The scene graph is flattened here, with
 // transforms in double precision, and the result is welded by position.
+#include <dm/core/confine.hpp>
 #include <dm/core/filesystem.hpp>
 #include <dm/core/log.hpp>
 #include <dm/core/units.hpp>
@@ -31,10 +32,12 @@
 #include <exception>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <set>
 #include <string>
 #include <unordered_map>
 #include <utility>
+#include <vector>
 
 #include "format_util.hpp"
 #include "isolate.hpp"
@@ -69,16 +72,37 @@ std::string meshLabel(const aiMesh& m, unsigned index) {
 }
 
 // ---------------------------------------------------------------------------
-// File access: every file an import opens is checked against one byte budget,
-// and only regular files are opened (a crafted .mtl or glTF uri naming a FIFO
-// or /dev/zero must not block or stream forever).
+// File access: every file an import opens besides the model itself (an OBJ's
+// material library, a glTF's buffers and images) must lie in the model's
+// folder or an allowed root (dm/core/confine.hpp: a model someone else made
+// must not make us read any file on the machine); only regular files are
+// opened (a crafted .mtl or glTF uri naming a FIFO or /dev/zero must not
+// block or stream forever); all are checked against one byte budget.
 
 struct ImportBudget {
   std::size_t maxBytes = 0;
   std::size_t usedBytes = 0;
   std::set<std::string> opened;  ///< canonical paths already counted
   std::string refusal;           ///< why the last refused open was refused
+  // Confinement: the model (always allowed), its folder and the roots
+  // (taken by the caller before any fork: confineToRoots takes no lock).
+  std::filesystem::path model, folder;
+  std::vector<std::filesystem::path> roots;
+  std::optional<Error> denied;  ///< the first file refused for its place
 };
+
+// Whether the import may open `file`: the model, or a file in the roots.
+bool confined(ImportBudget& b, const char* file) {
+  std::error_code ec;
+  const fs::path absolute = fs::absolute(file, ec);
+  if (ec) return false;
+  if (fs::weakly_canonical(absolute, ec) == b.model && !ec) return true;
+  auto r = confineToRoots(b.roots, b.folder, absolute.string(), "a file the model refers to");
+  if (r) return true;
+  if (!b.denied) b.denied = r.error();
+  b.refusal = r.error().message();
+  return false;
+}
 
 class LimitedIOSystem final : public Assimp::DefaultIOSystem {
  public:
@@ -86,7 +110,7 @@ class LimitedIOSystem final : public Assimp::DefaultIOSystem {
 
   bool Exists(const char* file) const override {
     std::error_code ec;
-    return file != nullptr && fs::is_regular_file(file, ec);
+    return file != nullptr && confined(*budget_, file) && fs::is_regular_file(file, ec);
   }
 
   Assimp::IOStream* Open(const char* file, const char* mode = "rb") override {
@@ -95,6 +119,7 @@ class LimitedIOSystem final : public Assimp::DefaultIOSystem {
       budget_->refusal = std::string("the importer tried to write ") + file + ", which is not allowed";
       return nullptr;
     }
+    if (!confined(*budget_, file)) return nullptr;
     std::error_code ec;
     const fs::file_status st = fs::status(file, ec);
     if (ec || !fs::exists(st)) return nullptr;  // a missing texture or .mtl: the reader decides
@@ -722,6 +747,7 @@ Result<Mesh> finish(Builder&& b, const MeshImportOptions& options, const std::st
 
 struct Source {
   const fs::path* file = nullptr;    ///< read from disk, or
+  std::vector<fs::path> roots;       ///< with a file: where the files it names may be
   std::span<const std::byte> bytes;  ///< parse from memory
   std::string hint;                  ///< extension for memory input
   std::string where;                 ///< name used in messages
@@ -820,8 +846,15 @@ Result<std::vector<Builder>> loadWithAssimp(const Source& src, const MeshImportO
   const aiScene* scene = nullptr;
   try {
     if (src.file != nullptr) {
+      std::error_code ec;
+      budget.model = fs::weakly_canonical(fs::absolute(*src.file, ec), ec);
+      budget.folder = budget.model.parent_path();
+      budget.roots = src.roots;
       importer.SetIOHandler(new LimitedIOSystem(&budget));
       scene = importer.ReadFile(src.file->string(), 0);
+      // A file named from outside the roots fails the import, even where
+      // the reader would go on without it (a missing .mtl is a warning).
+      if (budget.denied) return Error(*budget.denied).within(where);
     } else {
       importer.SetIOHandler(new NoFileIOSystem(&budget));
       scene = importer.ReadFileFromMemory(src.bytes.data(), src.bytes.size(), 0, src.hint.c_str());
@@ -1044,6 +1077,7 @@ bool canReadMesh(const std::filesystem::path& file) {
 Result<Mesh> readMesh(const std::filesystem::path& file, const MeshImportOptions& options) {
   Source src;
   src.file = &file;
+  src.roots = FileSystem::global().allowedRoots(fs::absolute(file).parent_path());
   src.where = file.string();
   src.stem = file.stem().string();
   auto meshes = import(src, options, true);
@@ -1054,6 +1088,7 @@ Result<Mesh> readMesh(const std::filesystem::path& file, const MeshImportOptions
 Result<std::vector<Mesh>> readMeshes(const std::filesystem::path& file, const MeshImportOptions& options) {
   Source src;
   src.file = &file;
+  src.roots = FileSystem::global().allowedRoots(fs::absolute(file).parent_path());
   src.where = file.string();
   src.stem = file.stem().string();
   return import(src, options, false);

@@ -1,11 +1,12 @@
 // File references inside untrusted files stay in their allowed roots
 // (FileSystem::confine, dm/core/filesystem.hpp): MetaImage ElementDataFile,
-// NRRD data file, the files of a DICOM series folder and a scene's resource
-// sources. The file outside the roots is a FIFO with no writer: opening it
-// for reading would block, so a reader that returns at all never opened it,
+// NRRD data file, the files of a DICOM series folder, a scene's resource
+// sources and the files a mesh names for Assimp to open (an OBJ's mtllib). The file outside the roots is a
+// FIFO with no writer: opening it for reading would block, so a reader that returns at all never opened it,
 // and a watchdog thread unblocks (and so exposes) one that did.
 #include <dm/core/filesystem.hpp>
 #include <dm/io/dicom.hpp>
+#include <dm/io/mesh_io.hpp>
 #include <dm/io/metaimage.hpp>
 #include <dm/io/nrrd.hpp>
 #include <dm/io/scene_file.hpp>
@@ -205,6 +206,65 @@ TEST(Confinement, SceneSourcesOutsideTheScenesFolderAreRefused) {
   auto inside = dm::readScene(l.caseDir / "scene.json");
   ASSERT_TRUE(inside) << inside.error();
   EXPECT_EQ(inside->resources.at(0).path, fs::canonical(l.caseDir) / "volumes" / "brain.nii.gz");
+}
+
+// A triangle whose OBJ names a material library: refused when the library
+// lies outside the model's folder (by "..", or a symlink that leaves), in-
+// process and isolated alike, even though Assimp goes on without a missing
+// library; loaded when it is inside or allowed. An absolute mtllib does not
+// leave: Assimp 5.2's OBJ reader puts the model's folder in front of it
+// (it looks for case//tmp/.../secret.raw), so the model loads without the
+// library and the file outside is never opened.
+const std::string kTriangleObj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl skin\nf 1 2 3\n";
+
+TEST(Confinement, AMeshsMaterialLibraryOutsideItsFolderIsRefused) {
+  Layout l("confine_obj");
+  fs::create_symlink(l.secret, l.caseDir / "link.mtl");
+  fs::create_symlink(l.outside, l.caseDir / "linkdir");
+  for (const bool isolate : {true, false}) {
+    dm::MeshImportOptions options;
+    options.isolate = isolate;
+    for (const std::string& ref :
+         {std::string("../outside/secret.raw"), std::string("link.mtl"), std::string("linkdir/secret.raw"),
+          std::string("sub/../../outside/secret.raw")}) {
+      SCOPED_TRACE(ref + (isolate ? " (isolated)" : " (in-process)"));
+      writeText(l.caseDir / "evil.obj", "mtllib " + ref + "\n" + kTriangleObj);
+      dm::Result<dm::Mesh> m = dm::Mesh();
+      EXPECT_FALSE(opensFifo(l.secret, [&] { m = dm::readMesh(l.caseDir / "evil.obj", options); }));
+      ASSERT_FALSE(m) << "a file outside the allowed roots was asked for and not refused";
+      EXPECT_EQ(m.error().code, dm::ErrorCode::Denied) << m.error();
+      EXPECT_NE(m.error().message().find("outside the allowed folders"), std::string::npos) << m.error();
+      EXPECT_NE(m.error().where.find("evil.obj"), std::string::npos) << m.error();
+      EXPECT_NE(m.error().hint.find("DM_ALLOW_PATH"), std::string::npos) << m.error();
+    }
+    SCOPED_TRACE(std::string("absolute") + (isolate ? " (isolated)" : " (in-process)"));
+    writeText(l.caseDir / "abs.obj", "mtllib " + l.secret.string() + "\n" + kTriangleObj);
+    dm::Result<dm::Mesh> m = dm::Mesh();
+    EXPECT_FALSE(opensFifo(l.secret, [&] { m = dm::readMesh(l.caseDir / "abs.obj", options); }));
+    ASSERT_TRUE(m) << m.error();
+    EXPECT_EQ(m->triangleCount(), 1u);
+  }
+}
+
+TEST(Confinement, AMeshsMaterialLibraryInsideOrAllowedLoads) {
+  Layout l("confine_obj_ok");
+  fs::create_directories(l.caseDir / "mats");
+  const std::string mtl = "newmtl skin\nKd 0.8 0.5 0.4\n";
+  writeText(l.caseDir / "mats" / "skin.mtl", mtl);
+  writeText(l.outside / "skin.mtl", mtl);
+  writeText(l.caseDir / "ok.obj", "mtllib mats/skin.mtl\n" + kTriangleObj);
+  auto inside = dm::readMesh(l.caseDir / "ok.obj");
+  ASSERT_TRUE(inside) << inside.error();
+  EXPECT_EQ(inside->triangleCount(), 1u);
+  writeText(l.caseDir / "out.obj", "mtllib ../outside/skin.mtl\n" + kTriangleObj);
+  auto refused = dm::readMesh(l.caseDir / "out.obj");
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().code, dm::ErrorCode::Denied) << refused.error();
+  dm::FileSystem::global().allowRoot(l.outside);
+  auto allowed = dm::readMesh(l.caseDir / "out.obj");
+  dm::FileSystem::global().disallowRoot(l.outside);
+  ASSERT_TRUE(allowed) << allowed.error();
+  EXPECT_EQ(allowed->triangleCount(), 1u);
 }
 
 }  // namespace
