@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <mutex>
 #include <string>
 
 #if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
@@ -26,6 +27,11 @@ namespace {
 
 constexpr const char* kWhere = "lockProcessMemory";
 
+// The lock is counted: each lockProcessMemory() that succeeded holds it until
+// its unlockProcessMemory() (two real-time runs in one process, the first to
+// end must not unlock the other's memory). Not on a real-time path: a mutex.
+std::mutex gMutex;
+int gHolders = 0;  // guarded by gMutex
 std::atomic<bool> gLocked{false};
 
 // CAP_IPC_LOCK (capability 14) in the effective set: /proc/self/status's
@@ -60,7 +66,11 @@ Status lockProcessMemory() {
 #elif !defined(MCL_ONFAULT)
   return fail(ErrorCode::Unsupported, "mlockall(MCL_ONFAULT) is not available on this system", kWhere);
 #else
-  if (gLocked.load(std::memory_order_acquire)) return ok();
+  std::lock_guard lock(gMutex);
+  if (gHolders > 0) {
+    ++gHolders;
+    return ok();
+  }
   rlimit limit{};
   getrlimit(RLIMIT_MEMLOCK, &limit);
   // Without the capability the limit caps the locked bytes; with
@@ -78,13 +88,17 @@ Status lockProcessMemory() {
                 std::string("mlockall failed: ") + std::strerror(err), kWhere,
                 "raise RLIMIT_MEMLOCK or grant CAP_IPC_LOCK");
   }
+  gHolders = 1;
   gLocked.store(true, std::memory_order_release);
   return ok();
 #endif
 }
 
 void unlockProcessMemory() noexcept {
-  if (gLocked.exchange(false, std::memory_order_acq_rel)) munlockall();
+  std::lock_guard lock(gMutex);
+  if (gHolders == 0 || --gHolders > 0) return;
+  munlockall();
+  gLocked.store(false, std::memory_order_release);
 }
 
 bool processMemoryLocked() noexcept { return gLocked.load(std::memory_order_acquire); }

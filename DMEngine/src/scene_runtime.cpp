@@ -918,7 +918,7 @@ Status SceneRuntime::start(const SceneRunOptions& options) {
   // disk in a tick is a missed deadline); a process that cannot lock runs
   // unlocked and says why.
   bool lockedMemory = false;
-  if (!lockstep && !processMemoryLocked()) {
+  if (!lockstep) {
     if (Status s = lockProcessMemory(); s)
       lockedMemory = true;
     else

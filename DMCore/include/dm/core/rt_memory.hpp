@@ -37,10 +37,11 @@ namespace dm {
 /// touches later (mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT)). Denied
 /// naming RLIMIT_MEMLOCK and CAP_IPC_LOCK when neither allows it;
 /// Unsupported under a sanitizer or where mlockall is not available.
-/// Calling it again while locked is ok.
+/// The lock is counted: each call that succeeded holds it (thread-safe).
 Status lockProcessMemory();
 
-/// Undoes lockProcessMemory() (munlockall); a no-op when not locked.
+/// Gives back one successful lockProcessMemory(); the last one unlocks
+/// (munlockall). A no-op when none is held.
 void unlockProcessMemory() noexcept;
 
 /// True while lockProcessMemory()'s lock is in force.
