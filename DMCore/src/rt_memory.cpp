@@ -36,7 +36,7 @@ std::atomic<bool> gLocked{false};
 
 // CAP_IPC_LOCK (capability 14) in the effective set: /proc/self/status's
 // CapEff, a hexadecimal mask.
-bool hasIpcLockCapability() {
+[[maybe_unused]] bool hasIpcLockCapability() {
   std::ifstream in("/proc/self/status");
   std::string line;
   while (std::getline(in, line)) {
@@ -47,7 +47,7 @@ bool hasIpcLockCapability() {
   return false;
 }
 
-std::string limitText(rlim_t v) {
+[[maybe_unused]] std::string limitText(rlim_t v) {
   return v == RLIM_INFINITY ? std::string("unlimited") : std::to_string(v / 1024) + " KiB";
 }
 
