@@ -8,7 +8,9 @@
 # the line coverage of the parser it fuzzes, with the lines no input
 # reaches. The table goes to build-fuzz/deep/report.md (docs/security.md
 # keeps the last one).
-#   scripts/fuzz-deep.sh [--runs N] [--seconds S] [--no-merge] [TARGET...]
+#   scripts/fuzz-deep.sh [--runs N] [--seconds S] [--no-merge] [--report-only] [TARGET...]
+# (--report-only: the coverage and the table again from the last run's logs
+# and corpora, without fuzzing.)
 # A crash leaves the input in build-fuzz/artifacts/ and fails the script
 # (after the other targets ran): fix it and add the input to the corpus.
 # Coverage misses what a forked import child runs (Assimp, OpenVDB: the
@@ -18,12 +20,14 @@ cd "$(dirname "$0")/.."
 runs=10000000
 seconds=3600
 merge=1
+fuzz=1
 only=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --runs) runs="$2"; shift 2 ;;
     --seconds) seconds="$2"; shift 2 ;;
     --no-merge) merge=0; shift ;;
+    --report-only) fuzz=0; merge=0; shift ;;
     -*) echo "fuzz-deep: unknown option $1" >&2; exit 2 ;;
     *) only+=("$1"); shift ;;
   esac
@@ -71,8 +75,11 @@ deep_one() {
   fuzz_prepare_corpus "$t" "$corpus"
   fuzz_run "$builddir" "$t" "$corpus" "$builddir/artifacts/$t.log" -runs="$runs" -max_total_time="$seconds"
 }
-echo "fuzz-deep: ${#targets[@]} targets, each to $runs executions or ${seconds}s, $(nproc) at a time"
-fuzz_each "$builddir" deep_one "${targets[@]}"
+fuzz_failed=()
+if [ "$fuzz" = 1 ]; then
+  echo "fuzz-deep: ${#targets[@]} targets, each to $runs executions or ${seconds}s, $(nproc) at a time"
+  fuzz_each "$builddir" deep_one "${targets[@]}"
+fi
 
 # New coverage into the committed corpora.
 if [ "$merge" = 1 ]; then
@@ -93,6 +100,10 @@ cmake --build "$covdir" -j "$(nproc)" --target "${targets[@]}"
 mapfile -t libs < <(find "$covdir" -name 'libdm*.so' -o -name 'libDM*.so' | sort)
 objects=()
 for l in "${libs[@]}"; do objects+=(-object "$l"); done
+# The coverage build records sources as build-fuzz-cov/../<path>; the
+# sources are named here by their absolute paths.
+cov() { llvm-cov "$1" "$covdir/Tests/fuzz/$t" "${objects[@]}" -instr-profile="$deep/$t.profdata" \
+          "-path-equivalence=$covdir/..,$PWD" "${@:2}"; }
 
 report="$deep/report.md"
 {
@@ -109,21 +120,20 @@ for t in "${targets[@]}"; do
       -rss_limit_mb=4096 -malloc_limit_mb=65536 -max_len=1048576 "Tests/fuzz/corpus/$t" "$builddir/corpus/$t" \
       >"$deep/$t.cov.log" 2>&1 || true
   llvm-profdata merge -sparse "$deep/$t".*.profraw -o "$deep/$t.profdata"
-  read -r -a srcs <<<"$(sources_of "$t")"
+  srcs=()
+  for f in $(sources_of "$t"); do srcs+=("$PWD/$f"); done
   covered="-"
   unreached="-"
   if [ ${#srcs[@]} -gt 0 ]; then
     # The sources' line coverage, from the export's totals.
-    covered=$(llvm-cov export -summary-only "$covdir/Tests/fuzz/$t" "${objects[@]}" \
-                -instr-profile="$deep/$t.profdata" "${srcs[@]}" |
+    covered=$(cov export -summary-only "${srcs[@]}" |
               /usr/bin/python3 -c 'import json,sys; l=json.load(sys.stdin)["data"][0]["totals"]["lines"]; print("%.1f %% (%d of %d)" % (l["percent"], l["covered"], l["count"]))')
     # The lines with a zero count, as ranges, per file.
-    llvm-cov show "$covdir/Tests/fuzz/$t" "${objects[@]}" -instr-profile="$deep/$t.profdata" "${srcs[@]}" \
-        >"$deep/$t.show.txt" 2>/dev/null || true
+    cov show "${srcs[@]}" >"$deep/$t.show.txt" 2>/dev/null || true
     unreached=$(awk -F'|' -v file="$(basename "${srcs[0]}")" '
         /^\/.*:$/ { file = $0; sub(/:$/, "", file); n = split(file, parts, "/"); file = parts[n]; next }
         NF >= 3 { count = $2; gsub(/ /, "", count); line = $1; gsub(/ /, "", line)
-                  if (count == "0") { if (start == "" || line != last + 1) { if (start != "") out = out sep file ":" start (last > start ? "-" last : ""); sep = ", "; start = line } last = line } }
+                  if (count == "0") { if (start == "" || line != last + 1) { if (start != "") { out = out sep file ":" start (last > start ? "-" last : ""); sep = ", " } start = line } last = line } }
         END { if (start != "") out = out sep file ":" start (last > start ? "-" last : ""); print out }' \
         "$deep/$t.show.txt")
     [ -n "$unreached" ] || unreached="none"
