@@ -50,24 +50,49 @@ class ParamReader {
     return x;
   }
 
-  /// Three comma-separated numbers "x,y,z"; `fallback` when absent.
-  std::array<double, 3> triple(const char* key, std::array<double, 3> fallback) {
+  /// N comma-separated finite numbers ("x,y,z" for three). True when `key`
+  /// is present and well formed (then `out` holds them); false when absent
+  /// (`out` untouched) or malformed (`out` untouched, the failure recorded).
+  template <std::size_t N>
+  bool numbers(const char* key, std::array<double, N>& out) {
+    static_assert(N >= 1 && N <= 9, "a handful of numbers");
     const char* v = find(key);
-    if (!v) return fallback;
-    std::array<double, 3> out{};
+    if (!v) return false;
+    std::array<double, N> parsed{};
     const char* p = v;
-    for (int i = 0; i < 3; ++i) {
+    for (std::size_t i = 0; i < N; ++i) {
       char* end = nullptr;
       errno = 0;
-      out[i] = std::strtod(p, &end);
-      if (end == p || errno == ERANGE || !std::isfinite(out[i]) || (i < 2 && *end != ',') ||
-          (i == 2 && *end)) {
-        failf("parameter '%s': '%s' is not three numbers \"x,y,z\"", key, v);
-        return fallback;
+      parsed[i] = std::strtod(p, &end);
+      const bool last = i + 1 == N;
+      if (end == p || errno == ERANGE || !std::isfinite(parsed[i]) || (!last && *end != ',') ||
+          (last && *end)) {
+        static const char* const kCount[] = {"",
+                                             "one number",
+                                             "two numbers",
+                                             "three numbers",
+                                             "four numbers",
+                                             "five numbers",
+                                             "six numbers",
+                                             "seven numbers",
+                                             "eight numbers",
+                                             "nine numbers"};
+        std::string example;
+        for (std::size_t k = 0; k < N; ++k) example += (k ? "," : "") + std::string(1, char('a' + k));
+        if (N == 3) example = "x,y,z";
+        failf("parameter '%s': '%s' is not %s \"%s\"", key, v, kCount[N], example.c_str());
+        return false;
       }
       p = end + 1;
     }
-    return out;
+    out = parsed;
+    return true;
+  }
+
+  /// Three comma-separated numbers "x,y,z"; `fallback` when absent or malformed.
+  std::array<double, 3> triple(const char* key, std::array<double, 3> fallback) {
+    numbers(key, fallback);
+    return fallback;
   }
 
   /// One of `choices`; returns its index, or `fallback` when absent.

@@ -97,7 +97,7 @@ struct Haply2Diy {
   std::uint8_t id = 3;
   int port[2] = {1, 2};  // arm k's port
   int dir[2] = {0, 0};   // 0 CW, 1 CCW
-  double offset[2] = {180, 0};
+  std::array<double, 2> offset{180, 0};
   double resolution = 13824;
   HaplyLinkage link;
   int buttonPin = -1;  // the board's pin number, -1: none
@@ -273,25 +273,6 @@ bool haplyAwaitAnswer(Haply2Diy& d, double seconds, std::string& why) {
   return false;
 }
 
-// Two comma-separated numbers "a,b".
-bool haplyPair(dm::driver::ParamReader& p, const char* key, double out[2]) {
-  const char* v = p.find(key);
-  if (!v) return true;
-  char* end = nullptr;
-  out[0] = std::strtod(v, &end);
-  if (end == v || *end != ',') {
-    p.failf("parameter '%s': '%s' is not two numbers \"a,b\"", key, v);
-    return false;
-  }
-  const char* second = end + 1;
-  out[1] = std::strtod(second, &end);
-  if (end == second || *end || !std::isfinite(out[0]) || !std::isfinite(out[1])) {
-    p.failf("parameter '%s': '%s' is not two numbers \"a,b\"", key, v);
-    return false;
-  }
-  return true;
-}
-
 void haplyClose(DmDevice* dev) {
   Haply2Diy* d = asHaply(dev);
   if (d->line) {
@@ -320,8 +301,8 @@ DmDevice* haplyOpen(const DmDeviceParam* params, size_t count, char* error, size
   const double maxForce = p.number("max_force", 0.0, 1e-3, 100.0);
   if (p.ok() && !p.find("max_force"))
     p.failf("parameter 'max_force' is required (N; Haply publishes no continuous force for the 2DIY)");
-  double ports[2] = {1, 2};
-  if (haplyPair(p, "ports", ports) &&
+  std::array<double, 2> ports{1, 2};
+  if (p.numbers("ports", ports) &&
       (ports[0] != std::floor(ports[0]) || ports[1] != std::floor(ports[1]) || ports[0] < 1 || ports[0] > 4 ||
        ports[1] < 1 || ports[1] > 4 || ports[0] == ports[1]))
     p.failf("parameter 'ports': two different ports 1 .. 4, e.g. \"1,2\"");
@@ -338,7 +319,7 @@ DmDevice* haplyOpen(const DmDeviceParam* params, size_t count, char* error, size
         p.failf("parameter 'directions': '%s' is not two of cw and ccw, e.g. \"cw,ccw\"", dirs);
     }
   }
-  haplyPair(p, "offsets", d->offset);
+  p.numbers("offsets", d->offset);
   d->resolution = p.number("resolution", 13824, 1, 1e7);
   const std::array<double, 3> links = p.triple("links", {0.05, 0.07, 0.02});
   d->link = {links[0], links[1], links[2]};
