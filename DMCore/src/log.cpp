@@ -116,6 +116,7 @@ struct State {
   RtQueue queue;
   std::mutex drainMutex;  // one consumer of the queue at a time
   std::atomic<bool> running{true};
+  std::mutex stopMutex;  // one joiner of the drainer
   std::thread drainer;
 
   State() {
@@ -130,10 +131,14 @@ struct State {
     });
   }
   ~State() {
+    stopDrainer();
+    logger->flush();
+  }
+  void stopDrainer() {
+    std::lock_guard lock(stopMutex);
     running.store(false, std::memory_order_release);
     if (drainer.joinable()) drainer.join();
     drainOnce();
-    logger->flush();
   }
   std::size_t drainOnce() {
     std::lock_guard lock(drainMutex);
@@ -228,6 +233,8 @@ void flush() {
   state().drainOnce();
   state().logger->flush();
 }
+
+void stopDrainThread() { state().stopDrainer(); }
 
 void setSink(Sink sink) {
   std::lock_guard lock(state().sinkMutex);

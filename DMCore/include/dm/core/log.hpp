@@ -59,6 +59,12 @@ std::uint64_t rtDropped() noexcept;
 /// Drains the real-time queue and flushes every sink; returns when done.
 void flush();
 
+/// Ends the background thread that drains the real-time queue (after one
+/// last drain), for a process that must stay single-threaded: DMIO's
+/// dm-isolate helper forks a child per import from its one thread. rt()
+/// records are then only written by flush(). Idempotent; not undone.
+void stopDrainThread();
+
 /// Receives every message that passes the level filter (after the default
 /// console sink). Used by tools and tests; at most one; pass {} to remove.
 using Sink = std::function<void(Level, std::string_view)>;
