@@ -1,8 +1,15 @@
-// Forked-child isolation of third-party parsers; see isolate.hpp.
+// Isolation of third-party parsers in a helper program or a forked child;
+// see isolate.hpp.
 #include "isolate.hpp"
 
+#include <dm/io/isolation.hpp>
+
+#include <dlfcn.h>
+#include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
+#include <spawn.h>
+#include <sys/mman.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -18,6 +25,7 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <new>
 
@@ -142,6 +150,8 @@ void budgetDeathCallback() {
 }
 #endif
 
+}  // namespace
+
 // Caps what the child may allocate beyond what it holds now at `budget`:
 // RLIMIT_AS on the address space, or, under the sanitizers (whose shadow
 // memory needs the address space), allocator hooks counting heap bytes. A
@@ -167,6 +177,8 @@ void limitMemory(std::size_t budget) {
 #endif
 }
 
+namespace {
+
 std::string mebibytes(std::size_t bytes) {
   char text[32];
   std::snprintf(text, sizeof text, "%.0f MiB", static_cast<double>(bytes) / (1024.0 * 1024.0));
@@ -175,10 +187,73 @@ std::string mebibytes(std::size_t bytes) {
 
 }  // namespace
 
+Result<IsolatedRun> collectChild(const ChildControl& child, int readFd, const IsolateOptions& options,
+                                 const std::string& where) {
+  IsolatedRun run;
+  const auto start = std::chrono::steady_clock::now();
+  bool timedOut = false, readError = false;
+  char chunk[1 << 16];
+  for (;;) {
+    int waitMs = -1;
+    if (options.timeoutSeconds > 0) {
+      const double left = options.timeoutSeconds -
+                          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      if (left <= 0) {
+        timedOut = true;
+        break;
+      }
+      waitMs = static_cast<int>(std::min(std::ceil(left * 1000), 1e9));
+    }
+    pollfd pfd{readFd, POLLIN, 0};
+    const int pr = ::poll(&pfd, 1, waitMs);
+    if (pr < 0 && errno == EINTR) continue;
+    if (pr < 0) {
+      readError = true;
+      break;
+    }
+    if (pr == 0) continue;  // the deadline is checked at the top
+    const ssize_t n = ::read(readFd, chunk, sizeof chunk);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) readError = true;
+    if (n <= 0) break;  // end of data (or error)
+    run.bytes.insert(run.bytes.end(), chunk, chunk + n);
+  }
+  ::close(readFd);
+  if (timedOut) child.kill();
+  const std::optional<int> ended = child.wait();
+  const bool known = ended.has_value();
+  const int status = ended.value_or(0);
+
+  if (timedOut) {
+    char secs[32];
+    std::snprintf(secs, sizeof secs, "%g", options.timeoutSeconds);
+    return fail(ErrorCode::Timeout,
+                options.library + " did not finish reading the file within " + secs + " s", where,
+                options.timeoutHint);
+  }
+  if (known && WIFSIGNALED(status))
+    return fail(ErrorCode::Parse,
+                options.library + " crashed while reading the file (signal " +
+                    std::to_string(WTERMSIG(status)) + ", " + strsignal(WTERMSIG(status)) + ")",
+                where, options.crashHint);
+  if (known && WIFEXITED(status) && WEXITSTATUS(status) == kBudgetExitStatus && options.memoryBudget > 0)
+    return fail(ErrorCode::Unsupported,
+                options.library + " needed more than its memory budget of " + mebibytes(options.memoryBudget) +
+                    " while reading the file",
+                where, options.budgetHint);
+  if (readError)
+    return fail(ErrorCode::Io, "reading the result of the " + options.library + " process failed", where,
+                options.disableHint);
+  run.exitInfo = !known              ? std::string("status unknown")
+                 : WIFEXITED(status) ? "exit status " + std::to_string(WEXITSTATUS(status))
+                                     : std::string("stopped");
+  return run;
+}
+
 Result<IsolatedRun> runIsolated(const std::function<void(FdWriter&)>& child, const IsolateOptions& options,
                                 const std::string& where) {
   int fds[2];
-  if (::pipe(fds) != 0)
+  if (::pipe2(fds, O_CLOEXEC) != 0)
     return fail(ErrorCode::Io,
                 "cannot create a pipe for the " + options.library + " process: " + std::strerror(errno),
                 where, options.disableHint);
@@ -213,68 +288,18 @@ Result<IsolatedRun> runIsolated(const std::function<void(FdWriter&)>& child, con
     ::close(fds[1]);
     ::_exit(w.ok() ? 0 : 3);
   }
-
   ::close(fds[1]);
-  IsolatedRun run;
-  const auto start = std::chrono::steady_clock::now();
-  bool timedOut = false, readError = false;
-  char chunk[1 << 16];
-  for (;;) {
-    int waitMs = -1;
-    if (options.timeoutSeconds > 0) {
-      const double left = options.timeoutSeconds -
-                          std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-      if (left <= 0) {
-        timedOut = true;
-        break;
-      }
-      waitMs = static_cast<int>(std::min(std::ceil(left * 1000), 1e9));
-    }
-    pollfd pfd{fds[0], POLLIN, 0};
-    const int pr = ::poll(&pfd, 1, waitMs);
-    if (pr < 0 && errno == EINTR) continue;
-    if (pr < 0) {
-      readError = true;
-      break;
-    }
-    if (pr == 0) continue;  // the deadline is checked at the top
-    const ssize_t n = ::read(fds[0], chunk, sizeof chunk);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) readError = true;
-    if (n <= 0) break;  // end of data (or error)
-    run.bytes.insert(run.bytes.end(), chunk, chunk + n);
-  }
-  ::close(fds[0]);
-  if (timedOut) ::kill(pid, SIGKILL);
-  int status = 0;
-  pid_t waited;
-  do waited = ::waitpid(pid, &status, 0);
-  while (waited < 0 && errno == EINTR);
-
-  if (timedOut) {
-    char secs[32];
-    std::snprintf(secs, sizeof secs, "%g", options.timeoutSeconds);
-    return fail(ErrorCode::Timeout,
-                options.library + " did not finish reading the file within " + secs + " s", where,
-                options.timeoutHint);
-  }
-  if (waited == pid && WIFSIGNALED(status))
-    return fail(ErrorCode::Parse,
-                options.library + " crashed while reading the file (signal " +
-                    std::to_string(WTERMSIG(status)) + ", " + strsignal(WTERMSIG(status)) + ")",
-                where, options.crashHint);
-  if (waited == pid && WIFEXITED(status) && WEXITSTATUS(status) == kBudgetExitStatus && options.memoryBudget > 0)
-    return fail(ErrorCode::Unsupported,
-                options.library + " needed more than its memory budget of " + mebibytes(options.memoryBudget) +
-                    " while reading the file",
-                where, options.budgetHint);
-  if (readError)
-    return fail(ErrorCode::Io, "reading the result of the " + options.library + " process failed", where,
-                options.disableHint);
-  run.exitInfo = waited != pid       ? std::string("status unknown")
-                 : WIFEXITED(status) ? "exit status " + std::to_string(WEXITSTATUS(status))
-                                     : std::string("stopped");
-  return run;
+  ChildControl control;
+  control.kill = [pid] { ::kill(pid, SIGKILL); };
+  control.wait = [pid]() -> std::optional<int> {
+    int status = 0;
+    pid_t waited;
+    do waited = ::waitpid(pid, &status, 0);
+    while (waited < 0 && errno == EINTR);
+    if (waited != pid) return std::nullopt;
+    return status;
+  };
+  return collectChild(control, fds[0], options, where);
 }
 
 }  // namespace dm::detail

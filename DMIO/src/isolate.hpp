@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <cstring>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -26,6 +27,7 @@ class FdWriter {
   explicit FdWriter(int fd) : fd_(fd) {}
   void bytes(const void* data, std::size_t n);
   void u64(std::uint64_t v) { bytes(&v, sizeof v); }
+  void f64(double v) { bytes(&v, sizeof v); }
   void str(const std::string& s) {
     u64(s.size());
     bytes(s.data(), s.size());
@@ -54,6 +56,11 @@ class ByteReader {
     bytes(&v, sizeof v);
     return v;
   }
+  double f64() {
+    double v = 0;
+    bytes(&v, sizeof v);
+    return v;
+  }
   std::string str();
   template <class T>
   void array(std::vector<T>& v) {
@@ -69,6 +76,8 @@ class ByteReader {
   Error error();
   std::size_t remaining() const { return static_cast<std::size_t>(end_ - p_); }
   bool ok() const { return ok_; }
+  /// For a reader that found a field out of range itself.
+  void markBroken() { ok_ = false; }
 
  private:
   const char* p_;
@@ -84,7 +93,7 @@ struct IsolateOptions {
   /// (whose shadow memory needs the address space) with allocator hooks
   /// counting heap bytes. Exceeding it fails with Unsupported.
   std::size_t memoryBudget = 0;
-  std::string disableHint;  ///< how to run in-process instead, for fork/pipe failures
+  std::string disableHint;  ///< how to choose another isolation, for spawn/fork/pipe failures
   std::string crashHint;    ///< what a crash means for the user
   std::string timeoutHint;  ///< what a timeout means for the user
   std::string budgetHint;   ///< what exceeding the memory budget means for the user
@@ -103,5 +112,59 @@ struct IsolatedRun {
 /// pipe, no fork).
 Result<IsolatedRun> runIsolated(const std::function<void(FdWriter&)>& child, const IsolateOptions& options,
                                 const std::string& where);
+
+/// Runs `job` in the dm-isolate helper program: `writeRequest` writes the
+/// request (into a sealed memory file, the job's standard input), the
+/// helper runs the job with the deadline and memory budget of `options` and
+/// the job writes its result to a pipe. The helper is started once per
+/// process (posix_spawn: a fresh program, nothing of the caller's threads
+/// or locks) and serves every job after that from a forked child of its own
+/// single thread (isolate_helper.cpp). Fails like runIsolated(), and with
+/// NotFound when there is no helper program (naming where it looked),
+/// Internal when the helper does not know the job (a helper of another
+/// version).
+Result<IsolatedRun> runHelper(const char* job, const std::function<void(FdWriter&)>& writeRequest,
+                              const IsolateOptions& options, const std::string& where);
+
+/// The helper program's path (dm/io/isolation.hpp says where it is looked
+/// for), or NotFound naming the places.
+Result<std::string> helperProgram();
+
+/// A job of the helper: reads its request, writes its result. It runs in a
+/// forked child of the helper's single thread, so it may start threads, but
+/// must not write to stdout.
+using HelperJob = void (*)(ByteReader& request, FdWriter& result);
+struct HelperJobEntry {
+  const char* name;
+  HelperJob run;
+};
+
+/// The helper's main(): `dm-isolate --serve`, started by runHelper() with its
+/// control socket on fd 3; serves jobs until the socket closes (the caller's
+/// process ended). Run by hand it prints what it is for and returns 2.
+int helperMain(int argc, char** argv, const HelperJobEntry* jobs, std::size_t jobCount);
+
+/// The jobs DMIO's readers hand the helper (defined beside each reader).
+void assimpImportJob(ByteReader& request, FdWriter& result);  // mesh_io.cpp
+void openVdbParseJob(ByteReader& request, FdWriter& result);  // vdb.cpp
+
+// Shared by both modes (isolate.cpp).
+
+/// Caps what this process (a child) may allocate from now on at `budget`
+/// bytes (0: no cap): RLIMIT_AS, or allocator hooks under the sanitizers.
+/// Beyond it the process exits with the over-budget status.
+void limitMemory(std::size_t budget);
+
+/// How the caller ends and reaps the other process.
+struct ChildControl {
+  std::function<void()> kill;
+  std::function<std::optional<int>()> wait;  ///< its wait status; nullopt: unknown
+};
+
+/// The caller's side of both modes: reads the result from `readFd` (and
+/// closes it) until its end or the deadline, ends (at the deadline) and
+/// reaps the other process and turns how it ended into an Error or the run.
+Result<IsolatedRun> collectChild(const ChildControl& child, int readFd, const IsolateOptions& options,
+                                 const std::string& where);
 
 }  // namespace dm::detail

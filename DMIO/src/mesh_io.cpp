@@ -48,6 +48,7 @@ using detail::ByteReader;
 using detail::FdWriter;
 using detail::IsolateOptions;
 using detail::lower;
+using detail::runHelper;
 using detail::runIsolated;
 
 namespace {
@@ -975,11 +976,40 @@ Result<std::vector<Builder>> receiveResult(const std::vector<char>& buf, const s
   return out;
 }
 
+// The helper's request: the source, the options and `merge`, then a marker
+// (assimpImportJob reads it back).
+constexpr std::uint64_t kRequestEnd = 0x444d4d4553485251ull;
+
+void writeRequest(FdWriter& w, const Source& src, const MeshImportOptions& o, bool merge) {
+  w.u64(src.file != nullptr ? 1 : 0);
+  if (src.file != nullptr) {
+    w.str(src.file->string());
+    w.u64(src.roots.size());
+    for (const fs::path& root : src.roots) w.str(root.string());
+  } else {
+    w.u64(src.bytes.size());
+    w.bytes(src.bytes.data(), src.bytes.size());
+    w.str(src.hint);
+  }
+  w.str(src.where);
+  w.str(src.stem);
+  w.str(o.unit);
+  w.f64(o.scale);
+  w.u64((o.mergeMeshes ? 1u : 0u) | (o.weld ? 2u : 0u) | (o.computeNormals ? 4u : 0u) | (merge ? 8u : 0u));
+  w.f64(o.weldTolerance);
+  w.u64(o.maxTriangles);
+  w.u64(o.maxFileBytes);
+  w.f64(o.timeoutSeconds);
+  w.u64(kRequestEnd);
+}
+
 Result<std::vector<Builder>> loadIsolated(const Source& src, const MeshImportOptions& options, bool merge) {
   IsolateOptions iso;
   iso.library = "Assimp";
   iso.timeoutSeconds = options.timeoutSeconds;
-  iso.disableHint = "set MeshImportOptions::isolate = false to import in-process";
+  iso.disableHint =
+      "set MeshImportOptions::isolation to Isolation::Fork (single-threaded callers) or Isolation::InProcess "
+      "(trusted files)";
   iso.crashHint = "the file is malformed or triggers an Assimp bug; check or re-export it";
   iso.timeoutHint =
       "the file is malformed (Assimp 5 loops on some broken files) or very large: check it, or raise "
@@ -1000,7 +1030,11 @@ Result<std::vector<Builder>> loadIsolated(const Source& src, const MeshImportOpt
       "the file is corrupt or crafted (it asks Assimp for more memory than its size and "
       "MeshImportOptions::maxTriangles justify); check it, or raise maxTriangles";
   auto run =
-      runIsolated([&](FdWriter& w) { sendResult(w, loadWithAssimp(src, options, merge)); }, iso, src.where);
+      options.isolation == Isolation::Fork
+          ? runIsolated([&](FdWriter& w) { sendResult(w, loadWithAssimp(src, options, merge)); }, iso,
+                        src.where)
+          : runHelper(
+                "assimp-import", [&](FdWriter& w) { writeRequest(w, src, options, merge); }, iso, src.where);
   if (!run) return run.error();
   return receiveResult(run->bytes, run->exitInfo, src.where);
 }
@@ -1010,7 +1044,8 @@ Result<std::vector<Mesh>> import(const Source& src, const MeshImportOptions& opt
   if (auto s = checkOptions(options, where); !s) return s.error();
   if (auto s = checkInput(src, options); !s) return s.error();
 
-  auto builders = options.isolate ? loadIsolated(src, options, merge) : loadWithAssimp(src, options, merge);
+  auto builders = options.isolation == Isolation::InProcess ? loadWithAssimp(src, options, merge)
+                                                            : loadIsolated(src, options, merge);
   if (!builders) return builders.error();
 
   std::vector<Mesh> out;
@@ -1116,3 +1151,52 @@ Result<Mesh> parseMesh(std::span<const std::byte> bytes, std::string_view format
 }
 
 }  // namespace dm
+
+namespace dm::detail {
+
+// The helper's side of an isolated import: the request writeRequest() wrote,
+// loadWithAssimp() on it, the builders back as sendResult() writes them.
+void assimpImportJob(ByteReader& r, FdWriter& w) {
+  Source src;
+  fs::path file;
+  std::vector<std::byte> bytes;
+  if (r.u64() == 1) {
+    file = r.str();
+    const std::uint64_t roots = r.u64();
+    for (std::uint64_t i = 0; i < roots && r.ok(); ++i) src.roots.emplace_back(r.str());
+    src.file = &file;
+  } else {
+    const std::uint64_t n = r.u64();
+    if (r.ok() && n <= r.remaining()) {
+      bytes.resize(static_cast<std::size_t>(n));
+      r.bytes(bytes.data(), bytes.size());
+    } else {
+      r.markBroken();
+    }
+    src.bytes = bytes;
+    src.hint = r.str();
+  }
+  src.where = r.str();
+  src.stem = r.str();
+  MeshImportOptions o;
+  o.unit = r.str();
+  o.scale = r.f64();
+  const std::uint64_t flags = r.u64();
+  o.mergeMeshes = (flags & 1u) != 0;
+  o.weld = (flags & 2u) != 0;
+  o.computeNormals = (flags & 4u) != 0;
+  const bool merge = (flags & 8u) != 0;
+  o.weldTolerance = r.f64();
+  o.maxTriangles = static_cast<std::size_t>(r.u64());
+  o.maxFileBytes = static_cast<std::size_t>(r.u64());
+  o.timeoutSeconds = r.f64();
+  o.isolation = Isolation::InProcess;  // this is the isolated process
+  if (r.u64() != kRequestEnd || !r.ok()) {
+    sendResult(w, fail(ErrorCode::Internal, "the import helper got an incomplete request", src.where,
+                       "please report this"));
+    return;
+  }
+  sendResult(w, loadWithAssimp(src, o, merge));
+}
+
+}  // namespace dm::detail

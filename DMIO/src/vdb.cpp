@@ -350,7 +350,9 @@ detail::IsolateOptions isolateOptions(const VdbReadOptions& options, std::size_t
   // The dense copy, the sparse tree (compressed files expand) and slack.
   iso.memoryBudget =
       2 * std::min(options.maxBytes, std::size_t{1} << 40) + 16 * fileBytes + (std::size_t{1} << 30);
-  iso.disableHint = "set VdbReadOptions::isolate = false to read in-process (trusted files only)";
+  iso.disableHint =
+      "set VdbReadOptions::isolation to Isolation::Fork (single-threaded callers) or Isolation::InProcess "
+      "(trusted files)";
   iso.crashHint =
       "the file is corrupt or crafted (OpenVDB allocates the lengths stored in it); check where it came from";
   iso.timeoutHint = "the file is corrupt or very large: check it, or raise VdbReadOptions::timeoutSeconds";
@@ -422,10 +424,24 @@ Result<Volume> parseVdb(std::span<const std::byte> bytes, std::string_view sourc
       !s)
     return s.error();
   initializeOpenVdb();  // before a fork, so the child does not initialise
-  if (!options.isolate) return parseInProcess(bytes, source, options, false);
-  auto run = detail::runIsolated(
-      [&](detail::FdWriter& w) { sendVolume(w, parseInProcess(bytes, source, options, true)); },
-      isolateOptions(options, bytes.size()), whereOf(source, options.gridName));
+  if (options.isolation == Isolation::InProcess) return parseInProcess(bytes, source, options, false);
+  const detail::IsolateOptions iso = isolateOptions(options, bytes.size());
+  auto run =
+      options.isolation == Isolation::Fork
+          ? detail::runIsolated(
+                [&](detail::FdWriter& w) { sendVolume(w, parseInProcess(bytes, source, options, true)); },
+                iso, whereOf(source, options.gridName))
+          : detail::runHelper(
+                "openvdb-parse",
+                [&](detail::FdWriter& w) {
+                  w.str(source);
+                  w.str(options.gridName);
+                  w.u64(options.maxBytes);
+                  w.u64(bytes.size());
+                  w.bytes(bytes.data(), bytes.size());
+                  w.u64(kEndMarker);
+                },
+                iso, whereOf(source, options.gridName));
   if (!run) return run.error();
   return receiveVolume(*run, whereOf(source, options.gridName), options.maxBytes);
 }
@@ -481,3 +497,33 @@ Result<std::vector<std::string>> listVdbGrids(const std::filesystem::path& file)
 }
 
 }  // namespace dm
+
+namespace dm::detail {
+
+// The helper's side of an isolated parse: source name, grid name, maxBytes
+// and the file's bytes in, the volume out as sendVolume() writes it. A fresh
+// process, so OpenVDB may use its oneTBB tasks here.
+void openVdbParseJob(ByteReader& r, FdWriter& w) {
+  const std::string source = r.str();
+  VdbReadOptions o;
+  o.gridName = r.str();
+  o.maxBytes = static_cast<std::size_t>(r.u64());
+  o.isolation = Isolation::InProcess;  // this is the isolated process
+  const std::uint64_t n = r.u64();
+  std::vector<std::byte> bytes;
+  if (r.ok() && n <= r.remaining()) {
+    bytes.resize(static_cast<std::size_t>(n));
+    r.bytes(bytes.data(), bytes.size());
+  } else {
+    r.markBroken();
+  }
+  if (r.u64() != kEndMarker || !r.ok()) {
+    sendVolume(w, fail(ErrorCode::Internal, "the OpenVDB helper got an incomplete request",
+                       whereOf(source, o.gridName), "please report this"));
+    return;
+  }
+  initializeOpenVdb();
+  sendVolume(w, parseInProcess(bytes, source, o, false));
+}
+
+}  // namespace dm::detail

@@ -210,23 +210,24 @@ TEST(Confinement, SceneSourcesOutsideTheScenesFolderAreRefused) {
 
 // A triangle whose OBJ names a material library: refused when the library
 // lies outside the model's folder (by "..", or a symlink that leaves), in-
-// process and isolated alike, even though Assimp goes on without a missing
-// library; loaded when it is inside or allowed. An absolute mtllib does not
-// leave: Assimp 5.2's OBJ reader puts the model's folder in front of it
-// (it looks for case//tmp/.../secret.raw), so the model loads without the
-// library and the file outside is never opened. In-process the FIFO's
-// watchdog catches a reader that opened it; an isolated import runs without
-// the watchdog thread (a fork beside a running thread is what isolation
-// cannot make safe: under ASan such a child hung on the allocator's lock,
-// held at the fork by another thread), and a child that opened the FIFO
-// would block until the import's timeout and fail the test.
+// process, in the helper program and in a forked child alike, even though
+// Assimp goes on without a missing library; loaded when it is inside or
+// allowed. An absolute mtllib does not leave: Assimp 5.2's OBJ reader puts
+// the model's folder in front of it (it looks for case//tmp/.../secret.raw),
+// so the model loads without the library and the file outside is never
+// opened. In-process and in the helper the FIFO's watchdog thread catches a
+// reader that opened it; a forked import runs without the watchdog thread
+// (a fork beside a running thread is what Isolation::Fork cannot make safe:
+// under ASan such a child hung on the allocator's lock, held at the fork by
+// another thread), and a child that opened the FIFO would block until the
+// import's timeout and fail the test.
 const std::string kTriangleObj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl skin\nf 1 2 3\n";
 
-dm::Result<dm::Mesh> readWatched(const Layout& l, const fs::path& file, bool isolate) {
+dm::Result<dm::Mesh> readWatched(const Layout& l, const fs::path& file, dm::Isolation isolation) {
   dm::MeshImportOptions options;
-  options.isolate = isolate;
+  options.isolation = isolation;
   options.timeoutSeconds = 30;
-  if (isolate) return dm::readMesh(file, options);
+  if (isolation == dm::Isolation::Fork) return dm::readMesh(file, options);
   dm::Result<dm::Mesh> m = dm::Mesh();
   EXPECT_FALSE(opensFifo(l.secret, [&] { m = dm::readMesh(file, options); }));
   return m;
@@ -236,22 +237,23 @@ TEST(Confinement, AMeshsMaterialLibraryOutsideItsFolderIsRefused) {
   Layout l("confine_obj");
   fs::create_symlink(l.secret, l.caseDir / "link.mtl");
   fs::create_symlink(l.outside, l.caseDir / "linkdir");
-  for (const bool isolate : {true, false}) {
+  for (const dm::Isolation isolation :
+       {dm::Isolation::Helper, dm::Isolation::Fork, dm::Isolation::InProcess}) {
     for (const std::string& ref :
          {std::string("../outside/secret.raw"), std::string("link.mtl"), std::string("linkdir/secret.raw"),
           std::string("sub/../../outside/secret.raw")}) {
-      SCOPED_TRACE(ref + (isolate ? " (isolated)" : " (in-process)"));
+      SCOPED_TRACE(ref + " (" + dm::toString(isolation) + ")");
       writeText(l.caseDir / "evil.obj", "mtllib " + ref + "\n" + kTriangleObj);
-      const dm::Result<dm::Mesh> m = readWatched(l, l.caseDir / "evil.obj", isolate);
+      const dm::Result<dm::Mesh> m = readWatched(l, l.caseDir / "evil.obj", isolation);
       ASSERT_FALSE(m) << "a file outside the allowed roots was asked for and not refused";
       EXPECT_EQ(m.error().code, dm::ErrorCode::Denied) << m.error();
       EXPECT_NE(m.error().message().find("outside the allowed folders"), std::string::npos) << m.error();
       EXPECT_NE(m.error().where.find("evil.obj"), std::string::npos) << m.error();
       EXPECT_NE(m.error().hint.find("DM_ALLOW_PATH"), std::string::npos) << m.error();
     }
-    SCOPED_TRACE(std::string("absolute") + (isolate ? " (isolated)" : " (in-process)"));
+    SCOPED_TRACE(std::string("absolute (") + dm::toString(isolation) + ")");
     writeText(l.caseDir / "abs.obj", "mtllib " + l.secret.string() + "\n" + kTriangleObj);
-    const dm::Result<dm::Mesh> m = readWatched(l, l.caseDir / "abs.obj", isolate);
+    const dm::Result<dm::Mesh> m = readWatched(l, l.caseDir / "abs.obj", isolation);
     ASSERT_TRUE(m) << m.error();
     EXPECT_EQ(m->triangleCount(), 1u);
   }

@@ -1,15 +1,27 @@
-// The forked-child isolation behind the Assimp and OpenVDB readers
-// (DMIO/src/isolate.hpp, private to DMIO): results come back through the
-// pipe, and a crash, a timeout or an allocation beyond the memory budget in
-// the child becomes an Error in the parent — in plain builds (RLIMIT_AS) and
-// under the sanitizers (allocator hooks) alike.
+// The isolation behind the Assimp and OpenVDB readers (DMIO/src/isolate.hpp,
+// private to DMIO), in a forked child and in the dm-isolate helper program:
+// results come back through the pipe, and a crash, a timeout or an
+// allocation beyond the memory budget in the other process becomes an Error
+// in the caller — in plain builds (RLIMIT_AS) and under the sanitizers
+// (allocator hooks) alike.
 #include "../../DMIO/src/isolate.hpp"
+
+#include <dm/io/mesh_io.hpp>
 
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
 #include <csignal>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <memory>
+#include <mutex>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -107,5 +119,194 @@ TEST(Isolate, DeadlineEndsTheChild) {
   EXPECT_EQ(run.error().code, dm::ErrorCode::Timeout);
   EXPECT_NE(run.error().message().find("timeout hint"), std::string::npos) << run.error();
 }
+
+// ---------------------------------------------------------------------------
+// The same guarantees in the dm-isolate helper program (the default), through
+// its check-* jobs (DMIO/helper/main.cpp).
+
+namespace helper_cases {
+
+using dm::detail::ByteReader;
+using dm::detail::runHelper;
+
+dm::Result<dm::detail::IsolatedRun> allocateInHelper(std::uint64_t bytes, std::uint64_t blocks,
+                                                     std::size_t budget) {
+  return runHelper(
+      "check-allocate",
+      [&](FdWriter& w) {
+        w.u64(bytes);
+        w.u64(blocks);
+      },
+      options(budget), "test.bin");
+}
+
+TEST(IsolateHelper, ResultComesBackWithinBudget) {
+  constexpr std::uint64_t kBytes = std::uint64_t{8} << 20;
+  auto run = allocateInHelper(kBytes, 1, std::size_t{256} << 20);
+  ASSERT_TRUE(run) << run.error();
+  ByteReader r(run->bytes);
+  EXPECT_EQ(r.u64(), kBytes / 4096);
+  EXPECT_TRUE(r.ok());
+  EXPECT_EQ(run->exitInfo, "exit status 0");
+}
+
+TEST(IsolateHelper, AllocationBeyondBudgetIsAnError) {
+  auto run = allocateInHelper(std::uint64_t{512} << 20, 1, std::size_t{64} << 20);
+  ASSERT_FALSE(run);
+  EXPECT_EQ(run.error().code, dm::ErrorCode::Unsupported) << run.error();
+  const std::string msg = run.error().message();
+  EXPECT_NE(msg.find("test.bin"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("TestLib needed more than its memory budget of 64 MiB"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("budget hint"), std::string::npos) << msg;
+}
+
+TEST(IsolateHelper, AllocationNoMachineCanServeIsOverBudget) {
+  for (const std::uint64_t bytes : {std::uint64_t{1} << 37, std::uint64_t{1} << 46}) {
+    auto run = allocateInHelper(bytes, 1, std::size_t{64} << 20);
+    ASSERT_FALSE(run) << bytes;
+    EXPECT_EQ(run.error().code, dm::ErrorCode::Unsupported) << bytes << ": " << run.error();
+  }
+}
+
+TEST(IsolateHelper, ManySmallAllocationsCountAgainstTheBudget) {
+  auto run = allocateInHelper(64 << 10, 4096, std::size_t{64} << 20);  // 256 MiB in all
+  ASSERT_FALSE(run);
+  EXPECT_EQ(run.error().code, dm::ErrorCode::Unsupported) << run.error();
+}
+
+TEST(IsolateHelper, CrashIsAParseError) {
+  auto run = runHelper(
+      "check-crash", [](FdWriter&) {}, options(0), "test.bin");
+  ASSERT_FALSE(run);
+  EXPECT_EQ(run.error().code, dm::ErrorCode::Parse) << run.error();
+  EXPECT_NE(run.error().message().find("TestLib crashed while reading the file"), std::string::npos)
+      << run.error();
+  EXPECT_NE(run.error().message().find("crash hint"), std::string::npos) << run.error();
+}
+
+TEST(IsolateHelper, DeadlineEndsTheHelper) {
+  const auto start = std::chrono::steady_clock::now();
+  auto run = runHelper(
+      "check-hang", [](FdWriter&) {}, options(0, 0.3), "test.bin");
+  ASSERT_FALSE(run);
+  EXPECT_EQ(run.error().code, dm::ErrorCode::Timeout) << run.error();
+  EXPECT_NE(run.error().message().find("timeout hint"), std::string::npos) << run.error();
+  // Killed at the deadline, not left to its own alarm a second later.
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 1.2);
+}
+
+// A request far larger than a pipe holds (64 KiB) reaches the helper whole:
+// it comes in a memory file, not through a pipe both sides could fill.
+TEST(IsolateHelper, ALargeRequestComesThroughWhole) {
+  std::string text(std::size_t{6} << 20, '\0');
+  for (std::size_t i = 0; i < text.size(); ++i) text[i] = static_cast<char>('a' + (i * 7919) % 26);
+  auto run = runHelper(
+      "check-echo", [&](FdWriter& w) { w.str(text); }, options(std::size_t{256} << 20), "test.bin");
+  ASSERT_TRUE(run) << run.error();
+  ByteReader r(run->bytes);
+  EXPECT_EQ(r.str(), text);
+  EXPECT_TRUE(r.ok());
+}
+
+TEST(IsolateHelper, AJobTheHelperDoesNotKnowIsNamed) {
+  auto run = runHelper(
+      "no-such-job", [](FdWriter&) {}, options(0), "test.bin");
+  ASSERT_FALSE(run);
+  EXPECT_EQ(run.error().code, dm::ErrorCode::Internal) << run.error();
+  EXPECT_NE(run.error().message().find("dm-isolate"), std::string::npos) << run.error();
+  EXPECT_NE(run.error().hint.find("DM_ISOLATE_HELPER"), std::string::npos) << run.error();
+}
+
+TEST(IsolateHelper, AHelperThatIsNotThereIsNamed) {
+  const char* before = std::getenv("DM_ISOLATE_HELPER");
+  const std::string saved = before ? before : "";
+  ::setenv("DM_ISOLATE_HELPER", "/nonexistent/dm-isolate", 1);
+  auto run = runHelper(
+      "check-echo", [](FdWriter& w) { w.str("x"); }, options(0), "test.bin");
+  if (before)
+    ::setenv("DM_ISOLATE_HELPER", saved.c_str(), 1);
+  else
+    ::unsetenv("DM_ISOLATE_HELPER");
+  ASSERT_FALSE(run);
+  EXPECT_EQ(run.error().code, dm::ErrorCode::NotFound) << run.error();
+  EXPECT_NE(run.error().message().find("/nonexistent/dm-isolate"), std::string::npos) << run.error();
+  EXPECT_NE(run.error().message().find("test.bin"), std::string::npos) << run.error();
+  // Without the variable the helper is found beside the library.
+  auto found = dm::detail::helperProgram();
+  ASSERT_TRUE(found) << found.error();
+  EXPECT_NE(found->find("dm-isolate"), std::string::npos) << *found;
+}
+
+// The helper forks every job from its only thread: the threads libraries
+// start when they load (DMCore's log drainer, log4cplus's pool under
+// OpenVDB) are ended first. ThreadSanitizer keeps a thread of its own.
+TEST(IsolateHelper, TheHelperForksFromItsOnlyThread) {
+  auto run = runHelper(
+      "check-helper-threads", [](FdWriter&) {}, options(0), "test.bin");
+  ASSERT_TRUE(run) << run.error();
+  ByteReader r(run->bytes);
+  const std::uint64_t threads = r.u64();
+  ASSERT_TRUE(r.ok());
+#if defined(__SANITIZE_THREAD__)
+  EXPECT_LE(threads, 2u);
+#else
+  EXPECT_EQ(threads, 1u);
+#endif
+}
+
+// Issue 37's acceptance: imports from a process whose other threads are
+// busy in the allocator, in stdio and in locks of their own — the state in
+// which a forked child can inherit a lock no thread will release — run
+// 1,000 times, each within its deadline, and all give the mesh.
+TEST(IsolateHelper, AThousandImportsBesideBusyThreadsNeverHang) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("dm_isolate_busy_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(dir);
+  const std::filesystem::path obj = dir / "triangle.obj";
+  std::FILE* f = std::fopen(obj.c_str(), "w");
+  ASSERT_NE(f, nullptr);
+  std::fputs("v 0 0 0\nv 0.01 0 0\nv 0 0.01 0\nf 1 2 3\n", f);
+  std::fclose(f);
+
+  std::atomic<bool> stop{false};
+  std::atomic<std::uint64_t> spins{0};
+  std::mutex shared;
+  std::vector<std::thread> busy;
+  for (int t = 0; t < 4; ++t)
+    busy.emplace_back([&, t] {
+      std::FILE* sink = std::fopen("/dev/null", "w");
+      std::uint64_t n = 0;
+      while (!stop.load(std::memory_order_relaxed)) {
+        std::vector<std::unique_ptr<char[]>> blocks;
+        for (int i = 0; i < 16; ++i) blocks.push_back(std::make_unique<char[]>(16u << ((n + i) % 12)));
+        {
+          std::lock_guard<std::mutex> lock(shared);
+          if (sink) std::fprintf(sink, "%d %llu\n", t, static_cast<unsigned long long>(n));
+        }
+        ++n;
+      }
+      if (sink) std::fclose(sink);
+      spins += n;
+    });
+
+  dm::MeshImportOptions options;  // Isolation::Helper, the default
+  options.timeoutSeconds = 20;
+  int loaded = 0;
+  std::string firstError;
+  for (int i = 0; i < 1000; ++i) {
+    auto m = dm::readMesh(obj, options);
+    if (m && m->triangleCount() == 1)
+      ++loaded;
+    else if (firstError.empty())
+      firstError = m ? "a mesh without its one triangle" : m.error().message();
+  }
+  stop = true;
+  for (auto& t : busy) t.join();
+  std::filesystem::remove_all(dir);
+  EXPECT_EQ(loaded, 1000) << firstError;
+  EXPECT_GT(spins.load(), 0u) << "the busy threads never ran";
+}
+
+}  // namespace helper_cases
 
 }  // namespace

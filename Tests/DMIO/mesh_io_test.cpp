@@ -681,29 +681,46 @@ TEST(MeshIo, ExportRejectsWhatCannotBeWritten) {
   EXPECT_TRUE(mentions(noDir.error(), "cube.stl")) << noDir.error();
 }
 
+// The helper program (the default), a forked child and the caller itself
+// import the same meshes, from a file and from memory, and report the same
+// errors.
 TEST(MeshIo, IsolatedAndInProcessImportsAgree) {
   TempDir dir("isolate");
   writeText(dir / "scene.dae", sceneDae());
-  dm::MeshImportOptions inProcess;
-  inProcess.isolate = false;
-  auto a = dm::readMeshes(dir / "scene.dae");
-  auto b = dm::readMeshes(dir / "scene.dae", inProcess);
-  ASSERT_TRUE(a) << a.error();
-  ASSERT_TRUE(b) << b.error();
-  ASSERT_EQ(a->size(), b->size());
-  for (std::size_t i = 0; i < a->size(); ++i) {
-    EXPECT_EQ((*a)[i].name, (*b)[i].name);
-    EXPECT_EQ((*a)[i].positions, (*b)[i].positions);
-    EXPECT_EQ((*a)[i].normals, (*b)[i].normals);
-    EXPECT_EQ((*a)[i].triangles, (*b)[i].triangles);
-  }
-  // Errors found in the child come back intact.
   writeText(dir / "nan.obj", "v 0 0 0\nv 1 0 0\nv 0 1 nan\nf 1 2 3\n");
-  auto c = dm::readMesh(dir / "nan.obj");
+  dm::MeshImportOptions inProcess;
+  inProcess.isolation = dm::Isolation::InProcess;
+  auto b = dm::readMeshes(dir / "scene.dae", inProcess);
+  ASSERT_TRUE(b) << b.error();
+  const std::string dae = sceneDae();
+  const std::span<const std::byte> daeBytes(reinterpret_cast<const std::byte*>(dae.data()), dae.size());
+  dm::MeshImportOptions mergedInProcess = inProcess;
+  auto fromMemoryInProcess = dm::parseMesh(daeBytes, "dae", mergedInProcess);
+  ASSERT_TRUE(fromMemoryInProcess) << fromMemoryInProcess.error();
   auto d = dm::readMesh(dir / "nan.obj", inProcess);
-  ASSERT_FALSE(c);
   ASSERT_FALSE(d);
-  EXPECT_EQ(c.error().message(), d.error().message());
+  for (const dm::Isolation isolation : {dm::Isolation::Helper, dm::Isolation::Fork}) {
+    SCOPED_TRACE(dm::toString(isolation));
+    dm::MeshImportOptions isolated;
+    isolated.isolation = isolation;
+    auto a = dm::readMeshes(dir / "scene.dae", isolated);
+    ASSERT_TRUE(a) << a.error();
+    ASSERT_EQ(a->size(), b->size());
+    for (std::size_t i = 0; i < a->size(); ++i) {
+      EXPECT_EQ((*a)[i].name, (*b)[i].name);
+      EXPECT_EQ((*a)[i].positions, (*b)[i].positions);
+      EXPECT_EQ((*a)[i].normals, (*b)[i].normals);
+      EXPECT_EQ((*a)[i].triangles, (*b)[i].triangles);
+    }
+    auto fromMemory = dm::parseMesh(daeBytes, "dae", isolated);
+    ASSERT_TRUE(fromMemory) << fromMemory.error();
+    EXPECT_EQ(fromMemory->positions, fromMemoryInProcess->positions);
+    EXPECT_EQ(fromMemory->triangles, fromMemoryInProcess->triangles);
+    // Errors found in the other process come back intact.
+    auto c = dm::readMesh(dir / "nan.obj", isolated);
+    ASSERT_FALSE(c);
+    EXPECT_EQ(c.error().message(), d.error().message());
+  }
 }
 
 TEST(MeshIo, IsolatedImportIsCutOffAtTheDeadline) {

@@ -268,26 +268,33 @@ TEST(Vdb, Colin27SkinVoxelizesToItsMeshVolume) {
 
 }  // namespace
 
-// The isolated reader (a forked child) returns the same volume, and a
-// truncated stream comes back as an Error. Run first in its own process (as
-// ctest does), before any worker threads exist.
+// The isolated readers (the helper program, the default, and a forked
+// child) return the same volume as the in-process one, and a truncated
+// stream comes back as an Error. Run first in its own process (as ctest
+// does), before any worker threads exist: a fork is only safe there.
 TEST(Vdb, IsolatedReadMatchesAndFailsCleanly) {
   const char* root = std::getenv("DM_SOURCE_DIR");
   if (!root) GTEST_SKIP() << "DM_SOURCE_DIR is not set (ctest sets it)";
   const std::filesystem::path seed = std::filesystem::path(root) / "Tests/fuzz/corpus/vdb_fuzz/fog.vdb";
   auto bytes = dm::readFile(seed);
   ASSERT_TRUE(bytes) << bytes.error();
-  dm::VdbReadOptions iso;
-  iso.isolate = true;
-  iso.timeoutSeconds = 30;
-  auto isolated = dm::parseVdb(*bytes, seed.string(), iso);
-  ASSERT_TRUE(isolated) << isolated.error();
-  EXPECT_EQ(isolated->dims(), dm::Vec3i(9, 9, 9));
-  auto cut = dm::parseVdb(std::span(bytes->data(), bytes->size() / 2), "half.vdb", iso);
-  ASSERT_FALSE(cut);
-  EXPECT_FALSE(cut.error().what.empty());
-  auto direct = dm::parseVdb(*bytes, seed.string());
+  dm::VdbReadOptions trusted;
+  trusted.isolation = dm::Isolation::InProcess;
+  auto direct = dm::parseVdb(*bytes, seed.string(), trusted);
   ASSERT_TRUE(direct) << direct.error();
-  EXPECT_TRUE(direct->indexToWorld().isApprox(isolated->indexToWorld(), 0.0));
-  for (std::size_t i = 0; i < direct->voxelCount(); ++i) ASSERT_EQ(direct->valueAt(i), isolated->valueAt(i));
+  for (const dm::Isolation isolation : {dm::Isolation::Helper, dm::Isolation::Fork}) {
+    SCOPED_TRACE(dm::toString(isolation));
+    dm::VdbReadOptions iso;
+    iso.isolation = isolation;
+    iso.timeoutSeconds = 30;
+    auto isolated = dm::parseVdb(*bytes, seed.string(), iso);
+    ASSERT_TRUE(isolated) << isolated.error();
+    EXPECT_EQ(isolated->dims(), dm::Vec3i(9, 9, 9));
+    auto cut = dm::parseVdb(std::span(bytes->data(), bytes->size() / 2), "half.vdb", iso);
+    ASSERT_FALSE(cut);
+    EXPECT_FALSE(cut.error().what.empty());
+    EXPECT_TRUE(direct->indexToWorld().isApprox(isolated->indexToWorld(), 0.0));
+    for (std::size_t i = 0; i < direct->voxelCount(); ++i)
+      ASSERT_EQ(direct->valueAt(i), isolated->valueAt(i));
+  }
 }

@@ -7,10 +7,14 @@
 // triangles that were distinct in double).
 //
 // Only our code is instrumented; Assimp is the system library. Assimp runs
-// isolated (the default), so its own hangs and crashes on broken input come
-// back as Timeout/Parse errors rather than stopping the fuzzer; a sanitizer
-// report from our code in the child makes it exit without a result, which
-// parseMesh reports as ErrorCode::Internal — and that aborts here.
+// isolated in a forked child (Isolation::Fork: several times the executions
+// a second of the default helper program, and safe here, where libFuzzer's
+// only other thread, its RSS monitor, wakes once a second to read /proc), so
+// its own hangs and crashes on broken input come back as Timeout/Parse
+// errors rather than stopping the fuzzer; a sanitizer report from our code
+// in the child makes it exit without a result, which parseMesh reports as
+// ErrorCode::Internal — and that aborts here. The helper runs the same
+// loadWithAssimp() (Tests/DMIO/isolate_test.cpp checks the way there).
 #include <dm/core/log.hpp>
 #include <dm/io/mesh_io.hpp>
 
@@ -47,6 +51,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   options.maxFileBytes = std::size_t{1} << 20;
   options.weldTolerance = (data[0] & 0x80) != 0 ? 1e-3 : 0.0;  // both weld paths
   options.timeoutSeconds = 10;                                 // well under libFuzzer's -timeout
+  options.isolation = dm::Isolation::Fork;
 
   auto mesh = dm::parseMesh(bytes, hint, options);
   if (!mesh) {

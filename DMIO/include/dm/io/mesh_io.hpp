@@ -31,8 +31,8 @@
 // vertex. Inputs over `maxFileBytes` (all files an import opens, together:
 // .mtl, .bin, ...) or producing more than `maxTriangles` triangles are
 // refused. Assimp 5.2 loops forever, crashes or corrupts memory on some
-// malformed files, so by default it runs in a child process with a deadline
-// (MeshImportOptions::isolate, timeoutSeconds). Inputs known to make it
+// malformed files, so by default it runs in a helper process with a deadline
+// (MeshImportOptions::isolation, timeoutSeconds). Inputs known to make it
 // loop are refused before it sees them: OFF headers promising more elements
 // than the file holds, PLY headers without an "end_header" line, Collada
 // index lists with letters.
@@ -51,6 +51,7 @@
 
 #include <dm/core/mesh.hpp>
 #include <dm/core/result.hpp>
+#include <dm/io/isolation.hpp>
 
 #include <cstddef>
 #include <filesystem>
@@ -83,16 +84,18 @@ struct MeshImportOptions {
   std::size_t maxTriangles = 50'000'000;
   /// Largest number of bytes read, over every file the import opens.
   std::size_t maxFileBytes = std::size_t{2} << 30;
-  /// Run Assimp in a child process (POSIX fork) so that a file which makes
-  /// it crash or loop (Assimp 5 does both on some malformed files) fails
-  /// with an Error instead of taking the caller down. Costs a fork and a
-  /// copy of the mesh through a pipe; turn off only for trusted files.
-  /// The child may allocate about 1 KiB per allowed triangle plus 64× the
+  /// Where Assimp runs (dm/io/isolation.hpp): by default in the dm-isolate
+  /// helper program, so that a file which makes it crash or loop (Assimp 5
+  /// does both on some malformed files) fails with an Error instead of
+  /// taking the caller down, whatever threads the caller runs. Costs a
+  /// process start and a copy of the mesh through a pipe
+  /// (docs/performance.md); Isolation::InProcess only for trusted files.
+  /// The helper may allocate about 1 KiB per allowed triangle plus 64× the
   /// file size and 512 MiB; a file that makes Assimp ask for more fails
   /// with Unsupported.
-  bool isolate = true;
-  /// Wall-clock limit for Assimp in the child, seconds (0: none). Only
-  /// with `isolate`.
+  Isolation isolation = Isolation::Helper;
+  /// Wall-clock limit for Assimp in the helper or child, seconds (0: none).
+  /// Not with Isolation::InProcess.
   double timeoutSeconds = 120.0;
 };
 

@@ -24,6 +24,7 @@
 
 #include <dm/core/result.hpp>
 #include <dm/core/volume.hpp>
+#include <dm/io/isolation.hpp>
 
 #include <cstddef>
 #include <filesystem>
@@ -40,14 +41,12 @@ struct VdbReadOptions {
   std::string gridName;
   /// Largest dense voxel payload accepted, in bytes; checked before allocating.
   std::size_t maxBytes = Volume::kDefaultMaxBytes;
-  /// Parse in a forked child with a memory budget of about
+  /// Where OpenVDB parses (dm/io/isolation.hpp): by default in the
+  /// dm-isolate helper program with a memory budget of about
   /// 2·maxBytes + 16·file size + 1 GiB and a deadline, so a crafted file that
-  /// makes OpenVDB allocate or loop becomes an Error. Use it for untrusted
-  /// files from a process that has not started worker threads yet (fork
-  /// copies only the calling thread; an allocator lock held by another
-  /// thread at that instant leaves the child stuck until the deadline).
-  /// false (default): in-process, for trusted files.
-  bool isolate = false;
+  /// makes OpenVDB allocate or loop becomes an Error. Isolation::InProcess
+  /// for trusted files (no process start, no copy of the volume).
+  Isolation isolation = Isolation::Helper;
   double timeoutSeconds = 60.0;  ///< isolated parsing only; 0: no deadline
 };
 
@@ -84,7 +83,7 @@ struct VdbWriteOptions {
 /// transform, empty grid, out of memory) or InvalidArgument (dense box over
 /// maxBytes).
 /// Hostile files: OpenVDB allocates what length fields inside the file ask
-/// for; read untrusted files with VdbReadOptions::isolate.
+/// for, which the default isolation (VdbReadOptions::isolation) contains.
 /// @code
 ///   auto v = dm::readVdb("bunny.vdb");
 ///   if (!v) { std::cerr << v.error() << '\n'; return 1; }
@@ -98,8 +97,8 @@ Result<Volume> readVdb(const std::filesystem::path& file, const VdbReadOptions& 
 /// every short read fail at once. OpenVDB 10 allocates strings and
 /// compressed blocks at the lengths stored in the file before reading them
 /// (e.g. openvdb::readString, up to 4 GiB from a 4-byte field), so with
-/// options.isolate the parse runs in a forked child with a memory budget
-/// and deadline (Tests/fuzz/vdb_fuzz.cpp exercises this path).
+/// isolation (the default) the parse runs in another process with a memory
+/// budget and deadline (Tests/fuzz/vdb_fuzz.cpp exercises this path).
 /// @code
 ///   auto bytes = dm::readFile("grid.vdb");
 ///   auto v = dm::parseVdb(*bytes, "grid.vdb");
