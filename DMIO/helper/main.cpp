@@ -67,7 +67,7 @@ void checkHang(ByteReader&, FdWriter&) {
 
 constexpr dm::detail::HelperJobEntry kJobs[] = {
     {"assimp-import", dm::detail::assimpImportJob},
-    {"openvdb-parse", dm::detail::openVdbParseJob},
+    {"openvdb-parse", dm::detail::openVdbParseJob, dm::detail::prepareOpenVdb},
     {"check-allocate", checkAllocate},
     {"check-echo", checkEcho},
     {"check-crash", checkCrash},

@@ -137,6 +137,10 @@ using HelperJob = void (*)(ByteReader& request, FdWriter& result);
 struct HelperJobEntry {
   const char* name;
   HelperJob run;
+  /// Run once when the helper starts, before it serves (and before it ends
+  /// the libraries' threads): what every job would otherwise do again in
+  /// its child, such as registering OpenVDB's grid types. May be null.
+  void (*prepare)() = nullptr;
 };
 
 /// The helper's main(): `dm-isolate --serve`, started by runHelper() with its
@@ -147,6 +151,7 @@ int helperMain(int argc, char** argv, const HelperJobEntry* jobs, std::size_t jo
 /// The jobs DMIO's readers hand the helper (defined beside each reader).
 void assimpImportJob(ByteReader& request, FdWriter& result);  // mesh_io.cpp
 void openVdbParseJob(ByteReader& request, FdWriter& result);  // vdb.cpp
+void prepareOpenVdb();                                         // vdb.cpp
 
 // Shared by both modes (isolate.cpp).
 

@@ -559,7 +559,11 @@ bool becomeSingleThreaded() {
 }  // namespace
 
 int helperMain(int argc, char** argv, const HelperJobEntry* jobs, std::size_t jobCount) {
-  if (argc == 2 && std::strcmp(argv[1], "--serve") == 0 && ::fcntl(3, F_GETFD) >= 0) serve(jobs, jobCount);
+  if (argc == 2 && std::strcmp(argv[1], "--serve") == 0 && ::fcntl(3, F_GETFD) >= 0) {
+    for (std::size_t i = 0; i < jobCount; ++i)
+      if (jobs[i].prepare != nullptr) jobs[i].prepare();
+    serve(jobs, jobCount);
+  }
   std::fprintf(stderr,
                "usage: dm-isolate --serve\n"
                "DMPlatform's readers start this program to run Assimp and OpenVDB apart from their own\n"

@@ -500,6 +500,8 @@ Result<std::vector<std::string>> listVdbGrids(const std::filesystem::path& file)
 
 namespace dm::detail {
 
+void prepareOpenVdb() { initializeOpenVdb(); }
+
 // The helper's side of an isolated parse: source name, grid name, maxBytes
 // and the file's bytes in, the volume out as sendVolume() writes it. A fresh
 // process, so OpenVDB may use its oneTBB tasks here.
