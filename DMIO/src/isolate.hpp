@@ -19,6 +19,12 @@
 #include <string>
 #include <vector>
 
+namespace dm {
+struct Mesh;
+class Volume;
+struct MeshImportOptions;
+}  // namespace dm
+
 namespace dm::detail {
 
 /// Writes a result to the parent's pipe (in the child).
@@ -147,6 +153,16 @@ struct HelperJobEntry {
 /// control socket on fd 3; serves jobs until the socket closes (the caller's
 /// process ended). Run by hand it prints what it is for and returns 2.
 int helperMain(int argc, char** argv, const HelperJobEntry* jobs, std::size_t jobCount);
+
+/// The caller's reading of an isolated import's result bytes, as a reader
+/// does after the helper or child ended cleanly, for
+/// Tests/fuzz/isolate_result_fuzz.cpp: a process whose heap a parser
+/// corrupted may still end cleanly with garbage, so every length, index and
+/// value is checked before use (Internal when the bytes are no result).
+Result<std::vector<Mesh>> meshesFromResult(const std::vector<char>& bytes, const MeshImportOptions& options,
+                                           bool merge, const std::string& where);  // mesh_io.cpp
+Result<Volume> volumeFromResult(const std::vector<char>& bytes, std::size_t maxBytes,
+                                const std::string& where);  // vdb.cpp
 
 /// The jobs DMIO's readers hand the helper (defined beside each reader).
 void assimpImportJob(ByteReader& request, FdWriter& result);  // mesh_io.cpp

@@ -942,8 +942,30 @@ void sendResult(FdWriter& w, const Result<std::vector<Builder>>& r) {
   w.u64(0x444d4d45534844ull);  // end marker: the child got to the end
 }
 
+// A child's builders must be what appendPart() makes: every attribute array
+// as long as the positions, finite positions and normals, every index in
+// range. A child whose heap Assimp corrupted may still end cleanly with
+// garbage, and finish() indexes by what it holds.
+bool consistent(const Builder& b) {
+  const std::size_t n = b.mesh.positions.size();
+  if (n > std::numeric_limits<std::uint32_t>::max() || b.mesh.normals.size() != n ||
+      b.hasNormal.size() != n || b.mesh.uvs.size() != n || b.mesh.colors.size() != n)
+    return false;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!b.mesh.positions[i].allFinite() || !b.mesh.normals[i].allFinite()) return false;
+  for (const Triangle& t : b.mesh.triangles)
+    for (const std::uint32_t v : t)
+      if (v >= n) return false;
+  return true;
+}
+
+// The bytes of one builder at the least: its name's length, six array
+// lengths and the flags.
+constexpr std::size_t kMinBuilderBytes = 8 * sizeof(std::uint64_t);
+
 Result<std::vector<Builder>> receiveResult(const std::vector<char>& buf, const std::string& exitInfo,
-                                           const std::string& where) {
+                                           const std::string& where, const MeshImportOptions& options,
+                                           bool merge) {
   ByteReader r(buf);
   auto broken = [&] {
     return fail(ErrorCode::Internal, "the import process ended (" + exitInfo + ") without a complete result",
@@ -957,8 +979,9 @@ Result<std::vector<Builder>> receiveResult(const std::vector<char>& buf, const s
     return e;
   }
   const std::uint64_t n = r.u64();
-  if (!r.ok() || n > buf.size()) return broken();
+  if (!r.ok() || n > r.remaining() / kMinBuilderBytes || (merge && n != 1)) return broken();
   std::vector<Builder> out(static_cast<std::size_t>(n));
+  std::size_t triangles = 0;
   for (Builder& b : out) {
     b.mesh.name = r.str();
     r.array(b.mesh.positions);
@@ -970,9 +993,30 @@ Result<std::vector<Builder>> receiveResult(const std::vector<char>& buf, const s
     const std::uint64_t flags = r.u64();
     b.anyUv = (flags & 1u) != 0;
     b.anyColor = (flags & 2u) != 0;
-    if (!r.ok()) return broken();
+    triangles += b.mesh.triangles.size();
+    if (!r.ok() || !consistent(b) || triangles > options.maxTriangles) return broken();
   }
   if (r.u64() != 0x444d4d45534844ull || !r.ok()) return broken();
+  return out;
+}
+
+// Welded, indexed meshes from the builders, the parts without a triangle
+// left out.
+Result<std::vector<Mesh>> finishAll(std::vector<Builder>&& builders, const MeshImportOptions& options,
+                                    const std::string& where) {
+  std::vector<Mesh> out;
+  for (Builder& b : builders) {
+    auto m = finish(std::move(b), options, where);
+    if (!m) return m.error();
+    if (!m->empty()) out.push_back(std::move(*m));
+  }
+  if (out.empty())
+    return fail(
+        ErrorCode::Parse,
+        "contains no triangles (all are degenerate" + std::string(options.weld ? " after welding)" : ")"),
+        where,
+        options.weld && options.weldTolerance > 0 ? "reduce MeshImportOptions::weldTolerance"
+                                                  : "the surface has zero area everywhere");
   return out;
 }
 
@@ -1036,7 +1080,7 @@ Result<std::vector<Builder>> loadIsolated(const Source& src, const MeshImportOpt
           : runHelper(
                 "assimp-import", [&](FdWriter& w) { writeRequest(w, src, options, merge); }, iso, src.where);
   if (!run) return run.error();
-  return receiveResult(run->bytes, run->exitInfo, src.where);
+  return receiveResult(run->bytes, run->exitInfo, src.where, options, merge);
 }
 
 Result<std::vector<Mesh>> import(const Source& src, const MeshImportOptions& options, bool merge) {
@@ -1047,21 +1091,7 @@ Result<std::vector<Mesh>> import(const Source& src, const MeshImportOptions& opt
   auto builders = options.isolation == Isolation::InProcess ? loadWithAssimp(src, options, merge)
                                                             : loadIsolated(src, options, merge);
   if (!builders) return builders.error();
-
-  std::vector<Mesh> out;
-  for (Builder& b : *builders) {
-    auto m = finish(std::move(b), options, where);
-    if (!m) return m.error();
-    if (!m->empty()) out.push_back(std::move(*m));
-  }
-  if (out.empty())
-    return fail(
-        ErrorCode::Parse,
-        "contains no triangles (all are degenerate" + std::string(options.weld ? " after welding)" : ")"),
-        where,
-        options.weld && options.weldTolerance > 0 ? "reduce MeshImportOptions::weldTolerance"
-                                                  : "the surface has zero area everywhere");
-  return out;
+  return finishAll(std::move(*builders), options, where);
 }
 
 const std::set<std::string>& assimpExtensions() {
@@ -1153,6 +1183,13 @@ Result<Mesh> parseMesh(std::span<const std::byte> bytes, std::string_view format
 }  // namespace dm
 
 namespace dm::detail {
+
+Result<std::vector<Mesh>> meshesFromResult(const std::vector<char>& bytes, const MeshImportOptions& options,
+                                           bool merge, const std::string& where) {
+  auto builders = receiveResult(bytes, "exit status 0", where, options, merge);
+  if (!builders) return builders.error();
+  return finishAll(std::move(*builders), options, where);
+}
 
 // The helper's side of an isolated import: the request writeRequest() wrote,
 // loadWithAssimp() on it, the builders back as sendResult() writes them.

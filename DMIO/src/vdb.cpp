@@ -403,6 +403,8 @@ Result<Volume> receiveVolume(const detail::IsolatedRun& run, const std::string& 
     return broken();
   for (auto x : d)
     if (x == 0 || x > static_cast<std::uint64_t>(std::numeric_limits<int>::max())) return broken();
+  // An affine index-to-world map, as densify() makes: finite, last row 0 0 0 1.
+  if (!m.allFinite() || m.row(3) != Eigen::RowVector4d(0, 0, 0, 1)) return broken();
   Affine3 a;
   a.matrix() = m;
   auto v = Volume::create(Vec3i(static_cast<int>(d[0]), static_cast<int>(d[1]), static_cast<int>(d[2])),
@@ -501,6 +503,14 @@ Result<std::vector<std::string>> listVdbGrids(const std::filesystem::path& file)
 namespace dm::detail {
 
 void prepareOpenVdb() { initializeOpenVdb(); }
+
+Result<Volume> volumeFromResult(const std::vector<char>& bytes, std::size_t maxBytes,
+                                const std::string& where) {
+  IsolatedRun run;
+  run.bytes = bytes;
+  run.exitInfo = "exit status 0";
+  return receiveVolume(run, where, maxBytes);
+}
 
 // The helper's side of an isolated parse: source name, grid name, maxBytes
 // and the file's bytes in, the volume out as sendVolume() writes it. A fresh

@@ -6,6 +6,8 @@
 // (allocator hooks) alike.
 #include "../../DMIO/src/isolate.hpp"
 
+#include <dm/core/mesh.hpp>
+#include <dm/core/volume.hpp>
 #include <dm/io/mesh_io.hpp>
 
 #include <gtest/gtest.h>
@@ -19,6 +21,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -308,5 +311,111 @@ TEST(IsolateHelper, AThousandImportsBesideBusyThreadsNeverHang) {
 }
 
 }  // namespace helper_cases
+
+// ---------------------------------------------------------------------------
+// What the caller makes of the other process's result: a parser that
+// corrupted its heap may let it end cleanly with garbage, so every length,
+// index and value is checked before the caller uses it.
+
+namespace result_cases {
+
+struct Bytes {
+  std::vector<char> data;
+  template <class T>
+  void put(const T& v) {
+    const char* p = reinterpret_cast<const char*>(&v);
+    data.insert(data.end(), p, p + sizeof v);
+  }
+  void u64(std::uint64_t v) { put(v); }
+  void str(const std::string& s) {
+    u64(s.size());
+    data.insert(data.end(), s.begin(), s.end());
+  }
+};
+
+constexpr std::uint64_t kMeshEnd = 0x444d4d45534844ull;
+
+// One merged part: a triangle whose third corner is `third`.
+std::vector<char> triangleResult(std::uint32_t third, double x = 0.01) {
+  Bytes b;
+  b.u64(1);  // ok
+  b.u64(1);  // one part
+  b.str("tri");
+  const double pos[3][3] = {{0, 0, 0}, {x, 0, 0}, {0, 0.01, 0}};
+  b.u64(3);
+  for (const auto& p : pos)
+    for (double c : p) b.put(c);
+  b.u64(3);
+  for (int i = 0; i < 3; ++i)
+    for (double c : {0.0, 0.0, 1.0}) b.put(c);
+  b.u64(3);
+  for (int i = 0; i < 3; ++i) b.put(std::uint8_t{1});
+  b.u64(3);
+  for (int i = 0; i < 6; ++i) b.put(0.0f);
+  b.u64(3);
+  for (int i = 0; i < 12; ++i) b.put(1.0f);
+  b.u64(1);
+  for (std::uint32_t v : {0u, 1u, third}) b.put(v);
+  b.u64(0);  // flags
+  b.u64(kMeshEnd);
+  return b.data;
+}
+
+TEST(IsolateResult, AWellFormedResultGivesTheMesh) {
+  auto m = dm::detail::meshesFromResult(triangleResult(2), dm::MeshImportOptions{}, true, "r.stl");
+  ASSERT_TRUE(m) << m.error();
+  ASSERT_EQ(m->size(), 1u);
+  EXPECT_EQ((*m)[0].triangleCount(), 1u);
+  EXPECT_TRUE((*m)[0].validate());
+}
+
+TEST(IsolateResult, ResultsThatAreNoMeshAreRefusedNotRead) {
+  std::vector<char> cut = triangleResult(2);
+  cut.resize(cut.size() - 8);  // no end marker
+  const std::vector<std::vector<char>> bad = {
+      triangleResult(3),                                            // a corner past the three vertices
+      triangleResult(0xffffffffu),                                  // far past them
+      triangleResult(2, std::numeric_limits<double>::quiet_NaN()),  // a vertex that is not finite
+      cut,
+  };
+  for (std::size_t i = 0; i < bad.size(); ++i) {
+    auto m = dm::detail::meshesFromResult(bad[i], dm::MeshImportOptions{}, true, "r.stl");
+    ASSERT_FALSE(m) << i;
+    EXPECT_EQ(m.error().code, dm::ErrorCode::Internal) << i << ": " << m.error();
+    EXPECT_NE(m.error().message().find("without a complete result"), std::string::npos) << m.error();
+  }
+  // A part count the bytes cannot hold is refused before anything is made.
+  Bytes huge;
+  huge.u64(1);
+  huge.u64(std::uint64_t{1} << 40);
+  auto m = dm::detail::meshesFromResult(huge.data, dm::MeshImportOptions{}, false, "r.stl");
+  ASSERT_FALSE(m);
+  EXPECT_EQ(m.error().code, dm::ErrorCode::Internal);
+}
+
+TEST(IsolateResult, AVolumeWhoseMapIsNotAffineIsRefused) {
+  for (const double corner : {1.0, 0.5, std::numeric_limits<double>::infinity()}) {
+    Bytes b;
+    b.u64(1);
+    for (int i = 0; i < 3; ++i) b.u64(2);
+    b.u64(static_cast<std::uint64_t>(dm::VoxelType::U8));
+    for (int c = 0; c < 4; ++c)
+      for (int r = 0; r < 4; ++r) b.put(r == 3 && c == 3 ? corner : (r == c ? 0.001 : 0.0));
+    b.u64(8);
+    for (int i = 0; i < 8; ++i) b.put(static_cast<std::uint8_t>(i));
+    b.u64(0x444d564442454e44ull);
+    auto v = dm::detail::volumeFromResult(b.data, std::size_t{1} << 20, "r.vdb");
+    if (corner == 1.0) {
+      ASSERT_TRUE(v) << v.error();
+      EXPECT_EQ(v->dims(), dm::Vec3i(2, 2, 2));
+      EXPECT_EQ(v->value(1, 1, 1), 7);
+    } else {
+      ASSERT_FALSE(v) << corner;
+      EXPECT_EQ(v.error().code, dm::ErrorCode::Internal) << v.error();
+    }
+  }
+}
+
+}  // namespace result_cases
 
 }  // namespace

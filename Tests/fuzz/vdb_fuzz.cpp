@@ -1,17 +1,19 @@
 // libFuzzer target: OpenVDB stream parsing from memory (dm::parseVdb).
 // Any input must give a Volume or a dm::Error, never a crash, hang or large
-// allocation in this process: OpenVDB itself runs in the isolated child that
-// parseVdb() forks with VdbReadOptions::isolate, whose crash or out-of-memory death must come back as an
+// allocation in this process: OpenVDB itself runs in a forked child
+// (Isolation::Fork here; applications get the dm-isolate helper, which runs
+// the same parse), whose crash or out-of-memory death must come back as an
 // Error. Such a child still runs libFuzzer's hooks, so it leaves crash-/oom-
 // files in the artifact folder; only this process's exit status counts.
 // (In CI's 30 s the children hit 4 GiB allocations from length fields and an
-// allocation-size-too-big inside OpenVDB; every one came back as an Error.) A parsed volume must also survive
-// writeVdb -> readVdb with identical dims and voxels (the writer's contract).
-// Forking (isolate) is safe only while no other thread can hold a lock, but
-// OpenVDB runs oneTBB tasks in-process (writing a grid evaluates its bounding
-// box in parallel), whose workers then outlive the call; a fork taken while
-// one held the allocator's lock left the child stuck until its deadline, and
-// CI once aborted on a read-back that timed out so. LLVMFuzzerInitialize caps
+// allocation-size-too-big inside OpenVDB; every one came back as an Error.) A
+// parsed volume must also survive writeVdb -> readVdb with identical dims and
+// voxels (the writer's contract).
+// A fork is safe only while no other thread can hold a lock, but OpenVDB
+// runs oneTBB tasks in-process (writing a grid evaluates its bounding box in
+// parallel), whose workers then outlive the call; a fork taken while one
+// held the allocator's lock left the child stuck until its deadline, and CI
+// once aborted on a read-back that timed out so. LLVMFuzzerInitialize caps
 // oneTBB at this one thread. The written file is ours, so it is read back
 // in-process, as trusted files are. maxBytes is small (2M float voxels) so a
 // crafted dense box costs seconds, not a minute (a 10 kB file asking for 256³
