@@ -1,15 +1,12 @@
-// Isolation of third-party parsers in a helper program or a forked child;
-// see isolate.hpp.
+// Isolation of third-party parsers: what the forked child and the helper's
+// jobs share (the result writer and reader, the memory budget, the caller's
+// collection of a result) and the forked child itself; the helper is in
+// isolate_helper.cpp. See isolate.hpp.
 #include "isolate.hpp"
 
-#include <dm/io/isolation.hpp>
-
-#include <dlfcn.h>
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
-#include <spawn.h>
-#include <sys/mman.h>
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -25,7 +22,6 @@
 #include <csignal>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
 #include <fstream>
 #include <new>
 

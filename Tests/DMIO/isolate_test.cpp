@@ -371,7 +371,7 @@ TEST(IsolateResult, AWellFormedResultGivesTheMesh) {
 
 TEST(IsolateResult, ResultsThatAreNoMeshAreRefusedNotRead) {
   std::vector<char> cut = triangleResult(2);
-  cut.resize(cut.size() - 8);  // no end marker
+  cut.erase(cut.end() - 8, cut.end());  // no end marker
   const std::vector<std::vector<char>> bad = {
       triangleResult(3),                                            // a corner past the three vertices
       triangleResult(0xffffffffu),                                  // far past them

@@ -37,7 +37,7 @@ namespace dm {
 
 enum class Isolation {
   Helper,    ///< the dm-isolate helper program (default; any thread state)
-  Fork,      ///< a forked child (single-threaded callers only)
+  Fork,      ///< a forked child (callers that know their threads)
   InProcess  ///< no isolation (trusted files only)
 };
 
