@@ -102,10 +102,14 @@ std::string ByteReader::str() {
 
 Error ByteReader::error() {
   Error e;
-  e.code = static_cast<ErrorCode>(u64());
+  const std::uint64_t code = u64();
   e.what = str();
   e.where = str();
   e.hint = str();
+  // The other process's error must name a known code and say what failed
+  // (found by Tests/fuzz/isolate_result_fuzz.cpp: an empty one got through).
+  if (code > static_cast<std::uint64_t>(ErrorCode::Denied) || e.what.empty()) ok_ = false;
+  e.code = ok_ ? static_cast<ErrorCode>(code) : ErrorCode::Internal;
   return e;
 }
 

@@ -34,6 +34,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -409,6 +410,10 @@ namespace {
   sigset_t none;
   sigemptyset(&none);
   ::sigprocmask(SIG_SETMASK, &none, nullptr);
+  // Die plainly on a fault, as the forked child does: a sanitizer's handler
+  // would otherwise report it and exit with a status (or abort, as
+  // ASAN_OPTIONS say), and the caller could not tell a crash from an exit.
+  for (int sig : {SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGABRT, SIGPIPE}) std::signal(sig, SIG_DFL);
   const double timeout = message.timeoutSeconds;
   if (timeout > 0 && std::isfinite(timeout))
     ::alarm(static_cast<unsigned>(std::min(std::ceil(timeout), 1e6)) + 1);

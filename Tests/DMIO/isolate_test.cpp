@@ -384,6 +384,20 @@ TEST(IsolateResult, ResultsThatAreNoMeshAreRefusedNotRead) {
     EXPECT_EQ(m.error().code, dm::ErrorCode::Internal) << i << ": " << m.error();
     EXPECT_NE(m.error().message().find("without a complete result"), std::string::npos) << m.error();
   }
+  // An error that names no known code or says nothing is no result either
+  // (isolate_result_fuzz found the empty one passed through).
+  for (const std::uint64_t code : {std::uint64_t{3}, std::uint64_t{200}}) {
+    Bytes e;
+    e.u64(0);
+    e.u64(code);
+    e.str(code == 3 ? "" : "a message");
+    e.str("x.stl");
+    e.str("");
+    auto m = dm::detail::meshesFromResult(e.data, dm::MeshImportOptions{}, true, "r.stl");
+    ASSERT_FALSE(m) << code;
+    EXPECT_EQ(m.error().code, dm::ErrorCode::Internal) << m.error();
+    EXPECT_NE(m.error().message().find("without a complete result"), std::string::npos) << m.error();
+  }
   // A part count the bytes cannot hold is refused before anything is made.
   Bytes huge;
   huge.u64(1);
