@@ -48,7 +48,8 @@ sources_of() {
     device_path_fuzz) echo DMIO/src/device_path.cpp ;;
     dicom_fuzz) echo DMIO/src/dicom.cpp ;;
     haply_answer_fuzz) echo DMIO/drivers/haply_protocol.hpp ;;
-    mesh_fuzz) echo DMIO/src/mesh_io.cpp ;;
+    isolate_result_fuzz) echo "DMIO/src/isolate.cpp" ;;
+    mesh_fuzz) echo "DMIO/src/mesh_guards.cpp DMIO/src/mesh_io.cpp" ;;
     metaimage_fuzz) echo DMIO/src/metaimage.cpp ;;
     net_auth_fuzz) echo DMNetwork/src/auth.cpp ;;
     net_igtl_fuzz) echo "DMNetwork/src/igtl.cpp DMNetwork/src/igtl_image.cpp DMNetwork/src/igtl_polydata.cpp" ;;

@@ -41,12 +41,17 @@
 
 #include "format_util.hpp"
 #include "isolate.hpp"
+#include "mesh_guards.hpp"
 
 namespace dm {
 
 using detail::ByteReader;
+using detail::checkColladaIndexLists;
+using detail::checkMeshHead;
 using detail::FdWriter;
 using detail::IsolateOptions;
+using detail::kMeshHeadBytes;
+using detail::looksLikeCollada;
 using detail::lower;
 using detail::runHelper;
 using detail::runIsolated;
@@ -166,129 +171,6 @@ class NoFileIOSystem final : public Assimp::IOSystem {
  private:
   ImportBudget* budget_;
 };
-
-// ---------------------------------------------------------------------------
-// Guards against inputs that make Assimp 5.2 hang rather than fail. They run
-// on the first kHeadBytes of the input, before Assimp sees it.
-
-constexpr std::size_t kHeadBytes = 64 * 1024;
-
-// OFF: Assimp 5.2's OFF reader trusts the vertex and face counts of the
-// header and allocates and loops accordingly (the assimp-testmodels file
-// invalid/OutOfMemory.off hangs it). A vertex needs at least 6 bytes
-// ("0 0 0\n") and a face at least 2, so counts beyond that are refused.
-
-bool parseCount(std::string_view s, std::size_t& pos, std::uint64_t& value) {
-  while (pos < s.size() && std::isspace(static_cast<unsigned char>(s[pos]))) ++pos;
-  if (pos >= s.size() || !std::isdigit(static_cast<unsigned char>(s[pos]))) return false;
-  value = 0;
-  while (pos < s.size() && std::isdigit(static_cast<unsigned char>(s[pos]))) {
-    const std::uint64_t digit = static_cast<std::uint64_t>(s[pos] - '0');
-    value = value > (std::numeric_limits<std::uint64_t>::max() - digit) / 10
-                ? std::numeric_limits<std::uint64_t>::max()
-                : value * 10 + digit;
-    ++pos;
-  }
-  return true;
-}
-
-Status checkOffHeader(std::string_view head, std::uint64_t fileBytes, bool offExtension,
-                      const std::string& where) {
-  std::size_t pos = 0;
-  // Skip blank lines and '#' comments.
-  for (;;) {
-    while (pos < head.size() && std::isspace(static_cast<unsigned char>(head[pos]))) ++pos;
-    if (pos < head.size() && head[pos] == '#') {
-      while (pos < head.size() && head[pos] != '\n') ++pos;
-      continue;
-    }
-    break;
-  }
-  std::size_t end = pos;
-  while (end < head.size() && !std::isspace(static_cast<unsigned char>(head[end]))) ++end;
-  const std::string token = lower(head.substr(pos, end - pos));
-  const bool offToken = token.size() >= 3 && token.compare(token.size() - 3, 3, "off") == 0;
-  if (!offToken && !offExtension) return ok();
-  if (offToken) {
-    pos = end;
-    if (token.find('n') != std::string::npos) {  // nOFF: the dimension comes first
-      std::uint64_t dim = 0;
-      if (!parseCount(head, pos, dim)) return ok();
-    }
-  }
-  std::uint64_t vertices = 0, faces = 0;
-  if (!parseCount(head, pos, vertices) || !parseCount(head, pos, faces))
-    return ok();  // the reader reports it
-  if (vertices > fileBytes / 6 + 1 || faces > fileBytes / 2 + 1)
-    return fail(ErrorCode::Parse,
-                "OFF header declares " + std::to_string(vertices) + " vertices and " + std::to_string(faces) +
-                    " faces, more than a file of " + std::to_string(fileBytes) + " bytes can hold",
-                where, "the header counts are wrong; fix or re-export the file");
-  return ok();
-}
-
-// PLY: Assimp 5.2 reads header lines until one starts with the token
-// "end_header" and never stops at the end of the input, so a header without
-// that line ("end_header" glued to the data, a truncated header) loops
-// forever. Every file that starts with "ply" (the reader's magic) must have
-// an "end_header" line, alone on its line, within the first kHeadBytes.
-Status checkPlyHeader(std::string_view head, bool wholeFile, const std::string& where) {
-  if (head.size() < 3 || lower(head.substr(0, 3)) != "ply") return ok();
-  const char* hint =
-      "the PLY header must end with a line holding only 'end_header'; fix or re-export the file";
-  std::size_t pos = 0;
-  while (pos < head.size()) {
-    const std::size_t eol = head.find('\n', pos);
-    const std::string_view line =
-        head.substr(pos, eol == std::string_view::npos ? std::string_view::npos : eol - pos);
-    if (line.starts_with("end_header")) {
-      const std::string_view rest = line.substr(10);
-      if (eol != std::string_view::npos && rest.find_first_not_of(" \t\r") == std::string_view::npos)
-        return ok();
-      return fail(
-          ErrorCode::Parse,
-          "PLY 'end_header' at byte " + std::to_string(pos) + " is not followed by the end of the line",
-          where, hint);
-    }
-    if (eol == std::string_view::npos) break;
-    pos = eol + 1;
-  }
-  return fail(ErrorCode::Parse,
-              std::string("PLY header has no 'end_header' line") + (wholeFile ? "" : " in its first 64 KiB"),
-              where, hint);
-}
-
-// Collada: Assimp 5.2 reads the index list of a <p> element with a loop that
-// does not advance over a character other than a digit, sign or blank, and
-// grows a vector forever ("<p>0 1 x 2</p>" never returns). Files that look
-// like Collada are scanned whole and such lists refused.
-bool looksLikeCollada(std::string_view head, bool daeExtension) {
-  return daeExtension || lower(head.substr(0, std::min<std::size_t>(head.size(), 4096))).find("<collada") !=
-                             std::string::npos;
-}
-
-Status checkColladaIndexLists(std::string_view xml, const std::string& where) {
-  std::size_t pos = 0;
-  while ((pos = xml.find("<p", pos)) != std::string_view::npos) {
-    pos += 2;
-    if (pos >= xml.size() || (xml[pos] != '>' && !std::isspace(static_cast<unsigned char>(xml[pos]))))
-      continue;
-    const std::size_t open = xml.find('>', pos);
-    if (open == std::string_view::npos) break;
-    if (xml[open - 1] == '/') continue;  // <p/>
-    const std::size_t close = xml.find("</p>", open);
-    if (close == std::string_view::npos) break;  // the XML parser reports it
-    const std::string_view list = xml.substr(open + 1, close - open - 1);
-    const std::size_t bad = list.find_first_not_of("0123456789+- \t\r\n");
-    if (bad != std::string_view::npos)
-      return fail(ErrorCode::Parse,
-                  "Collada index list <p> at byte " + std::to_string(open + 1) + " contains the character '" +
-                      std::string(1, list[bad]) + "' at byte " + std::to_string(open + 1 + bad),
-                  where, "index lists hold whitespace-separated integers only; fix or re-export the file");
-    pos = close + 4;
-  }
-  return ok();
-}
 
 // ---------------------------------------------------------------------------
 // Raw scene checks, before Assimp's post-processing touches the data.
@@ -777,7 +659,7 @@ Status checkInput(const Source& src, const MeshImportOptions& options) {
   const std::string& where = src.where;
   std::string head;
   std::uint64_t totalBytes = 0;
-  bool offExtension = false, daeExtension = false;
+  std::string extension;
   if (src.file != nullptr) {
     std::error_code ec;
     const fs::file_status st = fs::status(*src.file, ec);
@@ -789,17 +671,16 @@ Status checkInput(const Source& src, const MeshImportOptions& options) {
     if (ec) return fail(ErrorCode::Io, "cannot read the file size: " + ec.message(), where);
     std::ifstream f(*src.file, std::ios::binary);
     if (!f) return fail(ErrorCode::Io, "cannot open the file for reading", where, "check the permissions");
-    head.resize(kHeadBytes);
+    head.resize(kMeshHeadBytes);
     f.read(head.data(), static_cast<std::streamsize>(head.size()));
     head.resize(static_cast<std::size_t>(f.gcount()));
-    offExtension = lower(src.file->extension().string()) == ".off";
-    daeExtension = lower(src.file->extension().string()) == ".dae";
+    extension = lower(src.file->extension().string());
+    if (!extension.empty()) extension.erase(0, 1);
   } else {
     totalBytes = src.bytes.size();
     head.assign(reinterpret_cast<const char*>(src.bytes.data()),
-                std::min<std::size_t>(src.bytes.size(), kHeadBytes));
-    offExtension = src.hint == "off";
-    daeExtension = src.hint == "dae";
+                std::min<std::size_t>(src.bytes.size(), kMeshHeadBytes));
+    extension = src.hint;
   }
   if (totalBytes == 0) return fail(ErrorCode::Parse, "is empty", where, "give a mesh file with triangles");
   if (totalBytes > options.maxFileBytes)
@@ -807,8 +688,8 @@ Status checkInput(const Source& src, const MeshImportOptions& options) {
                 "is " + std::to_string(totalBytes) + " bytes, more than the limit of " +
                     std::to_string(options.maxFileBytes),
                 where, "raise MeshImportOptions::maxFileBytes if the file is genuine");
-  if (auto s = checkOffHeader(head, totalBytes, offExtension, where); !s) return s;
-  if (auto s = checkPlyHeader(head, head.size() == totalBytes, where); !s) return s;
+  if (auto s = checkMeshHead({head, totalBytes, extension}, options.maxTriangles, where); !s) return s;
+  const bool daeExtension = extension == "dae";
   if (looksLikeCollada(head, daeExtension)) {
     if (src.file == nullptr)
       return checkColladaIndexLists(

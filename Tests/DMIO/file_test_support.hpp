@@ -41,6 +41,9 @@ inline std::vector<std::byte> operator+(std::vector<std::byte> a, const std::vec
   return a;
 }
 
+/// True when the one-line message of `e` holds `s`.
+inline bool mentions(const dm::Error& e, const std::string& s) { return e.message().find(s) != std::string::npos; }
+
 /// Eight bytes of 1: the voxels of a 2 x 2 x 2 uint8 volume.
 inline const std::vector<std::byte> kEight(8, std::byte{1});
 

@@ -116,7 +116,7 @@ void expectUnitCube(const dm::Mesh& m, double size = 1.0) {
   }
 }
 
-bool mentions(const dm::Error& e, const std::string& s) { return e.message().find(s) != std::string::npos; }
+using dm::test::mentions;
 
 // ---------------------------------------------------------------------------
 

@@ -33,9 +33,13 @@
 // refused. Assimp 5.2 loops forever, crashes or corrupts memory on some
 // malformed files, so by default it runs in a helper process with a deadline
 // (MeshImportOptions::isolation, timeoutSeconds). Inputs known to make it
-// loop are refused before it sees them: OFF headers promising more elements
-// than the file holds, PLY headers without an "end_header" line, Collada
-// index lists with letters.
+// loop are refused before it sees them: OFF and PLY headers promising more
+// elements than the file holds, PLY headers without an "end_header" line,
+// Collada index lists with letters. Declared sizes are held to the budget
+// from the header, before any mesh memory is allocated: a PLY or OFF header
+// declaring more faces than `maxTriangles`, or more vertices than three per
+// allowed triangle (at most 2^32 - 1), and a binary STL declaring more
+// triangles, fail with Unsupported naming the figure and the limit.
 //
 // Export (writeMesh) uses the SDK's own writers: STL (binary or ASCII), PLY
 // (binary little-endian or ASCII; positions as double) and OBJ (text), each
@@ -80,7 +84,9 @@ struct MeshImportOptions {
   /// Compute normals for vertices without a usable file normal; when false
   /// such meshes get no normals.
   bool computeNormals = true;
-  /// Largest number of triangles accepted (over all parts and instances).
+  /// Largest number of triangles accepted (over all parts and instances);
+  /// also the budget a PLY, OFF or binary STL header's declared counts are
+  /// held to before the import (faces; vertices: three per triangle).
   std::size_t maxTriangles = 50'000'000;
   /// Largest number of bytes read, over every file the import opens.
   std::size_t maxFileBytes = std::size_t{2} << 30;
