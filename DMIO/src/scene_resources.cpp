@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <limits>
+#include <set>
 
 namespace dm {
 
@@ -215,6 +216,65 @@ Result<Mesh> makeSceneShape(const SceneResource& r) {
   return m;
 }
 
+namespace {
+
+std::uint64_t bytesOf(const Mesh& m) {
+  return m.positions.size() * sizeof(Vec3) + m.normals.size() * sizeof(Vec3) +
+         m.triangles.size() * sizeof(Triangle) + m.uvs.size() * sizeof(Vec2f) +
+         m.colors.size() * sizeof(Vec4f);
+}
+std::uint64_t bytesOf(const Volume& v) { return v.byteSize(); }
+std::uint64_t bytesOf(const Image& i) { return std::uint64_t(i.strideBytes()) * std::uint64_t(i.height()); }
+
+// The scene's memory budget (SceneLoadOptions::maxBytes). What the scene
+// declares itself (its phantoms' voxels) is summed before anything is
+// made; each resource then counts as it arrives (one held by two names,
+// a file the resource manager shares, once), and the first that takes the
+// total over the budget fails, naming both figures.
+class SceneBudget {
+ public:
+  explicit SceneBudget(std::size_t limit) : limit_(limit) {}
+
+  Status declare(const SceneDesc& scene) {
+    std::uint64_t declared = 0;
+    std::size_t phantoms = 0;
+    for (const SceneResource& r : scene.resources) {
+      if (!r.phantom) continue;
+      const Vec3i n = calvariumPhantomDims(*r.phantom);
+      declared += std::uint64_t(n.x()) * std::uint64_t(n.y()) * std::uint64_t(n.z()) * sizeof(std::int16_t);
+      ++phantoms;
+    }
+    if (declared <= limit_) return ok();
+    return fail(
+        ErrorCode::InvalidArgument,
+        formatString("the scene's %zu phantom(s) declare %llu bytes of voxels, more than the budget of %zu "
+                     "bytes",
+                     phantoms, static_cast<unsigned long long>(declared), limit_),
+        "resources", kHint);
+  }
+
+  template <class T>
+  Status add(const std::shared_ptr<const T>& item, const SceneResource& r) {
+    if (!counted_.insert(item.get()).second) return ok();
+    used_ += bytesOf(*item);
+    if (used_ <= limit_) return ok();
+    return fail(
+        ErrorCode::InvalidArgument,
+        formatString("it brings the scene's resources to %llu bytes, more than the budget of %zu bytes",
+                     static_cast<unsigned long long>(used_), limit_),
+        where(r), kHint);
+  }
+
+ private:
+  static constexpr const char* kHint =
+      "raise SceneLoadOptions::maxBytes if the memory is there, or use smaller, coarser resources";
+  std::size_t limit_;
+  std::uint64_t used_ = 0;
+  std::set<const void*> counted_;
+};
+
+}  // namespace
+
 Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoadOptions& options) {
   ResourceManager local;
   ResourceManager* rm = options.resourceManager;
@@ -222,12 +282,24 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
     if (auto s = registerIoLoaders(local); !s) return s.error();
     rm = &local;
   }
+  // The manager's cache is weak: its handles stay alive through the load so
+  // that a file two resources name is read once.
+  std::vector<Handle<Volume>> heldVolumes;
+  std::vector<Handle<Mesh>> heldMeshes;
+  SceneBudget budget(options.maxBytes);
+  if (auto s = budget.declare(scene); !s) return s.error();
   SceneResources out;
   const double total = std::max<std::size_t>(scene.resources.size(), 1);
   std::size_t done = 0;
   auto report = [&](const SceneResource& r) {
     if (options.progress) options.progress(r.name, double(done) / total);
     ++done;
+  };
+  // Counted against the budget, then kept under the resource's name.
+  auto keep = [&budget](auto& map, const SceneResource& r, auto item) -> Status {
+    if (auto s = budget.add(item, r); !s) return s;
+    map.emplace(r.name, std::move(item));
+    return ok();
   };
   auto missing = [](const SceneResource& r) -> Error {
     return fail(ErrorCode::NotFound, "\"" + r.source + "\" does not exist", where(r) + "/source",
@@ -241,13 +313,14 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
     if (r.phantom) {
       auto v = makeCalvariumPhantom(*r.phantom);
       if (!v) return v.error().within(where(r) + "/phantom");
-      out.volumes.emplace(r.name, std::make_shared<const Volume>(std::move(*v)));
+      if (auto s = keep(out.volumes, r, std::make_shared<const Volume>(std::move(*v))); !s) return s.error();
       continue;
     }
     if (r.path.empty()) return missing(r);
     auto h = rm->load<Volume>(r.path);
     if (!h) return h.error().within(where(r));
-    out.volumes.emplace(r.name, h->get());
+    if (auto s = keep(out.volumes, r, h->get()); !s) return s.error();
+    heldVolumes.push_back(std::move(*h));
   }
   // Segments, from the volumes they cut (never another segment: parseScene checks).
   for (const SceneResource& r : scene.resources) {
@@ -259,7 +332,7 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
                   where(r) + "/segment/volume");
     auto seg = makeSceneSegment(r, *vol);
     if (!seg) return seg.error();
-    out.volumes.emplace(r.name, std::make_shared<const Volume>(std::move(*seg)));
+    if (auto s = keep(out.volumes, r, std::make_shared<const Volume>(std::move(*seg))); !s) return s.error();
   }
   for (const SceneResource& r : scene.resources) {
     switch (r.type) {
@@ -273,7 +346,8 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
         if (r.scale != 1.0) o.set("scale", formatString("%.17g", r.scale));
         auto h = rm->load<Mesh>(r.path, o);
         if (!h) return h.error().within(where(r));
-        out.meshes.emplace(r.name, h->get());
+        if (auto s = keep(out.meshes, r, h->get()); !s) return s.error();
+        heldMeshes.push_back(std::move(*h));
         break;
       }
       case SceneResource::Type::Isosurface: {
@@ -283,14 +357,16 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
           return fail(ErrorCode::NotFound, "no volume resource \"" + r.volume + "\"", where(r) + "/volume");
         auto mesh = makeIsosurface(r, *vol);
         if (!mesh) return mesh.error();
-        out.meshes.emplace(r.name, std::make_shared<const Mesh>(std::move(*mesh)));
+        if (auto s = keep(out.meshes, r, std::make_shared<const Mesh>(std::move(*mesh))); !s)
+          return s.error();
         break;
       }
       case SceneResource::Type::Shape: {
         report(r);
         auto mesh = makeSceneShape(r);
         if (!mesh) return mesh.error();
-        out.meshes.emplace(r.name, std::make_shared<const Mesh>(std::move(*mesh)));
+        if (auto s = keep(out.meshes, r, std::make_shared<const Mesh>(std::move(*mesh))); !s)
+          return s.error();
         break;
       }
       case SceneResource::Type::Image: {
@@ -298,7 +374,8 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
         if (r.path.empty()) return missing(r);
         auto img = readPng(r.path);
         if (!img) return img.error().within(where(r));
-        out.images.emplace(r.name, std::make_shared<const Image>(std::move(*img)));
+        if (auto s = keep(out.images, r, std::make_shared<const Image>(std::move(*img))); !s)
+          return s.error();
         break;
       }
     }

@@ -5,6 +5,7 @@
 #include <dm/io/nifti.hpp>
 #include <dm/io/scene_resources.hpp>
 #include <dm/math/mesh_topology.hpp>
+#include <dm/math/phantom.hpp>
 #include <dm/math/primitives.hpp>
 
 #include <gtest/gtest.h>
@@ -48,8 +49,9 @@ struct SceneDir {
   }
 };
 
-dm::SceneDesc parse(const std::string& resources, const fs::path& base) {
-  const std::string text = R"({"format": "dmplatform-scene", "version": 1, "resources": )" + resources + "}";
+dm::SceneDesc parse(const std::string& resources, const fs::path& base, int version = 1) {
+  const std::string text = R"({"format": "dmplatform-scene", "version": )" + std::to_string(version) +
+                           R"(, "resources": )" + resources + "}";
   auto s = dm::parseScene(text, "test.json", base);
   EXPECT_TRUE(s) << (s ? "" : s.error().message());
   return s ? *s : dm::SceneDesc{};
@@ -167,4 +169,77 @@ TEST(SceneResources, EveryShapeIsClosedAndSized) {
   EXPECT_FALSE(dm::makeSceneShape(r));
   r.type = dm::SceneResource::Type::Mesh;
   EXPECT_FALSE(dm::makeSceneShape(r));
+}
+
+// The scene's memory budget: its phantoms' declared voxels are summed and
+// refused before any is generated (no progress reported), naming the total
+// and the budget.
+TEST(SceneResources, PhantomsOverTheBudgetAreRefusedFromTheirDeclaration) {
+  SceneDir d;
+  const dm::SceneDesc scene = parse(R"({
+    "left": {"type": "volume", "phantom": {"kind": "calvarium", "spacing": 0.0005, "half_width": 0.01}},
+    "right": {"type": "volume", "phantom": {"kind": "calvarium", "spacing": 0.0004, "half_width": 0.012}}})",
+                                    d.dir, 2);
+  std::uint64_t declared = 0;
+  for (const char* name : {"left", "right"}) {
+    const dm::Vec3i n = dm::calvariumPhantomDims(*scene.resource(name)->phantom);
+    declared += 2ull * std::uint64_t(n.x()) * std::uint64_t(n.y()) * std::uint64_t(n.z());
+  }
+  ASSERT_GT(declared, 100000u);
+  int progressCalls = 0;
+  dm::SceneLoadOptions tight;
+  tight.maxBytes = declared - 1;
+  tight.progress = [&](std::string_view, double) { ++progressCalls; };
+  auto refused = dm::loadSceneResources(scene, tight);
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().where, "resources");
+  EXPECT_NE(
+      refused.error().what.find("2 phantom(s) declare " + std::to_string(declared) +
+                                " bytes of voxels, more than the budget of " + std::to_string(declared - 1)),
+      std::string::npos)
+      << refused.error();
+  EXPECT_NE(refused.error().hint.find("SceneLoadOptions::maxBytes"), std::string::npos);
+  EXPECT_EQ(progressCalls, 0);
+
+  dm::SceneLoadOptions enough;
+  enough.maxBytes = declared;
+  auto loaded = dm::loadSceneResources(scene, enough);
+  ASSERT_TRUE(loaded) << loaded.error();
+  EXPECT_EQ(loaded->volume("left")->byteSize() + loaded->volume("right")->byteSize(), declared);
+}
+
+// Files count as they load, a file two resources share once; the resource
+// that takes the total over the budget fails, naming it and both figures.
+TEST(SceneResources, TheLoadedTotalIsHeldToTheBudget) {
+  SceneDir d;
+  const dm::SceneDesc scene = parse(R"({
+    "ball": {"type": "volume", "source": "ball.nii.gz"},
+    "again": {"type": "volume", "source": "ball.nii.gz"},
+    "box": {"type": "mesh", "source": "box.obj"}})",
+                                    d.dir);
+  auto all = dm::loadSceneResources(scene);
+  ASSERT_TRUE(all) << all.error();
+  ASSERT_EQ(all->volume("ball"), all->volume("again"));  // one file, one volume
+  const dm::Mesh& box = *all->mesh("box");
+  const std::uint64_t ball = 40 * 40 * 40;  // U8
+  const std::uint64_t boxBytes = box.positions.size() * sizeof(dm::Vec3) +
+                                 box.normals.size() * sizeof(dm::Vec3) +
+                                 box.triangles.size() * sizeof(dm::Triangle) +
+                                 box.uvs.size() * sizeof(dm::Vec2f) + box.colors.size() * sizeof(dm::Vec4f);
+  ASSERT_EQ(all->volume("ball")->byteSize(), ball);
+
+  dm::SceneLoadOptions exact;
+  exact.maxBytes = ball + boxBytes;
+  EXPECT_TRUE(dm::loadSceneResources(scene, exact));
+
+  dm::SceneLoadOptions tight;
+  tight.maxBytes = ball + boxBytes - 1;
+  auto refused = dm::loadSceneResources(scene, tight);
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().where, "resources/box");
+  EXPECT_NE(
+      refused.error().what.find("brings the scene's resources to " + std::to_string(ball + boxBytes) +
+                                " bytes, more than the budget of " + std::to_string(ball + boxBytes - 1)),
+      std::string::npos)
+      << refused.error();
 }

@@ -8,7 +8,8 @@
 // The scene file itself is parsed by dm/io/scene_file.hpp; this turns its
 // SceneResource entries into data-model objects shared read-only by every
 // engine (the renderer uploads the meshes, haptics builds BVHs over them).
-// Volumes load first, then what derives from them. Errors name the resource
+// Volumes load first, then what derives from them. The scene is held to a
+// memory budget (SceneLoadOptions::maxBytes). Errors name the resource
 // ("resources/skin: ...") and keep the loader's message (file, field, byte).
 //
 // @code
@@ -25,6 +26,7 @@
 #include <dm/core/volume.hpp>
 #include <dm/io/scene_file.hpp>
 
+#include <cstddef>
 #include <functional>
 #include <map>
 #include <memory>
@@ -56,6 +58,13 @@ struct SceneLoadOptions {
   ResourceManager* resourceManager = nullptr;
   /// Called before each resource with its name and the fraction done; may be empty.
   std::function<void(std::string_view name, double fraction)> progress;
+  /// The scene's memory budget, bytes: the voxels its phantoms declare are
+  /// summed before any is generated, and the volumes, meshes and images
+  /// count as they load (each held once); the resource that takes the total
+  /// over it fails with InvalidArgument naming the total and the budget.
+  /// Each file is also held to its reader's own budget before it allocates
+  /// (VolumeReadOptions::maxBytes, MeshImportOptions::maxTriangles).
+  std::size_t maxBytes = std::size_t{16} << 30;
 };
 
 /// Loads every resource of `scene`. Fails on the first resource that does
