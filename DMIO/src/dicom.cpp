@@ -33,6 +33,8 @@
 #include <variant>
 #include <vector>
 
+#include "format_util.hpp"
+
 namespace dm {
 
 namespace {
@@ -596,9 +598,10 @@ Result<Volume> decodeSlice(std::span<const std::byte> bytes, const SliceHeader& 
   const bool mask = h.bitsStored < h.bitsAllocated;
   if (swapPairs || mask) {
     if (cells * cellBytes > maxBytes)
-      return fail(ErrorCode::InvalidArgument,
-                  "slice exceeds the size limit of " + std::to_string(maxBytes) + " bytes", h.file,
-                  "raise DicomReadOptions::maxBytes");
+      return detail::volumeOverBudget("the slice of " + std::to_string(h.columns) + "x" +
+                                          std::to_string(h.rows) + " voxels of " + std::to_string(cellBytes) +
+                                          " bytes",
+                                      cells * cellBytes, maxBytes, h.file, "DicomReadOptions::maxBytes");
     fixed.assign(raw.begin(), raw.end());
     if (swapPairs)  // 8-bit OW data in big endian is stored as swapped 16-bit words
       for (std::size_t i = 0; i + 1 < fixed.size(); i += 2) std::swap(fixed[i], fixed[i + 1]);
@@ -748,11 +751,10 @@ Result<Volume> assemble(std::vector<SliceHeader> slices, const DicomReadOptions&
   const std::size_t sliceVoxels = std::size_t(first.columns) * std::size_t(first.rows);
   const std::size_t vb = voxelBytes(outType);
   if (nz > options.maxBytes / vb / sliceVoxels)
-    return fail(ErrorCode::InvalidArgument,
-                "the volume " + std::to_string(dims.x()) + "x" + std::to_string(dims.y()) + "x" +
-                    std::to_string(dims.z()) + " of " + toString(outType) + " exceeds the limit of " +
-                    std::to_string(options.maxBytes) + " bytes",
-                first.file, "raise DicomReadOptions::maxBytes");
+    return detail::volumeOverBudget(
+        "the volume " + std::to_string(dims.x()) + "x" + std::to_string(dims.y()) + "x" +
+            std::to_string(dims.z()) + " of " + toString(outType),
+        std::uint64_t(nz) * vb * sliceVoxels, options.maxBytes, first.file, "DicomReadOptions::maxBytes");
   const Affine3 affine = sliceAffine(first, stepK);
   auto volume = Volume::create(dims, outType, affine, options.maxBytes);
   if (!volume) {

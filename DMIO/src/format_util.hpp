@@ -10,9 +10,11 @@
 #include <cctype>
 #include <cmath>
 #include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <string>
 #include <string_view>
+#include <utility>
 
 namespace dm::detail {
 
@@ -54,6 +56,19 @@ inline std::string fmt17(double v) {
 inline bool isSingular(const Mat3& m) {
   const double scale = m.col(0).norm() * m.col(1).norm() * m.col(2).norm();
   return !(scale > 0) || !(std::abs(m.determinant()) > 1e-10 * scale);
+}
+
+/// The refusal of a volume whose declared size is over its reader's byte
+/// budget, before anything is allocated: "<declared> needs <bytes> bytes,
+/// more than the budget of <limit> bytes (<option>)", e.g. declared =
+/// "DimSize 512x512x300 of MET_SHORT". Every volume reader words it so.
+inline Error volumeOverBudget(const std::string& declared, std::uint64_t bytes, std::size_t limit,
+                              std::string where, const std::string& option) {
+  return fail(ErrorCode::InvalidArgument,
+              declared + " needs " + std::to_string(bytes) + " bytes, more than the budget of " +
+                  std::to_string(limit) + " bytes (" + option + ")",
+              std::move(where),
+              "raise " + option + " if the memory is there, or crop or downsample the volume");
 }
 
 /// Millimetre geometry written with %.17g must read back as a usable affine.

@@ -351,11 +351,10 @@ Result<Volume> loadData(const Parsed& p, std::span<const std::byte> stream, cons
   const Status withinLimit =
       p.volumeBytes <= options.maxBytes
           ? ok()
-          : Status(fail(ErrorCode::InvalidArgument,
-                        "DimSize " + std::to_string(p.dims.x()) + "x" + std::to_string(p.dims.y()) + "x" +
-                            std::to_string(p.dims.z()) + " of " + p.elementName + " exceeds the limit of " +
-                            std::to_string(options.maxBytes) + " bytes",
-                        source, "raise MetaImageReadOptions::maxBytes"));
+          : Status(detail::volumeOverBudget(
+                "DimSize " + std::to_string(p.dims.x()) + "x" + std::to_string(p.dims.y()) + "x" +
+                    std::to_string(p.dims.z()) + " of " + p.elementName,
+                p.volumeBytes, options.maxBytes, source, "MetaImageReadOptions::maxBytes"));
   const auto index = static_cast<std::uint64_t>(options.volumeIndex);
   if (index != 0 && p.volumeBytes > (std::uint64_t{1} << 62) / index)
     return fail(ErrorCode::Parse, "data offset of volume " + std::to_string(index) + " overflows", source);

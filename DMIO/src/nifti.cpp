@@ -429,11 +429,10 @@ Result<std::uint64_t> dataStart(const NiftiHeader& h, std::string_view source,
 
 Status checkLimit(const NiftiHeader& h, std::string_view source, const NiftiReadOptions& options) {
   if (h.volumeBytes <= options.maxBytes) return ok();
-  return fail(ErrorCode::InvalidArgument,
-              std::to_string(h.dim[1]) + "x" + std::to_string(h.dim[2]) + "x" + std::to_string(h.dim[3]) +
-                  " voxels of " + std::to_string(h.bitpix / 8) + " bytes exceed the limit of " +
-                  std::to_string(options.maxBytes) + " bytes",
-              std::string(source), "raise NiftiReadOptions::maxBytes or crop the volume");
+  return detail::volumeOverBudget(
+      std::to_string(h.dim[1]) + "x" + std::to_string(h.dim[2]) + "x" + std::to_string(h.dim[3]) +
+          " voxels of " + std::to_string(h.bitpix / 8) + " bytes",
+      h.volumeBytes, options.maxBytes, std::string(source), "NiftiReadOptions::maxBytes");
 }
 
 Error pastEnd(const NiftiHeader& h, std::string_view source, std::uint64_t start, std::uint64_t have,

@@ -592,11 +592,10 @@ Result<Volume> loadNrrdData(const ParsedNrrd& p, std::span<const std::byte> stre
   const Status withinLimit =
       p.volumeBytes <= options.maxBytes
           ? ok()
-          : Status(fail(ErrorCode::InvalidArgument,
-                        "sizes " + std::to_string(p.dims.x()) + "x" + std::to_string(p.dims.y()) + "x" +
-                            std::to_string(p.dims.z()) + " of " + p.typeName + " exceed the limit of " +
-                            std::to_string(options.maxBytes) + " bytes",
-                        source, "raise NrrdReadOptions::maxBytes"));
+          : Status(detail::volumeOverBudget(
+                "sizes " + std::to_string(p.dims.x()) + "x" + std::to_string(p.dims.y()) + "x" +
+                    std::to_string(p.dims.z()) + " of " + p.typeName,
+                p.volumeBytes, options.maxBytes, source, "NrrdReadOptions::maxBytes"));
   const auto index = static_cast<std::uint64_t>(options.volumeIndex);
   if (index != 0 && p.volumeBytes > (std::uint64_t{1} << 62) / index)
     return fail(ErrorCode::Parse, "data offset of volume " + std::to_string(index) + " overflows", source);

@@ -25,6 +25,7 @@
 #include <system_error>
 #include <utility>
 
+#include "format_util.hpp"
 #include "isolate.hpp"
 
 namespace dm {
@@ -133,11 +134,10 @@ Status checkBox(const openvdb::CoordBBox& box, VoxelType type, std::size_t maxBy
   const double bytes = extent[0] * extent[1] * extent[2] * static_cast<double>(voxelBytes(type));
   if (extent[0] > 2147483647.0 || extent[1] > 2147483647.0 || extent[2] > 2147483647.0 ||
       bytes > static_cast<double>(maxBytes))
-    return fail(ErrorCode::InvalidArgument,
-                "the grid's dense box " + std::to_string(extent[0]) + " x " + std::to_string(extent[1]) +
-                    " x " + std::to_string(extent[2]) + " needs " + std::to_string(bytes) +
-                    " bytes, more than maxBytes = " + std::to_string(maxBytes),
-                where, "raise VdbReadOptions::maxBytes if the memory is there");
+    return detail::volumeOverBudget(formatString("the grid's dense box %.0f x %.0f x %.0f of %s", extent[0],
+                                                 extent[1], extent[2], toString(type)),
+                                    static_cast<std::uint64_t>(std::min(bytes, 1.8e19)), maxBytes, where,
+                                    "VdbReadOptions::maxBytes");
   return ok();
 }
 

@@ -406,7 +406,9 @@ TEST_F(DicomBad, HugeRowsAndColumnsFailWithoutAllocating) {
   o.maxBytes = 100;
   auto v = dm::readDicomSeries(dir_->path(), o);
   ASSERT_FALSE(v);
-  EXPECT_NE(v.error().message().find("exceeds the limit of 100 bytes"), std::string::npos) << v.error();
+  EXPECT_NE(v.error().message().find("more than the budget of 100 bytes (DicomReadOptions::maxBytes)"),
+            std::string::npos)
+      << v.error();
 }
 
 TEST_F(DicomBad, CompressedSyntaxIsNamed) {
