@@ -1,10 +1,12 @@
 #include <dm/core/filesystem.hpp>
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <condition_variable>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -129,10 +131,24 @@ Result<std::vector<std::byte>> readFile(const fs::path& file, std::size_t maxByt
   if (!f)
     return fail(ErrorCode::NotFound, std::string("cannot open: ") + std::strerror(errno), file.string());
   std::vector<std::byte> out;
+  // A regular file's size is known before a byte is read: one over the
+  // limit is refused with its size, without allocating for it.
+  struct stat st {};
+  if (::fstat(::fileno(f), &st) == 0 && S_ISREG(st.st_mode)) {
+    const auto size = static_cast<std::uint64_t>(st.st_size);
+    if (size > maxBytes) {
+      std::fclose(f);
+      return fail(ErrorCode::InvalidArgument,
+                  "file is " + std::to_string(size) + " bytes, more than the limit of " +
+                      std::to_string(maxBytes) + " bytes",
+                  file.string());
+    }
+    out.reserve(static_cast<std::size_t>(size));
+  }
   std::byte buf[1 << 16];
   for (;;) {
     const std::size_t n = std::fread(buf, 1, sizeof buf, f);
-    if (out.size() + n > maxBytes) {
+    if (out.size() + n > maxBytes) {  // a pipe, or a file that grew
       std::fclose(f);
       return fail(ErrorCode::InvalidArgument,
                   "file is larger than the limit of " + std::to_string(maxBytes) + " bytes", file.string());

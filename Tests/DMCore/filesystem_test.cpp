@@ -62,7 +62,20 @@ TEST(FileSystem, ReadFileAndAtomicWrite) {
   EXPECT_EQ(std::string(reinterpret_cast<const char*>(bytes->data()), bytes->size()), text);
   auto tooBig = dm::readFile(d / "f.bin", 4);
   ASSERT_FALSE(tooBig);
-  EXPECT_NE(tooBig.error().what.find("larger than the limit"), std::string::npos);
+  EXPECT_NE(tooBig.error().what.find("file is 14 bytes, more than the limit of 4 bytes"), std::string::npos)
+      << tooBig.error();
+  // A file's size is judged before a byte is read: a sparse terabyte is
+  // refused at once, naming its size.
+  {
+    std::ofstream(d / "sparse.bin").put('x');
+    fs::resize_file(d / "sparse.bin", std::uintmax_t{1} << 40);
+    auto huge = dm::readFile(d / "sparse.bin", std::size_t{1} << 30);
+    ASSERT_FALSE(huge);
+    EXPECT_NE(huge.error().what.find("file is 1099511627776 bytes, more than the limit of 1073741824 bytes"),
+              std::string::npos)
+        << huge.error();
+    fs::remove(d / "sparse.bin");
+  }
   // No temporary file left behind.
   int files = 0;
   for ([[maybe_unused]] const auto& e : fs::directory_iterator(d)) ++files;

@@ -71,6 +71,15 @@ TEST(Recorder, RoundTripKeepsEveryStateBitForBit) {
 
   auto back = dm::readRecording(dir / "a.dmrec");
   ASSERT_TRUE(back.ok()) << back.error().message();
+  // The byte budget: a recording over it is refused from its size.
+  const auto size = fs::file_size(dir / "a.dmrec");
+  auto over = dm::readRecording(dir / "a.dmrec", size - 1);
+  ASSERT_FALSE(over.ok());
+  EXPECT_NE(over.error().what.find("file is " + std::to_string(size) + " bytes, more than the limit of " +
+                                   std::to_string(size - 1) + " bytes"),
+            std::string::npos)
+      << over.error();
+  EXPECT_TRUE(dm::readRecording(dir / "a.dmrec", size).ok());
   EXPECT_EQ(back->metadata, R"({"device":"stylus"})");
   EXPECT_EQ(back->tail, "");
   ASSERT_EQ(back->records.size(), states.size());

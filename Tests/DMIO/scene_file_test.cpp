@@ -874,6 +874,15 @@ TEST(SceneFile, SourcesResolveAgainstTheSceneDirectory) {
   auto r = dm::readScene(dir / "sub" / "scene.json");
   ASSERT_TRUE(r) << r.error();
   EXPECT_EQ(r->resource("bump")->path, dir / "sub" / "bump.png");
+  // A scene file is at most 16 MiB of JSON: one larger is refused from its
+  // size, naming it and the limit, before it is read.
+  fs::resize_file(dir / "sub" / "scene.json", (std::uintmax_t{16} << 20) + 1);
+  auto huge = dm::readScene(dir / "sub" / "scene.json");
+  ASSERT_FALSE(huge);
+  EXPECT_NE(huge.error().what.find("file is 16777217 bytes, more than the limit of 16777216 bytes"),
+            std::string::npos)
+      << huge.error();
+  EXPECT_NE(huge.error().hint.find("at most 16 MiB"), std::string::npos) << huge.error();
   fs::remove_all(dir);
   auto missing = dm::readScene(dir / "nothing.json");
   ASSERT_FALSE(missing);
