@@ -922,3 +922,25 @@ TEST(SceneFile, CompoundShapePartsAreCheckedAtTheirPaths) {
 }
 
 }  // namespace
+
+// The nesting budget: 64 levels. A 65th bracket is refused at its byte
+// before the JSON parser sees the text (so no recursive walk can run out of
+// stack); brackets inside strings do not count.
+TEST(SceneFile, NestingDeeperThanSixtyFourLevelsIsRefusedAtItsByte) {
+  const std::string deep = "{\"a\": " + std::string(64, '[') + std::string(64, ']') + "}";
+  auto refused = dm::parseScene(deep, "deep.json", "/data/scenes");
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().code, dm::ErrorCode::Parse);
+  EXPECT_EQ(refused.error().where, "deep.json: byte 70");  // "{" then 64 "[" after `{"a": `
+  EXPECT_NE(refused.error().what.find("nested deeper than 64 levels"), std::string::npos) << refused.error();
+
+  // 64 levels pass the budget (and fail later, as a scene, for their content).
+  const std::string deepest = "{\"a\": " + std::string(63, '[') + std::string(63, ']') + "}";
+  auto parsed = dm::parseScene(deepest, "ok.json", "/data/scenes");
+  ASSERT_FALSE(parsed);
+  EXPECT_EQ(parsed.error().what.find("nested deeper"), std::string::npos) << parsed.error();
+  const std::string quoted = "{\"a\": \"" + std::string(100, '[') + "\"}";
+  auto inString = dm::parseScene(quoted, "s.json", "/data/scenes");
+  ASSERT_FALSE(inString);
+  EXPECT_EQ(inString.error().what.find("nested deeper"), std::string::npos) << inString.error();
+}
