@@ -1,11 +1,13 @@
 // Factory registry and plugin linker: dlopen, ABI check, init through the C
 // host API, all-or-nothing registration, optional crash probe in a child.
+#include <dm/core/helper_program.hpp>
 #include <dm/core/log.hpp>
 #include <dm/core/plugin.hpp>
 
 #include <dlfcn.h>
 #include <fcntl.h>
 #include <poll.h>
+#include <spawn.h>
 #include <sys/types.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -187,84 +189,65 @@ const char* phaseName(char phase) noexcept {
   }
 }
 
-int probeRegister(DmHostContext*, const char*, const char*, std::uint32_t, const void*) noexcept {
-  return DM_PLUGIN_OK;
-}
-void probeLog(DmHostContext*, int, const char*) noexcept {}
-void probeSetError(DmHostContext*, const char*) noexcept {}
+// A marker whose address dladdr() maps to the file DMCore was loaded from
+// (dm-plugin-probe is looked for beside it).
+const char kLibraryAnchor = 0;
 
-// Runs in the forked child: only async-signal-tolerant work, no host locks,
-// no logging; reports progress as one byte per phase and leaves with _exit.
-[[noreturn]] void probeChild(const char* path, int fd) noexcept {
-  auto mark = [fd](char c) {
-    while (write(fd, &c, 1) < 0 && errno == EINTR) {
-    }
-  };
-  // Crash as the kernel would, even if the host (or a sanitizer runtime)
-  // installed handlers that turn faults into exit codes.
-  for (int sig : {SIGSEGV, SIGBUS, SIGILL, SIGFPE, SIGABRT, SIGTRAP, SIGSYS}) {
-    struct sigaction sa {};
-    sa.sa_handler = SIG_DFL;
-    sigemptyset(&sa.sa_mask);
-    sigaction(sig, &sa, nullptr);
-  }
-  sigset_t all;
-  sigfillset(&all);
-  sigprocmask(SIG_UNBLOCK, &all, nullptr);
-  try {
-    mark('o');
-    void* handle = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (!handle) {
-      mark('E');
-      _exit(0);
-    }
-    mark('e');
-    void* sym = dlsym(handle, DM_PLUGIN_ENTRY_SYMBOL);
-    if (!sym) {
-      mark('E');
-      _exit(0);
-    }
-    const DmPluginInfo* info = reinterpret_cast<DmPluginEntryFn>(sym)();
-    if (!info || info->abi_version != DM_PLUGIN_ABI_VERSION || !info->init) {
-      mark('E');
-      _exit(0);
-    }
-    mark('i');
-    const DmHostApi api{DM_PLUGIN_ABI_VERSION, nullptr, probeRegister, probeLog, probeSetError};
-    const int rc = info->init(&api);
-    if (rc == 0 && info->shutdown) {
-      mark('s');
-      info->shutdown();
-    }
-    mark('D');
-  } catch (...) {
-    mark('E');
-  }
-  _exit(0);
-}
-
-// Loads and inits `path` in a forked child; fails if the child crashes or
-// does not finish within `timeout`. Every other outcome (including ordinary
-// load errors) passes, and the in-process load reports it precisely.
+// Loads and inits `path` in the dm-plugin-probe program (DMCore/probe/
+// main.cpp), started with posix_spawn: unlike a fork of this process, whose
+// other threads may hold the loader's, the allocator's or the logger's locks
+// at that moment, it starts clean. Fails if the probe crashes or does not
+// finish within `timeout`. Every other outcome (including ordinary load
+// errors) passes, and the in-process load reports it precisely.
 Status probePlugin(const std::filesystem::path& path, std::chrono::milliseconds timeout) {
   const std::string where = str(path);
+  auto program = findHelperProgram(
+      {.name = "dm-plugin-probe",
+       .envVar = "DM_PLUGIN_PROBE",
+       .purpose = "loads a plugin apart from this process before it is loaded here",
+       .otherwise =
+           "build or install DMPlatform's dm-plugin-probe target, set DM_PLUGIN_PROBE to its path, or "
+           "turn PluginLinkerOptions::probe off",
+       .anchor = &kLibraryAnchor});
+  if (!program) return program.error().within(where);
   int fds[2];
   if (pipe2(fds, O_CLOEXEC) != 0)
     return fail(ErrorCode::Io, std::string("cannot create the probe pipe: ") + std::strerror(errno), where);
-  const std::string pathCopy = where;  // allocate before fork
-  const pid_t pid = fork();
-  if (pid < 0) {
-    const int err = errno;
-    close(fds[0]);
+  // The probe's end goes to its fd 3; keep it off 3 here so that the dup2
+  // of the spawn clears its close-on-exec flag.
+  if (fds[1] == 3) {
+    const int moved = fcntl(fds[1], F_DUPFD_CLOEXEC, 10);
     close(fds[1]);
-    return fail(ErrorCode::Io, std::string("cannot fork the probe process: ") + std::strerror(err), where,
+    fds[1] = moved;
+  }
+  posix_spawn_file_actions_t actions;
+  posix_spawnattr_t attr;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawnattr_init(&attr);
+  posix_spawn_file_actions_adddup2(&actions, fds[1], 3);
+  posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
+  // No signal the host's threads block or catch reaches the probe so.
+  sigset_t none, all;
+  sigemptyset(&none);
+  sigfillset(&all);
+  posix_spawnattr_setsigmask(&attr, &none);
+  posix_spawnattr_setsigdefault(&attr, &all);
+  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+  std::string programPath = *program;
+  std::string pluginPath = where;
+  char* argv[] = {programPath.data(), pluginPath.data(), nullptr};
+  pid_t pid = -1;
+  const int spawned =
+      fds[1] < 0 ? errno : ::posix_spawn(&pid, programPath.c_str(), &actions, &attr, argv, environ);
+  posix_spawn_file_actions_destroy(&actions);
+  posix_spawnattr_destroy(&attr);
+  if (fds[1] >= 0) close(fds[1]);
+  if (spawned != 0) {
+    close(fds[0]);
+    return fail(ErrorCode::Io,
+                "cannot start the probe process " + programPath + ": " + std::strerror(spawned), where,
                 "retry without PluginLinkerOptions::probe");
   }
-  if (pid == 0) {
-    close(fds[0]);
-    probeChild(pathCopy.c_str(), fds[1]);
-  }
-  close(fds[1]);
 
   using Clock = std::chrono::steady_clock;
   const auto deadline = Clock::now() + timeout;

@@ -12,6 +12,7 @@
 // which the helper answers the child's pid (with a pidfd, to end it at the
 // deadline) and later its wait status. The helper ends, ending its
 // children, when the control socket closes: when the caller's process ends.
+#include <dm/core/helper_program.hpp>
 #include <dm/core/log.hpp>
 #include <dm/io/isolation.hpp>
 
@@ -279,39 +280,14 @@ class HelperServer {
 }  // namespace
 
 Result<std::string> helperProgram() {
-  namespace fs = std::filesystem;
-  auto runnable = [](const fs::path& p) {
-    std::error_code ec;
-    return fs::is_regular_file(p, ec) && ::access(p.c_str(), X_OK) == 0;
-  };
-  if (const char* env = std::getenv("DM_ISOLATE_HELPER"); env != nullptr && *env != '\0') {
-    if (runnable(env)) return std::string(env);
-    return fail(ErrorCode::NotFound,
-                std::string("DM_ISOLATE_HELPER names '") + env + "', which is not an executable file",
-                "DM_ISOLATE_HELPER", "point it at the dm-isolate program of this DMPlatform, or unset it");
-  }
-  std::vector<fs::path> places;
-  std::error_code ec;
-  Dl_info info{};
-  if (::dladdr(&kLibraryAnchor, &info) != 0 && info.dli_fname != nullptr && *info.dli_fname != '\0') {
-    const fs::path lib = fs::weakly_canonical(fs::absolute(info.dli_fname, ec), ec);
-    places.push_back(lib.parent_path() / "dm-isolate");
-    places.push_back(lib.parent_path() / "dmplatform" / "dm-isolate");
-  }
-  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
-  if (!ec) places.push_back(exe.parent_path() / "dm-isolate");
-  std::string looked;
-  for (const fs::path& p : places) {
-    if (runnable(p)) return p.string();
-    looked += (looked.empty() ? "" : ", ") + p.string();
-  }
-  return fail(
-      ErrorCode::NotFound,
-      "the helper program dm-isolate, which runs Assimp and OpenVDB apart from this process, is not in " +
-          (looked.empty() ? std::string("any known folder") : looked),
-      "",
-      "build or install DMPlatform's dm-isolate target, set DM_ISOLATE_HELPER to its path, or choose "
-      "Isolation::Fork (single-threaded callers) or Isolation::InProcess (trusted files)");
+  return findHelperProgram({.name = "dm-isolate",
+                            .envVar = "DM_ISOLATE_HELPER",
+                            .purpose = "runs Assimp and OpenVDB apart from this process",
+                            .otherwise =
+                                "build or install DMPlatform's dm-isolate target, set DM_ISOLATE_HELPER to "
+                                "its path, or choose Isolation::Fork (single-threaded callers) or "
+                                "Isolation::InProcess (trusted files)",
+                            .anchor = &kLibraryAnchor});
 }
 
 Result<IsolatedRun> runHelper(const char* job, const std::function<void(FdWriter&)>& writeRequest,

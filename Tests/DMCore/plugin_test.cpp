@@ -9,10 +9,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cstdlib>
 #include <fstream>
+#include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "../common/build_paths.hpp"
@@ -514,6 +517,58 @@ TEST(PluginLinker, ProbeModeRefusesCrashingAndHangingPlugins) {
   const dm::ScanReport report = linker.scanDirectory(pluginDir("crash"));
   EXPECT_TRUE(report.loaded.empty());
   EXPECT_EQ(report.refused.size(), 2u);
+}
+
+// The probe is a spawned program, not a fork of this process: it starts
+// clean whatever the host's threads hold. 100 probes of a good plugin while
+// four threads churn the allocator and the dynamic loader (dlopen/dlclose
+// of another plugin: a fork taken while one holds the loader's lock would
+// leave the child's dlopen waiting forever) all pass and load.
+TEST(PluginLinker, ProbesBesideBusyThreadsNeverHangOrFail) {
+  std::atomic<bool> stop{false};
+  std::vector<std::thread> busy;
+  const fs::path other = pluginFile("good", "dm_test_cpp");
+  for (int i = 0; i < 4; ++i)
+    busy.emplace_back([&stop, &other, i] {
+      std::vector<std::unique_ptr<char[]>> blocks;
+      while (!stop.load(std::memory_order_relaxed)) {
+        blocks.push_back(std::make_unique<char[]>(std::size_t(64) << (i % 8)));
+        if (blocks.size() > 64) blocks.clear();
+        if (i % 2 == 0) {
+          if (void* h = dlopen(other.c_str(), RTLD_NOW | RTLD_LOCAL)) dlclose(h);
+        }
+      }
+    });
+  const fs::path good = pluginFile("good", "dm_test_good");
+  int loaded = 0;
+  for (int round = 0; round < 100; ++round) {
+    dm::FactoryRegistry registry;
+    dm::PluginLinker linker(registry, {.useEnvironment = false, .probe = true});
+    auto plugin = linker.load(good);
+    EXPECT_TRUE(plugin) << "round " << round << ": " << plugin.error();
+    loaded += plugin ? 1 : 0;
+  }
+  stop = true;
+  for (auto& t : busy) t.join();
+  EXPECT_EQ(loaded, 100);
+}
+
+// Where the probe program is not, probe mode fails naming what it looked
+// for, and loads nothing.
+TEST(PluginLinker, AMissingProbeProgramIsNamed) {
+  ASSERT_EQ(setenv("DM_PLUGIN_PROBE", "/nonexistent/dm-plugin-probe", 1), 0);
+  dm::FactoryRegistry registry;
+  dm::PluginLinker linker(registry, {.useEnvironment = false, .probe = true});
+  const fs::path good = pluginFile("good", "dm_test_good");
+  auto refused = linker.load(good);
+  unsetenv("DM_PLUGIN_PROBE");
+  ASSERT_FALSE(refused);
+  EXPECT_EQ(refused.error().code, dm::ErrorCode::NotFound);
+  EXPECT_HAS(refused.error().what, "DM_PLUGIN_PROBE names '/nonexistent/dm-plugin-probe'");
+  EXPECT_HAS(refused.error().hint, "dm-plugin-probe");
+  EXPECT_FALSE(isMapped(good));
+  // Found again beside libdmCore.so once the variable is gone.
+  EXPECT_TRUE(linker.load(good));
 }
 
 }  // namespace

@@ -16,9 +16,11 @@
 // shared object, unresolved symbol, no entry point, wrong ABI version, init
 // failure, duplicate factory). A refused plugin leaves no state behind: its
 // factories are removed and the library is unloaded. In probe mode a plugin
-// is first loaded and initialised in a forked child process, so a plugin that
-// crashes or hangs in its initialisers or init is refused without taking the
-// host down.
+// is first loaded and initialised in the dm-plugin-probe program (a fresh
+// process started with posix_spawn, safe whatever threads the host runs;
+// found as dm/core/helper_program.hpp says, DM_PLUGIN_PROBE overrides), so a
+// plugin that crashes or hangs in its initialisers or init is refused
+// without taking the host down.
 //
 // @code
 //   dm::FactoryRegistry registry;
@@ -165,12 +167,13 @@ struct PluginLinkerOptions {
   /// Also search the directories in the DM_PLUGIN_PATH environment variable
   /// (':'-separated), before searchPaths.
   bool useEnvironment = true;
-  /// Load and init every plugin in a forked child process first; refuse it
-  /// if the child crashes (signal) or does not finish within probeTimeout.
-  /// The plugin's static initializers, init and shutdown then run twice
-  /// (child, then host); costs one fork per plugin file (POSIX only).
+  /// Load and init every plugin in the dm-plugin-probe program first;
+  /// refuse it if the probe crashes (signal) or does not finish within
+  /// probeTimeout. The plugin's static initializers, init and shutdown then
+  /// run twice (probe, then host); costs one process start per plugin file
+  /// (POSIX only). A missing probe program is a NotFound error.
   bool probe = false;
-  /// Time the probe child may take to load, init and shut down a plugin.
+  /// Time the probe process may take to load, init and shut down a plugin.
   std::chrono::milliseconds probeTimeout{5000};
 };
 
