@@ -3,8 +3,12 @@
 #include <dm/core/helper_program.hpp>
 
 #include <dlfcn.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <spawn.h>
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdlib>
 #include <filesystem>
 #include <system_error>
@@ -45,6 +49,42 @@ Result<std::string> findHelperProgram(const HelperProgram& program) {
               std::string("the helper program ") + program.name + ", which " + program.purpose +
                   ", is not in " + (looked.empty() ? std::string("any known folder") : looked),
               "", program.otherwise);
+}
+
+int spawnHelperProgram(const std::string& program, std::span<const std::string> args, int channel,
+                       pid_t& pid) {
+  // dup2 onto the same number would keep its close-on-exec flag: hand the
+  // program a descriptor above the ones it gets.
+  int high = channel;
+  if (channel <= 3) {
+    high = ::fcntl(channel, F_DUPFD_CLOEXEC, 10);
+    if (high < 0) return errno;
+  }
+  std::vector<std::string> strings;
+  strings.reserve(args.size() + 1);
+  strings.push_back(program);
+  strings.insert(strings.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& a : strings) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawnattr_t attr;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawnattr_init(&attr);
+  posix_spawn_file_actions_adddup2(&actions, high, 3);
+  posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
+  posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
+  sigset_t none, all;
+  sigemptyset(&none);
+  sigfillset(&all);
+  posix_spawnattr_setsigmask(&attr, &none);
+  posix_spawnattr_setsigdefault(&attr, &all);
+  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
+  const int spawned = ::posix_spawn(&pid, program.c_str(), &actions, &attr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  posix_spawnattr_destroy(&attr);
+  if (high != channel) ::close(high);
+  return spawned;
 }
 
 }  // namespace dm

@@ -7,7 +7,6 @@
 #include <dlfcn.h>
 #include <fcntl.h>
 #include <poll.h>
-#include <spawn.h>
 #include <sys/types.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -213,40 +212,14 @@ Status probePlugin(const std::filesystem::path& path, std::chrono::milliseconds 
   int fds[2];
   if (pipe2(fds, O_CLOEXEC) != 0)
     return fail(ErrorCode::Io, std::string("cannot create the probe pipe: ") + std::strerror(errno), where);
-  // The probe's end goes to its fd 3; keep it off 3 here so that the dup2
-  // of the spawn clears its close-on-exec flag.
-  if (fds[1] == 3) {
-    const int moved = fcntl(fds[1], F_DUPFD_CLOEXEC, 10);
-    close(fds[1]);
-    fds[1] = moved;
-  }
-  posix_spawn_file_actions_t actions;
-  posix_spawnattr_t attr;
-  posix_spawn_file_actions_init(&actions);
-  posix_spawnattr_init(&attr);
-  posix_spawn_file_actions_adddup2(&actions, fds[1], 3);
-  posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
-  // No signal the host's threads block or catch reaches the probe so.
-  sigset_t none, all;
-  sigemptyset(&none);
-  sigfillset(&all);
-  posix_spawnattr_setsigmask(&attr, &none);
-  posix_spawnattr_setsigdefault(&attr, &all);
-  posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
-  std::string programPath = *program;
-  std::string pluginPath = where;
-  char* argv[] = {programPath.data(), pluginPath.data(), nullptr};
   pid_t pid = -1;
-  const int spawned =
-      fds[1] < 0 ? errno : ::posix_spawn(&pid, programPath.c_str(), &actions, &attr, argv, environ);
-  posix_spawn_file_actions_destroy(&actions);
-  posix_spawnattr_destroy(&attr);
-  if (fds[1] >= 0) close(fds[1]);
+  const std::string args[] = {where};
+  const int spawned = spawnHelperProgram(*program, args, fds[1], pid);
+  close(fds[1]);
   if (spawned != 0) {
     close(fds[0]);
-    return fail(ErrorCode::Io,
-                "cannot start the probe process " + programPath + ": " + std::strerror(spawned), where,
-                "retry without PluginLinkerOptions::probe");
+    return fail(ErrorCode::Io, "cannot start the probe process " + *program + ": " + std::strerror(spawned),
+                where, "retry without PluginLinkerOptions::probe");
   }
 
   using Clock = std::chrono::steady_clock;

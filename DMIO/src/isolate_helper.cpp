@@ -21,7 +21,6 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
-#include <spawn.h>
 #include <sys/mman.h>
 #include <sys/signalfd.h>
 #include <sys/socket.h>
@@ -225,27 +224,9 @@ class HelperServer {
                   std::string("cannot make a socket for the helper process: ") + std::strerror(errno), where,
                   options.disableHint);
     Fd mine(highFd(sv[0])), theirs(highFd(sv[1]));
-    posix_spawn_file_actions_t actions;
-    posix_spawnattr_t attr;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawnattr_init(&attr);
-    posix_spawn_file_actions_adddup2(&actions, theirs.get(), 3);
-    posix_spawn_file_actions_addopen(&actions, 0, "/dev/null", O_RDONLY, 0);
-    posix_spawn_file_actions_addopen(&actions, 1, "/dev/null", O_WRONLY, 0);
-    // No signal the caller's threads block or catch reaches the helper so.
-    sigset_t none, all;
-    sigemptyset(&none);
-    sigfillset(&all);
-    posix_spawnattr_setsigmask(&attr, &none);
-    posix_spawnattr_setsigdefault(&attr, &all);
-    posix_spawnattr_setflags(&attr, POSIX_SPAWN_SETSIGMASK | POSIX_SPAWN_SETSIGDEF);
-    std::string path = program;
-    char serve[] = "--serve";
-    char* argv[] = {path.data(), serve, nullptr};
     pid_t pid = -1;
-    const int spawned = ::posix_spawn(&pid, path.c_str(), &actions, &attr, argv, environ);
-    posix_spawn_file_actions_destroy(&actions);
-    posix_spawnattr_destroy(&attr);
+    const std::string serve[] = {"--serve"};
+    const int spawned = spawnHelperProgram(program, serve, theirs.get(), pid);
     if (spawned != 0 || mine.get() < 0)
       return fail(ErrorCode::Io,
                   "cannot start the " + options.library + " helper process (" + program +

@@ -4,7 +4,8 @@
 // process — dm-isolate (Assimp and OpenVDB parses, dm/io/isolation.hpp) and
 // dm-plugin-probe (a plugin's first load in probe mode, dm/core/plugin.hpp).
 //
-// A program is looked for, in order: at the path its environment variable
+// spawnHelperProgram() starts one the same way for every caller. A program
+// is looked for, in order: at the path its environment variable
 // names (which must then be an executable file); beside the shared library
 // that asks (found with dladdr from an object in it); in that folder's
 // dmplatform/ subfolder (the install layout, <libdir>/dmplatform/); beside
@@ -20,6 +21,9 @@
 
 #include <dm/core/result.hpp>
 
+#include <sys/types.h>
+
+#include <span>
 #include <string>
 
 namespace dm {
@@ -36,5 +40,15 @@ struct HelperProgram {
 /// The program's path, or NotFound naming the variable or the folders
 /// looked in. Reads the environment and the file system; O(1).
 Result<std::string> findHelperProgram(const HelperProgram& program);
+
+/// Starts `program` with `args` (argv[1], ...) by posix_spawn: no fork of
+/// this process, so no lock another of its threads holds comes along. The
+/// program gets `channel` as its fd 3, /dev/null as fd 0 and 1 (a helper
+/// never reads our stdin or writes into our stdout), our stderr, and every
+/// signal unblocked and at its default whatever our threads block or catch.
+/// Sets `pid` and returns 0, or returns the errno of the failure. The
+/// caller reaps the program (waitpid).
+int spawnHelperProgram(const std::string& program, std::span<const std::string> args, int channel,
+                       pid_t& pid);
 
 }  // namespace dm
