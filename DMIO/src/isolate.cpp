@@ -140,10 +140,28 @@ void budgetFreeHook(const volatile void* p) {
 #if defined(DM_ISOLATE_ASAN)
 // An allocation AddressSanitizer could not serve is over any budget (it asked
 // for more than the machine or the allocator has): the child ends as over
-// budget. Every other report (a memory error) still ends it as a crash.
+// budget. A death with no report at all is the runtime's own consistency
+// check failing — e.g. "CHECK failed: asan_allocator.cpp ... kAllocBegMagic"
+// when a block's header was overwritten — which our instrumented code cannot
+// cause without a report of its own first: the uninstrumented library wrote
+// past its memory (mesh_fuzz found a PLY on which Assimp 5.2.4 writes past a
+// new[] block; valgrind shows the write). That is the library crashing, and
+// the child ends as a crash does. Every other report (a memory error) still
+// ends it with the sanitizer's exit status.
 void budgetDeathCallback() {
   const char* bug = __asan_get_report_description();
-  if (bug == nullptr) return;
+  if (bug == nullptr) {
+    struct sigaction sa {};
+    sa.sa_handler = SIG_DFL;
+    sigemptyset(&sa.sa_mask);
+    ::sigaction(SIGABRT, &sa, nullptr);
+    sigset_t abrt;
+    sigemptyset(&abrt);
+    sigaddset(&abrt, SIGABRT);
+    ::sigprocmask(SIG_UNBLOCK, &abrt, nullptr);
+    ::raise(SIGABRT);
+    ::_exit(128 + SIGABRT);  // not reached
+  }
   for (const char* kind : {"out-of-memory", "allocation-size-too-big", "calloc-overflow", "pvalloc-overflow",
                            "invalid-allocation-alignment", "rss-limit-exceeded"})
     if (std::strcmp(bug, kind) == 0) exitOverBudget();
