@@ -48,6 +48,28 @@ void checkEcho(ByteReader& request, FdWriter& result) {
 
 void checkCrash(ByteReader&, FdWriter&) { std::raise(SIGSEGV); }
 
+// What an uninstrumented library that writes past its blocks does to the
+// heap: the header of a freed block overwritten (without instrumentation),
+// then allocations until AddressSanitizer's quarantine recycles the block
+// and its allocator's own check fails, with no report. Only meaningful
+// under AddressSanitizer (the test that runs it skips otherwise).
+__attribute__((no_sanitize("address"))) void overwriteHeader(std::uintptr_t block) {
+  volatile unsigned char* header = reinterpret_cast<unsigned char*>(block) - 16;
+  for (int i = 0; i < 16; ++i) header[i] = 0xcc;
+}
+void checkCorruptHeap(ByteReader&, FdWriter& result) {
+  char* block = new char[32];
+  const auto address = reinterpret_cast<std::uintptr_t>(block);
+  delete[] block;
+  overwriteHeader(address);
+  for (int i = 0; i < 100000; ++i) {
+    char* churn = new char[4096];
+    churn[0] = 1;
+    delete[] churn;
+  }
+  result.u64(0);
+}
+
 // Answers how many threads the helper (this job's parent, which forks every
 // job) has: 1, or a fork there would be unsafe.
 void checkHelperThreads(ByteReader&, FdWriter& result) {
@@ -71,6 +93,7 @@ constexpr dm::detail::HelperJobEntry kJobs[] = {
     {"check-allocate", checkAllocate},
     {"check-echo", checkEcho},
     {"check-crash", checkCrash},
+    {"check-corrupt-heap", checkCorruptHeap},
     {"check-helper-threads", checkHelperThreads},
     {"check-hang", checkHang},
 };
