@@ -129,13 +129,14 @@ for t in "${targets[@]}"; do
     # The sources' line coverage, from the export's totals.
     covered=$(cov export -summary-only "${srcs[@]}" |
               /usr/bin/python3 -c 'import json,sys; l=json.load(sys.stdin)["data"][0]["totals"]["lines"]; print("%.1f %% (%d of %d)" % (l["percent"], l["covered"], l["count"]))')
-    # The lines with a zero count, as ranges, per file.
+    # The lines with a zero count, as ranges, per file (llvm-cov names each
+    # file of several on a line of its own, "DMIO/src/x.cpp:").
     cov show "${srcs[@]}" >"$deep/$t.show.txt" 2>/dev/null || true
     unreached=$(awk -F'|' -v file="$(basename "${srcs[0]}")" '
-        /^\/.*:$/ { file = $0; sub(/:$/, "", file); n = split(file, parts, "/"); file = parts[n]; next }
+        /^[^ |].*:$/ { file = $0; sub(/:$/, "", file); n = split(file, parts, "/"); file = parts[n]; next }
         NF >= 3 { count = $2; gsub(/ /, "", count); line = $1; gsub(/ /, "", line)
-                  if (count == "0") { if (start == "" || line != last + 1) { if (start != "") { out = out sep file ":" start (last > start ? "-" last : ""); sep = ", " } start = line } last = line } }
-        END { if (start != "") out = out sep file ":" start (last > start ? "-" last : ""); print out }' \
+                  if (count == "0") { if (start == "" || line != last + 1 || file != lastfile) { if (start != "") { out = out sep lastfile ":" start (last > start ? "-" last : ""); sep = ", " } start = line } last = line; lastfile = file } }
+        END { if (start != "") out = out sep lastfile ":" start (last > start ? "-" last : ""); print out }' \
         "$deep/$t.show.txt")
     [ -n "$unreached" ] || unreached="none"
     echo "$unreached" >"$deep/$t.unreached.txt"
