@@ -91,6 +91,13 @@ Result<BodyDesc> rigidBodyFromMesh(const Mesh& mesh, double density) {
   return d;
 }
 
+Isometry3 bodyShapePose(const Vec3& position, const Quat& orientation, const BodyDesc& desc) noexcept {
+  Isometry3 pose = Isometry3::Identity();
+  pose.translation() = position;
+  pose.linear() = orientation.normalized().toRotationMatrix();
+  return pose * desc.shapeOffset;
+}
+
 Mat3 worldInertia(const Mat3& rotation, const Mat3& inertia) noexcept {
   return rotation * inertia * rotation.transpose();
 }

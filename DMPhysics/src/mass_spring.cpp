@@ -347,6 +347,16 @@ void MassSpringBody::setExternalForce(std::size_t i, const Vec3& f) {
 
 void MassSpringBody::clearExternalForces() { fext_.setZero(); }
 
+Status MassSpringBody::setMass(std::size_t i, double mass) {
+  DM_ASSERT(i < particleCount(), "particle index out of range");
+  if (!std::isfinite(mass) || mass <= 0)
+    return invalid(formatString("mass is %g kg", mass), "MassSpringBody::setMass: mass",
+                   "give a finite mass > 0 kg");
+  mass_[i] = mass;
+  massRangeStale_ = true;
+  return ok();
+}
+
 Status MassSpringBody::setDrag(double rate) {
   if (!std::isfinite(rate) || rate < 0)
     return invalid(formatString("drag rate is %g 1/s", rate), "MassSpringBody::setDrag: rate",
@@ -1179,6 +1189,12 @@ Result<ImplicitStepReport> MassSpringBody::stepImplicit(double h) {
     return invalid(formatString("time step is %g s", h), formatString("%s: h", where),
                    "give a finite h > 0 s");
   if (!prepared_) prepare();
+  if (massRangeStale_) {  // the CG's bounds (stepImplicitCore) use the lightest and heaviest
+    const auto [lightest, heaviest] = std::minmax_element(mass_.begin(), mass_.end());
+    massMin_ = mass_.empty() ? 0.0 : *lightest;
+    massMax_ = mass_.empty() ? 0.0 : *heaviest;
+    massRangeStale_ = false;
+  }
   // Picked on first use (a function-local static: safe from other static
   // initialisers that step a body).
   static const Kernels::StepFn stepFn = Kernels::pick();

@@ -7,18 +7,6 @@
 
 namespace dm {
 
-namespace {
-
-// The body's shape frame in the world: position · orientation · shapeOffset.
-Isometry3 shapePose(const Vec3& position, const Quat& orientation, const BodyDesc& desc) {
-  Isometry3 pose = Isometry3::Identity();
-  pose.translation() = position;
-  pose.linear() = orientation.normalized().toRotationMatrix();
-  return pose * desc.shapeOffset;
-}
-
-}  // namespace
-
 Result<SoftRigidCoupling> SoftRigidCoupling::create(const PhysicsWorld& world, FemBody& tissue,
                                                     std::span<const SoftRigidContact> contacts,
                                                     const Isometry3& tissuePose) {
@@ -43,7 +31,7 @@ Result<SoftRigidCoupling> SoftRigidCoupling::create(const PhysicsWorld& world, F
     // mass (the body origin) in the shape frame: shapeOffset⁻¹ · 0.
     const Mat3 rs = d.shapeOffset.linear();
     obstacles.push_back({.tree = k.tree,
-                         .pose = worldToTissue * shapePose(d.position, d.orientation, d),
+                         .pose = worldToTissue * bodyShapePose(d.position, d.orientation, d),
                          .stiffness = k.stiffness,
                          .friction = k.friction,
                          .mass = dynamic ? d.mass : 0.0,
@@ -79,7 +67,7 @@ Status SoftRigidCoupling::beforeTissueStep(const WorldState& state, double dt) {
     const bool falls = dynamic_[i] && !state.asleep(id);
     const Vec3 v = state.linearVelocity(id) + (falls ? Vec3(dt * world_->forces().gravity) : Vec3::Zero());
     tissue_->setObstaclePose(
-        i, worldToTissue * shapePose(state.position(id), state.orientation(id), world_->bodies()[id.index]));
+        i, worldToTissue * bodyShapePose(state.position(id), state.orientation(id), world_->bodies()[id.index]));
     tissue_->setObstacleVelocity(i, {toTissue * v, toTissue * state.angularVelocity(id)});
   }
   return ok();

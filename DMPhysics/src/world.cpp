@@ -406,13 +406,15 @@ Status PhysicsWorld::setBodyState(WorldState& state, BodyId id, const Vec3& posi
   if (state.s_.position.size() != bodies_.size())
     return fail(ErrorCode::InvalidArgument, "the state does not belong to this world",
                 "PhysicsWorld::setBodyState", "make the state with this world's makeState()");
-  const std::string where = bodyWhere(id.index, bodies_[id.index].name);
+  const auto where = [&] {
+    return bodyWhere(id.index, bodies_[id.index].name);
+  };  // (errors only: no allocation)
   if (!position.allFinite() || !orientation.coeffs().allFinite() || !linearVelocity.allFinite() ||
       !angularVelocity.allFinite())
-    return fail(ErrorCode::InvalidArgument, "a position, orientation or velocity is not finite", where,
+    return fail(ErrorCode::InvalidArgument, "a position, orientation or velocity is not finite", where(),
                 "give finite values");
   if (!(orientation.norm() > 1e-12))
-    return fail(ErrorCode::InvalidArgument, "orientation is a zero quaternion", where,
+    return fail(ErrorCode::InvalidArgument, "orientation is a zero quaternion", where(),
                 "give a unit quaternion");
   const std::uint32_t i = id.index;
   const BodyKind kind = bodies_[i].kind;
@@ -441,11 +443,14 @@ Status PhysicsWorld::applyImpulse(WorldState& state, BodyId id, const Vec3& impu
   if (state.s_.position.size() != bodies_.size())
     return fail(ErrorCode::InvalidArgument, "the state does not belong to this world",
                 "PhysicsWorld::applyImpulse", "make the state with this world's makeState()");
-  const std::string where = bodyWhere(id.index, bodies_[id.index].name);
+  const auto where = [&] {
+    return bodyWhere(id.index, bodies_[id.index].name);
+  };  // (errors only: no allocation)
   if (bodies_[id.index].kind == BodyKind::Static)
-    return fail(ErrorCode::InvalidArgument, "the body is static", where, "apply impulses to dynamic bodies");
+    return fail(ErrorCode::InvalidArgument, "the body is static", where(),
+                "apply impulses to dynamic bodies");
   if (!impulse.allFinite() || !point.allFinite())
-    return fail(ErrorCode::InvalidArgument, "impulse or point is not finite", where, "give finite values");
+    return fail(ErrorCode::InvalidArgument, "impulse or point is not finite", where(), "give finite values");
   wakeIsland(state, id.index);
   applyImpulseAt(state, id.index, impulse, point - state.s_.position[id.index]);
   return ok();

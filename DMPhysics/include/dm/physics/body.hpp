@@ -112,6 +112,10 @@ Status validateBodyDesc(const BodyDesc& desc, const std::string& where);
 /// @endcode
 Result<BodyDesc> rigidBodyFromMesh(const Mesh& mesh, double density);
 
+/// The body's shape frame (its mesh's) in the world, at a body position
+/// and orientation: position · orientation · desc.shapeOffset. O(1).
+Isometry3 bodyShapePose(const Vec3& position, const Quat& orientation, const BodyDesc& desc) noexcept;
+
 /// World inertia tensor R I Rᵀ (kg·m²) of a body-frame tensor `inertia`. O(1).
 Mat3 worldInertia(const Mat3& rotation, const Mat3& inertia) noexcept;
 

@@ -265,6 +265,13 @@ class MassSpringBody {
   void setPinned(std::size_t i, bool pinned);
   /// Constant external force on particle i (N) until changed; 0 initially.
   void setExternalForce(std::size_t i, const Vec3& f);
+  /// Particle i's external force, N.
+  Vec3 externalForce(std::size_t i) const { return fext_.segment<3>(3 * Eigen::Index(i)); }
+  /// Sets particle i's mass (kg) from the next step on, e.g. a rigid body's
+  /// mass lent for one step to the particles touching it
+  /// (dm::ParticleObstacles::beforeStep). Fails (InvalidArgument, nothing
+  /// changed) on a mass that is not finite and > 0. O(1), allocation-free.
+  Status setMass(std::size_t i, double mass);
   /// Sets every external force to zero. O(n).
   void clearExternalForces();
 
@@ -402,6 +409,7 @@ class MassSpringBody {
   double slotH_ = -1.0;
   std::size_t maxwellCount_ = 0;
   double massMin_ = 0.0, massMax_ = 0.0;  // over all particles
+  bool massRangeStale_ = false;           // setMass ran: massMin_/massMax_ to redo
   std::uint32_t degreeMax_ = 0;           // most elements at one particle
   // 3 per element: force on i (explicit); 6 per slot pair, x x' y y' z z':
   // the right-hand-side terms on the owners of its two slots (implicit).

@@ -283,7 +283,8 @@ class PhysicsWorld {
   /// Sets one body's position (m), orientation and velocities (world) in
   /// `state`, waking the body's island if it sleeps. Fails with NotFound for
   /// an unknown id, InvalidArgument on non-finite values or a zero
-  /// quaternion; orientation is normalised.
+  /// quaternion; orientation is normalised. Allocation-free unless it fails
+  /// (a real-time coupling may call it every step).
   Status setBodyState(WorldState& state, BodyId id, const Vec3& position, const Quat& orientation,
                       const Vec3& linearVelocity, const Vec3& angularVelocity) const;
 
