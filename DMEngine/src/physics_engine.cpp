@@ -434,15 +434,16 @@ bool PhysicsEngine::tick(const TickInfo& info) noexcept {
     error_ = s.error().within("physics step " + std::to_string(m.steps));
     return false;
   }
+  // The membranes next, the same way (dm::MembraneRigidCoupling).
+  if (auto s = m.membranes->step(dt, m.state); !s) {
+    error_ = s.error().within("physics step " + std::to_string(m.steps));
+    return false;
+  }
   if (!m.moving.empty())  // (static bodies alone never move)
     if (auto s = m.ode ? m.ode->step(m.state, dt) : m.world.step(m.state, dt); !s) {
       error_ = s.error().within("physics step " + std::to_string(m.steps));
       return false;
     }
-  if (auto s = m.membranes->step(dt); !s) {
-    error_ = s.error().within("physics step " + std::to_string(m.steps));
-    return false;
-  }
   if (!m.fluids->empty()) {
     for (std::size_t i = 0; i < m.moving.size(); ++i) {  // where the world's step left them
       FluidBody& link = m.fluidBodies[i];
@@ -549,6 +550,8 @@ nlohmann::json PhysicsEngine::summary() const {
     addContactForces(m.state, m.lastDt, contactForce);
   std::vector<Vec3> softForce(m.world.bodyCount(), Vec3::Zero());  // the tissue's contact, by world body
   m.soft->addBodyForces(softForce);
+  std::vector<Vec3> membraneForce(m.world.bodyCount(), Vec3::Zero());  // the membranes' contact
+  m.membranes->addBodyForces(membraneForce);
   Json bodies = Json::array();
   for (std::size_t b = 0; b < m.bodies.size(); ++b) {
     const Impl::Body& body = m.bodies[b];
@@ -564,6 +567,7 @@ nlohmann::json PhysicsEngine::summary() const {
               {"asleep", m.state.asleep(body.id)},
               {"contact_force_N", engine_json::vec3(contactForce[b])},
               {"soft_force_N", engine_json::vec3(softForce[body.id.index])},
+              {"membrane_force_N", engine_json::vec3(membraneForce[body.id.index])},
               {"tool_force_N", engine_json::vec3(m.toolForce[b])},
               {"fluid_force_N", engine_json::vec3(m.fluidForce[b])}};
     for (std::size_t k = 0; k < m.touchedBody.size(); ++k)

@@ -6,7 +6,7 @@
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
 #include <dm/physics/mass_spring.hpp>
-#include <dm/physics/particle_obstacles.hpp>
+#include <dm/physics/membrane_rigid.hpp>
 #include <dm/physics/world.hpp>
 
 #include <algorithm>
@@ -25,7 +25,7 @@ struct SceneMembranes::Body {
   Isometry3 pose = Isometry3::Identity();  // object → world
   double scale = 1.0;
   MassSpringBody springs;
-  std::optional<ParticleObstacles> contacts;  // the world's static colliding objects
+  std::optional<MembraneRigidCoupling> contacts;  // with the world's colliding objects
   std::vector<Vec3> rest;             // world, the particles at the start
   std::vector<std::uint32_t> pinned;  // particle indices
   std::vector<Triangle> triangles;    // the drawn mesh's (= the particles')
@@ -64,14 +64,7 @@ Result<std::unique_ptr<SceneMembranes>> SceneMembranes::build(const SceneDesc& s
     return out;
   auto obstacles = sceneObstacles(scene, resources, world);
   if (!obstacles) return obstacles.error();
-  for (SceneObstacle& ob : *obstacles) {
-    if (ob.dynamic)  // (the scene parser says so first)
-      return fail(
-          ErrorCode::InvalidArgument,
-          "a membrane meets static objects only: dynamic body \"" + ob.name + "\" would pass through it",
-          "objects/" + ob.name, "set \"collide\": false on it, or make it static");
-    out->obstacles_.push_back(std::move(ob));
-  }
+  out->obstacles_ = std::move(*obstacles);
   for (const SceneObject& o : scene.objects) {
     if (!o.membrane) continue;
     const SceneMembrane& m = *o.membrane;
@@ -110,10 +103,10 @@ Result<std::unique_ptr<SceneMembranes>> SceneMembranes::build(const SceneDesc& s
       b->springs.setPinned(i, true);
       b->pinned.push_back(i);
     }
-    std::vector<ParticleObstacle> touching;
+    std::vector<MembraneRigidContact> touching;
     for (const SceneObstacle& ob : out->obstacles_)
-      touching.push_back({.tree = ob.tree.get(), .pose = ob.start, .friction = m.friction});
-    auto contacts = ParticleObstacles::create(touching, m.thickness);
+      touching.push_back({.body = ob.body, .tree = ob.tree.get(), .friction = m.friction});
+    auto contacts = MembraneRigidCoupling::create(world, touching, m.thickness);
     if (!contacts) return contacts.error().within(where);
     b->contacts = std::move(*contacts);
     b->rest = placed.positions;
@@ -125,12 +118,11 @@ Result<std::unique_ptr<SceneMembranes>> SceneMembranes::build(const SceneDesc& s
   return out;
 }
 
-Status SceneMembranes::step(double h) {
+Status SceneMembranes::step(double h, WorldState& state) {
   for (const auto& bp : bodies_) {
     Body& b = *bp;
-    auto report = b.springs.stepImplicit(h);
+    auto report = b.contacts->step(b.springs, state, h);
     if (!report) return report.error().within("membrane \"" + b.name + "\"");
-    b.contacts->resolve(b.springs, h);
     ++b.steps;
     b.unconverged += !report->converged;
     b.cgIterations += static_cast<std::uint64_t>(report->cgIterations);
@@ -150,6 +142,13 @@ bool SceneMembranes::latestSurface(std::size_t i, Mesh& out) {
   return latestDeformedSurface(*b.surface, b.triangles, out);
 }
 
+void SceneMembranes::addBodyForces(std::span<Vec3> force) const {
+  for (const auto& b : bodies_)
+    for (std::size_t i = 0; i < obstacles_.size(); ++i)
+      if (obstacles_[i].body.index < force.size())
+        force[obstacles_[i].body.index] += b->contacts->contacts().force(i);
+}
+
 nlohmann::json SceneMembranes::summary() const {
   nlohmann::json list = nlohmann::json::array();
   for (const auto& bp : bodies_) {
@@ -167,8 +166,9 @@ nlohmann::json SceneMembranes::summary() const {
     for (std::uint32_t i : b.pinned) pinLoad += s.elementForceOn(i) + s.mass(i) * s.gravity();
     nlohmann::json touching = nlohmann::json::array();
     for (std::size_t i = 0; i < obstacles_.size(); ++i)
-      touching.push_back(
-          {{"name", obstacles_[i].name}, {"force_N", engine_json::vec3(b.contacts->force(i))}});
+      touching.push_back({{"name", obstacles_[i].name},
+                          {"dynamic", obstacles_[i].dynamic},
+                          {"force_N", engine_json::vec3(b.contacts->contacts().force(i))}});
     list.push_back({{"name", b.name},
                     {"particles", s.particleCount()},
                     {"elements", s.elementCount()},
@@ -183,7 +183,7 @@ nlohmann::json SceneMembranes::summary() const {
                     {"cg_iterations_mean", b.steps ? double(b.cgIterations) / double(b.steps) : 0.0},
                     {"cg_iterations_max", b.cgMax},
                     {"unconverged_steps", b.unconverged},
-                    {"contacts", b.contacts->contacts()},
+                    {"contacts", b.contacts->contacts().contacts()},
                     {"obstacles", std::move(touching)}});
   }
   return list;

@@ -55,11 +55,11 @@ void readMembrane(ConfigReader& object, SceneObject& o) {
         if (auto box = readBox(b)) m.pinnedBoxes.push_back(*box);
       }
   }
-  // A membrane meets the static objects that collide through its own
-  // particles (its "friction" and "thickness"), not as a rigid collider.
+  // A membrane meets the objects that collide through its own particles
+  // (its "friction" and "thickness"), not as a rigid collider.
   for (const char* key : {"collide", "contact"})
     if (object.has(key))
-      object.addError("a membrane is not a rigid collider: it meets static objects by its particles", key,
+      object.addError("a membrane is not a rigid collider: it meets colliding objects by its particles", key,
                       "remove \"" + std::string(key) +
                           "\" (the membrane's \"friction\" and \"thickness\" set its "
                           "contact)");
@@ -85,20 +85,13 @@ void checkMembranes(const SceneDesc& scene, ConfigReader root) {
               " cannot be touched: the haptic renderers touch rigid objects, "
               "soft tissue and bone",
           "objects", "remove " + inQuotes(o.name) + " from the haptics engine's \"objects\"");
-    // It meets static objects only: a dynamic body or soft tissue would
-    // pass through it (or it through them).
+    // It meets the colliding rigid objects, static and dynamic; soft tissue
+    // would pass through it (or it through the tissue).
     for (const SceneObject& other : scene.objects) {
-      if (&other == &o) continue;
-      if (other.dynamic && other.collide)
-        r.addError("membrane " + inQuotes(o.name) + " meets static objects only: dynamic body " +
-                       inQuotes(other.name) + ", which collides, would pass through it",
-                   "membrane", "set \"collide\": false on " + inQuotes(other.name) + ", or make it static");
-      else if (other.soft)
-        r.addError("membrane " + inQuotes(o.name) + " and soft object " + inQuotes(other.name) +
-                       " do not meet: each would pass through the other",
-                   "membrane", "remove one of them");
-      else
-        continue;
+      if (&other == &o || !other.soft) continue;
+      r.addError("membrane " + inQuotes(o.name) + " and soft object " + inQuotes(other.name) +
+                     " do not meet: each would pass through the other",
+                 "membrane", "remove one of them");
       break;
     }
     for (std::size_t f = 0; f < scene.fluids.size(); ++f) {

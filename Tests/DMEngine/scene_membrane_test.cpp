@@ -8,7 +8,8 @@
 // ones on a time scale proportional to their damping; a sheet dropped on a
 // static sphere drapes over it and the sphere carries its weight; a drum
 // over a sphere shares its weight between rim and sphere, the sphere's share
-// growing with the sheet's stiffness; lockstep
+// growing with the sheet's stiffness; a free ball dropped on a drum rests
+// in its sag, the membrane holding it up and the rim carrying both; lockstep
 // reruns are bit-identical; the render engine draws it deformed.
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/image_io.hpp>
@@ -172,6 +173,54 @@ TEST(SceneMembrane, ADrumTentedOverASphereSharesItsWeightBetweenRimAndSphere) {
   EXPECT_LT(onSphereShare[0], onSphereShare[1]);
   EXPECT_LT(onSphereShare[1], onSphereShare[2]);
   EXPECT_GT(onSphereShare[2], 1.0);  // measured 0.60, 1.60, 3.88 of the weight
+}
+
+// A drum (10 cm, 10 g, its rim held) with a free ball dropped onto it
+// off centre, `seconds` of it, the rigid bodies stepped by `backend`.
+json ballOnDrum(double seconds, const fs::path& out, const std::string& backend = "builtin") {
+  const std::string text = R"({
+    "format": "dmplatform-scene", "version": 2, "name": "ball_on_drum",
+    "resources": {"sheet": {"type": "shape", "shape": "plane", "half_extents": [0.05, 0.05], "subdivisions": 4},
+                  "ball": {"type": "shape", "shape": "sphere", "radius": 0.015, "subdivisions": 3}},
+    "objects": [{"name": "sheet", "mesh": "sheet", "pose": {"position": [0, 0, 0.1]},
+                 "membrane": {"mass": 0.01, "stiffness": 400, "damping": 0.02, "bend_stiffness": 0.5, "drag": 4,
+                              "pinned": "boundary", "friction": 0.5}},
+                {"name": "ball", "mesh": "ball", "dynamic": true, "mass": 0.02,
+                 "pose": {"position": [0.004, -0.003, 0.125]}}],
+    "engines": {"physics": {"rate_hz": 500, "backend": ")" +
+                           backend + R"("}},
+    "outputs": {"summary": true}
+  })";
+  return scene_run::runScene(scene_run::parsedScene(text, "ball_on_drum.json"), seconds, out);
+}
+
+TEST(SceneMembrane, AFreeBallDroppedOnADrumRestsInItsSagAndTheRimCarriesBoth) {
+  // The ball (20 g, r 1.5 cm) falls 1 cm onto the drum, rocks and settles
+  // in the middle of the sag it makes; at rest the membrane holds it up
+  // with its weight and the rim carries ball and drum (1 %), whichever
+  // backend moves the ball; reruns are bit-identical.
+  const dm::test::TempDir dir("membrane_ball");
+  for (const std::string backend : {"builtin", "ode"}) {
+    SCOPED_TRACE(backend);
+    const json s = ballOnDrum(6.0, dir / "a", backend);
+    const json& m = membraneOf(s);
+    const double M = 0.02, weight = (M + 0.01) * kG;
+    const Vec3 rim = vec(m.at("pinned_load_N"));
+    EXPECT_NEAR(rim.z(), -weight, 0.01 * weight) << m.dump(2);
+    const json& onBall = scene_run::named(m.at("obstacles"), "ball");
+    EXPECT_TRUE(onBall.at("dynamic").get<bool>());
+    EXPECT_NEAR(vec(onBall.at("force_N")).z(), M * kG, 0.01 * M * kG);
+    const json& ball = scene_run::named(s.at("physics").at("bodies"), "ball");
+    EXPECT_NEAR(vec(ball.at("membrane_force_N")).z(), M * kG, 0.01 * M * kG);
+    const Vec3 x = vec(ball.at("position_m"));
+    EXPECT_LT(vec(ball.at("velocity_m_s")).norm(), 1e-3);
+    EXPECT_LT(std::hypot(x.x(), x.y()), 0.5e-3);  // in the middle
+    EXPECT_LT(x.z(), 0.1 + 0.015 - 1e-3);         // sunk below the rim's plane
+    EXPECT_GE(m.at("contacts").get<int>(), 3);
+    if (backend == "builtin") {
+      EXPECT_EQ(s.at("physics"), ballOnDrum(6.0, dir / "b").at("physics"));
+    }
+  }
 }
 
 // The bundled example: a 50 g drape dropped on the Colin27 head's skin

@@ -22,8 +22,9 @@
 //     body (dm::FemBody on tetrahedra from its mesh, held faces, gravity)
 //     that the god-object presses through dm::HapticTissue — felt on its
 //     newest surface at the haptic rate, deformed at the physics rate;
-//     every "membrane" a mass–spring body kept out of the static colliding
-//     objects (dm::ParticleObstacles);
+//     every "membrane" a mass–spring body kept out of the colliding
+//     objects, holding up and pushed by the dynamic ones
+//     (dm::MembraneRigidCoupling);
 //   - render: a headless EGL context on the render engine's own thread,
 //     dm::SceneView drawing the render camera with the tool object following
 //     the haptic proxy, a HUD (time, force, force plot) from dm::Overlay,

@@ -312,8 +312,8 @@ struct SceneMembrane {
   /// Boxes whose vertices are held ("pinned_boxes"; the object's frame
   /// before its scale, as a soft object's fixed_boxes).
   std::vector<SceneBox> pinnedBoxes;
-  /// Coulomb coefficient of its contact with the static objects that
-  /// collide (dm::ParticleObstacles), ≥ 0.
+  /// Coulomb coefficient of its contact with the objects that collide,
+  /// static and dynamic (dm::MembraneRigidCoupling), ≥ 0.
   double friction = 0.0;
   double thickness = 0.0;  ///< m, ≥ 0: how far its particles stay off those objects' surfaces
 
