@@ -20,12 +20,9 @@ Result<SoftRigidCoupling> SoftRigidCoupling::create(const PhysicsWorld& world, F
   for (std::size_t i = 0; i < contacts.size(); ++i) {
     const SoftRigidContact& k = contacts[i];
     const std::string where = "SoftRigidCoupling::create: contacts[" + std::to_string(i) + "]";
-    if (!k.body.valid() || k.body.index >= world.bodyCount())
-      return fail(ErrorCode::InvalidArgument, "the body is not in the world", where, "use an id from addBody");
-    const BodyDesc& d = world.bodies()[k.body.index];
-    if (d.kind == BodyKind::Particle)
-      return fail(ErrorCode::InvalidArgument, "body '" + d.name + "' is a particle", where,
-                  "couple rigid or static bodies (a particle has no orientation for its mesh)");
+    auto body = world.meshedBody(k.body, where);
+    if (!body) return body.error();
+    const BodyDesc& d = **body;
     const bool dynamic = d.kind == BodyKind::Rigid;
     // Body-frame inertia seen from the shape frame: Rsᵀ I Rs; the centre of
     // mass (the body origin) in the shape frame: shapeOffset⁻¹ · 0.

@@ -290,6 +290,16 @@ Result<std::size_t> PhysicsWorld::addJoint(const JointDesc& desc) {
   return joints_.size() - 1;
 }
 
+Result<const BodyDesc*> PhysicsWorld::meshedBody(BodyId id, const std::string& where) const {
+  if (!id.valid() || id.index >= bodies_.size())
+    return fail(ErrorCode::InvalidArgument, "the body is not in the world", where, "use an id from addBody");
+  const BodyDesc& d = bodies_[id.index];
+  if (d.kind == BodyKind::Particle)
+    return fail(ErrorCode::InvalidArgument, "body '" + d.name + "' is a particle", where,
+                "couple rigid or static bodies (a particle has no orientation for its mesh)");
+  return &d;
+}
+
 Result<BodyId> PhysicsWorld::findBody(std::string_view name) const {
   for (std::size_t i = 0; i < bodies_.size(); ++i)
     if (bodies_[i].name == name) return BodyId{static_cast<std::uint32_t>(i)};

@@ -242,6 +242,10 @@ class PhysicsWorld {
   std::span<const Impulse> impulses() const noexcept { return impulses_; }
   /// The body named `name`; NotFound otherwise. O(bodies).
   Result<BodyId> findBody(std::string_view name) const;
+  /// Body `id` for a coupling that meets it with a mesh (soft tissue, a
+  /// membrane): InvalidArgument at `where` for an id not in the world or a
+  /// particle (no orientation for its mesh).
+  Result<const BodyDesc*> meshedBody(BodyId id, const std::string& where) const;
 
   /// A state at the bodies' initial values, t = 0, with every buffer step()
   /// needs allocated (contact scratch sized by ContactSettings::pairCapacity),
