@@ -108,9 +108,9 @@ std::size_t ParticleObstacles::resolve(MassSpringBody& body, double h, ParticleS
   for (std::size_t j = 0; j < force_.size(); ++j) force_[j] = std::exchange(lentForce_[j], Vec3::Zero());
   contacts_ = 0;
   if (!std::isfinite(h) || !(h > 0.0) || obstacles_.empty()) return 0;
+  if (lent_) afterStep(body, h);  // (a caller that forgot it: the shares back first)
   if (touch_.size() != body.particleCount()) touch_.assign(body.particleCount(), Touch{});  // first call
   for (Touch& t : touch_) t.obstacle = kNoObstacle;
-  std::fill(touchCount_.begin(), touchCount_.end(), 0u);
   if (pending_.capacity() < body.particleCount()) pending_.reserve(body.particleCount());  // first call
   pending_.clear();
   // Momentum per unit velocity change (over m): the implicit step's drag
@@ -276,7 +276,6 @@ void ParticleObstacles::solveFree(MassSpringBody& body, double h) {
     body.setVelocity(i, c.velocity);
     if (c.approach < kResting) {  // pressed or resting on it: lent to it in the next step
       touch_[i] = {.obstacle = c.obstacle, .normal = c.normal, .stuck = stuck && o.friction > 0.0};
-      ++touchCount_[c.obstacle];
     }
   }
 }
@@ -285,17 +284,25 @@ void ParticleObstacles::beforeStep(MassSpringBody& body) {
   if (lent_ || touch_.size() != body.particleCount()) return;
   const Vec3 g = body.gravity();
   const double drag = body.drag();
+  // Only the particles the membrane presses onto their body: one its
+  // springs (and its weight) pull off would leave, and a share would hold
+  // it. Counted first: the shares of a body add up to its effective mass.
+  std::fill(touchCount_.begin(), touchCount_.end(), 0u);
   for (std::size_t i = 0; i < touch_.size(); ++i) {
     Touch& t = touch_[i];
+    t.pressed = false;
     if (t.obstacle == kNoObstacle || body.pinned(i)) continue;
-    // Only a particle the membrane presses onto the body: one its springs
-    // (and its weight) pull off would leave, and a share would hold it.
     const Vec3 load = body.elementForceOn(i) + body.mass(i) * g + body.externalForce(i);
-    if (!(load.dot(t.normal) < 0.0)) continue;
+    t.pressed = load.dot(t.normal) < 0.0;
+    touchCount_[t.obstacle] += t.pressed;
+  }
+  for (std::size_t i = 0; i < touch_.size(); ++i) {
+    Touch& t = touch_[i];
+    if (!t.pressed) continue;
     const ParticleObstacle& o = obstacles_[t.obstacle];
     const Motion& m = motion_[t.obstacle];
     // The body's effective mass along the contact normal, split among the
-    // particles touching it.
+    // particles pressed onto it.
     const Vec3 r = body.position(i) - m.center;
     const double share = 1.0 / (compliance(0.0, o.inverseMass, m.inverseInertia, r, t.normal) *
                                 double(touchCount_[t.obstacle]));

@@ -195,8 +195,8 @@ json ballOnDrum(double seconds, const fs::path& out, const std::string& backend 
 }
 
 TEST(SceneMembrane, AFreeBallDroppedOnADrumRestsInItsSagAndTheRimCarriesBoth) {
-  // The ball (20 g, r 1.5 cm) falls 1 cm onto the drum, rocks and settles
-  // in the middle of the sag it makes; at rest the membrane holds it up
+  // The ball (20 g, r 1.5 cm) falls 1 cm onto the drum, 5 mm off centre,
+  // rocks and settles in the sag it makes, near the middle; at rest the membrane holds it up
   // with its weight and the rim carries ball and drum (1 %), whichever
   // backend moves the ball; reruns are bit-identical.
   const dm::test::TempDir dir("membrane_ball");
@@ -214,8 +214,8 @@ TEST(SceneMembrane, AFreeBallDroppedOnADrumRestsInItsSagAndTheRimCarriesBoth) {
     EXPECT_NEAR(vec(ball.at("membrane_force_N")).z(), M * kG, 0.01 * M * kG);
     const Vec3 x = vec(ball.at("position_m"));
     EXPECT_LT(vec(ball.at("velocity_m_s")).norm(), 1e-3);
-    EXPECT_LT(std::hypot(x.x(), x.y()), 0.5e-3);  // in the middle
-    EXPECT_LT(x.z(), 0.1 + 0.015 - 1e-3);         // sunk below the rim's plane
+    EXPECT_LT(std::hypot(x.x(), x.y()), 0.01);  // near the middle (landed 5 mm off), not rolled off
+    EXPECT_LT(x.z(), 0.1 + 0.015 - 1e-3);       // sunk below the rim's plane
     EXPECT_GE(m.at("contacts").get<int>(), 3);
     if (backend == "builtin") {
       EXPECT_EQ(s.at("physics"), ballOnDrum(6.0, dir / "b").at("physics"));

@@ -215,6 +215,7 @@ class ParticleObstacles {
     std::uint32_t obstacle = kNoObstacle;
     Vec3 normal = Vec3::Zero();
     bool stuck = false;             // static friction held
+    bool pressed = false;           // beforeStep: the membrane presses it onto the body
     double share = 0.0;             // kg lent
     Vec3 force = Vec3::Zero();      // N added to its external force
     Vec3 reference = Vec3::Zero();  // m/s: the share's velocity as part of its body, at lending
