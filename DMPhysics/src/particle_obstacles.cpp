@@ -105,10 +105,11 @@ Status ParticleObstacles::setMotion(std::size_t i, const Isometry3& pose, const 
 }
 
 std::size_t ParticleObstacles::resolve(MassSpringBody& body, double h, ParticleStep step) {
+  const bool valid = std::isfinite(h) && h > 0.0;
+  if (lent_ && valid) afterStep(body, h);  // (a caller that forgot it: the shares back first)
   for (std::size_t j = 0; j < force_.size(); ++j) force_[j] = std::exchange(lentForce_[j], Vec3::Zero());
   contacts_ = 0;
-  if (!std::isfinite(h) || !(h > 0.0) || obstacles_.empty()) return 0;
-  if (lent_) afterStep(body, h);  // (a caller that forgot it: the shares back first)
+  if (!valid || obstacles_.empty()) return 0;
   if (touch_.size() != body.particleCount()) touch_.assign(body.particleCount(), Touch{});  // first call
   for (Touch& t : touch_) t.obstacle = kNoObstacle;
   if (pending_.capacity() < body.particleCount()) pending_.reserve(body.particleCount());  // first call
