@@ -14,6 +14,8 @@
 #         ended within E mm of it, its voxels never more than D mm deep
 #         -DIGTL_IMAGES=N (scenes with an "igtl" engine): it published at
 #         least N IMAGE messages, and TRANSFORM and SENSOR messages
+# A lockstep run is run twice: the second run's force trace must equal the
+# first's byte for byte (lockstep is bit-reproducible for every scene).
 # Tele-operation scenes (a device with "serve") run in real time:
 #         -DMODE=realtime -DMIN_ROUND_TRIP_MS=T: the served device's link
 #         measured a round trip of at least T ms (p50), received a force
@@ -36,6 +38,20 @@ foreach(f summary.json forces.csv forces.png)
     message(FATAL_ERROR "missing output ${OUT}/${f}")
   endif()
 endforeach()
+if(MODE STREQUAL "lockstep")
+  file(REMOVE_RECURSE "${OUT}_rerun")
+  execute_process(COMMAND "${DMPLATFORM}" run "${SCENE}" --lockstep --duration ${DURATION} --out "${OUT}_rerun"
+                  RESULT_VARIABLE rc2 OUTPUT_QUIET ERROR_VARIABLE stderr2)
+  if(NOT rc2 EQUAL 0)
+    message(FATAL_ERROR "the second lockstep run failed (${rc2}):\n${stderr2}")
+  endif()
+  execute_process(COMMAND ${CMAKE_COMMAND} -E compare_files "${OUT}/forces.csv" "${OUT}_rerun/forces.csv"
+                  RESULT_VARIABLE differ)
+  if(NOT differ EQUAL 0)
+    message(FATAL_ERROR "two lockstep runs gave different force traces: ${OUT}/forces.csv, ${OUT}_rerun/forces.csv")
+  endif()
+  file(REMOVE_RECURSE "${OUT}_rerun")
+endif()
 # The trace is in scene time in both modes: it starts at 0, not at the
 # machine's monotonic clock.
 file(STRINGS ${OUT}/forces.csv rows LIMIT_COUNT 2)
