@@ -242,7 +242,7 @@ class ParticleObstacles {
   std::vector<Motion> motion_;
   std::vector<Vec3> force_;
   std::vector<Touch> touch_;               // per particle (sized by the first resolve)
-  std::vector<std::uint32_t> touchCount_;  // per obstacle, particles touching it
+  std::vector<std::uint32_t> touchCount_;  // per obstacle, particles pressed onto it (beforeStep)
   std::vector<Vec3> lentForce_;            // per obstacle, afterStep's, for the next resolve()'s force_
   std::vector<Pending> pending_;           // this resolve()'s contacts with free bodies (reserved once)
   bool lent_ = false;                      // between beforeStep and afterStep
