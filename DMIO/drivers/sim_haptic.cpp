@@ -22,8 +22,12 @@
 //                quaternion, normalised; every row the same, values within
 //                ±1e9), csv path; an optional header line first, '#' lines
 //                skipped
-//   loop         0 | 1: line and csv paths loop (1), or run once from the
-//                first sample and hold their end (0)                     (1)
+//   loop         0 | 1: line, circle, spiral and csv paths loop (1), or
+//                run once from the first sample and hold their end (0)  (1)
+// A key of another path than the one chosen, or a hand_* key without hand 1,
+// is an error naming it. The velocity reported is the path's own (its
+// formula's, a CSV segment's slope): none across a jump such as a spiral's
+// return to its first turn.
 // Every path's time starts at the device's first sample (lockstep and real
 // time alike).
 //   hand         0 | 1: drive a virtual hand instead of the stylus (0)
@@ -48,6 +52,7 @@
 #include <cstdio>
 #include <new>
 #include <random>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -84,14 +89,17 @@ Q4 slerp(const Q4& a, const Q4& b, double u) {
   for (double& c4 : q) c4 /= n;
   return q;
 }
-// Angular velocity (rad/s, world) that turns a into b in dt: 2·vec(b·a⁻¹)/dt
-// (first order; the samples are microseconds apart).
+// Angular velocity (rad/s, world) that turns a into b in dt at a constant
+// rate (a slerp's): the axis of b·a⁻¹ times its angle, over dt.
 V3 angularVelocity(const Q4& a, const Q4& b, double dt) {
   const double w = dot4(a, b);  // the scalar part of b · conj(a)
   const V3 v = {-b[0] * a[1] + b[1] * a[0] - b[2] * a[3] + b[3] * a[2],
                 -b[0] * a[2] + b[1] * a[3] + b[2] * a[0] - b[3] * a[1],
                 -b[0] * a[3] - b[1] * a[2] + b[2] * a[1] + b[3] * a[0]};
-  return scale(v, (w < 0 ? -2.0 : 2.0) / dt);
+  const double sn = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+  if (sn < 1e-12) return scale(v, (w < 0 ? -2.0 : 2.0) / dt);
+  const double angle = 2.0 * std::atan2(sn, std::abs(w));  // the shorter way, as slerp turns
+  return scale(v, (w < 0 ? -angle : angle) / (sn * dt));
 }
 
 enum Path { kPoint, kLine, kCircle, kSpiral, kCsv };
@@ -141,14 +149,14 @@ struct SimHaptic {
         return lerp(from, to, phase < 0.5 ? 2.0 * phase : 2.0 - 2.0 * phase);
       }
       case kCircle: {
-        const double w = 2.0 * kPi / period;
-        return add(center, {radius * std::cos(w * t), radius * std::sin(w * t), 0.0});
+        const double w = 2.0 * kPi / period, tt = repeat ? t : std::clamp(t, 0.0, period);
+        return add(center, {radius * std::cos(w * tt), radius * std::sin(w * tt), 0.0});
       }
       case kSpiral: {
         const double w = 2.0 * kPi / period;
-        const double u = t / period;
-        return add(center, {radius * std::cos(w * t), radius * std::sin(w * t),
-                            pitch * (u - turns * std::floor(u / turns))});
+        const double tt = repeat ? t : std::clamp(t, 0.0, turns * period), u = tt / period;
+        const double along = repeat ? u - turns * std::floor(u / turns) : u;  // held at the last turn's end
+        return add(center, {radius * std::cos(w * tt), radius * std::sin(w * tt), pitch * along});
       }
       case kCsv: {
         const auto [lo, u] = csvSegment(t);
@@ -194,11 +202,48 @@ struct SimHaptic {
     return 1e-9 * static_cast<double>(ns - originNs);
   }
 
-  // Central difference: exact to O(h²) for the smooth paths; at a line's
-  // turning point or a CSV knot it averages the two sides.
+  // The path's velocity from its formula (a CSV path: its segment's slope).
+  // Not a difference of positions: a path that jumps — a spiral starting
+  // its next turn, a looped CSV going back to its first row — has no
+  // velocity across the jump, and a difference across it (as at t = 0,
+  // where t − h is the end of the last turn) would fling a virtual hand
+  // that starts with it at metres per second.
   V3 targetVelocity(double t) const {
-    const double h = 1e-6;
-    return scale(sub(target(t + h), target(t - h)), 0.5 / h);
+    const double w = 2.0 * kPi / period;
+    switch (path) {
+      case kPoint:
+        return {};
+      case kLine: {
+        if (!repeat && (t < 0.0 || t >= 0.5 * period)) return {};
+        const double phase = t / period - std::floor(t / period);
+        return scale(sub(to, from), (phase < 0.5 ? 2.0 : -2.0) / period);
+      }
+      case kCircle:
+        if (!repeat && (t < 0.0 || t >= period)) return {};
+        return {-radius * w * std::sin(w * t), radius * w * std::cos(w * t), 0.0};
+      case kSpiral:
+        if (!repeat && (t < 0.0 || t >= turns * period)) return {};
+        return {-radius * w * std::sin(w * t), radius * w * std::cos(w * t), pitch / period};
+      case kCsv: {
+        if (!repeat && t < csv.front()[0]) return {};  // held at the first row
+        const std::size_t lo = csvSegment(t).first;
+        if (lo + 1 >= csv.size()) return {};  // held at the last row
+        const auto& a = csv[lo];
+        const auto& b = csv[lo + 1];
+        return scale(sub({b[1], b[2], b[3]}, {a[1], a[2], a[3]}), 1.0 / (b[0] - a[0]));
+      }
+    }
+    return {};
+  }
+
+  // The handle's angular velocity: its CSV segment's slerp rate.
+  V3 targetAngularVelocity(double t) const {
+    if (path != kCsv || !csvOrientation || (!repeat && t < csv.front()[0])) return {};
+    const std::size_t lo = csvSegment(t).first;
+    if (lo + 1 >= csv.size()) return {};
+    const auto& a = csv[lo];
+    const auto& b = csv[lo + 1];
+    return angularVelocity({a[4], a[5], a[6], a[7]}, {b[4], b[5], b[6], b[7]}, b[0] - a[0]);
   }
 
   // The hand integrated up to `now` with semi-implicit Euler, substeps ≤ 0.1 ms.
@@ -228,11 +273,7 @@ struct SimHaptic {
   // model), so orientation and angular velocity always come from the path.
   Sample trueSample(std::int64_t now) {
     const double t = pathSeconds(now);
-    Sample s{now, {}, {}, targetOrientation(t), {}};
-    if (csvOrientation) {
-      const double h = 1e-6;
-      s.w = angularVelocity(targetOrientation(t - h), targetOrientation(t + h), 2 * h);
-    }
+    Sample s{now, {}, {}, targetOrientation(t), targetAngularVelocity(t)};
     if (hand) {
       advanceHand(now);
       s.x = handX;
@@ -376,6 +417,23 @@ DmDevice* simOpen(const DmDeviceParam* params, size_t count, char* error, size_t
   d->workspace = r.number("workspace", 0.15, 1e-6, 100.0);
   d->dropAt = r.number("drop_at", -1.0, -1.0, 1e9);
   d->reconnectAt = r.number("reconnect_at", -1.0, -1.0, 1e9);
+  // A key of another path, or of the hand without one, would be ignored:
+  // name it instead.
+  static constexpr const char* kPathNames[] = {"point", "line", "circle", "spiral", "csv"};
+  static constexpr const char* kPathKeys[][6] = {{"center"},
+                                                 {"from", "to", "period", "loop"},
+                                                 {"center", "radius", "period", "loop"},
+                                                 {"center", "radius", "period", "pitch", "turns", "loop"},
+                                                 {"file", "loop"}};
+  for (const char* key : {"center", "radius", "period", "from", "to", "pitch", "turns", "file", "loop"}) {
+    const auto& keys = kPathKeys[d->path];
+    const bool used = std::any_of(std::begin(keys), std::end(keys),
+                                  [&](const char* k) { return k && std::string_view(k) == key; });
+    if (r.ok() && !used && r.find(key))
+      r.failf("parameter '%s' does nothing with path %s", key, kPathNames[d->path]);
+  }
+  for (const char* key : {"hand_mass", "hand_stiffness", "hand_damping"})
+    if (r.ok() && !d->hand && r.find(key)) r.failf("parameter '%s' needs hand 1", key);
   if (r.ok() && d->path == kCsv) {
     const char* file = r.find("file");
     if (!file)

@@ -11,7 +11,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <fstream>
+#include <iomanip>
 #include <numbers>
 #include <string>
 #include <utility>
@@ -197,6 +199,108 @@ TEST(SimHaptic, CsvPathInterpolatesAndLoops) {
   EXPECT_NE(bad.error().message().find("bad.csv:2"), std::string::npos) << bad.error().message();
 }
 
+// The spiral's formula, its velocity included, at every tick and across
+// the turn where it starts over: the velocity is the path's own, never the
+// jump back to the first turn (a central difference at t = 0 reads the end
+// of the last turn 12 mm away and gave 6,000 m/s).
+TEST(SimHaptic, SpiralFollowsItsFormulaAndItsVelocityNeverCrossesTheRestart) {
+  Builtin b;
+  auto d = openHapticOrFail(b.registry, {{"path", "spiral"},
+                                         {"radius", "0.0015"},
+                                         {"period", "0.5"},
+                                         {"pitch", "-0.0012"},
+                                         {"turns", "2"},
+                                         {"center", "0,0,0.006"}});
+  ASSERT_TRUE(d);
+  const double w = 2 * std::numbers::pi / 0.5, r = 0.0015;
+  for (std::int64_t k = 0; k < 2500; ++k) {  // 2.5 turns: the restart at 1 s, then half a turn
+    d->servo(k * kMs);
+    const dm::HapticState& st = d->state();
+    const double t = 1e-3 * static_cast<double>(k), u = t / 0.5;
+    const Vec3 x(r * std::cos(w * t), r * std::sin(w * t), 0.006 - 0.0012 * (u - 2 * std::floor(u / 2)));
+    const Vec3 v(-r * w * std::sin(w * t), r * w * std::cos(w * t), -0.0012 / 0.5);
+    EXPECT_NEAR((st.position - x).norm(), 0.0, 1e-12) << t;
+    EXPECT_NEAR((st.linearVelocity - v).norm(), 0.0, 1e-9) << t;
+  }
+}
+
+// loop 0: the spiral goes down its turns once and holds its last point.
+TEST(SimHaptic, SpiralWithoutLoopHoldsTheEndOfItsLastTurn) {
+  Builtin b;
+  auto d = openHapticOrFail(b.registry, {{"path", "spiral"},
+                                         {"radius", "0.001"},
+                                         {"period", "0.4"},
+                                         {"pitch", "-0.0008"},
+                                         {"turns", "3"},
+                                         {"loop", "0"}});
+  ASSERT_TRUE(d);
+  const std::int64_t t0 = 5555 * kMs;
+  d->servo(t0);
+  EXPECT_NEAR((d->state().position - Vec3(0.001, 0, 0)).norm(), 0.0, 1e-12);
+  for (std::int64_t ms : {1200, 1201, 3000, 60000}) {
+    d->servo(t0 + ms * kMs);
+    EXPECT_NEAR((d->state().position - Vec3(0.001, 0, -0.0024)).norm(), 0.0, 1e-12) << ms;
+    EXPECT_EQ(d->state().linearVelocity.norm(), 0.0) << ms;
+  }
+}
+
+// A virtual hand starts on its path at the path's speed: with no force on
+// it, it follows the spiral within the lag of its spring, never flung
+// away. The hand (m ẍ = k(target − x) − c ẋ) follows the circle with the
+// response H = k / (k − mω² + icω), an error r·|H − 1| (0.30 mm here),
+// and the descent at v with a lag c·v/k (0.036 mm); a quarter more for the
+// start's transient.
+TEST(SimHaptic, AVirtualHandStartsOnItsSpiralAtThePathsSpeed) {
+  Builtin b;
+  auto d = openHapticOrFail(b.registry, {{"path", "spiral"},
+                                         {"radius", "0.0015"},
+                                         {"period", "0.5"},
+                                         {"pitch", "-0.0012"},
+                                         {"turns", "10"},
+                                         {"center", "0,0,0.006"},
+                                         {"hand", "1"},
+                                         {"hand_mass", "0.1"},
+                                         {"hand_stiffness", "400"},
+                                         {"hand_damping", "6"}});
+  ASSERT_TRUE(d);
+  const double w = 2 * std::numbers::pi / 0.5, r = 0.0015;
+  double worst = 0.0;
+  for (std::int64_t k = 0; k < 1000; ++k) {
+    d->servo(k * kMs);
+    const double t = 1e-3 * static_cast<double>(k);
+    const Vec3 x(r * std::cos(w * t), r * std::sin(w * t), 0.006 - 0.0012 * t / 0.5);
+    worst = std::max(worst, (d->state().position - x).norm());
+    d->command(Vec3::Zero(), Vec3::Zero(), k * kMs);
+  }
+  const std::complex<double> H = 400.0 / std::complex<double>(400.0 - 0.1 * w * w, 6.0 * w);
+  const double steady = r * std::abs(H - 1.0) + 6.0 * 0.0024 / 400.0;
+  EXPECT_LT(worst, 1.25 * steady);
+  EXPECT_GT(worst, 0.9 * steady);
+}
+
+// A looped CSV path whose last row is not its first jumps back at each
+// loop; its velocity is its segment's slope, at t = 0 too, and the
+// handle's angular velocity is its segment's slerp rate.
+TEST(SimHaptic, CsvVelocitiesAreTheSegmentsOwnAcrossTheLoop) {
+  const dm::test::TempDir dir("sim_haptic_csv_velocity");
+  // Quarter turn about z over the second segment: 0.5π rad/s.
+  const double c = std::cos(std::numbers::pi / 8), s = std::sin(std::numbers::pi / 8);
+  std::ofstream(dir / "path.csv") << std::setprecision(17)
+                                  << "t,x,y,z,qw,qx,qy,qz\n0,0,0,0,1,0,0,0\n1,0.1,0,0,1,0,0,0\n2,0.1,0.05,0," << c
+                                  << ",0,0," << s << "\n";
+  Builtin b;
+  auto d = openHapticOrFail(b.registry, {{"path", "csv"}, {"file", (dir / "path.csv").string()}});
+  ASSERT_TRUE(d);
+  for (std::int64_t ms : {0, 500, 1000, 1500, 2000, 2500}) {  // loops every 2 s
+    d->servo(ms * kMs);
+    const bool first = (ms % 2000) < 1000;
+    const Vec3 v = first ? Vec3(0.1, 0, 0) : Vec3(0, 0.05, 0);
+    const Vec3 omega = first ? Vec3::Zero() : Vec3(0, 0, 0.25 * std::numbers::pi);
+    EXPECT_NEAR((d->state().linearVelocity - v).norm(), 0.0, 1e-12) << ms;
+    EXPECT_NEAR((d->state().angularVelocity - omega).norm(), 0.0, 1e-12) << ms;
+  }
+}
+
 TEST(SimHaptic, CsvPathWithOrientationSlerpsTheHandle) {
   // A handle turning 90° about z in 1 s while moving 0.1 m along x, then
   // 90° about x (given as the negated quaternion: the same rotation; the
@@ -270,6 +374,12 @@ TEST(SimHaptic, BadParametersNameTheKey) {
       {{{"colour", "red"}}, "'colour'"},
       {{{"path", "csv"}}, "'file'"},
       {{{"path", "csv"}, {"file", "/nonexistent/path.csv"}}, "/nonexistent/path.csv"},
+      // Keys another path (or the hand) takes would be ignored: errors.
+      {{{"path", "circle"}, {"pitch", "0.001"}}, "'pitch' does nothing with path circle"},
+      {{{"path", "line"}, {"center", "0,0,0"}}, "'center' does nothing with path line"},
+      {{{"path", "point"}, {"loop", "0"}}, "'loop' does nothing with path point"},
+      {{{"path", "spiral"}, {"from", "0,0,0"}}, "'from' does nothing with path spiral"},
+      {{{"path", "spiral"}, {"hand_stiffness", "400"}}, "'hand_stiffness' needs hand 1"},
   };
   for (const auto& [params, needle] : cases) {
     auto d = dm::HapticDevice::open(b.registry, "sim-haptic", params);
