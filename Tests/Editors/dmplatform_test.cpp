@@ -73,6 +73,13 @@ TEST(Dmplatform, InvalidScenesExitWithTwoAndNameTheEntry) {
        "/engines/physics/substeps"},
       // A wrong type.
       {scene(R"("physics": {})", R"(, "dynamic": true, "mass": "heavy")"), "/objects/1/mass"},
+      // Out of range.
+      {scene(R"("physics": {})", R"(, "dynamic": true, "mass": -1)"), "/objects/1/mass"},
+      // A dangling reference.
+      {scene(R"("monitor": {})", R"(, "material": "steel")"), "/objects/1/material"},
+      {scene(R"("physics": {}, "haptics": {"device": "hand", "objects": ["box"]})",
+             R"(, "dynamic": true, "mass": 0.1)"),
+       "/engines/haptics/device"},
   };
   for (const Case& c : cases) {
     const fs::path file = dir / "bad.json", out = dir / "out";
@@ -82,6 +89,27 @@ TEST(Dmplatform, InvalidScenesExitWithTwoAndNameTheEntry) {
     EXPECT_NE(r.err.find(c.where), std::string::npos) << c.where << "\n" << r.err;
     EXPECT_FALSE(fs::exists(out)) << c.where;
   }
+}
+
+// A device whose driver refuses its parameters fails as it is opened,
+// after the scene was read and before anything runs: the device named,
+// nothing written.
+TEST(Dmplatform, ADeviceThatCannotOpenExitsWithTwoBeforeRunning) {
+  const dm::test::TempDir dir("dmplatform_device");
+  std::ofstream(dir / "sheet.obj") << "v 0 0 0\nv 0.05 0 0\nv 0 0.05 0\nf 1 2 3\n";  // the helper's resource
+  std::string text = scene(R"("physics": {}, "haptics": {"device": "hand", "objects": ["box"]})",
+                           R"(, "dynamic": true, "mass": 0.1, "haptic": true, "material": "steel")");
+  text.insert(text.rfind("\"engines\""),
+              R"("materials": {"steel": {"model": "blinn-phong", "haptic": {"stiffness": 500}}},
+                 "devices": [{"name": "hand", "driver": "sim-haptic",
+                              "config": {"path": "line", "center": [0, 0, 0.05]}}], )");
+  const fs::path file = dir / "device.json", out = dir / "out";
+  std::ofstream(file) << text;
+  const dmtool_test::ToolRun r = runPlatform(file, out);
+  EXPECT_EQ(r.exitCode, 2) << dmtool_test::describe(r);
+  EXPECT_NE(r.err.find("devices/hand"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("'center' does nothing with path line"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(out));
 }
 
 TEST(Dmplatform, AModelThatCannotBeBuiltExitsWithTwoBeforeRunning) {
