@@ -26,6 +26,14 @@
 #         step converged
 #         -DHAPTICS=OFF: the scene has no haptics engine (no force trace,
 #         no haptic thresholds)
+#         -DSEGMENTATION_MIN_ML=V -DSEGMENTATION_MIN_PRECISION=P (scenes with
+#         a "segmentation" engine): at least V mL painted, at least P of it
+#         inside the reference region, no voxel outside the volume, the mask
+#         written
+#         -DPROGRAM=exe -DPROGRAM_ARGS=a,b -DSAME_FIGURES=path=key[,...]: the
+#         example program, run with those arguments into OUT_program, writes
+#         the same figures exactly — each scene summary path (members
+#         joined by "/") equal to the program summary's key
 # A lockstep run is run twice: the second run's force trace must equal the
 # first's byte for byte, and its summary the first's in every figure but the
 # measured times (engines, host, render, wall_s, the vision nodes' seconds):
@@ -338,4 +346,38 @@ if(DEFINED MEMBRANE)
   if(NOT found)
     message(FATAL_ERROR "no membrane ${MEMBRANE} in the physics summary")
   endif()
+endif()
+if(DEFINED SEGMENTATION_MIN_ML)
+  string(JSON ml GET "${summary}" segmentation painted_ml)
+  string(JSON precision GET "${summary}" segmentation precision)
+  string(JSON outside GET "${summary}" segmentation outside_volume_voxels)
+  if(ml LESS SEGMENTATION_MIN_ML OR precision LESS SEGMENTATION_MIN_PRECISION OR NOT outside EQUAL 0
+     OR NOT EXISTS "${OUT}/segmentation.nii.gz")
+    message(FATAL_ERROR "segmentation: ${ml} mL painted (expected >= ${SEGMENTATION_MIN_ML}), precision "
+                        "${precision} (expected >= ${SEGMENTATION_MIN_PRECISION}), ${outside} voxels outside the "
+                        "volume, mask written: ${OUT}/segmentation.nii.gz")
+  endif()
+  message(STATUS "segmentation: ${ml} mL painted, precision ${precision}")
+endif()
+if(DEFINED PROGRAM)
+  file(REMOVE_RECURSE "${OUT}_program")
+  string(REPLACE "," ";" programArgs "${PROGRAM_ARGS}")
+  execute_process(COMMAND "${PROGRAM}" ${programArgs} --out "${OUT}_program" RESULT_VARIABLE rc3 OUTPUT_QUIET
+                  ERROR_VARIABLE stderr3)
+  if(NOT rc3 EQUAL 0)
+    message(FATAL_ERROR "the example program failed (${rc3}):\n${stderr3}")
+  endif()
+  file(READ "${OUT}_program/summary.json" programSummary)
+  string(REPLACE "," ";" pairs "${SAME_FIGURES}")
+  foreach(pair ${pairs})
+    string(REGEX MATCH "^([^=]+)=(.+)$" parsed "${pair}")
+    string(REPLACE "/" ";" scenePath "${CMAKE_MATCH_1}")
+    set(programKey "${CMAKE_MATCH_2}")
+    string(JSON mine GET "${summary}" ${scenePath})
+    string(JSON theirs GET "${programSummary}" ${programKey})
+    if(NOT mine STREQUAL theirs)
+      message(FATAL_ERROR "the scene's ${CMAKE_MATCH_1} is ${mine}, the program's ${programKey} ${theirs}")
+    endif()
+  endforeach()
+  message(STATUS "the same figures as ${PROGRAM}: ${SAME_FIGURES}")
 endif()

@@ -9,6 +9,7 @@
 #include <dm/core/rt_memory.hpp>
 #include <dm/core/triple_buffer.hpp>
 #include <dm/engine/scene_runtime.hpp>
+#include <dm/haptics/effects.hpp>
 #include <dm/haptics/force_plot.hpp>
 #include <dm/haptics/god_object.hpp>
 #include <dm/haptics/haptic_loop.hpp>
@@ -32,6 +33,7 @@
 #endif
 #include "frame_slot.hpp"
 #ifdef DM_ENGINE_HAVE_VISION
+#include "segmentation_engine.hpp"
 #include "vision_engine.hpp"
 #endif
 #include "physics_engine.hpp"
@@ -193,6 +195,7 @@ class HapticsEngine final : public Engine {
   std::unique_ptr<MillableSurfaceFeed> boneFeed;
   std::string milledObject;
   double boneVolume = 0.0;  // m³ before milling
+  std::unique_ptr<EffectStack> effects;  // the loop's (the segmentation's guidance), or null; outlives it
   std::unique_ptr<HapticLoop> loop;
   ToolImpulseChannel* tools = nullptr;  // owned by the physics engine
   SpscRing<ProbeSample, 16384> ring;
@@ -373,6 +376,7 @@ struct SceneRuntime::Impl {
 #endif
 #ifdef DM_ENGINE_HAVE_VISION
   std::shared_ptr<VisionEngineHandle> vision;
+  std::shared_ptr<SegmentationEngineHandle> segmentation;
 #endif
   // A run between start() and finish().
   struct Running {
@@ -490,6 +494,8 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
     if (!v) return v.error();
     e->vps = v->get();
     e->renderer = std::move(*v);
+  } else if (h.renderer == SceneHapticsEngine::Renderer::None) {
+    e->renderer = std::make_unique<FreeSpaceRenderer>();
   } else if (h.renderer == SceneHapticsEngine::Renderer::BonePlacement) {
     auto b = buildSceneBonePlacement(scene, resources);
     if (!b) return b.error();
@@ -545,9 +551,19 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   config.overrunFades = !lockstep;
   HapticRenderer& renderer = e->needleOwner ? *e->needleOwner->needleRenderer() : *e->renderer;
   e->active = &renderer;
-  auto loop = HapticLoop::create(
-      {.device = *e->device, .renderer = renderer, .model = physics ? physics->hapticModel() : nullptr},
-      config);
+#ifdef DM_ENGINE_HAVE_VISION
+  if (segmentation)
+    if (std::unique_ptr<ForceEffect> guidance = segmentation->guidance()) {
+      e->effects = std::make_unique<EffectStack>(1);
+      if (auto added = e->effects->add(std::move(guidance)); !added)
+        return added.error().within("engines/segmentation");
+    }
+#endif
+  auto loop = HapticLoop::create({.device = *e->device,
+                                  .renderer = renderer,
+                                  .model = physics ? physics->hapticModel() : nullptr,
+                                  .effects = e->effects.get()},
+                                 config);
   if (!loop) return loop.error().within(where);
   e->loop = std::move(*loop);
   haptics = e;
@@ -633,6 +649,17 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
     auto p = PhysicsEngine::build(scene, resources, touched);
     if (!p) return p.error();
     physics = *p;
+  }
+  // The segmentation before the haptic loop, which takes its guidance.
+  if (scene.engines.segmentation) {
+#ifdef DM_ENGINE_HAVE_VISION
+    auto g = makeSegmentationEngine(scene, resources);
+    if (!g) return g.error();
+    segmentation = *g;
+#else
+    return fail(ErrorCode::Unsupported, "this build has no DMVision, which the segmentation engine needs",
+                "engines/segmentation", "build with DMVision (libopencv-dev) or remove it");
+#endif
   }
   if (scene.engines.haptics) {
     if (auto s = buildHaptics(lockstep); !s) return s.error();
@@ -757,6 +784,11 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
   if (vision) {
     vision->setFrames(frames);
     if (auto s = master.addEngine(vision->engine(), {.rateHz = scene.engines.vision->rateHz}); !s)
+      return s.error();
+  }
+  if (segmentation && haptics) {  // (the scene reader asks for a haptics engine)
+    segmentation->setTool([h = haptics.get()] { return h->loop->latest().input.devicePose.translation(); });
+    if (auto s = master.addEngine(segmentation->engine(), {.rateHz = scene.engines.segmentation->rateHz}); !s)
       return s.error();
   }
 #endif
@@ -1159,6 +1191,10 @@ Result<SceneRunResult> SceneRuntime::finish() {
 #endif
 #ifdef DM_ENGINE_HAVE_VISION
   if (im.vision) summary["vision"] = im.vision->summary();
+  if (im.segmentation) {
+    if (auto s = im.segmentation->write(out, written); !s) return s.error();
+    summary["segmentation"] = im.segmentation->summary();
+  }
 #endif
   if (im.haptics && im.haptics->recorder) {
     summary["recording"] = {{"file", std::string(kSceneRecordingFile)},

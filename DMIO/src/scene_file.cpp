@@ -41,8 +41,8 @@ constexpr std::array<std::string_view, 3> kVolumeModes{"composite", "mip", "slic
 constexpr std::array<std::string_view, 3> kAxes{"axial", "coronal", "sagittal"};
 constexpr std::array<std::string_view, 3> kLightTypes{"directional", "point", "spot"};
 constexpr std::array<std::string_view, 2> kProjections{"perspective", "orthographic"};
-constexpr std::array<std::string_view, 6> kRenderers{"god-object", "vps",    "sphere-tree",
-                                                     "burr",       "needle", "bone-placement"};
+constexpr std::array<std::string_view, 7> kRenderers{"god-object",     "vps", "sphere-tree", "burr", "needle",
+                                                     "bone-placement", "none"};
 
 // Finds keys that occur twice in one JSON object: nlohmann keeps only the
 // last, which would silently drop e.g. one of two resources named "skin".
@@ -205,6 +205,7 @@ class SceneParser {
     checkIgtl(scene_, root_);
     checkTools6Dof(scene_, root_);
     checkBonePlacement(scene_, root_);
+    checkSegmentation(scene_, root_);
   }
 
   bool badVersion() const { return badVersion_; }
@@ -977,7 +978,14 @@ class SceneParser {
     const std::size_t before = r.errors().size();
     h.device = r.string("device");
     if (r.errors().size() == before) checkName(r, "device", h.device, deviceIndex_, "device", "devices");
-    if (r.has("object") && r.has("objects")) {
+    const bool freeSpace = h.renderer == SceneHapticsEngine::Renderer::None;
+    if (freeSpace) {
+      // A tool in free space: nothing to touch, no proxy to size or shade.
+      for (const char* key : {"object", "objects", "tool_radius", "force_shading"})
+        if (r.has(key))
+          r.addError(std::string("renderer \"none\" touches nothing: \"") + key + "\" has no use", key,
+                     "remove it, or choose a renderer that touches objects");
+    } else if (r.has("object") && r.has("objects")) {
       r.addError("both \"object\" and \"objects\" are given", "object",
                  "list every object under \"objects\"");
     } else if (r.has("object")) {
@@ -1001,10 +1009,12 @@ class SceneParser {
     } else {
       r.addError("missing required objects", "objects", "add \"objects\": [\"<touchable object>\"]");
     }
-    h.toolRadius = r.number("tool_radius", {.min = 0.0, .max = 0.1}, 0.0);
+    if (!freeSpace) {
+      h.toolRadius = r.number("tool_radius", {.min = 0.0, .max = 0.1}, 0.0);
+      h.forceShading = r.boolean("force_shading", false);
+    }
     h.devicePose = readPose(r.child("device_pose"));
     h.maxForce = r.number("max_force", {.min = 0.0, .max = 1000.0}, 0.0);
-    h.forceShading = r.boolean("force_shading", false);
     if (r.has("proxy_object")) {
       const std::size_t b = r.errors().size();
       h.proxyObject = r.string("proxy_object");
@@ -1025,7 +1035,7 @@ class SceneParser {
   void engines() {
     ConfigReader sec = root_.child("engines");
     if (!expectObject(sec)) return;
-    sec.knownKeys({"haptics", "physics", "render", "monitor", "igtl", "vision"});
+    sec.knownKeys({"haptics", "physics", "render", "monitor", "igtl", "vision", "segmentation"});
     hapticsEngine(sec.child("haptics"));
     if (ConfigReader r = sec.child("physics"); expectObject(r)) {
       r.knownKeys({"rate_hz", "gravity", "sleep", "joints", "backend", "ode"});
@@ -1078,6 +1088,7 @@ class SceneParser {
     }
     if (v2Key(sec, "igtl")) readIgtl(sec, scene_.engines);
     if (v2Key(sec, "vision")) visionEngine(sec.child("vision"));
+    if (v2Key(sec, "segmentation")) readSegmentation(sec, scene_.engines);
   }
 
   // The vision engine: its rate and its graph, a file (a source like a
@@ -1446,6 +1457,8 @@ Json toJson(const SceneDesc& scene) {
                           {"device", h->device},          {"objects", h->objects},
                           {"tool_radius", h->toolRadius}, {"device_pose", toJson(h->devicePose)},
                           {"max_force", h->maxForce},     {"force_shading", h->forceShading}};
+  if (scene.engines.haptics && scene.engines.haptics->renderer == SceneHapticsEngine::Renderer::None)
+    for (const char* key : {"objects", "tool_radius", "force_shading"}) engines["haptics"].erase(key);
   if (scene.engines.haptics && !scene.engines.haptics->proxyObject.empty())
     engines["haptics"]["proxy_object"] = scene.engines.haptics->proxyObject;
   if (scene.engines.haptics && scene.engines.haptics->burr) {
@@ -1498,6 +1511,7 @@ Json toJson(const SceneDesc& scene) {
                          {"graph", v->graphFile.empty() ? v->graph : Json(v->graphFile.string())}};
   if (scene.engines.vision && !scene.engines.vision->overlay.empty())
     engines["vision"]["overlay"] = scene.engines.vision->overlay;
+  if (const auto& g = scene.engines.segmentation) writeSegmentation(*g, engines);
   j["engines"] = std::move(engines);
 
   const SceneOutputs& o = scene.outputs;

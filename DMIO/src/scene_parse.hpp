@@ -299,6 +299,12 @@ void readIgtl(ConfigReader& engines, SceneEngines& e);
 void checkIgtl(const SceneDesc& scene, ConfigReader root);
 void writeIgtl(const SceneIgtlEngine& g, Json& engines);
 
+// scene_segmentation.cpp: the segmentation engine (DMVision's haptic-guided
+// segmentation of a volume resource at the haptic tool).
+void readSegmentation(ConfigReader& engines, SceneEngines& e);
+void checkSegmentation(const SceneDesc& scene, ConfigReader root);
+void writeSegmentation(const SceneSegmentationEngine& g, Json& engines);
+
 // Scripts (scene_script.cpp): the "scripts" list with their checks against
 // the engines (read after them), and its JSON. `resolve` turns a source
 // into a confined path (adding its error to the reader when it cannot).

@@ -53,6 +53,21 @@ std::optional<Vec3i> nearestVoxel(const Volume& volume, const Vec3& p) noexcept 
                static_cast<int>(std::lround(ijk.z())));
 }
 
+NeighbourhoodStats neighbourhoodStats(const Volume& v, const Vec3i& c, int halfWidth) {
+  double sum = 0, sum2 = 0;
+  std::size_t n = 0;
+  const Vec3i d = v.dims();
+  for (int k = std::max(0, c.z() - halfWidth); k <= std::min(d.z() - 1, c.z() + halfWidth); ++k)
+    for (int j = std::max(0, c.y() - halfWidth); j <= std::min(d.y() - 1, c.y() + halfWidth); ++j)
+      for (int i = std::max(0, c.x() - halfWidth); i <= std::min(d.x() - 1, c.x() + halfWidth); ++i) {
+        const double x = v.value(i, j, k);
+        sum += x, sum2 += x * x, ++n;
+      }
+  if (n == 0) return {};
+  const double mean = sum / static_cast<double>(n);
+  return {mean, std::sqrt(std::max(0.0, sum2 / static_cast<double>(n) - mean * mean)), n};
+}
+
 Result<RegionStats> RegionGrower::grow(const Volume& image, std::span<const Vec3i> seeds,
                                        const RegionGrowOptions& options, Volume& mask) {
   constexpr const char* where = "RegionGrower::grow";

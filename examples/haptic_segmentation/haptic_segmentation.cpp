@@ -22,8 +22,11 @@
 // start with the mask in red and the probe's path in green) and summary.json:
 // painted volume; its precision against a reference segmentation of the same
 // white matter (global adaptive region growing from the same seed,
-// dm::growRegion); voxels painted outside the brain; the edge strength and
-// adaptive radius along the path; the engines' rates. The integration test
+// dm::growRegion); voxels painted outside the brain; the mean edge strength
+// and adaptive radius along the path, where it painted; the engines' rates.
+// examples/scenes/haptic_segmentation.json is the same simulator as a scene
+// (the segmentation engine, renderer "none"): its test checks that both
+// write the same figures. The integration test
 // (examples/CMakeLists.txt) runs it with and without guidance and checks
 // the painted volume, its precision, that nothing leaks out of the brain,
 // and that guidance keeps the probe farther from edges.
@@ -63,21 +66,6 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// The probe moves in free space: no contact, only the effects' forces. The
-// proxy is the device point.
-class FreeSpaceRenderer final : public dm::HapticRenderer {
- public:
-  std::string_view name() const noexcept override { return "free-space"; }
-  void reset(const dm::Isometry3&) noexcept override {}
-  dm::HapticResponse tick(const dm::HapticInput& input) noexcept override {
-    dm::HapticResponse r;
-    r.proxyPose = input.devicePose;
-    return r;
-  }
-  std::size_t objectCount() const noexcept override { return 0; }
-  void setObjectPose(std::size_t, const dm::Isometry3&) noexcept override {}
-};
-
 struct Options {
   std::string volume = "mricron:ch2bet.nii.gz";
   fs::path out = "haptic_segmentation_out";
@@ -91,25 +79,6 @@ struct Options {
 const dm::Vec3 kSeed = dm::Vec3(26, -12, 30) * dm::units::mm;
 constexpr double kPathRadius = 9 * dm::units::mm;
 constexpr double kPathPeriod = 4.0;  // s per turn
-
-struct Window {
-  double mean = 0, sigma = 0;
-};
-
-// Mean and standard deviation of the 5×5×5 voxels around `c` inside the grid.
-Window neighbourhood(const dm::Volume& v, const dm::Vec3i& c) {
-  double sum = 0, sum2 = 0;
-  int n = 0;
-  for (int k = c.z() - 2; k <= c.z() + 2; ++k)
-    for (int j = c.y() - 2; j <= c.y() + 2; ++j)
-      for (int i = c.x() - 2; i <= c.x() + 2; ++i) {
-        if (i < 0 || j < 0 || k < 0 || i >= v.dims().x() || j >= v.dims().y() || k >= v.dims().z()) continue;
-        const double x = v.value(i, j, k);
-        sum += x, sum2 += x * x, ++n;
-      }
-  const double mean = sum / n;
-  return {mean, std::sqrt(std::max(0.0, sum2 / n - mean * mean))};
-}
 
 // The axial slice through voxel row k (dm::volumeSlice, anterior up): grey
 // values, the mask in red, the probe's path in green.
@@ -164,12 +133,13 @@ int run(const Options& o) {
   if (!reference) return fail(reference.error());
 
   // The surgeon's window from the start point's neighbourhood.
-  const Window w = neighbourhood(*brain, *seed);
+  const dm::NeighbourhoodStats w = dm::neighbourhoodStats(*brain, *seed);
   dm::HapticSegmentationOptions so;
   so.maxRadius = 6 * dm::units::mm;
   so.gain = 1e-2;
   so.maxForce = 1.5;
-  so.grow = {.lower = w.mean - 2.5 * w.sigma, .upper = w.mean + 2.5 * w.sigma,
+  so.grow = {.lower = w.mean - 2.5 * w.stddev,
+             .upper = w.mean + 2.5 * w.stddev,
              .connectivity = dm::Connectivity::Six};
   auto seg = dm::HapticSegmentation::create(*brain, so);
   if (!seg) return fail(seg.error());
@@ -193,7 +163,7 @@ int run(const Options& o) {
                                         {"max_force", "3"}});
   if (!device) return fail(device.error());
 
-  FreeSpaceRenderer renderer;
+  dm::FreeSpaceRenderer renderer;  // the probe moves in free space: no contact, only the guidance
   dm::EffectStack effects(1);
   if (o.guidance) {
     const dm::HapticSegmentation* s = &*seg;
@@ -222,8 +192,10 @@ int run(const Options& o) {
                        .response = s.response});
     return true;
   });
-  // Painting, a few times per second, at the newest probe position.
+  // Painting, a few times per second, at the newest probe position; the
+  // edge strength and adaptive radius there, along the path.
   std::size_t updates = 0;
+  double edgeSum = 0, radiusSum = 0;
   dm::Error paintError;
   auto painting = dm::makeFunctionEngine("segmentation", [&](const dm::TickInfo&) {
     const dm::Vec3 p = hl.latest().input.devicePose.translation();
@@ -233,6 +205,8 @@ int run(const Options& o) {
       return false;
     }
     ++updates;
+    edgeSum += seg->edgeStrength().sampleWorld(p);
+    radiusSum += seg->adaptiveRadius(p);
     return true;
   });
   dm::MasterEngine master;
@@ -252,17 +226,8 @@ int run(const Options& o) {
     inReference += reference->mask.valueAt(n) != 0;
     outsideBrain += brain->valueAt(n) == 0;
   }
-  // Along the path (after the first half turn, when the hand has caught up).
-  double edgeSum = 0, radiusSum = 0, maxForce = 0;
-  std::size_t along = 0, index = 0;
-  for (const dm::ProbeSample& s : trace) {
-    maxForce = std::max(maxForce, s.response.force.norm());
-    if (s.t < 0.5 * kPathPeriod || index++ % 10 != 0) continue;  // every 10 ms
-    const dm::Vec3 p = s.devicePose.translation();
-    edgeSum += seg->edgeStrength().sampleWorld(p);
-    radiusSum += seg->adaptiveRadius(p);
-    ++along;
-  }
+  double maxForce = 0;
+  for (const dm::ProbeSample& s : trace) maxForce = std::max(maxForce, s.response.force.norm());
   if (auto s = dm_example::makeOutputDir(o.out); !s) return fail(s.error());
   std::vector<std::string> written;
   if (auto s = dm::writeVolume(mask, o.out / "segmentation.nii.gz"); !s) return fail(s.error());
@@ -286,15 +251,15 @@ int run(const Options& o) {
       {"mode", o.realtime ? "realtime" : "lockstep"},
       {"guidance", o.guidance},
       {"duration_s", o.duration},
-      {"window", {w.mean - 2.5 * w.sigma, w.mean + 2.5 * w.sigma}},
+      {"window", {w.mean - 2.5 * w.stddev, w.mean + 2.5 * w.stddev}},
       {"updates", updates},
       {"painted_voxels", painted},
       {"painted_ml", static_cast<double>(painted) * voxelMl},
       {"precision", painted ? static_cast<double>(inReference) / static_cast<double>(painted) : 0.0},
       {"outside_brain_voxels", outsideBrain},
       {"reference_ml", reference->stats.volumeMl},
-      {"mean_edge_strength", along ? edgeSum / static_cast<double>(along) : 0.0},
-      {"mean_radius_mm", along ? 1e3 * radiusSum / static_cast<double>(along) : 0.0},
+      {"mean_edge_strength", updates ? edgeSum / static_cast<double>(updates) : 0.0},
+      {"mean_radius_mm", updates ? 1e3 * radiusSum / static_cast<double>(updates) : 0.0},
       {"max_force_N", maxForce},
       {"engines", dm::engineStatsJson(stats)},
       {"outputs", written}};

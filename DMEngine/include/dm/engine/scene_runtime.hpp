@@ -12,8 +12,9 @@
 //     renderer going into the soft object with "layers" (dm::HapticNeedle;
 //     "Needles"), or a 6-DOF rigid tool: the VPS renderer (its point shell
 //     against the touched objects voxelized; dm::VpsRenderer) or the
-//     sphere-tree renderer (dm::SphereTree6DofRenderer) — and
-//     dm::HapticLoop (device servo, safety, fade) at the scene's rate;
+//     sphere-tree renderer (dm::SphereTree6DofRenderer), or a tool in free
+//     space (renderer "none", dm::FreeSpaceRenderer) — and dm::HapticLoop
+//     (device servo, effects, safety, fade) at the scene's rate;
 //   - physics: every "dynamic" object a rigid body of one dm::PhysicsWorld,
 //     the other objects static colliders; the god-object feels the moving
 //     bodies where physics has them (HapticLocalModel) and pushes them back
@@ -41,7 +42,11 @@
 //     (TRANSFORM) and the rendered frames (IMAGE) to every client at its
 //     rate, and answering GET_/STT_ queries; run() can wait for clients;
 //   - vision: a DMVision filter graph stepped one frame per tick, its
-//     "input" sources fed the rendered frames (a simulated endoscope).
+//     "input" sources fed the rendered frames (a simulated endoscope);
+//   - segmentation: DMVision's haptic-guided segmentation of a volume
+//     resource, painted at the haptic tool's point at its rate, its guidance
+//     force an effect of the haptic loop; the mask is written as
+//     segmentation.nii.gz;
 //   - scripts: each of the scene's "scripts" loaded through the loader of
 //     its language (dm/engine/script.hpp; ".py" where the Python package or
 //     the dmplatform program registered it) and ticked as the engine

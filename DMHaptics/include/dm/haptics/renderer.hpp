@@ -14,7 +14,8 @@
 //   vps.hpp          6-DOF voxel point shell with virtual coupling (McNeely
 //                    et al. 1999) on dense or OpenVDB voxel models;
 //   sphere_tree_6dof.hpp  6-DOF constraint-based sphere-tree method (Wang et al.);
-//   effects.hpp      viscosity, snap-to surface, vibration, guidance springs.
+//   effects.hpp      viscosity, snap-to surface, vibration, guidance springs;
+//   FreeSpaceRenderer (here) nothing to touch, for effects alone.
 //
 // Real time: tick() and setObjectPose() never allocate, lock, log or throw;
 // everything they need is sized when the renderer is built.
@@ -84,6 +85,22 @@ class HapticRenderer {
   /// frame → world) from the next tick on; a proxy resting on it is carried
   /// along. Out-of-range indices and non-finite poses are ignored. Real-time safe.
   virtual void setObjectPose(std::size_t index, const Isometry3& pose) noexcept = 0;
+};
+
+/// A tool in free space: nothing to touch, the proxy is the device point and
+/// the force is zero — the loop's effects (a force field such as a
+/// segmentation's guidance, viscosity, a fixture) give the hand its force.
+class FreeSpaceRenderer final : public HapticRenderer {
+ public:
+  std::string_view name() const noexcept override { return "free-space"; }
+  void reset(const Isometry3&) noexcept override {}
+  HapticResponse tick(const HapticInput& input) noexcept override {
+    HapticResponse r;
+    r.proxyPose = input.devicePose;
+    return r;
+  }
+  std::size_t objectCount() const noexcept override { return 0; }
+  void setObjectPose(std::size_t, const Isometry3&) noexcept override {}
 };
 
 }  // namespace dm

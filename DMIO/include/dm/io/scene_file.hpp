@@ -568,12 +568,15 @@ struct SceneBonePlacement {
 
 /// The haptic engine: one device rendering contact with objects.
 struct SceneHapticsEngine {
-  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr, Needle, BonePlacement };
+  /// `None` ("none", v2): a tool in free space, nothing to touch (no
+  /// "objects"); the proxy is the device point, effects such as the
+  /// segmentation engine's guidance give the force (dm::FreeSpaceRenderer).
+  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr, Needle, BonePlacement, None };
 
   double rateHz = 1000.0;  ///< 100..10000
   Renderer renderer = Renderer::GodObject;
   std::string device;                ///< a device name
-  std::vector<std::string> objects;  ///< touchable object names, ≥ 1
+  std::vector<std::string> objects;  ///< touchable object names, ≥ 1 (none with renderer "none")
   double toolRadius = 0.0;           ///< m, 0..0.1 (0: a point)
   Pose devicePose;                   ///< device frame → world
   double maxForce = 0.0;             ///< N, ≥ 0 (0: the device's limit)
@@ -691,6 +694,35 @@ struct SceneVisionEngine {
   bool operator==(const SceneVisionEngine&) const = default;
 };
 
+/// The segmentation engine (v2 "segmentation"; docs/scene-format.md,
+/// "Segmentation"): haptic-guided segmentation of a volume resource
+/// (dm::HapticSegmentation, DMVision) — `rateHz` times a second it paints the
+/// region around the haptics engine's tool point (the device point in the
+/// world), and its guidance force, pushing the tool away from edges, is an
+/// effect of the haptic loop. The intensity window is `window`, or the mean ±
+/// `windowK` standard deviations of the 5×5×5 voxels at `seed`. With
+/// `referenceK` the summary's precision is against an adaptive region grown
+/// from `seed` over the whole volume (dm::growRegion, 26-connected).
+struct SceneSegmentationEngine {
+  double rateHz = 20.0;                         ///< 1..1000
+  std::string volume;                           ///< a volume resource: the image
+  Vec3 seed = Vec3::Zero();                     ///< m, world (the volume's frame): inside its grid
+  std::optional<std::array<double, 2>> window;  ///< intensities [lower, upper], lower ≤ upper; or nullopt
+  double windowK = 2.5;                         ///< 0.1..10 (without `window`)
+  int connectivity = 6;                         ///< 6, 18 or 26
+  double minRadius = 1e-3;                      ///< m, 1e-5..0.1
+  double maxRadius = 15e-3;                     ///< m, minRadius..0.2
+  double edgeSigma = 1e-3;                      ///< m, 0..0.05 (0: no smoothing)
+  double edgeThreshold = 0.25;                  ///< (0, 1]
+  int rays = 64;                                ///< 6..4096
+  double gain = 1e-3;                           ///< N·m, ≥ 0
+  double maxForce = 2.0;                        ///< N, 0..100
+  bool guidance = true;                         ///< the guidance force in the haptic loop
+  std::optional<double> referenceK;             ///< "reference": {"k": ...}, 0.1..10; or nullopt
+
+  bool operator==(const SceneSegmentationEngine&) const = default;
+};
+
 /// Which engines run; each is optional.
 struct SceneEngines {
   std::optional<SceneHapticsEngine> haptics;
@@ -699,6 +731,7 @@ struct SceneEngines {
   std::optional<SceneMonitorEngine> monitor;
   std::optional<SceneIgtlEngine> igtl;      ///< v2
   std::optional<SceneVisionEngine> vision;  ///< v2
+  std::optional<SceneSegmentationEngine> segmentation;  ///< v2
 
   bool operator==(const SceneEngines&) const = default;
 };

@@ -115,4 +115,14 @@ Result<RegionGrowResult> growRegion(const Volume& image, std::span<const Vec3i> 
 /// it lies outside the grid or p is not finite. O(1).
 std::optional<Vec3i> nearestVoxel(const Volume& volume, const Vec3& p) noexcept;
 
+/// Mean and standard deviation of the voxels within `halfWidth` voxels of
+/// `centre` along each axis (a (2·halfWidth + 1)³ cube, clipped to the
+/// grid), and how many there were — the intensity window a user's click
+/// gives (mean ± k·σ). O(halfWidth³).
+struct NeighbourhoodStats {
+  double mean = 0.0, stddev = 0.0;
+  std::size_t count = 0;
+};
+NeighbourhoodStats neighbourhoodStats(const Volume& volume, const Vec3i& centre, int halfWidth = 2);
+
 }  // namespace dm
