@@ -362,15 +362,17 @@ WorldState PhysicsWorld::makeState() const {
   return st;
 }
 
-void PhysicsWorld::updateBounds(WorldState& state) const {
+void PhysicsWorld::updateBound(WorldState& state, std::size_t i) const {
   const WorldSnapshot& s = state.s_;
-  for (std::size_t i = 0; i < bodies_.size(); ++i) {
-    const BodyDesc& d = bodies_[i];
-    if (d.shape)
-      state.bounds_[i] = d.shape->aabb(bodyPose(s.position[i], s.orientation[i]) * d.shapeOffset);
-    else
-      state.bounds_[i] = Aabb(s.position[i], s.position[i]);
-  }
+  const BodyDesc& d = bodies_[i];
+  if (d.shape)
+    state.bounds_[i] = d.shape->aabb(bodyPose(s.position[i], s.orientation[i]) * d.shapeOffset);
+  else
+    state.bounds_[i] = Aabb(s.position[i], s.position[i]);
+}
+
+void PhysicsWorld::updateBounds(WorldState& state) const {
+  for (std::size_t i = 0; i < bodies_.size(); ++i) updateBound(state, i);
 }
 
 Status PhysicsWorld::restore(WorldState& state, const WorldSnapshot& snap) const {
@@ -432,7 +434,7 @@ Status PhysicsWorld::setBodyState(WorldState& state, BodyId id, const Vec3& posi
   state.s_.orientation[i] = orientation.normalized();
   state.s_.linearVelocity[i] = kind == BodyKind::Static ? Vec3::Zero() : linearVelocity;
   state.s_.angularVelocity[i] = kind == BodyKind::Rigid ? angularVelocity : Vec3::Zero();
-  updateBounds(state);
+  updateBound(state, i);  // only this body moved: O(1), as couplings call it per touched body every step
   wakeIsland(state, i);
   return ok();
 }

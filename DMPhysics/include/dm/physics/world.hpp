@@ -287,8 +287,9 @@ class PhysicsWorld {
   /// Sets one body's position (m), orientation and velocities (world) in
   /// `state`, waking the body's island if it sleeps. Fails with NotFound for
   /// an unknown id, InvalidArgument on non-finite values or a zero
-  /// quaternion; orientation is normalised. Allocation-free unless it fails
-  /// (a real-time coupling may call it every step).
+  /// quaternion; orientation is normalised. Allocation-free unless it fails,
+  /// and O(1) for an awake body (only its bounds are recomputed): a coupling
+  /// may call it for each body it touches every step.
   Status setBodyState(WorldState& state, BodyId id, const Vec3& position, const Quat& orientation,
                       const Vec3& linearVelocity, const Vec3& angularVelocity) const;
 
@@ -316,6 +317,7 @@ class PhysicsWorld {
   Status checkBody(BodyId id, const char* what) const;
   void evaluate(WorldState& state, double t) const;
   void updateBounds(WorldState& state) const;
+  void updateBound(WorldState& state, std::size_t i) const;  // body i's alone
   void applyImpulseAt(WorldState& state, std::uint32_t i, const Vec3& impulse, const Vec3& r) const;
   void stepSecondOrder(WorldState& state, int kind, double t, double dt) const;
   void stepRk4(WorldState& state, double t, double dt) const;
