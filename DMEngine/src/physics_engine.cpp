@@ -526,6 +526,9 @@ std::string PhysicsEngine::layerName(std::size_t i, int layer) const {
 const std::vector<std::string>& PhysicsEngine::softObjects() const noexcept { return impl_->drawnDeformed; }
 HapticTissue* PhysicsEngine::tissue(std::string_view object) noexcept { return impl_->soft->tissue(object); }
 HapticRenderer* PhysicsEngine::needleRenderer() noexcept { return impl_->soft->needle(); }
+HapticRenderer* PhysicsEngine::punchRenderer() noexcept {
+  return impl_->soft ? impl_->soft->punch() : nullptr;
+}
 bool PhysicsEngine::latestSurface(std::size_t i, Mesh& out) {
   const std::size_t soft = impl_->soft->names().size();
   return i < soft ? impl_->soft->latestSurface(i, out) : impl_->membranes->latestSurface(i - soft, out);

@@ -86,6 +86,9 @@ class PhysicsEngine final : public Engine {
   /// The needle renderer going into the soft object with "layers" (the
   /// haptics engine's renderer; stepped here), nullptr without one.
   HapticRenderer* needleRenderer() noexcept;
+  /// The punch renderer bonded to the soft object its "punch" names (the
+  /// haptics engine's renderer; stepped here), nullptr without one.
+  HapticRenderer* punchRenderer() noexcept;
   /// Render thread (one reader): softObjects()[i]'s deformed surface
   /// (object frame, before its scale) when a step finished since the last
   /// call, and on the first call (SoftTissues / SceneMembranes::latestSurface).

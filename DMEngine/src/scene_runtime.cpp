@@ -176,7 +176,8 @@ class HapticsEngine final : public Engine {
   std::unique_ptr<HapticDevice> device;
   std::unique_ptr<GodObjectRenderer> feltGodObject;  // inside renderer, when it presses soft tissue
   std::unique_ptr<HapticRenderer> renderer;
-  std::shared_ptr<PhysicsEngine> needleOwner;    // owns the needle renderer, when the loop drives that
+  std::shared_ptr<PhysicsEngine> needleOwner;  // owns the needle or punch renderer, when the loop drives that
+  HapticRenderer* physicsTool = nullptr;       // that renderer
   HapticRenderer* active = nullptr;              // what the loop ticks: renderer, or the needle
   GodObjectRenderer* godObject = nullptr;        // = renderer (or inside it), when it is the god-object
   BurrRenderer* burr = nullptr;                  // = renderer, when it is the burr
@@ -489,6 +490,15 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
       return fail(ErrorCode::InvalidArgument, "the needle renderer has no soft object with layers", where,
                   "name one in \"objects\" and give it \"layers\"");
     e->needleOwner = physics;
+    e->physicsTool = physics->needleRenderer();
+  } else if (h.renderer == SceneHapticsEngine::Renderer::Punch) {
+    // The punch and its tissue live in the physics engine, which steps
+    // them; the loop ticks the punch's renderer.
+    if (!physics || physics->punchRenderer() == nullptr)
+      return fail(ErrorCode::InvalidArgument, "the punch renderer has no soft object", where + "/punch",
+                  "name a soft object in \"punch\" and add the physics engine");
+    e->needleOwner = physics;
+    e->physicsTool = physics->punchRenderer();
   } else if (h.renderer == SceneHapticsEngine::Renderer::Vps) {
     auto v = buildSceneVps(scene, resources);
     if (!v) return v.error();
@@ -549,7 +559,7 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   // In lockstep an overrun says how loaded this machine is, not what the
   // simulation did: count it but keep the output (bit-identical reruns).
   config.overrunFades = !lockstep;
-  HapticRenderer& renderer = e->needleOwner ? *e->needleOwner->needleRenderer() : *e->renderer;
+  HapticRenderer& renderer = e->physicsTool ? *e->physicsTool : *e->renderer;
   e->active = &renderer;
 #ifdef DM_ENGINE_HAVE_VISION
   if (segmentation)

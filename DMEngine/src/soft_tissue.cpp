@@ -129,6 +129,76 @@ Result<std::vector<std::uint8_t>> tetLayers(const SceneObject& o, const TetMesh&
 
 }  // namespace
 
+// The punch renderer: a rigid indenter bonded to nodes of a soft object.
+// Haptic thread: tick() hands the device point to the physics thread and
+// answers the force of the newest step, held between steps. Physics thread:
+// step() moves the bonded nodes with the tool's displacement since its
+// first sample (their velocity the displacement of the step over h, as a
+// prescribed motion of held nodes), steps the tissue and publishes the force
+// the tissue puts on them (−Σ of their constraint forces, world). Neither
+// side allocates, locks or waits.
+class SoftTissues::PunchTool final : public HapticRenderer {
+ public:
+  PunchTool(FemBody& fem, std::vector<std::size_t> nodes, const Isometry3& pose)
+      : fem_(fem),
+        nodes_(std::move(nodes)),
+        pose_(pose),
+        reaction_(fem.nodeCount(), Vec3::Zero()),
+        toPhysics_(Vec3::Constant(std::numeric_limits<double>::quiet_NaN())),
+        toHand_(Vec3::Zero()) {}
+
+  std::string_view name() const noexcept override { return "punch"; }
+  void reset(const Isometry3&) noexcept override {}
+  std::size_t objectCount() const noexcept override { return 0; }
+  void setObjectPose(std::size_t, const Isometry3&) noexcept override {}
+
+  HapticResponse tick(const HapticInput& input) noexcept override {
+    const Vec3 p = input.devicePose.translation();
+    if (p.allFinite()) toPhysics_.write(p);
+    if (!first_.allFinite()) first_ = p;
+    HapticResponse r;
+    r.force = toHand_.read();
+    r.proxyPose = input.devicePose;  // bonded: the tool is where the hand holds it
+    r.contacts = 1;
+    r.penetration = first_.allFinite() ? (p - first_).norm() : 0.0;  // m, from the first pose
+    return r;
+  }
+
+  Result<FemStepReport> step(double h) {
+    if (toPhysics_.update()) device_ = toPhysics_.readBuffer();
+    if (device_.allFinite()) {
+      if (!started_) previous_ = device_;
+      started_ = true;
+      const Vec3 v = pose_.linear().transpose() * (device_ - previous_) / h;
+      previous_ = device_;
+      for (std::size_t i : nodes_) fem_.setVelocity(i, v);
+    }
+    auto report = fem_.step(h);
+    if (!report) return report;
+    fem_.computeConstraintForces(reaction_);  // sized at build: no allocation
+    Vec3 f = Vec3::Zero();
+    for (std::size_t i : nodes_) f -= reaction_[i];
+    onTool_ = pose_.linear() * f;
+    toHand_.write(onTool_);
+    return report;
+  }
+
+  /// The punch's force on the tissue (object frame), last step.
+  Vec3 toolForce() const noexcept { return -(pose_.linear().transpose() * onTool_); }
+  std::size_t nodeCount() const noexcept { return nodes_.size(); }
+
+ private:
+  FemBody& fem_;
+  std::vector<std::size_t> nodes_;
+  Isometry3 pose_;  // object → world
+  std::vector<Vec3> reaction_;
+  TripleBuffer<Vec3> toPhysics_, toHand_;
+  Vec3 first_ = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());   // haptic thread
+  Vec3 device_ = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());  // physics thread
+  Vec3 previous_ = Vec3::Zero(), onTool_ = Vec3::Zero();
+  bool started_ = false;
+};
+
 struct SoftTissues::Body {
   std::string name;
   Isometry3 pose = Isometry3::Identity();  // object → world
@@ -137,7 +207,8 @@ struct SoftTissues::Body {
   std::optional<SoftRigidCoupling> coupling;  // the world's bodies as its obstacles
   std::unique_ptr<HapticTissue> haptic;     // pressed by the god-object, or
   std::unique_ptr<NeedleInsertion> needle;  // a needle goes into it,
-  std::unique_ptr<HapticNeedle> felt;       // felt through this renderer
+  std::unique_ptr<HapticNeedle> felt;       // felt through this renderer, or
+  std::unique_ptr<PunchTool> punch;         // a punch is bonded to it
   std::vector<std::string> layerNames;      // the needle's layers, by index
   std::size_t fixedNodes = 0;
   // The surface the render engine draws: its vertices are these body nodes.
@@ -259,7 +330,23 @@ Result<std::unique_ptr<SoftTissues>> SoftTissues::build(const SceneDesc& scene,
     });
     const SceneMaterial* mat = scene.material(o.material);
     const double stiffness = mat != nullptr && mat->haptic ? mat->haptic->stiffness : 0.0;
-    if (!s.layers.empty() && haptics) {
+    const bool punched = haptics && haptics->punch &&
+                         haptics->renderer == SceneHapticsEngine::Renderer::Punch &&
+                         haptics->punch->object == o.name;
+    if (punched) {
+      // The punch's nodes: those in its region (world, at rest), held and
+      // moved with the tool.
+      const Aabb region(haptics->punch->region.min, haptics->punch->region.max);
+      std::vector<std::size_t> bonded;
+      for (std::size_t i = 0; i < b->fem->nodeCount(); ++i)
+        if (region.contains(b->pose * b->fem->positions()[i])) bonded.push_back(i);
+      if (bonded.empty())
+        return fail(
+            ErrorCode::InvalidArgument, "the punch's region holds no node of object \"" + o.name + "\"",
+            "engines/haptics/punch/region", "make the region enclose the tissue's nodes under the punch");
+      for (std::size_t i : bonded) b->fem->setFixed(i, true);
+      b->punch = std::make_unique<PunchTool>(*b->fem, std::move(bonded), b->pose);
+    } else if (!s.layers.empty() && haptics) {
       // The needle renderer's tissue (the parser checked that it is).
       auto layerOfTet = tetLayers(o, *tets, box.max().z(), resources, where + "/soft");
       if (!layerOfTet) return layerOfTet.error();
@@ -318,6 +405,12 @@ Status SoftTissues::attachNeedle(Body& b, std::span<const std::uint8_t> layerOfT
   return ok();
 }
 
+HapticRenderer* SoftTissues::punch() noexcept {
+  for (const auto& b : bodies_)
+    if (b->punch) return b->punch.get();
+  return nullptr;
+}
+
 HapticRenderer* SoftTissues::needle() noexcept {
   for (const auto& b : bodies_)
     if (b->felt) return b->felt.get();
@@ -374,7 +467,7 @@ Status SoftTissues::step(double h, WorldState& state) {
     Body& b = *bp;
     if (auto st = b.coupling->beforeTissueStep(state, h); !st)
       return st.error().within("soft object \"" + b.name + "\"");
-    auto report = b.felt ? b.felt->step(h) : b.haptic->step(h);
+    auto report = b.felt ? b.felt->step(h) : b.punch ? b.punch->step(h) : b.haptic->step(h);
     if (!report) return report.error().within("soft object \"" + b.name + "\"");
     b.coupling->afterTissueStep(state, h);
     ++b.steps;
@@ -399,7 +492,7 @@ bool SoftTissues::latestSurface(std::size_t i, Mesh& out) {
 // The tool's force on the tissue (body frame): the god-object's spring, or
 // the reverse of the tissue's force on the needle.
 Vec3 SoftTissues::toolForce(const Body& b) noexcept {
-  return b.needle ? Vec3(-b.needle->force()) : b.haptic->toolForce();
+  return b.needle ? Vec3(-b.needle->force()) : b.punch ? b.punch->toolForce() : b.haptic->toolForce();
 }
 
 void SoftTissues::addBodyForces(std::span<Vec3> force) const {
@@ -452,6 +545,7 @@ nlohmann::json SoftTissues::summary() const {
       list.back()["obstacles"] = std::move(touching);
       list.back()["obstacle_contacts"] = f.obstacleContactCount();
     }
+    if (b.punch) list.back()["punch"] = {{"nodes", b.punch->nodeCount()}};
     if (b.needle) {
       static constexpr const char* kTip[] = {"outside", "pressing", "cutting", "in-track"};
       const NeedleInsertion& n = *b.needle;

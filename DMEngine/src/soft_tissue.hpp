@@ -14,7 +14,10 @@
 // haptic material, tip radius of the haptics engine's tool) — or, for the
 // object with needle "layers", a dm::NeedleInsertion (each tetrahedron's
 // layer from its depth below the top face) felt through a dm::HapticNeedle,
-// the haptics engine's renderer, whose step() runs here.
+// the haptics engine's renderer, whose step() runs here — or, for the
+// object the punch renderer's "punch" names, its nodes in the punch's region
+// held and moved with the tool (a rigid indenter bonded to the tissue), the
+// tissue's force on them felt by the hand.
 //
 // Data flow (docs/architecture.md, "Scene runtime"):
 //   haptics → HapticTissue grip → step() (physics thread): the world's
@@ -77,6 +80,10 @@ class SoftTissues {
   /// "layers", for the haptics engine's loop; nullptr without one. Owned
   /// here: its step() is the physics thread's.
   HapticRenderer* needle() noexcept;
+  /// The punch renderer bonded to a soft object (the haptics engine's
+  /// "punch"), for the haptics engine's loop; nullptr without one. Owned
+  /// here: its step() is the physics thread's.
+  HapticRenderer* punch() noexcept;
   /// Physics thread, after step(): the needle's membranes broken so far,
   /// the layer at its tip (-1 outside) and the soft object it goes into
   /// (index in names()); nullopt without a needle.
@@ -124,6 +131,7 @@ class SoftTissues {
 
  private:
   struct Body;
+  class PunchTool;
   SoftTissues() = default;
   static void drawnSurface(const FemBody& fem, bool creases, Body& b);
   Status attachNeedle(Body& b, std::span<const std::uint8_t> layerOfTet,

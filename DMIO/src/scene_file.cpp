@@ -41,8 +41,8 @@ constexpr std::array<std::string_view, 3> kVolumeModes{"composite", "mip", "slic
 constexpr std::array<std::string_view, 3> kAxes{"axial", "coronal", "sagittal"};
 constexpr std::array<std::string_view, 3> kLightTypes{"directional", "point", "spot"};
 constexpr std::array<std::string_view, 2> kProjections{"perspective", "orthographic"};
-constexpr std::array<std::string_view, 7> kRenderers{"god-object",     "vps", "sphere-tree", "burr", "needle",
-                                                     "bone-placement", "none"};
+constexpr std::array<std::string_view, 8> kRenderers{
+    "god-object", "vps", "sphere-tree", "burr", "needle", "bone-placement", "none", "punch"};
 
 // Finds keys that occur twice in one JSON object: nlohmann keeps only the
 // last, which would silently drop e.g. one of two resources named "skin".
@@ -970,7 +970,7 @@ class SceneParser {
     if (!expectObject(r)) return;
     r.knownKeys({"rate_hz", "renderer", "device", "object", "objects", "tool_radius", "device_pose",
                  "max_force", "force_shading", "proxy_object", "burr", "needle", "vps", "sphere_tree",
-                 "bone_placement"});
+                 "bone_placement", "punch"});
     SceneHapticsEngine h;
     h.rateHz = r.number("rate_hz", {.min = 100.0, .max = 10000.0}, h.rateHz);
     h.renderer =
@@ -979,12 +979,16 @@ class SceneParser {
     h.device = r.string("device");
     if (r.errors().size() == before) checkName(r, "device", h.device, deviceIndex_, "device", "devices");
     const bool freeSpace = h.renderer == SceneHapticsEngine::Renderer::None;
-    if (freeSpace) {
-      // A tool in free space: nothing to touch, no proxy to size or shade.
+    const bool punch = h.renderer == SceneHapticsEngine::Renderer::Punch;
+    if (freeSpace || punch) {
+      // A tool in free space touches nothing, a punch is bonded to the
+      // object its block names: no objects, no proxy to size or shade.
       for (const char* key : {"object", "objects", "tool_radius", "force_shading"})
         if (r.has(key))
-          r.addError(std::string("renderer \"none\" touches nothing: \"") + key + "\" has no use", key,
-                     "remove it, or choose a renderer that touches objects");
+          r.addError(freeSpace ? std::string("renderer \"none\" touches nothing: \"") + key + "\" has no use"
+                               : std::string("the punch is bonded to the object its block names: \"") + key +
+                                     "\" has no use",
+                     key, freeSpace ? "remove it, or choose a renderer that touches objects" : "remove it");
     } else if (r.has("object") && r.has("objects")) {
       r.addError("both \"object\" and \"objects\" are given", "object",
                  "list every object under \"objects\"");
@@ -1009,7 +1013,7 @@ class SceneParser {
     } else {
       r.addError("missing required objects", "objects", "add \"objects\": [\"<touchable object>\"]");
     }
-    if (!freeSpace) {
+    if (!freeSpace && !punch) {
       h.toolRadius = r.number("tool_radius", {.min = 0.0, .max = 0.1}, 0.0);
       h.forceShading = r.boolean("force_shading", false);
     }
@@ -1029,6 +1033,7 @@ class SceneParser {
     if (v2Key(r, "vps")) readVps(r, h);
     if (v2Key(r, "sphere_tree")) readSphereTree(r, h);
     if (v2Key(r, "bone_placement")) readBonePlacement(r, h);
+    if (v2Key(r, "punch")) readPunch(r, h);
     scene_.engines.haptics = std::move(h);
   }
 
@@ -1189,7 +1194,8 @@ bool SceneHapticsEngine::operator==(const SceneHapticsEngine& o) const {
          toolRadius == o.toolRadius && devicePose.p == o.devicePose.p &&
          devicePose.q.coeffs() == o.devicePose.q.coeffs() && maxForce == o.maxForce &&
          forceShading == o.forceShading && proxyObject == o.proxyObject && burr == o.burr &&
-         needle == o.needle && vps == o.vps && sphereTree == o.sphereTree && bonePlacement == o.bonePlacement;
+         needle == o.needle && vps == o.vps && sphereTree == o.sphereTree &&
+         bonePlacement == o.bonePlacement && punch == o.punch;
 }
 
 const SceneResource* SceneDesc::resource(std::string_view n) const { return findNamed(resources, n); }
@@ -1457,8 +1463,11 @@ Json toJson(const SceneDesc& scene) {
                           {"device", h->device},          {"objects", h->objects},
                           {"tool_radius", h->toolRadius}, {"device_pose", toJson(h->devicePose)},
                           {"max_force", h->maxForce},     {"force_shading", h->forceShading}};
-  if (scene.engines.haptics && scene.engines.haptics->renderer == SceneHapticsEngine::Renderer::None)
+  if (scene.engines.haptics && (scene.engines.haptics->renderer == SceneHapticsEngine::Renderer::None ||
+                                scene.engines.haptics->renderer == SceneHapticsEngine::Renderer::Punch))
     for (const char* key : {"objects", "tool_radius", "force_shading"}) engines["haptics"].erase(key);
+  if (scene.engines.haptics && scene.engines.haptics->punch)
+    writePunch(*scene.engines.haptics->punch, engines["haptics"]);
   if (scene.engines.haptics && !scene.engines.haptics->proxyObject.empty())
     engines["haptics"]["proxy_object"] = scene.engines.haptics->proxyObject;
   if (scene.engines.haptics && scene.engines.haptics->burr) {

@@ -271,6 +271,8 @@ void checkMembranes(const SceneDesc& scene, ConfigReader root);
 void writeMembrane(const SceneObject& o, Json& object);
 // The haptics engine's "needle" block (the needle renderer's needle).
 void readNeedle(ConfigReader& haptics, SceneHapticsEngine& h);
+void readPunch(ConfigReader& haptics, SceneHapticsEngine& h);
+void writePunch(const ScenePunch& p, Json& haptics);
 void writeNeedle(const SceneNeedle& n, Json& haptics);
 
 // The 6-DOF rigid-tool renderers (scene_6dof.cpp): the haptics engine's

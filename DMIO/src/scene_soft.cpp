@@ -1,8 +1,8 @@
 // scene_soft.cpp — the scene file's soft tissue: an object's "soft" block
 // (FEM material, damping, tetrahedra size, held faces, the layers a needle
-// meets), the needle renderer's "needle" block, their checks against the
-// other keys and the engines, and their JSON (docs/scene-format.md, "Soft
-// tissue" and "Needles").
+// meets), the needle renderer's "needle" block and the punch renderer's
+// "punch" block, their checks against the other keys and the engines, and
+// their JSON (docs/scene-format.md, "Soft tissue", "Needles", "Punch").
 #include <numbers>
 
 #include "scene_parse.hpp"
@@ -100,6 +100,26 @@ void readNeedle(ConfigReader& haptics, SceneHapticsEngine& h) {
   }
   n.maxTorque = r.number("max_torque", {.min = 0.0, .max = 100.0}, n.maxTorque);
   h.needle = n;
+}
+
+void readPunch(ConfigReader& haptics, SceneHapticsEngine& h) {
+  ConfigReader r = haptics.child("punch");
+  if (!expectObject(r)) return;
+  r.knownKeys({"object", "region"});
+  ScenePunch p;
+  p.object = r.string("object");
+  ConfigReader region = r.child("region");
+  if (isNull(region)) {
+    r.addError("missing required region", "region",
+               "add \"region\": {\"min\": [...], \"max\": [...]} (m, world)");
+  } else if (auto box = readBox(region)) {
+    p.region = *box;
+  }
+  h.punch = std::move(p);
+}
+
+void writePunch(const ScenePunch& p, Json& haptics) {
+  haptics["punch"] = {{"object", p.object}, {"region", boxJson(p.region)}};
 }
 
 void writeNeedle(const SceneNeedle& n, Json& haptics) {
@@ -288,6 +308,24 @@ void checkSoft(const SceneDesc& scene, ConfigReader root) {
   } else if (h && h->needle) {
     haptics.addError("a \"needle\" block without the needle renderer", "needle",
                      "set \"renderer\": \"needle\", or remove \"needle\"");
+  }
+  const bool punch = h && h->renderer == SceneHapticsEngine::Renderer::Punch;
+  if (punch && !h->punch) {
+    haptics.addError(
+        "the punch renderer needs its punch", "punch",
+        "add \"punch\": {\"object\": <soft object>, \"region\": {\"min\": [...], \"max\": [...]}}");
+  } else if (!punch && h && h->punch) {
+    haptics.addError("a \"punch\" block without the punch renderer", "punch",
+                     "set \"renderer\": \"punch\", or remove \"punch\"");
+  } else if (punch && !h->punch->object.empty()) {
+    const SceneObject* o = scene.object(h->punch->object);
+    if (o == nullptr || !o->soft)
+      haptics.child("punch").addError(
+          "object " + inQuotes(h->punch->object) + (o ? " is not soft" : " is not defined"), "object",
+          "name an object with a \"soft\" block (the tissue the punch is bonded to)");
+    else if (!o->soft->layers.empty())
+      haptics.child("punch").addError("object " + inQuotes(o->name) + " has needle layers", "object",
+                                      "a punch presses tissue without layers");
   }
   for (std::size_t i = 0; i < scene.objects.size() && objects.isArray() && i < objects.size(); ++i) {
     const SceneObject& o = scene.objects[i];

@@ -774,7 +774,7 @@ TEST(SceneFile, ToJsonWritesEveryKeyAndReadsBackEqual) {
 
 TEST(SceneFile, BundledSceneRoundTrips) {
   for (const char* name : {"head_probe.json", "head_probe_teleop.json", "box_push.json", "burr_hole.json",
-                           "burr_hole_ct.json", "tooth_cavity.json"}) {
+                           "burr_hole_ct.json", "tooth_cavity.json", "tissue_indentation.json"}) {
     auto a = dm::readScene(sourceDir() / "examples/scenes" / name);
     ASSERT_TRUE(a) << a.error();
     auto b = dm::parseScene(dm::toJson(*a).dump(2), "written.json", a->baseDir);

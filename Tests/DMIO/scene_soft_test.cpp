@@ -428,3 +428,73 @@ TEST(SceneSoft, TissueFromAVolumeReadsAndWritesBack) {
 }
 
 }  // namespace scene_soft_test
+
+namespace scene_punch_test {
+
+using dm::Json;
+using namespace scene_test;
+
+// The pad bonded to a punch: renderer "punch", its block naming the pad.
+Json punchScene() {
+  Json j = scene_soft_test::padScene();
+  Json& h = j["engines"]["haptics"];
+  h = {{"device", "hand"},
+       {"renderer", "punch"},
+       {"proxy_object", "tool"},
+       {"punch",
+        {{"object", "pad"},
+         {"region", {{"min", {-0.005, -0.005, 0.0099}}, {"max", {0.005, 0.005, 0.0101}}}}}}};
+  return j;
+}
+
+TEST(ScenePunch, KeysReadAndWriteBackEqual) {
+  const Json j = punchScene();
+  auto s = parsed(j);
+  ASSERT_TRUE(s);
+  const auto& h = *s->engines.haptics;
+  EXPECT_EQ(h.renderer, dm::SceneHapticsEngine::Renderer::Punch);
+  ASSERT_TRUE(h.punch);
+  EXPECT_EQ(h.punch->object, "pad");
+  EXPECT_EQ(h.punch->region.min, dm::Vec3(-0.005, -0.005, 0.0099));
+  EXPECT_TRUE(h.objects.empty());
+  const Json written = expectRoundTrip(j);
+  EXPECT_FALSE(written["engines"]["haptics"].contains("objects"));
+  EXPECT_EQ(written["engines"]["haptics"]["punch"]["object"], "pad");
+}
+
+TEST(ScenePunch, MisusesAreErrorsAtTheirKeys) {
+  {
+    Json j = punchScene();
+    Json& h = j["engines"]["haptics"];
+    h["objects"] = {"pad"};
+    h["tool_radius"] = 0.001;
+    h["punch"]["object"] = "table";
+    h["punch"]["region"] = {{"min", {0, 0, 0}}, {"max", {-1, 0, 0}}};
+    h["punch"]["depth"] = 3;
+    const auto p = problemsOf(j);
+    expectAt(p, "/engines/haptics/objects", "bonded");
+    expectAt(p, "/engines/haptics/tool_radius", "bonded");
+    expectAt(p, "/engines/haptics/punch/object", "is not soft");
+    expectAt(p, "/engines/haptics/punch/region/max", "below min");
+    expectAt(p, "/engines/haptics/punch/depth", "unknown");
+  }
+  {
+    Json j = punchScene();
+    j["engines"]["haptics"].erase("punch");
+    expectAt(problemsOf(j), "/engines/haptics/punch", "needs its punch");
+    Json k = punchScene();
+    k["engines"]["haptics"]["punch"].erase("region");
+    k["engines"]["haptics"]["punch"]["object"] = "liver";
+    const auto p = problemsOf(k);
+    expectAt(p, "/engines/haptics/punch/region", "missing");
+    expectAt(p, "/engines/haptics/punch/object", "is not defined");
+  }
+  {
+    // A punch block under another renderer.
+    Json j = scene_soft_test::padScene();
+    j["engines"]["haptics"]["punch"] = punchScene()["engines"]["haptics"]["punch"];
+    expectAt(problemsOf(j), "/engines/haptics/punch", "without the punch renderer");
+  }
+}
+
+}  // namespace scene_punch_test

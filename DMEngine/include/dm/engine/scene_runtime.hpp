@@ -12,8 +12,10 @@
 //     renderer going into the soft object with "layers" (dm::HapticNeedle;
 //     "Needles"), or a 6-DOF rigid tool: the VPS renderer (its point shell
 //     against the touched objects voxelized; dm::VpsRenderer) or the
-//     sphere-tree renderer (dm::SphereTree6DofRenderer), or a tool in free
-//     space (renderer "none", dm::FreeSpaceRenderer) — and dm::HapticLoop
+//     sphere-tree renderer (dm::SphereTree6DofRenderer), or a punch bonded
+//     to a soft object's nodes (renderer "punch", stepped with the tissue by
+//     physics), or a tool in free space (renderer "none",
+//     dm::FreeSpaceRenderer) — and dm::HapticLoop
 //     (device servo, effects, safety, fade) at the scene's rate;
 //   - physics: every "dynamic" object a rigid body of one dm::PhysicsWorld,
 //     the other objects static colliders; the god-object feels the moving

@@ -471,6 +471,18 @@ struct SceneBurr {
   bool operator==(const SceneBurr&) const = default;
 };
 
+/// The punch of the punch renderer (v2 "punch"): a rigid indenter bonded to
+/// the soft object `object` — its FEM nodes within `region` (world, at
+/// rest) move with the tool's displacement from its first pose, and the
+/// hand feels the force the tissue puts on them (a flat-punch indentation
+/// test, a clamp or a grasper's jaws holding tissue).
+struct ScenePunch {
+  std::string object;  ///< a soft object's name
+  SceneBox region;     ///< m, world, at the objects' rest poses
+
+  bool operator==(const ScenePunch&) const = default;
+};
+
 /// The needle of the needle renderer (v2 "needle"; dm::NeedleOptions and
 /// dm::HapticNeedleOptions): where it sits on the device and how it couples
 /// to the tissue. The tip's spring on a membrane is the tissue material's
@@ -571,12 +583,14 @@ struct SceneHapticsEngine {
   /// `None` ("none", v2): a tool in free space, nothing to touch (no
   /// "objects"); the proxy is the device point, effects such as the
   /// segmentation engine's guidance give the force (dm::FreeSpaceRenderer).
-  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr, Needle, BonePlacement, None };
+  /// `Punch` ("punch", v2): bonded to a soft object's nodes (its "punch"
+  /// block names the object; no "objects").
+  enum class Renderer : std::uint8_t { GodObject, Vps, SphereTree, Burr, Needle, BonePlacement, None, Punch };
 
   double rateHz = 1000.0;  ///< 100..10000
   Renderer renderer = Renderer::GodObject;
   std::string device;                ///< a device name
-  std::vector<std::string> objects;  ///< touchable object names, ≥ 1 (none with renderer "none")
+  std::vector<std::string> objects;  ///< touchable object names, ≥ 1 (none with renderer "none" or "punch")
   double toolRadius = 0.0;           ///< m, 0..0.1 (0: a point)
   Pose devicePose;                   ///< device frame → world
   double maxForce = 0.0;             ///< N, ≥ 0 (0: the device's limit)
@@ -587,6 +601,7 @@ struct SceneHapticsEngine {
   std::optional<SceneVps> vps;        ///< v2: with renderer "vps" (and only then)
   std::optional<SceneSphereTree> sphereTree;  ///< v2: with renderer "sphere-tree" (and only then)
   std::optional<SceneBonePlacement> bonePlacement;  ///< v2: with renderer "bone-placement" (and only then)
+  std::optional<ScenePunch> punch;                  ///< v2: with renderer "punch" (and only then)
 
   bool operator==(const SceneHapticsEngine& o) const;
 };
