@@ -48,6 +48,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <mutex>
 #include <span>
 #include <thread>
@@ -131,6 +132,7 @@ class HapticsEngine final : public Engine {
         while (!recorder->hasRoom()) std::this_thread::yield();
       (void)recorder->pushHapticState(state);  // a drop is counted (summary)
     }
+    if (toolPoint) toolPoint->write(s.input.devicePose.translation());  // the device point, world
     if (streamed) {
       StreamedSample& out = streamed->writeBuffer();
       out.tool = s.response.proxyPose;
@@ -209,6 +211,9 @@ class HapticsEngine final : public Engine {
     bool valid = false;
   };
   std::unique_ptr<TripleBuffer<StreamedSample>> streamed;
+  // The newest tick's device point for the segmentation engine (its own
+  // channel: latest() has one consumer, the render engine's); null without one.
+  std::unique_ptr<TripleBuffer<Vec3>> toolPoint;
   std::unique_ptr<DeviceRecorder> recorder;  // the device's stream, when the scene records it
   bool waitForRecorder = false;              // lockstep: wait for queue room instead of dropping
   TickTime time;
@@ -797,7 +802,9 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
       return s.error();
   }
   if (segmentation && haptics) {  // (the scene reader asks for a haptics engine)
-    segmentation->setTool([h = haptics.get()] { return h->loop->latest().input.devicePose.translation(); });
+    haptics->toolPoint =
+        std::make_unique<TripleBuffer<Vec3>>(Vec3::Constant(std::numeric_limits<double>::quiet_NaN()));
+    segmentation->setTool([b = haptics->toolPoint.get()] { return b->read(); });
     if (auto s = master.addEngine(segmentation->engine(), {.rateHz = scene.engines.segmentation->rateHz}); !s)
       return s.error();
   }
