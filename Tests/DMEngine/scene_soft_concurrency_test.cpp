@@ -1,5 +1,6 @@
 // Soft tissue in a scene run on real-time threads: the haptics engine (the
-// god-object on the tissue's newest surface, or the needle's local model)
+// god-object on the tissue's newest surface, the needle's local model, or
+// the punch bonded to it)
 // and the physics engine (the FEM steps) exchange grips, surfaces, poses and
 // models through their triple buffers while both run. Run under TSan in CI:
 // any unsynchronised access between the two threads is a failure. The
@@ -45,6 +46,15 @@ TEST(SceneSoftRealTime, TheNeedleGoesInWhilePhysicsStepsIt) {
   const json& n = s.at("physics").at("soft").at(0).at("needle");
   EXPECT_GT(n.at("models_published").get<int>(), 10);
   EXPECT_GE(n.at("punctures").get<int>(), 1) << "the skin pops at about 1.75 s";
+}
+
+TEST(SceneSoftRealTime, ThePunchFollowsTheStylusWhilePhysicsStepsTheTissue) {
+  const json s = runRealTime(scene_run::bundledScene("tissue_indentation.json"), 1.0,
+                             dm::test::TempDir("soft_rt_punch").path());
+  ASSERT_TRUE(s.contains("physics")) << s.dump(2);
+  const json& block = s.at("physics").at("soft").at(0);
+  EXPECT_GE(block.at("steps").get<int>(), 2);
+  EXPECT_GT(block.at("max_tool_force_N").get<double>(), 0.0) << "the punch is 1.5 mm deep at 0.5 s";
 }
 
 }  // namespace scene_soft_concurrency_test
