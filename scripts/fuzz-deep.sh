@@ -68,6 +68,7 @@ sources_of() {
     vdb_fuzz) echo DMIO/src/vdb.cpp ;;
     vision_graph_fuzz) echo DMVision/src/filter_graph.cpp ;;
     vision_letter_fuzz) echo DMVision/src/classify.cpp ;;
+    volume_files_fuzz) echo "DMIO/src/metaimage.cpp DMIO/src/nrrd.cpp DMIO/src/nifti.cpp DMCore/src/filesystem.cpp" ;;
   esac
 }
 
