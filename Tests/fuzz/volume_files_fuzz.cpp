@@ -42,6 +42,10 @@ const fs::path& folder() {
         fs::temp_directory_path() / ("dm_volume_files_fuzz_" + std::to_string(::getpid()));
     fs::create_directories(parent / "in");
     std::ofstream(parent / "outside.raw", std::ios::binary) << sentinel();
+    std::atexit([] {  // no folder left behind in /tmp
+      std::error_code ec;
+      fs::remove_all(fs::temp_directory_path() / ("dm_volume_files_fuzz_" + std::to_string(::getpid())), ec);
+    });
     return parent / "in";
   }();
   return dir;
