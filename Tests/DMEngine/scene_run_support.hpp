@@ -8,6 +8,7 @@
 #include <dm/core/types.hpp>
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
+#include <dm/io/volume_io.hpp>
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -104,6 +105,22 @@ inline dm::SceneDesc parsedScene(const std::string& text, const std::string& fil
   auto s = dm::parseScene(text, file, dir, &problems);
   EXPECT_TRUE(s) << dm::formatSceneErrors(problems);
   return s ? *s : dm::SceneDesc{};
+}
+
+/// A homogeneous ball of value 100 and `radius` (m) in a zero background,
+/// n³ voxels of 1 mm centred on the origin, written as `file` (NIfTI): a
+/// volume whose segmentation is known.
+inline void writeBallVolume(const fs::path& file, double radius, int n = 40) {
+  dm::Affine3 toWorld = dm::Affine3::Identity();
+  toWorld.linear() = 0.001 * dm::Mat3::Identity();
+  toWorld.translation() = dm::Vec3::Constant(-0.001 * (n - 1) / 2.0);
+  auto v = dm::Volume::create({n, n, n}, dm::VoxelType::U8, toWorld);
+  ASSERT_TRUE(v) << v.error();
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i)
+        if ((toWorld * dm::Vec3(i, j, k)).norm() <= radius) v->setValue(i, j, k, 100);
+  ASSERT_TRUE(dm::writeVolume(*v, file));
 }
 
 /// examples/scenes/`file`, without its render engine, frames and plot.

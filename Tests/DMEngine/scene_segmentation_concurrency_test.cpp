@@ -7,7 +7,6 @@
 // outcome checks are loose (the threads run slower there).
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
-#include <dm/io/volume_io.hpp>
 
 #include <gtest/gtest.h>
 
@@ -24,17 +23,7 @@ using nlohmann::json;
 
 TEST(SceneSegmentationRealTime, ThePaintingReadsTheToolWhileTheLoopFeelsTheGuidance) {
   const dm::test::TempDir dir("segmentation_rt");
-  constexpr int kN = 40;
-  dm::Affine3 toWorld = dm::Affine3::Identity();
-  toWorld.linear() = 0.001 * dm::Mat3::Identity();
-  toWorld.translation() = dm::Vec3::Constant(-0.001 * (kN - 1) / 2.0);
-  auto v = dm::Volume::create({kN, kN, kN}, dm::VoxelType::U8, toWorld);
-  ASSERT_TRUE(v) << v.error();
-  for (int k = 0; k < kN; ++k)
-    for (int j = 0; j < kN; ++j)
-      for (int i = 0; i < kN; ++i)
-        if ((toWorld * dm::Vec3(i, j, k)).norm() <= 0.010) v->setValue(i, j, k, 100);
-  ASSERT_TRUE(dm::writeVolume(*v, dir / "ball.nii.gz"));
+  scene_run::writeBallVolume(dir / "ball.nii.gz", 0.010);
   const dm::SceneDesc scene =
       scene_run::parsedScene(R"({"format": "dmplatform-scene", "version": 2, "name": "ball",
     "resources": {"ball": {"type": "volume", "source": "ball.nii.gz"}},

@@ -10,7 +10,7 @@
 // before anything runs, naming the key.
 #include <dm/engine/scene_runtime.hpp>
 #include <dm/io/scene_file.hpp>
-#include <dm/io/volume_io.hpp>
+#include <dm/io/volume_io.hpp>  // readVolume
 
 #include <gtest/gtest.h>
 
@@ -32,20 +32,6 @@ namespace fs = std::filesystem;
 constexpr double kBallRadius = 0.010;  // m
 constexpr int kN = 40;                 // voxels a side, 1 mm, centred on the origin
 
-// The ball (100) in a zero background, as ball.nii.gz in `dir`.
-void writeBall(const fs::path& dir) {
-  dm::Affine3 toWorld = dm::Affine3::Identity();
-  toWorld.linear() = 0.001 * dm::Mat3::Identity();
-  toWorld.translation() = dm::Vec3::Constant(-0.001 * (kN - 1) / 2.0);
-  auto v = dm::Volume::create({kN, kN, kN}, dm::VoxelType::U8, toWorld);
-  ASSERT_TRUE(v) << v.error();
-  for (int k = 0; k < kN; ++k)
-    for (int j = 0; j < kN; ++j)
-      for (int i = 0; i < kN; ++i)
-        if ((toWorld * dm::Vec3(i, j, k)).norm() <= kBallRadius) v->setValue(i, j, k, 100);
-  ASSERT_TRUE(dm::writeVolume(*v, dir / "ball.nii.gz"));
-}
-
 std::string ballScene(bool guidance, const std::string& seed = "[0, 0, 0]") {
   return R"({"format": "dmplatform-scene", "version": 2, "name": "ball",
     "resources": {"ball": {"type": "volume", "source": "ball.nii.gz"}},
@@ -62,7 +48,7 @@ std::string ballScene(bool guidance, const std::string& seed = "[0, 0, 0]") {
 
 TEST(SceneSegmentation, ItPaintsTheBallAndItsGuidancePushesTowardTheCentre) {
   const dm::test::TempDir dir("scene_segmentation");
-  writeBall(dir.path());
+  scene_run::writeBallVolume(dir / "ball.nii.gz", kBallRadius, kN);
   const dm::SceneDesc scene = scene_run::parsedScene(ballScene(true), "ball.json", dir.path());
   const json s = scene_run::runScene(scene, 1.0, dir / "guided");
   ASSERT_TRUE(s.contains("segmentation")) << s.dump(1);
@@ -97,7 +83,7 @@ TEST(SceneSegmentation, ItPaintsTheBallAndItsGuidancePushesTowardTheCentre) {
 
 TEST(SceneSegmentation, ASeedOutsideTheVolumeFailsBeforeTheRun) {
   const dm::test::TempDir dir("scene_segmentation_seed");
-  writeBall(dir.path());
+  scene_run::writeBallVolume(dir / "ball.nii.gz", kBallRadius, kN);
   const dm::SceneDesc scene = scene_run::parsedScene(ballScene(true, "[0.5, 0, 0]"), "ball.json", dir.path());
   auto rt = dm::SceneRuntime::create(scene);
   ASSERT_TRUE(rt) << rt.error();
