@@ -53,7 +53,7 @@ void checkVolume(const SceneDesc& scene, ConfigReader& r, std::string_view key, 
 void readSegment(ConfigReader& resource, SceneResource& res) {
   ConfigReader r = resource.child("segment");
   if (!expectObject(r)) return;
-  r.knownKeys({"volume", "above", "below", "label", "box", "cuts", "largest_component"});
+  r.knownKeys({"volume", "above", "below", "label", "outside", "near", "box", "cuts", "largest_component"});
   SceneSegment g;
   g.volume = r.string("volume");
   int selects = 0;
@@ -72,6 +72,17 @@ void readSegment(ConfigReader& resource, SceneResource& res) {
   if (selects == 0)
     r.addError("a segment needs to know which voxels it keeps", {},
                "add \"above\": <value> (a CT's bone: HU above ~300), \"below\": <value> or \"label\": <n>");
+  if (r.has("outside")) g.outside = r.string("outside");
+  if (r.has("near")) {
+    ConfigReader n = r.child("near");
+    if (expectObject(n)) {
+      n.knownKeys({"volume", "distance"});
+      SceneSegmentNear near;
+      near.volume = n.string("volume");
+      near.distance = n.number("distance", {.min = 1e-6, .max = 0.1});
+      g.near = std::move(near);
+    }
+  }
   if (r.has("box")) {
     ConfigReader b = r.child("box");
     if (expectObject(b)) {
@@ -92,7 +103,15 @@ void readSegment(ConfigReader& resource, SceneResource& res) {
         if (!expectObject(c)) continue;
         c.knownKeys({"point", "normal", "kerf"});
         SceneCut cut;
-        cut.point = readVec3(c, "point");
+        if (c.has("point") && c.node()["point"].is_string()) {
+          if (c.string("point") == "centroid")
+            cut.atCentroid = true;
+          else
+            c.addError("point \"" + c.string("point") + "\" is not a point", "point",
+                       "give [x, y, z] (m) or \"centroid\" (of the voxels selected before the cuts)");
+        } else {
+          cut.point = readVec3(c, "point");
+        }
         cut.normal = readDirection(c, "normal", cut.normal);
         if (!c.has("normal")) c.addError("missing required normal (the side kept)", "normal");
         cut.kerf = c.number("kerf", {.min = 0.0, .max = 0.05}, 0.0);
@@ -107,11 +126,15 @@ void readSegment(ConfigReader& resource, SceneResource& res) {
 Json segmentJson(const SceneSegment& g) {
   Json j = {{"volume", g.volume}, {std::string(kSelects[static_cast<std::size_t>(g.select)]), g.value}};
   if (g.select == SceneSegment::Select::Label) j["label"] = static_cast<std::int64_t>(g.value);
+  if (!g.outside.empty()) j["outside"] = g.outside;
+  if (g.near) j["near"] = {{"volume", g.near->volume}, {"distance", g.near->distance}};
   if (g.box) j["box"] = {{"min", toJson(g.box->min)}, {"max", toJson(g.box->max)}};
   if (!g.cuts.empty()) {
     Json cuts = Json::array();
     for (const SceneCut& c : g.cuts)
-      cuts.push_back({{"point", toJson(c.point)}, {"normal", toJson(c.normal)}, {"kerf", c.kerf}});
+      cuts.push_back({{"point", c.atCentroid ? Json("centroid") : toJson(c.point)},
+                      {"normal", toJson(c.normal)},
+                      {"kerf", c.kerf}});
     j["cuts"] = std::move(cuts);
   }
   j["largest_component"] = g.largestComponent;
@@ -160,6 +183,11 @@ void checkBonePlacement(const SceneDesc& scene, ConfigReader root) {
     if (res.segment) {
       ConfigReader seg = resources.child(res.name).child("segment");
       if (!res.segment->volume.empty()) checkVolume(scene, seg, "volume", res.segment->volume, true);
+      if (!res.segment->outside.empty()) checkVolume(scene, seg, "outside", res.segment->outside, true);
+      if (res.segment->near && !res.segment->near->volume.empty()) {
+        ConfigReader near = seg.child("near");
+        checkVolume(scene, near, "volume", res.segment->near->volume, true);
+      }
     }
 
   const auto& h = scene.engines.haptics;

@@ -9,6 +9,7 @@
 #include <dm/math/phantom.hpp>
 #include <dm/math/primitives.hpp>
 #include <dm/math/volume_components.hpp>
+#include <dm/math/volume_distance.hpp>
 
 #include <algorithm>
 #include <limits>
@@ -78,11 +79,59 @@ Result<Mesh> makeIsosurface(const SceneResource& r, const Volume& full) {
 
 }  // namespace
 
-Result<Volume> makeSceneSegment(const SceneResource& r, const Volume& source) {
+namespace {
+
+// A mask volume a segment names ("outside", "near") must lie on the
+// source's grid, voxel for voxel.
+Status checkSameGrid(const Volume& mask, const Volume& source, const std::string& name,
+                     const std::string& at) {
+  const bool same = mask.dims() == source.dims() &&
+                    (mask.indexToWorld().matrix() - source.indexToWorld().matrix()).cwiseAbs().maxCoeff() <=
+                        1e-9 * (1.0 + source.indexToWorld().matrix().cwiseAbs().maxCoeff());
+  if (same) return ok();
+  const Vec3i a = mask.dims(), b = source.dims();
+  return fail(ErrorCode::InvalidArgument,
+              formatString("volume \"%s\" (%d x %d x %d) is not on the scan's grid (%d x %d x %d, its own "
+                           "voxel positions)",
+                           name.c_str(), a.x(), a.y(), a.z(), b.x(), b.y(), b.z()),
+              at, "give a mask made on the same scan (a brain mask of the MRI, a label map of the CT)");
+}
+
+// The count of nonzero voxels of a U8 mask.
+std::size_t countSet(const Volume& mask) {
+  const std::uint8_t* m = mask.data<std::uint8_t>();
+  return static_cast<std::size_t>(
+      std::count_if(m, m + mask.voxelCount(), [](std::uint8_t x) { return x != 0; }));
+}
+
+// Keeps the largest 26-connected part of `mask` in place.
+Status keepLargest(Volume& mask, const std::string& at) {
+  auto largest = largestComponent(mask);
+  if (!largest) return largest.error().within(at);
+  mask = std::move(*largest);
+  return ok();
+}
+
+}  // namespace
+
+Result<Volume> makeSceneSegment(const SceneResource& r, const Volume& source, const Volume* outside,
+                                const Volume* near) {
   if (!r.segment) return fail(ErrorCode::InvalidArgument, "not a segment", where(r));
   const SceneSegment& g = *r.segment;
   const std::string at = where(r) + "/segment";
   if (source.empty()) return fail(ErrorCode::InvalidArgument, "the volume is empty", at + "/volume");
+  if (!g.outside.empty()) {
+    if (outside == nullptr)
+      return fail(ErrorCode::InvalidArgument, "the mask \"" + g.outside + "\" was not given",
+                  at + "/outside");
+    if (auto s = checkSameGrid(*outside, source, g.outside, at + "/outside"); !s) return s.error();
+  }
+  if (g.near) {
+    if (near == nullptr)
+      return fail(ErrorCode::InvalidArgument, "the mask \"" + g.near->volume + "\" was not given",
+                  at + "/near/volume");
+    if (auto s = checkSameGrid(*near, source, g.near->volume, at + "/near/volume"); !s) return s.error();
+  }
   // The index range to visit: the box's corners in index space, or the grid.
   Vec3i lo = Vec3i::Zero(), hi = source.dims() - Vec3i::Ones();
   if (g.box) {
@@ -100,6 +149,28 @@ Result<Volume> makeSceneSegment(const SceneResource& r, const Volume& source) {
       return fail(ErrorCode::InvalidArgument, "the box misses the volume", at + "/box",
                   "give world coordinates (m) inside the scan");
   }
+  // "near": squared distances (in units of the smallest voxel size) to the
+  // other mask's voxels, over the range grown by the distance — exact, as
+  // no voxel farther out can be within it.
+  std::vector<float> nearD2;
+  Vec3i nearLo = lo, nearDims = Vec3i::Zero();
+  double nearR2 = 0;
+  if (g.near) {
+    const Vec3 spacing = source.indexToWorld().linear().colwise().norm().transpose();
+    const double unit = spacing.minCoeff();
+    const Vec3i grow = (g.near->distance / spacing.array()).ceil().cast<int>().matrix();
+    nearLo = (lo - grow).cwiseMax(Vec3i::Zero());
+    const Vec3i nearHi = (hi + grow).cwiseMin(source.dims() - Vec3i::Ones());
+    nearDims = nearHi - nearLo + Vec3i::Ones();
+    std::vector<std::uint8_t> fg(static_cast<std::size_t>(nearDims.prod()));
+    std::size_t n = 0;
+    for (int k = nearLo.z(); k <= nearHi.z(); ++k)
+      for (int j = nearLo.y(); j <= nearHi.y(); ++j)
+        for (int i = nearLo.x(); i <= nearHi.x(); ++i, ++n) fg[n] = near->value(i, j, k) != 0 ? 1 : 0;
+    nearD2 = squaredDistanceToForeground(fg, nearDims, spacing / unit);
+    const double reach = g.near->distance / unit;
+    nearR2 = reach * reach * (1 + 1e-9);  // a voxel exactly at the distance is within it
+  }
   const Vec3i dims = hi - lo + Vec3i::Ones();
   auto mask = Volume::create(dims, VoxelType::U8,
                              source.indexToWorld() * Affine3(Eigen::Translation3d(lo.cast<double>())));
@@ -114,21 +185,54 @@ Result<Volume> makeSceneSegment(const SceneResource& r, const Volume& source) {
                     : g.select == SceneSegment::Select::Below ? v < g.value
                                                               : v == g.value;
         if (!keep) continue;
-        const Vec3 p = source.indexToWorld() * Vec3(i, j, k);
-        if (g.box) keep = (p.array() >= g.box->min.array()).all() && (p.array() <= g.box->max.array()).all();
-        for (const SceneCut& c : g.cuts) keep = keep && c.normal.dot(p - c.point) > 0.5 * c.kerf;
+        if (g.box) {
+          const Vec3 p = source.indexToWorld() * Vec3(i, j, k);
+          keep = (p.array() >= g.box->min.array()).all() && (p.array() <= g.box->max.array()).all();
+        }
+        if (keep && outside != nullptr && !g.outside.empty()) keep = outside->value(i, j, k) == 0;
+        if (keep && g.near) {
+          const Vec3i q = Vec3i(i, j, k) - nearLo;
+          keep = nearD2[(static_cast<std::size_t>(q.z()) * nearDims.y() + q.y()) * nearDims.x() + q.x()] <=
+                 nearR2;
+        }
         m[n] = keep ? 1 : 0;
         selected += keep;
       }
   if (selected == 0)
     return fail(ErrorCode::InvalidArgument, "the segment selects no voxel", at,
-                "check the value against the scan's (dmtool info), the box and the cuts' sides");
-  if (g.largestComponent) {
-    auto largest = largestComponent(*mask);
-    if (!largest) return largest.error().within(at);
-    *mask = std::move(*largest);
+                "check the value against the scan's (dmtool info), the box, \"outside\" and \"near\"");
+  if (g.largestComponent)
+    if (auto s = keepLargest(*mask, at); !s) return s.error();
+  if (!g.cuts.empty()) {
+    // The centroid of what the cuts divide (world, m), for "point": "centroid".
     m = mask->data<std::uint8_t>();
+    Vec3 sum = Vec3::Zero();
+    std::size_t count = 0;
+    n = 0;
+    for (int k = 0; k < dims.z(); ++k)
+      for (int j = 0; j < dims.y(); ++j)
+        for (int i = 0; i < dims.x(); ++i, ++n)
+          if (m[n] != 0) {
+            sum += Vec3(i, j, k);
+            ++count;
+          }
+    const Vec3 centroid = mask->indexToWorld() * (sum / static_cast<double>(count));
+    n = 0;
+    for (int k = 0; k < dims.z(); ++k)
+      for (int j = 0; j < dims.y(); ++j)
+        for (int i = 0; i < dims.x(); ++i, ++n) {
+          if (m[n] == 0) continue;
+          const Vec3 p = mask->indexToWorld() * Vec3(i, j, k);
+          for (const SceneCut& c : g.cuts)
+            if (!(c.normal.dot(p - (c.atCentroid ? centroid : c.point)) > 0.5 * c.kerf)) m[n] = 0;
+        }
+    if (countSet(*mask) == 0)
+      return fail(ErrorCode::InvalidArgument, "the cuts leave no voxel", at + "/cuts",
+                  "check the cuts' sides: each normal points to the side kept");
+    if (g.largestComponent)
+      if (auto s = keepLargest(*mask, at); !s) return s.error();
   }
+  m = mask->data<std::uint8_t>();
   // Crop to the kept voxels with one empty voxel around them (a closed
   // isosurface, a small sphere tree); the voxels keep their world positions.
   Vec3i a = dims, b = -Vec3i::Ones();
@@ -330,7 +434,13 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
     if (!vol)
       return fail(ErrorCode::NotFound, "no volume resource \"" + r.segment->volume + "\"",
                   where(r) + "/segment/volume");
-    auto seg = makeSceneSegment(r, *vol);
+    const auto mask = [&](const std::string& name) -> std::shared_ptr<const Volume> {
+      return name.empty() ? nullptr : out.volume(name);
+    };
+    const std::shared_ptr<const Volume> outside = mask(r.segment->outside);
+    const std::shared_ptr<const Volume> near =
+        mask(r.segment->near ? r.segment->near->volume : std::string());
+    auto seg = makeSceneSegment(r, *vol, outside.get(), near.get());
     if (!seg) return seg.error();
     if (auto s = keep(out.volumes, r, std::make_shared<const Volume>(std::move(*seg))); !s) return s.error();
   }

@@ -1,6 +1,7 @@
 // Volume filters: Gaussian smoothing, gradients, 3-D Canny, thresholding,
 // connected components and binary morphology (see volume_filters.hpp).
 #include <dm/core/tasks.hpp>
+#include <dm/math/volume_distance.hpp>
 #include <dm/vision/volume_filters.hpp>
 
 #include <algorithm>
@@ -51,7 +52,6 @@ void forEachVoxelIjk(const Vec3i& dims, F&& fn) {
 // Per-chunk scratch of forEachLine().
 struct LineScratch {
   std::vector<double> real;
-  std::vector<int> index;
 };
 
 // Calls fn(scratch, base, stride, len) for every grid line along `axis`
@@ -89,34 +89,6 @@ void convolveAxis(const float* src, float* dst, const Vec3i& dims, int axis, con
   });
 }
 
-// Squared 1-D distance transform of one line (Felzenszwalb & Huttenlocher,
-// "Distance transforms of sampled functions", 2012): d[q] = min_p (q-p)² + f[p].
-void distanceTransform1d(const double* f, double* d, int len, int* v, double* z) {
-  int k = 0;
-  v[0] = 0;
-  z[0] = -HUGE_VAL;
-  z[1] = HUGE_VAL;
-  for (int q = 1; q < len; ++q) {
-    // z[0] = -inf ends the loop at k = 0 at the latest (every f is finite).
-    double s = 0;
-    for (;; --k) {
-      const int p = v[k];
-      s = ((f[q] + double(q) * q) - (f[p] + double(p) * p)) / (2.0 * (q - p));
-      if (s > z[k]) break;
-    }
-    ++k;
-    v[k] = q;
-    z[k] = s;
-    z[k + 1] = HUGE_VAL;
-  }
-  k = 0;
-  for (int q = 0; q < len; ++q) {
-    while (z[k + 1] < q) ++k;
-    const double dq = q - v[k];
-    d[q] = dq * dq + f[v[k]];
-  }
-}
-
 // Dilation of the foreground `fg` (0/1 per voxel) by the structuring element;
 // outside the grid counts as nothing. Writes 0/1 into `out`.
 void dilateMask(const std::vector<std::uint8_t>& fg, std::uint8_t* out, const Vec3i& dims, int radius,
@@ -146,29 +118,8 @@ void dilateMask(const std::vector<std::uint8_t>& fg, std::uint8_t* out, const Ve
     std::copy(a.begin(), a.end(), out);
     return;
   }
-  // Ball: squared Euclidean distance to the foreground, separably.
-  constexpr double kFar = 1e20;
-  std::vector<float> d2(n);
-  forEachVoxel(n, [&](std::size_t i) { d2[i] = fg[i] ? 0.0f : static_cast<float>(kFar); });
-  for (int axis = 0; axis < 3; ++axis) {
-    forEachLine(dims, axis, [&](LineScratch& scratch, std::size_t base, std::size_t stride, int len) {
-      const auto L = static_cast<std::size_t>(len);
-      scratch.real.resize(3 * L + 1);
-      scratch.index.resize(L);
-      double* f = scratch.real.data();
-      double* d = f + L;
-      double* z = d + L;  // len + 1 entries
-      int* v = scratch.index.data();
-      bool any = false;
-      for (std::size_t t = 0; t < L; ++t) {
-        f[t] = d2[base + stride * t];
-        any = any || f[t] < kFar;
-      }
-      if (!any) return;
-      distanceTransform1d(f, d, len, v, z);
-      for (std::size_t t = 0; t < L; ++t) d2[base + stride * t] = static_cast<float>(std::min(d[t], kFar));
-    });
-  }
+  // Ball: squared Euclidean distance to the foreground (index units: exact integers).
+  const std::vector<float> d2 = squaredDistanceToForeground(fg, dims);
   const double r2 = double(radius) * radius;
   forEachVoxel(n, [&](std::size_t i) { out[i] = d2[i] <= r2 ? 1 : 0; });
 }

@@ -2,8 +2,11 @@
 // calvarium CT (a curved plate) selected by value, cropped to a box and cut
 // by an oblique saw plane with a kerf is exactly the voxels a brute-force
 // scan of the CT picks (each keeping its world position), its largest
-// component is the largest 26-connected one, and every misuse of "segment",
-// "voxels" and "bone_placement" is refused at its JSON path.
+// component is the largest 26-connected one; a segment of an MRI outside its
+// brain mask and within a distance of it ("outside", "near", on an
+// anisotropic grid: a curved shell) cut through its centroid is exactly what
+// a brute-force scan over every pair of voxels picks; and every misuse of
+// "segment", "voxels" and "bone_placement" is refused at its JSON path.
 #include <dm/io/scene_file.hpp>
 #include <dm/io/scene_resources.hpp>
 #include <dm/math/phantom.hpp>
@@ -11,6 +14,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 #include <vector>
@@ -142,6 +146,125 @@ TEST(SceneBoneFile, ASegmentThatSelectsNothingOrMissesTheScanIsRefused) {
   EXPECT_EQ(missed.error().where, "resources/a/segment/box");
 }
 
+// An MRI head in miniature on an anisotropic grid (1 x 1 x 1.5 mm): a
+// brain (a ball of radius 7 mm, its mask), dark tissue (30) around it out to
+// 12 mm and bright scalp (100) beyond.
+struct MiniHead {
+  dm::Volume head, brain;
+  Vec3 centre;
+};
+
+MiniHead miniHead() {
+  const dm::Vec3i dims(30, 28, 20);
+  dm::Affine3 a = dm::Affine3::Identity();
+  a.translate(Vec3(-0.012, 0.004, 0.050));
+  a.scale(Vec3(0.001, 0.001, 0.0015));
+  MiniHead h;
+  h.head = *dm::Volume::create(dims, dm::VoxelType::U8, a);
+  h.brain = *dm::Volume::create(dims, dm::VoxelType::U8, a);
+  h.centre = a * Vec3(14.3, 13.6, 9.4);
+  for (int k = 0; k < dims.z(); ++k)
+    for (int j = 0; j < dims.y(); ++j)
+      for (int i = 0; i < dims.x(); ++i) {
+        const double r = (a * Vec3(i, j, k) - h.centre).norm();
+        h.brain.setValue(i, j, k, r <= 0.007 ? 1 : 0);
+        h.head.setValue(i, j, k, r <= 0.007 ? 80 : r <= 0.012 ? 30 : 100);
+      }
+  return h;
+}
+
+TEST(SceneBoneFile, OutsideAndNearAMaskAndACutThroughTheCentroidAreWhatABruteForceScanPicks) {
+  const MiniHead h = miniHead();
+  dm::SceneResource r;
+  r.name = "shell";
+  r.type = dm::SceneResource::Type::Volume;
+  dm::SceneSegment g;
+  g.volume = "head";
+  g.select = dm::SceneSegment::Select::Below;
+  g.value = 50;
+  g.outside = "brain";
+  g.near = dm::SceneSegmentNear{"brain", 0.003};
+  g.largestComponent = true;
+  r.segment = g;
+  // Brute force: below 50, not brain, some brain voxel centre within 3 mm.
+  std::vector<Vec3> brain, shell;
+  const dm::Vec3i dims = h.head.dims();
+  for (int k = 0; k < dims.z(); ++k)
+    for (int j = 0; j < dims.y(); ++j)
+      for (int i = 0; i < dims.x(); ++i)
+        if (h.brain.value(i, j, k) != 0) brain.push_back(h.head.indexToWorld() * Vec3(i, j, k));
+  for (int k = 0; k < dims.z(); ++k)
+    for (int j = 0; j < dims.y(); ++j)
+      for (int i = 0; i < dims.x(); ++i) {
+        const Vec3 p = h.head.indexToWorld() * Vec3(i, j, k);
+        if (h.head.value(i, j, k) >= 50 || h.brain.value(i, j, k) != 0) continue;
+        double nearest = 1;
+        for (const Vec3& b : brain) nearest = std::min(nearest, (p - b).norm());
+        if (nearest <= 0.003 + 1e-12) shell.push_back(p);
+      }
+  ASSERT_GT(shell.size(), 500u);
+  // The segment holds exactly these voxels (the shell is one piece).
+  const auto voxelsOf = [](const dm::Volume& v) {
+    std::vector<Vec3> out;
+    for (int k = 0; k < v.dims().z(); ++k)
+      for (int j = 0; j < v.dims().y(); ++j)
+        for (int i = 0; i < v.dims().x(); ++i)
+          if (v.value(i, j, k) != 0) out.push_back(v.indexToWorld() * Vec3(i, j, k));
+    return out;
+  };
+  const auto sameSet = [](std::vector<Vec3> a, std::vector<Vec3> b) {
+    const auto less = [](const Vec3& x, const Vec3& y) {
+      return std::lexicographical_compare(x.data(), x.data() + 3, y.data(), y.data() + 3);
+    };
+    std::sort(a.begin(), a.end(), less);
+    std::sort(b.begin(), b.end(), less);
+    if (a.size() != b.size()) return false;
+    for (std::size_t n = 0; n < a.size(); ++n)
+      if ((a[n] - b[n]).norm() > 1e-9) return false;
+    return true;
+  };
+  auto whole = dm::makeSceneSegment(r, h.head, &h.brain, &h.brain);
+  ASSERT_TRUE(whole) << whole.error();
+  const std::vector<Vec3> got = voxelsOf(*whole);
+  EXPECT_EQ(got.size(), shell.size());
+  EXPECT_TRUE(sameSet(got, shell));
+  // A 2 mm band: at 1.5 mm spacing along z the anisotropy matters — an
+  // index-unit distance would pick another set.
+  Vec3 centroid = Vec3::Zero();
+  for (const Vec3& p : shell) centroid += p;
+  centroid /= static_cast<double>(shell.size());
+  // Cut through the centroid, oblique, 1 mm kerf: each side is the brute
+  // force's half (each half of a shell is one piece).
+  const Vec3 n = Vec3(0.8, 0.3, -0.2).normalized();
+  for (const double side : {1.0, -1.0}) {
+    dm::SceneResource cut = r;
+    cut.segment->cuts = {dm::SceneCut{.normal = side * n, .kerf = 0.001, .atCentroid = true}};
+    auto half = dm::makeSceneSegment(cut, h.head, &h.brain, &h.brain);
+    ASSERT_TRUE(half) << half.error();
+    std::vector<Vec3> expected;
+    for (const Vec3& p : shell)
+      if (side * n.dot(p - centroid) > 0.0005) expected.push_back(p);
+    EXPECT_GT(expected.size(), shell.size() / 3);
+    EXPECT_TRUE(sameSet(voxelsOf(*half), expected)) << "side " << side;
+  }
+  // The masks must be on the scan's grid and given.
+  dm::Volume shifted =
+      *dm::Volume::create(h.brain.dims(), dm::VoxelType::U8,
+                          dm::Affine3(Eigen::Translation3d(0.001, 0, 0)) * h.brain.indexToWorld());
+  auto other = dm::makeSceneSegment(r, h.head, &shifted, &h.brain);
+  ASSERT_FALSE(other);
+  EXPECT_EQ(other.error().where, "resources/shell/segment/outside");
+  auto missing = dm::makeSceneSegment(r, h.head, &h.brain, nullptr);
+  ASSERT_FALSE(missing);
+  EXPECT_EQ(missing.error().where, "resources/shell/segment/near/volume");
+  // Cuts that leave nothing are refused at "cuts".
+  dm::SceneResource away = r;
+  away.segment->cuts = {dm::SceneCut{.point = h.centre + Vec3(0.05, 0, 0), .normal = Vec3::UnitX()}};
+  auto empty = dm::makeSceneSegment(away, h.head, &h.brain, &h.brain);
+  ASSERT_FALSE(empty);
+  EXPECT_EQ(empty.error().where, "resources/shell/segment/cuts");
+}
+
 TEST(SceneBoneFile, TheKeysRoundTrip) {
   Json j = boneScene();
   j["engines"]["haptics"]["bone_placement"] = {
@@ -161,7 +284,21 @@ TEST(SceneBoneFile, TheKeysRoundTrip) {
       {"coupling_angular_damping", 0.002},
       {"target_pose", {{"position", {0.001, 0, 0}}, {"euler_deg", {0, 0, 5}}}}};
   j["resources"]["c"] = {{"type", "volume"}, {"segment", {{"volume", "ct"}, {"label", 3}}}};
+  j["resources"]["d"] = {{"type", "volume"},
+                         {"segment",
+                          {{"volume", "ct"},
+                           {"below", 50},
+                           {"outside", "ct"},
+                           {"near", {{"volume", "ct"}, {"distance", 0.004}}},
+                           {"largest_component", true},
+                           {"cuts", {{{"point", "centroid"}, {"normal", {1, 0, 0}}, {"kerf", 0.001}}}}}}};
   const dm::SceneDesc a = parsed(j);
+  const dm::SceneSegment& d = *a.resource("d")->segment;
+  EXPECT_EQ(d.outside, "ct");
+  ASSERT_TRUE(d.near);
+  EXPECT_EQ(d.near->volume, "ct");
+  EXPECT_EQ(d.near->distance, 0.004);
+  EXPECT_TRUE(d.cuts.at(0).atCentroid);
   const dm::SceneBonePlacement& b = *a.engines.haptics->bonePlacement;
   EXPECT_EQ(b.maxContacts, 2048);
   EXPECT_EQ(b.slop, 0.0002);
@@ -191,6 +328,22 @@ TEST(SceneBoneFile, MisuseIsRefusedAtItsPath) {
     EXPECT_NE(at(p, "/resources/c/segment/below"), nullptr);
     EXPECT_NE(at(p, "/resources/c/segment/box/max"), nullptr);
     EXPECT_NE(at(p, "/resources/c/segment/cuts/0/normal"), nullptr);
+  }
+  {  // masks that are not volumes or are segments, a point that is a word, "near" without its distance
+    Json j = boneScene();
+    j["resources"]["c"] = {{"type", "volume"},
+                           {"segment",
+                            {{"volume", "ct"},
+                             {"below", 50},
+                             {"outside", "a"},
+                             {"near", {{"volume", "a_surface"}, {"radius", 0.002}}},
+                             {"cuts", {{{"point", "middle"}, {"normal", {1, 0, 0}}}}}}}};
+    const auto p = problemsOf(j);
+    EXPECT_NE(at(p, "/resources/c/segment/outside"), nullptr);
+    EXPECT_NE(at(p, "/resources/c/segment/near/volume"), nullptr);
+    EXPECT_NE(at(p, "/resources/c/segment/near/radius"), nullptr);
+    EXPECT_NE(at(p, "/resources/c/segment/near/distance"), nullptr);
+    EXPECT_NE(at(p, "/resources/c/segment/cuts/0/point"), nullptr);
   }
   {  // a segment that also has a source; no selection
     Json j = boneScene();

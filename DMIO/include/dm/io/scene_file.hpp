@@ -67,18 +67,33 @@ struct SceneBox {
 /// world frame. Voxels whose centre lies on the normal's side by more than
 /// kerf / 2 are kept; the slot of width `kerf` the saw removes is not.
 struct SceneCut {
-  Vec3 point = Vec3::Zero();    ///< m, on the plane
+  Vec3 point = Vec3::Zero();    ///< m, on the plane (unless `atCentroid`)
   Vec3 normal = Vec3::UnitZ();  ///< unit: the side kept
   double kerf = 0.0;            ///< m, ≥ 0, ≤ 0.05
+  /// "point": "centroid" — the plane passes through the centroid of the
+  /// voxels selected before the cuts (after `largest_component`), the
+  /// planned cut through the middle of a bone found in the scan.
+  bool atCentroid = false;
 
   bool operator==(const SceneCut&) const = default;
 };
 
+/// A segment's "near": only voxels within `distance` of another mask.
+struct SceneSegmentNear {
+  std::string volume;     ///< a volume on the source's grid: its nonzero voxels
+  double distance = 0.0;  ///< m, > 0, ≤ 0.1: between voxel centres (Euclidean, the voxel sizes applied)
+
+  bool operator==(const SceneSegmentNear&) const = default;
+};
+
 /// A volume made from another (v2 "segment"): a bone fragment, an organ —
-/// the voxels of `volume` selected by value, cropped to `box`, cut by saw
-/// planes, optionally reduced to their largest 26-connected part; a U8 0/1
-/// mask on the source's grid (cropped), so its voxels keep their world
-/// positions. Planned osteotomies are segments of the patient's CT.
+/// the voxels of `volume` selected by value, outside one mask and near
+/// another, cropped to `box`, optionally reduced to their largest
+/// 26-connected part, cut by saw planes (each side again reduced to its
+/// largest part); a U8 0/1 mask on the source's grid (cropped), so its
+/// voxels keep their world positions. Planned osteotomies are segments of
+/// the patient's CT (or of an MRI with its brain mask: the calvaria are the
+/// dark voxels outside the brain and within millimetres of it).
 struct SceneSegment {
   enum class Select : std::uint8_t { Above, Below, Label };
 
@@ -86,10 +101,12 @@ struct SceneSegment {
   Select select =
       Select::Above;  ///< "above": value > `value`; "below": value < `value`; "label": value == `value`
   double value = 0.0;
+  std::string outside;  ///< a volume on the source's grid: its nonzero voxels are dropped; or empty
+  std::optional<SceneSegmentNear> near;  ///< or nullopt
   std::optional<SceneBox>
       box;  ///< world, m: only voxels whose centres lie inside; the grid is cropped to them
   std::vector<SceneCut> cuts;  ///< every cut keeps its normal's side
-  bool largestComponent = false;
+  bool largestComponent = false;  ///< before the cuts, and after them
 
   bool operator==(const SceneSegment&) const = default;
 };

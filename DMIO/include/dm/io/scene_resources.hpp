@@ -79,13 +79,19 @@ Result<SceneResources> loadSceneResources(const SceneDesc& scene, const SceneLoa
 
 /// The volume of a resource with a `segment` made from `source` (the
 /// volume it names): U8, 1 where the voxel's value is selected (above,
-/// below, label), its centre inside the box and on the kept side of every
-/// cut (by more than half the kerf), reduced to the largest 26-connected
-/// component if asked; on the source's grid, cropped to the kept voxels and
-/// one empty voxel around them, so every voxel keeps its world position.
-/// Fails naming "resources/<name>/segment" when the box misses the volume
-/// or nothing is selected. O(voxels of the box).
-Result<Volume> makeSceneSegment(const SceneResource& resource, const Volume& source);
+/// below, label), `outside` (the mask its "outside" names) is zero, a
+/// nonzero voxel of `near` (its "near" mask) lies within the distance, and
+/// its centre is inside the box; reduced to the largest 26-connected
+/// component if asked; then on the kept side of every cut (by more than
+/// half the kerf; "centroid": the plane through the centroid of what the
+/// cuts divide), reduced to its largest component again; on the source's
+/// grid, cropped to the kept voxels and one empty voxel around them, so
+/// every voxel keeps its world position. The masks must be on the source's
+/// grid. Fails naming "resources/<name>/segment/..." when a mask is missing
+/// or on another grid, the box misses the volume, nothing is selected or
+/// the cuts leave nothing. O(voxels of the box grown by the distance).
+Result<Volume> makeSceneSegment(const SceneResource& resource, const Volume& source,
+                                const Volume* outside = nullptr, const Volume* near = nullptr);
 
 /// One part of a compound Shape resource as a Shape resource of its own (in
 /// the part's frame, not yet placed by its pose): the compound's name,

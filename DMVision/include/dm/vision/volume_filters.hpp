@@ -132,7 +132,8 @@ enum class StructuringElement : std::uint8_t {
 /// element around it that lies inside the grid is foreground (outside the
 /// grid neither erodes nor dilates, which keeps erode/dilate adjoint and
 /// opening/closing idempotent). Exact for any radius: ball via a separable
-/// squared Euclidean distance transform (Felzenszwalb–Huttenlocher), cube
+/// squared Euclidean distance transform (dm::squaredDistanceToForeground,
+/// dm/math/volume_distance.hpp), cube
 /// via separable 1-D distances; O(n) either way, at most 5 bytes of scratch
 /// per voxel. U8 output, same geometry. radius 0 copies the mask as 0/1.
 /// Fails with InvalidArgument on an empty volume or a radius < 0 or > 1024.
