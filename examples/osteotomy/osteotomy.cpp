@@ -29,11 +29,14 @@
 //   dm_example_osteotomy [--out DIR] [--push MM] [--realtime]
 //
 // Outputs in DIR: fragments.nii.gz (labels: 1 fixed, 2 moving, at the
-// anatomical pose), hand.dmrec (the recorded hand motion), forces.csv and
+// anatomical pose), hand.dmrec (the recorded hand motion; hand.csv, the
+// same every 10 ms for a scene's sim-haptic), forces.csv and
 // forces.png (force on the hand), alignment.csv (t, RMS error, contacts)
-// and summary.json (fragment sizes and masses, initial and final alignment
-// error, contact depth, the force at rest against the coupling's k·offset,
-// the engines' rates).
+// and summary.json (the region's box, fragment sizes and masses, initial and
+// final alignment error, contact depth, the force at rest against the
+// coupling's k·offset, the engines' rates; SI units).
+// examples/scenes/osteotomy_colin27.json is this surgery as a scene: the
+// suite checks it writes the same figures.
 //
 // Exit codes: 0 done, 1 failure (message on stderr), 2 bad command line.
 #include <dm/collide/sphere_tree.hpp>
@@ -51,11 +54,9 @@
 #include <dm/io/volume_io.hpp>
 #include <dm/vision/volume_filters.hpp>
 
-#include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
-#include "../common/example_support.hpp"
-
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -63,10 +64,13 @@
 #include <cstdio>
 #include <filesystem>
 #include <iostream>
+#include <limits>
 #include <numbers>
 #include <string>
 #include <thread>
 #include <vector>
+
+#include "../common/example_support.hpp"
 
 namespace {
 
@@ -107,6 +111,7 @@ struct Skull {
   dm::Volume fixed, moving, labels;  // U8 occupancies (1) and the label map, same grid
   Vec3 cutNormal = Vec3::UnitX();    // world, from the fixed side to the moving side
   std::size_t regionVoxels = 0;
+  Vec3 boxMin, boxMax;  // world, m: the region's voxels, to their outer faces
 };
 
 // Steps 1 and 2 of the file comment.
@@ -138,6 +143,15 @@ dm::Result<Skull> cutSkull(const dm::Volume& head, const dm::Volume& brain) {
   auto bone = dm::largestComponent(*region);
   if (!bone) return bone.error();
   Skull skull;
+  skull.boxMin = Vec3::Constant(std::numeric_limits<double>::infinity());
+  skull.boxMax = -skull.boxMin;
+  for (int c = 0; c < 8; ++c) {
+    const Vec3 corner((c & 1) ? kRegionDims.x() : 0, (c & 2) ? kRegionDims.y() : 0,
+                      (c & 4) ? kRegionDims.z() : 0);
+    const Vec3 p = region->indexToWorld() * (corner - Vec3::Constant(0.5));
+    skull.boxMin = skull.boxMin.cwiseMin(p);
+    skull.boxMax = skull.boxMax.cwiseMax(p);
+  }
   // The saw: a plane through the bone's centre, tilted 20° from the sagittal
   // plane about the anterior axis and 10° about the vertical.
   Vec3 centre = Vec3::Zero();
@@ -190,8 +204,11 @@ double rmsError(const std::vector<Vec3>& points, const dm::Isometry3& pose) {
 
 // The recorded hand: the anatomical pose is the identity (fragment frame =
 // world); the hand starts at `start`, waits kLead, moves to `goal` along a
-// smooth (minimum-jerk) path over kApproach and holds it for kHold.
-dm::Status recordHand(const fs::path& file, const dm::Isometry3& start, const dm::Isometry3& goal) {
+// smooth (minimum-jerk) path over kApproach and holds it for kHold. The same
+// motion every 10 ms goes to `csv` (sim-haptic's "path": "csv" rows, 17
+// digits: examples/scenes/osteotomy_colin27_hand.csv is this file).
+dm::Status recordHand(const fs::path& file, const fs::path& csv, const dm::Isometry3& start,
+                      const dm::Isometry3& goal) {
   auto rec = dm::DeviceRecorder::create(file, {.metadata = R"({"device":"surgeon's hand, 6-DOF"})", .overwrite = true});
   if (!rec) return rec.error();
   const dm::Quat q0(start.linear()), q1(goal.linear());
@@ -200,6 +217,13 @@ dm::Status recordHand(const fs::path& file, const dm::Isometry3& start, const dm
     return Vec3(q0 * (aa.angle() * aa.axis()));  // world rotation vector of the whole turn
   }();
   const auto total = static_cast<int>(std::lround((kLead + kApproach + kHold) * 1000));
+  std::string rows =
+      "t,x,y,z,qw,qx,qy,qz\n"
+      "# The surgeon's hand of dm_example_osteotomy on the Colin27 skull: the moving fragment's pose (its "
+      "frame =\n"
+      "# the scan's at the identity) every 10 ms, from 10 mm and 15 deg away to the planned pose pushed past "
+      "it\n"
+      "# along -n (a minimum-jerk approach over 2 s after 0.2 s, held 1.5 s). Written by the program.\n";
   for (int k = 0; k <= total; ++k) {
     const double t = 1e-3 * k, u = std::clamp((t - kLead) / kApproach, 0.0, 1.0);
     const double s = u * u * u * (10 - 15 * u + 6 * u * u);            // minimum jerk
@@ -210,10 +234,17 @@ dm::Status recordHand(const fs::path& file, const dm::Isometry3& start, const dm
     h.orientation = q0.slerp(s, q1);
     h.linearVelocity = ds * (goal.translation() - start.translation());
     h.angularVelocity = ds * axis;
+    if (k % 10 == 0) {
+      const Vec3& p = h.position;
+      const dm::Quat& q = h.orientation;
+      rows += dm::formatString("%.3f,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n", h.timeNs * 1e-9, p.x(),
+                               p.y(), p.z(), q.w(), q.x(), q.y(), q.z());
+    }
     // The queue holds 8192 records and drains within about a millisecond.
     while (!(*rec)->pushHapticState(h)) std::this_thread::sleep_for(std::chrono::milliseconds(1));
   }
-  return (*rec)->close();
+  if (auto s = (*rec)->close(); !s) return s;
+  return dm::writeFileAtomic(csv, rows.data(), rows.size());
 }
 
 int fail(const dm::Error& e) {
@@ -259,8 +290,9 @@ int run(const Options& o) {
   start.translation() = pivot - start.linear() * pivot + (8 * skull->cutNormal + 6 * side) * kMm;
   dm::Isometry3 goal = dm::Isometry3::Identity();
   goal.translation() = -o.pushMm * kMm * skull->cutNormal;
-  if (auto s = recordHand(o.out / "hand.dmrec", start, goal); !s) return fail(s.error());
+  if (auto s = recordHand(o.out / "hand.dmrec", o.out / "hand.csv", start, goal); !s) return fail(s.error());
   written.push_back("hand.dmrec");
+  written.push_back("hand.csv");
 
   dm::FactoryRegistry registry;
   dm::PluginLinker linker(registry);
@@ -349,28 +381,29 @@ int run(const Options& o) {
     movingVoxels += skull->labels.valueAt(i) == 2;
   }
   const auto vec = [](const Vec3& v) { return nlohmann::json::array({v.x(), v.y(), v.z()}); };
-  nlohmann::json summary = {
-      {"mode", o.realtime ? "realtime" : "lockstep"},
-      {"region_voxels", skull->regionVoxels},
-      {"fixed_voxels", fixedVoxels},
-      {"moving_voxels", movingVoxels},
-      {"moving_mass_kg", bone.massProperties().mass},
-      {"cut_normal", vec(skull->cutNormal)},
-      {"push_mm", o.pushMm},
-      {"reference_points", points.size()},
-      {"initial_error_mm", 1e3 * initialError},
-      {"final_error_mm", 1e3 * finalError},
-      {"final_contacts", last.response.contacts},
-      {"max_contact_depth_mm", 1e3 * maxDepth},
-      {"slop_mm", 1e3 * bone.slop()},
-      {"max_force_N", maxForce},
-      {"rest_force_N", vec(restForce)},
-      {"rest_coupling_force_N", vec(coupling)},
-      {"rest_force_along_normal_N", restForce.dot(skull->cutNormal)},
-      {"rest_force_minus_coupling_N", (restForce - coupling).norm()},
-      {"fault_ticks", loopStats.faultTicks},
-      {"engines", dm::engineStatsJson(stats)},
-      {"outputs", written}};
+  nlohmann::json summary = {{"mode", o.realtime ? "realtime" : "lockstep"},
+                            {"region_voxels", skull->regionVoxels},
+                            {"fixed_voxels", fixedVoxels},
+                            {"moving_voxels", movingVoxels},
+                            {"moving_mass_kg", bone.massProperties().mass},
+                            {"cut_normal", vec(skull->cutNormal)},
+                            {"push_mm", o.pushMm},
+                            {"reference_points", points.size()},
+                            {"region_box_m", {{"min", vec(skull->boxMin)}, {"max", vec(skull->boxMax)}}},
+                            {"initial_error_m", initialError},
+                            {"final_error_m", finalError},
+                            {"final_contacts", last.response.contacts},
+                            {"max_contact_depth_m", maxDepth},
+                            {"slop_m", bone.slop()},
+                            {"max_force_N", maxForce},
+                            {"final_force_N", vec(last.response.force)},
+                            {"rest_force_N", vec(restForce)},
+                            {"rest_coupling_force_N", vec(coupling)},
+                            {"rest_force_along_normal_N", restForce.dot(skull->cutNormal)},
+                            {"rest_force_minus_coupling_N", (restForce - coupling).norm()},
+                            {"fault_ticks", loopStats.faultTicks},
+                            {"engines", dm::engineStatsJson(stats)},
+                            {"outputs", written}};
   if (auto s = dm_example::writeOutput(o.out / "summary.json", summary.dump(2) + "\n", written); !s)
     return fail(s.error());
   std::printf("skull region %zu voxels cut into %zu + %zu; the fragment (%.1f g) placed from %.2f mm to %.3f mm RMS "
