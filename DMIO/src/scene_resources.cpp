@@ -158,7 +158,12 @@ Result<Volume> makeSceneSegment(const SceneResource& r, const Volume& source, co
   if (g.near) {
     const Vec3 spacing = source.indexToWorld().linear().colwise().norm().transpose();
     const double unit = spacing.minCoeff();
-    const Vec3i grow = (g.near->distance / spacing.array()).ceil().cast<int>().matrix();
+    // (at most the grid: a tiny voxel size must not overflow the int)
+    const Vec3i grow = (g.near->distance / spacing.array())
+                           .ceil()
+                           .matrix()
+                           .cwiseMin(source.dims().cast<double>())
+                           .cast<int>();
     nearLo = (lo - grow).cwiseMax(Vec3i::Zero());
     const Vec3i nearHi = (hi + grow).cwiseMin(source.dims() - Vec3i::Ones());
     nearDims = nearHi - nearLo + Vec3i::Ones();
@@ -192,8 +197,9 @@ Result<Volume> makeSceneSegment(const SceneResource& r, const Volume& source, co
         if (keep && outside != nullptr && !g.outside.empty()) keep = outside->value(i, j, k) == 0;
         if (keep && g.near) {
           const Vec3i q = Vec3i(i, j, k) - nearLo;
-          keep = nearD2[(static_cast<std::size_t>(q.z()) * nearDims.y() + q.y()) * nearDims.x() + q.x()] <=
-                 nearR2;
+          const float d2 =
+              nearD2[(static_cast<std::size_t>(q.z()) * nearDims.y() + q.y()) * nearDims.x() + q.x()];
+          keep = d2 < kNoForeground && d2 <= nearR2;
         }
         m[n] = keep ? 1 : 0;
         selected += keep;
