@@ -4,6 +4,7 @@
 #include <dm/io/vdb.hpp>
 
 #include <openvdb/io/File.h>
+#include <openvdb/io/GridDescriptor.h>
 #include <openvdb/io/Stream.h>
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Dense.h>
@@ -112,34 +113,82 @@ Result<openvdb::GridBase::Ptr> pickGrid(const openvdb::GridPtrVec& grids, const 
   return fail(ErrorCode::NotFound, "no grid named \"" + name + "\"", source, "the file holds: " + names);
 }
 
+/// Unites `box` with the box the metadata `lo`, `hi` of `g` record (when
+/// both are there and it is not empty).
+void expandByRecorded(openvdb::CoordBBox& box, const openvdb::GridBase& g, const char* lo, const char* hi) {
+  auto a = g.getMetadata<openvdb::Vec3IMetadata>(lo);
+  auto b = g.getMetadata<openvdb::Vec3IMetadata>(hi);
+  if (!a || !b) return;
+  const openvdb::CoordBBox recorded(openvdb::Coord(a->value()), openvdb::Coord(b->value()));
+  if (!recorded.empty()) box.expand(recorded);
+}
+
 /// The dense index box to read: the active voxels' box, united with the box
 /// writeVdb() recorded. Empty when neither exists.
 openvdb::CoordBBox denseBox(const openvdb::GridBase& g) {
   openvdb::CoordBBox box = g.evalActiveVoxelBoundingBox();
-  auto lo = g.getMetadata<openvdb::Vec3IMetadata>(kDenseMin);
-  auto hi = g.getMetadata<openvdb::Vec3IMetadata>(kDenseMax);
-  if (lo && hi) {
-    const openvdb::CoordBBox recorded(openvdb::Coord(lo->value()), openvdb::Coord(hi->value()));
-    if (!recorded.empty()) box.expand(recorded);
-  }
+  expandByRecorded(box, g, kDenseMin, kDenseMax);
   return box;
 }
 
-/// Fails when the dense box would exceed maxBytes (or int dims).
-Status checkBox(const openvdb::CoordBBox& box, VoxelType type, std::size_t maxBytes,
-                const std::string& where) {
+/// The box a grid's metadata declares before its tree: the active voxels'
+/// box a writer recorded (OpenVDB's file_bbox_min/max) united with
+/// writeVdb()'s dense box. Empty when it declares none.
+openvdb::CoordBBox declaredBox(const openvdb::GridBase& g) {
+  openvdb::CoordBBox box;
+  expandByRecorded(box, g, openvdb::GridBase::META_FILE_BBOX_MIN, openvdb::GridBase::META_FILE_BBOX_MAX);
+  expandByRecorded(box, g, kDenseMin, kDenseMax);
+  return box;
+}
+
+/// Fails when the dense box (`what`: which one) would exceed maxBytes (or int dims).
+Status checkBox(const openvdb::CoordBBox& box, VoxelType type, std::size_t maxBytes, const std::string& where,
+                const char* what = "dense") {
   if (box.empty()) return ok();
   const openvdb::Vec3d extent =
       openvdb::Vec3d(box.max().asVec3d()) - box.min().asVec3d() + openvdb::Vec3d(1.0);
   const double bytes = extent[0] * extent[1] * extent[2] * static_cast<double>(voxelBytes(type));
   if (extent[0] > 2147483647.0 || extent[1] > 2147483647.0 || extent[2] > 2147483647.0 ||
       bytes > static_cast<double>(maxBytes))
-    return detail::volumeOverBudget(formatString("the grid's dense box %.0f x %.0f x %.0f of %s", extent[0],
-                                                 extent[1], extent[2], toString(type)),
+    return detail::volumeOverBudget(formatString("the grid's %s box %.0f x %.0f x %.0f of %s", what,
+                                                 extent[0], extent[1], extent[2], toString(type)),
                                     static_cast<std::uint64_t>(std::min(bytes, 1.8e19)), maxBytes, where,
                                     "VdbReadOptions::maxBytes");
   return ok();
 }
+
+/// The grids of a VDB stream with their descriptors and metadata only, no
+/// tree read: the header, the file's metadata, then each grid's descriptor,
+/// compression flags and metadata, as openvdb::io::Stream reads them. The
+/// next grid is reached by the descriptor's end offset, which a seekable
+/// writer (io::File) records; in a stream without offsets the first grid's
+/// tree comes next, so the pass stops after the first grid.
+class GridHeaders : public openvdb::io::Archive {
+ public:
+  openvdb::GridPtrVec read(std::istream& is, std::size_t size) {
+    readHeader(is);
+    openvdb::io::StreamMetadata::Ptr meta(new openvdb::io::StreamMetadata);
+    openvdb::io::setStreamMetadataPtr(is, meta, /*transfer=*/false);
+    openvdb::io::setVersion(is, libraryVersion(), fileVersion());
+    openvdb::io::setDataCompression(is, compression());
+    openvdb::MetaMap file;
+    file.readMeta(is);
+    const std::int32_t count = readGridCount(is);
+    openvdb::GridPtrVec grids;
+    for (std::int32_t i = 0; i < count; ++i) {
+      openvdb::io::GridDescriptor gd;
+      openvdb::GridBase::Ptr grid = gd.read(is);
+      readGridCompression(is);
+      grid->readMeta(is);
+      grids.push_back(grid);
+      // (an offset out of the bytes ends the pass; the full read judges the file)
+      if (!inputHasGridOffsets() || gd.getEndPos() <= 0 || static_cast<std::uint64_t>(gd.getEndPos()) > size)
+        break;
+      gd.seekToEnd(is);
+    }
+    return grids;
+  }
+};
 
 template <class GridT, class DenseValue>
 void copyDense(const openvdb::GridBase& g, const openvdb::CoordBBox& box, DenseValue* out, bool serial) {
@@ -325,10 +374,28 @@ Result<Volume> readVdb(const std::filesystem::path& file, const VdbReadOptions& 
 
 namespace {
 
+/// Refuses the grid to read when its metadata declares a box over the
+/// budget, before any tree is read (OpenVDB allocates a tree as it reads
+/// it); a grid the pass cannot reach or that declares nothing is judged by
+/// its dense box after the read.
+Status checkDeclaredBox(std::span<const std::byte> bytes, const std::string& source,
+                        const VdbReadOptions& options) {
+  SpanBuf buf(bytes);
+  std::istream is(&buf);
+  is.exceptions(std::ios::failbit | std::ios::badbit | std::ios::eofbit);
+  GridHeaders headers;
+  for (const openvdb::GridBase::Ptr& g : headers.read(is, bytes.size()))
+    if (g && (options.gridName.empty() ? isScalarGrid(*g) : g->getName() == options.gridName))
+      return checkBox(declaredBox(*g), voxelTypeOf(*g), options.maxBytes, whereOf(source, g->getName()),
+                      "declared");
+  return ok();
+}
+
 Result<Volume> parseInProcess(std::span<const std::byte> bytes, const std::string& source,
                               const VdbReadOptions& options, bool serial) {
   std::string where = whereOf(source, options.gridName);
   try {
+    if (Status s = checkDeclaredBox(bytes, source, options); !s) return s.error();
     openvdb::GridPtrVecPtr grids = loadGrids(bytes);
     if (!grids) return fail(ErrorCode::Parse, "no grids", source, "the file holds no grid");
     auto picked = pickGrid(*grids, options.gridName, source);

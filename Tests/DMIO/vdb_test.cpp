@@ -16,11 +16,13 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <numbers>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace {
@@ -244,6 +246,60 @@ TEST(Vdb, RejectsBadFiles) {
   EXPECT_FALSE(dm::writeVdb(dm::Volume::create({2, 2, 2}, dm::VoxelType::U8).value(), good.path(),
                             {.levelSet = true}));
   EXPECT_FALSE(dm::writeVdb(dm::Volume{}, good.path()));
+}
+
+// The offset of `text` in `bytes` (the first), or npos.
+std::size_t findBytes(const std::vector<std::byte>& bytes, const std::string& text) {
+  const auto* b = reinterpret_cast<const char*>(bytes.data());
+  return std::string_view(b, bytes.size()).find(text);
+}
+
+TEST(Vdb, ADeclaredBoxOverTheBudgetIsRefusedBeforeTheTreeIsRead) {
+  const dm::Volume v = analyticVolume({12, 10, 8}, dm::VoxelType::F32, tiltedAffine(1e-3),
+                                      [](const Vec3& p) { return 1.0 + std::cos(400 * p.x()); });
+  ScratchFile good("declared.vdb");
+  ASSERT_TRUE(dm::writeVdb(v, good.path(), {.gridName = "fog"}));
+  auto bytes = dm::readFile(good.path());
+  ASSERT_TRUE(bytes) << bytes.error();
+  // The metadata entry writeVdb records: name, type "vec3i", size 12, then
+  // the three int32 of the dense box's upper corner; and the transform's
+  // type name, which follows the grid's metadata.
+  const std::size_t entry = findBytes(*bytes, "dm_dense_max");
+  ASSERT_NE(entry, std::string::npos);
+  const std::size_t value = entry + std::strlen("dm_dense_max") + 4 + std::strlen("vec3i") + 4;
+  std::int32_t corner[3];
+  std::memcpy(corner, bytes->data() + value, sizeof corner);
+  ASSERT_EQ(corner[0], 11);
+  ASSERT_EQ(corner[2], 7);
+  const std::size_t transform = findBytes(*bytes, "Map");
+  ASSERT_NE(transform, std::string::npos);
+  ASSERT_GT(transform, value);
+  // Cut the file inside the grid's transform: no tree can be read from it.
+  std::vector<std::byte> cut(bytes->begin(), bytes->begin() + static_cast<std::ptrdiff_t>(transform + 8));
+  auto truncated = dm::parseVdb(cut, "cut.vdb");
+  ASSERT_FALSE(truncated);
+  EXPECT_EQ(truncated.error().code, dm::ErrorCode::Parse) << truncated.error();
+  // The same cut file declaring a 4000^3 box: refused from the declaration,
+  // over the budget, naming the grid — before the tree it does not have.
+  const std::int32_t huge[3] = {3999, 3999, 3999};
+  std::memcpy(cut.data() + value, huge, sizeof huge);
+  auto declared = dm::parseVdb(cut, "cut.vdb");
+  ASSERT_FALSE(declared);
+  EXPECT_EQ(declared.error().code, dm::ErrorCode::InvalidArgument) << declared.error();
+  EXPECT_NE(declared.error().what.find("declared box 4000 x 4000 x 4000"), std::string::npos)
+      << declared.error();
+  EXPECT_NE(declared.error().where.find("grid \"fog\""), std::string::npos) << declared.error();
+  // The whole file declaring it: the same refusal; with a budget that holds
+  // the declared box, it reads (the declaration widens the dense box).
+  std::vector<std::byte> whole = *bytes;
+  const std::int32_t wider[3] = {15, 10, 9};
+  std::memcpy(whole.data() + value, huge, sizeof huge);
+  EXPECT_FALSE(dm::parseVdb(whole, "whole.vdb"));
+  std::memcpy(whole.data() + value, wider, sizeof wider);
+  auto read = dm::parseVdb(whole, "whole.vdb", {.maxBytes = 16 * 11 * 10 * 4});
+  ASSERT_TRUE(read) << read.error();
+  EXPECT_EQ(read->dims(), dm::Vec3i(16, 11, 10));
+  EXPECT_FALSE(dm::parseVdb(whole, "whole.vdb", {.maxBytes = 16 * 11 * 10 * 4 - 1}));
 }
 
 TEST(Vdb, Colin27SkinVoxelizesToItsMeshVolume) {

@@ -39,7 +39,9 @@ namespace dm {
 struct VdbReadOptions {
   /// Grid to read; empty: the first float, double, int32, int64 or bool grid.
   std::string gridName;
-  /// Largest dense voxel payload accepted, in bytes; checked before allocating.
+  /// Largest dense voxel payload accepted, in bytes: the box the grid's
+  /// metadata declares is checked before its tree is read, the dense box
+  /// before the volume is allocated.
   std::size_t maxBytes = Volume::kDefaultMaxBytes;
   /// Where OpenVDB parses (dm/io/isolation.hpp): by default in the
   /// dm-isolate helper program with a memory budget of about
@@ -93,8 +95,9 @@ Result<Volume> readVdb(const std::filesystem::path& file, const VdbReadOptions& 
 
 /// readVdb() from the bytes of a .vdb file in memory; `sourceName` names
 /// it in errors. Checks the stream header (magic 0x56444220, file version
-/// 213..224, header size) before handing the bytes to OpenVDB, and makes
-/// every short read fail at once. OpenVDB 10 allocates strings and
+/// 213..224, header size) before handing the bytes to OpenVDB, refuses a
+/// grid whose metadata declares a box over maxBytes before any tree is
+/// read, and makes every short read fail at once. OpenVDB 10 allocates strings and
 /// compressed blocks at the lengths stored in the file before reading them
 /// (e.g. openvdb::readString, up to 4 GiB from a 4-byte field), so with
 /// isolation (the default) the parse runs in another process with a memory
