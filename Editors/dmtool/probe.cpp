@@ -20,26 +20,20 @@
 // intensities of empty space and of full bone (partial volume between);
 // --mesh-out writes the drilled bone's surface and the summary gives the
 // volume removed. --rpm, --bone-range and --mesh-out belong to burr alone.
-#include <dm/collide/bvh.hpp>
-#include <dm/collide/point_shell.hpp>
-#include <dm/collide/sphere_tree.hpp>
-#include <dm/collide/voxel_model.hpp>
 #include <dm/core/filesystem.hpp>
 #include <dm/haptics/burr.hpp>
 #include <dm/haptics/force_plot.hpp>
-#include <dm/haptics/god_object.hpp>
 #include <dm/haptics/probe.hpp>
-#include <dm/haptics/sphere_tree_6dof.hpp>
-#include <dm/haptics/vps.hpp>
+#include <dm/haptics/probe_renderers.hpp>
 #include <dm/io/device_path.hpp>
 #include <dm/io/image_io.hpp>
 #include <dm/io/mesh_io.hpp>
 #include <dm/io/resources.hpp>
 #include <dm/io/volume_io.hpp>
 #include <dm/math/isosurface.hpp>
-#include <dm/math/primitives.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <iostream>
@@ -98,15 +92,6 @@ dm::Result<Environment> loadModel(const std::filesystem::path& in, const ProbeCl
   return env;
 }
 
-double largestExtent(const dm::Aabb& box) { return box.isEmpty() ? 0.0 : box.sizes().maxCoeff(); }
-
-dm::Result<dm::Mesh> toolMesh(const ProbeCliOptions& o, double defaultRadius) {
-  if (o.tool.empty()) return dm::makeIcosphere(o.toolRadius > 0 ? o.toolRadius : defaultRadius, 3);
-  dm::MeshImportOptions import;
-  import.unit = o.unit;
-  return dm::readMesh(resolveInput(o.tool), import);
-}
-
 dm::HapticMaterial material(const ProbeCliOptions& o) {
   dm::HapticMaterial m;
   m.stiffness = o.stiffness;
@@ -118,116 +103,44 @@ dm::HapticMaterial material(const ProbeCliOptions& o) {
   return m;
 }
 
-dm::Result<std::unique_ptr<dm::HapticRenderer>> makeGodObject(const Environment& env,
-                                                              const ProbeCliOptions& o) {
-  dm::Mesh mesh;
-  if (env.mesh) {
-    mesh = *env.mesh;
-  } else {
-    // A volume: the closed isosurface around the solid (value > threshold).
-    if (!o.threshold)
-      return dm::fail(dm::ErrorCode::InvalidArgument, "godobject on a volume needs --threshold",
-                      "--threshold",
-                      "give the value above which a voxel is solid, e.g. --threshold 300 for bone in CT");
-    auto m = dm::extractIsosurface(*env.volume, {.iso = *o.threshold, .closeBorders = true});
-    if (!m) return m.error();
-    mesh = std::move(*m);
+// The renderer --renderer names, built as dm/haptics/probe_renderers.hpp
+// says (Python's dmplatform builds the same).
+dm::Result<std::unique_ptr<dm::HapticRenderer>> makeRenderer(const Environment& env, const ProbeCliOptions& o,
+                                                             std::shared_ptr<dm::MillableVolume>& bone) {
+  if (o.renderer == "burr")
+    for (auto [given, option] :
+         {std::pair{!o.friction.empty(), "--friction"}, std::pair{!o.tool.empty(), "--tool"},
+          std::pair{o.threshold.has_value(), "--threshold"}})
+      if (given)
+        return dm::fail(dm::ErrorCode::InvalidArgument, std::string(option) + " does not apply to burr", option,
+                        "burr takes a sphere of --tool-radius, and --bone-range for intensity volumes");
+  std::optional<dm::Mesh> tool;
+  if (!o.tool.empty()) {
+    dm::MeshImportOptions import;
+    import.unit = o.unit;
+    auto t = dm::readMesh(resolveInput(o.tool), import);
+    if (!t) return t.error().within("--tool");
+    tool = std::move(*t);
   }
-  auto bvh = dm::MeshBvh::build(mesh);
-  if (!bvh) return bvh.error();
-  std::vector<dm::GodObjectObject> objects(1);
-  objects[0].bvh = std::make_shared<const dm::MeshBvh>(std::move(*bvh));
-  objects[0].material = material(o);
-  auto r = dm::GodObjectRenderer::create(std::move(objects), {.proxyRadius = o.toolRadius});
-  if (!r) return r.error();
-  return std::unique_ptr<dm::HapticRenderer>(std::move(*r));
-}
-
-dm::Result<std::shared_ptr<const dm::VoxelModel>> voxelModel(const Environment& env,
-                                                             const ProbeCliOptions& o) {
-  if (env.volume) {
-    if (o.threshold) return dm::VoxelModel::fromOccupancy(*env.volume, *o.threshold);
-    return dm::VoxelModel::fromSdf(*env.volume);
-  }
-  dm::VoxelizeOptions vox;
-  vox.voxelSize = o.voxelSize > 0 ? o.voxelSize : largestExtent(env.mesh->bounds()) / 128.0;
-  return dm::VoxelModel::fromMesh(*env.mesh, vox);
-}
-
-dm::Result<std::unique_ptr<dm::HapticRenderer>> makeVps(const Environment& env, const ProbeCliOptions& o) {
-  auto model = voxelModel(env, o);
-  if (!model) return model.error();
-  auto tool = toolMesh(o, 2e-3);
-  if (!tool) return tool.error();
-  const double spacing =
-      std::max(largestExtent(tool->bounds()) / 20.0, (*model)->indexToWorld().linear().col(0).norm() / 2);
-  auto shell = dm::PointShell::fromMesh(*tool, {.spacing = spacing});
-  if (!shell) return shell.error().within("--tool");
-  // The hand feels the virtual coupling (k_c = --stiffness) in series with
-  // the contact, made ten times stiffer so that it dominates; per-point
-  // depths are clamped only beyond the tool's own size.
-  dm::HapticMaterial contact = material(o);
-  contact.stiffness = 10.0 * o.stiffness;
-  dm::VpsOptions options;
-  options.couplingStiffness = o.stiffness;
-  options.maxPointDepth = std::max(options.maxPointDepth, 0.5 * largestExtent(tool->bounds()));
-  options.maxForce = options.maxTorque = std::numeric_limits<double>::infinity();
-  auto r = dm::VpsRenderer::create(*shell, {{*model, dm::Isometry3::Identity(), contact}}, options);
-  if (!r) return r.error();
-  return std::unique_ptr<dm::HapticRenderer>(std::move(*r));
-}
-
-dm::Result<std::unique_ptr<dm::HapticRenderer>> makeSphereTree(const Environment& env,
-                                                               const ProbeCliOptions& o) {
-  dm::SphereTreeOptions st;
-  st.levels = o.levels;
-  if (o.threshold) st.threshold = *o.threshold;
-  auto envTree =
-      env.mesh ? dm::buildSphereTreeOctree(*env.mesh, st) : dm::buildSphereTreeOctree(*env.volume, st);
-  if (!envTree) return envTree.error();
-  auto tool = toolMesh(o, 2e-3);
-  if (!tool) return tool.error();
-  dm::SphereTreeOptions toolOptions;
-  toolOptions.levels = o.toolLevel + 1;
-  auto toolTree = dm::buildSphereTreeOctree(*tool, toolOptions);
-  if (!toolTree) return toolTree.error().within("--tool");
-  std::vector<dm::SphereTreeObject> objects(1);
-  objects[0].tree = *envTree;
-  objects[0].material = material(o);
-  objects[0].name = o.model;
-  dm::SphereTree6DofOptions options;
+  dm::ProbeRendererOptions options;
+  options.material = material(o);
+  options.threshold = o.threshold;
+  options.toolRadius = o.toolRadius;
+  options.tool = tool ? &*tool : nullptr;
+  options.voxelSize = o.voxelSize;
+  options.levels = o.levels;
   options.toolLevel = o.toolLevel;
-  options.linearStiffness = dm::Vec3::Constant(o.stiffness);
-  auto r = dm::SphereTree6DofRenderer::create(*toolTree, std::move(objects), options);
-  if (!r) return r.error();
-  return std::unique_ptr<dm::HapticRenderer>(std::move(*r));
-}
-
-// The bone a burr drills, kept to report and write what it removed.
-dm::Result<std::unique_ptr<dm::HapticRenderer>> makeBurr(const Environment& env, const ProbeCliOptions& o,
-                                                         std::shared_ptr<dm::MillableVolume>& bone) {
-  if (!env.volume)
-    return dm::fail(dm::ErrorCode::InvalidArgument, "burr drills a volume, not a mesh", "MODEL",
-                    "give a signed distance volume (negative inside) or a CT/MRI volume with --bone-range");
-  for (auto [given, option] :
-       {std::pair{!o.friction.empty(), "--friction"}, std::pair{!o.tool.empty(), "--tool"},
-        std::pair{o.threshold.has_value(), "--threshold"}})
-    if (given)
-      return dm::fail(dm::ErrorCode::InvalidArgument, std::string(option) + " does not apply to burr", option,
-                      "burr takes a sphere of --tool-radius, and --bone-range for intensity volumes");
-  auto made = o.boneRange.size() == 2
-                  ? dm::MillableVolume::fromIntensity(*env.volume, o.boneRange[0], o.boneRange[1])
-                  : dm::MillableVolume::fromSdf(*env.volume);
-  if (!made) return made.error();
-  bone = std::make_shared<dm::MillableVolume>(std::move(*made));
-  dm::BurrOptions options;
-  options.tool = dm::MillingTool::sphere(o.toolRadius > 0 ? o.toolRadius : 2e-3);
-  options.stiffness = o.stiffness;
-  options.damping = o.damping;
-  if (o.rpm) options.rpm = *o.rpm;
-  auto r = dm::BurrRenderer::create(bone, options);
-  if (!r) return r.error();
-  return std::unique_ptr<dm::HapticRenderer>(std::move(*r));
+  options.rpm = o.rpm;
+  if (o.boneRange.size() == 2) options.boneRange = std::array<double, 2>{o.boneRange[0], o.boneRange[1]};
+  const dm::ProbeEnvironment model{.mesh = env.mesh ? &*env.mesh : nullptr,
+                                   .volume = env.volume ? &*env.volume : nullptr};
+  if (o.renderer == "vps") return dm::makeVpsProbe(model, options);
+  if (o.renderer == "spheretree") return dm::makeSphereTreeProbe(model, options);
+  if (o.renderer == "burr") return dm::makeBurrProbe(model, options, bone);
+  if (env.volume && !o.threshold)
+    return dm::fail(dm::ErrorCode::InvalidArgument, "godobject on a volume needs --threshold", "--threshold",
+                    "give the value above which a voxel is solid, e.g. --threshold 300 for bone in CT");
+  return dm::makeGodObjectProbe(model, options);
 }
 
 int runProbe(const ProbeCliOptions& o) {
@@ -254,11 +167,7 @@ int runProbe(const ProbeCliOptions& o) {
   if (!env) return printError(env.error());
 
   std::shared_ptr<dm::MillableVolume> bone;
-  dm::Result<std::unique_ptr<dm::HapticRenderer>> renderer = o.renderer == "vps" ? makeVps(*env, o)
-                                                             : o.renderer == "spheretree"
-                                                                 ? makeSphereTree(*env, o)
-                                                             : o.renderer == "burr" ? makeBurr(*env, o, bone)
-                                                                                    : makeGodObject(*env, o);
+  auto renderer = makeRenderer(*env, o, bone);
   if (!renderer) return printError(renderer.error().within(in.string()));
 
   auto samples = dm::replayDevicePath(**renderer, *path, o.rate);
