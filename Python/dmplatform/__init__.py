@@ -14,17 +14,17 @@ scene files run in lockstep or real time with Python scripts inside them
 import numpy as _np
 
 from ._core import (Error, Fluid, FluidInlet, FluidRegion, FluidSuction, HapticRenderer, HapticResponse, Image, Mesh, MeshTree, PhysicsWorld,
-                    RunResult, Scene, Simulation, Volume, god_object, hausdorff, isosurface, probe, read_mesh,
-                    read_png, read_volume, run, sample_boundary, simplify, voxelize, write_mesh, write_png,
-                    write_volume)
+                    RunResult, Scene, Simulation, Volume, burr, god_object, hausdorff, isosurface, probe, read_mesh,
+                    read_png, read_volume, run, sample_boundary, simplify, sphere_tree, voxelize, vps, write_mesh,
+                    write_png, write_volume)
 
 from .fit import fit
 from .sweeps import sweep
 
 __all__ = ["Error", "Fluid", "FluidInlet", "FluidRegion", "FluidSuction", "HapticRenderer", "HapticResponse", "Image", "Mesh", "MeshTree", "PhysicsWorld",
-           "RunResult", "Scene", "Simulation", "Volume", "fit", "god_object", "hausdorff", "isosurface", "probe",
-           "read_forces", "read_mesh", "read_png", "read_volume", "run", "sample_boundary", "simplify", "sweep", "voxelize",
-           "write_mesh", "write_png", "write_volume"]
+           "RunResult", "Scene", "Simulation", "Volume", "burr", "fit", "god_object", "hausdorff", "isosurface", "probe",
+           "read_forces", "read_mesh", "read_png", "read_volume", "run", "sample_boundary", "simplify", "sphere_tree",
+           "sweep", "voxelize", "vps", "write_mesh", "write_png", "write_volume"]
 
 
 def read_forces(path):

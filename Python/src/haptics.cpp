@@ -1,13 +1,17 @@
 // haptics.cpp — haptic rendering for Python: the god-object renderer over
-// meshes (dm::GodObjectRenderer) ticked one device pose at a time, and
+// meshes (dm::GodObjectRenderer) and dmtool probe's vps, sphere-tree and
+// burr renderers over a mesh or a volume (dm/haptics/probe_renderers.hpp,
+// built as dmtool builds them), ticked one device pose at a time, and
 // dmtool probe as a function — a device path (a CSV file or an array of
 // rows t, x, y, z[, qw, qx, qy, qz]) replayed through a renderer in
 // lockstep (dm::replayDevicePath) into a structured array with forces.csv's
 // columns, optionally written as that CSV (the bytes dmtool probe writes).
 #include <dm/collide/bvh.hpp>
+#include <dm/collide/millable_volume.hpp>
 #include <dm/core/filesystem.hpp>
 #include <dm/haptics/god_object.hpp>
 #include <dm/haptics/probe.hpp>
+#include <dm/haptics/probe_renderers.hpp>
 #include <dm/io/device_path.hpp>
 
 #include <pybind11/numpy.h>
@@ -31,7 +35,38 @@ struct PyRenderer {
   std::unique_ptr<HapticRenderer> renderer;
   GodObjectRenderer* godObject = nullptr;
   std::vector<std::shared_ptr<const MeshBvh>> trees;
+  std::shared_ptr<MillableVolume> bone;  // burr: the bone it drills
 };
+
+// The environment of dmtool probe's renderers: a Mesh or a Volume.
+ProbeEnvironment environmentOf(const py::object& model) {
+  if (py::isinstance<Mesh>(model)) return {.mesh = &model.cast<const Mesh&>()};
+  if (py::isinstance<Volume>(model)) return {.volume = &model.cast<const Volume&>()};
+  raise(fail(ErrorCode::InvalidArgument, "expected a Mesh or a Volume", "model",
+             "read one with read_mesh or read_volume, or make one (isosurface, phantom)"));
+}
+
+// The material and tool shared by vps, sphere_tree and burr, checked.
+ProbeRendererOptions probeOptions(double stiffness, double damping, double staticFriction,
+                                  double dynamicFriction, double toolRadius) {
+  ProbeRendererOptions o;
+  o.material = {.stiffness = stiffness,
+                .damping = damping,
+                .staticFriction = staticFriction,
+                .dynamicFriction = dynamicFriction};
+  unwrap(o.material.validate("stiffness/damping/friction"));
+  if (!(toolRadius >= 0.0 && toolRadius <= 1.0))
+    raise(fail(ErrorCode::InvalidArgument, formatString("tool_radius %g m is outside [0, 1]", toolRadius),
+               "tool_radius"));
+  o.toolRadius = toolRadius;
+  return o;
+}
+
+std::shared_ptr<PyRenderer> wrap(Result<std::unique_ptr<HapticRenderer>> r) {
+  auto out = std::make_shared<PyRenderer>();
+  out->renderer = unwrap(std::move(r));
+  return out;
+}
 
 py::array_t<double> poseArray(const Isometry3& pose) { return arrayOf(Mat4(pose.matrix())); }
 
@@ -164,7 +199,23 @@ void bindHaptics(py::module_& m) {
             d["normal"] = arrayOf(c.normal);
             return d;
           },
-          "The god-object's contact of the last tick (object, triangle, point, normal), or None.");
+          "The god-object's contact of the last tick (object, triangle, point, normal), or None.")
+      .def_property_readonly(
+          "removed_volume",
+          [](const PyRenderer& r) -> py::object {
+            if (!r.bone) return py::none();
+            return py::float_(r.bone->removedVolume(0));
+          },
+          "A burr's: m³ of bone drilled away so far; None for other renderers.")
+      .def(
+          "bone_occupancy",
+          [](const PyRenderer& r) -> py::object {
+            if (!r.bone) return py::none();
+            return py::cast(std::make_shared<Volume>(unwrap(r.bone->occupancyVolume())));
+          },
+          "A burr's: the drilled bone as a Volume of occupancies in [0, 1] (isosurface at 0.5 for its "
+          "surface); "
+          "None for other renderers.");
 
   m.def(
       "god_object",
@@ -209,6 +260,84 @@ void bindHaptics(py::module_& m) {
       "The god-object renderer (a 3-DOF proxy, or a ball tip of proxy_radius) over meshes or MeshTrees at "
       "their poses (4x4 each; None: identity), one haptic material for all (N/m, N·s/m, friction "
       "coefficients); as `dmtool probe --renderer godobject` builds it.");
+
+  m.def(
+      "vps",
+      [](const py::object& model, double stiffness, double damping, double staticFriction,
+         double dynamicFriction, const py::object& tool, double toolRadius, const py::object& threshold,
+         double voxelSize) {
+        ProbeRendererOptions o =
+            probeOptions(stiffness, damping, staticFriction, dynamicFriction, toolRadius);
+        if (!threshold.is_none()) o.threshold = threshold.cast<double>();
+        if (!tool.is_none()) o.tool = &tool.cast<const Mesh&>();
+        if (!(voxelSize >= 0.0 && voxelSize <= 1.0))
+          raise(fail(ErrorCode::InvalidArgument, formatString("voxel_size %g m is outside [0, 1]", voxelSize),
+                     "voxel_size"));
+        o.voxelSize = voxelSize;
+        const ProbeEnvironment env = environmentOf(model);
+        return wrap(released([&] { return makeVpsProbe(env, o); }));
+      },
+      py::arg("model"), py::arg("stiffness") = 1000.0, py::arg("damping") = 0.0,
+      py::arg("static_friction") = 0.0, py::arg("dynamic_friction") = 0.0, py::arg("tool") = py::none(),
+      py::arg("tool_radius") = 0.0, py::arg("threshold") = py::none(), py::arg("voxel_size") = 0.0,
+      "The voxel point shell renderer (6-DOF): the tool (a Mesh, or a ball of tool_radius, default 2 mm) "
+      "sampled into a point shell against the model — a Volume's occupancy above `threshold`, a signed "
+      "distance Volume without one, or a Mesh voxelized at voxel_size (default: its largest extent / 128); "
+      "the hand feels a virtual coupling of `stiffness` in series with a contact ten times stiffer. As "
+      "`dmtool probe --renderer vps` builds it.");
+
+  m.def(
+      "sphere_tree",
+      [](const py::object& model, double stiffness, double damping, double staticFriction,
+         double dynamicFriction, const py::object& tool, double toolRadius, const py::object& threshold,
+         int levels, int toolLevel) {
+        ProbeRendererOptions o =
+            probeOptions(stiffness, damping, staticFriction, dynamicFriction, toolRadius);
+        if (!threshold.is_none()) o.threshold = threshold.cast<double>();
+        if (!tool.is_none()) o.tool = &tool.cast<const Mesh&>();
+        if (levels < 2 || levels > 10)
+          raise(fail(ErrorCode::InvalidArgument, formatString("levels %d is outside [2, 10]", levels),
+                     "levels"));
+        if (toolLevel < 1 || toolLevel > 8)
+          raise(fail(ErrorCode::InvalidArgument, formatString("tool_level %d is outside [1, 8]", toolLevel),
+                     "tool_level"));
+        o.levels = levels;
+        o.toolLevel = toolLevel;
+        const ProbeEnvironment env = environmentOf(model);
+        return wrap(released([&] { return makeSphereTreeProbe(env, o); }));
+      },
+      py::arg("model"), py::arg("stiffness") = 1000.0, py::arg("damping") = 0.0,
+      py::arg("static_friction") = 0.0, py::arg("dynamic_friction") = 0.0, py::arg("tool") = py::none(),
+      py::arg("tool_radius") = 0.0, py::arg("threshold") = py::none(), py::arg("levels") = 6,
+      py::arg("tool_level") = 4,
+      "The 6-DOF sphere-tree renderer: octree sphere trees of the model (a Mesh, or a Volume solid above "
+      "`threshold`; `levels` deep) and of the tool (a Mesh, or a ball of tool_radius, default 2 mm; "
+      "colliding "
+      "at tool_level), the tool held out by constraints. As `dmtool probe --renderer spheretree` builds it.");
+
+  m.def(
+      "burr",
+      [](const Volume& volume, double stiffness, double damping, double toolRadius, const py::object& rpm,
+         const py::object& boneRange) {
+        ProbeRendererOptions o = probeOptions(stiffness, damping, 0.0, 0.0, toolRadius);
+        if (!rpm.is_none()) o.rpm = rpm.cast<double>();
+        if (!boneRange.is_none()) {
+          const auto range = boneRange.cast<std::vector<double>>();
+          if (range.size() != 2)
+            raise(
+                fail(ErrorCode::InvalidArgument, "bone_range takes two values (empty, full)", "bone_range"));
+          o.boneRange = std::array<double, 2>{range[0], range[1]};
+        }
+        auto out = std::make_shared<PyRenderer>();
+        out->renderer = unwrap(released([&] { return makeBurrProbe({.volume = &volume}, o, out->bone); }));
+        return out;
+      },
+      py::arg("volume"), py::arg("stiffness") = 1000.0, py::arg("damping") = 0.0,
+      py::arg("tool_radius") = 0.0, py::arg("rpm") = py::none(), py::arg("bone_range") = py::none(),
+      "A sphere burr of tool_radius (default 2 mm) at `rpm` drilling the volume: a signed distance (negative "
+      "inside), or with bone_range the intensities of empty space and of full bone (partial volume between). "
+      "Its removed_volume and bone_occupancy tell what it drilled. As `dmtool probe --renderer burr` builds "
+      "it.");
 
   m.def(
       "probe",
