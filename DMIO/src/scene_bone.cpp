@@ -72,13 +72,18 @@ void readSegment(ConfigReader& resource, SceneResource& res) {
   if (selects == 0)
     r.addError("a segment needs to know which voxels it keeps", {},
                "add \"above\": <value> (a CT's bone: HU above ~300), \"below\": <value> or \"label\": <n>");
-  if (r.has("outside")) g.outside = r.string("outside");
+  if (r.has("outside")) {
+    g.outside = r.string("outside");
+    if (g.outside.empty()) r.addError("an empty volume name", "outside", "name the mask's volume resource");
+  }
   if (r.has("near")) {
     ConfigReader n = r.child("near");
     if (expectObject(n)) {
       n.knownKeys({"volume", "distance"});
       SceneSegmentNear near;
       near.volume = n.string("volume");
+      if (n.has("volume") && near.volume.empty())
+        n.addError("an empty volume name", "volume", "name the mask's volume resource");
       near.distance = n.number("distance", {.min = 1e-6, .max = 0.1});
       g.near = std::move(near);
     }

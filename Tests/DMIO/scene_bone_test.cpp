@@ -345,6 +345,18 @@ TEST(SceneBoneFile, MisuseIsRefusedAtItsPath) {
     EXPECT_NE(at(p, "/resources/c/segment/near/distance"), nullptr);
     EXPECT_NE(at(p, "/resources/c/segment/cuts/0/point"), nullptr);
   }
+  {  // empty mask names are not "no mask"
+    Json j = boneScene();
+    j["resources"]["c"] = {{"type", "volume"},
+                           {"segment",
+                            {{"volume", "ct"},
+                             {"below", 50},
+                             {"outside", ""},
+                             {"near", {{"volume", ""}, {"distance", 0.002}}}}}};
+    const auto p = problemsOf(j);
+    EXPECT_NE(at(p, "/resources/c/segment/outside"), nullptr);
+    EXPECT_NE(at(p, "/resources/c/segment/near/volume"), nullptr);
+  }
   {  // a segment that also has a source; no selection
     Json j = boneScene();
     j["resources"]["c"] = {{"type", "volume"}, {"source", "x.nii"}, {"segment", {{"volume", "ct"}}}};
