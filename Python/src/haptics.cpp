@@ -46,9 +46,11 @@ ProbeEnvironment environmentOf(const py::object& model) {
              "read one with read_mesh or read_volume, or make one (isosurface, phantom)"));
 }
 
-// The material and tool shared by vps, sphere_tree and burr, checked.
+// The material, tool and threshold shared by vps, sphere_tree and burr, checked.
 ProbeRendererOptions probeOptions(double stiffness, double damping, double staticFriction,
-                                  double dynamicFriction, double toolRadius) {
+                                  double dynamicFriction, double toolRadius,
+                                  const py::object& tool = py::none(),
+                                  const py::object& threshold = py::none()) {
   ProbeRendererOptions o;
   o.material = {.stiffness = stiffness,
                 .damping = damping,
@@ -59,6 +61,8 @@ ProbeRendererOptions probeOptions(double stiffness, double damping, double stati
     raise(fail(ErrorCode::InvalidArgument, formatString("tool_radius %g m is outside [0, 1]", toolRadius),
                "tool_radius"));
   o.toolRadius = toolRadius;
+  if (!tool.is_none()) o.tool = &tool.cast<const Mesh&>();
+  if (!threshold.is_none()) o.threshold = threshold.cast<double>();
   return o;
 }
 
@@ -267,9 +271,7 @@ void bindHaptics(py::module_& m) {
          double dynamicFriction, const py::object& tool, double toolRadius, const py::object& threshold,
          double voxelSize) {
         ProbeRendererOptions o =
-            probeOptions(stiffness, damping, staticFriction, dynamicFriction, toolRadius);
-        if (!threshold.is_none()) o.threshold = threshold.cast<double>();
-        if (!tool.is_none()) o.tool = &tool.cast<const Mesh&>();
+            probeOptions(stiffness, damping, staticFriction, dynamicFriction, toolRadius, tool, threshold);
         if (!(voxelSize >= 0.0 && voxelSize <= 1.0))
           raise(fail(ErrorCode::InvalidArgument, formatString("voxel_size %g m is outside [0, 1]", voxelSize),
                      "voxel_size"));
@@ -292,9 +294,7 @@ void bindHaptics(py::module_& m) {
          double dynamicFriction, const py::object& tool, double toolRadius, const py::object& threshold,
          int levels, int toolLevel) {
         ProbeRendererOptions o =
-            probeOptions(stiffness, damping, staticFriction, dynamicFriction, toolRadius);
-        if (!threshold.is_none()) o.threshold = threshold.cast<double>();
-        if (!tool.is_none()) o.tool = &tool.cast<const Mesh&>();
+            probeOptions(stiffness, damping, staticFriction, dynamicFriction, toolRadius, tool, threshold);
         if (levels < 2 || levels > 10)
           raise(fail(ErrorCode::InvalidArgument, formatString("levels %d is outside [2, 10]", levels),
                      "levels"));

@@ -22,21 +22,15 @@ RT = 0.002  # m, the ball tool and burr
 
 
 @pytest.fixture(scope="module")
-def ball_sdf():
-    n = int(2 * R / H) + 12
-    z, y, x = np.mgrid[0:n, 0:n, 0:n]
-    c = (n - 1) / 2 * H
-    affine = np.diag([H, H, H, 1.0])
-    affine[:3, 3] = -c
-    p = np.stack([x, y, z], -1) * H - c
-    field = (np.linalg.norm(p, axis=-1) - R).astype(np.float32)  # signed distance, negative inside
-    return dm.Volume(field, affine)
+def ball_solid(sphere_field):
+    """The sphere as a solid: values above 0 inside (a threshold's, an isosurface's inside)."""
+    return sphere_field(R, H, 12)
 
 
 @pytest.fixture(scope="module")
-def ball_solid(ball_sdf):
-    """The same sphere as a solid: values above 0 inside (a threshold's, an isosurface's inside)."""
-    return dm.Volume(-ball_sdf.array, ball_sdf.affine)
+def ball_sdf(ball_solid):
+    """The same sphere's signed distance, negative inside."""
+    return dm.Volume(-ball_solid.array, ball_solid.affine)
 
 
 def press(renderer, depth, steps=400):

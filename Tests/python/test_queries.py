@@ -19,15 +19,8 @@ TOL = 0.25 * H  # marching cubes of a smooth field: within a fraction of a voxel
 
 
 @pytest.fixture(scope="module")
-def sphere():
-    n = int(2 * R / H) + 8
-    z, y, x = np.mgrid[0:n, 0:n, 0:n]
-    c = (n - 1) / 2 * H
-    affine = np.diag([H, H, H, 1.0])
-    affine[:3, 3] = -c
-    p = np.stack([x, y, z], -1) * H - c
-    field = (R - np.linalg.norm(p, axis=-1)).astype(np.float32)  # > 0 inside
-    return dm.isosurface(dm.Volume(field, affine), 0.0)
+def sphere(sphere_field):
+    return dm.isosurface(sphere_field(R, H, 8), 0.0)  # the field is > 0 inside
 
 
 def plate():
