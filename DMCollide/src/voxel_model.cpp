@@ -1,9 +1,9 @@
 // Voxel models, dense storage: builders (mesh, occupancy with an exact
-// Euclidean distance transform, SDF volume), trilinear distance/gradient
+// Euclidean distance transform, dm::squaredDistanceTransform; SDF volume), trilinear distance/gradient
 // queries and sphere-traced ray casts; see dm/collide/voxel_model.hpp. The
 // OpenVDB storage is in voxel_model_vdb.cpp.
 #include <dm/collide/voxel_model.hpp>
-#include <dm/core/tasks.hpp>
+#include <dm/math/volume_distance.hpp>
 
 #include <Eigen/Eigenvalues>
 
@@ -40,79 +40,6 @@ Status checkVolume(const Volume& v, const std::string& where) {
     return fail(ErrorCode::InvalidArgument, "volume has more than 2^40 voxels", where + ": volume",
                 "crop or resample it");
   return ok();
-}
-
-// Squared Euclidean distance transform of one line (Felzenszwalb &
-// Huttenlocher, "Distance Transforms of Sampled Functions", 2012): out[q] =
-// min_p (s·(q − p))² + f[p], with f = +∞ where there is no feature. The
-// lower envelope of the parabolas rooted at the finite samples is built in
-// one pass and read back in another: O(n). v and z are scratch of n and
-// n + 1 entries.
-void edtLine(const float* f, std::ptrdiff_t stride, int n, double s, float* out, int* v, double* z) {
-  int k = -1;
-  auto key = [&](int q) { return static_cast<double>(f[q * stride]) + (q * s) * (q * s); };
-  for (int q = 0; q < n; ++q) {
-    if (!std::isfinite(f[q * stride])) continue;
-    while (true) {
-      if (k < 0) {
-        k = 0;
-        v[0] = q;
-        z[0] = -kInf;
-        z[1] = kInf;
-        break;
-      }
-      const double x = (key(q) - key(v[k])) / (2.0 * s * (q - v[k]));
-      if (x <= z[k]) {
-        --k;
-        continue;
-      }
-      ++k;
-      v[k] = q;
-      z[k] = x;
-      z[k + 1] = kInf;
-      break;
-    }
-  }
-  if (k < 0) {
-    for (int q = 0; q < n; ++q) out[q] = kInfF;
-    return;
-  }
-  k = 0;
-  for (int q = 0; q < n; ++q) {
-    while (z[k + 1] < q * s) ++k;
-    const double dq = (q - v[k]) * s;
-    out[q] = static_cast<float>(dq * dq + f[v[k] * stride]);
-  }
-}
-
-// In-place squared EDT of `f` (x fastest, dims) along the three axes with
-// spacings `s` (m): f holds 0 at features and +∞ elsewhere on entry, the
-// squared distance (m²) to the nearest feature centre on exit.
-void edt3(std::vector<float>& f, const Vec3i& dims, const Vec3& s) {
-  const std::size_t nx = static_cast<std::size_t>(dims.x()), ny = static_cast<std::size_t>(dims.y());
-  for (int axis = 0; axis < 3; ++axis) {
-    const int n = dims[axis];
-    if (n == 1) continue;
-    const std::size_t lines = f.size() / static_cast<std::size_t>(n);
-    const std::ptrdiff_t stride = axis == 0 ? 1 : static_cast<std::ptrdiff_t>(axis == 1 ? nx : nx * ny);
-    parallelFor(0, lines, 64, [&](std::size_t b, std::size_t e) {
-      std::vector<int> v(static_cast<std::size_t>(n));
-      std::vector<double> z(static_cast<std::size_t>(n) + 1);
-      std::vector<float> line(static_cast<std::size_t>(n));
-      for (std::size_t l = b; l < e; ++l) {
-        std::size_t start = 0;
-        if (axis == 0)
-          start = l * nx;
-        else if (axis == 1)
-          start = (l % nx) + (l / nx) * nx * ny;
-        else
-          start = l;
-        float* base = f.data() + start;
-        edtLine(base, stride, n, s[axis], line.data(), v.data(), z.data());
-        for (int q = 0; q < n; ++q) base[q * stride] = line[static_cast<std::size_t>(q)];
-      }
-    });
-  }
 }
 
 }  // namespace
@@ -256,12 +183,12 @@ Result<std::shared_ptr<const VoxelModel>> VoxelModel::fromOccupancy(const Volume
     std::vector<float> d(n), f(n);
     // Outside voxels: distance to the nearest inside centre.
     for (std::size_t idx = 0; idx < n; ++idx) f[idx] = bit(idx) ? 0.0f : kInfF;
-    edt3(f, dims, s);
+    squaredDistanceTransform(f, dims, s);
     for (std::size_t idx = 0; idx < n; ++idx)
       if (!bit(idx)) d[idx] = std::sqrt(f[idx]) - half;
     // Inside voxels: distance to the nearest outside centre, negated.
     for (std::size_t idx = 0; idx < n; ++idx) f[idx] = bit(idx) ? kInfF : 0.0f;
-    edt3(f, dims, s);
+    squaredDistanceTransform(f, dims, s);
     for (std::size_t idx = 0; idx < n; ++idx)
       if (bit(idx)) d[idx] = half - std::sqrt(f[idx]);
     f = {};

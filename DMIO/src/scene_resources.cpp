@@ -12,6 +12,7 @@
 #include <dm/math/volume_distance.hpp>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <set>
 
@@ -199,7 +200,7 @@ Result<Volume> makeSceneSegment(const SceneResource& r, const Volume& source, co
           const Vec3i q = Vec3i(i, j, k) - nearLo;
           const float d2 =
               nearD2[(static_cast<std::size_t>(q.z()) * nearDims.y() + q.y()) * nearDims.x() + q.x()];
-          keep = d2 < kNoForeground && d2 <= nearR2;
+          keep = std::isfinite(d2) && d2 <= nearR2;  // +inf: no mask voxel anywhere
         }
         m[n] = keep ? 1 : 0;
         selected += keep;

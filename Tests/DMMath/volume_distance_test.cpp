@@ -1,12 +1,13 @@
 // dm::squaredDistanceToForeground against brute force: every voxel's squared
 // distance to the nearest foreground voxel centre, on anisotropic grids
 // (a random speckle and a thin curved shell), in index units exact
-// integers, and kNoForeground on a grid without foreground.
+// integers, and +∞ on a grid without foreground.
 #include <dm/math/volume_distance.hpp>
 
 #include <gtest/gtest.h>
 
 #include <cstdint>
+#include <limits>
 #include <random>
 #include <vector>
 
@@ -15,6 +16,8 @@ namespace {
 using dm::Vec3;
 using dm::Vec3i;
 
+constexpr float kInf = std::numeric_limits<float>::infinity();
+
 std::vector<float> bruteForce(const std::vector<std::uint8_t>& fg, const Vec3i& d, const Vec3& s) {
   std::vector<Vec3> points;
   for (int k = 0; k < d.z(); ++k)
@@ -22,12 +25,12 @@ std::vector<float> bruteForce(const std::vector<std::uint8_t>& fg, const Vec3i& 
       for (int i = 0; i < d.x(); ++i)
         if (fg[(static_cast<std::size_t>(k) * d.y() + j) * d.x() + i] != 0)
           points.push_back(Vec3(i, j, k).cwiseProduct(s));
-  std::vector<float> out(fg.size(), dm::kNoForeground);
+  std::vector<float> out(fg.size(), kInf);
   std::size_t n = 0;
   for (int k = 0; k < d.z(); ++k)
     for (int j = 0; j < d.y(); ++j)
       for (int i = 0; i < d.x(); ++i, ++n) {
-        double best = dm::kNoForeground;
+        double best = kInf;
         for (const Vec3& p : points) best = std::min(best, (Vec3(i, j, k).cwiseProduct(s) - p).squaredNorm());
         out[n] = static_cast<float>(best);
       }
@@ -65,10 +68,10 @@ TEST(VolumeDistance, AThinCurvedShellInIndexUnitsGivesExactIntegers) {
   }
 }
 
-TEST(VolumeDistance, NoForegroundLeavesTheMarker) {
+TEST(VolumeDistance, NoForegroundIsInfinitelyFar) {
   const Vec3i d(5, 4, 3);
   const std::vector<std::uint8_t> fg(60, 0);
-  for (const float v : dm::squaredDistanceToForeground(fg, d, Vec3(1, 2, 3))) EXPECT_EQ(v, dm::kNoForeground);
+  for (const float v : dm::squaredDistanceToForeground(fg, d, Vec3(1, 2, 3))) EXPECT_EQ(v, kInf);
 }
 
 }  // namespace
