@@ -20,6 +20,12 @@
 // thread's steady clock. Deliveries run on the network thread, never before
 // their due time. The number of packets in flight is bounded.
 //
+// SteppedLinkEmulator draws the same fates (same options, same generator)
+// on a clock its caller supplies: no thread and no timer; the receiver asks
+// for what is due at its own time. That is the link of a lockstep run on
+// the master engine's virtual clock, where every delivery instant must be
+// the same on every run; it never allocates after create().
+//
 // @code
 //   auto link = dm::LinkEmulator::create(net, {.delay = 20ms, .jitter = 5ms, .lossProbability = 0.01},
 //                                        [&](std::span<const std::byte> p) { receiver.feed(p); });
@@ -105,6 +111,43 @@ class LinkEmulator {
  private:
   explicit LinkEmulator(std::shared_ptr<Impl> impl);
   std::shared_ptr<Impl> impl_;
+};
+
+/// The LinkEmulator's link on a caller's clock (see the file comment): the
+/// sender submits at its time, the receiver pops what is due by its time,
+/// earliest due first (ties in submission order). One thread, or a sender
+/// and a receiver that the caller keeps apart; real-time safe after
+/// create() (fixed slots of maxPacketBytes, maxInFlight of them).
+///
+/// @code
+///   auto link = dm::SteppedLinkEmulator::create({.delay = 10ms, .lossProbability = 0.01, .seed = 3});
+///   (*link)->submit(packet, clock.now());
+///   std::span<const std::byte> p;
+///   while ((*link)->popDue(clock.now(), p)) receiver.feed(p);
+/// @endcode
+class SteppedLinkEmulator {
+ public:
+  /// Fails as LinkEmulator::create, and when maxInFlight × maxPacketBytes,
+  /// allocated here, is over 64 MiB (the defaults are: lower maxPacketBytes).
+  static Result<std::unique_ptr<SteppedLinkEmulator>> create(LinkEmulatorOptions options);
+  ~SteppedLinkEmulator();
+  SteppedLinkEmulator(const SteppedLinkEmulator&) = delete;
+  SteppedLinkEmulator& operator=(const SteppedLinkEmulator&) = delete;
+
+  /// Copies `packet` sent at `nowNs` and draws its fate. False (counted as
+  /// refused) when it exceeds maxPacketBytes or every slot is in flight.
+  /// O(log inFlight + packet size).
+  bool submit(std::span<const std::byte> packet, std::int64_t nowNs) noexcept;
+  /// The next packet due at or before `nowNs`, removed from the link; the
+  /// span stays valid until the next call. False when none is due.
+  bool popDue(std::int64_t nowNs, std::span<const std::byte>& packet) noexcept;
+  LinkEmulatorStats stats() const noexcept;
+
+  struct Impl;
+
+ private:
+  explicit SteppedLinkEmulator(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
 };
 
 }  // namespace dm
