@@ -12,6 +12,7 @@
 #include <memory>
 #include <new>
 #include <optional>
+#include <string_view>
 #include <thread>
 
 #include "driver_params.hpp"
@@ -39,7 +40,19 @@ struct NetHaptic {
   double waveImpedance = 0.0;
   dm::WaveLossPolicy wavePolicy = dm::WaveLossPolicy::Hold;
   std::optional<dm::WaveSlavePort> wave;
+  // An in-process link on a clock that only the run advances (lockstep):
+  // open cannot wait for the first state, so reads until then, within
+  // wait_for_state of opening, report "no sample yet" (an I/O error of the
+  // tick) instead of a lost device.
+  bool waitInRun = false;
+  std::int64_t firstStateDeadlineNs = 0;
+  bool sawState = false;
 };
+
+// Is the device there but its first state still on the way (see waitInRun)?
+bool awaitingFirstState(const NetHaptic& d) {
+  return d.waitInRun && !d.sawState && d.host->clock().now() < d.firstStateDeadlineNs;
+}
 
 NetHaptic* self(DmDevice* d) { return reinterpret_cast<NetHaptic*>(d); }
 
@@ -58,9 +71,17 @@ DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t
   const double connectTimeout = r.number("connect_timeout", 2.0, 0.0, 600.0);
   const bool synchronized = r.number("synchronized_clocks", 0.0, 0.0, 1.0) != 0.0;
   const char* deviceText = r.find("device");
-  if (r.ok() && !deviceText) r.failf("parameter 'device' is required: \"address:port\" of the device side");
+  if (r.ok() && !deviceText)
+    r.failf("parameter 'device' is required: \"address:port\" of the device side, or \"inproc:NAME\"");
   if (!r.ok()) return nullptr;
-  auto peer = dm::parseEndpoint(deviceText, "parameter 'device'");
+  const bool inproc = std::string_view(deviceText).starts_with("inproc:");
+  if (inproc && (r.find("local") || r.find("synchronized_clocks"))) {
+    r.failf("parameter '%s' does not apply to an in-process device (%s): it has no socket and one clock",
+            r.find("local") ? "local" : "synchronized_clocks", deviceText);
+    return nullptr;
+  }
+  auto peer = inproc ? dm::Result<dm::SocketAddress>(dm::SocketAddress{deviceText, 0})
+                     : dm::parseEndpoint(deviceText, "parameter 'device'");
   if (!peer) {
     r.failf("%s", peer.error().message().c_str());
     return nullptr;
@@ -101,11 +122,14 @@ DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t
     return nullptr;
   }
   d->info = std::move(*info);
-  if (waitForState > 0) {
+  if (waitForState > 0 && inproc && dynamic_cast<const dm::RealClock*>(&d->host->clock()) == nullptr) {
+    d->waitInRun = true;
+    d->firstStateDeadlineNs = d->host->clock().now() + dm::secondsToNanos(waitForState);
+  } else if (waitForState > 0) {
     // The first servo then already has a state instead of reporting a loss.
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(waitForState);
     dm::HapticState first;
-    while (!d->host->latestState(first)) {
+    while (d->host->poll(), !d->host->latestState(first)) {
       if (std::chrono::steady_clock::now() >= deadline) {
         r.failf("the device side at %s answered but sent no state within wait_for_state = %g s (is its servo "
                 "loop running?)",
@@ -143,9 +167,12 @@ int netInfo(DmDevice* dev, DmHapticInfo* out) {
 
 int netRead(DmDevice* dev, int64_t now, DmHapticState* out) {
   NetHaptic* d = self(dev);
+  d->host->poll();
   dm::HapticState s;
   std::int64_t age = 0;
-  if (!d->host->latestState(s, &age) || age > d->timeoutNs) return DM_DEVICE_ERROR_LOST;
+  if (!d->host->latestState(s, &age) || age > d->timeoutNs)
+    return awaitingFirstState(*d) ? DM_DEVICE_ERROR_IO : DM_DEVICE_ERROR_LOST;
+  d->sawState = true;
   if (d->waveImpedance > 0) {
     // Slave port: the tool starts where the device is, then only waves move
     // it; apply() in write moves it with the force rendered at what read
@@ -179,7 +206,7 @@ int netRead(DmDevice* dev, int64_t now, DmHapticState* out) {
 
 int netWrite(DmDevice* dev, int64_t /*now*/, const double force[3], const double torque[3]) {
   NetHaptic* d = self(dev);
-  if (!d->host->linkUp()) return DM_DEVICE_ERROR_LOST;
+  if (!d->host->linkUp()) return awaitingFirstState(*d) ? DM_DEVICE_ERROR_IO : DM_DEVICE_ERROR_LOST;
   dm::HapticOutput out;
   out.force = dm::Vec3(force[0], force[1], force[2]);
   out.torque = dm::Vec3(torque[0], torque[1], torque[2]);

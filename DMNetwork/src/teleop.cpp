@@ -1,6 +1,6 @@
 // teleop.cpp — the tele-operation device stream (dm/network/teleop.hpp):
-// payload codec, the two ends on one shared implementation, the device
-// bridge.
+// payload codec, the in-process links, the two ends on one shared
+// implementation, the device bridge.
 //
 // Threads: each end's receive thread blocks in recvfrom (no event loop in
 // between: half the round trip of an asio receive, docs/performance.md),
@@ -8,7 +8,8 @@
 // sequence lock for the echo and the peer address); the servo thread sends
 // with one non-blocking sendto on the same descriptor. The descriptor stays
 // open until the implementation is destroyed, so a send racing close() never
-// reaches a reused descriptor.
+// reaches a reused descriptor. An in-process end has neither thread nor
+// descriptor: its poll() runs the receive path on the reader's thread.
 #include <dm/core/clock.hpp>
 #include <dm/core/log.hpp>
 #include <dm/core/ring.hpp>
@@ -24,12 +25,13 @@
 #include <array>
 #include <atomic>
 #include <bit>
-#include <chrono>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <condition_variable>
 #include <cstring>
 #include <limits>
+#include <map>
 #include <mutex>
 #include <thread>
 #include <type_traits>
@@ -282,8 +284,10 @@ std::size_t writeTeleopWave(const MessageHeader& header, const WaveSample& wave,
   return sealMessage(h, out, kTeleopWaveBytes);
 }
 
-std::vector<std::byte> encodeTeleopInfo(const MessageHeader& header, const HapticInfo& info) {
-  std::vector<std::byte> out(kMessageHeaderBytes + kTeleopInfoBytes);
+std::size_t writeTeleopInfo(const MessageHeader& header, const HapticInfo& info,
+                            std::span<std::byte> out) noexcept {
+  if (out.size() < kMessageHeaderBytes + kTeleopInfoBytes) return 0;
+  std::memset(out.data() + kMessageHeaderBytes, 0, kTeleopInfoBytes);
   std::byte* p = out.data() + kMessageHeaderBytes;
   for (const std::string* s : {&info.driver, &info.vendor, &info.model, &info.serial}) {
     std::memcpy(p, s->data(), std::min<std::size_t>(s->size(), 63));
@@ -299,7 +303,12 @@ std::vector<std::byte> encodeTeleopInfo(const MessageHeader& header, const Hapti
   putVec(p, limits, 5);
   MessageHeader h = header;
   h.type = kTeleopInfoType;
-  sealMessage(h, out, kTeleopInfoBytes);
+  return sealMessage(h, out, kTeleopInfoBytes);
+}
+
+std::vector<std::byte> encodeTeleopInfo(const MessageHeader& header, const HapticInfo& info) {
+  std::vector<std::byte> out(kMessageHeaderBytes + kTeleopInfoBytes);
+  writeTeleopInfo(header, info, out);
   return out;
 }
 
@@ -400,9 +409,82 @@ Result<TeleopPacket> decodeTeleopPacket(std::span<const std::byte> datagram) {
   return out;
 }
 
-// ---- the shared implementation --------------------------------------------------
+// ---- in-process links -----------------------------------------------------------
 
 namespace detail {
+
+constexpr std::string_view kInprocPrefix = "inproc:";
+
+/// One datagram in an in-process queue, stamped on the link's clock.
+struct InprocDatagram {
+  std::int64_t sentNs = 0;
+  std::size_t size = 0;
+  std::array<std::byte, kTeleopMaxDatagram> bytes{};
+};
+
+/// The two queues between a device end and its host end (see the header).
+/// Each queue has one producer (the sending end's servo thread, or its
+/// control thread before that thread runs) and one consumer (the receiving
+/// end's poll()).
+struct InprocLink {
+  std::string name;
+  RealClock wallClock;
+  const Clock* clock = &wallClock;
+  HapticInfo deviceInfo;
+  SpscRing<InprocDatagram, 256> toDevice, toHost;
+  std::atomic<bool> deviceOpen{true}, hostAttached{false};
+};
+
+/// The process's in-process links by name; a name is free again once its
+/// device end closed.
+class InprocRegistry {
+ public:
+  static InprocRegistry& instance() {
+    static InprocRegistry registry;
+    return registry;
+  }
+
+  Result<std::shared_ptr<InprocLink>> open(const std::string& name, const Clock* clock,
+                                           const HapticInfo& info) {
+    std::lock_guard lock(mutex_);
+    if (auto it = links_.find(name); it != links_.end())
+      if (auto alive = it->second.lock(); alive && alive->deviceOpen.load())
+        return fail(ErrorCode::Network, "an in-process device \"" + name + "\" is already open",
+                    "TeleopDevice inproc:" + name, "give each served device a name of its own");
+    auto link = std::make_shared<InprocLink>();
+    link->name = name;
+    if (clock != nullptr) link->clock = clock;
+    link->deviceInfo = info;
+    links_[name] = link;
+    return link;
+  }
+
+  Result<std::shared_ptr<InprocLink>> join(const std::string& name) {
+    std::lock_guard lock(mutex_);
+    const auto it = links_.find(name);
+    std::shared_ptr<InprocLink> link = it == links_.end() ? nullptr : it->second.lock();
+    if (!link || !link->deviceOpen.load())
+      return fail(ErrorCode::NotFound, "no in-process device \"" + name + "\" is open",
+                  "TeleopHost inproc:" + name,
+                  "open its TeleopDevice (a scene's served device) before the host");
+    if (link->hostAttached.exchange(true))
+      return fail(ErrorCode::Busy, "another host streams with in-process device \"" + name + "\"",
+                  "TeleopHost inproc:" + name, "close the other host first");
+    return link;
+  }
+
+  void close(const InprocLink& link) {
+    std::lock_guard lock(mutex_);
+    if (auto it = links_.find(link.name); it != links_.end() && it->second.lock().get() == &link)
+      links_.erase(it);
+  }
+
+ private:
+  std::mutex mutex_;
+  std::map<std::string, std::weak_ptr<InprocLink>, std::less<>> links_;
+};
+
+// ---- the shared implementation --------------------------------------------------
 
 /// Everything both ends share; Role picks which stream is received.
 struct TeleopEnd {
@@ -421,6 +503,12 @@ struct TeleopEnd {
     if (!(options.timeoutSeconds > 0) || !std::isfinite(options.timeoutSeconds))
       return fail(ErrorCode::InvalidArgument, formatString("timeoutSeconds is %g", options.timeoutSeconds), where,
                   "give a timeout > 0 (0.1 s is typical at 1 kHz)");
+    const std::string& linkAddress = role == Role::Host ? options.peer.address : options.local.address;
+    if (linkAddress.starts_with(kInprocPrefix)) return bindInproc(linkAddress.substr(kInprocPrefix.size()));
+    if (options.clock != nullptr)
+      return fail(
+          ErrorCode::InvalidArgument, "a clock was given for a socket", where,
+          "datagrams arrive on the wall clock: leave TeleopOptions::clock null, or use an inproc: link");
     auto address = parseAddress(options.local.address, where + ": local.address");
     if (!address) return address.error();
     for (const std::string& a : options.allow)
@@ -471,6 +559,67 @@ struct TeleopEnd {
     return ok();
   }
 
+  // The in-process link `linkName` (see the header): no socket, no thread.
+  Status bindInproc(const std::string& linkName) {
+    name = std::string(role == Role::Host ? "TeleopHost " : "TeleopDevice ") + std::string(kInprocPrefix) +
+           linkName;
+    if (linkName.empty())
+      return fail(ErrorCode::InvalidArgument, "the in-process link has no name", name,
+                  "write \"inproc:NAME\"");
+    if (!options.allow.empty())
+      return fail(ErrorCode::InvalidArgument,
+                  "an allow list names IP addresses; an in-process link has no address", name,
+                  "remove the allow list");
+    auto link = role == Role::Device ? InprocRegistry::instance().open(linkName, options.clock, localInfo)
+                                     : InprocRegistry::instance().join(linkName);
+    if (!link) return std::move(link).error();
+    inproc = std::move(*link);
+    if (role == Role::Host) {
+      if (options.clock != nullptr && options.clock != inproc->clock) {
+        inproc->hostAttached.store(false);
+        return fail(ErrorCode::InvalidArgument, "the host names a clock other than its device's", name,
+                    "leave TeleopOptions::clock null on the host: it takes the device's");
+      }
+      hostPeer = udp::endpoint();  // the one peer of a link has no address
+      peer.store(toPeer(*hostPeer));
+    }
+    clock = inproc->clock;
+    options.clocksSynchronized = true;  // both ends read the link's one clock
+    if (options.emulate) {
+      // Datagrams are at most kTeleopMaxDatagram: size the slots for that.
+      LinkEmulatorOptions o = *options.emulate;
+      o.maxPacketBytes = kTeleopMaxDatagram;
+      auto e = SteppedLinkEmulator::create(o);
+      if (!e) return std::move(e).error();
+      stepped = std::move(*e);
+    }
+    return ok();
+  }
+
+  // The reader thread: an in-process end takes what arrived and handles
+  // what is due on the link's clock.
+  void poll() noexcept {
+    if (!inproc || closed.load(std::memory_order_acquire)) return;
+    auto& in = role == Role::Host ? inproc->toHost : inproc->toDevice;
+    while (in.tryPop(incoming)) {
+      const std::span<const std::byte> datagram(incoming.bytes.data(), incoming.size);
+      if (stepped) {
+        if (!stepped->submit(datagram, incoming.sentNs)) malformed.fetch_add(1, std::memory_order_relaxed);
+        continue;
+      }
+      from = udp::endpoint();
+      onDatagram(datagram);
+    }
+    if (!stepped) return;
+    std::span<const std::byte> due;
+    while (stepped->popDue(linkNow(), due)) {
+      from = udp::endpoint();
+      onDatagram(due);
+    }
+  }
+
+  std::int64_t linkNow() const noexcept { return clock->now(); }
+
   void receiveLoop() {
     pthread_setname_np(pthread_self(), role == Role::Host ? "dm-teleop-host" : "dm-teleop-dev");
     std::array<std::byte, sizeof(PeerAddress) + kTeleopMaxDatagram + 1> packet{};  // emulation only
@@ -516,7 +665,7 @@ struct TeleopEnd {
   }
 
   void onDatagram(std::span<const std::byte> bytes) {
-    const std::int64_t now = nowNs();
+    const std::int64_t now = linkNow();
     if (bytes.size() > kTeleopMaxDatagram) return refuse(malformed, "larger than any tele-operation message");
     auto packet = decodeTeleopPacket(bytes);
     if (!packet) return refuse(malformed, packet.error().message());
@@ -552,9 +701,10 @@ struct TeleopEnd {
     lastPeerNs = now;
     peerAliveNs.store(now, std::memory_order_release);
     if (type == kTeleopHelloType) {
-      const std::vector<std::byte> answer =
-          encodeTeleopInfo({.sequence = infoSequence++, .timestampNs = nowNs()}, localInfo);
-      sendRaw(answer);
+      std::array<std::byte, kTeleopMaxDatagram> answer;
+      const std::size_t n =
+          writeTeleopInfo({.sequence = infoSequence++, .timestampNs = linkNow()}, localInfo, answer);
+      sendRaw(std::span<const std::byte>(answer.data(), n));
       return;
     }
     if (type == kTeleopWaveType) return queueWave(packet->wave);
@@ -630,12 +780,28 @@ struct TeleopEnd {
     }
   }
 
-  // Real-time safe: one non-blocking sendto.
+  // Real-time safe: one non-blocking sendto, or one push into an
+  // in-process queue whose other end is there.
   bool sendRaw(std::span<const std::byte> bytes) noexcept {
     PeerAddress p;
     if (closed.load(std::memory_order_acquire) || !peer.load(p)) {
       sendFailed.fetch_add(1, std::memory_order_relaxed);
       return false;
+    }
+    if (inproc) {
+      const bool there = role == Role::Host ? inproc->deviceOpen.load(std::memory_order_acquire)
+                                            : inproc->hostAttached.load(std::memory_order_acquire);
+      auto& out = role == Role::Host ? inproc->toDevice : inproc->toHost;
+      bool pushed = false;
+      if (there && bytes.size() <= kTeleopMaxDatagram) {
+        InprocDatagram& d = outgoing;
+        d.sentNs = linkNow();
+        d.size = bytes.size();
+        std::memcpy(d.bytes.data(), bytes.data(), bytes.size());
+        pushed = out.tryPush(d);
+      }
+      (pushed ? sent : sendFailed).fetch_add(1, std::memory_order_relaxed);
+      return pushed;
     }
     const ssize_t n = ::sendto(fd, bytes.data(), bytes.size(), MSG_DONTWAIT | MSG_NOSIGNAL,
                                reinterpret_cast<const sockaddr*>(&p.address), p.length);
@@ -656,7 +822,7 @@ struct TeleopEnd {
   template <class Write, class Value>
   bool sendStream(Write write, const Value& value) noexcept {
     std::array<std::byte, kMessageHeaderBytes + kTeleopStateBytes> datagram;
-    const std::int64_t now = nowNs();
+    const std::int64_t now = linkNow();
     const MessageHeader header{.sequence = sequence.fetch_add(1, std::memory_order_relaxed), .timestampNs = now};
     const std::size_t n = write(header, currentEcho(now), value, std::span<std::byte>(datagram));
     return sendRaw(std::span<const std::byte>(datagram.data(), n));
@@ -665,7 +831,7 @@ struct TeleopEnd {
   bool sendWave(const WaveSample& w) noexcept {
     std::array<std::byte, kMessageHeaderBytes + kTeleopWaveBytes> datagram;
     const MessageHeader header{.sequence = waveSequence.fetch_add(1, std::memory_order_relaxed),
-                               .timestampNs = nowNs()};
+                               .timestampNs = linkNow()};
     const std::size_t n = writeTeleopWave(header, w, datagram);
     return sendRaw(std::span<const std::byte>(datagram.data(), n));
   }
@@ -674,7 +840,7 @@ struct TeleopEnd {
   // Wave came from the current host within it.
   bool linkUp() const noexcept {
     const std::int64_t last = (role == Role::Host ? lastAcceptNs : peerAliveNs).load(std::memory_order_acquire);
-    return last != kNever && nowNs() - last < timeoutNs;
+    return last != kNever && linkNow() - last < timeoutNs;
   }
 
   TeleopStats stats() const {
@@ -698,13 +864,21 @@ struct TeleopEnd {
     s.clockOffset = 1e-9 * static_cast<double>(offsetNs.load(std::memory_order_relaxed));
     s.linkUp = linkUp();
     const std::int64_t last = lastAcceptNs.load(std::memory_order_acquire);
-    s.sinceLastReceive = last == kNever ? -1.0 : 1e-9 * static_cast<double>(nowNs() - last);
+    s.sinceLastReceive = last == kNever ? -1.0 : 1e-9 * static_cast<double>(linkNow() - last);
     return s;
   }
 
   // Stops the receive thread (within kWakeMicroseconds) and the emulator;
   // the descriptor stays open until destruction (see the file comment).
   void close() {
+    if (inproc && !closed.load()) {
+      if (role == Role::Device) {
+        inproc->deviceOpen.store(false, std::memory_order_release);
+        InprocRegistry::instance().close(*inproc);
+      } else {
+        inproc->hostAttached.store(false, std::memory_order_release);
+      }
+    }
     closed.store(true, std::memory_order_release);
     if (receiver.joinable()) receiver.join();
     if (emulator) emulator->close();
@@ -726,8 +900,17 @@ struct TeleopEnd {
   std::uint16_t port = 0;
   const std::int64_t timeoutNs;
   std::atomic<bool> closed{false};
+  RealClock wallClock;
+  const Clock* clock = &wallClock;  // an in-process link's, or the wall clock
 
-  // The handling thread only: the receive thread, or the emulator's.
+  // In-process link (see the header): the queues, the emulator on the
+  // link's clock, and one datagram's room for each direction (the reader's
+  // and the sender's thread).
+  std::shared_ptr<InprocLink> inproc;
+  std::unique_ptr<SteppedLinkEmulator> stepped;
+  InprocDatagram incoming, outgoing;
+
+  // The handling thread only: the receive thread, the emulator's, or poll()'s.
   std::array<std::byte, kTeleopMaxDatagram + 1> buffer{};
   udp::endpoint from;
   std::optional<udp::endpoint> hostPeer;    // host: the device (fixed)
@@ -786,6 +969,15 @@ Result<std::unique_ptr<TeleopHost>> TeleopHost::open(TeleopOptions options) {
 }
 
 Result<HapticInfo> TeleopHost::waitForDevice(std::chrono::milliseconds timeout) {
+  if (impl_->inproc) {
+    // The link holds its device's Info; the Hello makes the device side
+    // stream to this host from its next poll.
+    if (!impl_->inproc->deviceOpen.load() || !sendHello())
+      return fail(ErrorCode::Network, "the in-process device closed", impl_->name, "open it again");
+    std::lock_guard lock(impl_->infoMutex);
+    impl_->deviceInfo = impl_->inproc->deviceInfo;
+    return *impl_->deviceInfo;
+  }
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   std::unique_lock lock(impl_->infoMutex);
   impl_->deviceInfo.reset();
@@ -814,7 +1006,7 @@ bool TeleopHost::sendForce(const HapticOutput& force) noexcept { return impl_->s
 
 bool TeleopHost::sendHello() noexcept {
   std::array<std::byte, kMessageHeaderBytes + kTeleopHelloBytes> datagram;
-  const std::size_t n = writeTeleopHello({.timestampNs = nowNs()}, datagram);
+  const std::size_t n = writeTeleopHello({.timestampNs = impl_->linkNow()}, datagram);
   return impl_->sendRaw(std::span<const std::byte>(datagram.data(), n));
 }
 
@@ -825,11 +1017,13 @@ bool TeleopHost::latestState(HapticState& state, std::int64_t* ageNs) noexcept {
   const auto& s = impl_->states.read();
   if (!s.valid) return false;
   state = s.value;
-  if (ageNs) *ageNs = nowNs() - s.receivedNs;
+  if (ageNs) *ageNs = impl_->linkNow() - s.receivedNs;
   return true;
 }
 
 bool TeleopHost::linkUp() const noexcept { return impl_->linkUp(); }
+void TeleopHost::poll() noexcept { impl_->poll(); }
+const Clock& TeleopHost::clock() const noexcept { return *impl_->clock; }
 std::uint16_t TeleopHost::port() const noexcept { return impl_->port; }
 TeleopStats TeleopHost::stats() const { return impl_->stats(); }
 void TeleopHost::close() { impl_->close(); }
@@ -861,11 +1055,13 @@ bool TeleopDevice::latestForce(HapticOutput& force, std::int64_t* ageNs) noexcep
   const auto& f = impl_->forces.read();
   if (!f.valid) return false;
   force = f.value;
-  if (ageNs) *ageNs = nowNs() - f.receivedNs;
+  if (ageNs) *ageNs = impl_->linkNow() - f.receivedNs;
   return true;
 }
 
 bool TeleopDevice::linkUp() const noexcept { return impl_->linkUp(); }
+void TeleopDevice::poll() noexcept { impl_->poll(); }
+const Clock& TeleopDevice::clock() const noexcept { return *impl_->clock; }
 std::uint16_t TeleopDevice::port() const noexcept { return impl_->port; }
 TeleopStats TeleopDevice::stats() const { return impl_->stats(); }
 void TeleopDevice::close() { impl_->close(); }
@@ -886,6 +1082,7 @@ DeviceStatus TeleopDeviceBridge::step(std::int64_t nowNs) noexcept {
   const double period = 1.0 / device_.info().servoRateHz;
   const double elapsed = lastStepNs_ ? 1e-9 * static_cast<double>(nowNs - *lastStepNs_) : period;
   lastStepNs_ = nowNs;
+  link_.poll();
   // Command first, so that servo() sends a force of age 0 in this period.
   HapticOutput force;
   bool live = false;

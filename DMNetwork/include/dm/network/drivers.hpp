@@ -12,12 +12,21 @@
 // Each instance owns its stream's receive thread.
 //
 // Parameters:
-//   device               "address:port" of the device side (required; numeric)
+//   device               "address:port" of the device side (required; numeric),
+//                        or "inproc:NAME": the in-process link NAME that a
+//                        TeleopDevice of this process opened (teleop.hpp),
+//                        e.g. a scene's served device in a lockstep run;
+//                        `local` and `synchronized_clocks` do not apply to it
 //   local                "address:port" to bind                (0.0.0.0:0)
 //   timeout              s without a state before "lost"       (0.1)
 //   connect_timeout      s open() waits for the device's Info  (2)
 //   wait_for_state       s open() then waits for the first state, so the
-//                        first servo has one; none by then: open fails (0)
+//                        first servo has one; none by then: open fails (0).
+//                        On an in-process link whose clock only the run
+//                        advances (lockstep) open cannot wait: the reads
+//                        and writes before the first state, within this
+//                        long of opening on that clock, report an I/O error
+//                        of the tick (no sample yet) instead of a lost device
 //   synchronized_clocks  0 | 1: clocks are synchronized (same host, PTP) (0)
 //   wave_impedance       N·s/m; > 0: wave-variable mode, the device side's
 //                        TeleopDeviceBridge must use the same b     (0: off)

@@ -39,6 +39,19 @@
 // latestState/latestForce read a dm::TripleBuffer: call each from one thread
 // (the servo thread). stats(), waitForDevice(), close() are not real-time.
 //
+// In-process links: an address "inproc:NAME" (the device's `local`, the
+// host's `peer`) joins the two ends inside one process through a pair of
+// lock-free queues instead of a socket, on a dm::Clock the device side
+// names (TeleopOptions::clock: the master engine's virtual clock in a
+// lockstep run, the wall clock by default). No thread delivers: each end's
+// poll(), called by its servo thread before it reads, takes what arrived,
+// passes it through a dm::SteppedLinkEmulator when `emulate` is set (the same
+// seeded fates as LinkEmulator, due on the link's clock) and handles what is
+// due. With a virtual clock every delivery instant, and so every force, is
+// the same on every run. The host learns its device's Info from the link
+// (waitForDevice needs no round trip); the device learns its host from the
+// Hello as over UDP. A name has one device and at most one host at a time.
+//
 // Safety: the device side reports the age of the newest force; its bridge
 // (TeleopDeviceBridge) outputs zero when no force arrived within the timeout,
 // so a lost link never leaves a force on the operator.
@@ -52,6 +65,7 @@
 // @endcode
 #pragma once
 
+#include <dm/core/clock.hpp>
 #include <dm/core/result.hpp>
 #include <dm/io/haptic_device.hpp>
 #include <dm/network/io_thread.hpp>  // SocketAddress
@@ -117,7 +131,10 @@ std::size_t writeTeleopForce(const MessageHeader& header, const TeleopEcho& echo
 std::size_t writeTeleopHello(const MessageHeader& header, std::span<std::byte> out) noexcept;
 /// Writes one Wave datagram, as writeTeleopState.
 std::size_t writeTeleopWave(const MessageHeader& header, const WaveSample& wave, std::span<std::byte> out) noexcept;
-/// Encodes one Info datagram (strings truncated to 63 bytes).
+/// Writes one Info datagram (strings truncated to 63 bytes), as writeTeleopState.
+std::size_t writeTeleopInfo(const MessageHeader& header, const HapticInfo& info,
+                            std::span<std::byte> out) noexcept;
+/// writeTeleopInfo into a new buffer of the exact size.
 std::vector<std::byte> encodeTeleopInfo(const MessageHeader& header, const HapticInfo& info);
 
 /// Decodes and validates one datagram of the stream. Fails with Parse
@@ -161,8 +178,12 @@ struct TeleopStats {
 
 /// Settings of either end.
 struct TeleopOptions {
-  SocketAddress local{"127.0.0.1", 0};  ///< bind address; port 0 = ephemeral
-  SocketAddress peer;                   ///< host: the device's address (required); device: unused
+  /// Bind address; port 0 = ephemeral. Device: "inproc:NAME" (port
+  /// ignored) opens the in-process link NAME instead of a socket.
+  SocketAddress local{"127.0.0.1", 0};
+  /// Host: the device's address (required), or "inproc:NAME" to join the
+  /// in-process link a TeleopDevice opened; device: unused.
+  SocketAddress peer;
   std::vector<std::string> allow;       ///< device: host addresses accepted (empty: any)
   double timeoutSeconds = 0.1;          ///< peer silent this long: link down (> 0)
   bool clocksSynchronized = false;      ///< one-way latency without offset estimation
@@ -170,6 +191,11 @@ struct TeleopOptions {
   /// dm::LinkEmulator (delay, jitter, loss, duplication, reordering) before
   /// it is handled: tele-operation under a bad link, on one machine.
   std::optional<LinkEmulatorOptions> emulate;
+  /// In-process links only: the time base of stamps, ages, timeouts and
+  /// emulated delays, which must outlive both ends (null: the monotonic wall
+  /// clock). The device side sets it; a host takes its device's (naming
+  /// another is an error). Sockets run on the wall clock: an error there.
+  const Clock* clock = nullptr;
 };
 
 /// The simulation side: receives the device state, sends forces.
@@ -203,6 +229,13 @@ class TeleopHost {
   bool latestState(HapticState& state, std::int64_t* ageNs = nullptr) noexcept;
   /// Real-time safe: a state arrived within the timeout.
   bool linkUp() const noexcept;
+  /// Real-time safe, the reader thread: an in-process link's end handles
+  /// the datagrams that arrived and are due now (call it before reading);
+  /// a socket's receive thread needs none (no-op).
+  void poll() noexcept;
+  /// The end's time base (TeleopOptions::clock).
+  const Clock& clock() const noexcept;
+  /// 0 for an in-process link.
   std::uint16_t port() const noexcept;
   TeleopStats stats() const;
   /// Stops the receive thread (within 20 ms); idempotent. Sends after it
@@ -240,6 +273,9 @@ class TeleopDevice {
   bool popWave(WaveSample& wave) noexcept;
   /// A host is known and a Force or Hello came from it within the timeout.
   bool linkUp() const noexcept;
+  /// As TeleopHost::poll / clock / port.
+  void poll() noexcept;
+  const Clock& clock() const noexcept;
   std::uint16_t port() const noexcept;
   TeleopStats stats() const;
   void close();
@@ -260,7 +296,8 @@ struct TeleopBridgeOptions {
   WaveLossPolicy wavePolicy = WaveLossPolicy::Hold;
 };
 
-/// Runs a local HapticDevice as the device side of a stream. Each step():
+/// Runs a local HapticDevice as the device side of a stream. Each step()
+/// first polls the link, then:
 ///  * force mode: commands the newest force, or zero when none arrived
 ///    within the timeout (link lost), servos the device, sends its state;
 ///  * wave-variable mode (dm/network/wave_variables.hpp): the device is the
