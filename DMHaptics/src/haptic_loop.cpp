@@ -143,12 +143,19 @@ void HapticLoop::tick(const TickInfo& info) noexcept {
   in.linearVelocity = s * (rotation_ * st.linearVelocity);
   in.angularVelocity = rotation_ * st.angularVelocity;
 
-  if (needReset_) {
-    renderer_.reset(in.devicePose);
-    needReset_ = false;
+  // A device that never reported a state has no pose: the tool waits (no
+  // output; the renderer is neither reset nor ticked, or a god-object's
+  // proxy would start at a pose nobody holds and stay on its side of a wall).
+  const bool posed = device_.hasState();
+  HapticResponse resp;
+  if (posed) {
+    if (needReset_) {
+      renderer_.reset(in.devicePose);
+      needReset_ = false;
+    }
+    resp = renderer_.tick(in);
+    if (effects_ != nullptr) effects_->apply(in, resp);
   }
-  HapticResponse resp = renderer_.tick(in);
-  if (effects_ != nullptr) effects_->apply(in, resp);
 
   // World → device frame.
   Vec3 force = config_.forceScale * (rotation_.transpose() * resp.force);
@@ -171,7 +178,7 @@ void HapticLoop::tick(const TickInfo& info) noexcept {
 
   const std::int64_t elapsed = realClock_.now() - realStart + (info.start_ns - info.scheduled_ns);
   const bool overrun = info.skipped > 0 || elapsed > info.period_ns;
-  const bool fault = !finite || (overrun && config_.overrunFades) || lost;
+  const bool fault = !finite || (overrun && config_.overrunFades) || lost || !posed;
   if (lost) fade_.cut();
   fade_.apply(force, torque, finite, fault, dt);
   device_.command(force, torque, now);

@@ -181,6 +181,7 @@ DeviceStatus HapticDevice::servo(std::int64_t nowNs) noexcept {
     st.angularVelocity = Vec3(s.angular_velocity[0], s.angular_velocity[1], s.angular_velocity[2]);
     st.buttons = s.buttons;
     states_.publish();
+    hasState_.store(true, std::memory_order_release);
   } else {
     ioError = true;  // a sample with NaN is dropped like a failed read
   }

@@ -2,7 +2,8 @@
 // "sim-haptic" driver): the device → world → device frame mapping against
 // the transform formulas, allocation-free ticks, the local model (a 10 Hz
 // physics publisher never slows the haptic ticks), the loop-side fade on
-// renderer NaN, overruns and device loss, the passivity observer against the
+// renderer NaN, overruns and device loss, a renderer that waits for the
+// device's first pose, the passivity observer against the
 // zero-order-hold work sum, the passivity controller on a sampled wall, and
 // configuration errors.
 #include <dm/haptics/haptic_loop.hpp>
@@ -336,6 +337,37 @@ TEST(HapticLoop, DeviceLossCutsAndReconnectionRampsUp) {
   EXPECT_EQ((*loop)->latest().gain, 1.0);
   EXPECT_NEAR(dev->lastOutput().force.y(), 1.0, 1e-12);
   EXPECT_GT((*loop)->stats().lostTicks, 0u);
+}
+
+TEST(HapticLoop, TheRendererWaitsForTheDevicesFirstPose) {
+  // A device that is lost from its first servo (a remote one whose first
+  // state is still on the way) has no pose: a renderer reset at the
+  // default pose would start a god-object's proxy at the device origin.
+  Builtin b;
+  auto dev = openSim(
+      b, {{"path", "point"}, {"center", "0.01,0.02,0.03"}, {"drop_at", "0"}, {"reconnect_at", "0.05"}});
+  ASSERT_TRUE(dev);
+  ProbeRenderer r;
+  r.constant = Vec3(0, 1.0, 0);
+  HapticLoopConfig cfg;
+  cfg.overrunFades = false;
+  auto loop = HapticLoop::create({.device = *dev, .renderer = r}, cfg);
+  ASSERT_TRUE(loop.ok());
+  VirtualClock clock;
+  ASSERT_TRUE((*loop)->runLockstep(clock, 60).ok());
+  EXPECT_FALSE(dev->hasState());
+  EXPECT_EQ(r.ticks, 0u);
+  EXPECT_EQ(r.resets, 0u);
+  EXPECT_TRUE((*loop)->latest().fault);
+  EXPECT_EQ((*loop)->latest().deviceForce.norm(), 0.0);
+  EXPECT_EQ((*loop)->stats().faultTicks, 60u);
+  // Reconnected at 100 ms (retried every 100 ms from the loss): the first
+  // tick with a state resets the renderer where the device is.
+  ASSERT_TRUE((*loop)->runLockstep(clock, 100).ok());
+  EXPECT_TRUE(dev->hasState());
+  EXPECT_EQ(r.resets, 1u);
+  EXPECT_GT(r.ticks, 0u);
+  EXPECT_NEAR((r.resetPose.translation() - Vec3(0.01, 0.02, 0.03)).norm(), 0.0, 1e-12);
 }
 
 TEST(HapticLoop, ObserverSumsTheZeroOrderHoldWork) {

@@ -11,7 +11,10 @@
 //   3. device frame → world: p_w = deviceToWorld · (s·p_d), R_w = R·R_d,
 //      v_w = s·R·v_d, ω_w = R·ω_d (s = workspaceScale, R = deviceToWorld's
 //      rotation);
-//   4. renderer.tick(), then the EffectStack adds its forces;
+//   4. renderer.tick(), then the EffectStack adds its forces; until the
+//      device reported its first state (HapticDevice::hasState) it has no
+//      pose: the renderer is neither reset nor ticked, the output is zero
+//      and the tick counts as a fault;
 //   5. world → device frame: F_d = forceScale·Rᵀ·F_w, τ_d = Rᵀ·τ_w
 //      (forceScale = workspaceScale preserves power, so a passive scene stays
 //      passive at the hand; 1 renders forces unscaled);
@@ -139,7 +142,7 @@ struct HapticLoopSample {
   Vec3 deviceForce = Vec3::Zero();   ///< N, commanded, device frame
   Vec3 deviceTorque = Vec3::Zero();  ///< N·m, commanded, device frame
   double gain = 1.0;                 ///< OutputFade gain
-  bool fault = false;                ///< renderer NaN, overrun or device lost this tick
+  bool fault = false;                ///< renderer NaN, overrun, device lost or without a state yet
   bool passivityActive = false;      ///< the passivity controller added damping
   double workOnUser = 0.0;           ///< J, observer total (device frame)
 };
@@ -177,8 +180,8 @@ class HapticLoop {
   HapticLoop(const HapticLoop&) = delete;
   HapticLoop& operator=(const HapticLoop&) = delete;
 
-  /// Starts the real-time thread; the first tick resets the renderer at the
-  /// device pose; the fade and the passivity observer start afresh (the
+  /// Starts the real-time thread; the first tick with a device state resets
+  /// the renderer at the device pose; the fade and the passivity observer start afresh (the
   /// counters keep counting). Fails like RealTimeLoop::start().
   Status start();
   /// Stops and joins the thread. Idempotent.
@@ -186,8 +189,8 @@ class HapticLoop {
   bool running() const noexcept;
 
   /// Lockstep: `n` ticks on the calling thread, advancing `clock` by one
-  /// period each (RealTimeLoop::runLockstep). The first tick ever resets the
-  /// renderer at the device pose.
+  /// period each (RealTimeLoop::runLockstep). The first tick with a device
+  /// state resets the renderer at the device pose.
   /// @code
   ///   dm::VirtualClock clock;
   ///   if (auto s = loop->runLockstep(clock, 1000); !s) return s;  // one second at 1 kHz

@@ -155,8 +155,11 @@ class HapticDevice {
   /// Real-time safe. Returns Lost while the device is away.
   DeviceStatus servo(std::int64_t nowNs) noexcept;
 
-  /// The latest sample published by servo() (consumer thread).
+  /// The latest sample published by servo() (consumer thread); a default
+  /// HapticState until hasState().
   const HapticState& state() noexcept { return states_.read(); }
+  /// servo() has published a sample: the device has a pose (any thread).
+  bool hasState() const noexcept { return hasState_.load(std::memory_order_acquire); }
   /// Next event, if any (consumer thread).
   bool pollEvent(DeviceEvent& event) noexcept { return events_.tryPop(event); }
   /// What the last servo() sent (zero while lost). Servo thread.
@@ -180,6 +183,7 @@ class HapticDevice {
 
   TripleBuffer<Command> commands_;
   TripleBuffer<HapticState> states_;
+  std::atomic<bool> hasState_{false};
   SpscRing<DeviceEvent, 64> events_;
   std::atomic<std::uint64_t> nonFinite_{0};
   std::atomic<bool> connected_{true};
