@@ -41,13 +41,15 @@
 # first's byte for byte, and its summary the first's in every figure but the
 # measured times (engines, host, render, wall_s, the vision nodes' seconds):
 # lockstep is bit-reproducible for every scene.
-# Tele-operation scenes (a device with "serve") run in real time:
-#         -DMODE=realtime -DMIN_ROUND_TRIP_MS=T: the served device's link
-#         measured a round trip of at least T ms (p50), received a force
-#         for at least 90 % of the haptic ticks, and its wave receiver, if
-#         any, output no more energy than it received. -DMAX_FAULT_TICKS=N
-#         allows N safety-fault ticks (real-time overruns on a shared
-#         machine; default 0).
+# Tele-operation scenes (a device with "serve"), in lockstep or with
+#         -DMODE=realtime: -DMIN_ROUND_TRIP_MS=T [-DMAX_ROUND_TRIP_MS=T]: the
+#         served device's link measured a round trip of at least (at most)
+#         T ms (p50), received a force for at least 90 % of the haptic
+#         ticks, and its wave receiver, if any, output no more energy than
+#         it received; -DTELEOP_TRANSPORT=udp|inproc: the link's transport.
+#         -DMAX_FAULT_TICKS=N allows N safety-fault ticks (real-time overruns
+#         on a shared machine, ticks before a remote device's first state;
+#         default 0).
 if(NOT DEFINED MODE)
   set(MODE lockstep)
 endif()
@@ -241,6 +243,15 @@ if(DEFINED MIN_ROUND_TRIP_MS)
   string(JSON received GET "${summary}" teleop 0 received)
   if(rtt LESS MIN_ROUND_TRIP_MS)
     message(FATAL_ERROR "tele-operation round trip p50 ${rtt} ms, expected >= ${MIN_ROUND_TRIP_MS} ms")
+  endif()
+  if(DEFINED MAX_ROUND_TRIP_MS AND rtt GREATER MAX_ROUND_TRIP_MS)
+    message(FATAL_ERROR "tele-operation round trip p50 ${rtt} ms, expected <= ${MAX_ROUND_TRIP_MS} ms")
+  endif()
+  if(DEFINED TELEOP_TRANSPORT)
+    string(JSON transport GET "${summary}" teleop 0 transport)
+    if(NOT transport STREQUAL TELEOP_TRANSPORT)
+      message(FATAL_ERROR "tele-operation transport ${transport}, expected ${TELEOP_TRANSPORT}")
+    endif()
   endif()
   # The simulator sends a force every haptic tick.
   math(EXPR minReceived "${ticks} * 9 / 10")

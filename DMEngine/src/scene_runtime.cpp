@@ -277,16 +277,27 @@ Result<MeshBvh> objectBvh(const Mesh& mesh, double scale) {
 
 #ifdef DM_ENGINE_HAVE_NETWORK
 // A device with "serve": the console side of a tele-operation link inside
-// this process. It stands for another machine, so it runs on a real-time
-// loop of its own at the device's servo rate, not as one of the master's
-// engines, and is live before the simulator's net-haptic device opens.
+// this process. In real time it stands for another machine: a UDP socket
+// on its "listen" address and a real-time loop of its own at the device's
+// servo rate, live before the simulator's net-haptic device opens. In
+// lockstep a socket's datagrams would arrive on the wall clock, so the link
+// is the in-process one ("inproc:NAME", dm/network/teleop.hpp) on the
+// master's virtual clock, and the master ticks the console's servo as an
+// engine ("serve:NAME") before the haptics engine: the same stream, with its
+// emulated delay, jitter and loss, the same on every run.
 struct ServedDevice {
   std::string name;
   std::unique_ptr<HapticDevice> device;
   std::unique_ptr<TeleopDevice> link;
   std::unique_ptr<TeleopDeviceBridge> bridge;
-  std::unique_ptr<RealTimeLoop> loop;
+  std::unique_ptr<RealTimeLoop> loop;  // real time
+  std::shared_ptr<Engine> engine;      // lockstep
   std::string address;  // what "@name" stands for
+
+  void step(std::int64_t nowNs) noexcept {
+    bridge->step(nowNs);
+    maxOutputForce = std::max(maxOutputForce, device->lastOutput().force.norm());
+  }
 
   ServedDevice() = default;
   ServedDevice(const ServedDevice&) = delete;
@@ -303,6 +314,7 @@ struct ServedDevice {
     };
     nlohmann::json j = {{"device", name},
                         {"address", address},
+                        {"transport", loop ? "udp" : "inproc"},
                         {"sent", st.sent},
                         {"received", st.received},
                         {"lost", st.lost},
@@ -321,8 +333,11 @@ struct ServedDevice {
   double maxOutputForce = 0.0;  // written by the loop thread, read after it stopped
 };
 
-// Opens, serves and starts the device `d` (which has "serve").
-Result<std::unique_ptr<ServedDevice>> serveDevice(FactoryRegistry& registry, const SceneDevice& d) {
+// Opens and serves the device `d` (which has "serve"): in real time on its
+// socket and loop, started here; in lockstep on an in-process link on
+// `lockstepClock`, with the engine the caller adds to the master.
+Result<std::unique_ptr<ServedDevice>> serveDevice(FactoryRegistry& registry, const SceneDevice& d,
+                                                  const Clock* lockstepClock) {
   const std::string where = "devices/" + d.name + "/serve";
   auto listen = parseEndpoint(d.serve->listen, where + "/listen", true);
   if (!listen) return listen.error();
@@ -331,29 +346,38 @@ Result<std::unique_ptr<ServedDevice>> serveDevice(FactoryRegistry& registry, con
   auto device = HapticDevice::open(registry, d.driver, deviceParams(d));
   if (!device) return device.error().within("devices/" + d.name);
   sd->device = std::move(*device);
-  // On a loopback address the simulator is on this machine, with the same
-  // CLOCK_MONOTONIC: one-way latencies need no offset estimate.
-  const bool loopback = listen->address.starts_with("127.") || listen->address == "::1";
-  auto link = TeleopDevice::open(
-      {.local = *listen, .timeoutSeconds = d.serve->timeout, .clocksSynchronized = loopback},
-      sd->device->info());
+  TeleopOptions options{.local = *listen, .timeoutSeconds = d.serve->timeout};
+  if (lockstepClock != nullptr) {
+    options.local = {"inproc:" + d.name, 0};
+    options.clock = lockstepClock;
+  } else {
+    // On a loopback address the simulator is on this machine, with the same
+    // CLOCK_MONOTONIC: one-way latencies need no offset estimate.
+    options.clocksSynchronized = listen->address.starts_with("127.") || listen->address == "::1";
+  }
+  auto link = TeleopDevice::open(options, sd->device->info());
   if (!link) return link.error().within(where);
   sd->link = std::move(*link);
   const std::string host = listen->address.empty() || listen->address == "0.0.0.0" ? "127.0.0.1"
                            : listen->address == "::"                               ? "[::1]"
                            : listen->address.find(':') != std::string::npos ? "[" + listen->address + "]"
                                                                             : listen->address;
-  sd->address = host + ":" + std::to_string(sd->link->port());
+  sd->address =
+      lockstepClock != nullptr ? options.local.address : host + ":" + std::to_string(sd->link->port());
   sd->bridge = std::make_unique<TeleopDeviceBridge>(
       *sd->device, *sd->link,
       TeleopBridgeOptions{.timeoutSeconds = d.serve->timeout, .waveImpedance = d.serve->waveImpedance});
   ServedDevice* raw = sd.get();
+  if (lockstepClock != nullptr) {
+    sd->engine = makeFunctionEngine("serve:" + d.name, [raw](const TickInfo& t) {
+      raw->step(t.start_ns);
+      return true;
+    });
+    return sd;
+  }
   sd->loop = std::make_unique<RealTimeLoop>(
       RealTimeLoopConfig{.rate_hz = sd->device->info().servoRateHz, .name = "dm-served"},
-      [raw](const TickInfo& t) {
-        raw->bridge->step(t.start_ns);
-        raw->maxOutputForce = std::max(raw->maxOutputForce, raw->device->lastOutput().force.norm());
-      });
+      [raw](const TickInfo& t) { raw->step(t.start_ns); });
   if (auto s = sd->loop->start(); !s) return s.error().within(where);
   return sd;
 }
@@ -533,10 +557,7 @@ Status SceneRuntime::Impl::buildHaptics(bool lockstep) {
   if (auto s = registerNetworkDrivers(*linker); !s) return s.error();
   for (const SceneDevice& d : scene.devices) {
     if (!d.serve) continue;
-    if (lockstep)
-      return fail(ErrorCode::Unsupported, "a served device runs on the network's real time, not in lockstep",
-                  "devices/" + d.name + "/serve", "run the scene with --realtime");
-    auto sd = serveDevice(registry, d);
+    auto sd = serveDevice(registry, d, lockstep ? &master.virtualClock() : nullptr);
     if (!sd) return sd.error();
     served.push_back(std::move(*sd));
   }
@@ -678,6 +699,14 @@ Status SceneRuntime::Impl::buildEngines(bool lockstep, const SceneRunOptions& op
   }
   if (scene.engines.haptics) {
     if (auto s = buildHaptics(lockstep); !s) return s.error();
+#ifdef DM_ENGINE_HAVE_NETWORK
+    // Lockstep: a served console's servo before the haptics engine, which
+    // then reads what its link delivered by that time.
+    for (const auto& sd : served)
+      if (sd->engine)
+        if (auto s = master.addEngine(sd->engine, {.rateHz = sd->device->info().servoRateHz}); !s)
+          return s.error();
+#endif
     if (auto s = master.addEngine(haptics, {.rateHz = scene.engines.haptics->rateHz, .priority = 80}); !s)
       return s.error();
     if (scene.outputs.recording)
@@ -1105,7 +1134,7 @@ Result<SceneRunResult> SceneRuntime::finish() {
 #ifdef DM_ENGINE_HAVE_NETWORK
   nlohmann::json teleop = nlohmann::json::array();
   for (const auto& sd : im.served) {
-    sd->loop->stop();  // the console side stops with the simulator
+    if (sd->loop) sd->loop->stop();  // the console side stops with the simulator
     teleop.push_back(sd->summary());
   }
 #endif
