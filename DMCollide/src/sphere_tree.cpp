@@ -11,6 +11,7 @@
 #include <dm/collide/mesh_query.hpp>
 #include <dm/collide/sphere_tree.hpp>
 #include <dm/core/tasks.hpp>
+#include <dm/math/isosurface.hpp>
 #include <dm/math/mass_properties.hpp>
 
 #include <algorithm>
@@ -353,36 +354,47 @@ struct MeshSource {
   double volume = 0.0;  // enclosed volume, 0 if open
 };
 
+// Clips the triangle v to every cell of `g` it meets and calls
+// emit(cell, polygon, n) with each non-empty piece (at most 9 vertices);
+// false when emit returned false (stop).
+template <class Emit>
+bool clipToCells(const Vec3 (&v)[3], const Grid& g, Emit&& emit) {
+  Vec3 bufA[16], bufB[16];
+  Vec3i c0, c1;
+  for (int a = 0; a < 3; ++a) {
+    const double mn = std::min({v[0][a], v[1][a], v[2][a]}), mx = std::max({v[0][a], v[1][a], v[2][a]});
+    c0[a] = g.cellOf(mn, a, -1e-9);
+    c1[a] = g.cellOf(mx, a, 1e-9);
+  }
+  for (int z = c0.z(); z <= c1.z(); ++z)
+    for (int y = c0.y(); y <= c1.y(); ++y)
+      for (int x = c0.x(); x <= c1.x(); ++x) {
+        const Vec3i c(x, y, z);
+        const Vec3 lo = g.corner(c), hi = g.corner(c + Vec3i::Ones());
+        int n = 3;
+        std::copy(v, v + 3, bufA);
+        for (int a = 0; a < 3 && n > 0; ++a) {
+          n = clipPolygon(bufA, n, bufB, a, lo[a], true);
+          n = n > 0 ? clipPolygon(bufB, n, bufA, a, hi[a], false) : 0;
+        }
+        if (n > 0 && !emit(c, bufA, n)) return false;
+      }
+  return true;
+}
+
 Result<Pieces> meshPieces(const Mesh& mesh, int gridLevel, const SphereTreeOptions& opt, const char* where) {
   const Grid g = meshGrid(mesh.bounds(), gridLevel);
   std::vector<Record> records;
   std::vector<Vec3> raw;
-  Vec3 bufA[16], bufB[16];
   for (const Triangle& t : mesh.triangles) {
     const Vec3 v[3] = {mesh.positions[t[0]], mesh.positions[t[1]], mesh.positions[t[2]]};
-    Vec3i c0, c1;
-    for (int a = 0; a < 3; ++a) {
-      const double mn = std::min({v[0][a], v[1][a], v[2][a]}), mx = std::max({v[0][a], v[1][a], v[2][a]});
-      c0[a] = g.cellOf(mn, a, -1e-9);
-      c1[a] = g.cellOf(mx, a, 1e-9);
-    }
-    for (int z = c0.z(); z <= c1.z(); ++z)
-      for (int y = c0.y(); y <= c1.y(); ++y)
-        for (int x = c0.x(); x <= c1.x(); ++x) {
-          const Vec3i c(x, y, z);
-          const Vec3 lo = g.corner(c), hi = g.corner(c + Vec3i::Ones());
-          int n = 3;
-          std::copy(v, v + 3, bufA);
-          for (int a = 0; a < 3 && n > 0; ++a) {
-            n = clipPolygon(bufA, n, bufB, a, lo[a], true);
-            n = n > 0 ? clipPolygon(bufB, n, bufA, a, hi[a], false) : 0;
-          }
-          if (n == 0) continue;
-          const auto first = static_cast<std::uint32_t>(raw.size());
-          raw.insert(raw.end(), bufA, bufA + n);
-          records.push_back(surfaceRecord(linearKey(c, g.r), raw, first, static_cast<std::uint32_t>(n)));
-          if (records.size() > opt.maxPieces) return tooMany(where, opt.maxPieces);
-        }
+    const bool all = clipToCells(v, g, [&](const Vec3i& c, const Vec3* poly, int n) {
+      const auto first = static_cast<std::uint32_t>(raw.size());
+      raw.insert(raw.end(), poly, poly + n);
+      records.push_back(surfaceRecord(linearKey(c, g.r), raw, first, static_cast<std::uint32_t>(n)));
+      return records.size() <= opt.maxPieces;
+    });
+    if (!all) return tooMany(where, opt.maxPieces);
   }
   if (!opt.solid) return mergeRecords(records, raw, gridLevel, where, opt.maxPieces);
 
@@ -456,7 +468,7 @@ Result<Pieces> meshPieces(const Mesh& mesh, int gridLevel, const SphereTreeOptio
 // the first and last qualifying voxel (the hull of a row of cubes is the hull
 // of its two end cubes). Cells are over the occupied voxels' index box.
 Result<Pieces> volumePieces(const Volume& vol, int gridLevel, const SphereTreeOptions& opt, const char* where,
-                            double& occupiedVolume) {
+                            double& occupiedVolume, Grid& g) {
   const Vec3i d = vol.dims();
   auto occ = [&](int i, int j, int k) { return vol.contains(i, j, k) && vol.value(i, j, k) > opt.threshold; };
   Vec3i lo = d, hi = Vec3i::Constant(-1);
@@ -474,7 +486,6 @@ Result<Pieces> volumePieces(const Volume& vol, int gridLevel, const SphereTreeOp
                 "no voxel is above the threshold " + std::to_string(opt.threshold), where,
                 "lower SphereTreeOptions::threshold (occupied: value > threshold)");
   occupiedVolume = static_cast<double>(count) * std::abs(vol.indexToWorld().linear().determinant());
-  Grid g;
   g.r = 1 << gridLevel;
   g.lo = lo.cast<double>() - Vec3::Constant(0.5);
   g.h = (hi - lo + Vec3i::Ones()).cast<double>() / g.r;
@@ -515,6 +526,77 @@ Result<Pieces> volumePieces(const Volume& vol, int gridLevel, const SphereTreeOp
       if (records.size() > opt.maxPieces) return tooMany(where, opt.maxPieces);
     }
   return mergeRecords(records, raw, gridLevel, where, opt.maxPieces);
+}
+
+// The smooth surface of a voxel model as surface pieces indexed like its
+// voxel pieces `voxels` (grid `g`, index space): the isosurface `iso`
+// (world) clipped to the cells in index space, each polygon mapped back to
+// the world and given to every voxel piece within a voxel of its cell. The
+// isosurface crosses the edge from a surface voxel's centre to its outside
+// neighbour's, up to a voxel from the centre and so often in another cell:
+// without the reach such a voxel's node would hold no surface and collide
+// through its sphere, which stands out of the surface by up to a voxel.
+Pieces voxelSurfacePieces(const Volume& vol, const Pieces& voxels, const Grid& g, const Mesh& iso) {
+  std::unordered_map<std::uint64_t, std::uint32_t> pieceOf;
+  for (std::size_t k = 0; k < voxels.size(); ++k)
+    pieceOf.emplace(linearKey(voxels.cell[k], g.r), static_cast<std::uint32_t>(k));
+  const Affine3& toWorld = vol.indexToWorld();
+  const Affine3 toIndex = toWorld.inverse();
+  const Vec3i reach = g.h.cwiseInverse().array().ceil().cast<int>();  // cells per voxel, per axis
+  // The pieces' grid grown by the reach on every side (the same cells): the
+  // surface beside the outermost voxels lies outside the voxels' index box.
+  Grid wide = g;
+  const int margin = reach.maxCoeff();
+  wide.r = g.r + 2 * margin;
+  wide.lo = g.lo - static_cast<double>(margin) * g.h;
+  std::vector<Record> records;  // key: the voxel piece
+  std::vector<Vec3> raw;
+  for (const Triangle& t : iso.triangles) {
+    const Vec3 v[3] = {toIndex * iso.positions[t[0]], toIndex * iso.positions[t[1]],
+                       toIndex * iso.positions[t[2]]};
+    clipToCells(v, wide, [&](const Vec3i& wc, const Vec3* poly, int n) {
+      const Vec3i c = wc - Vec3i::Constant(margin);
+      std::uint32_t first = 0;
+      bool stored = false;
+      for (int dz = -reach.z(); dz <= reach.z(); ++dz)
+        for (int dy = -reach.y(); dy <= reach.y(); ++dy)
+          for (int dx = -reach.x(); dx <= reach.x(); ++dx) {
+            const Vec3i nc = c + Vec3i(dx, dy, dz);
+            if ((nc.array() < 0).any() || (nc.array() >= g.r).any()) continue;
+            const auto it = pieceOf.find(linearKey(nc, g.r));
+            if (it == pieceOf.end()) continue;
+            if (!stored) {
+              first = static_cast<std::uint32_t>(raw.size());
+              for (int i = 0; i < n; ++i) raw.push_back(toWorld * poly[i]);
+              stored = true;
+            }
+            records.push_back(surfaceRecord(it->second, raw, first, static_cast<std::uint32_t>(n)));
+          }
+      return true;
+    });
+  }
+  std::stable_sort(records.begin(), records.end(),
+                   [](const Record& a, const Record& b) { return a.key < b.key; });
+  Pieces out;
+  out.gridLevel = voxels.gridLevel;
+  out.cell = voxels.cell;
+  out.areaVector.assign(voxels.size(), Vec3::Zero());
+  out.areaMoment.assign(voxels.size(), Vec3::Zero());
+  out.area.assign(voxels.size(), 0.0);
+  std::size_t r = 0;
+  for (std::size_t k = 0; k < voxels.size(); ++k) {
+    for (; r < records.size() && records[r].key == k; ++r) {
+      const Record& rec = records[r];
+      out.points.insert(out.points.end(), raw.begin() + rec.first, raw.begin() + rec.first + rec.count);
+      out.areaVector[k] += rec.areaVector;
+      out.area[k] += rec.area;
+      out.areaMoment[k] += rec.areaMoment;
+    }
+    out.start.push_back(static_cast<std::uint32_t>(out.points.size()));
+    out.surfaceEnd.push_back(out.start.back());
+    out.anySurface = out.anySurface || out.area[k] > 0.0;
+  }
+  return out;
 }
 
 // ------------------------------------------------------------- builders ---
@@ -909,6 +991,22 @@ Result<std::shared_ptr<const SphereTree>> finish(Build&& t, double referenceVolu
   return SphereTree::fromNodes(std::move(t.nodes), std::move(t.patches), referenceVolume, method);
 }
 
+// The patches' fits reach over about two triangles (see computePatches),
+// measured across them: the median of the triangles' shortest edges (the
+// normals of a sliver's fan change across it, not along it).
+double patchFitRadius(const Mesh& mesh) {
+  std::vector<double> shortest;
+  shortest.reserve(mesh.triangles.size());
+  for (const Triangle& tri : mesh.triangles) {
+    const Vec3 &a = mesh.positions[tri[0]], &b = mesh.positions[tri[1]], &c = mesh.positions[tri[2]];
+    shortest.push_back(std::min({(b - a).norm(), (c - b).norm(), (a - c).norm()}));
+  }
+  if (shortest.empty()) return 1e-12;
+  std::nth_element(shortest.begin(), shortest.begin() + static_cast<std::ptrdiff_t>(shortest.size() / 2),
+                   shortest.end());
+  return std::max(2.0 * shortest[shortest.size() / 2], 1e-12);
+}
+
 Result<std::shared_ptr<const SphereTree>> buildFromMesh(const Mesh& mesh, const SphereTreeOptions& opt,
                                                         SphereTreeMethod method, const char* where) {
   if (Status s = checkLevels(opt, where); !s) return s.error();
@@ -926,20 +1024,7 @@ Result<std::shared_ptr<const SphereTree>> buildFromMesh(const Mesh& mesh, const 
                 "pass a valid mesh");
   Build t =
       fitted ? fittedBuild(*pieces, opt.levels, opt.fittedIterations) : octreeBuild(*pieces, opt.levels);
-  // The patches' fits reach over about two triangles (see computePatches),
-  // measured across them: the median of the triangles' shortest edges (the
-  // normals of a sliver's fan change across it, not along it).
-  if (pieces->anySurface) {
-    std::vector<double> shortest;
-    shortest.reserve(mesh.triangles.size());
-    for (const Triangle& tri : mesh.triangles) {
-      const Vec3 &a = mesh.positions[tri[0]], &b = mesh.positions[tri[1]], &c = mesh.positions[tri[2]];
-      shortest.push_back(std::min({(b - a).norm(), (c - b).norm(), (a - c).norm()}));
-    }
-    std::nth_element(shortest.begin(), shortest.begin() + static_cast<std::ptrdiff_t>(shortest.size() / 2),
-                     shortest.end());
-    computePatches(t, *pieces, mesh, std::max(2.0 * shortest[shortest.size() / 2], 1e-12));
-  }
+  if (pieces->anySurface) computePatches(t, *pieces, mesh, patchFitRadius(mesh));
   return finish(std::move(t), volume, method);
 }
 
@@ -950,10 +1035,18 @@ Result<std::shared_ptr<const SphereTree>> buildFromVolume(const Volume& vol, con
   const bool fitted = method == SphereTreeMethod::Fitted;
   const int gridLevel = std::min(kMaxLevels, opt.levels - 1 + (fitted ? 2 : 0));
   double occupied = 0.0;
-  auto pieces = volumePieces(vol, gridLevel, opt, where, occupied);
+  Grid grid;
+  auto pieces = volumePieces(vol, gridLevel, opt, where, occupied, grid);
   if (!pieces) return pieces.error();
   Build t =
       fitted ? fittedBuild(*pieces, opt.levels, opt.fittedIterations) : octreeBuild(*pieces, opt.levels);
+  // The patches: the smooth surface the voxels sample, the isosurface at the
+  // threshold (trilinear between voxel centres, closed at the grid border
+  // like the occupancy), not the voxels' staircase of cube faces.
+  auto iso = extractIsosurface(vol, {.iso = opt.threshold, .computeNormals = false, .closeBorders = true});
+  if (!iso) return iso.error().within(where);
+  const Pieces surface = voxelSurfacePieces(vol, *pieces, grid, *iso);
+  if (surface.anySurface) computePatches(t, surface, *iso, patchFitRadius(*iso));
   return finish(std::move(t), occupied, method);
 }
 

@@ -1,7 +1,8 @@
 // SphereTree6DofRenderer on curved surfaces: a ball tool (fitted tree of a
 // fine icosphere) pressed along the true normal at points all over a
-// sphere, a cylinder and a torus (fitted trees of fine meshes), slid over
-// the sphere and rotated in place. Ground truth is analytic: the true
+// sphere, a cylinder and a torus (fitted trees of fine meshes) and a
+// voxel model of the sphere (trees of its voxels, patches of its
+// isosurface), slid over the sphere and rotated in place. Ground truth is analytic: the true
 // penetration of the ball into the shape, the shape's normal, and K·depth
 // (the renderer's contact model: a spring between the handle and the tool
 // resting on the surface). Through the trees' surface patches the force is
@@ -266,6 +267,60 @@ TEST(SphereTreeAccuracy, BallPressedIntoACylinderAndATorus) {
       print("torus", levels + 1, toolLevel, 0.1, t);
       expectWithinBounds(c, cylSag, "cylinder");
       expectWithinBounds(t, torusSag, "torus");
+    }
+  }
+}
+
+// A voxel model of the sphere as a scanner's smooth intensities give it,
+// not a binary mask: the signed distance R − |x| sampled at voxel centres on
+// a grid of spacing `spacing` (per axis), turned by `turn`, occupied where > 0.
+Volume voxelSphere(const Vec3& spacing, const Mat3& turn) {
+  const Vec3i n = (2.0 * (kSphereRadius + 0.004) * spacing.cwiseInverse()).array().ceil().cast<int>() + 1;
+  Affine3 a = Affine3::Identity();
+  a.linear() = turn * spacing.asDiagonal();
+  a.translation() = -(a.linear() * (0.5 * (n - Vec3i::Ones()).cast<double>()));
+  auto v = Volume::create(n, VoxelType::F32, a);
+  EXPECT_TRUE(v.ok());
+  for (int k = 0; k < n.z(); ++k)
+    for (int j = 0; j < n.y(); ++j)
+      for (int i = 0; i < n.x(); ++i) v->setValue(i, j, k, kSphereRadius - (a * Vec3(i, j, k)).norm());
+  return std::move(*v);
+}
+
+// Trees built from that voxel model: their patches are fitted to its
+// isosurface at the threshold (trilinear between voxel centres: inside the
+// true sphere by at most about its chord sag over a voxel diagonal), not
+// to the voxels' cubes. Before them, a ball pressed on such a tree felt the
+// cubes' spheres: a third of the force sideways on a 60³ grid at 6 levels.
+TEST(SphereTreeAccuracy, BallPressedIntoAVoxelSphere) {
+  const Analytic shape = sphereShape(kSphereRadius);
+  const double toolSag = sagOf(kToolRadius, 0.13e-3);
+  struct Case {
+    const char* name;
+    Vec3 spacing;
+    Mat3 turn;
+    bool fittedTree;
+  };
+  const Mat3 tilt = Eigen::AngleAxisd(0.3, Vec3(1, 2, 3).normalized()).toRotationMatrix();
+  const std::vector<Case> cases = {{"voxels", Vec3::Constant(0.5e-3), Mat3::Identity(), true},
+                                   {"voxels~", Vec3(0.5e-3, 0.6e-3, 0.45e-3), tilt, false}};
+  for (const Case& c : cases) {
+    const Volume v = voxelSphere(c.spacing, c.turn);
+    const double sag = sagOf(kSphereRadius, std::sqrt(3.0) * c.spacing.maxCoeff()) + toolSag;
+    for (const int levels : sweep() ? std::vector<int>{5, 6, 7} : std::vector<int>{6}) {
+      SphereTreeOptions opt;
+      opt.levels = levels;
+      auto env = c.fittedTree ? buildSphereTreeFitted(v, opt) : buildSphereTreeOctree(v, opt);
+      ASSERT_TRUE(env.ok()) << env.error();
+      ASSERT_EQ((*env)->patches().size(), (*env)->nodes().size());
+      for (const int toolLevel : sweep() ? std::vector<int>{4, 5} : std::vector<int>{4}) {
+        const Errors e = pressAll(*renderer(*env, toolLevel), shape, spherePoints(kSphereRadius));
+        print(c.name, levels, toolLevel, 0.1, e);
+        expectWithinBounds(e, sag, c.name);
+        if (sweep())
+          print(c.name, levels, toolLevel, 0.0,
+                pressAll(*renderer(*env, toolLevel, 0.0), shape, spherePoints(kSphereRadius)));
+      }
     }
   }
 }

@@ -48,22 +48,19 @@ def press(renderer, depth, steps=400):
 # d, from its geometry: vps feels its coupling in series with a stiffer
 # contact (0.2 d < F/k <= d); the sphere tree's proxy rests on the model's
 # surface, for a mesh the marching-cubes polygon within its sagitta H²/8R
-# (2.6 µm) of the sphere (|F/k - d| <= 5 µm), for a volume the voxels'
-# spheres, which reach past the surface by up to half a voxel's diagonal,
-# with the tool tree's spheres past the ball (d <= F/k <= d + H) — its tree
-# down to the voxels (levels=7 for 60³: at the default 6 a leaf holds 2³
-# voxels and the ball, pressed on the pole, feels a third of the push
-# sideways off their staircase). The push is along the normal within 2 % of
-# it, on the voxel spheres' staircase within H / 4RT (its steps tilt the
-# contact; measured 2.5 %).
+# (2.6 µm) of the sphere (|F/k - d| <= 5 µm), and for a volume the same:
+# its tree's patches are fitted to the field's isosurface (before they
+# were, the ball felt the voxels' spheres, up to half a voxel's diagonal
+# past the surface, and at the default 6 levels a third of the push
+# sideways off their staircase). The push is along the normal within 2 %.
 @pytest.mark.parametrize("make,low,high,side", [
     (lambda sdf, solid: dm.vps(sdf, stiffness=500.0, tool_radius=RT), lambda d: 0.2 * d, lambda d: d, 0.02),
     (lambda sdf, solid: dm.vps(solid, stiffness=500.0, tool_radius=RT, threshold=0.0),
      lambda d: 0.2 * d, lambda d: d, 0.02),
     (lambda sdf, solid: dm.sphere_tree(dm.isosurface(solid, 0.0), stiffness=500.0, tool_radius=RT),
      lambda d: d - 5e-6, lambda d: d + 5e-6, 0.02),
-    (lambda sdf, solid: dm.sphere_tree(solid, stiffness=500.0, tool_radius=RT, threshold=0.0, levels=7),
-     lambda d: d, lambda d: d + H, H / (4 * RT)),
+    (lambda sdf, solid: dm.sphere_tree(solid, stiffness=500.0, tool_radius=RT, threshold=0.0),
+     lambda d: d - 5e-6, lambda d: d + 5e-6, 0.02),
 ], ids=["vps_sdf", "vps_occupancy", "sphere_tree_mesh", "sphere_tree_volume"])
 def test_a_ball_pressed_on_a_sphere_is_pushed_back_up_its_normal(ball_sdf, ball_solid, make, low, high, side):
     k = 500.0

@@ -66,9 +66,9 @@ namespace dm {
 /// on the next level, and the children of consecutive nodes follow each
 /// other. Leaves carry no reference to the triangles or voxels they cover
 /// (the builders' pieces are cell fragments, not source primitives); the
-/// mesh builders store the surface of every node as a SurfacePatch beside
-/// the nodes (SphereTree::patches()); the implicit tree's leaves are the
-/// voxels themselves.
+/// builders store the surface of every node as a SurfacePatch beside the
+/// nodes (SphereTree::patches()); the implicit tree's leaves are the voxels
+/// themselves.
 struct SphereTreeNode {
   Vec3 center = Vec3::Zero();  ///< m, local frame
   /// m: sphere about `center` covering the geometry of the node (what the
@@ -82,8 +82,10 @@ struct SphereTreeNode {
   std::uint8_t level = 0;        ///< 0 = root
 };
 
-/// The surface inside one node of a mesh sphere tree, as a small quadric
-/// patch in the tree's local frame. With (u, v, w) the coordinates of
+/// The surface inside one node of a sphere tree built from a mesh, or from a
+/// voxel model (its isosurface at the threshold: the smooth surface the
+/// voxels sample, not their staircase), as a small quadric patch in the
+/// tree's local frame. With (u, v, w) the coordinates of
 /// x − origin along (tangentU, tangentV, normal), the patch is the graph
 ///     w = h(u, v) = c₀ + c₁u + c₂v + ½(c₃u² + 2c₄uv + c₅v²),  |(u, v)| ≤ halfWidth,
 /// least-squares fitted to the node's surface points (the triangles clipped to its cells; a node under two
@@ -219,9 +221,9 @@ class SphereTree final : public SphereHierarchy {
       SphereTreeMethod method = SphereTreeMethod::Given);
 
   const std::vector<SphereTreeNode>& nodes() const noexcept { return nodes_; }
-  /// One surface patch per node for trees built from meshes (node i's patch
-  /// is patches()[i]; nodes without surface, e.g. inside a solid tree, have
-  /// an invalid one); empty for voxel-built trees and trees given without.
+  /// One surface patch per node for trees built from meshes and voxel
+  /// models (node i's patch is patches()[i]; nodes without surface, e.g.
+  /// inside a solid tree, have an invalid one); empty for trees given without.
   std::span<const SurfacePatch> patches() const noexcept { return patches_; }
   /// The nodes of level `l` (contiguous in nodes()); empty for a bad level.
   std::span<const SphereTreeNode> level(int l) const noexcept;
@@ -281,8 +283,13 @@ Result<std::shared_ptr<const SphereTree>> buildSphereTreeFitted(const Mesh& mesh
 /// Octree sphere tree of a voxel model (occupied: value > options.threshold):
 /// cells of the occupied voxels' index bounding box, each voxel assigned by
 /// its centre, spheres covering the voxels' cubes in world coordinates (m,
-/// through volume.indexToWorld()). Fails with InvalidArgument on an empty
-/// volume, no occupied voxel, levels outside 1..10 or too many pieces.
+/// through volume.indexToWorld()). A node's SurfacePatch is fitted to the
+/// isosurface at the threshold (dm::extractIsosurface, closed at the grid's
+/// border) clipped to the node's cells: where the values vary smoothly (a
+/// CT's, a distance field's) it follows the sampled surface to second order
+/// instead of the voxels' staircase. Fails with InvalidArgument on an empty
+/// volume, no occupied voxel, levels outside 1..10 or too many pieces, and
+/// like extractIsosurface.
 /// @code
 ///   auto tree = dm::buildSphereTreeOctree(labels, {.levels = 4, .solid = true, .threshold = 0.5});
 /// @endcode
