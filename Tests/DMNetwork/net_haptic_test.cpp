@@ -33,10 +33,7 @@ using dm::test::monotonicNs;
 class NetHaptic : public ::testing::Test {
  protected:
   void SetUp() override {
-    ASSERT_TRUE(dm::registerBuiltinDrivers(linker));
-    ASSERT_TRUE(dm::registerNetworkDrivers(linker));
-    auto sim = dm::HapticDevice::open(registry, "sim-haptic",
-                                      {{"path", "point"}, {"center", "0.01,0.02,0.03"}, {"max_force", "6"}});
+    auto sim = dm::test::openHeldStylus(registry, linker);
     ASSERT_TRUE(sim) << sim.error().message();
     local = std::move(*sim);
     openDeviceSide(0);

@@ -17,22 +17,12 @@
 #include <string>
 #include <vector>
 
+#include "network_test_support.hpp"
+
 namespace {
 
 using namespace std::chrono_literals;
 constexpr std::int64_t kOneMs = 1'000'000;
-
-dm::HapticInfo consoleInfo() {
-  dm::HapticInfo info;
-  info.driver = "sim-haptic";
-  info.vendor = "DMPlatform";
-  info.model = "console";
-  info.serial = "inproc-1";
-  info.workspace = dm::Aabb(dm::Vec3(-0.1, -0.1, -0.1), dm::Vec3(0.1, 0.1, 0.1));
-  info.maxForce = 3;
-  info.servoRateHz = 1000;
-  return info;
-}
 
 dm::HapticState stateAt(std::int64_t tick) {
   dm::HapticState s;
@@ -50,7 +40,7 @@ struct InprocPair {
   explicit InprocPair(const std::string& name,
                       std::optional<dm::LinkEmulatorOptions> emulate = std::nullopt) {
     auto d = dm::TeleopDevice::open({.local = {"inproc:" + name, 0}, .timeoutSeconds = 0.1, .clock = &clock},
-                                    consoleInfo());
+                                    dm::test::sampleInfo());
     EXPECT_TRUE(d.ok()) << d.error().message();
     if (d) device = std::move(*d);
     auto h = dm::TeleopHost::open({.peer = {"inproc:" + name, 0}, .timeoutSeconds = 0.1, .emulate = emulate});
@@ -80,8 +70,8 @@ TEST(TeleopInproc, StatesAndForcesFlowOnTheLinksClockWithExactTiming) {
   EXPECT_EQ(link.host->port(), 0);
   auto info = link.host->waitForDevice(10ms);
   ASSERT_TRUE(info.ok()) << info.error().message();
-  EXPECT_EQ(info->serial, "inproc-1");
-  EXPECT_EQ(info->maxForce, 3.0);
+  EXPECT_EQ(info->serial, "sim-7");
+  EXPECT_EQ(info->maxForce, 8.0);
   // The device knows no host until it polled the Hello.
   EXPECT_FALSE(link.device->sendState(stateAt(0)));
   for (std::int64_t k = 0; k < 200; ++k) {
@@ -159,9 +149,11 @@ TEST(TeleopInproc, TwoRunsWithJitterAndLossSeeTheSameStream) {
 
 TEST(TeleopInproc, NamesHostsAndClocksAreChecked) {
   dm::VirtualClock clock, other;
-  auto first = dm::TeleopDevice::open({.local = {"inproc:checked", 0}, .clock = &clock}, consoleInfo());
+  auto first =
+      dm::TeleopDevice::open({.local = {"inproc:checked", 0}, .clock = &clock}, dm::test::sampleInfo());
   ASSERT_TRUE(first.ok());
-  auto again = dm::TeleopDevice::open({.local = {"inproc:checked", 0}, .clock = &clock}, consoleInfo());
+  auto again =
+      dm::TeleopDevice::open({.local = {"inproc:checked", 0}, .clock = &clock}, dm::test::sampleInfo());
   ASSERT_FALSE(again.ok());
   EXPECT_NE(again.error().message().find("already open"), std::string::npos);
   auto missing = dm::TeleopHost::open({.peer = {"inproc:nobody", 0}});
@@ -175,19 +167,22 @@ TEST(TeleopInproc, NamesHostsAndClocksAreChecked) {
   auto second = dm::TeleopHost::open({.peer = {"inproc:checked", 0}});
   ASSERT_FALSE(second.ok());
   EXPECT_EQ(second.error().code, dm::ErrorCode::Busy);
-  auto allow = dm::TeleopDevice::open({.local = {"inproc:allow", 0}, .allow = {"127.0.0.1"}}, consoleInfo());
+  auto allow =
+      dm::TeleopDevice::open({.local = {"inproc:allow", 0}, .allow = {"127.0.0.1"}}, dm::test::sampleInfo());
   ASSERT_FALSE(allow.ok());
   EXPECT_NE(allow.error().message().find("allow"), std::string::npos);
-  auto unnamed = dm::TeleopDevice::open({.local = {"inproc:", 0}}, consoleInfo());
+  auto unnamed = dm::TeleopDevice::open({.local = {"inproc:", 0}}, dm::test::sampleInfo());
   EXPECT_FALSE(unnamed.ok());
-  auto socketWithClock = dm::TeleopDevice::open({.local = {"127.0.0.1", 0}, .clock = &clock}, consoleInfo());
+  auto socketWithClock =
+      dm::TeleopDevice::open({.local = {"127.0.0.1", 0}, .clock = &clock}, dm::test::sampleInfo());
   ASSERT_FALSE(socketWithClock.ok());
   EXPECT_NE(socketWithClock.error().message().find("clock"), std::string::npos);
   // A closed device frees its name; its host's sends then fail.
   (*first)->close();
   EXPECT_FALSE((*host)->sendForce({}));
   EXPECT_FALSE((*host)->waitForDevice(10ms).ok());
-  auto reopened = dm::TeleopDevice::open({.local = {"inproc:checked", 0}, .clock = &clock}, consoleInfo());
+  auto reopened =
+      dm::TeleopDevice::open({.local = {"inproc:checked", 0}, .clock = &clock}, dm::test::sampleInfo());
   EXPECT_TRUE(reopened.ok());
 }
 
@@ -196,10 +191,7 @@ TEST(TeleopInproc, NamesHostsAndClocksAreChecked) {
 class NetHapticInproc : public ::testing::Test {
  protected:
   void SetUp() override {
-    ASSERT_TRUE(dm::registerBuiltinDrivers(linker));
-    ASSERT_TRUE(dm::registerNetworkDrivers(linker));
-    auto sim = dm::HapticDevice::open(registry, "sim-haptic",
-                                      {{"path", "point"}, {"center", "0.01,0.02,0.03"}, {"max_force", "6"}});
+    auto sim = dm::test::openHeldStylus(registry, linker);
     ASSERT_TRUE(sim) << sim.error().message();
     console = std::move(*sim);
     auto d = dm::TeleopDevice::open({.local = {"inproc:console", 0}, .timeoutSeconds = 0.1, .clock = &clock},

@@ -43,21 +43,7 @@ dm::HapticState sampleState(double k) {
   return s;
 }
 
-dm::HapticInfo sampleInfo() {
-  dm::HapticInfo info;
-  info.driver = "sim-haptic";
-  info.vendor = "DMPlatform";
-  info.model = "simulated 3-DOF stylus";
-  info.serial = "sim-7";
-  info.capabilities = DM_HAPTIC_CAP_POSITION | DM_HAPTIC_CAP_FORCE;
-  info.buttonCount = 2;
-  info.workspace = dm::Aabb(dm::Vec3(-0.1, -0.1, -0.05), dm::Vec3(0.1, 0.1, 0.05));
-  info.maxForce = 8;
-  info.maxStiffness = 2000;
-  info.maxDamping = 20;
-  info.servoRateHz = 1000;
-  return info;
-}
+using dm::test::sampleInfo;
 
 /// A plain UDP socket on 127.0.0.1 that plays one end by hand.
 class RawUdpPeer {
