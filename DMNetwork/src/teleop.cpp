@@ -577,6 +577,7 @@ struct TeleopEnd {
     if (role == Role::Host) {
       if (options.clock != nullptr && options.clock != inproc->clock) {
         inproc->hostAttached.store(false);
+        inproc.reset();  // not attached: close() leaves the link alone
         return fail(ErrorCode::InvalidArgument, "the host names a clock other than its device's", name,
                     "leave TeleopOptions::clock null on the host: it takes the device's");
       }
