@@ -108,7 +108,8 @@ class MasterEngine {
   /// Observes every transition (control thread).
   void onTransition(StateMachine::Observer observer) { fsm_.onTransition(std::move(observer)); }
   const std::vector<Transition>& history() const noexcept { return fsm_.history(); }
-  /// The simulation clock in lockstep (ns since start()).
+  /// The simulation clock in lockstep (ns since start()); it outlives the
+  /// engines, which may hold it.
   const VirtualClock& virtualClock() const noexcept { return clock_; }
   /// Statistics per engine, in the order the engines were added.
   std::vector<EngineStats> stats() const;
@@ -121,10 +122,12 @@ class MasterEngine {
   void stopThreads();
   Status startThreads();
 
+  // Declared first, so destroyed last: engines may hold the clock
+  // (virtualClock()) and read it as they are destroyed.
+  VirtualClock clock_;
   StateMachine fsm_;
   std::vector<std::unique_ptr<Slot>> slots_;
   RunMode mode_ = RunMode::Lockstep;
-  VirtualClock clock_;
   std::int64_t realStartNs_ = 0;
   std::size_t loaded_ = 0;  // engines whose load() succeeded
   Error lastError_;
