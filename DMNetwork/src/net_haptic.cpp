@@ -122,7 +122,7 @@ DmDevice* netOpen(const DmDeviceParam* params, size_t count, char* error, size_t
     return nullptr;
   }
   d->info = std::move(*info);
-  if (waitForState > 0 && inproc && dynamic_cast<const dm::RealClock*>(&d->host->clock()) == nullptr) {
+  if (waitForState > 0 && d->host->onSuppliedClock()) {
     d->waitInRun = true;
     d->firstStateDeadlineNs = d->host->clock().now() + dm::secondsToNanos(waitForState);
   } else if (waitForState > 0) {

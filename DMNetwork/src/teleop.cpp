@@ -1025,6 +1025,9 @@ bool TeleopHost::latestState(HapticState& state, std::int64_t* ageNs) noexcept {
 bool TeleopHost::linkUp() const noexcept { return impl_->linkUp(); }
 void TeleopHost::poll() noexcept { impl_->poll(); }
 const Clock& TeleopHost::clock() const noexcept { return *impl_->clock; }
+bool TeleopHost::onSuppliedClock() const noexcept {
+  return impl_->inproc != nullptr && impl_->inproc->clock != &impl_->inproc->wallClock;
+}
 std::uint16_t TeleopHost::port() const noexcept { return impl_->port; }
 TeleopStats TeleopHost::stats() const { return impl_->stats(); }
 void TeleopHost::close() { impl_->close(); }

@@ -186,6 +186,24 @@ TEST(TeleopInproc, NamesHostsAndClocksAreChecked) {
   EXPECT_TRUE(reopened.ok());
 }
 
+TEST(TeleopInproc, AHostKnowsWhetherItsLinkRunsOnASuppliedClock) {
+  // net-haptic waits for the first state in the run on a supplied clock
+  // (it moves only as the run advances it) and before the run on the wall.
+  dm::VirtualClock clock;
+  auto stepped =
+      dm::TeleopDevice::open({.local = {"inproc:stepped", 0}, .clock = &clock}, dm::test::sampleInfo());
+  auto wall = dm::TeleopDevice::open({.local = {"inproc:wall", 0}}, dm::test::sampleInfo());
+  ASSERT_TRUE(stepped.ok() && wall.ok());
+  auto onStepped = dm::TeleopHost::open({.peer = {"inproc:stepped", 0}});
+  auto onWall = dm::TeleopHost::open({.peer = {"inproc:wall", 0}});
+  ASSERT_TRUE(onStepped.ok() && onWall.ok());
+  EXPECT_TRUE((*onStepped)->onSuppliedClock());
+  EXPECT_FALSE((*onWall)->onSuppliedClock());
+  auto socket = dm::TeleopHost::open({.local = {"127.0.0.1", 0}, .peer = {"127.0.0.1", 9}});
+  ASSERT_TRUE(socket.ok()) << socket.error().message();
+  EXPECT_FALSE((*socket)->onSuppliedClock());
+}
+
 // ---- net-haptic over an in-process link -----------------------------------------
 
 class NetHapticInproc : public ::testing::Test {

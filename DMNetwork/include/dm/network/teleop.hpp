@@ -235,6 +235,11 @@ class TeleopHost {
   void poll() noexcept;
   /// The end's time base (TeleopOptions::clock).
   const Clock& clock() const noexcept;
+  /// True when the link runs on a clock its device end was given
+  /// (TeleopOptions::clock: a lockstep run's virtual clock), which moves
+  /// only as its owner advances it: a wait for the first state belongs in
+  /// that run, not before it. False on the wall clock (every socket).
+  bool onSuppliedClock() const noexcept;
   /// 0 for an in-process link.
   std::uint16_t port() const noexcept;
   TeleopStats stats() const;
