@@ -37,10 +37,10 @@ Result<Components> labelComponents(const Volume& mask, Connectivity c) {
   auto labelsVol = Volume::create(mask.dims(), VoxelType::U32, mask.indexToWorld());
   if (!labelsVol) return std::move(labelsVol).error();
   std::uint32_t* label = labelsVol->data<std::uint32_t>();
-  constexpr std::uint32_t kNone = std::numeric_limits<std::uint32_t>::max();
+  constexpr std::uint32_t kUnvisited = std::numeric_limits<std::uint32_t>::max();
 
   // Union-find over voxel indices; a root is its component's first voxel.
-  std::vector<std::uint32_t> parent(n, kNone);
+  std::vector<std::uint32_t> parent(n, kUnvisited);
   auto find = [&](std::uint32_t x) {
     while (parent[x] != x) {
       parent[x] = parent[parent[x]];
@@ -62,7 +62,7 @@ Result<Components> labelComponents(const Volume& mask, Connectivity c) {
         for (const Vec3i& o : backward) {
           if (!mask.contains(i + o.x(), j + o.y(), k + o.z())) continue;
           const std::size_t nb = mask.linearIndex(i + o.x(), j + o.y(), k + o.z());
-          if (parent[nb] == kNone) continue;
+          if (parent[nb] == kUnvisited) continue;
           const std::uint32_t a = find(self), b = find(static_cast<std::uint32_t>(nb));
           if (a != b) parent[std::max(a, b)] = std::min(a, b);
         }
@@ -70,7 +70,7 @@ Result<Components> labelComponents(const Volume& mask, Connectivity c) {
   // Provisional labels in order of first voxel, then renumber by size.
   std::vector<std::size_t> sizes;
   for (std::size_t v = 0; v < n; ++v) {
-    if (parent[v] == kNone) continue;
+    if (parent[v] == kUnvisited) continue;
     const std::uint32_t r = find(static_cast<std::uint32_t>(v));
     if (r == v) {
       sizes.push_back(0);

@@ -203,7 +203,8 @@ TEST(SceneIgtl, TheReferenceLibraryReceivesTheToolForceBoxAndFrames) {
   ASSERT_GE(rows.size(), 1990u);
   double maxForce = 0;
   for (std::size_t i = 0; i < got.forces.size(); ++i) {
-    const auto& [t, f] = got.forces[i];
+    const double t = got.forces[i].first;  // not a structured binding: clang 14 cannot capture one
+    const auto& f = got.forces[i].second;
     const auto row = std::min_element(rows.begin(), rows.end(), [t](const auto& a, const auto& b) {
       return std::abs(a.t - t) < std::abs(b.t - t);
     });

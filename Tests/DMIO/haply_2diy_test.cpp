@@ -304,7 +304,9 @@ TEST_F(Haply2Diy, BadParametersAreRefusedNamingThem) {
       {{{"max_force", "-1"}}, "max_force"},
       {{{"path", "/dev/null"}}, "path"},
   };
-  for (const auto& [params, key] : cases) {
+  for (const auto& testCase : cases) {
+    const auto& params = testCase.first;  // not a structured binding: clang 14 cannot capture one
+    const auto& key = testCase.second;
     auto d = dm::HapticDevice::open(drivers_.registry, "haply-2diy", [&] {
       dm::DeviceParams p = params;
       bool hasPath = false, hasForce = false;

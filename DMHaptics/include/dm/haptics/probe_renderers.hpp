@@ -34,7 +34,7 @@
 
 namespace dm {
 
-class Mesh;
+struct Mesh;
 class Volume;
 class MillableVolume;
 
