@@ -160,6 +160,15 @@ BoundingSphere minimalSphere(std::vector<Vec3>& points) {
 
 // ---------------------------------------------------------------- pieces ---
 
+// One facet of a piece: a triangle clipped to the piece's cell, its points
+// [first, first + count) of the piece's own (from start[i]).
+struct PieceFacet {
+  Vec3 areaVector = Vec3::Zero();
+  double area = 0.0;
+  Vec3 areaMoment = Vec3::Zero();
+  std::uint32_t first = 0, count = 0;
+};
+
 // Pieces in CSR form: piece i has points [start[i], start[i+1]) and lies in
 // cell `cell[i]` of a 2^gridLevel grid. Its surface (the triangles clipped
 // to the cell; none for solid corners and voxels) has the points
@@ -175,6 +184,10 @@ struct Pieces {
   std::vector<double> radius;  // ball about the centroid holding the piece's points
   std::vector<Vec3> areaVector, areaMoment;
   std::vector<double> area;
+  // The surface of piece i facet by facet (one clipped triangle each, for
+  // the nodes' creases): facets [facetStart[i], facetStart[i + 1]).
+  std::vector<std::uint32_t> facetStart{0};
+  std::vector<PieceFacet> facets;
   bool anySurface = false;
   std::size_t size() const { return cell.size(); }
 };
@@ -251,13 +264,16 @@ Result<Pieces> mergeRecords(std::vector<Record>& records, const std::vector<Vec3
     std::size_t surfaceEnd = first;
     for (; i < records.size() && records[i].key == key; ++i) {
       const Record& rec = records[i];
+      const auto at = static_cast<std::uint32_t>(out.points.size() - first);
       for (std::uint32_t k = 0; k < rec.count; ++k) out.points.push_back(raw[rec.first + k]);
       if (!rec.surface) continue;
       surfaceEnd = out.points.size();
       areaVector += rec.areaVector;
       area += rec.area;
       areaMoment += rec.areaMoment;
+      out.facets.push_back({rec.areaVector, rec.area, rec.areaMoment, at, rec.count});
     }
+    out.facetStart.push_back(static_cast<std::uint32_t>(out.facets.size()));
     for (std::size_t k = first; k < out.points.size(); ++k) sum += out.points[k];
     out.start.push_back(static_cast<std::uint32_t>(out.points.size()));
     out.surfaceEnd.push_back(static_cast<std::uint32_t>(surfaceEnd - first));  // a count until reordered
@@ -290,6 +306,9 @@ Result<Pieces> mergeRecords(std::vector<Record>& records, const std::vector<Vec3
     sorted.areaVector.push_back(out.areaVector[i]);
     sorted.area.push_back(out.area[i]);
     sorted.areaMoment.push_back(out.areaMoment[i]);
+    sorted.facets.insert(sorted.facets.end(), out.facets.begin() + out.facetStart[i],
+                         out.facets.begin() + out.facetStart[i + 1]);
+    sorted.facetStart.push_back(static_cast<std::uint32_t>(sorted.facets.size()));
   }
   sorted.radius.resize(sorted.size());
   for (std::size_t i = 0; i < sorted.size(); ++i) {
@@ -585,8 +604,11 @@ Pieces voxelSurfacePieces(const Volume& vol, const Pieces& voxels, const Grid& g
   out.area.assign(voxels.size(), 0.0);
   std::size_t r = 0;
   for (std::size_t k = 0; k < voxels.size(); ++k) {
+    const std::size_t first = out.points.size();
     for (; r < records.size() && records[r].key == k; ++r) {
       const Record& rec = records[r];
+      out.facets.push_back({rec.areaVector, rec.area, rec.areaMoment,
+                            static_cast<std::uint32_t>(out.points.size() - first), rec.count});
       out.points.insert(out.points.end(), raw.begin() + rec.first, raw.begin() + rec.first + rec.count);
       out.areaVector[k] += rec.areaVector;
       out.area[k] += rec.area;
@@ -594,6 +616,7 @@ Pieces voxelSurfacePieces(const Volume& vol, const Pieces& voxels, const Grid& g
     }
     out.start.push_back(static_cast<std::uint32_t>(out.points.size()));
     out.surfaceEnd.push_back(out.start.back());
+    out.facetStart.push_back(static_cast<std::uint32_t>(out.facets.size()));
     out.anySurface = out.anySurface || out.area[k] > 0.0;
   }
   return out;
@@ -644,6 +667,11 @@ constexpr double kFitCrease = 0.866;
 // A neighbourhood holding more vertices than this is already a few
 // triangles across inside the node: the node's own surface fits it.
 constexpr std::size_t kMaxFitPoints = 256;
+
+// A node of more facets than this is many triangles across: its surface
+// is no crease of a few flat faces worth a contact of its own (the box's
+// edge nodes hold tens; the levels above a fine mesh's leaves, thousands).
+constexpr std::size_t kMaxCreaseFacets = 4096;
 
 // The mesh's vertices with their area-weighted normals, binned on a grid of
 // cell `h` and sorted by cell, so that the vertices near a point are a few
@@ -698,6 +726,7 @@ void computePatches(Build& t, const Pieces& p, const Mesh& mesh, double fitRadiu
   t.patches.assign(t.nodes.size(), SurfacePatch{});
   parallelFor(std::size_t{0}, t.nodes.size(), 4, [&](std::size_t b, std::size_t e) {
     std::vector<Vec3> own, fit;
+    std::vector<detail::Facet> facets;
     for (std::size_t n = b; n < e; ++n) {
       const auto [rb, re] = t.range[n];
       own.clear();
@@ -729,6 +758,16 @@ void computePatches(Build& t, const Pieces& p, const Mesh& mesh, double fitRadiu
         if (fit.size() > kMaxFitPoints) fit.clear();
       }
       t.patches[n] = detail::fitSurfacePatch(areaVector, area, areaMoment, own, fit, fitRadius);
+      facets.clear();
+      for (std::uint32_t i = rb; i < re && facets.size() <= kMaxCreaseFacets; ++i) {
+        const std::uint32_t k = t.order[i];
+        for (std::uint32_t f = p.facetStart[k]; f < p.facetStart[k + 1]; ++f) {
+          const PieceFacet& pf = p.facets[f];
+          facets.push_back({pf.areaVector, pf.area, pf.areaMoment,
+                            std::span<const Vec3>(p.points.data() + p.start[k] + pf.first, pf.count)});
+        }
+      }
+      if (facets.size() >= 2 && facets.size() <= kMaxCreaseFacets) detail::fitCrease(t.patches[n], facets);
     }
   });
 }
@@ -1061,6 +1100,18 @@ Result<std::shared_ptr<const SphereTree>> SphereTree::fromNodes(std::vector<Sphe
 }
 
 namespace {
+// Why crease `c` is not a valid SurfacePatch::Crease ("" when it is).
+std::string creaseProblem(const SurfacePatch::Crease& c) {
+  if (c.planes == 0) return "";
+  if (c.planes != 2 && c.planes != 3) return "crease.planes is neither 0, 2 nor 3";
+  for (int i = 0; i < c.planes; ++i)
+    if (!c.normal[i].allFinite() || std::abs(c.normal[i].norm() - 1.0) > 1e-6 || !std::isfinite(c.offset[i]))
+      return "a crease plane's normal is not a unit vector or its offset is not finite";
+  if (!(c.deviation >= 0) || !(c.reach >= 0) || !std::isfinite(c.deviation) || !std::isfinite(c.reach))
+    return "crease.deviation or crease.reach is negative or not finite";
+  return "";
+}
+
 // Why patch `p` is not a valid SurfacePatch ("" when it is).
 std::string patchProblem(const SurfacePatch& p) {
   const auto unit = [](const Vec3& v) { return std::abs(v.norm() - 1.0) < 1e-6; };
@@ -1068,7 +1119,8 @@ std::string patchProblem(const SurfacePatch& p) {
       !std::all_of(p.coeff.begin(), p.coeff.end(), [](double c) { return std::isfinite(c); }) ||
       !std::isfinite(p.halfWidth) || !std::isfinite(p.deviation) || !std::isfinite(p.coherence))
     return "a field is not finite";
-  if (p.normal.isZero()) return "";  // a node without surface
+  if (const std::string c = creaseProblem(p.crease); !c.empty()) return c;
+  if (p.normal.isZero()) return "";  // a node without smooth surface (none, or a thin wall's crease)
   if (!unit(p.normal) || !unit(p.tangentU) || !unit(p.tangentV))
     return "normal or tangent is not a unit vector";
   if (std::abs(p.normal.dot(p.tangentU)) > 1e-6 || (p.normal.cross(p.tangentU) - p.tangentV).norm() > 1e-6)

@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <tuple>
+#include <vector>
 
 #include "surface_patch_fit.hpp"
 
@@ -60,7 +62,170 @@ Vec3 SurfacePatch::support(const Vec3& dir) const noexcept {
   return point(bu, bv);
 }
 
+namespace {
+
+// The point of P = {y : a_i·y ≤ b_i, i < m} (m ≤ 3, the a_i unit) nearest
+// x: the projection onto the planes of an active set S, which is the
+// answer when its multipliers are ≥ 0 and it lies in P (KKT); every set is
+// tried (at most 7) and the nearest such point kept.
+Vec3 projectOntoHalfSpaces(const Vec3& x, const Vec3* a, const double* b, int m) noexcept {
+  constexpr double kFeasible = 1e-10;  // m
+  Vec3 best = x;
+  double bestDist = std::numeric_limits<double>::infinity();
+  for (int set = 1; set < (1 << m); ++set) {
+    int idx[3], k = 0;
+    for (int i = 0; i < m; ++i)
+      if (set & (1 << i)) idx[k++] = i;
+    Eigen::Matrix3d g = Eigen::Matrix3d::Identity();
+    Eigen::Vector3d r = Eigen::Vector3d::Zero();
+    for (int i = 0; i < k; ++i) {
+      r[i] = a[idx[i]].dot(x) - b[idx[i]];
+      for (int j = 0; j < k; ++j) g(i, j) = a[idx[i]].dot(a[idx[j]]);
+    }
+    // Multipliers μ = G⁻¹ r, G the Gram matrix of the set's normals
+    // (fixed-size arithmetic: this runs in the haptic tick).
+    Eigen::Vector3d mu = Eigen::Vector3d::Zero();
+    if (k == 1) {
+      mu[0] = r[0];
+    } else if (k == 2) {
+      const double det = g(0, 0) * g(1, 1) - g(0, 1) * g(0, 1);
+      if (!(det > 1e-12)) continue;  // parallel planes: no common line
+      mu[0] = (g(1, 1) * r[0] - g(0, 1) * r[1]) / det;
+      mu[1] = (g(0, 0) * r[1] - g(0, 1) * r[0]) / det;
+    } else {
+      if (!(std::abs(g.determinant()) > 1e-12)) continue;
+      mu = g.inverse() * r;
+    }
+    bool ok = true;
+    Vec3 y = x;
+    for (int i = 0; i < k; ++i) {
+      ok = ok && mu[i] >= -kFeasible && std::isfinite(mu[i]);
+      y -= mu[i] * a[idx[i]];
+    }
+    for (int i = 0; i < m && ok; ++i) ok = a[i].dot(y) - b[i] <= kFeasible;
+    if (const double d = (y - x).squaredNorm(); ok && d < bestDist) bestDist = d, best = y;
+  }
+  return best;
+}
+
+}  // namespace
+
+SurfacePatch::Query SurfacePatch::creaseQuery(const Vec3& x) const noexcept {
+  const int m = crease.planes;
+  // The region the point is projected onto, as a_i·y ≤ b_i: the solid
+  // (convex) or the free wedge (concave, where the solid is the union).
+  const double sign = crease.convex ? 1.0 : -1.0;
+  Vec3 a[3];
+  double b[3], s[3];
+  int lo = 0, hi = 0;
+  bool inRegion = true;
+  for (int i = 0; i < m; ++i) {
+    a[i] = sign * crease.normal[i];
+    b[i] = sign * crease.offset[i];
+    s[i] = crease.normal[i].dot(x) - crease.offset[i];  // > 0: outside plane i's half-space
+    inRegion = inRegion && a[i].dot(x) <= b[i];
+    if (s[i] > s[hi]) hi = i;
+    if (s[i] < s[lo]) lo = i;
+  }
+  Query q;
+  Vec3 foot;
+  if (inRegion) {
+    // Inside a convex solid, or outside a concave one: the nearest plane
+    // (the distance to a convex region's boundary from within it).
+    const int i = crease.convex ? hi : lo;
+    q.distance = s[i];
+    q.normal = crease.normal[i];
+    foot = x - s[i] * crease.normal[i];
+  } else {
+    foot = projectOntoHalfSpaces(x, a, b, m);
+    const Vec3 d = crease.convex ? Vec3(x - foot) : Vec3(foot - x);  // outward
+    const double dn = d.norm();
+    q.distance = crease.convex ? dn : -dn;
+    q.normal = dn > 1e-12 ? Vec3(d / dn) : crease.normal[crease.convex ? hi : lo];
+  }
+  q.lateral = (foot - origin).norm();
+  return q;
+}
+
 namespace detail {
+
+void fitCrease(SurfacePatch& p, std::span<const Facet> facets) {
+  p.crease = {};
+  // Group the facets by normal, largest first, each into the first group
+  // whose mean normal is within kCreaseGroupCos of its own.
+  constexpr double kCreaseGroupCos = 0.94;  // 20°
+  // A face lying on a cell's wall is clipped into the cells on both sides,
+  // and the neighbour's faces into this cell's walls as slivers of no
+  // width, whose normals are noise: facets under 1e-9 of the node's area
+  // are left out.
+  double total = 0.0;
+  for (const Facet& f : facets) total += f.area;
+  std::vector<std::uint32_t> order;
+  for (std::uint32_t f = 0; f < facets.size(); ++f)
+    if (facets[f].area > 1e-9 * total && facets[f].areaVector.norm() > 1e-12 * facets[f].area)
+      order.push_back(f);
+  std::sort(order.begin(), order.end(), [&](std::uint32_t x, std::uint32_t y) {
+    return std::tuple(facets[x].area, y) > std::tuple(facets[y].area, x);
+  });
+  struct Group {
+    Vec3 areaVector = Vec3::Zero(), areaMoment = Vec3::Zero();
+    double area = 0.0;
+  };
+  std::array<Group, 3> groups;
+  std::vector<std::uint8_t> groupOf(facets.size(), 0);
+  int count = 0;
+  for (const std::uint32_t f : order) {
+    const Vec3 n = facets[f].areaVector.normalized();
+    int g = 0;
+    while (g < count && groups[g].areaVector.normalized().dot(n) < kCreaseGroupCos) ++g;
+    if (g == 3) return;  // more than three faces: no crease
+    count = std::max(count, g + 1);
+    groups[g].areaVector += facets[f].areaVector;
+    groups[g].areaMoment += facets[f].areaMoment;
+    groups[g].area += facets[f].area;
+    groupOf[f] = static_cast<std::uint8_t>(g);
+  }
+  if (count < 2) return;
+  if (!p.valid()) {  // the faces' normals cancel (a thin wall): the frame is the surface's centroid
+    double area = 0.0;
+    Vec3 moment = Vec3::Zero();
+    for (int g = 0; g < count; ++g) area += groups[g].area, moment += groups[g].areaMoment;
+    p.origin = moment / area;
+  }
+  SurfacePatch::Crease c;
+  c.planes = static_cast<std::uint8_t>(count);
+  std::array<Vec3, 3> centroid{};
+  for (int g = 0; g < count; ++g) {
+    c.normal[g] = groups[g].areaVector.normalized();
+    centroid[g] = groups[g].areaMoment / groups[g].area;
+    c.offset[g] = c.normal[g].dot(centroid[g]);
+  }
+  // Convex where every face's centroid lies behind or on every other
+  // face's plane, concave where in front or on, and at least one strictly
+  // (a face's centroid lies on another's plane where it is a strip along
+  // their edge); anything else (a twisted or S-shaped surface) is no
+  // crease of planes.
+  double reach = 0.0;
+  for (const std::uint32_t f : order)
+    for (const Vec3& x : facets[f].points) {
+      reach = std::max(reach, (x - p.origin).norm());
+      const int g = groupOf[f];
+      c.deviation = std::max(c.deviation, std::abs(c.normal[g].dot(x) - c.offset[g]));
+    }
+  const double tiny = 1e-6 * std::max(reach, 1e-12);
+  int behind = 0, front = 0;
+  for (int i = 0; i < count; ++i)
+    for (int j = 0; j < count; ++j) {
+      if (i == j) continue;
+      const double side = c.normal[i].dot(centroid[j]) - c.offset[i];
+      behind += side < -tiny ? 1 : 0;
+      front += side > tiny ? 1 : 0;
+    }
+  if ((behind > 0) == (front > 0)) return;  // mixed, or every centroid on every plane
+  c.convex = behind > 0;
+  c.reach = reach;
+  p.crease = c;
+}
 
 SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& areaMoment,
                              std::span<const Vec3> points, std::span<const Vec3> fit, double fitScale) {

@@ -21,4 +21,22 @@ namespace dm::detail {
 SurfacePatch fitSurfacePatch(const Vec3& areaVector, double area, const Vec3& areaMoment,
                              std::span<const Vec3> own, std::span<const Vec3> fit, double fitScale);
 
+/// One facet of a node's surface: a mesh triangle clipped to one of its
+/// cells (area vector Σ area·n, area, area moment, its polygon's points).
+struct Facet {
+  Vec3 areaVector = Vec3::Zero();
+  double area = 0.0;
+  Vec3 areaMoment = Vec3::Zero();
+  std::span<const Vec3> points;
+};
+
+/// p.crease from the node's facets: grouped by normal (within 20° of a
+/// group's mean, largest first), 2 or 3 groups make the crease's planes
+/// (area-weighted normal through the area centroid), convex when every
+/// group's centroid lies behind every other plane, concave when in front;
+/// none for 1 group, more than 3, or a mixed arrangement. A patch whose
+/// normals cancel (a thin wall) gets its origin from the facets.
+/// O(facets · 3 + points).
+void fitCrease(SurfacePatch& p, std::span<const Facet> facets);
+
 }  // namespace dm::detail

@@ -105,6 +105,10 @@ struct SphereTree6DofRenderer::State {
   std::vector<Vec3> toolCenter;
   std::vector<double> toolBound;
   std::vector<const SurfacePatch*> toolPatch;  // the used level's usable patches (else null)
+  // m: radius of each tool patch's osculating ball (the mean curvature's
+  // inverse; a flat or concave patch: 1000 times the node's radius), for
+  // contacts with creases.
+  std::vector<double> toolRho;
   double toolReach = 0.0;                      // max |centre| of the used level's spheres
   double toolMaxRadius = 0.0;
   double envMaxLeafRadius = 0.0;
@@ -151,6 +155,7 @@ struct SphereTree6DofRenderer::State {
     Vec3 envCenter = Vec3::Zero();  // world
     double envRadius = 0.0;
     const SurfacePatch* envPatch = nullptr;  // object local frame; null: collide with the sphere
+    bool envCrease = false;                  // envPatch's crease, not its quadric
     // A soft object's patch is carried by x ↦ o + u + F (x − o) (o its rest
     // origin): u its displacement, F⁻¹ kept (object local frame).
     bool soft = false;
@@ -181,14 +186,29 @@ struct SphereTree6DofRenderer::State {
 
   // ---------------------------------------------------------------------
   // A node's patch when it is usable: valid, coherent, and within
-  // surfaceTolerance × radius of its surface.
-  const SurfacePatch* usablePatch(std::span<const SurfacePatch> patches, NodeId node,
-                                  double radius) const noexcept {
+  // surfaceTolerance × radius of its surface; else, where `crease` is given
+  // (environment nodes), its crease when that is within the tolerance
+  // (*crease = true); else null.
+  const SurfacePatch* usablePatch(std::span<const SurfacePatch> patches, NodeId node, double radius,
+                                  bool* crease = nullptr) const noexcept {
     if (node >= patches.size()) return nullptr;
     const SurfacePatch& sp = patches[node];
-    if (!sp.valid() || sp.coherence < kMinCoherence || sp.deviation > opt.surfaceTolerance * radius)
-      return nullptr;
-    return &sp;
+    const double tolerance = opt.surfaceTolerance * radius;
+    if (sp.valid() && sp.coherence >= kMinCoherence && sp.deviation <= tolerance) return &sp;
+    if (crease && sp.hasCrease() && sp.crease.deviation <= tolerance) {
+      *crease = true;
+      return &sp;
+    }
+    return nullptr;
+  }
+
+  // Where the object-frame point x is relative to pair pr's patch (its
+  // crease or its quadric), and the patch's extent from its origin.
+  static SurfacePatch::Query envQuery(const Pair& pr, const Vec3& x) noexcept {
+    return pr.envCrease ? pr.envPatch->creaseQuery(x) : pr.envPatch->query(x);
+  }
+  static double envWidth(const Pair& pr) noexcept {
+    return pr.envCrease ? pr.envPatch->crease.reach : pr.envPatch->halfWidth;
   }
 
   void addCandidate(const Pair& p) noexcept {
@@ -235,7 +255,8 @@ struct SphereTree6DofRenderer::State {
       NodeId kids[8];
       const int nk = env.children(en.e, kids);
       if (toolLeaf && nk == 0) {
-        Pair pr{gap, en.t, k, en.e, o.pose * be.center, be.radius, usablePatch(o.patches, en.e, be.radius)};
+        Pair pr{gap, en.t, k, en.e, o.pose * be.center, be.radius};
+        pr.envPatch = usablePatch(o.patches, en.e, be.radius, &pr.envCrease);
         if (o.deformation && pr.envPatch) {
           const auto node = static_cast<std::uint32_t>(en.e);
           const Mat3 f = o.deformation->deformationGradient(node);
@@ -289,6 +310,10 @@ struct SphereTree6DofRenderer::State {
   // overlap at their rims, by kLateralSlack) is constrained by the one it
   // lies most centrally over: the patches fit the same surface, the others
   // repeat its constraint (to their deviation) and only cost solver sweeps.
+  // A crease comes before any quadric: its planes continue the faces beside
+  // it, while a face's patch near a convex edge reaches past the edge (a
+  // disc about its centre covers its corners) and there would hold the tool
+  // off by the height of the face's plane over the edge's far side.
   void dropOverlappingPatches() noexcept {
     std::size_t n = 0;
     for (std::size_t i = 0; i < pairCount; ++i)
@@ -296,7 +321,7 @@ struct SphereTree6DofRenderer::State {
     if (n < 2) return;
     const auto key = [&](std::uint32_t i) {
       const Pair& p = pairs[i];
-      return std::tuple(p.object, p.toolNode, p.atCollection.centrality, i);
+      return std::tuple(p.object, p.toolNode, !p.envCrease, p.atCollection.centrality, i);
     };
     std::sort(scratch.begin(), scratch.begin() + static_cast<std::ptrdiff_t>(n),
               [&](std::uint32_t a, std::uint32_t b) { return key(a) < key(b); });
@@ -353,11 +378,14 @@ struct SphereTree6DofRenderer::State {
     c.point = toolCenter[pr.toolNode];
     c.radius = toolBound[pr.toolNode];
     c.strict = true;
+    if (pr.envCrease) return creaseContact(pr, p, r, c, lateralExtra);
     if (pr.envPatch) {
-      const SurfacePatch& ep = *pr.envPatch;
       const Isometry3& pose = objects[pr.object].pose;
       const Mat3 ro = pose.linear();
-      Vec3 nEnv = ro * ep.normal;
+      const auto at = [&](const Vec3& toolPoint) {
+        return envQuery(pr, restPoint(pr, ro.transpose() * (p + r * toolPoint - pose.translation())));
+      };
+      Vec3 nEnv = ro * pr.envPatch->normal;
       SurfacePatch::Query q;
       for (int pass = 0; pass < (tp ? 2 : 1); ++pass) {
         if (tp) {
@@ -366,14 +394,15 @@ struct SphereTree6DofRenderer::State {
           c.point = tp->support(d);
           c.radius = 0.0;
         }
-        q = ep.query(restPoint(pr, ro.transpose() * (p + r * c.point - pose.translation())));
+        q = at(c.point);
         nEnv = ro * restNormal(pr, q.normal);
       }
-      const double gate = kLateralSlack * ep.halfWidth + c.radius;
+      const double width = envWidth(pr);
+      const double gate = kLateralSlack * width + c.radius;
       if (q.lateral > gate + lateralExtra) return false;
       c.strict = q.lateral <= gate;
-      c.centrality = q.lateral / std::max(ep.halfWidth, 1e-300);
-      if (q.distance - c.radius >= -kMaxPatchDepth * ep.halfWidth) {
+      c.centrality = q.lateral / std::max(width, 1e-300);
+      if (q.distance - c.radius >= -kMaxPatchDepth * width) {
         c.n = nEnv;
         c.dist = q.distance - c.radius;
         c.envPatch = true;
@@ -395,14 +424,69 @@ struct SphereTree6DofRenderer::State {
     return true;
   }
 
+  // contact() against an environment crease. At an edge or a corner the
+  // normal is not the environment's (it has none there) but the direction
+  // from the crease's nearest point to the tool's centre of curvature: the
+  // tool point alone is on the edge at contact, where its direction from
+  // the edge is undefined, so iterating on it (as on a quadric) diverges.
+  // A tool patch is taken as its osculating ball (radius toolRho, about the
+  // point ρ inside its support point along the normal), starting from the
+  // centre of curvature at the patch's origin; three passes of normal →
+  // support point → centre → nearest crease point → normal (a ball's centre
+  // is its first). A tool sphere is its own ball.
+  bool creaseContact(const Pair& pr, const Vec3& p, const Mat3& r, Contact& c,
+                     double lateralExtra) const noexcept {
+    const SurfacePatch* tp = toolPatch[pr.toolNode];
+    const Isometry3& pose = objects[pr.object].pose;
+    const Mat3 ro = pose.linear();
+    const auto local = [&](const Vec3& toolPoint) {
+      return restPoint(pr, ro.transpose() * (p + r * toolPoint - pose.translation()));
+    };
+    const double rho = tp ? toolRho[pr.toolNode] : 0.0;
+    // The first centre: the tool patch's own centre of curvature (a ball's centre).
+    Vec3 center = local(tp ? Vec3(tp->origin - rho * tp->normal) : c.point);
+    SurfacePatch::Query q = pr.envPatch->creaseQuery(center);
+    Vec3 toolPoint = center;  // object (rest) frame
+    if (tp) {
+      for (int pass = 0; pass < 3; ++pass) {
+        const Vec3 d = -(r.transpose() * (ro * restNormal(pr, q.normal)));
+        if (d.dot(tp->normal) <= 0.0) return false;
+        c.point = tp->support(d);
+        c.radius = 0.0;
+        toolPoint = local(c.point);
+        center = local(c.point - rho * d);
+        q = pr.envPatch->creaseQuery(center);
+      }
+    }
+    const double width = envWidth(pr);
+    const double gate = kLateralSlack * width + c.radius;
+    if (q.lateral > gate + lateralExtra) return false;
+    c.strict = q.lateral <= gate;
+    c.centrality = q.lateral / std::max(width, 1e-300);
+    // The tool point's own distance to the crease: never less than the
+    // tool's (the tool's is the least over its points), equal at the
+    // converged point; a rim point of a patch that does not hold the
+    // contact stays above it and so does not bind.
+    const double dist = tp ? pr.envPatch->creaseQuery(toolPoint).distance : q.distance - c.radius;
+    if (dist >= -kMaxPatchDepth * width) {
+      c.n = ro * restNormal(pr, q.normal);
+      c.dist = dist;
+      c.envPatch = true;
+      return true;
+    }
+    c.point = toolCenter[pr.toolNode];
+    c.radius = toolBound[pr.toolNode];
+    sphereContact(pr, p, r, c);
+    return true;
+  }
+
   // Distance of row i's contact (the same tool point and feature) at the tool pose (p, R).
   double rowDistance(std::size_t i, const Vec3& p, const Mat3& r) const noexcept {
     const Pair& pr = pairs[i];
     const Contact& c = rowContact[i];
     if (c.envPatch) {
       const Isometry3& pose = objects[pr.object].pose;
-      return pr.envPatch
-                 ->query(restPoint(pr, pose.linear().transpose() * (p + r * c.point - pose.translation())))
+      return envQuery(pr, restPoint(pr, pose.linear().transpose() * (p + r * c.point - pose.translation())))
                  .distance -
              c.radius;
     }
@@ -589,12 +673,17 @@ Result<std::unique_ptr<SphereTree6DofRenderer>> SphereTree6DofRenderer::create(
   s->toolCenter.resize(s->levelEnd);
   s->toolBound.resize(s->levelEnd);
   s->toolPatch.assign(s->levelEnd, nullptr);
+  s->toolRho.assign(s->levelEnd, 0.0);
   for (std::uint32_t i = s->levelEnd; i-- > 0;) {
     const SphereTreeNode& n = nodes[i];
     s->toolCenter[i] = n.center;
     if (i >= s->levelBegin) {
       s->toolBound[i] = n.radius;
       s->toolPatch[i] = s->usablePatch(tool->patches(), i, n.radius);
+      if (const SurfacePatch* tp = s->toolPatch[i]) {
+        const double kappa = -0.5 * (tp->coeff[3] + tp->coeff[5]);  // outward-convex: h curves down
+        s->toolRho[i] = std::min(kappa > 0.0 ? 1.0 / kappa : HUGE_VAL, 1e3 * n.radius);
+      }
       s->toolReach = std::max(s->toolReach, n.center.norm());
       s->toolMaxRadius = std::max(s->toolMaxRadius, n.radius);
       continue;

@@ -22,6 +22,7 @@
 #include <random>
 #include <vector>
 
+#include "../common/l_prism.hpp"
 #include "collide_test_support.hpp"
 
 namespace {
@@ -298,6 +299,89 @@ TEST(SphereTree, MeshTreesStoreTheSurfaceAsQuadricPatches) {
   EXPECT_GE(incoherent, 8) << "the corner cells hold three faces";
 }
 
+// A box's edges and corners are creases of two and three convex planes,
+// and a groove (the L prism's inner edge) one of two concave planes; their
+// distances are the exact signed distances to those solids.
+TEST(SphereTree, MeshTreesStoreEdgesAndCornersAsCreases) {
+  const Vec3 h(0.02, 0.015, 0.01);
+  auto box = dm::buildSphereTreeFitted(dm::makeBox(h), {.levels = 5});
+  ASSERT_TRUE(box.ok()) << box.error();
+  const auto boxDistance = [&](const Vec3& x) {
+    const Vec3 q = x.cwiseAbs() - h;
+    return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+  };
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> unit(-1.0, 1.0);
+  int planes[4] = {0, 0, 0, 0}, compared = 0;
+  const auto nodes = (*box)->nodes();
+  for (std::size_t i = nodes.size() - (*box)->level(4).size(); i < nodes.size(); ++i) {
+    const dm::SurfacePatch& p = (*box)->patches()[i];
+    ++planes[p.crease.planes];
+    if (!p.hasCrease()) continue;
+    EXPECT_TRUE(p.crease.convex) << i;
+    EXPECT_LT(p.crease.deviation, 1e-12);
+    std::array<bool, 3> axisUsed{};
+    for (int k = 0; k < p.crease.planes; ++k) {
+      const Vec3& n = p.crease.normal[k];
+      Eigen::Index axis = 0;
+      n.cwiseAbs().maxCoeff(&axis);
+      EXPECT_NEAR(std::abs(n[axis]), 1.0, 1e-12) << "a face's normal";
+      EXPECT_NEAR(p.crease.offset[k], h[axis], 1e-12);
+      axisUsed[static_cast<std::size_t>(axis)] = true;
+    }
+    // Points about the node where the box's other faces are farther than
+    // its own planes: the crease's distance is the box's.
+    for (int t = 0; t < 40; ++t) {
+      const Vec3 x = p.origin + 2.0 * p.crease.reach * Vec3(unit(rng), unit(rng), unit(rng));
+      bool clear = true;
+      for (int a = 0; a < 3; ++a)
+        if (!axisUsed[static_cast<std::size_t>(a)])
+          clear = clear && std::abs(x[a]) < h[a] - std::abs(boxDistance(x)) - 1e-9;
+      if (!clear) continue;
+      ++compared;
+      const dm::SurfacePatch::Query q = p.creaseQuery(x);
+      EXPECT_NEAR(q.distance, boxDistance(x), 1e-12) << "node " << i;
+      // The normal points from the nearest point of the solid to x.
+      const Vec3 nearest = x - q.distance * q.normal;
+      EXPECT_NEAR(boxDistance(nearest), 0.0, 1e-12);
+      EXPECT_NEAR(q.normal.norm(), 1.0, 1e-12);
+    }
+  }
+  EXPECT_GE(planes[3], 8) << "the corners";
+  EXPECT_GE(planes[2], 12) << "the edges";
+  EXPECT_GT(planes[0], planes[2]) << "the faces";
+  EXPECT_GT(compared, 500);
+
+  const double a = 0.0093;  // the groove (off the cells' walls) at (a, a); the L is 2 cm square
+  auto l = dm::buildSphereTreeFitted(dm::test::lPrism(0.01, a, 0.01), {.levels = 5});
+  ASSERT_TRUE(l.ok()) << l.error();
+  const auto grooveDistance = [a](const Vec3& x) {  // near the inner edge, between the L's arms
+    if (x.x() >= a && x.y() >= a) return std::min(x.x() - a, x.y() - a);
+    return -std::hypot(std::max(a - x.x(), 0.0), std::max(a - x.y(), 0.0));
+  };
+  int grooves = 0, grooveCompared = 0;
+  const auto lNodes = (*l)->nodes();
+  for (std::size_t i = lNodes.size() - (*l)->level(4).size(); i < lNodes.size(); ++i) {
+    const dm::SurfacePatch& p = (*l)->patches()[i];
+    if (!p.hasCrease() || p.crease.convex) continue;
+    ++grooves;
+    ASSERT_EQ(p.crease.planes, 2) << "a groove of two faces";
+    EXPECT_NEAR(std::hypot(p.origin.x() - a, p.origin.y() - a), 0.0, 2 * p.crease.reach)
+        << "on the inner edge";
+    for (int t = 0; t < 40; ++t) {
+      const Vec3 x = p.origin + 2.0 * p.crease.reach * Vec3(unit(rng), unit(rng), unit(rng));
+      if (std::abs(x.z()) > 0.004 || x.x() < 0.5 * a || x.y() < 0.5 * a || x.x() > 1.5 * a || x.y() > 1.5 * a)
+        continue;  // the top, bottom and outer faces are nearer elsewhere
+      ++grooveCompared;
+      const dm::SurfacePatch::Query q = p.creaseQuery(x);
+      EXPECT_NEAR(q.distance, grooveDistance(x), 1e-12) << "node " << i;
+      EXPECT_NEAR(grooveDistance(x - q.distance * q.normal), 0.0, 1e-12);
+    }
+  }
+  EXPECT_GE(grooves, 2) << "the inner edge is 1 cm long";
+  EXPECT_GT(grooveCompared, 20);
+}
+
 TEST(SphereTree, FromNodesChecksThePatches) {
   std::vector<dm::SphereTreeNode> nodes(1);
   nodes[0].radius = 1.0;
@@ -321,6 +405,22 @@ TEST(SphereTree, FromNodesChecksThePatches) {
   EXPECT_FALSE(dm::SphereTree::fromNodes(nodes, {bad}, 1.0).ok());
   bad = p;
   bad.coherence = 1.5;
+  EXPECT_FALSE(dm::SphereTree::fromNodes(nodes, {bad}, 1.0).ok());
+  dm::SurfacePatch edge = p;  // a crease of two planes
+  edge.crease.planes = 2;
+  edge.crease.convex = true;
+  edge.crease.normal = {Vec3::UnitZ(), Vec3::UnitY(), Vec3::Zero()};
+  EXPECT_TRUE(dm::SphereTree::fromNodes(nodes, {edge}, 1.0).ok());
+  bad = edge;
+  bad.crease.planes = 1;
+  r = dm::SphereTree::fromNodes(nodes, {bad}, 1.0);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().what.find("crease.planes"), std::string::npos) << r.error().what;
+  bad = edge;
+  bad.crease.normal[1] = Vec3(0, 2, 0);
+  EXPECT_FALSE(dm::SphereTree::fromNodes(nodes, {bad}, 1.0).ok());
+  bad = edge;
+  bad.crease.reach = -1;
   EXPECT_FALSE(dm::SphereTree::fromNodes(nodes, {bad}, 1.0).ok());
 }
 

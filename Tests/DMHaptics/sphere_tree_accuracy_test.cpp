@@ -22,6 +22,7 @@
 #include <numbers>
 #include <vector>
 
+#include "../common/l_prism.hpp"
 #include "haptics_test_support.hpp"
 
 namespace dm {
@@ -268,6 +269,129 @@ TEST(SphereTreeAccuracy, BallPressedIntoACylinderAndATorus) {
       expectWithinBounds(c, cylSag, "cylinder");
       expectWithinBounds(t, torusSag, "torus");
     }
+  }
+}
+
+// A box's signed distance and its gradient (outward; at a point beside an
+// edge or a corner, from the nearest point of the box to it).
+Analytic boxShape(const Vec3& h) {
+  return {[h](const Vec3& x) {
+            const Vec3 q = x.cwiseAbs() - h;
+            return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+          },
+          [h](const Vec3& x) {
+            const Vec3 q = x.cwiseAbs() - h;
+            Vec3 g = Vec3::Zero();
+            if (q.maxCoeff() > 0) {
+              g = q.cwiseMax(0.0);
+            } else if (q.maxCoeff() == 0) {  // on the surface: on an edge the bisector, a corner the diagonal
+              g = (q.array() == 0).cast<double>();
+            } else {
+              Vec3::Index i = 0;
+              q.maxCoeff(&i);
+              g[i] = 1;
+            }
+            return Vec3(g.cwiseProduct(x.cwiseSign()).normalized());
+          }};
+}
+
+constexpr double kBoxHalf[3] = {0.02, 0.015, 0.01};
+
+// A box's edges and corners: the true normal there is the direction from
+// the edge or corner to the ball's centre, which no face's normal is. The
+// tree's edge and corner nodes hold creases (planes grouped from their
+// facets), which the renderer touches by the tool's centre of curvature.
+TEST(SphereTreeAccuracy, BallPressedIntoBoxEdgesAndCorners) {
+  const Vec3 h(kBoxHalf[0], kBoxHalf[1], kBoxHalf[2]);
+  const Analytic shape = boxShape(h);
+  std::vector<Vec3> points;  // on edges of each direction (off their middles), and corners
+  for (const double t : {-0.6, 0.1, 0.45}) {
+    points.push_back(Vec3(t * h.x(), h.y(), h.z()));
+    points.push_back(Vec3(-h.x(), t * h.y(), h.z()));
+    points.push_back(Vec3(h.x(), -h.y(), t * h.z()));
+  }
+  for (const Vec3& c : {Vec3(1, 1, 1), Vec3(-1, 1, 1), Vec3(1, -1, -1), Vec3(-1, -1, -1)})
+    points.push_back(c.cwiseProduct(h));
+  const double toolSag = sagOf(kToolRadius, 0.13e-3);
+  for (const int levels : sweep() ? std::vector<int>{5, 6, 7} : std::vector<int>{6}) {
+    const auto env = fitted(makeBox(h), levels);
+    ASSERT_TRUE(env && toolTree());
+    for (const int toolLevel : sweep() ? std::vector<int>{3, 4, 5} : std::vector<int>{4, 5}) {
+      const Errors e = pressAll(*renderer(env, toolLevel), shape, points);
+      print("box edges", levels, toolLevel, 0.1, e);
+      expectWithinBounds(e, toolSag, "box edges and corners");
+      if (sweep())
+        print("box edges", levels, toolLevel, 0.0, pressAll(*renderer(env, toolLevel, 0.0), shape, points));
+    }
+  }
+}
+
+// Rolling the pressed ball over an edge, from the top face round to the
+// side: the force turns with the true normal at the handle, K times its
+// true penetration, all the way round.
+TEST(SphereTreeAccuracy, BallRolledOverABoxEdge) {
+  const Vec3 h(kBoxHalf[0], kBoxHalf[1], kBoxHalf[2]);
+  const Analytic shape = boxShape(h);
+  const auto env = fitted(makeBox(h), 6);
+  ASSERT_TRUE(env && toolTree());
+  const Vec3 edge(0.003, h.y(), h.z());  // the edge along x at the top's +y side
+  const double arm = kToolRadius - kDepth;
+  const auto handle = [&](double a) { return Vec3(edge + arm * Vec3(0, std::sin(a), std::cos(a))); };
+  for (const int toolLevel : {4, 5}) {
+    auto r = renderer(env, toolLevel);
+    ASSERT_TRUE(r);
+    const double a0 = -0.5, a1 = 0.5 * std::numbers::pi + 0.5;  // from over the top to over the side
+    const Isometry3 start = test::at(handle(a0) + Vec3(0, 0, 0.004));
+    r->reset(start);
+    test::drive(*r, start, test::at(handle(a0)), 30, 30);
+    double magnitude = 0, angle = 0, inside = 0;
+    const int ticks = 1000;  // 2.6 rad in 1 s: 5 mm/s at the handle
+    for (int i = 1; i <= ticks; ++i) {
+      const Vec3 hp = handle(a0 + (a1 - a0) * i / ticks);
+      const HapticResponse out = r->tick({.timeNs = i * 1000000LL, .dt = 1e-3, .devicePose = test::at(hp)});
+      const double expected = kStiffness * (kToolRadius - shape.distance(hp));
+      magnitude = std::max(magnitude, std::abs(out.force.norm() - expected) / expected);
+      angle = std::max(angle, angleBetween(out.force, shape.normal(hp)));
+      inside = std::max(inside, kToolRadius - shape.distance(out.proxyPose.translation()));
+    }
+    std::printf(
+        "[ spheretree box roll  ] env levels 6, tool level %d: |F| %.2f %%, direction %.2f deg, inside %.1f "
+        "um\n",
+        toolLevel, 100 * magnitude, angle * 180 / std::numbers::pi, 1e6 * inside);
+    EXPECT_LT(magnitude, 0.02) << toolLevel;
+    EXPECT_LT(angle, 2 * std::numbers::pi / 180) << toolLevel;
+    EXPECT_LT(inside, sagOf(kToolRadius, 0.13e-3) + 1e-7) << toolLevel;
+  }
+}
+
+// A groove (the L prism's inner edge, concave): the ball pressed into it
+// along the bisector rests on both faces, its centre R from each, and the
+// force is K·depth along the bisector.
+TEST(SphereTreeAccuracy, BallPressedIntoAGroove) {
+  const double c = 0.0093;  // the groove at (c, c), off the tree's cell walls
+  const auto env = fitted(test::lPrism(0.01, c, 0.01), 6);
+  ASSERT_TRUE(env && toolTree());
+  const Vec3 m = Vec3(1, 1, 0).normalized();
+  for (const int toolLevel : {4, 5}) {
+    auto r = renderer(env, toolLevel);
+    ASSERT_TRUE(r);
+    double magnitude = 0, angle = 0, off = 0;
+    for (const double z : {-0.002, 0.0007, 0.0021}) {
+      const Vec3 rest(c + kToolRadius, c + kToolRadius, z);  // touching both faces
+      const Isometry3 start = test::at(rest + 0.004 * m);
+      r->reset(start);
+      const HapticResponse out = drive(*r, start, test::at(rest - kDepth * m), 30, 30);
+      magnitude =
+          std::max(magnitude, std::abs(out.force.norm() - kStiffness * kDepth) / (kStiffness * kDepth));
+      angle = std::max(angle, angleBetween(out.force, m));
+      off = std::max(off, (out.proxyPose.translation() - rest).norm());
+    }
+    std::printf(
+        "[ spheretree groove   ] env levels 6, tool level %d: |F| %.2f %%, direction %.2f deg, off %.1f um\n",
+        toolLevel, 100 * magnitude, angle * 180 / std::numbers::pi, 1e6 * off);
+    EXPECT_LT(magnitude, 0.02) << toolLevel;
+    EXPECT_LT(angle, 2 * std::numbers::pi / 180) << toolLevel;
+    EXPECT_LT(off, 0.02 * kDepth) << toolLevel;
   }
 }
 

@@ -95,7 +95,14 @@ struct SphereTreeNode {
 /// smooth surface it is exact to second order (a sphere, cylinder or torus
 /// patch is a quadric graph up to O(halfWidth³·κ²)); where the node holds an
 /// edge, a corner or both sides of a thin wall, `coherence` or `deviation`
-/// says so and a user falls back to the node's sphere.
+/// says so. Such a node whose surface is two or three flat faces meeting
+/// at a crease (a box's edge or corner, a groove, a cylinder's rim) also
+/// holds them as a `Crease`: the planes of its facets grouped by normal,
+/// and whether the solid there is their half-spaces' intersection (an edge
+/// or corner that sticks out) or their union (a groove, an inner corner).
+/// Its signed distance (creaseQuery) is then exact for the faces' planes: a
+/// point beside a convex edge is nearest the edge, not either face. Any
+/// other node falls back to its sphere.
 struct SurfacePatch {
   Vec3 origin = Vec3::Zero();  ///< m: area centroid of the node's surface
   Vec3 normal = Vec3::Zero();  ///< unit outward (area-weighted mean normal); zero: the node holds no surface
@@ -106,8 +113,21 @@ struct SurfacePatch {
   double deviation = 0.0;         ///< m: largest distance (along normal) of a surface point below the patch
   double coherence = 0.0;  ///< |Σ area·n| / Σ area ∈ [0, 1]: 1 flat, ≈ 0 both sides of a thin wall
 
+  /// The node's surface as 2 or 3 planes meeting at a crease (see above).
+  struct Crease {
+    std::uint8_t planes = 0;         ///< 0 (none), 2 (an edge) or 3 (a corner)
+    bool convex = false;             ///< solid = ∩ of the planes' inner half-spaces; else their ∪
+    std::array<Vec3, 3> normal{};    ///< unit, outward
+    std::array<double, 3> offset{};  ///< m: plane i = {x : normal[i]·x = offset[i]}
+    double deviation = 0.0;          ///< m: largest distance of a facet's point from its group's plane
+    double reach = 0.0;              ///< m: largest distance of the node's surface points from origin
+  };
+  Crease crease;
+
   /// True when the node holds surface (normal is a unit vector).
   bool valid() const noexcept { return normal.squaredNorm() > 0.5; }
+  /// True when the node holds a crease (crease.planes ≥ 2).
+  bool hasCrease() const noexcept { return crease.planes >= 2; }
   /// w = h(u, v), m.
   double height(double u, double v) const noexcept;
   /// Where a point x (local frame) is relative to the patch.
@@ -117,6 +137,13 @@ struct SurfacePatch {
     double lateral = 0.0;        ///< m: |(u, v)|, to compare with halfWidth
   };
   Query query(const Vec3& x) const noexcept;
+  /// Where x is relative to the crease's planes (hasCrease()): the exact
+  /// signed distance to the solid they bound (convex: the nearest point of
+  /// the intersection of half-spaces, on a face, the edge or the corner;
+  /// concave: the nearest plane outside, the nearest point of the free
+  /// wedge inside), the outward normal there (from the nearest point to x),
+  /// and `lateral` = |nearest point − origin|. O(1).
+  Query creaseQuery(const Vec3& x) const noexcept;
   /// The point of the patch (|(u, v)| ≤ halfWidth) farthest along the unit
   /// direction d (local frame): the quadric's stationary point where it is a
   /// maximum inside the disc, else the best of the centre and the rim point

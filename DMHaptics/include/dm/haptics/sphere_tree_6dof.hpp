@@ -17,8 +17,14 @@
 // the tool point. Candidate pairs are still found with the spheres (which
 // contain the patches); a tool point only counts against an environment
 // patch that it lies over, and at most a quarter of the patch's width below
-// it; otherwise, at edges, corners and thin walls, and for trees without
-// patches, the spheres collide as in the published method. Each
+// it. An environment leaf at an edge, a corner, a groove or a thin wall
+// whose surface is two or three flat faces collides through its crease
+// (the faces' planes, SurfacePatch::Crease): its normal is the direction
+// from the crease's nearest point to the tool patch's centre of curvature
+// (beside an edge, not either face's normal), and a crease takes a tool
+// point before any face patch it also lies over (a face's patch reaches
+// past a convex edge). Other nodes, and trees without patches, collide
+// through their spheres as in the published method. Each
 // tick the graphic tool's configuration q_g (position and orientation, the
 // orientation as a rotation increment about the previous graphic pose) is
 // the minimiser of
@@ -135,9 +141,10 @@ struct SphereTree6DofOptions {
   /// an environment leaf whose SurfacePatch lies within this share of its
   /// radius of the node's surface (and whose normals agree within about
   /// 25°) collides through the patch, exactly to second order on smooth
-  /// surfaces; other nodes (edges, corners, thin walls) and trees without
-  /// patches (given, voxel-built and implicit trees) collide through their
-  /// spheres. 0 = spheres only (the published method).
+  /// surfaces; an environment leaf at an edge, corner, groove or thin wall
+  /// whose crease planes lie within it of its facets, through the crease;
+  /// other nodes and trees without patches (given and implicit trees)
+  /// collide through their spheres. 0 = spheres only (the published method).
   double surfaceTolerance = 0.1;
 };
 
