@@ -397,21 +397,7 @@ struct SphereTree6DofRenderer::State {
         q = at(c.point);
         nEnv = ro * restNormal(pr, q.normal);
       }
-      const double width = envWidth(pr);
-      const double gate = kLateralSlack * width + c.radius;
-      if (q.lateral > gate + lateralExtra) return false;
-      c.strict = q.lateral <= gate;
-      c.centrality = q.lateral / std::max(width, 1e-300);
-      if (q.distance - c.radius >= -kMaxPatchDepth * width) {
-        c.n = nEnv;
-        c.dist = q.distance - c.radius;
-        c.envPatch = true;
-        return true;
-      }
-      c.point = toolCenter[pr.toolNode];
-      c.radius = toolBound[pr.toolNode];
-      sphereContact(pr, p, r, c);
-      return true;
+      return patchContact(pr, p, r, q, nEnv, q.distance - c.radius, c, lateralExtra);
     }
     if (tp) {
       const Vec3 toEnv = r.transpose() * (pr.envCenter - p) - tp->origin;
@@ -458,18 +444,28 @@ struct SphereTree6DofRenderer::State {
         q = pr.envPatch->creaseQuery(center);
       }
     }
-    const double width = envWidth(pr);
-    const double gate = kLateralSlack * width + c.radius;
-    if (q.lateral > gate + lateralExtra) return false;
-    c.strict = q.lateral <= gate;
-    c.centrality = q.lateral / std::max(width, 1e-300);
     // The tool point's own distance to the crease: never less than the
     // tool's (the tool's is the least over its points), equal at the
     // converged point; a rim point of a patch that does not hold the
     // contact stays above it and so does not bind.
     const double dist = tp ? pr.envPatch->creaseQuery(toolPoint).distance : q.distance - c.radius;
+    return patchContact(pr, p, r, q, ro * restNormal(pr, q.normal), dist, c, lateralExtra);
+  }
+
+  // The end of a contact through an environment patch or crease whose
+  // query at the tool point is q: false when the tool point lies beside it
+  // (the lateral gate); the contact (normal n, distance dist) unless it is
+  // deeper than kMaxPatchDepth of the patch's width, where the spheres
+  // collide instead.
+  bool patchContact(const Pair& pr, const Vec3& p, const Mat3& r, const SurfacePatch::Query& q, const Vec3& n,
+                    double dist, Contact& c, double lateralExtra) const noexcept {
+    const double width = envWidth(pr);
+    const double gate = kLateralSlack * width + c.radius;
+    if (q.lateral > gate + lateralExtra) return false;
+    c.strict = q.lateral <= gate;
+    c.centrality = q.lateral / std::max(width, 1e-300);
     if (dist >= -kMaxPatchDepth * width) {
-      c.n = ro * restNormal(pr, q.normal);
+      c.n = n;
       c.dist = dist;
       c.envPatch = true;
       return true;
