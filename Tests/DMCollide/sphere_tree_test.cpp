@@ -380,6 +380,29 @@ TEST(SphereTree, MeshTreesStoreEdgesAndCornersAsCreases) {
   }
   EXPECT_GE(grooves, 2) << "the inner edge is 1 cm long";
   EXPECT_GT(grooveCompared, 20);
+
+  // A thin wall (0.4 mm thick, 4 cm wide): leaves away from its rim hold
+  // both sides, whose normals cancel; their crease is the slab between.
+  const double t = 0.0002;
+  auto plate = dm::buildSphereTreeFitted(dm::makeBox(Vec3(0.02, 0.02, t)), {.levels = 5});
+  ASSERT_TRUE(plate.ok()) << plate.error();
+  int slabs = 0;
+  const auto plateNodes = (*plate)->nodes();
+  for (std::size_t i = plateNodes.size() - (*plate)->level(4).size(); i < plateNodes.size(); ++i) {
+    const dm::SurfacePatch& p = (*plate)->patches()[i];
+    if (p.origin.head<2>().cwiseAbs().maxCoeff() > 0.015) continue;  // the rim
+    ++slabs;
+    ASSERT_EQ(p.crease.planes, 2) << "node " << i;
+    EXPECT_TRUE(p.crease.convex);
+    EXPECT_NEAR(std::abs(p.crease.normal[0].z()), 1.0, 1e-12);
+    EXPECT_NEAR(p.crease.normal[0].z(), -p.crease.normal[1].z(), 1e-12);
+    for (const double z : {0.001, t, 0.5 * t, -0.7 * t, -0.003}) {
+      const Vec3 x(p.origin.x(), p.origin.y(), z);
+      EXPECT_NEAR(p.creaseQuery(x).distance, std::abs(z) - t, 1e-12) << z;
+      EXPECT_NEAR(p.creaseQuery(x).normal.z(), z >= 0 ? 1.0 : -1.0, 1e-12) << z;
+    }
+  }
+  EXPECT_GT(slabs, 20);
 }
 
 TEST(SphereTree, FromNodesChecksThePatches) {
