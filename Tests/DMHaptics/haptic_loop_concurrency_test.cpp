@@ -80,6 +80,13 @@ TEST(HapticLoopConcurrency, PhysicsServoAndConsumerThreadsAroundTheRealTimeLoop)
       std::this_thread::sleep_for(std::chrono::milliseconds(3));
     }
   });
+  // The loop renders from the device's first state on (the ticks before it
+  // are fault ticks without a renderer tick): start it once the servo
+  // thread has produced one, so that every loop tick is a renderer tick.
+  const auto stateBy = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (!device.hasState() && std::chrono::steady_clock::now() < stateBy)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  ASSERT_TRUE(device.hasState()) << "the servo thread produced no state in 5 s";
   ASSERT_TRUE((*loop)->start().ok());
   double maxGain = 0.0;
   std::uint64_t consumerReads = 0;
