@@ -106,7 +106,7 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
     Mat3 Dm;
     Dm << mesh.nodes[t[1]] - mesh.nodes[t[0]], mesh.nodes[t[2]] - mesh.nodes[t[0]],
         mesh.nodes[t[3]] - mesh.nodes[t[0]];
-    const double V = Dm.determinant() / 6.0;
+    const double V = Dm.determinant() / 6.0 * (mesh.fractions.empty() ? 1.0 : mesh.fractions[e]);
     body.restInverse_[e] = Dm.inverse();
     body.restVolume_[e] = V;
     for (int i = 0; i < 4; ++i) body.mass_[t[i]] += material.density * V / 4.0;
@@ -134,74 +134,21 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
     return femimpl::invalid("the mesh is too large for the solver's index type", where);
   body.rowStart_.assign(n + 1, 0);
   body.colIndex_.resize(pairs.size());
-  body.lowerStart_.assign(n + 1, 0);
   for (std::size_t p = 0; p < pairs.size(); ++p) {
-    const std::size_t row = pairs[p] >> 32, col = pairs[p] & 0xffffffffu;
-    ++body.rowStart_[row + 1];
-    if (col != row) ++body.lowerStart_[col + 1];
-    body.colIndex_[p] = int(col);
+    ++body.rowStart_[(pairs[p] >> 32) + 1];
+    body.colIndex_[p] = int(pairs[p] & 0xffffffffu);
   }
-  for (std::size_t i = 0; i < n; ++i) {
-    body.rowStart_[i + 1] += body.rowStart_[i];
-    body.lowerStart_[i + 1] += body.lowerStart_[i];
-  }
-  body.lower_.resize(std::size_t(body.lowerStart_[n]));
-  {
-    std::vector<int> fill(body.lowerStart_.begin(), body.lowerStart_.end() - 1);
-    for (std::size_t row = 0; row < n; ++row)
-      for (int s = body.rowStart_[row] + 1; s < body.rowStart_[row + 1]; ++s)
-        body.lower_[std::size_t(fill[std::size_t(body.colIndex_[std::size_t(s)])]++)] = {s, int(row)};
-  }
-  auto slotOf = [&](std::uint32_t a, std::uint32_t b) {
-    const std::uint32_t row = std::min(a, b), col = std::max(a, b);
-    const int* begin = body.colIndex_.data() + body.rowStart_[row];
-    const int* end = body.colIndex_.data() + body.rowStart_[row + 1];
-    const int slot = int(std::lower_bound(begin, end, int(col)) - body.colIndex_.data());
-    return a > b ? ~slot : slot;
-  };
+  for (std::size_t i = 0; i < n; ++i) body.rowStart_[i + 1] += body.rowStart_[i];
+  body.buildLowerBlocks();
   body.slot_.resize(T);
-  for (std::size_t e = 0; e < T; ++e)
-    for (int i = 0, k = 0; i < 4; ++i)
-      for (int j = i; j < 4; ++j) body.slot_[e][std::size_t(k++)] = slotOf(mesh.tets[e][i], mesh.tets[e][j]);
+  for (std::size_t e = 0; e < T; ++e) body.setElementSlots(e);
   body.blocks_.assign(pairs.size(), Mat3::Zero());
-
-  // Greedy colouring: elements sharing a node get different colours, so one
-  // colour's elements can scatter into nodes and blocks concurrently.
-  std::vector<int> nodeTetStart(n + 1, 0), nodeTets(T * 4);
-  for (const Tet& t : mesh.tets)
-    for (std::uint32_t v : t) ++nodeTetStart[v + 1];
-  for (std::size_t i = 0; i < n; ++i) nodeTetStart[i + 1] += nodeTetStart[i];
-  {
-    std::vector<int> fill(nodeTetStart.begin(), nodeTetStart.end() - 1);
-    for (std::size_t e = 0; e < T; ++e)
-      for (std::uint32_t v : mesh.tets[e]) nodeTets[std::size_t(fill[v]++)] = int(e);
-  }
-  std::vector<int> colour(T, -1);
-  std::vector<std::size_t> lastSeen;  // lastSeen[c] == e + 1: colour c is taken for element e
-  int colours = 0;
-  for (std::size_t e = 0; e < T; ++e) {
-    for (std::uint32_t v : mesh.tets[e])
-      for (int k = nodeTetStart[v]; k < nodeTetStart[v + 1]; ++k)
-        if (const int c = colour[std::size_t(nodeTets[std::size_t(k)])]; c >= 0)
-          lastSeen[std::size_t(c)] = e + 1;
-    int c = 0;
-    while (c < colours && lastSeen[std::size_t(c)] == e + 1) ++c;
-    if (c == colours) ++colours, lastSeen.push_back(0);
-    colour[e] = c;
-  }
-  body.colourStart_.assign(std::size_t(colours) + 1, 0);
-  for (int c : colour) ++body.colourStart_[std::size_t(c) + 1];
-  for (int c = 0; c < colours; ++c)
-    body.colourStart_[std::size_t(c) + 1] += body.colourStart_[std::size_t(c)];
-  body.colourOrder_.resize(T);
-  {
-    std::vector<std::size_t> fill(body.colourStart_.begin(), body.colourStart_.end() - 1);
-    for (std::size_t e = 0; e < T; ++e) body.colourOrder_[fill[std::size_t(colour[e])]++] = std::uint32_t(e);
-  }
+  body.colourAll();
 
   body.surface_ = tetMeshSurface(mesh);
   body.contactOf_.assign(n, -1);
-  for (const Triangle& t : body.surface_) body.surfaceNodes_.insert(body.surfaceNodes_.end(), t.begin(), t.end());
+  for (const Triangle& t : body.surface_)
+    body.surfaceNodes_.insert(body.surfaceNodes_.end(), t.begin(), t.end());
   std::sort(body.surfaceNodes_.begin(), body.surfaceNodes_.end());
   body.surfaceNodes_.erase(std::unique(body.surfaceNodes_.begin(), body.surfaceNodes_.end()),
                            body.surfaceNodes_.end());
@@ -214,6 +161,79 @@ Result<FemBody> FemBody::create(const TetMesh& mesh, const FemMaterial& material
   body.sweepSkip_.assign(n, 0);
   body.pcg_.reserve(dofs);
   return body;
+}
+
+// Per row, the blocks left of the diagonal as the stored blocks (col, row)
+// to transpose, from the upper-triangular pattern.
+void FemBody::buildLowerBlocks() {
+  const std::size_t n = rowStart_.size() - 1;
+  lowerStart_.assign(n + 1, 0);
+  for (std::size_t row = 0; row < n; ++row)
+    for (int s = rowStart_[row] + 1; s < rowStart_[row + 1]; ++s)
+      ++lowerStart_[std::size_t(colIndex_[std::size_t(s)]) + 1];
+  for (std::size_t i = 0; i < n; ++i) lowerStart_[i + 1] += lowerStart_[i];
+  lower_.resize(std::size_t(lowerStart_[n]));
+  std::vector<int> fill(lowerStart_.begin(), lowerStart_.end() - 1);
+  for (std::size_t row = 0; row < n; ++row)
+    for (int s = rowStart_[row] + 1; s < rowStart_[row + 1]; ++s)
+      lower_[std::size_t(fill[std::size_t(colIndex_[std::size_t(s)])]++)] = {s, int(row)};
+}
+
+// The stored block of node pair (a, b): its slot, or ~slot where the pair
+// is stored transposed (a > b). The pair must be in the pattern.
+int FemBody::slotOf(std::uint32_t a, std::uint32_t b) const {
+  const std::uint32_t row = std::min(a, b), col = std::max(a, b);
+  const int* begin = colIndex_.data() + rowStart_[row];
+  const int* end = colIndex_.data() + rowStart_[row + 1];
+  const int slot = int(std::lower_bound(begin, end, int(col)) - colIndex_.data());
+  return a > b ? ~slot : slot;
+}
+
+void FemBody::setElementSlots(std::size_t e) {
+  for (int i = 0, k = 0; i < 4; ++i)
+    for (int j = i; j < 4; ++j) slot_[e][std::size_t(k++)] = slotOf(tets_[e][i], tets_[e][j]);
+}
+
+// Greedy colouring: elements sharing a node get different colours, so one
+// colour's elements can scatter into nodes and blocks concurrently.
+void FemBody::colourAll() {
+  const std::size_t n = x_.size(), T = tets_.size();
+  std::vector<int> nodeTetStart(n + 1, 0), nodeTets(T * 4);
+  for (const Tet& t : tets_)
+    for (std::uint32_t v : t) ++nodeTetStart[v + 1];
+  for (std::size_t i = 0; i < n; ++i) nodeTetStart[i + 1] += nodeTetStart[i];
+  {
+    std::vector<int> fill(nodeTetStart.begin(), nodeTetStart.end() - 1);
+    for (std::size_t e = 0; e < T; ++e)
+      for (std::uint32_t v : tets_[e]) nodeTets[std::size_t(fill[v]++)] = int(e);
+  }
+  colour_.assign(T, -1);
+  std::vector<std::size_t> lastSeen;  // lastSeen[c] == e + 1: colour c is taken for element e
+  int colours = 0;
+  for (std::size_t e = 0; e < T; ++e) {
+    for (std::uint32_t v : tets_[e])
+      for (int k = nodeTetStart[v]; k < nodeTetStart[v + 1]; ++k)
+        if (const int c = colour_[std::size_t(nodeTets[std::size_t(k)])]; c >= 0)
+          lastSeen[std::size_t(c)] = e + 1;
+    int c = 0;
+    while (c < colours && lastSeen[std::size_t(c)] == e + 1) ++c;
+    if (c == colours) ++colours, lastSeen.push_back(0);
+    colour_[e] = c;
+  }
+  nodeColours_.clear();  // rebuilt by applyCut when it needs them
+  groupColours(colours);
+}
+
+// colourStart_/colourOrder_ from colour_ (a counting sort: elements of a
+// colour in ascending order).
+void FemBody::groupColours(int colours) {
+  colourStart_.assign(std::size_t(colours) + 1, 0);
+  for (int c : colour_) ++colourStart_[std::size_t(c) + 1];
+  for (int c = 0; c < colours; ++c) colourStart_[std::size_t(c) + 1] += colourStart_[std::size_t(c)];
+  colourOrder_.resize(colour_.size());
+  std::vector<std::size_t> fill(colourStart_.begin(), colourStart_.end() - 1);
+  for (std::size_t e = 0; e < colour_.size(); ++e)
+    colourOrder_[fill[std::size_t(colour_[e])]++] = std::uint32_t(e);
 }
 
 // ---------------------------------------------------------------------------

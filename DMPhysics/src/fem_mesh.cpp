@@ -233,6 +233,15 @@ Status TetMesh::validate() const {
       return femimpl::invalid("tets[" + std::to_string(t) + "] has volume " + femimpl::num(v) + " m³ (must be > 0)", where,
                      "orient tetrahedra so that det[x1−x0, x2−x0, x3−x0] > 0 and drop flat ones");
   }
+  if (!fractions.empty() && fractions.size() != tets.size())
+    return femimpl::invalid(
+        std::to_string(fractions.size()) + " fractions for " + std::to_string(tets.size()) + " tetrahedra",
+        where, "give one per tetrahedron, or none (all 1)");
+  for (std::size_t t = 0; t < fractions.size(); ++t)
+    if (!(fractions[t] > 0.0 && fractions[t] <= 1.0))
+      return femimpl::invalid(
+          "fractions[" + std::to_string(t) + "] = " + femimpl::num(fractions[t]) + " is outside (0, 1]",
+          where);
   if (hanging.empty()) return ok();
   std::vector<std::uint8_t> seen(nodes.size(), 0);
   for (std::size_t k = 0; k < hanging.size(); ++k) {

@@ -94,6 +94,8 @@ namespace dm {
 
 class MeshBvh;
 class Volume;
+class TetCutter;
+struct CutUpdate;
 
 /// A zero-length spring from a material point of the body, Σ wᵢ x_{nodes[i]}
 /// over up to four nodes (a point inside a tetrahedron: its barycentric
@@ -170,6 +172,11 @@ struct TetMesh {
   /// Constrained nodes (empty for a conforming mesh); tetMeshHierarchical()
   /// fills it, at most one entry per node.
   std::vector<HangingNode> hanging;
+  /// The share of each tetrahedron's volume that is material, in (0, 1]:
+  /// empty (the usual) = all 1. A cut mesh's copies of one element hold
+  /// parts of it (dm/physics/tet_cut.hpp); FemBody scales their mass and
+  /// stiffness by it.
+  std::vector<double> fractions;
 
   std::size_t nodeCount() const noexcept { return nodes.size(); }
   std::size_t tetCount() const noexcept { return tets.size(); }
@@ -178,7 +185,8 @@ struct TetMesh {
   /// Σ tetVolume over all tetrahedra, m³. O(T).
   double totalVolume() const;
   /// Checks indices in range, no repeated index within a tetrahedron, finite
-  /// positions and positive volumes, and hanging nodes (indices in range,
+  /// positions and positive volumes, fractions (none or one per
+  /// tetrahedron, each in (0, 1]), and hanging nodes (indices in range,
   /// two distinct masters other than the node, at their masters' midpoint,
   /// one entry per node, no cycle); errors name the tetrahedron, node or
   /// hanging entry.
@@ -557,6 +565,29 @@ class FemBody {
   /// body; `out` keeps its capacity between calls.
   void surfaceMesh(Mesh& out) const;
 
+  /// Applies what TetCutter::cut() changed (`update`) to this body, which
+  /// must have been created from the cutter's mesh and kept in step with
+  /// every update since: new nodes start from their sources' state (position,
+  /// velocity, fixed or not; no external force), changed and new elements
+  /// take their copies' nodes and material fractions (mass and stiffness
+  /// scale with them; a new copy starts from its original's rotation), and
+  /// the solver's structures are updated in place: the node masses of the
+  /// changed elements, the block pattern merged with their new node pairs
+  /// (pairs no element uses any more stay as zero blocks), the changed
+  /// elements recoloured into colours their nodes leave free. O(changed
+  /// elements + nnz) (a linear pass over the pattern, no sort), far below
+  /// building the body anew; it allocates. Fails (InvalidArgument, body
+  /// unchanged) on a body with hanging nodes, or an update that does not
+  /// fit the body (fewer nodes or elements in the cutter than in the body,
+  /// indices out of range). surfaceTriangles() stay the uncut boundary: the
+  /// cut surface is TetCutter::surface(), evaluated at positions(); new
+  /// nodes join the nodes obstacles push.
+  /// @code
+  ///   auto up = cutter.cut(dm::bladeSweep(a0, b0, a1, b1), body.positions());
+  ///   if (up && !up->changedElements.empty()) body.applyCut(cutter, *up);
+  /// @endcode
+  Status applyCut(const TetCutter& cutter, const CutUpdate& update);
+
   /// Statistics of the last step.
   const FemStepReport& lastReport() const noexcept { return report_; }
   /// Number of element colours (parallel phases per assembly).
@@ -569,6 +600,14 @@ class FemBody {
   double elementForces(std::size_t e, const Mat3& R, const std::vector<Vec3>& x, Vec3 (&f)[4],
                        Vec3 (&g)[4]) const;
   void assemble();
+  // The solver's structures (see create()): per row the blocks left of the
+  // diagonal, a node pair's slot, an element's slots, the greedy colouring
+  // of all elements and the grouping by colour.
+  void buildLowerBlocks();
+  int slotOf(std::uint32_t a, std::uint32_t b) const;
+  void setElementSlots(std::size_t e);
+  void colourAll();
+  void groupColours(int colours);
   void applySystem(const VecX& in, VecX& out, double massScale, double stiffScale);
   // Hanging nodes' positions and velocities from their masters'.
   void syncHanging();
@@ -614,6 +653,10 @@ class FemBody {
   std::vector<LowerBlock> lower_;
   std::vector<std::uint32_t> colourOrder_;  // elements grouped by colour
   std::vector<std::size_t> colourStart_;
+  std::vector<int> colour_;  // per element
+  // Per node, the colours its elements have (had: a bit stays when an
+  // element is recoloured), built by the first applyCut(); empty otherwise.
+  std::vector<std::uint64_t> nodeColours_;
   std::vector<Triangle> surface_;
   // Hanging nodes, resolved to independent masters: node hangNode_[k] =
   // Σ hangWeight_[s]·(node hangMaster_[s]), s in [hangStart_[k], hangStart_[k+1]).
