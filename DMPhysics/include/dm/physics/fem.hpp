@@ -65,6 +65,11 @@
 // A dynamic obstacle (mass > 0, a free rigid body) adds six unknowns, its
 // velocity change, to that system: the contact springs act on both sides
 // (dm/physics/soft_rigid.hpp couples such bodies to a PhysicsWorld).
+// Cutting: dm::TetCutter (dm/physics/tet_cut.hpp) splits elements along a
+// blade's swept surface by the virtual node algorithm, and applyCut() takes
+// each of its updates into the body in place (new nodes, element copies
+// whose material fraction, TetMesh::fractions, scales their mass and
+// stiffness, the block pattern and colouring updated, not rebuilt).
 // Element loops run in parallel with dm::parallelFor over a greedy element
 // colouring (elements of one colour share no node) and the system product
 // row by row, so the result does not depend on the thread count.
