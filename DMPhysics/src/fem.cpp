@@ -611,6 +611,18 @@ double FemBody::elementForces(std::size_t e, const Mat3& R, const std::vector<Ve
   return V * (mu_ * eps.squaredNorm() + 0.5 * lambda_ * tr * tr);
 }
 
+Mat3 FemBody::elementStress(std::size_t e) const {
+  DM_DEMAND(e < tets_.size(), "FemBody::elementStress: element out of range");
+  const Tet& t = tets_[e];
+  Mat3 Ds;
+  Ds << x_[t[1]] - x_[t[0]], x_[t[2]] - x_[t[0]], x_[t[3]] - x_[t[0]];
+  const Mat3 R = options_.corotational ? rot_[e].toRotationMatrix() : Mat3::Identity();
+  const Mat3 RtF = R.transpose() * (Ds * restInverse_[e]);
+  const Mat3 eps = 0.5 * (RtF + RtF.transpose()) - Mat3::Identity();
+  const Mat3 sigma = 2.0 * mu_ * eps + lambda_ * eps.trace() * Mat3::Identity();
+  return R * sigma * R.transpose();
+}
+
 // Rotations, elastic forces (force_) and rotated stiffness blocks (blocks_):
 // with r_i = R g_i, R K_ij Rᵀ = V(μ(r_i·r_j)I + μ r_j r_iᵀ + λ r_i r_jᵀ).
 void FemBody::assemble() {

@@ -5,6 +5,8 @@
 #include <dm/physics/fem.hpp>
 #include <dm/physics/tet_cut.hpp>
 
+#include <Eigen/Eigenvalues>
+
 #include <algorithm>
 #include <bit>
 #include <string>
@@ -170,6 +172,32 @@ Status FemBody::applyCut(const TetCutter& cutter, const CutUpdate& update) {
   for (std::size_t i = n; i < n1; ++i) surfaceNodes_.push_back(std::uint32_t(i));
   contacts_.reserve(surfaceNodes_.size());
   return ok();
+}
+
+std::vector<TearSplit> tensileTears(const FemBody& body, const TetCutter& cutter, double strength) {
+  struct Candidate {
+    std::uint32_t element;
+    double stress;
+    Vec3 direction;
+  };
+  std::vector<Candidate> over;
+  const std::size_t T = std::min(body.tetCount(), cutter.elements().size());
+  for (std::size_t e = 0; e < T; ++e) {
+    if (cutter.isSplit(e)) continue;
+    const Eigen::SelfAdjointEigenSolver<Mat3> eig(body.elementStress(e));
+    const double top = eig.eigenvalues()(2);
+    if (top >= strength) over.push_back({std::uint32_t(e), top, eig.eigenvectors().col(2)});
+  }
+  std::vector<TearSplit> tears;
+  for (const Candidate& c : over)
+    if (cutter.touchesCrack(c.element)) tears.push_back({c.element, c.direction});
+  if (tears.empty() && !over.empty()) {
+    const Candidate* top = &over.front();
+    for (const Candidate& c : over)
+      if (c.stress > top->stress) top = &c;
+    tears.push_back({top->element, top->direction});
+  }
+  return tears;
 }
 
 }  // namespace dm

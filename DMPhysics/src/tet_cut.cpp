@@ -278,14 +278,33 @@ void TetCutter::componentFractions(std::size_t t, const std::array<std::uint8_t,
   for (int l = 0; l < 4; ++l) fraction[l] = l < k ? vol[l] / total : 0.0;
 }
 
-Result<CutUpdate> TetCutter::cut(std::span<const CutTriangle> surface, std::span<const Vec3> x) {
+Status TetCutter::checkPositions(std::span<const Vec3> x, const char* where) const {
   using namespace tetcut;
-  constexpr const char* where = "TetCutter::cut";
   if (x.size() != nodeCount())
     return invalidCut(std::to_string(x.size()) + " positions for " + std::to_string(nodeCount()) + " nodes",
                       where);
   for (std::size_t i = 0; i < x.size(); ++i)
     if (!x[i].allFinite()) return invalidCut("position " + std::to_string(i) + " is not finite", where);
+  return ok();
+}
+
+void TetCutter::cross(std::size_t e, double s, std::vector<std::uint32_t>& dirty, CutUpdate& update) {
+  crossing_[e] = std::clamp(s, options_.snap, 1.0 - options_.snap);
+  ++crossedCount_, ++update.edgesCrossed;
+  for (std::uint32_t i = edgeTetStart_[e]; i < edgeTetStart_[e + 1]; ++i) dirty.push_back(edgeTets_[i]);
+}
+
+bool TetCutter::touchesCrack(std::size_t e) const {
+  const std::uint32_t t = elements_[e].source;
+  for (const std::uint32_t edge : tetEdge_[t])
+    if (crossing_[edge] >= 0.0) return true;
+  return false;
+}
+
+Result<CutUpdate> TetCutter::cut(std::span<const CutTriangle> surface, std::span<const Vec3> x) {
+  using namespace tetcut;
+  constexpr const char* where = "TetCutter::cut";
+  if (auto st = checkPositions(x, where); !st) return st.error();
   for (std::size_t i = 0; i < surface.size(); ++i)
     for (const Vec3& p : surface[i])
       if (!p.allFinite())
@@ -302,15 +321,58 @@ Result<CutUpdate> TetCutter::cut(std::span<const CutTriangle> surface, std::span
       const Vec3& q = x[edgeNodes_[e][1]];
       if ((p.cwiseMax(q).array() < lo.array()).any() || (p.cwiseMin(q).array() > hi.array()).any()) continue;
       const double s = segmentTriangle(p, q, tri[0], tri[1], tri[2]);
-      if (s < 0.0) continue;
-      crossing_[e] = std::clamp(s, options_.snap, 1.0 - options_.snap);
-      ++crossedCount_, ++update.edgesCrossed;
-      for (std::uint32_t i = edgeTetStart_[e]; i < edgeTetStart_[e + 1]; ++i) dirty.push_back(edgeTets_[i]);
+      if (s >= 0.0) cross(e, s, dirty, update);
     }
   }
+  splitDirty(dirty, update);
+  return update;
+}
+
+Result<CutUpdate> TetCutter::tear(std::span<const TearSplit> splits, std::span<const Vec3> x) {
+  using namespace tetcut;
+  constexpr const char* where = "TetCutter::tear";
+  if (auto st = checkPositions(x, where); !st) return st.error();
+  for (std::size_t i = 0; i < splits.size(); ++i) {
+    if (splits[i].element >= elements_.size())
+      return invalidCut("split " + std::to_string(i) + " names element " + std::to_string(splits[i].element) +
+                            " of " + std::to_string(elements_.size()),
+                        where);
+    if (!splits[i].normal.allFinite() || splits[i].normal.squaredNorm() == 0.0)
+      return invalidCut("split " + std::to_string(i) + ": the normal is zero or not finite", where);
+  }
+  CutUpdate update;
+  std::vector<std::uint32_t> dirty;
+  for (const TearSplit& split : splits) {
+    const CutElement& el = elements_[split.element];
+    const std::uint32_t t = el.source;
+    // Through the crossings the element has (a crack's plane), else its centroid.
+    Vec3 through = Vec3::Zero();
+    int n = 0;
+    for (const std::uint32_t e : tetEdge_[t])
+      if (crossing_[e] >= 0.0) {
+        const Vec3& p = x[edgeNodes_[e][0]];
+        through += p + crossing_[e] * (x[edgeNodes_[e][1]] - p), ++n;
+      }
+    if (n > 0)
+      through /= n;
+    else
+      through = (x[el.nodes[0]] + x[el.nodes[1]] + x[el.nodes[2]] + x[el.nodes[3]]) / 4.0;
+    const Vec3 normal = split.normal.normalized();
+    for (const std::uint32_t e : tetEdge_[t]) {
+      if (crossing_[e] >= 0.0) continue;
+      const double dp = normal.dot(x[edgeNodes_[e][0]] - through),
+                   dq = normal.dot(x[edgeNodes_[e][1]] - through);
+      if ((dp < 0.0) != (dq < 0.0) && dp != dq) cross(e, dp / (dp - dq), dirty, update);
+    }
+  }
+  splitDirty(dirty, update);
+  return update;
+}
+
+void TetCutter::splitDirty(std::vector<std::uint32_t>& dirty, CutUpdate& update) {
+  using namespace tetcut;
   std::sort(dirty.begin(), dirty.end());
   dirty.erase(std::unique(dirty.begin(), dirty.end()), dirty.end());
-
   for (const std::uint32_t t : dirty) {
     std::array<std::uint8_t, 4> label{};
     const int k = labelCorners(t, label);
@@ -351,7 +413,6 @@ Result<CutUpdate> TetCutter::cut(std::span<const CutTriangle> surface, std::span
   std::sort(update.changedElements.begin(), update.changedElements.end());
   update.changedElements.erase(std::unique(update.changedElements.begin(), update.changedElements.end()),
                                update.changedElements.end());
-  return update;
 }
 
 void TetCutter::regroupNodes(CutUpdate& update) {

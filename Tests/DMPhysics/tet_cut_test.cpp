@@ -361,6 +361,15 @@ TEST(TetCut, BadInputIsRefusedByName) {
   ASSERT_FALSE(r.ok());
   EXPECT_NE(r.error().message().find("triangle 1"), std::string::npos);
   EXPECT_EQ(c->crossedEdgeCount(), 0u);  // nothing changed
+  const TearSplit outside{.element = 9999, .normal = Vec3::UnitX()};
+  r = c->tear({&outside, 1}, x);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message().find("element 9999"), std::string::npos);
+  const TearSplit flat{.element = 0, .normal = Vec3::Zero()};
+  r = c->tear({&flat, 1}, x);
+  ASSERT_FALSE(r.ok());
+  EXPECT_NE(r.error().message().find("normal"), std::string::npos);
+  EXPECT_EQ(c->crossedEdgeCount(), 0u);
 }
 
 }  // namespace

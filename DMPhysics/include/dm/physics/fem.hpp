@@ -541,6 +541,13 @@ class FemBody {
   double elasticEnergy() const;
   /// Kinetic energy ½ Σ mᵢ|vᵢ|², J.
   double kineticEnergy() const;
+  /// Stress of element e (Pa, body frame) at the current positions:
+  /// R·σ·Rᵀ with σ = 2μ ε + λ tr(ε) I of the co-rotated strain ε = sym(RᵀF)
+  /// − I and R the element's rotation from the last step (identity for
+  /// plain linear FEM): the Cauchy stress of small strains, rotations
+  /// removed. Constant over the element. Out-of-range e is a DM_DEMAND
+  /// failure.
+  Mat3 elementStress(std::size_t e) const;
   /// Elastic node forces at the current positions (N), resized to
   /// nodeCount(); same rotations as elasticEnergy(). O(T).
   void computeElasticForces(std::vector<Vec3>& out) const;

@@ -119,6 +119,13 @@ struct CutUpdate {
   std::vector<CutNodeChange> newNodes;
 };
 
+/// A tear through one element (TetCutter::tear): a plane normal to
+/// `normal` (body frame).
+struct TearSplit {
+  std::uint32_t element = 0;
+  Vec3 normal = Vec3::UnitX();
+};
+
 /// A vertex of the cut surface: Σ weights[i]·x[nodes[i]] (unused entries
 /// weigh 0), so it follows the nodes.
 struct CutSurfaceVertex {
@@ -135,6 +142,20 @@ struct CutSurface {
   void evaluate(std::span<const Vec3> x, std::vector<Vec3>& out) const;
 };
 
+/// The tears of a body whose material fails in tension: elements not yet
+/// split whose largest principal stress (FemBody::elementStress) is at
+/// least `strength` (Pa), each torn across that stress's direction. Where
+/// any of them touches a crack (TetCutter::touchesCrack) only those grow
+/// it; otherwise only the most stressed one starts a crack (ties: the lowest
+/// element), so a uniform field opens one crack, not one per element. The
+/// body must be in step with the cutter (FemBody::applyCut). O(T).
+/// @code
+///   auto tears = dm::tensileTears(body, cutter, 5e4);
+///   if (!tears.empty())
+///     if (auto up = cutter.tear(tears, body.positions())) body.applyCut(cutter, *up);
+/// @endcode
+std::vector<TearSplit> tensileTears(const FemBody& body, const TetCutter& cutter, double strength);
+
 /// Cuts a tetrahedral mesh by swept surfaces; see the file comment.
 /// Not thread-safe.
 class TetCutter {
@@ -150,6 +171,20 @@ class TetCutter {
   /// non-finite position or triangle. O(E) per triangle for the crossing
   /// search plus O(separated elements) for the regrouping.
   Result<CutUpdate> cut(std::span<const CutTriangle> surface, std::span<const Vec3> x);
+
+  /// Tears elements (material failure, not a blade): each split's plane,
+  /// normal to its `normal`, through the mean of the crossings its element
+  /// already has (so a crack grows in the plane it started in) or else
+  /// through the element's centroid at positions x, crosses the element's
+  /// uncrossed edges it meets; the elements that separates split as in
+  /// cut(). Fails (InvalidArgument, nothing changed) like cut(), and on an
+  /// element out of range or a normal that is zero or not finite.
+  Result<CutUpdate> tear(std::span<const TearSplit> splits, std::span<const Vec3> x);
+  /// Whether element e's original tetrahedron has a crossed edge: a cut or
+  /// a crack reaches it.
+  bool touchesCrack(std::size_t e) const;
+  /// Whether element e's original tetrahedron is split.
+  bool isSplit(std::size_t e) const { return labelCount_[elements_[e].source] > 1; }
 
   std::size_t nodeCount() const noexcept { return origin_.size(); }
   std::size_t originalNodeCount() const noexcept { return x0_.size(); }
@@ -196,6 +231,14 @@ class TetCutter {
   // Volume fraction of each component of t.
   void componentFractions(std::size_t t, const std::array<std::uint8_t, 4>& label, int k,
                           std::array<double, 4>& fraction) const;
+  // Checks positions for cut() and tear().
+  Status checkPositions(std::span<const Vec3> x, const char* where) const;
+  // Crosses edge e at fraction s from its lower node (snapped) and marks its
+  // tetrahedra dirty.
+  void cross(std::size_t e, double s, std::vector<std::uint32_t>& dirty, CutUpdate& update);
+  // Splits the dirty tetrahedra that their crossings separate, regroups
+  // the nodes, and finishes the update.
+  void splitDirty(std::vector<std::uint32_t>& dirty, CutUpdate& update);
   // Regroups the nodes of every split element's copies (the virtual node
   // rule), keeping node indices where it can.
   void regroupNodes(CutUpdate& update);
