@@ -50,6 +50,11 @@
 //    elements, the cut faces between copies — two sheets that open as the
 //    pieces move apart. Closed wherever the blade did not exit.
 //
+// Tearing uses the same machinery: tear() crosses an element's edges by a
+// plane (through the crossings it has, so a crack keeps its plane), and
+// tensileTears() picks the elements whose principal stress reaches the
+// material's strength.
+//
 // Units: SI (m). Deterministic: the same mesh and the same calls give the
 // same elements, nodes and surface bit for bit (lockstep replays).
 //
