@@ -1,5 +1,6 @@
 // Continuous cutting of tetrahedral meshes by the virtual node algorithm;
 // see dm/physics/tet_cut.hpp for the method and its reference.
+#include <dm/collide/triangle.hpp>
 #include <dm/physics/tet_cut.hpp>
 
 #include <algorithm>
@@ -29,18 +30,11 @@ Error invalidCut(std::string what, std::string where) {
 }
 
 // Where segment p→q meets triangle abc, as a fraction of the segment in
-// [0, 1], or −1 where it does not (or the triangle is degenerate).
+// [0, 1], or −1 where it does not: the watertight test, so an edge through
+// the diagonal two sweep triangles share is crossed.
 double segmentTriangle(const Vec3& p, const Vec3& q, const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 n = (b - a).cross(c - a);
-  if (n.squaredNorm() == 0.0) return -1.0;
-  const double dp = n.dot(p - a), dq = n.dot(q - a);
-  if ((dp > 0.0 && dq > 0.0) || (dp < 0.0 && dq < 0.0) || dp == dq) return -1.0;
-  const double t = dp / (dp - dq);
-  const Vec3 x = p + t * (q - p);
-  if (n.dot((b - a).cross(x - a)) < 0.0 || n.dot((c - b).cross(x - b)) < 0.0 ||
-      n.dot((a - c).cross(x - c)) < 0.0)
-    return -1.0;
-  return t;
+  RayTriangleHit hit;
+  return rayTriangle(p, q - p, a, b, c, 0.0, 1.0, hit) ? hit.t : -1.0;
 }
 
 struct Uf {

@@ -1,9 +1,11 @@
 // BladeResistance: the force of cutting (fracture toughness × engaged
 // length), the energy balance, the cut already made, and real-time safety.
+#include <dm/math/primitives.hpp>
 #include <dm/physics/blade.hpp>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "../common/alloc_counter.hpp"
@@ -106,6 +108,39 @@ TEST(BladeResistance, ThickerCutsNeedProportionallyMoreForceAndTheLoopIsPassive)
   }
   EXPECT_GE(worst, -0.5 * std::pow(kJ * wMax, 2) / kK);
   EXPECT_GT(b.work(), kJ * b.cutArea() * 0.99);
+}
+
+TEST(BladeResistance, EngagedLengthIsTheEdgeInsideTheTissue) {
+  // An icosphere of radius 10 mm: a chord at distance h from the centre is
+  // 2·sqrt(r² − h²) long, with r between the faces' distance from the
+  // centre (the polyhedron's inscribed radius) and the vertices' (10 mm).
+  const double R = 0.010;
+  const Mesh ball = makeIcosphere(R, 4);
+  double rIn = R;
+  for (const Triangle& t : ball.triangles) {
+    const Vec3 &a = ball.positions[t[0]], &b = ball.positions[t[1]], &c = ball.positions[t[2]];
+    rIn = std::min(rIn, std::abs((b - a).cross(c - a).normalized().dot(a)));
+  }
+  for (const double h : {0.0, 0.003, 0.0071, 0.0095}) {
+    const double w = engagedLength(Vec3(-0.02, h, 0.0), Vec3(0.02, h, 0.0), ball);
+    EXPECT_LE(w, 2 * std::sqrt(R * R - h * h) + 1e-15) << "h = " << h;
+    EXPECT_GE(w, 2 * std::sqrt(rIn * rIn - h * h) - 1e-15) << "h = " << h;
+  }
+  // From the centre out: the radius; wholly inside: the whole edge; outside: 0.
+  const double fromCentre = engagedLength(Vec3::Zero(), Vec3(0, 0, 0.02), ball);
+  EXPECT_LE(fromCentre, R + 1e-15);
+  EXPECT_GE(fromCentre, rIn - 1e-15);
+  EXPECT_NEAR(engagedLength(Vec3(-0.001, 0, 0), Vec3(0.002, 0.001, 0), ball), std::sqrt(0.003 * 0.003 + 1e-6),
+              1e-15);
+  EXPECT_EQ(engagedLength(Vec3(0.02, 0, 0), Vec3(0.03, 0, 0), ball), 0.0);
+  // Through both sides of a torus (major 20 mm, minor 5 mm): two tubes of
+  // 10 mm each, the hole between them not counted.
+  const Mesh torus = makeTorus(0.020, 0.005, 256, 128);
+  const double through = engagedLength(Vec3(-0.03, 0, 0), Vec3(0.03, 0, 0), torus);
+  EXPECT_NEAR(through, 0.020, 0.020 * 1e-3);
+  EXPECT_LE(through, 0.020 + 1e-15);
+  // Starting in one tube: its remaining 5 mm and the far tube's 10 mm.
+  EXPECT_NEAR(engagedLength(Vec3(-0.020, 0, 0), Vec3(0.03, 0, 0), torus), 0.015, 0.015 * 1e-3);
 }
 
 TEST(BladeResistance, RealTimeSafety) {

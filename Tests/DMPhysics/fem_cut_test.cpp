@@ -305,10 +305,19 @@ TEST(FemCut, AScalpelFeltAt1kHzCutsTheTissueItsFrontSweeps) {
   Vec3 lastFront = blade->front();
   double felt = 0.0, firstIn = 1.0, lastIn = 0.0;
   int cuttingTicks = 0;
+  Mesh surface;
+  body->surfaceMesh(surface);
+  const Vec3 edge(0, 0, depth + 0.004);  // from the tip up, out of the tissue
   for (int ms = 1; ms <= 1800; ++ms) {
     const Vec3 tip(-0.003 + speed * ms * 1e-3, y, size.z() - depth);
-    // Engaged: the edge below the top surface, where the tip is over the block.
-    const double w = tip.x() > 0.0 && tip.x() < size.x() ? depth : 0.0;
+    // Engaged: the edge inside the tissue's boundary (its uncut surface at
+    // the last physics step): the depth wherever the tip is under the top.
+    const double w = engagedLength(tip, tip + edge, surface);
+    if (tip.x() > 1e-4 && tip.x() < size.x() - 1e-4) {
+      ASSERT_NEAR(w, depth, 1e-12) << ms;
+    } else if (tip.x() < -1e-4 || tip.x() > size.x() + 1e-4) {
+      ASSERT_EQ(w, 0.0) << ms;
+    }
     if (w > 0.0) firstIn = std::min(firstIn, tip.x()), lastIn = tip.x();
     const Vec3 f = blade->tick(tip, u, w);
     if (blade->cutting()) felt += f.x(), ++cuttingTicks;
@@ -321,6 +330,7 @@ TEST(FemCut, AScalpelFeltAt1kHzCutsTheTissueItsFrontSweeps) {
         ASSERT_TRUE(body->applyCut(*cutter, *cut).ok());
       }
       ASSERT_TRUE(body->step(0.01).ok());
+      body->surfaceMesh(surface);
       lastFront = front;
     }
   }

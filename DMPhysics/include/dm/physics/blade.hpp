@@ -38,10 +38,19 @@
 // @endcode
 #pragma once
 
+#include <dm/core/mesh.hpp>
 #include <dm/core/result.hpp>
 #include <dm/core/types.hpp>
 
 namespace dm {
+
+/// The length (m) of the segment a→b (a blade's edge) inside a closed,
+/// outward-facing surface (the tissue's boundary at its current positions,
+/// e.g. FemBody::surfaceMesh): where it starts by the winding number
+/// (dm::windingNumber > 0.5), then in and out at each crossing. What
+/// BladeResistance::tick() takes as the engaged length; a physics-rate
+/// query: O(triangles), allocates.
+double engagedLength(const Vec3& a, const Vec3& b, const Mesh& surface);
 
 /// Parameters of BladeResistance.
 struct BladeResistanceOptions {
