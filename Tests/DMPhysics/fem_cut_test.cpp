@@ -30,10 +30,7 @@ TEST(FemCut, AnUpdatedBodyStepsLikeABodyBuiltFromTheCutMesh) {
   ASSERT_TRUE(mesh.ok());
   const FemMaterial mat{.youngsModulus = 2e4, .poissonRatio = 0.4, .density = 1000};
   const FemDamping damp{.alpha = 0.0, .beta = 0.01};
-  FemSolverOptions opt;
-  opt.tolerance = 1e-12;
-  opt.maxIterations = 2000;
-  opt.parallel = false;
+  const FemSolverOptions opt{.tolerance = 1e-12, .maxIterations = 2000, .parallel = false};
   auto body = FemBody::create(*mesh, mat, damp, opt);
   ASSERT_TRUE(body.ok());
   body->fixNodesWhere([](const Vec3& p) { return p.x() < 1e-9; });
@@ -97,9 +94,7 @@ TEST(FemCut, APieceCutOffFallsFreely) {
   auto mesh = tetMeshBox({4, 4, 10}, size);
   ASSERT_TRUE(mesh.ok());
   const FemMaterial mat{.youngsModulus = 3e4, .poissonRatio = 0.45, .density = 1050};
-  FemSolverOptions opt;
-  opt.tolerance = 1e-10;
-  opt.maxIterations = 1000;
+  const FemSolverOptions opt{.tolerance = 1e-10, .maxIterations = 1000};
   auto body = FemBody::create(*mesh, mat, {.alpha = 0.0, .beta = 0.005}, opt);
   ASSERT_TRUE(body.ok());
   body->fixNodesWhere([&](const Vec3& p) { return p.z() > size.z() - 1e-9; });
@@ -200,9 +195,7 @@ TEST(FemCut, ABarInTensionTearsAtItsCriticalLoadAndTheCrackRunsThrough) {
   auto mesh = tetMeshBox({10, 2, 2}, size);
   ASSERT_TRUE(mesh.ok());
   const FemMaterial mat{.youngsModulus = 2e4, .poissonRatio = 0.0, .density = 1000};
-  FemSolverOptions opt;
-  opt.tolerance = 1e-10;
-  opt.maxIterations = 2000;
+  const FemSolverOptions opt{.tolerance = 1e-10, .maxIterations = 2000};
   auto body = FemBody::create(*mesh, mat, {.alpha = 150.0, .beta = 0.0}, opt);
   auto cutter = TetCutter::create(*mesh);
   ASSERT_TRUE(body.ok() && cutter.ok());

@@ -75,6 +75,22 @@ void expectConsistent(const TetCutter& c) {
   for (std::size_t t = 0; t < sum.size(); ++t) EXPECT_NEAR(sum[t], 1.0, 1e-12) << "tetrahedron " << t;
 }
 
+// After a cut into two pieces, at rest: the elements consistent, the
+// surface closed, each piece's surface enclosing its material (to 1e-12 of
+// `volume`). The pieces' material volumes, element 0's piece first.
+std::pair<double, double> twoClosedPieces(const TetCutter& c, double volume) {
+  expectConsistent(c);
+  const CutSurface s = c.surface();
+  EXPECT_TRUE(isClosed(s));
+  const PieceVolumes v = pieceVolumes(c, s, c.restPositions());
+  EXPECT_EQ(v.material.size(), 2u);
+  if (v.material.size() != 2) return {0.0, 0.0};
+  for (int p = 0; p < 2; ++p) EXPECT_NEAR(v.enclosed[p], v.material[p], 1e-12 * volume) << "piece " << p;
+  std::vector<std::uint32_t> pieceOf;
+  c.pieces(pieceOf);
+  return {v.material[pieceOf[0]], v.material[1 - pieceOf[0]]};
+}
+
 // A blade as long as the block is wide (along y, with margins), moved from
 // (x0, z(x0)) to (x1, z(x1)) on the plane z = z0 + slope·x: its swept
 // surface is that plane across the block.
@@ -232,19 +248,11 @@ TEST(TetCut, CurvedCutTakesOutACylinderSectionWithinTheInterpolationBound) {
         cutter->restPositions());
     ASSERT_TRUE(up.ok());
   }
-  expectConsistent(*cutter);
-  const CutSurface s = cutter->surface();
-  EXPECT_TRUE(isClosed(s));
-  const PieceVolumes v = pieceVolumes(*cutter, s, cutter->restPositions());
-  ASSERT_EQ(v.material.size(), 2u);
-  std::vector<std::uint32_t> pieceOf;
-  cutter->pieces(pieceOf);
-  const double inner = v.material[pieceOf[0]];  // element 0 holds the corner (0, 0, 0)
+  const auto [inner, outer] = twoClosedPieces(*cutter, size.prod());  // element 0 holds the corner (0, 0, 0)
   const double exact = std::numbers::pi * R * R * H / 4;
   const double h = size.x() / 8;
   EXPECT_NEAR(inner, exact, exact * h * h / (4 * R * R)) << "relative error " << (inner - exact) / exact;
-  EXPECT_NEAR(v.material[0] + v.material[1], size.prod(), 1e-12 * size.prod());
-  for (int p = 0; p < 2; ++p) EXPECT_NEAR(v.enclosed[p], v.material[p], 1e-12 * size.prod());
+  EXPECT_NEAR(inner + outer, size.prod(), 1e-12 * size.prod());
 }
 
 TEST(TetCut, AThinSheetOneElementThickIsCutThrough) {
@@ -261,20 +269,13 @@ TEST(TetCut, AThinSheetOneElementThickIsCutThrough) {
                   ->cut(bladeSweep(at(-0.005) + down, at(-0.005) + up, at(0.05) + down, at(0.05) + up),
                         cutter->restPositions())
                   .ok());
-  expectConsistent(*cutter);
-  const CutSurface s = cutter->surface();
-  EXPECT_TRUE(isClosed(s));
-  const PieceVolumes v = pieceVolumes(*cutter, s, cutter->restPositions());
-  ASSERT_EQ(v.material.size(), 2u);
+  const auto [under, over] = twoClosedPieces(*cutter, size.prod());
   // The part above the line: the triangle cut off the square's corner
   // (0, 0.0013) … (0.04, 0.0373) … (0, 0.04) plus the strip over y = 0.0373.
   const double L = size.x(), y0 = 0.0013, y1 = 0.0013 + 0.9 * L;
   const double above = (L * (L - y1) + L * (y1 - y0) / 2) * size.z();
-  std::vector<std::uint32_t> pieceOf;
-  cutter->pieces(pieceOf);
-  const double under = v.material[pieceOf[0]];
   EXPECT_NEAR(under, size.prod() - above, 1e-12 * size.prod());
-  for (int p = 0; p < 2; ++p) EXPECT_NEAR(v.enclosed[p], v.material[p], 1e-12 * size.prod());
+  EXPECT_NEAR(over, above, 1e-12 * size.prod());
 }
 
 TEST(TetCut, CutsFollowTheDeformedBody) {
