@@ -182,11 +182,16 @@ void FemBody::buildLowerBlocks() {
 // The stored block of node pair (a, b): its slot, or ~slot where the pair
 // is stored transposed (a > b). The pair must be in the pattern.
 int FemBody::slotOf(std::uint32_t a, std::uint32_t b) const {
-  const std::uint32_t row = std::min(a, b), col = std::max(a, b);
+  const int slot = findBlock(std::min(a, b), std::max(a, b));
+  return a > b ? ~slot : slot;
+}
+
+// The slot of block (row, col), row ≤ col, or -1 where the pattern lacks it.
+int FemBody::findBlock(std::uint32_t row, std::uint32_t col) const {
   const int* begin = colIndex_.data() + rowStart_[row];
   const int* end = colIndex_.data() + rowStart_[row + 1];
-  const int slot = int(std::lower_bound(begin, end, int(col)) - colIndex_.data());
-  return a > b ? ~slot : slot;
+  const int* it = std::lower_bound(begin, end, int(col));
+  return it != end && *it == int(col) ? int(it - colIndex_.data()) : -1;
 }
 
 void FemBody::setElementSlots(std::size_t e) {

@@ -89,12 +89,7 @@ Status FemBody::applyCut(const TetCutter& cutter, const CutUpdate& update) {
       for (int j = 0; j < 4; ++j) {
         const std::uint32_t a = tets_[e][i], b = tets_[e][j];
         if (a > b) continue;
-        if (a < n) {
-          const int* begin = colIndex_.data() + rowStart_[a];
-          const int* end = colIndex_.data() + rowStart_[a + 1];
-          const int* it = std::lower_bound(begin, end, int(b));
-          if (it != end && *it == int(b)) continue;
-        }
+        if (a < n && findBlock(a, b) >= 0) continue;
         add.push_back((std::uint64_t(a) << 32) | b);
       }
   std::sort(add.begin(), add.end());

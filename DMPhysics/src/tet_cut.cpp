@@ -582,8 +582,8 @@ CutSurface TetCutter::surface() const {
     const auto& label = label_[t];
     auto copyNodes = [&](int l) -> const Tet& { return elements_[copyOf_[t][l]].nodes; };
 
-    // Boundary faces, split at crossings; each run of one component between
-    // two separating crossings is fanned from the face point.
+    // Boundary faces: whole where nothing crosses them, else fanned from the
+    // face point over their outline split at the crossings.
     for (int k = 0; k < 4; ++k) {
       if (faceTets_[tetFace_[t][k]][1] != kNone) continue;
       const int* f = kFace[k];

@@ -617,6 +617,7 @@ class FemBody {
   // of all elements and the grouping by colour.
   void buildLowerBlocks();
   int slotOf(std::uint32_t a, std::uint32_t b) const;
+  int findBlock(std::uint32_t row, std::uint32_t col) const;
   void setElementSlots(std::size_t e);
   void colourAll();
   void groupColours(int colours);
